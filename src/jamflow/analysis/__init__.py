@@ -1,0 +1,1 @@
+"""Analyses of packings and flow runs; each returns an ``xarray.Dataset``."""

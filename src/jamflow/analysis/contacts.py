@@ -1,0 +1,164 @@
+"""Contact networks: detection, rattler removal, isostaticity, force balance.
+
+Isostatic count convention
+--------------------------
+For N_s stable (non-rattler) frictionless spheres in a periodic box the rigid
+backbone needs ``N_c = d (N_s - 1) + 1`` contacts: ``d N_s`` translational degrees
+of freedom, minus ``d`` global translations, plus one. The ``+1`` is the inflation
+(or compression) degree of freedom of CALiPPSO, and equally the positive-pressure
+constraint of a soft packing at fixed box (2D: ``2 (N - N_r) - 1``); both give the
+same number. Contacts are counted once per pair (``i < j``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..packing import Packing, max_overlap, near_pairs
+from ..tolerances import CONTACT_GAP_TOL
+
+__all__ = [
+    "ContactSummary",
+    "contacts_from_gaps",
+    "contact_network",
+    "find_rattlers",
+    "isostatic_count",
+    "force_balance_residual",
+    "summarize",
+]
+
+
+def contacts_from_gaps(packing: Packing, gap_tol: float = CONTACT_GAP_TOL) -> NDArray[np.int64]:
+    """Pairs with relative gap ``r / sigma_ij - 1 <= gap_tol``, shape (Nc, 2), ``i < j``."""
+    if not np.isfinite(gap_tol):
+        raise ValueError(f"gap_tol must be finite, got {gap_tol}")
+    pairs, _ = near_pairs(packing, gap_tol)
+    return np.stack([pairs.i, pairs.j], axis=1)
+
+
+def contact_network(packing: Packing, gap_tol: float | None = None) -> NDArray[np.int64]:
+    """The packing's explicit contacts, or contacts from ``gap_tol`` when it has none.
+
+    An explicit ``gap_tol`` always recomputes the network from geometry.
+    """
+    if gap_tol is None and packing.contacts is not None:
+        return packing.contacts
+    return contacts_from_gaps(packing, CONTACT_GAP_TOL if gap_tol is None else gap_tol)
+
+
+def find_rattlers(n: int, d: int, contacts: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """Iteratively flag particles with fewer than ``d + 1`` contacts.
+
+    A particle with at most ``d`` contacts cannot be held in place by frictionless
+    contacts; removing it may leave neighbours under-coordinated, so the removal
+    repeats until no particle changes.
+
+    Parameters
+    ----------
+    n, d : int
+        Number of particles and dimension.
+    contacts : ndarray of int, shape (Nc, 2)
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+        True for rattlers.
+    """
+    contacts = np.asarray(contacts, dtype=np.int64).reshape(-1, 2)
+    rattler = np.zeros(n, dtype=bool)
+    active = np.ones(len(contacts), dtype=bool)
+    while True:
+        z = np.bincount(contacts[active].ravel(), minlength=n)
+        new = (~rattler) & (z < d + 1)
+        if not np.any(new):
+            return rattler
+        rattler |= new
+        active &= ~(rattler[contacts[:, 0]] | rattler[contacts[:, 1]])
+
+
+def isostatic_count(d: int, n_stable: int) -> int:
+    """Contacts of an isostatic backbone, ``d (N_s - 1) + 1`` (see module docstring)."""
+    return d * (n_stable - 1) + 1 if n_stable > 0 else 0
+
+
+def force_balance_residual(packing: Packing) -> NDArray[np.float64]:
+    """Per-particle net contact force relative to the mean force, shape (N,).
+
+    The force on ``i`` from a repulsive contact ``(i, j)`` is ``-f n_ij`` with
+    ``n_ij`` the unit vector from ``i`` to ``j``. Returns ``|F_i| / <f>``.
+    """
+    if packing.contacts is None or packing.force is None:
+        raise ValueError("packing has no contact forces")
+    if len(packing.force) == 0:
+        return np.zeros(packing.n)
+    dx = packing.contact_vectors()
+    nij = dx / np.linalg.norm(dx, axis=1)[:, None]
+    fv = packing.force[:, None] * nij
+    net = np.zeros((packing.n, packing.d))
+    np.add.at(net, packing.contacts[:, 0], -fv)
+    np.add.at(net, packing.contacts[:, 1], fv)
+    scale = float(np.mean(np.abs(packing.force)))
+    return np.linalg.norm(net, axis=1) / (scale if scale > 0 else 1.0)
+
+
+@dataclass(frozen=True)
+class ContactSummary:
+    """What ``jamflow check`` reports (keys of its ``--json`` output)."""
+
+    N: int
+    d: int
+    phi: float
+    pressure: float | None
+    n_contacts: int
+    n_rattlers: int
+    n_stable: int
+    isostatic: bool
+    isostatic_count: int
+    z: float
+    max_overlap: float  # largest sigma_ij - r_ij [length]
+    max_overlap_rel: float  # max_overlap / mean diameter
+    force_balance_residual: float | None
+    contact_source: str
+
+    def as_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+def summarize(packing: Packing, gap_tol: float | None = None) -> ContactSummary:
+    """Contacts, rattlers, isostaticity, overlap and force balance of a packing.
+
+    Contacts come from the packing when it has them, else from ``gap_tol``
+    (default :data:`~jamflow.tolerances.CONTACT_GAP_TOL`). ``n_contacts`` counts the
+    backbone after rattler removal; ``isostatic`` compares it with
+    :func:`isostatic_count`.
+    """
+    explicit = gap_tol is None and packing.contacts is not None
+    contacts = contact_network(packing, gap_tol)
+    rattler = find_rattlers(packing.n, packing.d, contacts)
+    backbone = ~(rattler[contacts[:, 0]] | rattler[contacts[:, 1]])
+    n_c = int(backbone.sum())
+    n_s = int((~rattler).sum())
+    iso = isostatic_count(packing.d, n_s)
+    overlap_abs, _ = max_overlap(packing)
+    residual = None
+    if packing.force is not None and explicit:
+        residual = float(np.max(force_balance_residual(packing)[~rattler], initial=0.0))
+    return ContactSummary(
+        N=packing.n,
+        d=packing.d,
+        phi=packing.packing_fraction,
+        pressure=packing.pressure,
+        n_contacts=n_c,
+        n_rattlers=int(rattler.sum()),
+        n_stable=n_s,
+        isostatic=bool(n_s > 0 and n_c == iso),
+        isostatic_count=iso,
+        z=2.0 * n_c / n_s if n_s else 0.0,
+        max_overlap=overlap_abs,
+        max_overlap_rel=overlap_abs / float(np.mean(packing.diameter)),
+        force_balance_residual=residual,
+        contact_source="packing" if explicit else f"gap <= {CONTACT_GAP_TOL if gap_tol is None else gap_tol:g}",
+    )

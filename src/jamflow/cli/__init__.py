@@ -1,0 +1,45 @@
+"""The ``jamflow`` command line: one subcommand per stage or analysis.
+
+Each topic module in this package exposes ``register(subparsers)``, adding its
+subcommands; a subcommand's handler takes the parsed arguments and returns an exit
+code. Errors from bad input reach the user as one line on stderr and exit code 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from ..provenance import jamflow_version
+
+#: Topic modules of this package that contribute subcommands.
+COMMAND_MODULES: tuple[str, ...] = ("packings",)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full argument parser with every registered subcommand."""
+    parser = argparse.ArgumentParser(
+        prog="jamflow",
+        description="Jammed packings of frictionless hard spheres: generate, drive, certify, analyse.",
+    )
+    parser.add_argument("--version", action="version", version=f"jamflow {jamflow_version()}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name in COMMAND_MODULES:
+        importlib.import_module(f"{__name__}.{name}").register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``jamflow`` console script."""
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.handler(args) or 0)
+    except (ValueError, FileNotFoundError, RuntimeError, OSError) as exc:
+        print(f"jamflow {args.command}: error: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

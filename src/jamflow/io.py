@@ -1,0 +1,206 @@
+"""Reading and writing: netCDF datasets (atomic), CALiPPSO ``.dat``, extended XYZ.
+
+This is the only library module that touches files.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from .box import Box
+from .packing import Packing
+from .provenance import provenance_attrs
+from .tolerances import OVERLAP_TOL
+
+__all__ = [
+    "write_dataset",
+    "read_dataset",
+    "write_packing",
+    "read_packing",
+    "new_dataset_attrs",
+    "read_dat",
+    "write_dat",
+    "write_xyz",
+]
+
+
+def new_dataset_attrs(title: str, parameters: dict[str, Any], **extra: Any) -> dict[str, Any]:
+    """Global attributes for a non-packing product: provenance, parameters as JSON."""
+    attrs = provenance_attrs(title)
+    attrs["parameters"] = json.dumps(parameters, sort_keys=True, default=str)
+    attrs.update(extra)
+    return attrs
+
+
+def _netcdf_attr(value: Any) -> Any:
+    """Attributes must be str, number or array: bools -> 0/1, dicts/lists -> JSON."""
+    if isinstance(value, (bool, np.bool_)):
+        return int(value)
+    if value is None:
+        return ""
+    if isinstance(value, (dict, list, tuple)):
+        return json.dumps(value, sort_keys=True, default=str)
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def write_dataset(ds: xr.Dataset, path: str | os.PathLike) -> Path:
+    """Write ``ds`` to netCDF4 atomically (temporary file in the same folder + rename).
+
+    Variables are zlib-compressed. A process killed during the write leaves only a
+    hidden ``.*.tmp`` file, never a partial file under ``path``.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    ds = ds.copy()
+    ds.attrs = {k: _netcdf_attr(v) for k, v in ds.attrs.items()}
+    for var in ds.variables.values():
+        var.attrs = {k: _netcdf_attr(v) for k, v in var.attrs.items()}
+    encoding = {
+        name: {"zlib": True, "complevel": 4}
+        for name, var in ds.data_vars.items()
+        if var.dtype.kind in "biuf"
+    }
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=encoding)
+        with open(tmp, "rb") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def read_dataset(path: str | os.PathLike) -> xr.Dataset:
+    """Load a netCDF file fully into memory and close it."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no such file: {path}")
+    try:
+        return xr.load_dataset(path, engine="netcdf4")
+    except OSError as exc:
+        raise ValueError(f"{path} is not a readable netCDF file: {exc}") from exc
+
+
+def write_packing(
+    packing: Packing, path: str | os.PathLike, stage_parameters: dict[str, Any] | None = None
+) -> Path:
+    """Write a packing dataset atomically."""
+    return write_dataset(packing.to_dataset(stage_parameters), path)
+
+
+def read_packing(path: str | os.PathLike, overlap_tol: float | None = OVERLAP_TOL) -> Packing:
+    """Read and validate a packing.
+
+    Parameters
+    ----------
+    path : path-like
+    overlap_tol : float or None
+        Largest accepted relative overlap; ``None`` for soft packings.
+
+    Raises
+    ------
+    ValueError, OverlapError
+        Malformed file, bad shapes, non-finite values, centres outside the box,
+        or overlaps beyond ``overlap_tol``.
+    """
+    packing = Packing.from_dataset(read_dataset(path))
+    packing.validate(overlap_tol)
+    return packing
+
+
+# --- CALiPPSO .dat ------------------------------------------------------------------
+
+
+def read_dat(path: str | os.PathLike) -> Packing:
+    """Read a CALiPPSO.jl ``.dat`` configuration (monodisperse, unit periodic box).
+
+    Format: line 1 d, line 2 N, line 3 diameter, then N lines of d coordinates.
+    """
+    path = Path(path)
+    lines = [ln.split() for ln in path.read_text().splitlines() if ln.strip()]
+    try:
+        d, n, diameter = int(lines[0][0]), int(lines[1][0]), float(lines[2][0])
+        x = np.array([[float(v) for v in ln] for ln in lines[3:]], dtype=np.float64)
+    except (IndexError, ValueError) as exc:
+        raise ValueError(f"{path}: not a CALiPPSO .dat file ({exc})") from exc
+    if x.shape != (n, d):
+        raise ValueError(f"{path}: header says N={n}, d={d} but found positions of shape {x.shape}")
+    box = Box.cubic(d, 1.0)
+    return Packing(
+        position=box.wrap(x),
+        diameter=np.full(n, diameter),
+        box=box,
+        protocol="import-dat",
+        parameters={"source_file": path.name},
+        attrs={"length_unit": "side of the periodic box"},
+    )
+
+
+def write_dat(packing: Packing, path: str | os.PathLike) -> Path:
+    """Write a monodisperse packing in a unit cubic box as a CALiPPSO ``.dat`` file."""
+    if not np.allclose(packing.box.matrix, np.eye(packing.d)):
+        raise ValueError("the .dat format needs a unit cubic box")
+    if np.ptp(packing.diameter) != 0.0:
+        raise ValueError("the .dat format holds one diameter (monodisperse packings)")
+    header = f"{packing.d}\n{packing.n}\n{packing.diameter[0]!r}\n"
+    body = "\n".join(" ".join(repr(float(v)) for v in row) for row in packing.position)
+    return _atomic_text(Path(path), header + body + "\n")
+
+
+# --- extended XYZ (OVITO) -------------------------------------------------------------
+
+
+def write_xyz(packing: Packing, path: str | os.PathLike) -> Path:
+    """Write extended XYZ with a ``Radius`` column, readable by OVITO and ASE.
+
+    2D packings get a zero z column and a thin third lattice vector so viewers that
+    expect 3D still open them; d > 3 keeps only the first three coordinates and says
+    so in the comment line.
+    """
+    d = packing.d
+    h = np.zeros((3, 3))
+    k = min(d, 3)
+    h[:k, :k] = packing.box.matrix[:k, :k]
+    if d == 2:
+        h[2, 2] = float(packing.diameter.max())
+    pos = np.zeros((packing.n, 3))
+    pos[:, :k] = packing.box.wrap(packing.position)[:, :k]
+    lattice = " ".join(repr(float(v)) for v in h.T.ravel())
+    note = f' projection="first 3 of {d} coordinates"' if d > 3 else ""
+    lines = [
+        str(packing.n),
+        f'Lattice="{lattice}" Properties=species:S:1:pos:R:3:radius:R:1 pbc="T T {"T" if d > 2 else "F"}"'
+        f' phi={packing.packing_fraction!r}{note}',
+    ]
+    radius = 0.5 * packing.diameter
+    lines += [f"S {p[0]!r} {p[1]!r} {p[2]!r} {r!r}" for p, r in zip(pos.tolist(), radius.tolist())]
+    return _atomic_text(Path(path), "\n".join(lines) + "\n")
+
+
+def _atomic_text(path: Path, text: str) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path

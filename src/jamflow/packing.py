@@ -1,0 +1,368 @@
+"""The packing state and its xarray form.
+
+A :class:`Packing` holds centres, diameters and the box, plus what a stage may know
+about it: contacts (pairs ``i < j`` by particle identity), contact forces, a rattler
+mask, the pressure, and provenance (protocol, seed, the stage's parameters).
+Lengths are dimensionless; the unit is stated in ``length_unit`` (e.g. the side of
+the initial box).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field, replace
+from math import gamma, pi
+from typing import Any
+
+import numpy as np
+import xarray as xr
+from numpy.typing import ArrayLike, NDArray
+
+from .box import Box
+from .neighbors import PairList, pairs_within
+from .provenance import provenance_attrs
+from .tolerances import INSIDE_BOX_TOL, OVERLAP_TOL
+
+__all__ = [
+    "Packing",
+    "OverlapError",
+    "sphere_volume",
+    "near_pairs",
+    "max_overlap",
+]
+
+
+class OverlapError(ValueError):
+    """A hard-sphere packing has pairs overlapping beyond the tolerance."""
+
+
+def sphere_volume(d: int, diameter: ArrayLike) -> NDArray[np.float64]:
+    """Volume of d-dimensional balls of the given diameters [length^d]."""
+    r = 0.5 * np.asarray(diameter, dtype=np.float64)
+    return pi ** (d / 2) / gamma(d / 2 + 1) * r**d
+
+
+@dataclass(frozen=True, eq=False)
+class Packing:
+    """State of N spheres in a periodic box.
+
+    Attributes
+    ----------
+    position : ndarray, shape (N, d)
+        Centres [length].
+    diameter : ndarray, shape (N,)
+        Diameters [length], all > 0.
+    box : Box
+        Periodic, possibly sheared box.
+    contacts : ndarray of int64, shape (Nc, 2) or None
+        Contact pairs by particle identity, each row ``i < j``, rows sorted.
+    force : ndarray, shape (Nc,) or None
+        Contact force magnitudes (positive = repulsive) in the units of the
+        producing stage (``force_unit``).
+    rattler : ndarray of bool, shape (N,) or None
+        Particles outside the rigid backbone.
+    pressure : float or None
+        Reduced pressure if the producing stage knows it.
+    protocol : str
+        Chain of stages that produced the packing, e.g. ``"random>ls>calippso"``.
+    seed : int or None
+        Seed of the random choices of the producing chain.
+    parameters : dict
+        The producing stage's full parameters (stored as JSON).
+    attrs : dict
+        Further scalar attributes of the producing stage (stored verbatim).
+    """
+
+    position: NDArray[np.float64]
+    diameter: NDArray[np.float64]
+    box: Box
+    contacts: NDArray[np.int64] | None = None
+    force: NDArray[np.float64] | None = None
+    rattler: NDArray[np.bool_] | None = None
+    pressure: float | None = None
+    protocol: str = "unknown"
+    seed: int | None = None
+    parameters: dict[str, Any] = field(default_factory=dict)
+    attrs: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        x = np.array(self.position, dtype=np.float64)
+        D = np.array(self.diameter, dtype=np.float64)
+        if x.ndim != 2:
+            raise ValueError(f"position must have shape (N, d), got {x.shape}")
+        n, d = x.shape
+        if d != self.box.d:
+            raise ValueError(f"position has d={d} but the box has d={self.box.d}")
+        if n < 1:
+            raise ValueError("a packing needs at least one particle")
+        if D.shape != (n,):
+            raise ValueError(f"diameter must have shape ({n},), got {D.shape}")
+        if not np.all(np.isfinite(x)):
+            raise ValueError("position contains NaN or infinite values")
+        if not np.all(np.isfinite(D)) or np.any(D <= 0.0):
+            raise ValueError("every diameter must be finite and > 0")
+        if D.max() >= 0.5 * float(np.min(self.box.widths)):
+            raise ValueError(
+                f"largest diameter {D.max():.6g} must be below half the smallest box width "
+                f"({0.5 * float(np.min(self.box.widths)):.6g}); use more particles"
+            )
+        object.__setattr__(self, "position", x)
+        object.__setattr__(self, "diameter", D)
+        if self.contacts is not None:
+            c = np.asarray(self.contacts, dtype=np.int64).reshape(-1, 2)
+            if np.any(c[:, 0] >= c[:, 1]) or np.any(c < 0) or np.any(c >= n):
+                raise ValueError("contacts must be pairs i < j of valid particle indices")
+            order = np.lexsort((c[:, 1], c[:, 0]))
+            c = c[order]
+            if len(c) > 1 and np.any(np.all(c[1:] == c[:-1], axis=1)):
+                raise ValueError("contacts contain a duplicated pair")
+            object.__setattr__(self, "contacts", c)
+            if self.force is not None:
+                f = np.asarray(self.force, dtype=np.float64)
+                if f.shape != (len(c),):
+                    raise ValueError(f"force must have shape ({len(c)},), got {f.shape}")
+                if not np.all(np.isfinite(f)):
+                    raise ValueError("force contains NaN or infinite values")
+                object.__setattr__(self, "force", f[order])
+        elif self.force is not None:
+            raise ValueError("forces given without contacts")
+        if self.rattler is not None:
+            r = np.asarray(self.rattler, dtype=bool)
+            if r.shape != (n,):
+                raise ValueError(f"rattler must have shape ({n},), got {r.shape}")
+            object.__setattr__(self, "rattler", r)
+
+    # derived quantities -------------------------------------------------------------
+    @property
+    def n(self) -> int:
+        """Number of particles N."""
+        return self.position.shape[0]
+
+    @property
+    def d(self) -> int:
+        """Spatial dimension d."""
+        return self.position.shape[1]
+
+    @property
+    def packing_fraction(self) -> float:
+        """Sum of particle volumes over box volume (dimensionless)."""
+        return float(sphere_volume(self.d, self.diameter).sum() / self.box.volume)
+
+    def sigma(self, i: ArrayLike, j: ArrayLike) -> NDArray[np.float64]:
+        """Contact distances ``(D_i + D_j) / 2`` for index arrays [length]."""
+        return 0.5 * (self.diameter[np.asarray(i)] + self.diameter[np.asarray(j)])
+
+    def contact_vectors(self) -> NDArray[np.float64]:
+        """Minimum-image ``x_j - x_i`` for every contact, shape (Nc, d) [length]."""
+        if self.contacts is None:
+            raise ValueError("packing has no contacts")
+        c = self.contacts
+        return self.box.minimum_image(self.position[c[:, 1]] - self.position[c[:, 0]])
+
+    def wrapped(self) -> "Packing":
+        """Same packing with centres mapped into the primary cell."""
+        return replace(self, position=self.box.wrap(self.position))
+
+    def evolve(self, **changes: Any) -> "Packing":
+        """Copy with fields replaced (``dataclasses.replace``)."""
+        return replace(self, **changes)
+
+    # validation ---------------------------------------------------------------------
+    def validate(self, overlap_tol: float | None = OVERLAP_TOL) -> None:
+        """Check centres lie in the box and no pair overlaps beyond ``overlap_tol``.
+
+        Parameters
+        ----------
+        overlap_tol : float or None
+            Largest accepted relative overlap ``(sigma_ij - r) / sigma_ij``; ``None``
+            skips the check (soft packings).
+
+        Raises
+        ------
+        ValueError
+            Centres outside the primary cell.
+        OverlapError
+            Pairs overlapping beyond the tolerance, with the worst ones named.
+        """
+        inside = self.box.contains(self.position, INSIDE_BOX_TOL)
+        if not np.all(inside):
+            bad = np.flatnonzero(~inside)
+            raise ValueError(f"{bad.size} particle(s) lie outside the box, e.g. index {bad[0]}")
+        if overlap_tol is None:
+            return
+        pairs, h = near_pairs(self, 0.0)
+        bad = -h > overlap_tol
+        if np.any(bad):
+            worst = np.argsort(h)[: min(3, int(bad.sum()))]
+            named = ", ".join(f"({pairs.i[k]}, {pairs.j[k]}): {-h[k]:.3g}" for k in worst)
+            raise OverlapError(
+                f"{int(bad.sum())} pair(s) overlap by more than {overlap_tol:g} (relative); "
+                f"worst {named}"
+            )
+
+    # xarray form --------------------------------------------------------------------
+    def to_dataset(self, stage_parameters: dict[str, Any] | None = None) -> xr.Dataset:
+        """Dataset following DESIGN.md (units, long names, provenance)."""
+        return packing_to_dataset(self, stage_parameters)
+
+    @classmethod
+    def from_dataset(cls, ds: xr.Dataset) -> "Packing":
+        """Inverse of :meth:`to_dataset` (no overlap validation; see ``io``)."""
+        return packing_from_dataset(ds)
+
+
+def near_pairs(packing: Packing, max_gap: float) -> tuple[PairList, NDArray[np.float64]]:
+    """Pairs with relative gap ``h = r / sigma_ij - 1`` at most ``max_gap``.
+
+    Parameters
+    ----------
+    packing : Packing
+    max_gap : float
+        Largest relative gap kept (dimensionless); negative gaps are overlaps.
+
+    Returns
+    -------
+    pairs : PairList
+    h : ndarray, shape (P,)
+        Relative gaps of the returned pairs.
+    """
+    cutoff = float(packing.diameter.max()) * (1.0 + max_gap)
+    pairs = pairs_within(packing.position, packing.box, cutoff)
+    h = pairs.distance / packing.sigma(pairs.i, pairs.j) - 1.0
+    keep = h <= max_gap
+    return pairs.select(keep), h[keep]
+
+
+def max_overlap(packing: Packing) -> tuple[float, float]:
+    """Largest overlap ``sigma_ij - r`` [length] and its relative value (0 if none)."""
+    pairs, h = near_pairs(packing, 0.0)
+    if len(h) == 0:
+        return 0.0, 0.0
+    k = int(np.argmin(h))
+    rel = max(0.0, -float(h[k]))
+    return rel * float(packing.sigma(pairs.i[k], pairs.j[k])), rel
+
+
+# --- dataset conversion -----------------------------------------------------------
+
+_LENGTH_COMMENT = "dimensionless; the unit length is given by the global attribute length_unit"
+
+
+def packing_to_dataset(p: Packing, stage_parameters: dict[str, Any] | None = None) -> xr.Dataset:
+    """Convert a packing to an ``xarray.Dataset`` (see :class:`Packing`)."""
+    params = dict(p.parameters if stage_parameters is None else stage_parameters)
+    data_vars: dict[str, Any] = {
+        "position": (
+            ("particle", "spatial"),
+            p.position,
+            {"units": "1", "long_name": "particle centre position", "comment": _LENGTH_COMMENT},
+        ),
+        "diameter": (
+            ("particle",),
+            p.diameter,
+            {"units": "1", "long_name": "particle diameter", "comment": _LENGTH_COMMENT},
+        ),
+        "box": (
+            ("spatial", "lattice_vector"),
+            p.box.matrix,
+            {
+                "units": "1",
+                "long_name": "box lattice vectors as columns (upper triangular; tilt = Lees-Edwards shear)",
+                "comment": _LENGTH_COMMENT,
+            },
+        ),
+    }
+    if p.contacts is not None:
+        data_vars["contact_i"] = (
+            ("contact",),
+            p.contacts[:, 0],
+            {"units": "1", "long_name": "index of the first particle of a contact (i < j)"},
+        )
+        data_vars["contact_j"] = (
+            ("contact",),
+            p.contacts[:, 1],
+            {"units": "1", "long_name": "index of the second particle of a contact (i < j)"},
+        )
+    if p.force is not None:
+        data_vars["force"] = (
+            ("contact",),
+            p.force,
+            {
+                "units": "1",
+                "long_name": "contact force magnitude (positive = repulsive)",
+                "comment": "in the force unit of the producing stage, global attribute force_unit",
+            },
+        )
+    if p.rattler is not None:
+        data_vars["rattler"] = (
+            ("particle",),
+            p.rattler.astype(np.int8),
+            {
+                "units": "1",
+                "long_name": "rattler flag (1 = outside the rigid backbone)",
+                "flag_values": np.array([0, 1], dtype=np.int8),
+                "flag_meanings": "backbone rattler",
+            },
+        )
+    attrs: dict[str, Any] = {
+        "length_unit": "box side of the initial configuration",
+        "force_unit": "stage-specific",
+    }
+    attrs.update(p.attrs)
+    attrs.update(
+        {
+            "d": p.d,
+            "N": p.n,
+            "packing_fraction": p.packing_fraction,
+            "pressure": np.nan if p.pressure is None else float(p.pressure),
+            "protocol": p.protocol,
+            "seed": -1 if p.seed is None else int(p.seed),
+            "parameters": json.dumps(params, sort_keys=True, default=_json_default),
+        }
+    )
+    attrs.update(provenance_attrs(title=f"jamflow packing ({p.protocol})"))
+    return xr.Dataset(data_vars=data_vars, attrs=attrs)
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    raise TypeError(f"cannot store {type(obj).__name__} in parameters JSON")
+
+
+_RESERVED = {
+    "d", "N", "packing_fraction", "pressure", "protocol", "seed", "parameters",
+    "Conventions", "title", "history", "source", "jamflow_version", "git_sha", "created",
+}
+
+
+def packing_from_dataset(ds: xr.Dataset) -> Packing:
+    """Build a :class:`Packing` from a dataset written by :func:`packing_to_dataset`."""
+    missing = [v for v in ("position", "diameter", "box") if v not in ds]
+    if missing:
+        raise ValueError(f"dataset is not a packing: missing variable(s) {', '.join(missing)}")
+    contacts = force = rattler = None
+    if "contact_i" in ds:
+        contacts = np.stack([ds["contact_i"].values, ds["contact_j"].values], axis=1)
+        if "force" in ds:
+            force = ds["force"].values
+    if "rattler" in ds:
+        rattler = ds["rattler"].values.astype(bool)
+    pressure = ds.attrs.get("pressure", np.nan)
+    seed = int(ds.attrs.get("seed", -1))
+    extra = {k: v for k, v in ds.attrs.items() if k not in _RESERVED}
+    return Packing(
+        position=ds["position"].values,
+        diameter=ds["diameter"].values,
+        box=Box(ds["box"].values),
+        contacts=contacts,
+        force=force,
+        rattler=rattler,
+        pressure=None if pressure is None or not np.isfinite(pressure) else float(pressure),
+        protocol=str(ds.attrs.get("protocol", "unknown")),
+        seed=None if seed < 0 else seed,
+        parameters=json.loads(ds.attrs.get("parameters", "{}")),
+        attrs=extra,
+    )
