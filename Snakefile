@@ -1,0 +1,28 @@
+# jamflow workflow: a scene (config/*.yaml) names a system, a protocol chain, analyses and
+# figures; this file only validates the scene and includes the stages.
+from snakemake.utils import min_version, validate
+
+min_version("9.0")
+
+
+# The default scene, unless a scene is given with --configfile (scenes are not merged
+# into the default: a scene file is complete on its own).
+if not config:
+
+    configfile: "config/config.yaml"
+
+
+
+validate(config, "workflow/schemas/config.schema.yaml")
+
+
+include: "workflow/rules/common.smk"
+include: "workflow/rules/pack.smk"
+include: "workflow/rules/analysis.smk"
+include: "workflow/rules/figures.smk"
+
+
+rule all:
+    input:
+        scene_targets(),
+    default_target: True

@@ -1,0 +1,35 @@
+# Packing stages: a source (init or import) followed by the scene's chain.
+
+
+rule init:
+    output:
+        packing("{sample}", "init"),
+    log:
+        f"{LOGS}/init/{{sample}}.log",
+    benchmark:
+        f"{BENCH}/init/{{sample}}.tsv"
+    params:
+        seed=seed_of,
+        system=config.get("system", {}),
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow init {output} --d {params.system[d]} --n {params.system[n]}"
+        " --phi {params.system[phi]} --dispersity {params.system[dispersity]}"
+        " --ratio {params.system[ratio]} --fraction {params.system[fraction]}"
+        " --width {params.system[width]} --seed {params.seed} --quiet > {log} 2>&1"
+
+
+rule import_dat:
+    input:
+        lambda wildcards: config["import"][wildcards.sample],
+    output:
+        packing("{sample}", "import"),
+    log:
+        f"{LOGS}/import/{{sample}}.log",
+    benchmark:
+        f"{BENCH}/import/{{sample}}.tsv"
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow import-dat {input} {output} --quiet > {log} 2>&1"
