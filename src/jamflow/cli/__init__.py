@@ -12,6 +12,7 @@ import importlib
 import sys
 from collections.abc import Sequence
 
+from ..presets import preset_options
 from ..provenance import jamflow_version
 
 #: Topic modules of this package that contribute subcommands.
@@ -19,7 +20,10 @@ COMMAND_MODULES: tuple[str, ...] = ("packings",)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The full argument parser with every registered subcommand."""
+    """The full argument parser with every registered subcommand.
+
+    The subcommand parsers are kept in ``parser.subcommands`` (name -> parser).
+    """
     parser = argparse.ArgumentParser(
         prog="jamflow",
         description="Jammed packings of frictionless hard spheres: generate, drive, certify, analyse.",
@@ -28,13 +32,20 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMAND_MODULES:
         importlib.import_module(f"{__name__}.{name}").register(sub)
+    parser.subcommands = dict(sub.choices)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``jamflow`` console script."""
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
     try:
+        preset = getattr(args, "preset", "default")
+        if preset != "default":
+            # a preset changes the defaults; options given explicitly still win
+            parser.subcommands[args.command].set_defaults(**preset_options(args.command, preset))
+            args = parser.parse_args(argv)
         return int(args.handler(args) or 0)
     except (ValueError, FileNotFoundError, RuntimeError, OSError) as exc:
         print(f"jamflow {args.command}: error: {exc}", file=sys.stderr)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-__all__ = ["add_command", "add_quiet", "stage_parameters"]
+__all__ = ["add_command", "add_quiet", "add_preset", "stage_parameters"]
 
 
 def add_command(sub: Any, name: str, handler: Any, help: str, description: str | None = None) -> argparse.ArgumentParser:
@@ -18,6 +18,16 @@ def add_command(sub: Any, name: str, handler: Any, help: str, description: str |
 def add_quiet(parser: argparse.ArgumentParser) -> None:
     """``--quiet``: no progress bars."""
     parser.add_argument("--quiet", action="store_true", help="no progress bars or progress messages")
+
+
+def add_preset(parser: argparse.ArgumentParser) -> None:
+    """``--preset fast|default|publication``; explicit options override the preset."""
+    from ..presets import PRESET_NAMES
+
+    parser.add_argument(
+        "--preset", choices=PRESET_NAMES, default="default",
+        help="accuracy preset (see README); explicit options override it",
+    )
 
 
 def stage_parameters(args: argparse.Namespace, *exclude: str) -> dict[str, Any]:
