@@ -12,7 +12,6 @@ search runs on a basis whose tilts are reduced to ``|h[i, j]| <= h[i, i] / 2``.
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -151,9 +150,10 @@ class Box:
     def minimum_image(self, dx: ArrayLike) -> NDArray[np.float64]:
         """Shortest periodic image of displacement vectors, shape (..., d) [length].
 
-        Exact for any vector and any strain: after sequential rounding in the
-        reduced basis, the 3^d neighbouring lattice translations are searched
-        (orthogonal boxes need only the rounding).
+        Exact for any vector and any strain. Sequential rounding in the reduced
+        basis (last axis first) already gives the shortest image whenever the result
+        is shorter than half the smallest width; the remaining vectors get an exact
+        closest-lattice-point search (see :func:`_closest_image`).
         """
         dx = np.asarray(dx, dtype=np.float64)
         if self.is_orthogonal:
@@ -161,14 +161,11 @@ class Box:
             return dx - L * np.round(dx / L)
         red = self.reduced
         out = red._round_upper_triangular(dx)
-        best = np.einsum("...k,...k->...", out, out)
-        for n in _unit_offsets(self.d):
-            cand = out - red.matrix @ n
-            dist = np.einsum("...k,...k->...", cand, cand)
-            closer = dist < best
-            out = np.where(closer[..., None], cand, out)
-            best = np.where(closer, dist, best)
-        return out
+        flat = out.reshape(-1, self.d)
+        far = np.einsum("pk,pk->p", flat, flat) >= (0.5 * float(np.min(self.widths))) ** 2
+        if np.any(far):
+            flat[far] = _closest_image(flat[far], red.matrix)
+        return flat.reshape(out.shape)
 
     def _round_upper_triangular(self, dx: NDArray[np.float64]) -> NDArray[np.float64]:
         """Lees–Edwards style rounding: last axis first, subtracting whole columns."""
@@ -204,6 +201,34 @@ class Box:
         return hash(self.matrix.tobytes())
 
 
-def _unit_offsets(d: int) -> list[NDArray[np.float64]]:
-    """All nonzero integer vectors in {-1, 0, 1}^d."""
-    return [np.array(n, dtype=np.float64) for n in itertools.product((-1, 0, 1), repeat=d) if any(n)]
+def _closest_image(y: NDArray[np.float64], h: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Shortest vectors ``y - h n`` over integer ``n`` (sphere decoding), shape (M, d).
+
+    For upper-triangular ``h`` the squared norm of ``y - h n`` is a sum of terms
+    ``(r_k - h[k, k] n_k)^2`` in which ``r_k`` depends only on ``n_j``, ``j > k``.
+    Enumerating ``n_k`` from the last axis down, keeping every partial choice whose
+    partial norm stays within ``|y|``, visits every lattice point in the ball of
+    radius ``|y|`` around ``y`` (``n = 0`` among them) and nothing else
+    (Fincke–Pohst enumeration); the shortest candidate per vector is returned.
+    """
+    m, d = y.shape
+    radius2 = np.einsum("pk,pk->p", y, y) * (1.0 + 1e-12)
+    owner = np.arange(m)
+    res = y.copy()
+    acc = np.zeros(m)
+    for k in range(d - 1, -1, -1):
+        slack = np.sqrt(np.maximum(radius2[owner] - acc, 0.0))
+        lo = np.ceil((res[:, k] - slack) / h[k, k]).astype(np.int64)
+        hi = np.floor((res[:, k] + slack) / h[k, k]).astype(np.int64)
+        count = np.maximum(hi - lo + 1, 0)
+        parent = np.repeat(np.arange(len(owner)), count)
+        start = np.cumsum(count) - count
+        n_k = lo[parent] + np.arange(len(parent)) - start[parent]
+        owner, res = owner[parent], res[parent] - n_k[:, None] * h[:, k]
+        acc = acc[parent] + res[:, k] ** 2
+    best = np.full(m, np.inf)
+    np.minimum.at(best, owner, acc)
+    pick = np.flatnonzero(acc == best[owner])
+    out = y.copy()
+    out[owner[pick]] = res[pick]
+    return out
