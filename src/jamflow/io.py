@@ -155,7 +155,7 @@ def write_dat(packing: Packing, path: str | os.PathLike) -> Path:
         raise ValueError("the .dat format needs a unit cubic box")
     if np.ptp(packing.diameter) != 0.0:
         raise ValueError("the .dat format holds one diameter (monodisperse packings)")
-    header = f"{packing.d}\n{packing.n}\n{packing.diameter[0]!r}\n"
+    header = f"{packing.d}\n{packing.n}\n{float(packing.diameter[0])!r}\n"
     body = "\n".join(" ".join(repr(float(v)) for v in row) for row in packing.position)
     return _atomic_text(Path(path), header + body + "\n")
 
