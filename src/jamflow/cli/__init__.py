@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+import typing
 from collections.abc import Sequence
 
 from ..presets import preset_options
@@ -19,12 +20,19 @@ from ..provenance import jamflow_version
 COMMAND_MODULES: tuple[str, ...] = ("packings",)
 
 
+class _Parser(argparse.ArgumentParser):
+    """Reports usage errors as one line (``prog: error: message``) with exit code 2."""
+
+    def error(self, message: str) -> typing.NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The full argument parser with every registered subcommand.
 
     The subcommand parsers are kept in ``parser.subcommands`` (name -> parser).
     """
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="jamflow",
         description="Jammed packings of frictionless hard spheres: generate, drive, certify, analyse.",
     )
