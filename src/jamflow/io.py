@@ -69,7 +69,7 @@ def write_dataset(ds: xr.Dataset, path: str | os.PathLike) -> Path:
         for name, var in ds.data_vars.items()
         if var.dtype.kind in "biuf"
     }
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = _temporary(path)
     os.close(fd)
     try:
         ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=encoding)
@@ -192,7 +192,7 @@ def write_xyz(packing: Packing, path: str | os.PathLike) -> Path:
 
 def _atomic_text(path: Path, text: str) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = _temporary(path)
     try:
         with os.fdopen(fd, "w") as fh:
             fh.write(text)
@@ -204,3 +204,16 @@ def _atomic_text(path: Path, text: str) -> Path:
             os.unlink(tmp)
         raise
     return path
+
+
+def _temporary(path: Path) -> tuple[int, str]:
+    """Hidden temporary file beside ``path`` with the permissions a plain create gives.
+
+    ``mkstemp`` creates mode 0600; the renamed result would otherwise be unreadable
+    to the group (e.g. other users of a cluster project directory).
+    """
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.fchmod(fd, 0o666 & ~umask)
+    return fd, tmp
