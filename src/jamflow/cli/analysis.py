@@ -1,0 +1,191 @@
+"""Analysis subcommands: gaps, forces, overlap, overlap-series, rdf, flow-summary, plot."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from tqdm import tqdm
+
+from ..analysis.flow import flow_summary
+from ..analysis.forces import force_distribution
+from ..analysis.gaps import gap_distribution
+from ..analysis.overlap import overlap_dataset, overlap_series
+from ..analysis.structure import structure_dataset
+from ..io import read_dat, read_dataset, read_packing, write_dataset
+from ..packing import Packing
+from .common import add_command, add_quiet, stage_parameters
+from .packings import add_overlap_option, overlap_tol
+
+
+#: ``jamflow plot`` kinds and what each takes as input (matplotlib is imported only when plotting).
+PLOT_KINDS: dict[str, str] = {
+    "packing": "one packing netCDF",
+    "gaps": "one or more `jamflow gaps` outputs",
+    "forces": "one `jamflow forces` output",
+    "rdf": "one or more `jamflow rdf` outputs",
+    "stress-strain": "one or more flow time series or `jamflow flow-summary` outputs",
+    "phi-kappa": "one flow time series or `jamflow flow-summary` output",
+    "overlap": "one or more `jamflow overlap-series` outputs (one per sample)",
+}
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = add_command(sub, "gaps", _gaps, "gap distribution p(h) over samples with a power-law fit",
+                    "Gap distribution p(h), h = r/sigma_ij - 1, of non-contact near pairs on logarithmic bins, "
+                    "averaged over samples (one file = one sample), with p(h) ~ h^-gamma fitted on a window.")
+    p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc", help="input packings (.nc or .dat), then the output")
+    p.add_argument("--max-gap", type=float, default=0.1, help="largest gap binned (default 0.1)")
+    p.add_argument("--min-gap", type=float, default=1e-13, help="smallest gap binned (default 1e-13)")
+    p.add_argument("--bins-per-decade", type=int, default=5, help="logarithmic bins per decade (default 5)")
+    p.add_argument("--fit-min", type=float, default=1e-5, help="lower end of the fit window (default 1e-5)")
+    p.add_argument("--fit-max", type=float, default=1e-2, help="upper end of the fit window (default 1e-2)")
+    p.add_argument("--gap-tol", type=float, default=None,
+                   help="pairs with h <= GAP_TOL are contacts; default: the packing's own contacts, "
+                        "else jamflow.tolerances.CONTACT_GAP_TOL")
+    add_overlap_option(p)
+    add_quiet(p)
+
+    p = add_command(sub, "forces", _forces, "contact-force distribution P(f/<f>), tail exponent, bucklers")
+    p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc", help="packings with forces, then the output")
+    p.add_argument("--f-max", type=float, default=6.0, help="upper end of the bins, in mean forces (default 6)")
+    p.add_argument("--linear-bins", type=int, default=60, help="linear bins on [0, f_max] (default 60)")
+    p.add_argument("--log-min", type=float, default=1e-6, help="lower end of the log bins (default 1e-6)")
+    p.add_argument("--bins-per-decade", type=int, default=5, help="log bins per decade (default 5)")
+    p.add_argument("--fit-min", type=float, default=1e-3, help="lower end of the tail fit window (default 1e-3)")
+    p.add_argument("--fit-max", type=float, default=1e-1, help="upper end of the tail fit window (default 1e-1)")
+    add_overlap_option(p)
+    add_quiet(p)
+
+    p = add_command(sub, "overlap", _overlap, "contact-network overlap Q(A, B) = |C_A ∩ C_B| / N_c(B)")
+    p.add_argument("a", help="packing A")
+    p.add_argument("b", help="reference packing B")
+    p.add_argument("out", help="output netCDF")
+    p.add_argument("--gap-tol", type=float, default=None, help="contacts from h <= GAP_TOL instead of the stored ones")
+    add_overlap_option(p)
+
+    p = add_command(sub, "overlap-series", _overlap_series,
+                    "Q(p_tar) and |Delta phi_J| of one sample against its largest p_tar")
+    p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc", help="jammed packings of one sample, then the output")
+    p.add_argument("--p-target", type=float, nargs="+", required=True, help="target pressure of each input, same order")
+    p.add_argument("--gap-tol", type=float, default=None, help="contacts from h <= GAP_TOL instead of the stored ones")
+    add_overlap_option(p)
+
+    p = add_command(sub, "rdf", _rdf, "radial distribution g(r) and crystallinity (2D psi6, 3D Q6)")
+    p.add_argument("packing", help="input packing (.nc or .dat)")
+    p.add_argument("out", help="output netCDF")
+    p.add_argument("--r-max", type=float, default=3.0, help="largest r in mean diameters (default 3)")
+    p.add_argument("--bins", type=int, default=150, help="number of r bins (default 150)")
+    add_overlap_option(p)
+
+    p = add_command(sub, "flow-summary", _flow_summary,
+                    "stress-strain, friction, steady-state averages, contact lifetimes, event rates of a flow run")
+    p.add_argument("run", help="flow time series netCDF")
+    p.add_argument("out", help="output netCDF")
+    p.add_argument("--strain-min", type=float, default=None, help="start of the steady-state window (default: mid run)")
+    p.add_argument("--strain-max", type=float, default=None, help="end of the steady-state window (default: end)")
+    p.add_argument("--blocks", type=int, default=10, help="blocks of the error estimate (default 10)")
+
+    p = add_command(sub, "plot", _plot, "draw a figure (writes OUT.png and OUT.pdf)",
+                    "Kinds: " + "; ".join(f"{k}: {v}" for k, v in PLOT_KINDS.items()))
+    p.add_argument("kind", choices=sorted(PLOT_KINDS), help="figure kind")
+    p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.png", help="inputs, then the output figure")
+    p.add_argument("--labels", nargs="+", default=None, help="legend label per input")
+    p.add_argument("--slab-axis", type=int, default=2, help="packing, d >= 3: axis normal to the drawn slab (default 2)")
+    add_overlap_option(p)
+
+
+def _split(paths: list[str], what: str) -> tuple[list[str], str]:
+    if len(paths) < 2:
+        raise ValueError(f"give at least one {what} and an output path")
+    return paths[:-1], paths[-1]
+
+
+def _load_packing(path: str, tol: float | None) -> Packing:
+    if Path(path).suffix == ".dat":
+        packing = read_dat(path)
+        packing.validate(tol)
+        return packing
+    return read_packing(path, tol)
+
+
+def _load_all(paths: list[str], tol: float | None, quiet: bool) -> list[Packing]:
+    return [_load_packing(p, tol) for p in tqdm(paths, desc="reading", disable=quiet or len(paths) < 2)]
+
+
+def _gaps(args: argparse.Namespace) -> int:
+    inputs, out = _split(args.paths, "packing")
+    ds = gap_distribution(_load_all(inputs, overlap_tol(args), args.quiet), args.max_gap, args.min_gap,
+                          args.bins_per_decade, args.fit_min, args.fit_max, args.gap_tol,
+                          stage_parameters(args, "paths") | {"inputs": inputs})
+    write_dataset(ds, out)
+    return 0
+
+
+def _forces(args: argparse.Namespace) -> int:
+    inputs, out = _split(args.paths, "packing")
+    ds = force_distribution(_load_all(inputs, overlap_tol(args), args.quiet), args.f_max, args.linear_bins,
+                            args.log_min, args.bins_per_decade, args.fit_min, args.fit_max,
+                            stage_parameters(args, "paths") | {"inputs": inputs})
+    write_dataset(ds, out)
+    return 0
+
+
+def _overlap(args: argparse.Namespace) -> int:
+    tol = overlap_tol(args)
+    ds = overlap_dataset(_load_packing(args.a, tol), _load_packing(args.b, tol), args.gap_tol,
+                         stage_parameters(args, "out"))
+    write_dataset(ds, args.out)
+    return 0
+
+
+def _overlap_series(args: argparse.Namespace) -> int:
+    inputs, out = _split(args.paths, "packing")
+    packings = _load_all(inputs, overlap_tol(args), True)
+    write_dataset(overlap_series(packings, args.p_target, args.gap_tol,
+                                 stage_parameters(args, "paths") | {"inputs": inputs}), out)
+    return 0
+
+
+def _rdf(args: argparse.Namespace) -> int:
+    packing = _load_packing(args.packing, overlap_tol(args))
+    write_dataset(structure_dataset(packing, args.r_max, args.bins, stage_parameters(args, "out")), args.out)
+    return 0
+
+
+def _flow_summary(args: argparse.Namespace) -> int:
+    ds = flow_summary(read_dataset(args.run), args.strain_min, args.strain_max, args.blocks,
+                      stage_parameters(args, "out"))
+    write_dataset(ds, args.out)
+    return 0
+
+
+def _plot(args: argparse.Namespace) -> int:
+    from .. import plots
+
+    inputs, out = _split(args.paths, "input")
+    if Path(out).suffix.lower() not in (".png", ".pdf"):
+        raise ValueError(f"output must end in .png (a .pdf is written beside it), got {out}")
+    if args.labels is not None and len(args.labels) != len(inputs):
+        raise ValueError(f"--labels needs one label per input ({len(inputs)}), got {len(args.labels)}")
+    single = {"packing", "forces", "phi-kappa"}
+    if args.kind in single and len(inputs) != 1:
+        raise ValueError(f"plot {args.kind} takes one input, got {len(inputs)}")
+    if args.kind == "packing":
+        fig = plots.plot_packing(_load_packing(inputs[0], overlap_tol(args)), args.slab_axis)
+    else:
+        data = [read_dataset(p) for p in inputs]
+        if args.kind == "gaps":
+            fig = plots.plot_gaps(data, args.labels)
+        elif args.kind == "forces":
+            fig = plots.plot_forces(data[0])
+        elif args.kind == "rdf":
+            fig = plots.plot_rdf(data, args.labels)
+        elif args.kind == "stress-strain":
+            fig = plots.plot_stress_strain(data, args.labels)
+        elif args.kind == "phi-kappa":
+            fig = plots.plot_phi_kappa(data[0])
+        else:
+            fig = plots.plot_overlap_series(data)
+    plots.save_figure(fig, out)
+    return 0

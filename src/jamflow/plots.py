@@ -1,0 +1,298 @@
+"""Figures: one function per figure, each returning a matplotlib ``Figure``.
+
+Figures are built on ``matplotlib.figure.Figure`` directly (no pyplot state, no GUI
+backend), so they render headless and in parallel jobs. :func:`save_figure`
+writes a PNG and a PDF next to each other. Axes are labelled with their units or
+"(dimensionless)"; lengths are in the packing's length unit.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+from matplotlib.collections import EllipseCollection, LineCollection
+from matplotlib.figure import Figure
+from matplotlib.patches import Polygon
+
+from .analysis.contacts import contact_network, find_rattlers
+from .analysis.forces import THETA_EXTENDED, THETA_LOCALISED
+from .analysis.gaps import MEAN_FIELD_GAP_EXPONENT
+from .packing import Packing
+
+__all__ = [
+    "save_figure",
+    "plot_packing",
+    "plot_gaps",
+    "plot_forces",
+    "plot_rdf",
+    "plot_stress_strain",
+    "plot_phi_kappa",
+    "plot_overlap_series",
+]
+
+_DL = "(dimensionless)"
+
+
+def save_figure(fig: Figure, path: str | os.PathLike, dpi: int = 150) -> tuple[Path, Path]:
+    """Write ``fig`` as ``<stem>.png`` and ``<stem>.pdf``; returns both paths."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    png, pdf = path.with_suffix(".png"), path.with_suffix(".pdf")
+    fig.savefig(png, dpi=dpi, bbox_inches="tight")
+    fig.savefig(pdf, bbox_inches="tight")
+    return png, pdf
+
+
+# --- packings -------------------------------------------------------------------------
+
+
+def plot_packing(packing: Packing, slab_axis: int = 2, title: str | None = None) -> Figure:
+    """Discs to scale in the (possibly sheared) box with the contact network.
+
+    2D: every disc, periodic images clipped to the box. d >= 3: the slab of
+    particles whose centre lies within one radius of the mid-plane of coordinate
+    ``slab_axis``, drawn as their cross-sections with that plane, projected on the
+    first two axes. Contacts are lines between centres, their width proportional
+    to the force when the packing has forces; rattlers are drawn in orange.
+    """
+    fig = Figure(figsize=(6.4, 6.4 * min(2.0, packing.box.lengths[1] / packing.box.lengths[0]) + 0.6))
+    ax = fig.add_subplot()
+    h = packing.box.matrix
+    x = packing.box.wrap(packing.position)
+    radius = 0.5 * packing.diameter
+    contacts = contact_network(packing)
+    rattler = packing.rattler if packing.rattler is not None else find_rattlers(packing.n, packing.d, contacts)
+    shown = np.ones(packing.n, dtype=bool)
+    if packing.d >= 3:
+        mid = 0.5 * h[slab_axis, slab_axis]
+        dz = x[:, slab_axis] - mid
+        shown = np.abs(dz) < radius
+        radius = np.sqrt(np.clip(radius**2 - dz**2, 0.0, None))
+    a1, a2 = h[:2, 0], h[:2, 1]
+    corners = np.array([[0.0, 0.0], a1, a1 + a2, a2])
+    clip = Polygon(corners, closed=True, facecolor="none", edgecolor="k", lw=1.2)
+    ax.add_patch(clip)
+    big = packing.diameter > np.median(packing.diameter) * (1 + 1e-9)
+    colours = np.where(rattler, "tab:orange", np.where(big, "#9ecae1", "#c6dbef"))
+    shifts = [i * a1 + j * a2 for i, j in itertools.product((-1, 0, 1), repeat=2)]
+    idx = np.flatnonzero(shown)
+    for s in shifts:
+        col = EllipseCollection(2 * radius[idx], 2 * radius[idx], 0.0, units="xy", offsets=x[idx, :2] + s,
+                                offset_transform=ax.transData, facecolors=colours[idx], edgecolors="#3b5b7a",
+                                linewidths=0.4)
+        col.set_clip_path(clip)
+        ax.add_collection(col)
+    if len(contacts):
+        ci, cj = contacts[:, 0], contacts[:, 1]
+        dx = packing.box.minimum_image(x[cj] - x[ci])
+        keep = shown[ci] & shown[cj]
+        if packing.force is not None and packing.contacts is not None and len(packing.force) == len(contacts):
+            f = packing.force
+            width = 3.0 * f / max(float(np.max(f)), 1e-300)
+            label = "contacts (width proportional to force)"
+        else:
+            width = np.full(len(contacts), 0.8)
+            label = "contacts"
+        seg = np.stack([x[ci, :2], x[ci, :2] + dx[:, :2]], axis=1)[keep]
+        for s in shifts:
+            lc = LineCollection(seg + s, linewidths=width[keep], colors="#8b0000", label=label if s is shifts[4] else None)
+            lc.set_clip_path(clip)
+            ax.add_collection(lc)
+    pad = 0.03 * max(packing.box.lengths[:2])
+    xs = corners[:, 0]
+    ax.set_xlim(xs.min() - pad, xs.max() + pad)
+    ax.set_ylim(-pad, corners[:, 1].max() + pad)
+    ax.set_aspect("equal")
+    unit = packing.attrs.get("length_unit", "length unit")
+    ax.set_xlabel(f"x [{unit}]")
+    ax.set_ylabel(f"y [{unit}]")
+    slab = "" if packing.d == 2 else f", slab |x_{slab_axis} - L/2| < D/2 ({int(shown.sum())} particles)"
+    n_r = int(np.sum(rattler))
+    ax.set_title(title or f"d={packing.d}, N={packing.n}, phi={packing.packing_fraction:.5f}, "
+                          f"{len(contacts)} contacts, {n_r} rattlers{slab}", fontsize=9)
+    if len(contacts):
+        ax.legend(loc="upper right", fontsize=8, framealpha=0.8)
+    return fig
+
+
+# --- distributions ----------------------------------------------------------------------
+
+
+def _labels(datasets: Sequence[xr.Dataset], labels: Sequence[str] | None) -> list[str]:
+    return list(labels) if labels else [f"{ds.attrs.get('n_samples', 1)} sample(s), d={ds.attrs.get('d', '?')}" for ds in datasets]
+
+
+def plot_gaps(datasets: Sequence[xr.Dataset], labels: Sequence[str] | None = None) -> Figure:
+    """Gap distributions (``jamflow gaps`` outputs) on log–log axes with fits (CALiPPSO Fig. 10)."""
+    fig = Figure(figsize=(6.4, 4.8))
+    ax = fig.add_subplot()
+    for ds, label in zip(datasets, _labels(datasets, labels)):
+        y, e = ds["gap_density"].values, ds["gap_density_err"].values
+        ok = y > 0
+        bars = ax.errorbar(ds["h"].values[ok], y[ok], yerr=np.minimum(e[ok], 0.999 * y[ok]), fmt="o", ms=3,
+                           capsize=2, label=label)
+        g, ge = ds.attrs.get("fit_exponent", np.nan), ds.attrs.get("fit_exponent_err", np.nan)
+        if np.isfinite(g):
+            hf = np.logspace(np.log10(ds.attrs["fit_min"]), np.log10(ds.attrs["fit_max"]), 20)
+            ax.plot(hf, ds.attrs["fit_prefactor"] * hf ** (-g), "-", color=bars[0].get_color(),
+                    label=f"fit: gamma = {g:.3f} ± {ge:.3f}")
+    h_all = np.concatenate([ds["h"].values[ds["gap_density"].values > 0] for ds in datasets])
+    if len(h_all):
+        ref = datasets[0]
+        y0 = ref["gap_density"].values
+        k = int(np.argmin(np.abs(np.log(ref["h"].values / 1e-2)) + np.where(y0 > 0, 0, np.inf)))
+        hh = np.logspace(np.log10(h_all.min()), np.log10(h_all.max()), 20)
+        ax.plot(hh, 0.5 * y0[k] * (hh / ref["h"].values[k]) ** (-MEAN_FIELD_GAP_EXPONENT), "k--", lw=1,
+                label=f"mean field h^-{MEAN_FIELD_GAP_EXPONENT}")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("relative gap h = r/sigma - 1 (dimensionless)")
+    ax.set_ylabel("p(h): neighbours per particle per unit h (dimensionless)")
+    ax.legend(fontsize=8)
+    ax.grid(True, which="major", alpha=0.3)
+    return fig
+
+
+def plot_forces(ds: xr.Dataset) -> Figure:
+    """Force distribution (``jamflow forces`` output): linear P(f) and log–log tails by population."""
+    fig = Figure(figsize=(10.5, 4.2))
+    ax1, ax2 = fig.subplots(1, 2)
+    ax1.errorbar(ds["f"].values, ds["P_linear"].values, yerr=ds["P_linear_err"].values, fmt="o-", ms=3, capsize=2,
+                 label=f"all backbone contacts ({ds.attrs.get('n_samples', 1)} sample(s))")
+    ax1.set_xlabel("f / <f> (dimensionless)")
+    ax1.set_ylabel("P(f / <f>) (dimensionless)")
+    ax1.set_yscale("log")
+    ax1.legend(fontsize=8)
+    x = ds["f_log"].values
+    for name, label in (("", "all"), ("_buckler", "contacts with a buckler"), ("_extended", "extended (no buckler)")):
+        y, e = ds[f"P_log{name}"].values, ds[f"P_log{name}_err"].values
+        ok = y > 0
+        th = ds.attrs.get(f"fit_exponent{name}", np.nan)
+        the = ds.attrs.get(f"fit_exponent{name}_err", np.nan)
+        fit = f", theta = {th:.2f} ± {the:.2f}" if np.isfinite(th) else ""
+        ax2.errorbar(x[ok], y[ok], yerr=np.minimum(e[ok], 0.999 * y[ok]), fmt="o", ms=3, capsize=2, label=label + fit)
+    lo = float(ds.attrs.get("fit_min", 1e-3))
+    xx = np.logspace(np.log10(x.min()), 0, 10)
+    ok = ds["P_log"].values > 0
+    if np.any(ok):
+        k = int(np.argmin(np.abs(np.log(x / max(lo, x[ok].min()))) + np.where(ok, 0, np.inf)))
+        y0 = ds["P_log"].values[k]
+        ax2.plot(xx, y0 * (xx / x[k]) ** THETA_EXTENDED, "k--", lw=1, label=f"f^{THETA_EXTENDED} (extended, mean field)")
+        ax2.plot(xx, y0 * (xx / x[k]) ** THETA_LOCALISED, "k:", lw=1, label=f"f^{THETA_LOCALISED} (localised)")
+    ax2.set_xscale("log")
+    ax2.set_yscale("log")
+    ax2.set_xlabel("f / <f> (dimensionless)")
+    ax2.set_ylabel("P(f / <f>) (dimensionless)")
+    ax2.legend(fontsize=7)
+    fig.suptitle(f"buckler fraction {ds.attrs.get('buckler_fraction', np.nan):.3f} of non-rattlers", fontsize=9)
+    return fig
+
+
+def plot_rdf(datasets: Sequence[xr.Dataset], labels: Sequence[str] | None = None) -> Figure:
+    """g(r) of ``jamflow rdf`` outputs, with the crystallinity numbers in the legend."""
+    fig = Figure(figsize=(6.4, 4.4))
+    ax = fig.add_subplot()
+    for k, ds in enumerate(datasets):
+        label = labels[k] if labels else f"d={ds.attrs.get('d')}, phi={ds.attrs.get('packing_fraction', np.nan):.4f}"
+        if "psi6_global" in ds.attrs:
+            label += f", |psi6| global {ds.attrs['psi6_global']:.3f}, local {ds.attrs['psi6_local_mean']:.3f}"
+        if "Q6_global" in ds.attrs:
+            label += f", Q6 {ds.attrs['Q6_global']:.3f}, crystal-like {ds.attrs['crystal_fraction']:.3f}"
+        ax.plot(ds["r"].values, ds["g"].values, "-", lw=1.2, label=label)
+    ax.axhline(1.0, color="grey", lw=0.8, ls=":")
+    ax.set_xlabel("r / mean diameter (dimensionless)")
+    ax.set_ylabel("g(r) (dimensionless)")
+    ax.legend(fontsize=7)
+    return fig
+
+
+# --- flow -----------------------------------------------------------------------------------
+
+
+def _window(ax, ds: xr.Dataset, name: str) -> None:
+    if "window_strain_min" in ds.attrs and f"mean_{name}" in ds.attrs:
+        lo, hi = ds.attrs["window_strain_min"], ds.attrs["window_strain_max"]
+        m, e = ds.attrs[f"mean_{name}"], ds.attrs[f"err_{name}"]
+        ax.axvspan(lo, hi, color="grey", alpha=0.12, label="steady-state window")
+        ax.hlines(m, lo, hi, colors="k", linestyles="--", lw=1, label=f"mean {m:.4g} ± {e:.2g}")
+
+
+def plot_stress_strain(datasets: Sequence[xr.Dataset], labels: Sequence[str] | None = None) -> Figure:
+    """Shear stress, pressure and friction against strain (Lerner et al. Figs. 4 and 6).
+
+    Accepts flow time series or ``jamflow flow-summary`` outputs (then the
+    steady-state window and means are drawn).
+    """
+    fig = Figure(figsize=(7.0, 7.5))
+    axes = fig.subplots(3, 1, sharex=True)
+    for k, ds in enumerate(datasets):
+        label = labels[k] if labels else f"run {k} ({ds.attrs.get('mode', 'flow')})"
+        s = ds["strain"].values
+        axes[0].plot(s, ds["shear_stress"].values, lw=0.8, label=label)
+        axes[1].plot(s, ds["pressure"].values, lw=0.8, label=label)
+        p = ds["pressure"].values
+        with np.errstate(divide="ignore", invalid="ignore"):
+            mu = ds["friction"].values if "friction" in ds else np.where(p != 0, ds["shear_stress"].values / p, np.nan)
+        axes[2].plot(s, mu, lw=0.8, label=label)
+    if len(datasets) == 1:
+        for ax, name in zip(axes, ("shear_stress", "pressure", "friction")):
+            _window(ax, datasets[0], name)
+    unit = datasets[0]["shear_stress"].attrs.get("units", "1")
+    unit = _DL if unit == "1" else f"[{unit}]"
+    axes[0].set_ylabel(f"shear stress sigma {unit}")
+    axes[1].set_ylabel(f"pressure p {unit}")
+    axes[2].set_ylabel(f"friction mu = sigma / p {_DL}")
+    axes[2].set_xlabel(f"shear strain gamma {_DL}")
+    for ax in axes:
+        ax.legend(fontsize=7)
+    return fig
+
+
+def plot_phi_kappa(ds: xr.Dataset) -> Figure:
+    """Packing fraction and compression-to-shear rate ratio kappa against strain (Lerner et al. Fig. 7)."""
+    fig = Figure(figsize=(7.0, 5.5))
+    ax1, ax2 = fig.subplots(2, 1, sharex=True)
+    s = ds["strain"].values
+    ax1.plot(s, ds["packing_fraction"].values, lw=0.9)
+    _window(ax1, ds, "packing_fraction")
+    ax1.set_ylabel(f"packing fraction phi {_DL}")
+    if "kappa" in ds and np.any(np.isfinite(ds["kappa"].values)):
+        ax2.plot(s, ds["kappa"].values, lw=0.9)
+        _window(ax2, ds, "kappa")
+        ax2.axhline(0.0, color="grey", lw=0.8, ls=":")
+    else:
+        ax2.text(0.5, 0.5, "kappa not defined (run not at fixed pressure)", ha="center", transform=ax2.transAxes)
+    ax2.set_ylabel(f"kappa (compression / shear rate) {_DL}")
+    ax2.set_xlabel(f"shear strain gamma {_DL}")
+    for ax in (ax1, ax2):
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
+    p = ds.attrs.get("mean_pressure")
+    fig.suptitle(f"mode {ds.attrs.get('mode', '?')}" + (f", <p> = {p:.4g}" if p is not None else ""), fontsize=9)
+    return fig
+
+
+def plot_overlap_series(datasets: Sequence[xr.Dataset]) -> Figure:
+    """1 - Q and |Delta phi_J| against p_target, mean and standard error over samples (CALiPPSO Fig. 3 c–f)."""
+    merged = xr.concat([ds[["one_minus_Q", "abs_delta_phi_J"]] for ds in datasets], dim="sample")
+    m = len(datasets)
+    fig = Figure(figsize=(6.4, 6.4))
+    axes = fig.subplots(2, 1, sharex=True)
+    x = merged["p_target"].values
+    for ax, name, ylabel in ((axes[0], "abs_delta_phi_J", f"|Delta phi_J| {_DL}"), (axes[1], "one_minus_Q", f"1 - Q {_DL}")):
+        y = merged[name].mean("sample").values
+        e = merged[name].std("sample", ddof=1).values / np.sqrt(m) if m > 1 else np.zeros_like(y)
+        ok = x < x.max()
+        ax.errorbar(x[ok], y[ok], yerr=e[ok], fmt="o-", ms=4, capsize=2, label=f"{m} sample(s)")
+        ax.set_xscale("log")
+        if np.any(y[ok] > 0):
+            ax.set_yscale("symlog", linthresh=max(1e-12, float(np.min(y[ok][y[ok] > 0]))))
+        ax.set_ylabel(ylabel)
+        ax.legend(fontsize=8)
+    axes[1].set_xlabel(f"target pressure p_tar {_DL}")
+    return fig
