@@ -1,0 +1,115 @@
+"""Neighbour search against O(N^2) brute force in periodic and sheared boxes, d = 2..5."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from jamflow.box import Box
+from jamflow.neighbors import PairList, pairs_within, pairs_within_brute_force
+
+
+def _box(d: int, strain: float, rng: np.random.Generator) -> Box:
+    """Box with sides 0.8..1.25 and, for nonzero strain, every tilt h[i, j] = strain * h[j, j]."""
+    h = np.diag(rng.uniform(0.8, 1.25, d))
+    i, j = np.triu_indices(d, 1)
+    h[i, j] = strain * h[j, j] * rng.uniform(0.5, 1.0, len(i))
+    return Box(h)
+
+
+def _brute_pairs(x: np.ndarray, box: Box, cutoff: float) -> tuple[np.ndarray, np.ndarray]:
+    """Independent of the k-d trees: every pair, minimum image by the box."""
+    i, j = np.triu_indices(len(x), k=1)
+    dx = box.minimum_image(x[j] - x[i])
+    keep = np.linalg.norm(dx, axis=1) <= cutoff
+    return np.stack([i[keep], j[keep]], axis=1), dx[keep]
+
+
+def _assert_same(pl: PairList, x: np.ndarray, box: Box, cutoff: float) -> None:
+    ref, ref_dx = _brute_pairs(x, box, cutoff)
+    got = np.stack([pl.i, pl.j], axis=1)
+    assert pl.i.dtype == np.int64 and pl.j.dtype == np.int64
+    assert np.all(pl.i < pl.j)
+    assert np.array_equal(np.lexsort((pl.j, pl.i)), np.arange(len(pl)))
+    np.testing.assert_array_equal(got, ref)
+    np.testing.assert_allclose(pl.dx, ref_dx, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(pl.distance, np.linalg.norm(ref_dx, axis=1), rtol=0, atol=1e-12)
+    assert np.all(pl.distance <= cutoff)
+
+
+@pytest.mark.parametrize("d", [2, 3, 4, 5])
+@pytest.mark.parametrize("strain", [0.0, 0.3, -0.5, 7.7, 50.0])
+@pytest.mark.parametrize("cutoff_fraction", [0.05, 0.3, 0.499])
+def test_pairs_match_brute_force(d: int, strain: float, cutoff_fraction: float) -> None:
+    rng = np.random.default_rng([d, int(strain * 10) % 1000, int(cutoff_fraction * 1000)])
+    box = _box(d, strain, rng)
+    n = 300
+    # unwrapped centres: some far outside the primary cell
+    x = box.to_cartesian(rng.uniform(-3.0, 4.0, (n, d)))
+    cutoff = cutoff_fraction * float(np.min(box.widths))
+    pl = pairs_within(x, box, cutoff)
+    _assert_same(pl, x, box, cutoff)
+    if cutoff_fraction > 0.1:
+        assert len(pl) > 0
+    lib_brute = pairs_within_brute_force(x, box, cutoff)
+    np.testing.assert_array_equal(lib_brute.i, pl.i)
+    np.testing.assert_array_equal(lib_brute.j, pl.j)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_cutoff_just_below_half_the_width_in_a_tiny_box(d: int) -> None:
+    rng = np.random.default_rng(5)
+    for box in (Box.cubic(d, 0.01), Box.lees_edwards(np.full(d, 0.01), 12.25)):
+        x = box.to_cartesian(rng.random((40, d)))
+        cutoff = 0.5 * float(np.min(box.widths)) * (1 - 1e-9)
+        _assert_same(pairs_within(x, box, cutoff), x, box, cutoff)
+
+
+def test_few_particles() -> None:
+    box = Box.lees_edwards([1.0, 1.0], 0.4)
+    for n in (0, 1):
+        pl = pairs_within(np.zeros((n, 2)), box, 0.3)
+        assert len(pl) == 0 and pl.dx.shape == (0, 2)
+    # two particles across the sheared boundary: the image through the top face is
+    # displaced by the tilt
+    x = np.array([[0.55, 0.98], [0.15, 0.03]])
+    pl = pairs_within(x, box, 0.2)
+    assert len(pl) == 1
+    np.testing.assert_allclose(pl.dx[0], [0.15 + 0.4 - 0.55, 0.03 + 1.0 - 0.98], atol=1e-12)
+    np.testing.assert_allclose(pl.distance, [np.hypot(0.0, 0.05)], atol=1e-12)
+
+
+@pytest.mark.parametrize("gamma", [0.0, 0.5, 1.0, 23.0])
+def test_square_lattice_has_four_neighbours(gamma: float) -> None:
+    # a 10 x 10 square lattice stays periodic under Lees-Edwards strain k/2 (k integer)
+    # because the image shift (10 gamma a, 10 a) is a lattice vector
+    a, m = 0.1, 10
+    grid = np.stack(np.meshgrid(np.arange(m), np.arange(m), indexing="ij"), -1).reshape(-1, 2) * a
+    box = Box.lees_edwards([m * a, m * a], gamma)
+    pl = pairs_within(grid, box, 1.01 * a)
+    assert len(pl) == 2 * m * m
+    assert np.all(np.bincount(np.concatenate([pl.i, pl.j]), minlength=m * m) == 4)
+    np.testing.assert_allclose(pl.distance, a, rtol=1e-9)
+
+
+def test_select() -> None:
+    rng = np.random.default_rng(3)
+    box = Box.cubic(3)
+    pl = pairs_within(rng.random((200, 3)), box, 0.2)
+    mask = pl.distance < 0.1
+    sub = pl.select(mask)
+    np.testing.assert_array_equal(sub.i, pl.i[mask])
+    np.testing.assert_array_equal(sub.dx, pl.dx[mask])
+
+
+@pytest.mark.parametrize("box", [Box.cubic(3), Box.lees_edwards([1.0, 1.0, 1.0], 3.3)])
+def test_bad_cutoffs_and_shapes_raise(box: Box) -> None:
+    x = np.random.default_rng(0).random((10, 3))
+    half = 0.5 * float(np.min(box.widths))
+    for cutoff in (half, 1.5 * half, 0.0, -0.1, np.nan, np.inf):
+        with pytest.raises(ValueError, match="cutoff"):
+            pairs_within(x, box, cutoff)
+    with pytest.raises(ValueError, match="shape"):
+        pairs_within(x[:, :2], box, 0.1)
+    with pytest.raises(ValueError, match="shape"):
+        pairs_within(x[0], box, 0.1)
