@@ -22,3 +22,26 @@ INSIDE_BOX_TOL: float = 1e-12
 
 #: Relative force-balance residual ``|sum_c f_c n_c| / <|f|>`` regarded as zero.
 FORCE_BALANCE_TOL: float = 1e-8
+
+#: Relative tolerance of the overdamped rewiring procedure (Lerner et al., Sec. IV B):
+#: a contact force below ``-REWIRE_REL_TOL * max|f|`` counts as negative and a pair
+#: rate below ``-REWIRE_REL_TOL * (velocity scale)`` as approaching. Sparse LU solves
+#: of ``N f = b`` are accurate to ~1e-13 relative away from jamming; 1e-9 keeps
+#: round-off from flipping signs while resolving any physical sign change.
+REWIRE_REL_TOL: float = 1e-9
+
+#: Largest relative constraint error ``|r_ij - sigma_ij| / sigma_ij`` of a contact in
+#: the overdamped event-driven dynamics before the drift correction (Sec. IV C) is
+#: applied regardless of its schedule; errors per step are O(dt^2).
+CONTACT_DRIFT_TOL: float = 1e-9
+
+#: Jamming certificate (``strict_jamming``): a particle moves in an LP solution when
+#: its displacement relative to the median one exceeds this many mean diameters.
+#: LP displacements are bounded by one mean diameter and solved to a feasibility
+#: tolerance of 1e-9, so genuine unjamming motions are O(1) and noise is <~1e-8.
+CERTIFY_MOTION_TOL: float = 1e-6
+
+#: Gap-aware jamming certificate: particles rattle within cages of the order of the
+#: gaps, so the motion threshold is at least this factor times the largest gap kept
+#: (in mean diameters); unjamming motions reach the O(1) displacement bound.
+CERTIFY_CAGE_FACTOR: float = 100.0

@@ -1,0 +1,451 @@
+"""The event-driven integration loop (Lerner, Düring & Wyart, Sec. IV A–C).
+
+One step: predict the next collision among non-contacting listed pairs under the
+current velocities, move everything on straight lines to ``min(t_col, t + dt)``
+(positions ``x += t (E x + U)``, box ``h += t E h``), then
+
+- on a collision, add the pair and run the rewiring procedure (Sec. IV B);
+- otherwise recompute the forces on the moved network and rewire if any turned
+  negative.
+
+The step ``dt`` follows the rule of Sec. IV A: about ``steps_per_event`` steps
+between events (a running mean of the event interval), bounded by ``dt_max``.
+Every ``correct_every`` steps (and whenever the constraint error exceeds
+``drift_tol``) the drift correction of Sec. IV C (Eq. 28) projects the contacts back
+to ``r_ij = d_i + d_j``, handling collisions during the correction.
+
+Lengths are in units of lambda, time in units of ``1 / rate`` (deformation) or
+``tau`` (forces); the integrator itself works in the drive's own units.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse.linalg as spla
+from numpy.typing import NDArray
+
+from ..box import Box
+from ..tolerances import CONTACT_DRIFT_TOL, REWIRE_REL_TOL
+from .collisions import NeighborList, build_neighbor_list, images_of, next_collision
+from .driving import Drive
+from .jamming import constrained_subset, self_stress
+from .network import (
+    SingularNetworkError,
+    Solution,
+    affine_rates,
+    pair_vectors,
+    pair_velocities,
+    s_matrix,
+    solve_network,
+    stress_tensor,
+)
+from .rewiring import Evaluation, rewire
+
+__all__ = ["FlowOptions", "FlowState", "Integrator", "EVENT_MADE", "EVENT_BROKEN"]
+
+EVENT_MADE = 1
+EVENT_BROKEN = -1
+
+
+@dataclass(frozen=True)
+class FlowOptions:
+    """Accuracy and bookkeeping knobs of the event-driven dynamics.
+
+    Attributes
+    ----------
+    dt_max : float
+        Upper bound of the integration step [time unit of the drive]. The paper uses
+        1e-5; the constraint error per step is O(dt^2) and is corrected anyway.
+    steps_per_event : float
+        Target mean number of steps between events (paper: 10).
+    dt_min : float
+        Lower bound of the step.
+    correct_every : int
+        Apply the drift correction every this many steps (0: only on ``drift_tol``).
+    drift_tol : float
+        Relative constraint error that triggers a correction regardless.
+    skin : float
+        Verlet-list skin [lambda].
+    sync_every : int
+        Steps between synchronisation points (neighbour-list rebuild, box reduction,
+        checkpoints). Results do not depend on whether checkpoints are written.
+    cond_limit : float
+        Pivot ratio of N = S S^T treated as singular.
+    rel_tol : float
+        Rewiring tolerance (see :mod:`.rewiring`).
+    """
+
+    dt_max: float = 1e-3
+    steps_per_event: float = 10.0
+    dt_min: float = 1e-14
+    correct_every: int = 100
+    drift_tol: float = CONTACT_DRIFT_TOL
+    skin: float = 0.3
+    sync_every: int = 2000
+    cond_limit: float = 1e13
+    rel_tol: float = REWIRE_REL_TOL
+
+    def __post_init__(self) -> None:
+        if not (0 < self.dt_min <= self.dt_max):
+            raise ValueError("need 0 < dt_min <= dt_max")
+        if self.steps_per_event <= 0:
+            raise ValueError("steps_per_event must be positive")
+        if self.correct_every < 0 or self.sync_every < 1:
+            raise ValueError("correct_every >= 0 and sync_every >= 1 required")
+        if self.skin <= 0:
+            raise ValueError("skin must be positive")
+
+
+@dataclass
+class FlowState:
+    """Complete dynamical state (everything a checkpoint must hold).
+
+    Attributes
+    ----------
+    x : ndarray, shape (N, d)
+        Centres [lambda] (wrapped at synchronisation points only).
+    h : ndarray, shape (d, d)
+        Box matrix [lambda].
+    radius : ndarray, shape (N,)
+        Radii d_i [lambda] (contact at ``r_ij = d_i + d_j``).
+    nl : NeighborList
+    contact : ndarray of bool, shape (P,)
+        Which listed pairs form the contact network.
+    permanent : ndarray of bool, shape (P,)
+        Listed pairs that are permanent contacts (composite particles).
+    time, strain : float
+        Elapsed time and accumulated imposed strain (``rate * time`` for deformations).
+    step : int
+    event_interval : float
+        Running mean time between events (dt rule).
+    last_event_time : float
+    jammed : bool
+    """
+
+    x: NDArray[np.float64]
+    h: NDArray[np.float64]
+    radius: NDArray[np.float64]
+    nl: NeighborList
+    contact: NDArray[np.bool_]
+    permanent: NDArray[np.bool_]
+    time: float = 0.0
+    strain: float = 0.0
+    step: int = 0
+    event_interval: float = np.inf
+    last_event_time: float = 0.0
+    jammed: bool = False
+    kappa: float = np.nan
+    events: list = field(default_factory=list)
+
+
+class Integrator:
+    """Event-driven overdamped dynamics of one packing under one drive.
+
+    Parameters
+    ----------
+    state : FlowState
+    drive : Drive
+    options : FlowOptions
+    """
+
+    def __init__(self, state: FlowState, drive: Drive, options: FlowOptions) -> None:
+        self.state = state
+        self.drive = drive
+        self.options = options
+        self.d = state.x.shape[1]
+        self.n = state.x.shape[0]
+        self.base_gradient = drive.gradient(self.d)
+        self.pressure_internal = None if drive.pressure is None else drive.pressure * drive.force_unit
+        self.solution: Solution = self._solution_now()
+        self.last_correction: tuple[float, float] = (np.nan, np.nan)
+
+    # ---------------------------------------------------------------- construction
+    @classmethod
+    def start(
+        cls,
+        x: NDArray[np.float64],
+        h: NDArray[np.float64],
+        radius: NDArray[np.float64],
+        drive: Drive,
+        options: FlowOptions,
+        contacts: NDArray[np.int64] | None = None,
+    ) -> "Integrator":
+        """Set up from positions; initial contacts are the given ones (or none) plus
+        permanent ones, filtered by the rewiring procedure."""
+        box = Box(h).reduced
+        x = box.wrap(x)
+        nl = build_neighbor_list(x, box, radius, options.skin)
+        contact = np.zeros(len(nl.pairs), bool)
+        permanent = np.zeros(len(nl.pairs), bool)
+        n = len(x)
+        for arr, mask in ((contacts, contact), (drive.permanent, permanent)):
+            if arr is not None and len(arr):
+                pos = nl.index_of(np.sort(np.asarray(arr, np.int64), axis=1), n)
+                if np.any(pos < 0):
+                    raise ValueError("a given contact is farther apart than the neighbour-list cutoff")
+                mask[pos] = True
+        contact |= permanent
+        state = FlowState(x, np.array(box.matrix), np.asarray(radius, float), nl, contact, permanent)
+        state.event_interval = options.dt_max * options.steps_per_event
+        integ = cls.__new__(cls)
+        integ.state, integ.drive, integ.options = state, drive, options
+        integ.d, integ.n = x.shape[1], n
+        integ.base_gradient = drive.gradient(integ.d)
+        integ.pressure_internal = None if drive.pressure is None else drive.pressure * drive.force_unit
+        integ.last_correction = (np.nan, np.nan)
+        if contact.any():
+            integ._rewire(contact.copy())
+        else:
+            integ.solution = integ._solve(contact)
+        return integ
+
+    # ------------------------------------------------------------- network algebra
+    def _pairs(self, mask: NDArray[np.bool_]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        return self.state.nl.pairs[mask], self.state.nl.images[mask]
+
+    def _solve(self, mask: NDArray[np.bool_]) -> Solution:
+        pairs, images = self._pairs(mask)
+        return solve_network(
+            self.state.x, self.state.h, pairs, images, self.base_gradient,
+            external=self.drive.external_forces(), xi0=self.drive.xi0,
+            pressure=self.pressure_internal, rate=self.drive.rate, cond_limit=self.options.cond_limit,
+        )
+
+    def _drive_rates(self, pairs: NDArray[np.int64], images: NDArray[np.int64]) -> NDArray[np.float64]:
+        """``S V_aff / xi0 + S F_ext`` on a network (for the self-stress sign)."""
+        R = pair_vectors(self.state.x, self.state.h, pairs, images)
+        E = self.base_gradient
+        if self.drive.pressure is not None:
+            E = E - self.drive.rate * np.eye(self.d)  # pressure pushes inward
+        out = affine_rates(R, E) / self.drive.xi0
+        ext = self.drive.external_forces()
+        if ext is not None:
+            unit = R / np.linalg.norm(R, axis=1)[:, None]
+            out = out + s_matrix(pairs, unit, self.n) @ ext.ravel()
+        return out
+
+    def evaluate(self, mask: NDArray[np.bool_]) -> Evaluation:
+        """Forces on the sub-network ``mask``, or its self-stress if potentially jammed."""
+        pairs, images = self._pairs(mask)
+        count = constrained_subset(self.n, self.d, pairs)
+        singular = count.potentially_jammed and not self.state.permanent.any()
+        if not singular:
+            try:
+                sol = self._solve(mask)
+                return Evaluation(sol.force, sol)
+            except SingularNetworkError:
+                singular = True
+        f0, _ = self_stress(self.state.x, self.state.h, pairs, images, self._drive_rates(pairs, images))
+        return Evaluation(f0, None, True)
+
+    def rates(self, sol: Solution, idx: NDArray[np.int64]) -> NDArray[np.float64]:
+        """Pair rates dr/dt (Eq. 26) of listed pairs ``idx``."""
+        pairs, images = self.state.nl.pairs[idx], self.state.nl.images[idx]
+        R = pair_vectors(self.state.x, self.state.h, pairs, images)
+        return pair_velocities(R, pairs, sol)
+
+    def velocity_scale(self, sol: Solution) -> float:
+        """Scale against which pair rates are judged zero [lambda / time]."""
+        u = float(np.max(np.abs(sol.velocity), initial=0.0))
+        return max(u, float(np.linalg.norm(sol.gradient, 2)) * self.state.nl.cutoff, 1e-300)
+
+    def _rewire(self, candidate: NDArray[np.bool_]) -> None:
+        res = rewire(candidate, self.evaluate, self.rates, self.velocity_scale,
+                     permanent=self.state.permanent, rel_tol=self.options.rel_tol)
+        old = self.state.contact
+        new = res.active
+        self._record_events(old, new)
+        self.state.contact = new
+        if res.jammed:
+            self.state.jammed = True
+            f0 = res.evaluation.force
+            self.solution = Solution(f0 / np.mean(f0), np.zeros((self.n, self.d)), np.zeros((self.d, self.d)), np.nan)
+        else:
+            self.solution = res.evaluation.solution
+        self.state.kappa = self.solution.kappa
+
+    def _record_events(self, old: NDArray[np.bool_], new: NDArray[np.bool_]) -> None:
+        st = self.state
+        made = np.flatnonzero(new & ~old)
+        broken = np.flatnonzero(old & ~new)
+        for idx, kind in ((made, EVENT_MADE), (broken, EVENT_BROKEN)):
+            for k in idx:
+                st.events.append((st.strain, st.time, int(st.nl.pairs[k, 0]), int(st.nl.pairs[k, 1]), kind))
+        if made.size or broken.size:
+            gap = st.time - st.last_event_time
+            if gap > 0:
+                # running mean of the time between events (dt rule of Sec. IV A)
+                st.event_interval = gap if not np.isfinite(st.event_interval) else 0.8 * st.event_interval + 0.2 * gap
+            st.last_event_time = st.time
+
+    def _solution_now(self) -> Solution:
+        ev = self.evaluate(self.state.contact)
+        if ev.solution is None:
+            self.state.jammed = True
+            return Solution(ev.force / np.mean(ev.force), np.zeros((self.n, self.d)), np.zeros((self.d, self.d)), np.nan)
+        return ev.solution
+
+    # -------------------------------------------------------------------- motion
+    def _move(self, t: float, velocity: NDArray[np.float64], gradient: NDArray[np.float64]) -> None:
+        st = self.state
+        st.x = st.x + t * (st.x @ gradient.T + velocity)
+        st.h = st.h + t * (gradient @ st.h)
+        # Lees–Edwards Euler update must keep h upper triangular exactly
+        st.h = np.triu(st.h)
+        st.nl.advance(velocity, gradient, t)
+
+    def dt(self) -> float:
+        """Current integration step (Sec. IV A rule)."""
+        o = self.options
+        target = self.state.event_interval / o.steps_per_event
+        return float(min(o.dt_max, max(o.dt_min, target))) * self.drive.time_unit
+
+    def step(self, horizon: float = np.inf) -> bool:
+        """One integration step, at most to ``time + horizon``. Returns True on a collision."""
+        st = self.state
+        sol = self.solution
+        tmax = min(self.dt(), horizon)
+        t, k = next_collision(st.x, st.h, st.nl.pairs, st.nl.images, st.nl.sigma, st.contact,
+                              sol.velocity, sol.gradient, tmax)
+        self._move(t, sol.velocity, sol.gradient)
+        st.time += t
+        if self.drive.deforms:
+            st.strain += t * self.drive.rate
+        st.step += 1
+        if k >= 0:
+            cand = st.contact.copy()
+            cand[k] = True
+            self._rewire(cand)
+        else:
+            self._refresh()
+        if self.drive.mode == "self_propelled":
+            due = np.flatnonzero(self.drive.propulsion.switch_time <= st.time)
+            if due.size:
+                self.drive.propulsion.redraw(due, st.time)
+                self._refresh()
+        if self.options.correct_every and st.step % self.options.correct_every == 0:
+            self.correct()
+        elif st.contact.any() and self.constraint_error() > self.options.drift_tol:
+            self.correct()
+        if st.step % self.options.sync_every == 0:
+            self.synchronize()
+        elif not st.nl.valid:
+            self.rebuild()
+        return k >= 0
+
+    def _refresh(self) -> None:
+        """Forces on the moved network; rewire if some turned negative (Sec. IV A ii.b)."""
+        ev = self.evaluate(self.state.contact)
+        if ev.solution is not None:
+            f = ev.force
+            free = ~self.state.permanent[self.state.contact]
+            tol = self.options.rel_tol * float(np.max(np.abs(f), initial=0.0))
+            if not np.any((f < -tol) & free):
+                self.solution = ev.solution
+                self.state.kappa = ev.solution.kappa
+                return
+        self._rewire(self.state.contact.copy())
+
+    def next_switch(self) -> float:
+        """Time until the next self-propulsion redraw (inf otherwise)."""
+        if self.drive.mode != "self_propelled":
+            return np.inf
+        return float(self.drive.propulsion.switch_time.min() - self.state.time)
+
+    # -------------------------------------------------------------- diagnostics
+    def contact_errors(self) -> NDArray[np.float64]:
+        """Relative constraint errors ``(r_ij - sigma_ij) / sigma_ij`` of contacts, shape (Nc,)."""
+        st = self.state
+        pairs, images = self._pairs(st.contact)
+        R = pair_vectors(st.x, st.h, pairs, images)
+        sig = st.nl.sigma[st.contact]
+        return np.linalg.norm(R, axis=1) / sig - 1.0
+
+    def constraint_error(self) -> float:
+        """Largest ``|r_ij - sigma_ij| / sigma_ij`` over contacts (0 without contacts)."""
+        e = self.contact_errors()
+        return float(np.max(np.abs(e), initial=0.0))
+
+    def min_gap_noncontact(self) -> float:
+        """Smallest relative gap ``r / sigma - 1`` among listed non-contacting pairs."""
+        st = self.state
+        off = ~st.contact
+        R = pair_vectors(st.x, st.h, st.nl.pairs[off], st.nl.images[off])
+        return float(np.min(np.linalg.norm(R, axis=1) / st.nl.sigma[off] - 1.0, initial=np.inf))
+
+    def stress(self) -> NDArray[np.float64]:
+        """Contact stress tensor [force / lambda^(d-1)] (see :func:`stress_tensor`)."""
+        st = self.state
+        pairs, images = self._pairs(st.contact)
+        R = pair_vectors(st.x, st.h, pairs, images)
+        return stress_tensor(R, self.solution.force, abs(float(np.linalg.det(st.h))))
+
+    def z_bar(self) -> float:
+        return constrained_subset(self.n, self.d, self._pairs(self.state.contact)[0]).z_bar
+
+    # --------------------------------------------------------- drift correction
+    def correct(self, max_rounds: int = 50) -> tuple[float, float]:
+        """Drift correction of Sec. IV C (Eq. 28). Returns the error before and after."""
+        st = self.state
+        before = self.constraint_error()
+        if not st.contact.any():
+            self.last_correction = (before, before)
+            return self.last_correction
+        zero = np.zeros((self.d, self.d))
+        for _ in range(max_rounds):
+            pairs, images = self._pairs(st.contact)
+            R = pair_vectors(st.x, st.h, pairs, images)
+            r = np.linalg.norm(R, axis=1)
+            dr = r - st.nl.sigma[st.contact]
+            S = s_matrix(pairs, R / r[:, None], self.n)
+            Nmat = (S @ S.T).tocsc()
+            try:
+                dR = -(S.T @ spla.splu(Nmat, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0).solve(dr))
+            except RuntimeError:
+                # singular N (self-stress): least-squares displacement instead
+                dR = -(S.T @ spla.lsqr(Nmat, dr, atol=1e-15, btol=1e-15)[0])
+            dR = dR.reshape(self.n, self.d)
+            t, k = next_collision(st.x, st.h, st.nl.pairs, st.nl.images, st.nl.sigma, st.contact, dR, zero, 1.0)
+            self._move(t, dR, zero)
+            if k < 0:
+                break
+            old = st.contact
+            st.contact = old.copy()
+            st.contact[k] = True
+            self._record_events(old, st.contact)
+        self._rewire(st.contact.copy())
+        after = self.constraint_error()
+        self.last_correction = (before, after)
+        return self.last_correction
+
+    # ------------------------------------------------------ neighbour list upkeep
+    def rebuild(self) -> None:
+        """Wrap positions, reduce the box, rebuild the Verlet list and remap the network."""
+        st = self.state
+        old_pairs = st.nl.pairs
+        contacts = old_pairs[st.contact]
+        perm = old_pairs[st.permanent]
+        box = Box(st.h).reduced
+        # separations of contacts before the remap fix their new images unambiguously
+        R_contact = pair_vectors(st.x, st.h, contacts, st.nl.images[st.contact])
+        x = box.wrap(st.x)
+        st.h = np.array(box.matrix)
+        st.x = x
+        st.nl = build_neighbor_list(x, box, st.radius, self.options.skin)
+        pos = st.nl.index_of(contacts, self.n)
+        if np.any(pos < 0):
+            raise RuntimeError("a contact fell outside the neighbour list (skin too small)")
+        st.nl.images[pos] = images_of(x, st.h, contacts, R_contact)
+        st.contact = np.zeros(len(st.nl.pairs), bool)
+        st.contact[pos] = True
+        st.permanent = np.zeros(len(st.nl.pairs), bool)
+        if len(perm):
+            st.permanent[st.nl.index_of(perm, self.n)] = True
+
+    def synchronize(self) -> None:
+        """Synchronisation point: rebuild and recompute the solution from the state alone."""
+        self.rebuild()
+        self.solution = self._solution_now()
+        self.state.kappa = self.solution.kappa

@@ -1,0 +1,342 @@
+"""A whole event-driven run: packing in, time series + final packing + snapshots out.
+
+The time series follows the flow schema shared with the analyses: dim ``step`` with
+coordinates ``strain`` and ``time``; ``shear_stress`` (Eq. 30), ``pressure``
+(Eq. 24), ``packing_fraction``, ``kappa``, ``n_contacts``, ``z_bar`` (Eq. 29),
+``volume``, ``constraint_error``; dim ``event`` with the contact changes. Units
+(Sec. II D): lengths in lambda, time in ``1 / gamma_dot`` (deformations) or
+``tau = lambda / (f_ext xi0)`` (forces), forces in ``lambda gamma_dot / xi0`` or
+``f_ext``.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+from numpy.typing import NDArray
+
+from ..analysis.contacts import find_rattlers
+from ..io import new_dataset_attrs, write_dataset
+from ..packing import Packing, sphere_volume
+from .driving import Drive
+from .integrate import FlowOptions, Integrator
+
+__all__ = ["Stop", "FlowResult", "length_unit", "run_flow"]
+
+LENGTH_UNITS = ("mean_diameter", "small_diameter")
+
+
+@dataclass(frozen=True)
+class Stop:
+    """When a run ends (whichever comes first; a jammed network always ends it).
+
+    Attributes
+    ----------
+    strain : float or None
+        Accumulated imposed strain (``rate * time``).
+    packing_fraction : float or None
+        Target packing fraction (compression; reached exactly).
+    time : float or None
+        Elapsed time in the drive's time unit.
+    max_steps : int or None
+        Step budget of this invocation (a resumed run continues from its checkpoint).
+    """
+
+    strain: float | None = None
+    packing_fraction: float | None = None
+    time: float | None = None
+    max_steps: int | None = None
+
+
+@dataclass
+class FlowResult:
+    """Products of a run.
+
+    Attributes
+    ----------
+    series : xarray.Dataset
+        Time series and events (flow schema).
+    final : Packing
+        Last (or jammed) packing with contacts and forces, input length units.
+    snapshots : xarray.Dataset or None
+    complete : bool
+        False when the run stopped on ``max_steps`` before its target.
+    jammed : bool
+    """
+
+    series: xr.Dataset
+    final: Packing
+    snapshots: xr.Dataset | None
+    complete: bool
+    jammed: bool
+
+
+def length_unit(diameter: NDArray[np.float64], which: str = "mean_diameter") -> float:
+    """The unit lambda in input lengths.
+
+    ``mean_diameter``: mean diameter (self-propelled discs, Sec. V B).
+    ``small_diameter``: mean diameter of the particles below the mean diameter, i.e.
+    the small species of a binary mixture (Sec. V A); the mean for monodisperse input.
+    """
+    if which not in LENGTH_UNITS:
+        raise ValueError(f"length unit must be one of {LENGTH_UNITS}, got {which!r}")
+    D = np.asarray(diameter, dtype=np.float64)
+    if which == "small_diameter":
+        small = D[D < D.mean() * (1 - 1e-12)]
+        if small.size and D.max() / D.min() > 1.2:
+            return float(small.mean())
+    return float(D.mean())
+
+
+@dataclass
+class Recorder:
+    """Accumulates the time series, events and snapshots of a run."""
+
+    columns: dict[str, list] = field(default_factory=lambda: {k: [] for k in SERIES})
+    snapshots: list[dict[str, Any]] = field(default_factory=list)
+    next_snapshot: int = 0
+
+    def record(self, integ: Integrator) -> None:
+        st = integ.state
+        drive = integ.drive
+        sig = integ.stress() / drive.force_unit
+        vol = abs(float(np.linalg.det(st.h)))
+        row = {
+            "strain": st.strain,
+            "time": st.time / drive.time_unit,
+            "shear_stress": -sig[0, 1],
+            "pressure": float(np.trace(sig)) / integ.d,
+            "packing_fraction": float(sphere_volume(integ.d, 2 * st.radius).sum() / vol),
+            "kappa": st.kappa,
+            "n_contacts": int(st.contact.sum()),
+            "z_bar": integ.z_bar(),
+            "volume": vol,
+            "constraint_error": integ.constraint_error(),
+        }
+        for k, v in row.items():
+            self.columns[k].append(v)
+
+    def snapshot(self, integ: Integrator, scale: float) -> None:
+        st = integ.state
+        pairs = st.nl.pairs[st.contact]
+        self.snapshots.append({
+            "position": st.x * scale, "box": st.h * scale, "strain": st.strain,
+            "time": st.time / integ.drive.time_unit, "pairs": pairs,
+            "force": integ.solution.force / integ.drive.force_unit,
+        })
+
+
+SERIES = ("strain", "time", "shear_stress", "pressure", "packing_fraction", "kappa",
+          "n_contacts", "z_bar", "volume", "constraint_error")
+
+_SERIES_META = {
+    "strain": ("1", "accumulated imposed strain gamma (rate * time; shear strain for shear modes)"),
+    "time": ("1", "time in units of 1/gamma_dot (deformation) or lambda/(f_ext xi0) (forces)"),
+    "shear_stress": ("1", "shear stress -(1/Omega) sum f r_x r_y / r (Eq. 30), units of gamma_dot/(xi0 lambda^(d-2))"),
+    "pressure": ("1", "pressure <f|r>/(Omega d) (Eq. 24), units of gamma_dot/(xi0 lambda^(d-2))"),
+    "packing_fraction": ("1", "packing fraction"),
+    "kappa": ("1", "ratio of isotropic compression rate to shear rate (Eq. 25); NaN unless fixed pressure"),
+    "n_contacts": ("1", "number of contacts in the network"),
+    "z_bar": ("1", "constrained coordination number z_bar (Eq. 29)"),
+    "volume": ("1", "box volume in units of lambda^d"),
+    "constraint_error": ("1", "max |r_ij - sigma_ij| / sigma_ij over contacts"),
+}
+
+
+def _horizon(integ: Integrator, stop: Stop) -> float:
+    st = integ.state
+    drive = integ.drive
+    hz = integ.next_switch()
+    if stop.strain is not None and drive.deforms:
+        hz = min(hz, (stop.strain - st.strain) / drive.rate)
+    if stop.time is not None:
+        hz = min(hz, stop.time * drive.time_unit - st.time)
+    if stop.packing_fraction is not None and drive.compresses:
+        phi = sphere_volume(integ.d, 2 * st.radius).sum() / abs(np.linalg.det(st.h))
+        # h scales by (1 - rate t) within a step: phi grows as (1 - rate t)^-d
+        hz = min(hz, (1.0 - (phi / stop.packing_fraction) ** (1.0 / integ.d)) / drive.rate)
+    return max(hz, 0.0)
+
+
+def _done(integ: Integrator, stop: Stop) -> bool:
+    st = integ.state
+    if st.jammed:
+        return True
+    tiny = 1e-12
+    if stop.strain is not None and integ.drive.deforms and st.strain >= stop.strain - tiny * max(1.0, stop.strain):
+        return True
+    if stop.time is not None and st.time >= (stop.time - tiny * max(1.0, stop.time)) * integ.drive.time_unit:
+        return True
+    if stop.packing_fraction is not None and integ.drive.compresses:
+        phi = sphere_volume(integ.d, 2 * st.radius).sum() / abs(np.linalg.det(st.h))
+        if phi >= stop.packing_fraction * (1 - tiny):
+            return True
+    return False
+
+
+def run_flow(
+    packing: Packing,
+    drive: Drive,
+    stop: Stop,
+    options: FlowOptions = FlowOptions(),
+    unit: str = "mean_diameter",
+    record_every: int = 1,
+    n_snapshots: int = 0,
+    checkpoint: str | os.PathLike | None = None,
+    parameters: dict[str, Any] | None = None,
+    progress: Any = None,
+) -> FlowResult:
+    """Drive a hard-sphere packing with the event-driven overdamped dynamics.
+
+    Parameters
+    ----------
+    packing : Packing
+        Non-overlapping start; its contacts (if any) seed the network.
+    drive : Drive
+    stop : Stop
+    options : FlowOptions
+    unit : str
+        Choice of lambda (see :func:`length_unit`).
+    record_every : int
+        Record the time series every this many steps (and at the start and end).
+    n_snapshots : int
+        Number of evenly spaced packing snapshots over the target strain / time.
+    checkpoint : path, optional
+        Checkpoint file, written at every synchronisation point; if it exists the
+        run resumes from it and produces the same numbers as an uninterrupted run.
+    parameters : dict, optional
+        Stage parameters for provenance.
+    progress : callable, optional
+        ``progress(fraction_done)`` after each recorded step (progress bars).
+    """
+    from .checkpoint import load_checkpoint, save_checkpoint
+
+    lam = length_unit(packing.diameter, unit)
+    params = dict(parameters or {})
+    params.update({"drive": drive.describe(), "lambda": lam, "unit": unit})
+    recorder = Recorder()
+    if checkpoint is not None and Path(checkpoint).exists():
+        integ, recorder = load_checkpoint(checkpoint, drive, options)
+    else:
+        integ = Integrator.start(packing.position / lam, packing.box.matrix / lam,
+                                 packing.diameter / (2 * lam), drive, options, packing.contacts)
+        recorder.record(integ)
+        if n_snapshots:
+            recorder.snapshot(integ, lam)
+    target = stop.strain if stop.strain is not None else stop.time
+    steps = 0
+    while not _done(integ, stop):
+        if stop.max_steps is not None and steps >= stop.max_steps:
+            break
+        integ.step(_horizon(integ, stop))
+        steps += 1
+        st = integ.state
+        if st.step % record_every == 0 or _done(integ, stop):
+            recorder.record(integ)
+            if progress is not None and target:
+                progress(min(1.0, (st.strain if stop.strain is not None else st.time / drive.time_unit) / target))
+        if n_snapshots and target:
+            position = st.strain if stop.strain is not None else st.time / drive.time_unit
+            while recorder.next_snapshot < n_snapshots and position >= (recorder.next_snapshot + 1) * target / n_snapshots * (1 - 1e-12):
+                recorder.next_snapshot += 1
+                recorder.snapshot(integ, lam)
+        if checkpoint is not None and st.step % options.sync_every == 0:
+            save_checkpoint(checkpoint, integ, recorder)
+    complete = _done(integ, stop)
+    if complete and recorder.columns["strain"][-1] != integ.state.strain:
+        recorder.record(integ)
+    series = _series_dataset(integ, recorder, params, complete)
+    snaps = _snapshot_dataset(recorder, integ, params) if n_snapshots else None
+    final = _final_packing(integ, packing, lam, params)
+    return FlowResult(series, final, snaps, complete, integ.state.jammed)
+
+
+def _mode_name(drive: Drive) -> str:
+    if drive.mode in ("forces", "self_propelled"):
+        return "drive"
+    if drive.mode in ("compress", "shear_compress"):
+        return "compress"
+    return drive.mode
+
+
+def _series_dataset(integ: Integrator, rec: Recorder, params: dict, complete: bool) -> xr.Dataset:
+    cols = rec.columns
+    data_vars = {}
+    for k in SERIES[2:]:
+        dtype = np.int64 if k == "n_contacts" else np.float64
+        units, long_name = _SERIES_META[k]
+        data_vars[k] = (("step",), np.asarray(cols[k], dtype=dtype), {"units": units, "long_name": long_name})
+    ev = integ.state.events
+    ev_arr = np.array(ev, dtype=np.float64).reshape(-1, 5)
+    data_vars["event_strain"] = (("event",), ev_arr[:, 0], {"units": "1", "long_name": "strain at the event"})
+    data_vars["event_time"] = (("event",), ev_arr[:, 1] / integ.drive.time_unit, {"units": "1", "long_name": "time of the event (units of the time series)"})
+    data_vars["event_i"] = (("event",), ev_arr[:, 2].astype(np.int64), {"units": "1", "long_name": "first particle of the pair (i < j)"})
+    data_vars["event_j"] = (("event",), ev_arr[:, 3].astype(np.int64), {"units": "1", "long_name": "second particle of the pair (i < j)"})
+    data_vars["event_kind"] = (("event",), ev_arr[:, 4].astype(np.int8), {
+        "units": "1", "long_name": "contact event kind",
+        "flag_values": np.array([1, -1], dtype=np.int8), "flag_meanings": "contact_made contact_broken"})
+    coords = {
+        "strain": (("step",), np.asarray(cols["strain"]), {"units": "1", "long_name": _SERIES_META["strain"][1]}),
+        "time": (("step",), np.asarray(cols["time"]), {"units": "1", "long_name": _SERIES_META["time"][1]}),
+    }
+    drive = integ.drive
+    attrs = new_dataset_attrs(
+        "jamflow event-driven overdamped flow time series", params,
+        mode=_mode_name(drive), drive_mode=drive.mode, d=integ.d, N=integ.n,
+        length_unit="lambda (global attribute lambda, in input length units)",
+        time_unit="1/gamma_dot" if drive.deforms else "lambda/(f_ext xi0)",
+        force_unit="lambda gamma_dot / xi0" if drive.deforms else "f_ext",
+        jammed=int(integ.state.jammed), complete=int(complete), n_steps=integ.state.step,
+        **{"lambda": params["lambda"]},
+    )
+    return xr.Dataset(data_vars=data_vars, coords=coords, attrs=attrs)
+
+
+def _snapshot_dataset(rec: Recorder, integ: Integrator, params: dict) -> xr.Dataset:
+    snaps = rec.snapshots
+    counts = np.array([len(s["pairs"]) for s in snaps], dtype=np.int64)
+    pairs = np.concatenate([s["pairs"] for s in snaps]).reshape(-1, 2)
+    forces = np.concatenate([s["force"] for s in snaps])
+    length = "input length units (lambda times global attribute lambda)"
+    data_vars = {
+        "snapshot_position": (("snapshot", "particle", "spatial"), np.stack([s["position"] for s in snaps]),
+                              {"units": "1", "long_name": "particle centres", "comment": length}),
+        "snapshot_box": (("snapshot", "spatial", "lattice_vector"), np.stack([s["box"] for s in snaps]),
+                         {"units": "1", "long_name": "box lattice vectors as columns", "comment": length}),
+        "snapshot_strain": (("snapshot",), np.array([s["strain"] for s in snaps]), {"units": "1", "long_name": "strain of the snapshot"}),
+        "snapshot_time": (("snapshot",), np.array([s["time"] for s in snaps]), {"units": "1", "long_name": "time of the snapshot"}),
+        "snapshot_contact_count": (("snapshot",), counts, {"units": "1", "long_name": "number of contacts of each snapshot",
+                                                            "sample_dimension": "snapshot_contact"}),
+        "snapshot_contact_i": (("snapshot_contact",), pairs[:, 0], {"units": "1", "long_name": "first particle of a contact (contiguous ragged by snapshot)"}),
+        "snapshot_contact_j": (("snapshot_contact",), pairs[:, 1], {"units": "1", "long_name": "second particle of a contact"}),
+        "snapshot_force": (("snapshot_contact",), forces, {"units": "1", "long_name": "contact force (force unit of the time series)"}),
+        "diameter": (("particle",), 2 * integ.state.radius * params["lambda"], {"units": "1", "long_name": "particle diameter", "comment": length}),
+    }
+    attrs = new_dataset_attrs("jamflow event-driven flow snapshots", params, d=integ.d, N=integ.n,
+                              **{"lambda": params["lambda"]})
+    return xr.Dataset(data_vars=data_vars, attrs=attrs)
+
+
+def _final_packing(integ: Integrator, packing: Packing, lam: float, params: dict) -> Packing:
+    st = integ.state
+    pairs = st.nl.pairs[st.contact]
+    force = integ.solution.force / integ.drive.force_unit
+    sig = integ.stress() / integ.drive.force_unit
+    x = (st.x * lam)
+    from ..box import Box
+
+    box = Box(st.h * lam)
+    return Packing(
+        position=box.wrap(x), diameter=packing.diameter, box=box, contacts=pairs, force=force,
+        rattler=find_rattlers(integ.n, integ.d, pairs), pressure=float(np.trace(sig)) / integ.d,
+        protocol=f"{packing.protocol}>{_mode_name(integ.drive)}", seed=packing.seed, parameters=params,
+        attrs={"force_unit": ("self-stress normalised to mean 1" if st.jammed else
+                              ("lambda gamma_dot / xi0" if integ.drive.deforms else "f_ext")),
+               "jammed": int(st.jammed), "strain": st.strain, "lambda": lam,
+               "shear_stress": float(-sig[0, 1]), "constraint_error": integ.constraint_error()},
+    )
