@@ -39,6 +39,7 @@ __all__ = [
     "fit_power_law",
     "sample_average",
     "non_contact_gaps",
+    "gap_histogram",
     "gap_distribution",
 ]
 
@@ -183,6 +184,76 @@ def non_contact_gaps(packing: Packing, max_gap: float, gap_tol: float | None = N
     return h[h > 0.0]
 
 
+def gap_histogram(
+    gaps: Sequence[ArrayLike],
+    n_particles: Sequence[int],
+    max_gap: float = 0.1,
+    min_gap: float = 1e-13,
+    bins_per_decade: int = 5,
+    fit_min: float = 1e-5,
+    fit_max: float = 1e-2,
+) -> tuple[xr.Dataset, dict]:
+    """Logarithmic histogram of gap samples, sample average and power-law fit.
+
+    Parameters
+    ----------
+    gaps : sequence of array_like, each shape (P_s,)
+        Non-contact relative gaps of each sample (dimensionless).
+    n_particles : sequence of int
+        N of each sample (for the per-particle normalisation).
+    max_gap, min_gap, bins_per_decade, fit_min, fit_max
+        As in :func:`gap_distribution`.
+
+    Returns
+    -------
+    dataset : xarray.Dataset
+        Variables of :func:`gap_distribution` (no global attributes).
+    summary : dict
+        Fit results and counts (``fit_exponent``, ``fit_exponent_err``, ...).
+    """
+    if len(gaps) == 0 or len(gaps) != len(n_particles):
+        raise ValueError("need one particle count per gap sample, and at least one sample")
+    edges = log_bin_edges(min_gap, max_gap, bins_per_decade)
+    width = np.diff(edges)
+    counts = np.zeros((len(gaps), len(width)))
+    density = np.zeros_like(counts)
+    pdf = np.zeros_like(counts)
+    n_below = 0
+    for s, (h, n) in enumerate(zip(gaps, n_particles)):
+        h = np.asarray(h, dtype=np.float64)
+        n_below += int(np.sum((h > 0) & (h < min_gap)))
+        counts[s], _ = np.histogram(h, bins=edges)
+        density[s] = 2.0 * counts[s] / (n * width)
+        total = counts[s].sum()
+        pdf[s] = counts[s] / (total * width) if total > 0 else 0.0
+    dens_mean, dens_err, method = sample_average(density, counts)
+    pdf_mean, pdf_err, _ = sample_average(pdf, counts)
+    centre = np.sqrt(edges[:-1] * edges[1:])
+    summary: dict = {"error_method": method, "n_below_range": n_below, "n_samples": len(gaps),
+                     "fit_min": float(fit_min), "fit_max": float(fit_max)}
+    try:
+        fit = fit_power_law(centre, dens_mean, dens_err, fit_min, fit_max)
+        summary.update(fit_exponent=-fit.slope, fit_exponent_err=fit.slope_err, fit_prefactor=fit.prefactor,
+                       fit_chi2_reduced=fit.chi2_reduced, fit_n_bins=fit.n_points)
+    except ValueError:
+        summary.update(fit_exponent=np.nan, fit_exponent_err=np.nan, fit_prefactor=np.nan,
+                       fit_chi2_reduced=np.nan, fit_n_bins=0)
+    one = {"units": "1"}
+    ds = xr.Dataset(
+        data_vars={
+            "h_lower": ("bin", edges[:-1], {**one, "long_name": "lower bin edge of the relative gap h"}),
+            "h_upper": ("bin", edges[1:], {**one, "long_name": "upper bin edge of the relative gap h"}),
+            "gap_density": ("bin", dens_mean, {**one, "long_name": "non-contact neighbours per particle per unit h, sample mean"}),
+            "gap_density_err": ("bin", dens_err, {**one, "long_name": "standard error of gap_density"}),
+            "gap_pdf": ("bin", pdf_mean, {**one, "long_name": "gap probability density normalised on the binned range, sample mean"}),
+            "gap_pdf_err": ("bin", pdf_err, {**one, "long_name": "standard error of gap_pdf"}),
+            "count": (("sample", "bin"), counts.astype(np.int64), {**one, "long_name": "number of non-contact pairs per bin"}),
+        },
+        coords={"h": ("bin", centre, {**one, "long_name": "relative gap h = r/sigma_ij - 1 (geometric bin centre)"})},
+    )
+    return ds, summary
+
+
 def gap_distribution(
     packings: Sequence[Packing],
     max_gap: float = 0.1,
@@ -222,63 +293,19 @@ def gap_distribution(
     """
     if len(packings) == 0:
         raise ValueError("gap_distribution needs at least one packing")
-    edges = log_bin_edges(min_gap, max_gap, bins_per_decade)
-    width = np.diff(edges)
-    counts = np.zeros((len(packings), len(width)))
-    density = np.zeros_like(counts)
-    pdf = np.zeros_like(counts)
-    n_below = 0
-    for s, packing in enumerate(packings):
-        h = non_contact_gaps(packing, max_gap, gap_tol)
-        n_below += int(np.sum(h < min_gap))
-        counts[s], _ = np.histogram(h, bins=edges)
-        density[s] = 2.0 * counts[s] / (packing.n * width)
-        total = counts[s].sum()
-        pdf[s] = counts[s] / (total * width) if total > 0 else 0.0
-    dens_mean, dens_err, method = sample_average(density, counts)
-    pdf_mean, pdf_err, _ = sample_average(pdf, counts)
-    centre = np.sqrt(edges[:-1] * edges[1:])
-    try:
-        fit = fit_power_law(centre, dens_mean, dens_err, fit_min, fit_max)
-        fit_attrs = {
-            "fit_exponent": -fit.slope,
-            "fit_exponent_err": fit.slope_err,
-            "fit_prefactor": fit.prefactor,
-            "fit_chi2_reduced": fit.chi2_reduced,
-            "fit_n_bins": fit.n_points,
-        }
-    except ValueError:
-        fit_attrs = {"fit_exponent": np.nan, "fit_exponent_err": np.nan, "fit_prefactor": np.nan,
-                     "fit_chi2_reduced": np.nan, "fit_n_bins": 0}
+    gaps = [non_contact_gaps(p, max_gap, gap_tol) for p in packings]
+    ds, summary = gap_histogram(gaps, [p.n for p in packings], max_gap, min_gap, bins_per_decade, fit_min, fit_max)
     contact_def = ("explicit contacts of each packing (else h <= CONTACT_GAP_TOL)" if gap_tol is None
                    else f"pairs with h <= {gap_tol:g}")
-    attrs = new_dataset_attrs(
+    ds.attrs = new_dataset_attrs(
         "jamflow gap distribution",
         parameters or {},
-        n_samples=len(packings),
         d=int(packings[0].d),
         N=int(packings[0].n),
         contacts_excluded=contact_def,
-        error_method=method,
-        fit_min=float(fit_min),
-        fit_max=float(fit_max),
         fit_method="weighted least squares of log p against log h, weights (p/err)^2; "
                    "error scaled by sqrt(chi2_reduced) when > 1",
         mean_field_exponent=MEAN_FIELD_GAP_EXPONENT,
-        n_below_range=n_below,
-        **fit_attrs,
+        **summary,
     )
-    one = {"units": "1"}
-    return xr.Dataset(
-        data_vars={
-            "h_lower": ("bin", edges[:-1], {**one, "long_name": "lower bin edge of the relative gap h"}),
-            "h_upper": ("bin", edges[1:], {**one, "long_name": "upper bin edge of the relative gap h"}),
-            "gap_density": ("bin", dens_mean, {**one, "long_name": "non-contact neighbours per particle per unit h, sample mean"}),
-            "gap_density_err": ("bin", dens_err, {**one, "long_name": "standard error of gap_density"}),
-            "gap_pdf": ("bin", pdf_mean, {**one, "long_name": "gap probability density normalised on the binned range, sample mean"}),
-            "gap_pdf_err": ("bin", pdf_err, {**one, "long_name": "standard error of gap_pdf"}),
-            "count": (("sample", "bin"), counts.astype(np.int64), {**one, "long_name": "number of non-contact pairs per bin"}),
-        },
-        coords={"h": ("bin", centre, {**one, "long_name": "relative gap h = r/sigma_ij - 1 (geometric bin centre)"})},
-        attrs=attrs,
-    )
+    return ds
