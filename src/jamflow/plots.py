@@ -23,6 +23,7 @@ from .analysis.contacts import contact_network, find_rattlers
 from .analysis.forces import THETA_EXTENDED, THETA_LOCALISED
 from .analysis.gaps import MEAN_FIELD_GAP_EXPONENT
 from .packing import Packing
+from .tolerances import CONTACT_GAP_TOL
 
 __all__ = [
     "save_figure",
@@ -60,13 +61,20 @@ def plot_packing(packing: Packing, slab_axis: int = 2, title: str | None = None)
     first two axes. Contacts are lines between centres, their width proportional
     to the force when the packing has forces; rattlers are drawn in orange.
     """
-    fig = Figure(figsize=(6.4, 6.4 * min(2.0, packing.box.lengths[1] / packing.box.lengths[0]) + 0.6))
+    fig = Figure(layout="constrained", figsize=(6.4, 6.4 * min(2.0, packing.box.lengths[1] / packing.box.lengths[0]) + 0.6))
     ax = fig.add_subplot()
     h = packing.box.matrix
     x = packing.box.wrap(packing.position)
     radius = 0.5 * packing.diameter
     contacts = contact_network(packing)
-    rattler = packing.rattler if packing.rattler is not None else find_rattlers(packing.n, packing.d, contacts)
+    # without stored contacts (e.g. an LS snapshot) near contacts are only geometric: flag no rattlers
+    if packing.rattler is not None:
+        rattler = packing.rattler
+    elif packing.contacts is not None:
+        rattler = find_rattlers(packing.n, packing.d, contacts)
+    else:
+        rattler = np.zeros(packing.n, dtype=bool)
+    source = "" if packing.contacts is not None else f" with h <= {CONTACT_GAP_TOL:g}"
     shown = np.ones(packing.n, dtype=bool)
     if packing.d >= 3:
         mid = 0.5 * h[slab_axis, slab_axis]
@@ -87,22 +95,27 @@ def plot_packing(packing: Packing, slab_axis: int = 2, title: str | None = None)
                                 linewidths=0.4)
         col.set_clip_path(clip)
         ax.add_collection(col)
+    drawn_contacts = 0
     if len(contacts):
         ci, cj = contacts[:, 0], contacts[:, 1]
         dx = packing.box.minimum_image(x[cj] - x[ci])
         keep = shown[ci] & shown[cj]
+        drawn_contacts = int(keep.sum())
         if packing.force is not None and packing.contacts is not None and len(packing.force) == len(contacts):
-            f = packing.force
-            width = 3.0 * f / max(float(np.max(f)), 1e-300)
+            width = 3.0 * packing.force / max(float(np.max(packing.force)), 1e-300)
             label = "contacts (width proportional to force)"
         else:
             width = np.full(len(contacts), 0.8)
             label = "contacts"
         seg = np.stack([x[ci, :2], x[ci, :2] + dx[:, :2]], axis=1)[keep]
-        for s in shifts:
-            lc = LineCollection(seg + s, linewidths=width[keep], colors="#8b0000", label=label if s is shifts[4] else None)
-            lc.set_clip_path(clip)
-            ax.add_collection(lc)
+        if drawn_contacts:
+            for s in shifts:
+                lc = LineCollection(seg + s, linewidths=width[keep], colors="#8b0000")
+                lc.set_clip_path(clip)
+                ax.add_collection(lc)
+            ax.plot([], [], color="#8b0000", lw=1.5, label=label)
+    if np.any(rattler[shown]):
+        ax.plot([], [], "o", color="tab:orange", label="rattlers")
     pad = 0.03 * max(packing.box.lengths[:2])
     xs = corners[:, 0]
     ax.set_xlim(xs.min() - pad, xs.max() + pad)
@@ -114,8 +127,8 @@ def plot_packing(packing: Packing, slab_axis: int = 2, title: str | None = None)
     slab = "" if packing.d == 2 else f", slab |x_{slab_axis} - L/2| < D/2 ({int(shown.sum())} particles)"
     n_r = int(np.sum(rattler))
     ax.set_title(title or f"d={packing.d}, N={packing.n}, phi={packing.packing_fraction:.5f}, "
-                          f"{len(contacts)} contacts, {n_r} rattlers{slab}", fontsize=9)
-    if len(contacts):
+                          f"{len(contacts)} contacts{source}, {n_r} rattlers{slab}", fontsize=9)
+    if ax.get_legend_handles_labels()[0]:
         ax.legend(loc="upper right", fontsize=8, framealpha=0.8)
     return fig
 
@@ -129,7 +142,7 @@ def _labels(datasets: Sequence[xr.Dataset], labels: Sequence[str] | None) -> lis
 
 def plot_gaps(datasets: Sequence[xr.Dataset], labels: Sequence[str] | None = None) -> Figure:
     """Gap distributions (``jamflow gaps`` outputs) on log–log axes with fits (CALiPPSO Fig. 10)."""
-    fig = Figure(figsize=(6.4, 4.8))
+    fig = Figure(layout="constrained", figsize=(6.4, 4.8))
     ax = fig.add_subplot()
     for ds, label in zip(datasets, _labels(datasets, labels)):
         y, e = ds["gap_density"].values, ds["gap_density_err"].values
@@ -140,7 +153,7 @@ def plot_gaps(datasets: Sequence[xr.Dataset], labels: Sequence[str] | None = Non
         if np.isfinite(g):
             hf = np.logspace(np.log10(ds.attrs["fit_min"]), np.log10(ds.attrs["fit_max"]), 20)
             ax.plot(hf, ds.attrs["fit_prefactor"] * hf ** (-g), "-", color=bars[0].get_color(),
-                    label=f"fit: gamma = {g:.3f} ± {ge:.3f}")
+                    label=f"{label}: fit gamma = {g:.3f} ± {ge:.3f}")
     h_all = np.concatenate([ds["h"].values[ds["gap_density"].values > 0] for ds in datasets])
     if len(h_all):
         ref = datasets[0]
@@ -160,7 +173,7 @@ def plot_gaps(datasets: Sequence[xr.Dataset], labels: Sequence[str] | None = Non
 
 def plot_forces(ds: xr.Dataset) -> Figure:
     """Force distribution (``jamflow forces`` output): linear P(f) and log–log tails by population."""
-    fig = Figure(figsize=(10.5, 4.2))
+    fig = Figure(layout="constrained", figsize=(10.5, 4.2))
     ax1, ax2 = fig.subplots(1, 2)
     ax1.errorbar(ds["f"].values, ds["P_linear"].values, yerr=ds["P_linear_err"].values, fmt="o-", ms=3, capsize=2,
                  label=f"all backbone contacts ({ds.attrs.get('n_samples', 1)} sample(s))")
@@ -169,21 +182,30 @@ def plot_forces(ds: xr.Dataset) -> Figure:
     ax1.set_yscale("log")
     ax1.legend(fontsize=8)
     x = ds["f_log"].values
-    for name, label in (("", "all"), ("_buckler", "contacts with a buckler"), ("_extended", "extended (no buckler)")):
+    lo, hi = float(ds.attrs.get("fit_min", 1e-3)), float(ds.attrs.get("fit_max", 1e-1))
+    populations = (("", "all", "o"), ("_buckler", "contacts with a buckler", "s"),
+                   ("_extended", "extended (no buckler)", "^"))
+    for name, label, marker in populations:
         y, e = ds[f"P_log{name}"].values, ds[f"P_log{name}_err"].values
         ok = y > 0
+        if not np.any(ok):
+            continue
         th = ds.attrs.get(f"fit_exponent{name}", np.nan)
         the = ds.attrs.get(f"fit_exponent{name}_err", np.nan)
-        fit = f", theta = {th:.2f} ± {the:.2f}" if np.isfinite(th) else ""
-        ax2.errorbar(x[ok], y[ok], yerr=np.minimum(e[ok], 0.999 * y[ok]), fmt="o", ms=3, capsize=2, label=label + fit)
-    lo = float(ds.attrs.get("fit_min", 1e-3))
-    xx = np.logspace(np.log10(x.min()), 0, 10)
-    ok = ds["P_log"].values > 0
-    if np.any(ok):
-        k = int(np.argmin(np.abs(np.log(x / max(lo, x[ok].min()))) + np.where(ok, 0, np.inf)))
-        y0 = ds["P_log"].values[k]
-        ax2.plot(xx, y0 * (xx / x[k]) ** THETA_EXTENDED, "k--", lw=1, label=f"f^{THETA_EXTENDED} (extended, mean field)")
-        ax2.plot(xx, y0 * (xx / x[k]) ** THETA_LOCALISED, "k:", lw=1, label=f"f^{THETA_LOCALISED} (localised)")
+        fit = f", theta = {th:.3f} ± {the:.3f}" if np.isfinite(th) else ""
+        bars = ax2.errorbar(x[ok], y[ok], yerr=np.minimum(e[ok], 0.999 * y[ok]), fmt=marker, ms=4, mfc="none",
+                            capsize=2, label=label + fit)
+        if np.isfinite(th):
+            xf = np.logspace(np.log10(lo), np.log10(hi), 10)
+            ax2.plot(xf, ds.attrs[f"fit_prefactor{name}"] * xf**th, "-", color=bars[0].get_color(), lw=1.2)
+    if np.isfinite(ds.attrs.get("fit_prefactor", np.nan)):
+        # mean-field slopes drawn through the all-contact fit at the top of the fit window
+        y0 = ds.attrs["fit_prefactor"] * hi ** ds.attrs["fit_exponent"]
+        xx = np.logspace(np.log10(x.min()), np.log10(hi), 10)
+        ax2.plot(xx, 0.5 * y0 * (xx / hi) ** THETA_EXTENDED, "k--", lw=1,
+                 label=f"f^{THETA_EXTENDED} (extended, mean field)")
+        ax2.plot(xx, 0.5 * y0 * (xx / hi) ** THETA_LOCALISED, "k:", lw=1, label=f"f^{THETA_LOCALISED} (localised)")
+    ax2.axvspan(lo, hi, color="grey", alpha=0.1, label="fit window")
     ax2.set_xscale("log")
     ax2.set_yscale("log")
     ax2.set_xlabel("f / <f> (dimensionless)")
@@ -195,7 +217,7 @@ def plot_forces(ds: xr.Dataset) -> Figure:
 
 def plot_rdf(datasets: Sequence[xr.Dataset], labels: Sequence[str] | None = None) -> Figure:
     """g(r) of ``jamflow rdf`` outputs, with the crystallinity numbers in the legend."""
-    fig = Figure(figsize=(6.4, 4.4))
+    fig = Figure(layout="constrained", figsize=(6.4, 4.4))
     ax = fig.add_subplot()
     for k, ds in enumerate(datasets):
         label = labels[k] if labels else f"d={ds.attrs.get('d')}, phi={ds.attrs.get('packing_fraction', np.nan):.4f}"
@@ -228,7 +250,7 @@ def plot_stress_strain(datasets: Sequence[xr.Dataset], labels: Sequence[str] | N
     Accepts flow time series or ``jamflow flow-summary`` outputs (then the
     steady-state window and means are drawn).
     """
-    fig = Figure(figsize=(7.0, 7.5))
+    fig = Figure(layout="constrained", figsize=(7.0, 7.5))
     axes = fig.subplots(3, 1, sharex=True)
     for k, ds in enumerate(datasets):
         label = labels[k] if labels else f"run {k} ({ds.attrs.get('mode', 'flow')})"
@@ -244,9 +266,9 @@ def plot_stress_strain(datasets: Sequence[xr.Dataset], labels: Sequence[str] | N
             _window(ax, datasets[0], name)
     unit = datasets[0]["shear_stress"].attrs.get("units", "1")
     unit = _DL if unit == "1" else f"[{unit}]"
-    axes[0].set_ylabel(f"shear stress sigma {unit}")
-    axes[1].set_ylabel(f"pressure p {unit}")
-    axes[2].set_ylabel(f"friction mu = sigma / p {_DL}")
+    axes[0].set_ylabel(f"shear stress sigma\n{unit}")
+    axes[1].set_ylabel(f"pressure p\n{unit}")
+    axes[2].set_ylabel(f"friction mu = sigma / p\n{_DL}")
     axes[2].set_xlabel(f"shear strain gamma {_DL}")
     for ax in axes:
         ax.legend(fontsize=7)
@@ -255,7 +277,7 @@ def plot_stress_strain(datasets: Sequence[xr.Dataset], labels: Sequence[str] | N
 
 def plot_phi_kappa(ds: xr.Dataset) -> Figure:
     """Packing fraction and compression-to-shear rate ratio kappa against strain (Lerner et al. Fig. 7)."""
-    fig = Figure(figsize=(7.0, 5.5))
+    fig = Figure(layout="constrained", figsize=(7.0, 5.5))
     ax1, ax2 = fig.subplots(2, 1, sharex=True)
     s = ds["strain"].values
     ax1.plot(s, ds["packing_fraction"].values, lw=0.9)
@@ -267,7 +289,7 @@ def plot_phi_kappa(ds: xr.Dataset) -> Figure:
         ax2.axhline(0.0, color="grey", lw=0.8, ls=":")
     else:
         ax2.text(0.5, 0.5, "kappa not defined (run not at fixed pressure)", ha="center", transform=ax2.transAxes)
-    ax2.set_ylabel(f"kappa (compression / shear rate) {_DL}")
+    ax2.set_ylabel(f"kappa = compression / shear rate\n{_DL}")
     ax2.set_xlabel(f"shear strain gamma {_DL}")
     for ax in (ax1, ax2):
         if ax.get_legend_handles_labels()[0]:
@@ -281,7 +303,7 @@ def plot_overlap_series(datasets: Sequence[xr.Dataset]) -> Figure:
     """1 - Q and |Delta phi_J| against p_target, mean and standard error over samples (CALiPPSO Fig. 3 c–f)."""
     merged = xr.concat([ds[["one_minus_Q", "abs_delta_phi_J"]] for ds in datasets], dim="sample")
     m = len(datasets)
-    fig = Figure(figsize=(6.4, 6.4))
+    fig = Figure(layout="constrained", figsize=(6.4, 6.4))
     axes = fig.subplots(2, 1, sharex=True)
     x = merged["p_target"].values
     for ax, name, ylabel in ((axes[0], "abs_delta_phi_J", f"|Delta phi_J| {_DL}"), (axes[1], "one_minus_Q", f"1 - Q {_DL}")):

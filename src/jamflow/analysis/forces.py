@@ -154,7 +154,9 @@ def force_distribution(
             fit = fit_power_law(log_centre, mean, err, fit_min, fit_max)
             fits[f"fit_exponent{name}"] = fit.slope
             fits[f"fit_exponent{name}_err"] = fit.slope_err
+            fits[f"fit_prefactor{name}"] = fit.prefactor
         except ValueError:
+            fits[f"fit_prefactor{name}"] = np.nan
             fits[f"fit_exponent{name}"] = np.nan
             fits[f"fit_exponent{name}_err"] = np.nan
     n_nonrattler = n_buckler = 0
