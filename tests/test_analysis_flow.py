@@ -122,3 +122,23 @@ def test_flow_summary_cli_round_trip(tmp_path, rng):
     assert json.loads(out.attrs["parameters"])["strain_min"] == 0.5
     assert all("units" in v.attrs and "long_name" in v.attrs for v in out.data_vars.values())
     assert out["lifetime_strain"].values.tolist() == pytest.approx([0.4])
+
+
+@pytest.mark.slow
+def test_summary_of_a_real_overdamped_shear_run():
+    from jamflow.initial import random_packing
+    from jamflow.overdamped.driving import Drive
+    from jamflow.overdamped.run import Stop, run_flow
+
+    start = random_packing(32, 2, 0.5, "bi", 7, 1.4, 0.5, 0.1)
+    res = run_flow(start, Drive(mode="shear_fixed_pressure", pressure=10.0), Stop(strain=1.0, max_steps=3000))
+    out = flow_summary(res.series)
+    print({k: out.attrs[k] for k in ("mean_shear_stress", "err_shear_stress", "mean_friction", "n_events_made",
+                                     "n_lifetimes", "contact_count_change", "event_net_change")})
+    assert out.attrs["n_events_made"] > 0
+    assert out.attrs["contact_count_change"] == out.attrs["event_net_change"]
+    assert out.attrs["n_inconsistent_events"] == 0
+    assert np.all(out["lifetime_strain"].values > 0)
+    # once contacts carry the load the imposed pressure holds (before the first collision p = 0)
+    loaded = out["n_contacts"].values > 0
+    assert loaded.any() and np.all(out["pressure"].values[loaded] == pytest.approx(10.0, rel=1e-9))

@@ -41,9 +41,9 @@ def ideal_gas(rng: np.random.Generator, n: int, d: int, length: float) -> Packin
 
 @pytest.mark.parametrize("d", [2, 3])
 def test_ideal_gas_rdf_is_one(rng, d):
-    n = 4000
+    n = 3000
     p = ideal_gas(rng, n, d, 1.0)
-    r, g, edges = radial_distribution(p, r_max=40.0, bins=20)  # r up to 0.4 box lengths
+    r, g, edges = radial_distribution(p, r_max=30.0, bins=15)  # r up to 0.3 box lengths
     pairs_per_bin = 0.5 * n * (n - 1) * np.diff(edges ** d) * (np.pi if d == 2 else 4 * np.pi / 3) * 0.01**d
     err = 1.0 / np.sqrt(pairs_per_bin)
     print(f"d={d}: max |g-1|/err = {np.max(np.abs(g - 1) / err):.2f}")

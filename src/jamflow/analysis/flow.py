@@ -158,7 +158,9 @@ def flow_summary(
         ``lifetime_strain``, ``lifetime_time``; attributes ``mean_<q>`` /
         ``err_<q>``, ``friction_ratio_of_means`` (<sigma>/<p>), event counts and
         rates per unit strain and time in the window (``*_per_particle`` divided
-        by N), censored-lifetime counts.
+        by N), censored-lifetime counts, and ``contact_count_change`` (last minus
+        first ``n_contacts``) beside ``event_net_change`` (made minus broken over the
+        whole run), equal for a consistent event list.
     """
     _check_flow(ds)
     strain = ds["strain"].values.astype(np.float64)
@@ -254,6 +256,9 @@ def flow_summary(
             n_open_at_start=life["n_open_at_start"],
             n_open_at_end=life["n_open_at_end"],
             n_inconsistent_events=life["n_inconsistent"],
+            # bookkeeping check: contacts gained over the run must equal made minus broken events
+            contact_count_change=float(ds["n_contacts"].values[-1] - ds["n_contacts"].values[0]),
+            event_net_change=int(np.sum(kind == 1) - np.sum(kind == -1)),
             **attrs_avg,
             **rates,
         ),
