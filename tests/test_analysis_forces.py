@@ -85,3 +85,36 @@ def test_forces_cli(tmp_path, rng):
     for key in ("fit_exponent", "fit_exponent_buckler", "fit_exponent_extended", "buckler_definition"):
         assert key in ds.attrs
     assert all("units" in v.attrs and "long_name" in v.attrs for v in ds.data_vars.values())
+
+
+def test_buckler_and_extended_tails_are_separated(rng):
+    # triangular lattice; every third particle of every other row loses three of its six
+    # contacts and becomes a buckler (d + 1 = 3); its neighbours keep four or more
+    nx, ny = 36, 36
+    p = lattice(nx, ny)
+    c = p.contacts
+    centres = np.array([j * nx + i for j in range(0, ny, 2) for i in range(0, nx, 3)])
+    drop = []
+    for k in centres:
+        mine = np.flatnonzero((c == k).any(axis=1))
+        drop.extend(mine[:3])
+    keep = np.delete(c, drop, axis=0)
+    z = np.bincount(keep.ravel(), minlength=p.n)
+    expected = z == 3  # independent count: no rattlers here (min z is 3)
+    assert z.min() >= 3 and expected.sum() == len(centres)
+    on_buckler = expected[keep[:, 0]] | expected[keep[:, 1]]
+    theta_l, theta_e = 0.17462, THETA_EXTENDED
+    samples = []
+    for _ in range(12):
+        f = np.empty(len(keep))
+        f[on_buckler] = rng.random(on_buckler.sum()) ** (1.0 / (1.0 + theta_l))
+        f[~on_buckler] = rng.random((~on_buckler).sum()) ** (1.0 / (1.0 + theta_e))
+        samples.append(Packing(p.position, p.diameter, p.box, contacts=keep, force=f))
+    assert np.array_equal(bucklers(samples[0]), expected)
+    ds = force_distribution(samples, log_min=1e-5, fit_min=1e-4, fit_max=0.3, bins_per_decade=3)
+    tl, tle = ds.attrs["fit_exponent_buckler"], ds.attrs["fit_exponent_buckler_err"]
+    te, tee = ds.attrs["fit_exponent_extended"], ds.attrs["fit_exponent_extended_err"]
+    print(f"buckler theta = {tl:.3f} +- {tle:.3f} (true {theta_l}); extended {te:.3f} +- {tee:.3f} (true {theta_e})")
+    assert abs(tl - theta_l) < 2.5 * tle and abs(te - theta_e) < 2.5 * tee
+    assert te - tl > 3.0 * np.hypot(tle, tee)  # the two populations are told apart
+    assert ds.attrs["buckler_fraction"] == pytest.approx(len(centres) / p.n)

@@ -300,21 +300,28 @@ def plot_phi_kappa(ds: xr.Dataset) -> Figure:
 
 
 def plot_overlap_series(datasets: Sequence[xr.Dataset]) -> Figure:
-    """1 - Q and |Delta phi_J| against p_target, mean and standard error over samples (CALiPPSO Fig. 3 c–f)."""
-    merged = xr.concat([ds[["one_minus_Q", "abs_delta_phi_J"]] for ds in datasets], dim="sample")
+    """<phi_J>, |Delta phi_J| and 1 - Q against p_target over samples (CALiPPSO Fig. 3 a, c, e).
+
+    One ``jamflow overlap-series`` dataset per sample; points are sample means with
+    standard errors. The reference pressure itself (where |Delta phi_J| = 1 - Q = 0
+    by definition) is left out of the lower two panels.
+    """
+    merged = xr.concat([ds[["phi_J", "one_minus_Q", "abs_delta_phi_J"]] for ds in datasets], dim="sample")
     m = len(datasets)
-    fig = Figure(layout="constrained", figsize=(6.4, 6.4))
-    axes = fig.subplots(2, 1, sharex=True)
+    fig = Figure(layout="constrained", figsize=(6.4, 8.0))
+    axes = fig.subplots(3, 1, sharex=True)
     x = merged["p_target"].values
-    for ax, name, ylabel in ((axes[0], "abs_delta_phi_J", f"|Delta phi_J| {_DL}"), (axes[1], "one_minus_Q", f"1 - Q {_DL}")):
+    panels = ((axes[0], "phi_J", f"<phi_J> {_DL}", np.ones(len(x), dtype=bool)),
+              (axes[1], "abs_delta_phi_J", f"<|Delta phi_J|> {_DL}", x < x.max()),
+              (axes[2], "one_minus_Q", f"1 - <Q> {_DL}", x < x.max()))
+    for ax, name, ylabel, ok in panels:
         y = merged[name].mean("sample").values
         e = merged[name].std("sample", ddof=1).values / np.sqrt(m) if m > 1 else np.zeros_like(y)
-        ok = x < x.max()
-        ax.errorbar(x[ok], y[ok], yerr=e[ok], fmt="o-", ms=4, capsize=2, label=f"{m} sample(s)")
+        ax.errorbar(x[ok], y[ok], yerr=e[ok], fmt="o-", ms=4, capsize=2, label=f"mean ± s.e. over {m} sample(s)")
         ax.set_xscale("log")
-        if np.any(y[ok] > 0):
-            ax.set_yscale("symlog", linthresh=max(1e-12, float(np.min(y[ok][y[ok] > 0]))))
+        if name != "phi_J" and np.any(y[ok] > 0):
+            ax.set_yscale("symlog", linthresh=float(np.min(y[ok][y[ok] > 0])))
         ax.set_ylabel(ylabel)
         ax.legend(fontsize=8)
-    axes[1].set_xlabel(f"target pressure p_tar {_DL}")
+    axes[2].set_xlabel(f"LS target pressure p_tar {_DL}")
     return fig
