@@ -344,10 +344,12 @@ def packing_from_dataset(ds: xr.Dataset) -> Packing:
     if missing:
         raise ValueError(f"dataset is not a packing: missing variable(s) {', '.join(missing)}")
     contacts = force = rattler = None
+    if ("contact_i" in ds) != ("contact_j" in ds):
+        raise ValueError("dataset has only one of contact_i and contact_j")
     if "contact_i" in ds:
         contacts = np.stack([ds["contact_i"].values, ds["contact_j"].values], axis=1)
-        if "force" in ds:
-            force = ds["force"].values
+    if "force" in ds:
+        force = ds["force"].values  # without contacts, Packing rejects it
     if "rattler" in ds:
         rattler = ds["rattler"].values.astype(bool)
     pressure = ds.attrs.get("pressure", np.nan)
