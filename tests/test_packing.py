@@ -232,3 +232,12 @@ def test_dataset_with_stage_parameters_and_missing_fields() -> None:
     assert q.pressure is None and q.seed is None
     with pytest.raises(ValueError, match="missing variable"):
         Packing.from_dataset(ds.drop_vars("box"))
+
+
+def test_malformed_contact_variables_in_a_dataset() -> None:
+    ds = _full_packing().to_dataset()
+    with pytest.raises(ValueError, match="only one of contact_i and contact_j"):
+        Packing.from_dataset(ds.drop_vars("contact_j"))
+    # forces without contacts are an error, not silently dropped
+    with pytest.raises(ValueError, match="forces given without contacts"):
+        Packing.from_dataset(ds.drop_vars(["contact_i", "contact_j"]))
