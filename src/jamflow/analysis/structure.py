@@ -32,8 +32,10 @@ __all__ = [
     "radial_distribution",
     "nearest_neighbours",
     "hexatic_order",
+    "bond_order_vectors",
     "steinhardt_q",
     "crystal_like",
+    "crystal_like_from",
     "structure_dataset",
 ]
 
@@ -99,8 +101,9 @@ def nearest_neighbours(packing: Packing, k: int) -> tuple[NDArray[np.int64], NDA
     """
     n, d = packing.n, packing.d
     limit = 0.999 * _half_width(packing)
-    # radius expected to hold ~2k neighbours in an ideal gas, then grow if needed
-    cutoff = min(limit, float((2.0 * k * packing.box.volume / n / sphere_volume(d, 2.0)) ** (1.0 / d)))
+    # radius expected to hold ~3k neighbours in an ideal gas (a Poisson count below k is
+    # then rare even among 1e5 particles); grow it only if some particle still lacks k
+    cutoff = min(limit, float((3.0 * k * packing.box.volume / n / sphere_volume(d, 2.0)) ** (1.0 / d)))
     while True:
         pairs = pairs_within(packing.position, packing.box, cutoff)
         src = np.concatenate([pairs.i, pairs.j])
@@ -128,7 +131,17 @@ def hexatic_order(packing: Packing) -> NDArray[np.complex128]:
     return np.exp(6j * theta).mean(axis=1)
 
 
-def _qlm(packing: Packing, l: int, k: int) -> tuple[NDArray[np.complex128], NDArray[np.int64]]:
+def bond_order_vectors(packing: Packing, l: int = 6, k: int = 12) -> tuple[NDArray[np.complex128], NDArray[np.int64]]:
+    """Steinhardt ``q_lm(i) = (1/k) sum_j Y_lm(r_ij)`` over the ``k`` nearest neighbours (3D).
+
+    Returns
+    -------
+    qlm : ndarray of complex, shape (N, 2l+1)
+        For ``m = -l .. l``.
+    neighbours : ndarray of int64, shape (N, k)
+    """
+    if packing.d != 3:
+        raise ValueError(f"Steinhardt q_l is computed in 3D, got d={packing.d}")
     j, dx = nearest_neighbours(packing, k)
     r = np.linalg.norm(dx, axis=2)
     polar = np.arccos(np.clip(dx[..., 2] / r, -1.0, 1.0))
@@ -150,9 +163,7 @@ def steinhardt_q(packing: Packing, l: int = 6, k: int = 12) -> tuple[NDArray[np.
         neighbour counts, so this is the bond average).
     qlm : ndarray of complex, shape (N, 2l+1)
     """
-    if packing.d != 3:
-        raise ValueError(f"Steinhardt q_l is computed in 3D, got d={packing.d}")
-    qlm, _ = _qlm(packing, l, k)
+    qlm, _ = bond_order_vectors(packing, l, k)
     norm = 4.0 * np.pi / (2 * l + 1)
     q_local = np.sqrt(norm * np.sum(np.abs(qlm) ** 2, axis=1))
     q_global = float(np.sqrt(norm * np.sum(np.abs(qlm.mean(axis=0)) ** 2)))
@@ -173,11 +184,19 @@ def crystal_like(
     connected : ndarray of int, shape (N,)
         Number of neighbours ``j`` with ``Re(q6(i) · q6(j)*) / (|q6(i)| |q6(j)|) > dot_threshold``.
     """
-    if packing.d != 3:
-        raise ValueError(f"the ten Wolde-Frenkel criterion is computed in 3D, got d={packing.d}")
-    qlm, j = _qlm(packing, 6, k)
+    qlm, j = bond_order_vectors(packing, 6, k)
+    return crystal_like_from(qlm, j, dot_threshold, min_connected)
+
+
+def crystal_like_from(
+    qlm: NDArray[np.complex128],
+    neighbours: NDArray[np.int64],
+    dot_threshold: float = TWF_DOT_THRESHOLD,
+    min_connected: int = TWF_MIN_CONNECTED,
+) -> tuple[NDArray[np.bool_], NDArray[np.int64]]:
+    """:func:`crystal_like` from precomputed :func:`bond_order_vectors` (l = 6)."""
     unit = qlm / np.linalg.norm(qlm, axis=1)[:, None]
-    dots = np.real(np.sum(unit[:, None, :] * np.conj(unit[j]), axis=2))
+    dots = np.real(np.sum(unit[:, None, :] * np.conj(unit[neighbours]), axis=2))
     connected = np.sum(dots > dot_threshold, axis=1)
     return connected >= min_connected, connected
 
@@ -203,8 +222,11 @@ def structure_dataset(packing: Packing, r_max: float = 3.0, bins: int = 150, par
         extra = {"crystallinity": "2D hexatic psi6 over 6 nearest neighbours",
                  "psi6_global": float(np.abs(psi.mean())), "psi6_local_mean": float(np.abs(psi).mean())}
     elif packing.d == 3:
-        q6, q6g, _ = steinhardt_q(packing)
-        crys, connected = crystal_like(packing)
+        qlm, neighbours = bond_order_vectors(packing, 6, 12)
+        norm = 4.0 * np.pi / 13.0
+        q6 = np.sqrt(norm * np.sum(np.abs(qlm) ** 2, axis=1))
+        q6g = float(np.sqrt(norm * np.sum(np.abs(qlm.mean(axis=0)) ** 2)))
+        crys, connected = crystal_like_from(qlm, neighbours)
         data_vars["q6"] = ("particle", q6, {**one, "long_name": "local Steinhardt q6 (12 nearest neighbours)"})
         data_vars["crystal_like"] = ("particle", crys.astype(np.int8),
                                      {**one, "long_name": "ten Wolde-Frenkel crystal-like flag (1 = crystal-like)"})
