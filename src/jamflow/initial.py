@@ -152,6 +152,13 @@ def _rsa(
         trials += len(cand)
         start = placed
         tree = cKDTree(xs[:start], boxsize=1.0) if start else None
+        if tree is not None:
+            # Vectorised pre-rejection: a candidate overlapping its nearest placed sphere
+            # even with the smallest diameter this batch can assign is rejected by the
+            # loop below too, so dropping it early changes nothing but the run time.
+            dist, nearest = tree.query(cand)
+            smallest = Ds[min(start + len(cand), n) - 1]
+            cand = cand[dist >= 0.5 * (Ds[nearest] + smallest)]
         near_lists = tree.query_ball_point(cand, reach) if tree is not None else [[]] * len(cand)
         for c, near in zip(cand, near_lists):
             Dk = Ds[placed]
