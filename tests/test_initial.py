@@ -99,6 +99,11 @@ def test_unreachable_phi_is_a_clear_error(d: int, phi: float) -> None:
     assert isinstance(err.value, ValueError)
 
 
+def test_unreachable_phi_with_the_default_trial_budget() -> None:
+    with pytest.raises(UnreachableError, match=r"placed only \d+ of 100 spheres at phi=0.5 in d=3"):
+        random_packing(100, 3, 0.5, seed=1)
+
+
 def test_too_few_particles_for_the_box() -> None:
     with pytest.raises(UnreachableError, match="half the box"):
         random_packing(2, 3, 0.3, seed=0)
