@@ -1,0 +1,157 @@
+"""Soft-sphere subcommands: soft-jam, aqs, sd-shear, moduli."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+import xarray as xr
+from tqdm import tqdm
+
+from ..io import new_dataset_attrs, read_packing, write_dataset, write_packing
+from ..packing import Packing
+from ..soft.hessian import backbone_pairs, elastic_moduli, hessian, lowest_modes
+from ..soft.jamming import FORCE_TOL_VANDERWERF, jam_to_pressure
+from ..soft.potential import PowerLawPotential
+from ..soft.shear import LERNER_DELTA_R, aqs_shear, lerner_sd_shear
+from .common import add_command, add_quiet, stage_parameters
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = add_command(sub, "soft-jam", _soft_jam,
+                    "soft-sphere jamming onset: compress/decompress bisection + enthalpy minimisation to P0")
+    p.add_argument("input", help="input netCDF packing (overlaps allowed)")
+    p.add_argument("out", help="output netCDF packing (lengths in units of the mean diameter)")
+    p.add_argument("--pressure", type=float, required=True,
+                   help="target pressure P0 [epsilon / mean diameter^d], e.g. 1e-7")
+    p.add_argument("--seed", type=int, default=None,
+                   help="start from uniformly random centres drawn with this seed (O'Hern's "
+                        "infinite-temperature quench); default: start from the input centres")
+    p.add_argument("--force-tol", type=float, default=FORCE_TOL_VANDERWERF,
+                   help=f"final max per-particle |F| [epsilon / mean diameter] (default {FORCE_TOL_VANDERWERF:.3g}: F^2 < 1e-25)")
+    p.add_argument("--pressure-rtol", type=float, default=1e-6, help="final |P - P0| / P0 (default 1e-6)")
+    p.add_argument("--delta-phi", type=float, default=1e-3, help="first bisection step in packing fraction (default 1e-3)")
+    p.add_argument("--exponent", type=float, default=2.0, help="potential exponent w (2 harmonic, 2.5 Hertz)")
+    p.add_argument("--max-steps", type=int, default=20_000_000, help="FIRE step budget of the whole protocol")
+    add_quiet(p)
+
+    p = add_command(sub, "aqs", _aqs, "athermal quasistatic shear of a soft packing (stress-strain time series)")
+    p.add_argument("input", help="input netCDF soft packing")
+    p.add_argument("out", help="output netCDF time series (dim step, coordinate strain)")
+    p.add_argument("--strain", type=float, required=True, help="total strain")
+    p.add_argument("--step", type=float, required=True, help="strain step delta gamma")
+    p.add_argument("--fixed-pressure", action="store_true",
+                   help="minimise the enthalpy at the input's pressure (or --pressure) after every step")
+    p.add_argument("--pressure", type=float, default=None, help="fixed pressure P0 (implies --fixed-pressure)")
+    p.add_argument("--force-tol", type=float, default=1e-12, help="FIRE tolerance on max |F| (default 1e-12)")
+    p.add_argument("--exponent", type=float, default=2.0, help="potential exponent w")
+    p.add_argument("--max-steps", type=int, default=10_000_000, help="FIRE steps allowed per strain step")
+    p.add_argument("--final", default=None, help="also write the last state as a packing netCDF")
+    add_quiet(p)
+
+    p = add_command(sub, "sd-shear", _sd_shear,
+                    "Lerner et al. steepest-descent shear with tentative-network hard-sphere stress (flow schema)")
+    p.add_argument("input", help="input netCDF packing (lengths in units of lambda)")
+    p.add_argument("out", help="output netCDF flow time series")
+    p.add_argument("--strain", type=float, required=True, help="total strain")
+    p.add_argument("--step", type=float, default=1e-6, help="strain step (paper: 1e-6)")
+    p.add_argument("--dt", type=float, default=0.1, help="steepest-descent step (paper: 0.1)")
+    p.add_argument("--grad-tol", type=float, default=1e-9, help="max |grad U| stop (paper: 1e-9)")
+    p.add_argument("--delta-r", type=float, default=LERNER_DELTA_R, help="tentative network distance (paper: 1e-5)")
+    p.add_argument("--max-steps", type=int, default=10_000_000, help="descent steps allowed per strain step")
+    add_quiet(p)
+
+    p = add_command(sub, "moduli", _moduli,
+                    "bulk and shear moduli (affine and relaxed) and lowest Hessian eigenvalues of a soft packing")
+    p.add_argument("input", help="input netCDF soft packing at force balance")
+    p.add_argument("out", help="output netCDF dataset")
+    p.add_argument("--modes", type=int, default=10, help="number of lowest non-translational eigenvalues")
+    p.add_argument("--exponent", type=float, default=2.0, help="potential exponent w")
+
+
+def _random_start(packing: Packing, seed: int) -> Packing:
+    rng = np.random.default_rng(seed)
+    s = rng.random((packing.n, packing.d))
+    return packing.evolve(position=packing.box.to_cartesian(s), seed=seed)
+
+
+def _soft_jam(args: argparse.Namespace) -> int:
+    packing = read_packing(args.input, None)
+    if args.seed is not None:
+        packing = _random_start(packing, args.seed)
+    bar = tqdm(desc="soft-jam", unit=" bisection", disable=args.quiet)
+
+    def progress(info: dict) -> None:
+        bar.update(1)
+        bar.set_postfix(phi=f"{info['phi']:.8f}", P=f"{info['pressure']:.3e}")
+
+    result = jam_to_pressure(
+        packing, args.pressure, PowerLawPotential(exponent=args.exponent), args.force_tol,
+        args.pressure_rtol, args.delta_phi, max_steps=args.max_steps, progress=progress,
+    )
+    bar.close()
+    if not result.converged:
+        raise RuntimeError(
+            f"enthalpy minimisation did not reach force_tol {args.force_tol:g} / pressure_rtol "
+            f"{args.pressure_rtol:g} within {args.max_steps} steps"
+        )
+    write_packing(result.packing, args.out, stage_parameters(args, "input", "out"))
+    return 0
+
+
+def _aqs(args: argparse.Namespace) -> int:
+    packing = read_packing(args.input, None)
+    pressure = args.pressure
+    if args.fixed_pressure and pressure is None:
+        if packing.pressure is None or not packing.pressure > 0:
+            raise ValueError("--fixed-pressure needs a positive pressure attribute in the input or --pressure")
+        pressure = packing.pressure
+    n = int(np.ceil(args.strain / args.step - 1e-9))
+    bar = tqdm(total=n, desc="aqs", disable=args.quiet)
+    ds, final = aqs_shear(
+        packing, args.strain, args.step, PowerLawPotential(exponent=args.exponent), args.force_tol,
+        pressure, max_steps=args.max_steps, progress=lambda _: bar.update(1),
+    )
+    bar.close()
+    write_dataset(ds, args.out)
+    if args.final:
+        write_packing(final, args.final, stage_parameters(args, "input", "out", "final"))
+    return 0
+
+
+def _sd_shear(args: argparse.Namespace) -> int:
+    packing = read_packing(args.input, None)
+    n = int(np.ceil(args.strain / args.step - 1e-9))
+    bar = tqdm(total=n + 1, desc="sd-shear", disable=args.quiet)
+    ds = lerner_sd_shear(packing, args.strain, args.step, args.dt, args.grad_tol, args.delta_r,
+                         max_steps=args.max_steps, progress=lambda _: bar.update(1))
+    bar.close()
+    write_dataset(ds, args.out)
+    return 0
+
+
+def _moduli(args: argparse.Namespace) -> int:
+    packing = read_packing(args.input, None)
+    potential = PowerLawPotential(exponent=args.exponent)
+    m = elastic_moduli(packing.position, packing.box, packing.diameter, potential)
+    pairs, rattler = backbone_pairs(packing.position, packing.box, packing.diameter, potential)
+    H = hessian(packing.position, packing.box, packing.diameter, potential, pairs)
+    eigenvalues, _ = lowest_modes(H, packing.d, args.modes, keep=~rattler)
+    unit = "epsilon / length^d"
+    scalars = {name: ((), value, {"units": "1", "long_name": name.replace("_", " ") + " modulus", "comment": unit})
+               for name, value in (("bulk", m.bulk), ("shear", m.shear),
+                                   ("bulk_affine", m.bulk_affine), ("shear_affine", m.shear_affine))}
+    ds = xr.Dataset(
+        data_vars={
+            **scalars,
+            "pressure": ((), m.pressure, {"units": "1", "long_name": "virial pressure", "comment": unit}),
+            "eigenvalue": (("mode",), eigenvalues,
+                           {"units": "1", "long_name": "lowest non-translational Hessian eigenvalues (non-rattlers)",
+                            "comment": "epsilon / length^2 (unit mass)"}),
+        },
+        attrs=new_dataset_attrs("jamflow soft-sphere elastic moduli", stage_parameters(args, "input", "out"),
+                                d=packing.d, N=packing.n, n_rattlers=m.n_rattlers,
+                                protocol=packing.protocol, length_unit=packing.attrs.get("length_unit", "")),
+    )
+    write_dataset(ds, args.out)
+    return 0

@@ -1,0 +1,33 @@
+"""Soft repulsive spheres: potentials, minimisers, jamming onset, quasistatic shear, Hessian.
+
+Modules: :mod:`~jamflow.soft.potential` (pair potential, forces, stress, Verlet list),
+:mod:`~jamflow.soft.minimize` (FIRE, steepest descent, CG, enthalpy minimisation),
+:mod:`~jamflow.soft.jamming` (compress/decompress bisection to a target pressure),
+:mod:`~jamflow.soft.shear` (athermal quasistatic shear; Lerner et al.'s steepest-descent
+protocol), :mod:`~jamflow.soft.hessian` (dynamical matrix, modes, elastic moduli).
+"""
+
+from .minimize import (
+    ConvergenceError,
+    FireParameters,
+    MinimizeResult,
+    conjugate_gradient,
+    fire,
+    minimize_enthalpy,
+    steepest_descent,
+)
+from .potential import NeighborList, PowerLawPotential, evaluate, overlapping_pairs
+
+__all__ = [
+    "ConvergenceError",
+    "FireParameters",
+    "MinimizeResult",
+    "NeighborList",
+    "PowerLawPotential",
+    "conjugate_gradient",
+    "evaluate",
+    "fire",
+    "minimize_enthalpy",
+    "overlapping_pairs",
+    "steepest_descent",
+]

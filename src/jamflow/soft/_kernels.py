@@ -1,0 +1,217 @@
+"""Numba kernels of the soft-sphere package: pair forces, FIRE and steepest descent.
+
+Positions enter as ``x = s * y``: ``y`` are coordinates in a reference box ``h_ref``
+and ``s`` an isotropic scale factor (``s = 1`` and no box degree of freedom for
+fixed-box minimisation). The pair vector of pair ``p`` is
+``s * (y[j] - y[i] + offset[p])`` with ``offset[p] = h_ref @ n_p`` the periodic image
+fixed when the neighbour list was built. All kernels are single-threaded and cached.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+#: Status codes returned by the iterative kernels.
+CONVERGED, REBUILD, MAX_STEPS, STALLED = 0, 1, 2, 3
+
+
+@njit(cache=True)
+def pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial):
+    """Energy, forces and virial of the power-law contact potential.
+
+    ``U = (eps / w) sum_{r < sigma} (1 - r / sigma)^w``. Fills ``force`` (N, d) with
+    ``-dU/dx`` and ``virial`` (d, d) with ``sum f r_a r_b / r`` (f = repulsive pair
+    force magnitude). Returns ``(U, number of overlapping pairs)``.
+    """
+    n, d = y.shape
+    force[:, :] = 0.0
+    virial[:, :] = 0.0
+    energy = 0.0
+    n_contact = 0
+    dx = np.empty(d)
+    harmonic = w == 2.0
+    for p in range(pi.shape[0]):
+        i = pi[p]
+        j = pj[p]
+        r2 = 0.0
+        for a in range(d):
+            dx[a] = s * (y[j, a] - y[i, a] + offset[p, a])
+            r2 += dx[a] * dx[a]
+        sig = sigma[p]
+        if r2 >= sig * sig:
+            continue
+        r = np.sqrt(r2)
+        xi = 1.0 - r / sig
+        if harmonic:
+            energy += 0.5 * eps * xi * xi
+            fmag = eps * xi / sig
+        else:
+            energy += eps / w * xi**w
+            fmag = eps * xi ** (w - 1.0) / sig
+        n_contact += 1
+        inv_r = 1.0 / r
+        for a in range(d):
+            fa = fmag * dx[a] * inv_r
+            force[j, a] += fa
+            force[i, a] -= fa
+            for b in range(d):
+                virial[a, b] += fmag * dx[a] * dx[b] * inv_r
+    return energy, n_contact
+
+
+@njit(cache=True)
+def _max_force_sq(force):
+    m = 0.0
+    for i in range(force.shape[0]):
+        f2 = 0.0
+        for a in range(force.shape[1]):
+            f2 += force[i, a] * force[i, a]
+        if f2 > m:
+            m = f2
+    return m
+
+
+@njit(cache=True)
+def _needs_rebuild(y, y_build, s, s_build, reach, skin, slack):
+    """Verlet criterion: twice the largest non-affine displacement plus box deformation.
+
+    ``y_build`` are the build-time positions mapped affinely to the current reference
+    box and ``slack`` the deformation term accumulated before this call.
+    """
+    m = 0.0
+    for i in range(y.shape[0]):
+        d2 = 0.0
+        for a in range(y.shape[1]):
+            dd = y[i, a] - y_build[i, a]
+            d2 += dd * dd
+        if d2 > m:
+            m = d2
+    return 2.0 * s * np.sqrt(m) + abs(s / s_build - 1.0) * reach + slack >= skin
+
+
+@njit(cache=True)
+def fire(
+    y, v, box_state, fire_state, fire_params,
+    offset, pi, pj, sigma, eps, w,
+    y_build, s_build, reach, skin, slack,
+    barostat, pressure0, volume_ref, q_scale,
+    force_tol, pressure_rtol, max_steps, force, virial,
+):
+    """FIRE 2.0 (Guénolé et al. 2020, Algorithm 2; Bitzek et al. 2006) with unit masses.
+
+    Parameters (arrays are updated in place so a run can resume after a rebuild)
+    ----------
+    y, v : (N, d) reference-box coordinates and velocities.
+    box_state : (3,) ``[q, v_q, s]`` with ``s = exp(q / q_scale)`` the box scale
+        (only evolves when ``barostat``).
+    fire_state : (3,) ``[dt, alpha, n_positive]``.
+    fire_params : (8,) ``[dt_max, dt_min, f_inc, f_dec, alpha0, f_alpha, n_delay,
+        initial_delay]``.
+    barostat : bool
+        Minimise the enthalpy ``H = U + P0 V`` with ``q`` as a degree of freedom, whose
+        generalised force is ``d V (P - P0) / q_scale``.
+
+    Returns
+    -------
+    status, steps, energy, n_contact, max_force_sq, pressure
+    """
+    n, d = y.shape
+    dt, alpha, npos = fire_state[0], fire_state[1], int(fire_state[2])
+    dt_max, dt_min, f_inc, f_dec = fire_params[0], fire_params[1], fire_params[2], fire_params[3]
+    alpha0, f_alpha, n_delay = fire_params[4], fire_params[5], int(fire_params[6])
+    initial_delay = fire_params[7] > 0.0
+    q, vq, s = box_state[0], box_state[1], box_state[2]
+    energy, n_contact = pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial)
+    volume = volume_ref * s**d
+    pressure = (np.trace(virial)) / (d * volume)
+    fmax2 = _max_force_sq(force)
+    status = MAX_STEPS
+    step = 0
+    # the generalised force on reference coordinates is s * F (chain rule)
+    while step < max_steps:
+        if fmax2 <= force_tol * force_tol and (
+            not barostat or abs(pressure - pressure0) <= pressure_rtol * pressure0
+        ):
+            status = CONVERGED
+            break
+        if _needs_rebuild(y, y_build, s, s_build, reach, skin, slack):
+            status = REBUILD
+            break
+        fq = d * volume * (pressure - pressure0) / q_scale if barostat else 0.0
+        power = s * np.sum(force * v) + fq * vq
+        if power > 0.0:
+            npos += 1
+            if npos > n_delay:
+                dt = min(dt * f_inc, dt_max)
+                alpha *= f_alpha
+        else:
+            npos = 0
+            if not (initial_delay and step < n_delay):
+                if dt * f_dec >= dt_min:
+                    dt *= f_dec
+                alpha = alpha0
+            # step back half a step and stop: FIRE 2.0 correction of overshoot
+            y -= 0.5 * dt * v
+            v[:, :] = 0.0
+            if barostat:
+                q -= 0.5 * dt * vq
+                vq = 0.0
+        # semi-implicit Euler with FIRE velocity mixing
+        v += dt * s * force
+        if barostat:
+            vq += dt * fq
+        vnorm = np.sqrt(np.sum(v * v) + vq * vq)
+        fnorm = np.sqrt(s * s * np.sum(force * force) + fq * fq)
+        if fnorm > 0.0:
+            v *= 1.0 - alpha
+            v += alpha * vnorm / fnorm * s * force
+            vq = (1.0 - alpha) * vq + alpha * vnorm / fnorm * fq
+        y += dt * v
+        if barostat:
+            q += dt * vq
+            s = np.exp(q / q_scale)
+            volume = volume_ref * s**d
+        energy, n_contact = pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial)
+        pressure = np.trace(virial) / (d * volume)
+        fmax2 = _max_force_sq(force)
+        step += 1
+    fire_state[0], fire_state[1], fire_state[2] = dt, alpha, npos
+    box_state[0], box_state[1], box_state[2] = q, vq, s
+    return status, step, energy, n_contact, fmax2, pressure
+
+
+@njit(cache=True)
+def steepest_descent(
+    y, offset, pi, pj, sigma, eps, w, y_build, reach, skin, slack,
+    dt, force_tol, max_steps, force, virial, energies,
+):
+    """Overdamped integrator ``dx/dt = -grad U`` (Lerner et al. Eq. 31, xi_0 = 1), fixed step.
+
+    Stops when the largest per-particle ``|grad U|`` falls below ``force_tol``.
+    ``energies`` (K,) receives the energy before each of the first K steps.
+
+    Returns
+    -------
+    status, steps, energy, n_contact, max_force_sq
+    """
+    energy, n_contact = pair_forces(y, 1.0, offset, pi, pj, sigma, eps, w, force, virial)
+    fmax2 = _max_force_sq(force)
+    status = MAX_STEPS
+    step = 0
+    while True:
+        if step < energies.shape[0]:
+            energies[step] = energy
+        if fmax2 <= force_tol * force_tol:
+            status = CONVERGED
+            break
+        if step >= max_steps:
+            break
+        if _needs_rebuild(y, y_build, 1.0, 1.0, reach, skin, slack):
+            status = REBUILD
+            break
+        y += dt * force
+        energy, n_contact = pair_forces(y, 1.0, offset, pi, pj, sigma, eps, w, force, virial)
+        fmax2 = _max_force_sq(force)
+        step += 1
+    return status, step, energy, n_contact, fmax2

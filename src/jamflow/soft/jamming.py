@@ -1,0 +1,195 @@
+"""Jamming onset of soft spheres: compress/decompress bisection to a target pressure.
+
+Protocol (O'Hern et al., PRE 68, 011306 (2003); VanderWerf et al., Sec. II):
+
+1. lengths are rescaled so the mean diameter is 1 (the output's length unit);
+2. the box is scaled isotropically (centres affinely) in steps of packing fraction
+   ``delta_phi``, each followed by FIRE energy minimisation at fixed box to
+   ``max_i |F_i| <= bisection_force_factor * P0``; if the virial pressure is below
+   ``P0`` the next step compresses, above it decompresses, and ``delta_phi`` halves
+   whenever the direction reverses;
+3. when ``|P - P0| <= bisection_rtol * P0`` (or ``delta_phi`` underflows) the
+   enthalpy ``H = U + P0 V`` is minimised with centres and box scale as degrees of
+   freedom to ``max_i |F_i| <= force_tol`` and ``|P - P0| <= pressure_rtol * P0``.
+
+Units: energy ``epsilon`` (see :mod:`jamflow.soft.potential`), length the mean
+diameter ``<D>``, pressure ``epsilon / <D>^d``, force ``epsilon / <D>``.
+
+Force-balance floor of float64: VanderWerf et al. ask for squared forces per particle
+below 1e-25 (``force_tol = 10**-12.5``). With ``<D> = 1`` and box sides of order
+``L ~ N^(1/d)``, pair vectors carry a round-off of ``~ L * 2^-53``, so contact forces
+have an absolute noise of ``~ epsilon * 1e-15 ... 1e-14`` and per-particle forces
+cannot be balanced much below ``~1e-14``: FIRE reaches ``max_i |F_i|^2`` of about
+``1e-29`` (2D, N = 1024; measured in ``benchmarks/soft_jamming.py``), so the 1e-25
+criterion is met with three to four orders of magnitude to spare.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..analysis.contacts import find_rattlers
+from ..box import Box
+from ..packing import Packing, sphere_volume
+from .minimize import FireParameters, fire, minimize_enthalpy
+from .potential import NeighborList, PowerLawPotential, overlapping_pairs
+
+__all__ = ["JammingResult", "jam_to_pressure", "soft_packing", "FORCE_TOL_VANDERWERF"]
+
+#: ``max_i |F_i|`` equivalent of VanderWerf et al.'s ``F_i^2 < 1e-25`` [epsilon / <D>].
+FORCE_TOL_VANDERWERF: float = 10.0**-12.5
+
+
+@dataclass(frozen=True)
+class JammingResult:
+    """A soft packing at the target pressure and how it was reached.
+
+    Attributes
+    ----------
+    packing : Packing
+        Wrapped centres in units of the mean diameter, overlapping pairs as contacts
+        with their repulsive force magnitudes, rattlers, virial pressure.
+    converged : bool
+        Final enthalpy minimisation met both tolerances.
+    history : dict of lists
+        Per bisection step: ``phi``, ``pressure``, ``steps`` (FIRE steps).
+    steps : int
+        Total FIRE steps (force evaluations) of the whole protocol.
+    """
+
+    packing: Packing
+    converged: bool
+    history: dict[str, list] = field(default_factory=dict)
+    steps: int = 0
+
+
+def soft_packing(
+    x: np.ndarray,
+    box: Box,
+    diameter: np.ndarray,
+    potential: PowerLawPotential,
+    template: Packing,
+    protocol_suffix: str,
+    parameters: dict,
+    attrs: dict,
+) -> Packing:
+    """Packing with contacts = overlapping pairs, forces, rattlers and virial pressure."""
+    pairs, _, f = overlapping_pairs(x, box, diameter, potential)
+    contacts = np.stack([pairs.i, pairs.j], axis=1)
+    rattler = find_rattlers(len(x), box.d, contacts)
+    pressure = float(np.sum(f * pairs.distance) / (box.d * box.volume))
+    return Packing(
+        position=box.wrap(x), diameter=diameter, box=box, contacts=contacts, force=f,
+        rattler=rattler, pressure=pressure, protocol=template.protocol + protocol_suffix,
+        seed=template.seed, parameters=parameters, attrs=attrs,
+    )
+
+
+def jam_to_pressure(
+    packing: Packing,
+    pressure: float = 1e-7,
+    potential: PowerLawPotential = PowerLawPotential(),
+    force_tol: float = FORCE_TOL_VANDERWERF,
+    pressure_rtol: float = 1e-6,
+    delta_phi: float = 1e-3,
+    bisection_rtol: float = 0.1,
+    bisection_force_factor: float = 1e-2,
+    max_steps: int = 20_000_000,
+    fire_params: FireParameters = FireParameters(),
+    progress: Callable[[dict], None] | None = None,
+) -> JammingResult:
+    """Bring a packing to the jamming onset at pressure ``P0`` (see module doc).
+
+    Parameters
+    ----------
+    packing : Packing
+        Starting configuration (any packing fraction; overlaps allowed).
+    pressure : float
+        Target pressure ``P0`` [epsilon / <D>^d], > 0 (e.g. 1e-7 ... 1e-9).
+    potential : PowerLawPotential
+    force_tol : float
+        Final ``max_i |F_i|`` [epsilon / <D>]; default ``10**-12.5`` (F^2 < 1e-25).
+    pressure_rtol : float
+        Final ``|P - P0| / P0``.
+    delta_phi : float
+        First packing-fraction step of the bisection.
+    bisection_rtol : float
+        Bisection stops when ``|P - P0| <= bisection_rtol * P0``.
+    bisection_force_factor : float
+        Bisection minimisations stop at ``max_i |F_i| <= factor * P0``.
+    max_steps : int
+        Budget of FIRE steps for the whole protocol; raises RuntimeError if exceeded.
+    fire_params : FireParameters
+    progress : callable, optional
+        Called with a dict (``phi``, ``pressure``, ``delta_phi``, ``steps``) after each
+        bisection step.
+
+    Returns
+    -------
+    JammingResult
+    """
+    if not (np.isfinite(pressure) and pressure > 0.0):
+        raise ValueError(f"target pressure must be positive and finite, got {pressure}")
+    if not (force_tol > 0.0 and pressure_rtol > 0.0 and delta_phi > 0.0):
+        raise ValueError("force_tol, pressure_rtol and delta_phi must be positive")
+    d = packing.d
+    unit = float(packing.diameter.mean())
+    D = packing.diameter / unit
+    box = Box(packing.box.matrix / unit)
+    x = packing.position / unit
+    particle_volume = float(sphere_volume(d, D).sum())
+    phi = particle_volume / box.volume
+    nlist = NeighborList(D)
+    history: dict[str, list] = {"phi": [], "pressure": [], "steps": []}
+    steps = 0
+    direction = 0
+    bisect_tol = bisection_force_factor * pressure
+    while True:
+        res = fire(x, box, D, potential, bisect_tol, max_steps - steps, fire_params, nlist)
+        steps += res.steps
+        x = res.position
+        history["phi"].append(phi)
+        history["pressure"].append(res.pressure)
+        history["steps"].append(res.steps)
+        if progress is not None:
+            progress({"phi": phi, "pressure": res.pressure, "delta_phi": delta_phi, "steps": steps})
+        if not res.converged:
+            raise RuntimeError(f"FIRE step budget ({max_steps}) exhausted at phi = {phi:.10f}")
+        if abs(res.pressure - pressure) <= bisection_rtol * pressure:
+            break
+        new_direction = 1 if res.pressure < pressure else -1
+        if direction and new_direction != direction:
+            delta_phi *= 0.5
+        direction = new_direction
+        if delta_phi < 4.0 * np.finfo(float).eps * phi:
+            break
+        new_phi = phi + direction * delta_phi
+        factor = (phi / new_phi) ** (1.0 / d)
+        box, x, phi = box.scaled(factor), x * factor, new_phi
+    final = minimize_enthalpy(x, box, D, pressure, potential, force_tol, pressure_rtol,
+                              max_steps - steps, fire_params, nlist)
+    steps += final.steps
+    box = final.box
+    fmax2 = final.max_force**2
+    attrs = {
+        "length_unit": "mean particle diameter",
+        "force_unit": "epsilon / mean diameter",
+        "pressure_unit": "epsilon / mean diameter^d",
+        "energy": final.energy,
+        "energy_unit": "epsilon",
+        "max_force_sq": fmax2,
+        "potential_exponent": potential.exponent,
+        "target_pressure": pressure,
+        "fire_steps": steps,
+        "converged": int(final.converged),
+    }
+    params = {
+        "pressure": pressure, "force_tol": force_tol, "pressure_rtol": pressure_rtol,
+        "bisection_rtol": bisection_rtol, "bisection_force_factor": bisection_force_factor,
+        "potential_exponent": potential.exponent, "fire": fire_params.as_dict(),
+    }
+    out = soft_packing(final.position, box, D, potential, packing, ">soft", params, attrs)
+    return JammingResult(out, bool(final.converged), history, steps)
