@@ -62,6 +62,12 @@ class FlowOptions:
         Target mean number of steps between events (paper: 10).
     dt_min : float
         Lower bound of the step.
+    step_drift : float
+        Largest relative constraint error one step may create: a contact moving
+        with relative velocity W perpendicular to it opens by ``dt^2 |W|^2 / (2 sigma)``
+        (Sec. IV C, Fig. 3), so ``dt <= sigma sqrt(2 step_drift) / max |W|``. Near
+        jamming non-affine velocities diverge and this bound, not the event rule,
+        sets the step (an addition to the paper's rule).
     correct_every : int
         Apply the drift correction every this many steps (0: only on ``drift_tol``).
     drift_tol : float
@@ -80,6 +86,7 @@ class FlowOptions:
     dt_max: float = 1e-3
     steps_per_event: float = 10.0
     dt_min: float = 1e-14
+    step_drift: float = 1e-9
     correct_every: int = 100
     drift_tol: float = CONTACT_DRIFT_TOL
     skin: float = 0.3
@@ -299,8 +306,17 @@ class Integrator:
     def dt(self) -> float:
         """Current integration step (Sec. IV A rule)."""
         o = self.options
-        target = self.state.event_interval / o.steps_per_event
-        return float(min(o.dt_max, max(o.dt_min, target))) * self.drive.time_unit
+        st = self.state
+        dt = min(o.dt_max, st.event_interval / o.steps_per_event) * self.drive.time_unit
+        if st.contact.any() and self.solution.velocity.shape == st.x.shape:
+            pairs, images = self._pairs(st.contact)
+            R = pair_vectors(st.x, st.h, pairs, images)
+            sol = self.solution
+            W = R @ sol.gradient.T + sol.velocity[pairs[:, 1]] - sol.velocity[pairs[:, 0]]
+            w = float(np.sqrt(np.max(np.einsum("ck,ck->c", W, W) / st.nl.sigma[st.contact] ** 2)))
+            if w > 0:
+                dt = min(dt, np.sqrt(2.0 * o.step_drift) / w)
+        return float(max(o.dt_min * self.drive.time_unit, dt))
 
     def step(self, horizon: float = np.inf) -> bool:
         """One integration step, at most to ``time + horizon``. Returns True on a collision."""
@@ -386,15 +402,25 @@ class Integrator:
         return constrained_subset(self.n, self.d, self._pairs(self.state.contact)[0]).z_bar
 
     # --------------------------------------------------------- drift correction
-    def correct(self, max_rounds: int = 50) -> tuple[float, float]:
-        """Drift correction of Sec. IV C (Eq. 28). Returns the error before and after."""
+    def correct(self, max_rounds: int = 50, target: float = 1e-13) -> tuple[float, float]:
+        """Drift correction of Sec. IV C (Eq. 28). Returns the error before and after.
+
+        Eq. 28 is the linear (Newton) step for ``r_ij = sigma_ij``; it is repeated while
+        the error decreases and exceeds ``target`` (near jamming N is ill-conditioned
+        and one linear step can overshoot; a step that increases the error is undone).
+        Collisions during the correction join the network (steps iii.a, iv), and the
+        network is rewired at the end (step v).
+        """
         st = self.state
         before = self.constraint_error()
         if not st.contact.any():
             self.last_correction = (before, before)
             return self.last_correction
         zero = np.zeros((self.d, self.d))
+        err = before
         for _ in range(max_rounds):
+            if err <= target:
+                break
             pairs, images = self._pairs(st.contact)
             R = pair_vectors(st.x, st.h, pairs, images)
             r = np.linalg.norm(R, axis=1)
@@ -407,14 +433,21 @@ class Integrator:
                 # singular N (self-stress): least-squares displacement instead
                 dR = -(S.T @ spla.lsqr(Nmat, dr, atol=1e-15, btol=1e-15)[0])
             dR = dR.reshape(self.n, self.d)
+            saved = (st.x.copy(), st.h.copy(), st.contact.copy(), len(st.events), st.nl.displacement.copy(), st.nl.strain_norm)
             t, k = next_collision(st.x, st.h, st.nl.pairs, st.nl.images, st.nl.sigma, st.contact, dR, zero, 1.0)
             self._move(t, dR, zero)
-            if k < 0:
+            if k >= 0:
+                old = st.contact
+                st.contact = old.copy()
+                st.contact[k] = True
+                self._record_events(old, st.contact)
+            new_err = self.constraint_error()
+            if k < 0 and new_err >= err:
+                st.x, st.h, st.contact = saved[0], saved[1], saved[2]
+                del st.events[saved[3]:]
+                st.nl.displacement, st.nl.strain_norm = saved[4], saved[5]
                 break
-            old = st.contact
-            st.contact = old.copy()
-            st.contact[k] = True
-            self._record_events(old, st.contact)
+            err = new_err
         self._rewire(st.contact.copy())
         after = self.constraint_error()
         self.last_correction = (before, after)

@@ -55,7 +55,9 @@ class ConstrainedCount:
 
     @property
     def excess(self) -> int:
-        """``N_c_bar - (d N_bar - d + 1)``: > 0 means hyperstatic, 0 potentially jammed."""
+        """``N_c_bar - (d N_bar - d + 1)``: > 0 hyperstatic, 0 potentially jammed; -1 if empty."""
+        if self.n_particles == 0:
+            return -1
         return self.n_contacts - (self.d * self.n_particles - self.d + 1)
 
 

@@ -147,6 +147,7 @@ def rewire(
 
 def admissible(
     active: NDArray[np.bool_],
+    candidates: NDArray[np.bool_],
     evaluate: Callable[[NDArray[np.bool_]], Evaluation],
     rates: Callable[[Solution, NDArray[np.int64]], NDArray[np.float64]],
     velocity_scale: Callable[[Solution], float],
@@ -156,6 +157,11 @@ def admissible(
 
     (A6): forces on A positive (forces off A are zero by construction).
     (A8): rates on A zero (``S V = 0`` on A, checked to ``rel_tol``) and positive on Γ \\ A.
+
+    Parameters
+    ----------
+    active, candidates : ndarray of bool, shape (P,)
+        A and Γ (A within Γ).
 
     Returns
     -------
@@ -175,7 +181,7 @@ def admissible(
     f = ev.force
     fmin = float(f.min() / _scale(f)) if f.size and _scale(f) > 0 else np.inf
     vs = velocity_scale(ev.solution)
-    off = np.flatnonzero(~active)
+    off = np.flatnonzero(np.asarray(candidates, dtype=bool) & ~active)
     on = np.flatnonzero(active)
     vmin = float(rates(ev.solution, off).min() / vs) if off.size else np.inf
     von = float(np.max(np.abs(rates(ev.solution, on))) / vs) if on.size else 0.0
