@@ -159,7 +159,7 @@ def test_failed_write_leaves_previous_file_and_no_temporary(tmp_path: Path) -> N
     write_packing(_packing(), path)
     before = path.read_bytes()
     bad = xr.Dataset({"v": ("x", np.array([{"a": 1}], dtype=object))})
-    with pytest.raises(Exception):
+    with pytest.raises(ValueError):
         write_dataset(bad, path)
     assert path.read_bytes() == before
     assert sorted(os.listdir(tmp_path)) == ["p.nc"]
