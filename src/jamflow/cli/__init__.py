@@ -17,7 +17,7 @@ from ..presets import preset_options
 from ..provenance import jamflow_version
 
 #: Topic modules of this package that contribute subcommands.
-COMMAND_MODULES: tuple[str, ...] = ("packings", "analysis", "soft")
+COMMAND_MODULES: tuple[str, ...] = ("packings", "analysis", "soft", "flow")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -58,7 +58,3 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ValueError, FileNotFoundError, RuntimeError, OSError) as exc:
         print(f"jamflow {args.command}: error: {exc}", file=sys.stderr)
         return 1
-
-
-if __name__ == "__main__":
-    sys.exit(main())
