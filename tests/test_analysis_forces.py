@@ -118,3 +118,16 @@ def test_buckler_and_extended_tails_are_separated(rng):
     assert abs(tl - theta_l) < 2.5 * tle and abs(te - theta_e) < 2.5 * tee
     assert te - tl > 3.0 * np.hypot(tle, tee)  # the two populations are told apart
     assert ds.attrs["buckler_fraction"] == pytest.approx(len(centres) / p.n)
+
+
+def test_hypostatic_network_needs_all_contacts(rng):
+    # keep only the horizontal bonds of the lattice: z = 2 < d + 1, rattler removal empties it
+    p = lattice(10, 10)
+    dx = p.contact_vectors()
+    horizontal = p.contacts[np.abs(dx[:, 1]) < 1e-9]
+    q = Packing(p.position, p.diameter, p.box, contacts=horizontal, force=rng.random(len(horizontal)) + 0.1)
+    with pytest.raises(ValueError, match="no backbone contacts"):
+        force_distribution([q])
+    ds = force_distribution([q], backbone_only=False)
+    assert ds.attrs["n_forces"] == len(horizontal) == 100
+    assert ds.attrs["buckler_fraction"] == 0.0  # every particle has 2 contacts, none has d + 1 = 3

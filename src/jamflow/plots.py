@@ -176,7 +176,7 @@ def plot_forces(ds: xr.Dataset) -> Figure:
     fig = Figure(layout="constrained", figsize=(10.5, 4.2))
     ax1, ax2 = fig.subplots(1, 2)
     ax1.errorbar(ds["f"].values, ds["P_linear"].values, yerr=ds["P_linear_err"].values, fmt="o-", ms=3, capsize=2,
-                 label=f"all backbone contacts ({ds.attrs.get('n_samples', 1)} sample(s))")
+                 label=f"{ds.attrs.get('contacts_used', 'backbone contacts')} ({ds.attrs.get('n_samples', 1)} sample(s))")
     ax1.set_xlabel("f / <f> (dimensionless)")
     ax1.set_ylabel("P(f / <f>) (dimensionless)")
     ax1.set_yscale("log")
@@ -196,7 +196,7 @@ def plot_forces(ds: xr.Dataset) -> Figure:
         bars = ax2.errorbar(x[ok], y[ok], yerr=np.minimum(e[ok], 0.999 * y[ok]), fmt=marker, ms=4, mfc="none",
                             capsize=2, label=label + fit)
         if np.isfinite(th):
-            xf = np.logspace(np.log10(lo), np.log10(hi), 10)
+            xf = np.logspace(np.log10(max(lo, float(x[ok].min()))), np.log10(hi), 10)
             ax2.plot(xf, ds.attrs[f"fit_prefactor{name}"] * xf**th, "-", color=bars[0].get_color(), lw=1.2)
     if np.isfinite(ds.attrs.get("fit_prefactor", np.nan)):
         # mean-field slopes drawn through the all-contact fit at the top of the fit window

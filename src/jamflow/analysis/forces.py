@@ -44,9 +44,11 @@ THETA_EXTENDED: float = 0.42311
 THETA_LOCALISED: float = 0.17462
 
 
-def _backbone(packing: Packing) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.bool_]]:
+def _backbone(packing: Packing, backbone_only: bool = True) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.bool_]]:
     if packing.contacts is None or packing.force is None:
         raise ValueError("the force distribution needs a packing with contacts and forces")
+    if not backbone_only:
+        return packing.contacts, packing.force, np.zeros(packing.n, dtype=bool)
     rattler = (packing.rattler if packing.rattler is not None
                else find_rattlers(packing.n, packing.d, packing.contacts))
     c = packing.contacts
@@ -54,15 +56,20 @@ def _backbone(packing: Packing) -> tuple[NDArray[np.int64], NDArray[np.float64],
     return c[keep], packing.force[keep], rattler
 
 
-def bucklers(packing: Packing) -> NDArray[np.bool_]:
-    """Non-rattler particles with exactly ``d + 1`` backbone contacts, shape (N,)."""
-    c, _, rattler = _backbone(packing)
+def bucklers(packing: Packing, backbone_only: bool = True) -> NDArray[np.bool_]:
+    """Non-rattler particles with exactly ``d + 1`` backbone contacts, shape (N,).
+
+    With ``backbone_only=False`` every contact counts and no particle is a rattler.
+    """
+    c, _, rattler = _backbone(packing, backbone_only)
     z = np.bincount(c.ravel(), minlength=packing.n)
     return (~rattler) & (z == packing.d + 1)
 
 
-def normalised_forces(packing: Packing) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+def normalised_forces(packing: Packing, backbone_only: bool = True) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """Backbone forces divided by their mean, and the buckler-contact mask.
+
+    ``backbone_only=False`` uses every contact (see :func:`force_distribution`).
 
     Returns
     -------
@@ -71,13 +78,14 @@ def normalised_forces(packing: Packing) -> tuple[NDArray[np.float64], NDArray[np
     buckler_contact : ndarray of bool, shape (Nc_backbone,)
         True where at least one particle of the contact is a buckler.
     """
-    c, f, _ = _backbone(packing)
+    c, f, _ = _backbone(packing, backbone_only)
     if len(f) == 0:
-        raise ValueError("packing has no backbone contacts")
+        raise ValueError("packing has no backbone contacts (a flowing, hypostatic network loses every "
+                         "particle to rattler removal: use all contacts instead)")
     mean = float(np.mean(f))
     if not mean > 0.0:
         raise ValueError(f"mean contact force must be positive, got {mean:g}")
-    b = bucklers(packing)
+    b = bucklers(packing, backbone_only)
     return f / mean, b[c[:, 0]] | b[c[:, 1]]
 
 
@@ -97,6 +105,7 @@ def force_distribution(
     bins_per_decade: int = 5,
     fit_min: float = 1e-3,
     fit_max: float = 1e-1,
+    backbone_only: bool = True,
     parameters: dict | None = None,
 ) -> xr.Dataset:
     """Sample-averaged P(f / <f>) on linear and logarithmic bins, with tail fits.
@@ -113,6 +122,10 @@ def force_distribution(
         Logarithmic bins on ``[log_min, f_max]``.
     fit_min, fit_max : float
         Window of the fits ``P(f) ~ f^theta`` on the logarithmic histogram.
+    backbone_only : bool
+        True (jammed packings): contacts between non-rattlers only, rattlers from
+        the packing or from iterative removal. False: every contact, no rattlers —
+        for flowing, hypostatic networks, which iterative removal empties.
     parameters : dict or None
         Stage parameters recorded in the provenance attributes.
 
@@ -131,7 +144,7 @@ def force_distribution(
     """
     if len(packings) == 0:
         raise ValueError("force_distribution needs at least one packing")
-    per_sample = [normalised_forces(p) for p in packings]
+    per_sample = [normalised_forces(p, backbone_only) for p in packings]
     allf = [f for f, _ in per_sample]
     buck = [f[b] for f, b in per_sample]
     ext = [f[~b] for f, b in per_sample]
@@ -161,8 +174,8 @@ def force_distribution(
             fits[f"fit_exponent{name}_err"] = np.nan
     n_nonrattler = n_buckler = 0
     for p in packings:
-        b = bucklers(p)
-        _, _, rattler = _backbone(p)
+        b = bucklers(p, backbone_only)
+        _, _, rattler = _backbone(p, backbone_only)
         n_nonrattler += int((~rattler).sum())
         n_buckler += int(b.sum())
     n_all = sum(len(f) for f in allf)
@@ -173,6 +186,7 @@ def force_distribution(
         d=int(packings[0].d),
         N=int(packings[0].n),
         force_normalisation="each force divided by the mean backbone force of its packing",
+        contacts_used="backbone (non-rattler) contacts" if backbone_only else "all contacts, no rattler removal",
         buckler_definition="non-rattler particle with exactly d+1 backbone contacts; a buckler contact "
                            "has at least one buckler among its two particles (Charbonneau et al. PRL 2015)",
         error_method=method,

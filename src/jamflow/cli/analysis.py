@@ -54,6 +54,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--bins-per-decade", type=int, default=5, help="log bins per decade (default 5)")
     p.add_argument("--fit-min", type=float, default=1e-3, help="lower end of the tail fit window (default 1e-3)")
     p.add_argument("--fit-max", type=float, default=1e-1, help="upper end of the tail fit window (default 1e-1)")
+    p.add_argument("--all-contacts", action="store_true",
+                   help="use every contact, no rattler removal (flowing, hypostatic networks)")
     add_overlap_option(p)
     add_quiet(p)
 
@@ -126,7 +128,7 @@ def _forces(args: argparse.Namespace) -> int:
     inputs, out = _split(args.paths, "packing")
     ds = force_distribution(_load_all(inputs, overlap_tol(args), args.quiet), args.f_max, args.linear_bins,
                             args.log_min, args.bins_per_decade, args.fit_min, args.fit_max,
-                            stage_parameters(args, "paths") | {"inputs": inputs})
+                            not args.all_contacts, stage_parameters(args, "paths") | {"inputs": inputs})
     write_dataset(ds, out)
     return 0
 
