@@ -76,13 +76,18 @@ def soft_packing(
     parameters: dict,
     attrs: dict,
 ) -> Packing:
-    """Packing with contacts = overlapping pairs, forces, rattlers and virial pressure."""
+    """Packing with contacts = overlapping pairs, forces, rattlers and virial pressure.
+
+    Centres are wrapped first, so the stored forces are those of the stored centres
+    (wrapping moves centres by round-off, ~L 2^-53).
+    """
+    x = box.wrap(x)
     pairs, _, f = overlapping_pairs(x, box, diameter, potential)
     contacts = np.stack([pairs.i, pairs.j], axis=1)
     rattler = find_rattlers(len(x), box.d, contacts)
     pressure = float(np.sum(f * pairs.distance) / (box.d * box.volume))
     return Packing(
-        position=box.wrap(x), diameter=diameter, box=box, contacts=contacts, force=f,
+        position=x, diameter=diameter, box=box, contacts=contacts, force=f,
         rattler=rattler, pressure=pressure, protocol=template.protocol + protocol_suffix,
         seed=template.seed, parameters=parameters, attrs=attrs,
     )

@@ -1,0 +1,83 @@
+"""Minimisers: monotone steepest descent, FIRE/CG/SD agreement, enthalpy at P0."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+import pytest
+
+from jamflow.initial import random_packing
+from jamflow.soft import (
+    conjugate_gradient,
+    evaluate,
+    fire,
+    minimize_enthalpy,
+    steepest_descent,
+)
+from jamflow.soft.jamming import FORCE_TOL_VANDERWERF, jam_to_pressure
+
+
+@lru_cache
+def _jammed(n: int, d: int, pressure: float, seed: int):
+    start = random_packing(n, d, 0.5 if d == 2 else 0.3, "bi", seed=seed)
+    return jam_to_pressure(start, pressure).packing
+
+
+def _perturbed(seed: int = 7, amplitude: float = 0.02):
+    p = _jammed(32, 2, 1e-2, seed)
+    rng = np.random.default_rng(seed)
+    return p.position + rng.normal(scale=amplitude, size=p.position.shape), p
+
+
+def test_steepest_descent_lowers_energy_monotonically():
+    x, p = _perturbed()
+    out = steepest_descent(x, p.box, p.diameter, dt=0.05, force_tol=1e-10, record=100_000)
+    e = out.energies
+    assert out.result.converged
+    assert len(e) > 100
+    # round-off floor: centres carry ~L 2^-53 errors, each contact changes U by ~f dx
+    start = evaluate(x, p.box, p.diameter)
+    floor = start.n_contacts * start.max_force * p.box.lengths.max() * np.finfo(float).eps
+    assert np.all(np.diff(e) <= floor)
+    assert e[-1] < 0.5 * e[0]
+
+
+def test_fire_cg_and_descent_reach_the_same_minimum():
+    x, p = _perturbed()
+    tol = 1e-12
+    a = fire(x, p.box, p.diameter, force_tol=tol)
+    b = steepest_descent(x, p.box, p.diameter, dt=0.1, force_tol=tol).result
+    c = conjugate_gradient(x, p.box, p.diameter, force_tol=tol)
+    for r in (a, b, c):
+        assert r.converged and r.max_force <= tol
+    for r in (b, c):
+        assert r.energy == pytest.approx(a.energy, rel=1e-8)
+        # same minimum up to a rigid translation (the d zero modes)
+        shift = np.mean(r.position - a.position, axis=0)
+        assert np.abs(r.position - a.position - shift).max() < 1e-6
+
+
+def test_fire_meets_the_vanderwerf_force_criterion():
+    p = _jammed(64, 2, 1e-7, 3)
+    ev = evaluate(p.position, p.box, p.diameter)
+    assert np.max(np.sum(ev.force**2, axis=1)) < 1e-25
+    assert ev.max_force <= FORCE_TOL_VANDERWERF
+
+
+@pytest.mark.parametrize("d, p0", [(2, 1e-4), (3, 1e-3)])
+def test_enthalpy_minimum_has_virial_pressure_p0(d, p0):
+    p = _jammed(48, d, 1e-2, 5)
+    res = minimize_enthalpy(p.position, p.box, p.diameter, p0, force_tol=1e-13, pressure_rtol=1e-8)
+    assert res.converged
+    ev = evaluate(res.position, res.box, p.diameter)
+    assert ev.pressure == pytest.approx(p0, rel=1e-8)
+    assert ev.max_force <= 1e-13
+    assert res.box.volume > p.box.volume  # lower pressure: the box expanded
+    assert res.box.shear_strain == p.box.shear_strain
+
+
+def test_enthalpy_minimisation_rejects_nonpositive_pressure():
+    p = _jammed(32, 2, 1e-2, 7)
+    with pytest.raises(ValueError):
+        minimize_enthalpy(p.position, p.box, p.diameter, 0.0)
