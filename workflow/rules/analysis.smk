@@ -14,5 +14,61 @@ rule check:
         stage="[a-z]+",
     conda:
         "../envs/jamflow.yaml"
+    params:
+        read=lambda wildcards: read_flags(wildcards.stage),
     shell:
-        "jamflow check {input} --json > {output} 2> {log}"
+        "jamflow check {input} --json {params.read} > {output} 2> {log}"
+
+
+rule gaps:
+    input:
+        final_packings(),
+    output:
+        f"{RESULTS}/analysis/gaps.nc",
+    log:
+        f"{LOGS}/analysis/gaps.log",
+    benchmark:
+        f"{BENCH}/analysis/gaps.tsv"
+    params:
+        read=read_flags(FINAL),
+        fit_min=opt("gaps", "fit_min"),
+        fit_max=opt("gaps", "fit_max"),
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow gaps {input} {output} --fit-min {params.fit_min} --fit-max {params.fit_max}"
+        " {params.read} --quiet > {log} 2>&1"
+
+
+rule forces:
+    input:
+        final_packings(),
+    output:
+        f"{RESULTS}/analysis/forces.nc",
+    log:
+        f"{LOGS}/analysis/forces.log",
+    benchmark:
+        f"{BENCH}/analysis/forces.tsv"
+    params:
+        read=read_flags(FINAL),
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow forces {input} {output} {params.read} > {log} 2>&1"
+
+
+rule rdf:
+    input:
+        packing("{sample}", FINAL),
+    output:
+        f"{RESULTS}/analysis/{{sample}}/rdf.nc",
+    log:
+        f"{LOGS}/analysis/rdf_{{sample}}.log",
+    benchmark:
+        f"{BENCH}/analysis/rdf_{{sample}}.tsv"
+    params:
+        read=read_flags(FINAL),
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow rdf {input} {output} {params.read} > {log} 2>&1"

@@ -39,6 +39,10 @@ def final_packings():
     return [packing(s, FINAL) for s in samples()]
 
 
+def rdf_files():
+    return [f"{RESULTS}/analysis/{s}/rdf.nc" for s in samples()]
+
+
 def opt(section, key):
     """A stage parameter from the scene, with the schema default filled in."""
     return config.get(section, {})[key]
@@ -50,9 +54,11 @@ def scene_targets():
     analyses = config.get("analyses", [])
     if "check" in analyses:
         targets += [f"{RESULTS}/analysis/{s}/{FINAL}.check.json" for s in samples()]
-    for kind in ("gaps", "rdf"):
+    for kind in ("gaps", "forces"):
         if kind in analyses:
             targets.append(f"{RESULTS}/analysis/{kind}.nc")
+    if "rdf" in analyses:
+        targets += rdf_files()
     for fig in config.get("figures", []):
         if fig == "packing":
             targets += [f"{RESULTS}/figures/packing_{s}.png" for s in samples()]
@@ -63,3 +69,8 @@ def scene_targets():
 
 wildcard_constraints:
     sample="[A-Za-z0-9_-]+",
+
+
+def read_flags(stage):
+    """Reading options for a stage's packing: soft packings carry overlaps."""
+    return "--soft" if stage == "soft" else ""

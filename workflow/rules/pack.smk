@@ -33,3 +33,22 @@ rule import_dat:
         "../envs/jamflow.yaml"
     shell:
         "jamflow import-dat {input} {output} --quiet > {log} 2>&1"
+
+
+rule soft_jam:
+    input:
+        previous_stage("soft"),
+    output:
+        packing("{sample}", "soft"),
+    log:
+        f"{LOGS}/soft/{{sample}}.log",
+    benchmark:
+        f"{BENCH}/soft/{{sample}}.tsv"
+    params:
+        pressure=lambda wildcards: opt("soft", "pressure"),
+        force_tol=lambda wildcards: opt("soft", "force_tol"),
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow soft-jam {input} {output} --pressure {params.pressure}"
+        " --force-tol {params.force_tol} --quiet > {log} 2>&1"
