@@ -28,7 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="start from uniformly random centres drawn with this seed (O'Hern's "
                         "infinite-temperature quench); default: start from the input centres")
     p.add_argument("--force-tol", type=float, default=FORCE_TOL_VANDERWERF,
-                   help=f"final max per-particle |F| [epsilon / mean diameter] (default {FORCE_TOL_VANDERWERF:.3g}: F^2 < 1e-25)")
+                   help=f"final max per-particle |F| [epsilon / mean diameter] (default {FORCE_TOL_VANDERWERF:.3g}: F^2 <= 1e-26)")
     p.add_argument("--pressure-rtol", type=float, default=1e-6, help="final |P - P0| / P0 (default 1e-6)")
     p.add_argument("--delta-phi", type=float, default=1e-3, help="first bisection step in packing fraction (default 1e-3)")
     p.add_argument("--exponent", type=float, default=2.0, help="potential exponent w (2 harmonic, 2.5 Hertz)")

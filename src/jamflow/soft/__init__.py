@@ -8,7 +8,7 @@ protocol), :mod:`~jamflow.soft.hessian` (dynamical matrix, modes, elastic moduli
 """
 
 from .minimize import (
-    ConvergenceError,
+    DescentResult,
     FireParameters,
     MinimizeResult,
     conjugate_gradient,
@@ -19,7 +19,7 @@ from .minimize import (
 from .potential import NeighborList, PowerLawPotential, evaluate, overlapping_pairs
 
 __all__ = [
-    "ConvergenceError",
+    "DescentResult",
     "FireParameters",
     "MinimizeResult",
     "NeighborList",

@@ -12,8 +12,8 @@ dilation ``dR/depsilon = R``), ``Xi = d^2 U / dx de`` and, at mechanical equilib
     d^2U/de^2 (relaxed) = d^2U/de^2 (affine) - Xi^T H^+ Xi.
 
 The shear modulus is ``G = (1/V) d^2U/dgamma^2`` and the bulk modulus
-``B = -V dP/dV = (1/(d^2 V)) d^2U/depsilon^2 + (d - 1) P / d`` (``V ~ (1 + epsilon)^d``). ``H^+`` acts on the non-rattler
-subspace: rattlers and their pairs are dropped, one backbone particle is pinned to
+``B = -V dP/dV = (1/(d^2 V)) d^2U/depsilon^2 + (d - 1) P / d`` (``V ~ (1 + epsilon)^d``).
+``H^+`` acts on the non-rattler subspace: rattlers and their pairs are dropped, one backbone particle is pinned to
 remove the d translations (``Xi`` is orthogonal to them, so the pinned solve is the
 pseudo-inverse solve).
 """

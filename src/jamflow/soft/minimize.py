@@ -6,7 +6,8 @@ the packing. Force tolerances are absolute, in ``epsilon / length`` of the packi
 convergence means that the largest per-particle force norm ``max_i |F_i|`` is at
 most ``force_tol``. The criterion of VanderWerf et al. (Sec. II), squared forces per
 particle below 1e-25 in units of the spring constant, is ``force_tol = 10**-12.5``
-for a packing whose mean diameter is 1 (see :mod:`jamflow.soft.jamming`).
+for a packing whose mean diameter is 1; the jamming stage uses 1e-13 (see
+:mod:`jamflow.soft.jamming`).
 """
 
 from __future__ import annotations
@@ -28,12 +29,8 @@ __all__ = [
     "minimize_enthalpy",
     "steepest_descent",
     "conjugate_gradient",
-    "ConvergenceError",
+    "DescentResult",
 ]
-
-
-class ConvergenceError(RuntimeError):
-    """A minimiser did not reach its tolerance within its step budget."""
 
 
 @dataclass(frozen=True)

@@ -35,6 +35,7 @@ from ..box import Box
 from ..io import new_dataset_attrs
 from ..neighbors import pairs_within
 from ..packing import Packing
+from .jamming import soft_packing
 from .minimize import FireParameters, fire, minimize_enthalpy, steepest_descent
 from .potential import NeighborList, PowerLawPotential, evaluate
 
@@ -105,8 +106,6 @@ def aqs_shear(
     """
     if not (step > 0.0 and strain > 0.0):
         raise ValueError(f"strain and step must be positive, got {strain}, {step}")
-    from .jamming import soft_packing
-
     n_steps = int(np.ceil(strain / step - 1e-9))
     x = np.array(packing.position)
     box = packing.box
