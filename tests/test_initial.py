@@ -127,3 +127,21 @@ def test_bad_arguments_raise(kwargs: dict, message: str) -> None:
     args = dict(n=50, d=2, phi=0.2, seed=0) | kwargs
     with pytest.raises(ValueError, match=message):
         random_packing(**args)
+
+
+def test_bidisperse_species_spread_has_the_requested_relative_std():
+    rng = np.random.default_rng(5)
+    D = draw_diameters(20000, "bi", rng, ratio=1.4, fraction=0.5, species_spread=0.03)
+    small = D < np.sqrt(1.4)
+    assert small.sum() == 10000
+    for species, mean in ((D[small], 1.0), (D[~small], 1.4)):
+        assert abs(species.mean() / mean - 1) < 1e-3
+        assert abs(species.std() / species.mean() - 0.03) < 1e-3
+    with pytest.raises(ValueError):
+        draw_diameters(10, "bi", rng, species_spread=0.6)
+
+
+def test_zero_species_spread_reproduces_plain_bidisperse():
+    a = draw_diameters(100, "bi", np.random.default_rng(3))
+    b = draw_diameters(100, "bi", np.random.default_rng(3), species_spread=0.0)
+    assert np.array_equal(a, b)

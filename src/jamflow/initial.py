@@ -35,6 +35,7 @@ def draw_diameters(
     ratio: float = 1.4,
     fraction: float = 0.5,
     width: float = 0.1,
+    species_spread: float = 0.0,
 ) -> NDArray[np.float64]:
     """Diameters with mean ~1 (the unit of length before box scaling).
 
@@ -49,6 +50,10 @@ def draw_diameters(
     ratio, fraction, width : float
         Size ratio (> 1), number fraction of small spheres in (0, 1), relative width
         (0 <= width < 1 for uniform).
+    species_spread : float
+        ``bi`` only: relative standard deviation of each species' diameters
+        (uniform distribution, ``0 <= species_spread < 1/sqrt(3)``), e.g. 0.03 for
+        the 3% polydisperse 1:1.4 mixture of Lerner et al.; 0 draws no numbers.
     """
     if n < 1:
         raise ValueError(f"n must be >= 1, got {n}")
@@ -57,9 +62,14 @@ def draw_diameters(
     if dispersity == "bi":
         if ratio <= 1.0 or not 0.0 < fraction < 1.0:
             raise ValueError(f"bidisperse needs ratio > 1 and 0 < fraction < 1, got {ratio}, {fraction}")
+        if not 0.0 <= species_spread < 1.0 / np.sqrt(3.0):
+            raise ValueError(f"species_spread must lie in [0, 1/sqrt(3)), got {species_spread}")
         n_small = int(round(fraction * n))
-        D = np.where(np.arange(n) < n_small, 1.0, ratio)
-        return rng.permutation(D)
+        D = rng.permutation(np.where(np.arange(n) < n_small, 1.0, ratio))
+        if species_spread > 0.0:
+            half = np.sqrt(3.0) * species_spread
+            D *= rng.uniform(1.0 - half, 1.0 + half, n)
+        return D
     if dispersity == "poly":
         if not 0.0 <= width < 1.0:
             raise ValueError(f"uniform polydispersity needs 0 <= width < 1, got {width}")
@@ -80,6 +90,7 @@ def random_packing(
     ratio: float = 1.4,
     fraction: float = 0.5,
     width: float = 0.1,
+    species_spread: float = 0.0,
     max_trials_per_particle: int = 2000,
 ) -> Packing:
     """Random non-overlapping packing at packing fraction ``phi`` in a cubic box.
@@ -92,7 +103,7 @@ def random_packing(
         Number of particles and dimension (2..).
     phi : float
         Packing fraction, 0 < phi.
-    dispersity, ratio, fraction, width
+    dispersity, ratio, fraction, width, species_spread
         See :func:`draw_diameters`.
     seed : int
         Seed of every random choice.
@@ -104,7 +115,7 @@ def random_packing(
     if not 0.0 < phi < 1.0:
         raise ValueError(f"phi must lie in (0, 1), got {phi}")
     rng = np.random.default_rng(seed)
-    D = draw_diameters(n, dispersity, rng, ratio, fraction, width)
+    D = draw_diameters(n, dispersity, rng, ratio, fraction, width, species_spread)
     D *= (phi / sphere_volume(d, D).sum()) ** (1.0 / d)  # unit box volume
     box = Box.cubic(d, 1.0)
     if D.max() >= 0.5:
@@ -120,7 +131,8 @@ def random_packing(
         seed=seed,
         parameters={
             "n": n, "d": d, "phi": phi, "dispersity": dispersity, "seed": seed,
-            "ratio": ratio, "fraction": fraction, "width": width, "method": "rsa",
+            "ratio": ratio, "fraction": fraction, "width": width,
+            "species_spread": species_spread, "method": "rsa",
             "max_trials_per_particle": max_trials_per_particle,
         },
         attrs={"length_unit": "side of the periodic box"},

@@ -17,7 +17,8 @@ rule init:
         "jamflow init {output} --d {params.system[d]} --n {params.system[n]}"
         " --phi {params.system[phi]} --dispersity {params.system[dispersity]}"
         " --ratio {params.system[ratio]} --fraction {params.system[fraction]}"
-        " --width {params.system[width]} --seed {params.seed} --quiet > {log} 2>&1"
+        " --width {params.system[width]} --species-spread {params.system[species_spread]}"
+        " --seed {params.seed} --quiet > {log} 2>&1"
 
 
 rule import_dat:

@@ -23,6 +23,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--ratio", type=float, default=1.4, help="bidisperse size ratio (default 1.4)")
     p.add_argument("--fraction", type=float, default=0.5, help="bidisperse number fraction of small spheres (default 0.5)")
     p.add_argument("--width", type=float, default=0.1, help="polydisperse relative width (default 0.1)")
+    p.add_argument("--species-spread", type=float, default=0.0,
+                   help="bidisperse: relative standard deviation within each species (default 0)")
     p.add_argument("--seed", type=int, required=True, help="random seed")
     add_quiet(p)
 
@@ -59,7 +61,7 @@ def overlap_tol(args: argparse.Namespace) -> float | None:
 
 def _init(args: argparse.Namespace) -> int:
     p = random_packing(args.n, args.d, args.phi, args.dispersity, args.seed,
-                       args.ratio, args.fraction, args.width)
+                       args.ratio, args.fraction, args.width, args.species_spread)
     write_packing(p, args.out, stage_parameters(args, "out"))
     return 0
 
