@@ -18,6 +18,7 @@ validate(config, "workflow/schemas/config.schema.yaml")
 
 include: "workflow/rules/common.smk"
 include: "workflow/rules/pack.smk"
+include: "workflow/rules/flow.smk"
 include: "workflow/rules/analysis.smk"
 include: "workflow/rules/figures.smk"
 

@@ -43,6 +43,28 @@ def rdf_files():
     return [f"{RESULTS}/analysis/{s}/rdf.nc" for s in samples()]
 
 
+def shear_conditions():
+    """Shear runs of the scene: ``fixed-volume`` or ``p<P>`` per fixed pressure P."""
+    pressures = config.get("flow", {}).get("pressures", [])
+    return [f"p{p:g}" for p in pressures] if pressures else ["fixed-volume"]
+
+
+def pressure_option(condition):
+    """The ``jamflow shear`` option of a shear condition."""
+    return "" if condition == "fixed-volume" else f"--pressure {condition.removeprefix('p')}"
+
+
+def shear_summaries(condition=None):
+    conditions = shear_conditions() if condition is None else [condition]
+    return [
+        f"{RESULTS}/analysis/{s}/shear_{c}_summary.nc" for c in conditions for s in samples()
+    ]
+
+
+def shear_labels():
+    return " ".join(f"{s}:{c}" for c in shear_conditions() for s in samples())
+
+
 def opt(section, key):
     """A stage parameter from the scene, with the schema default filled in."""
     return config.get(section, {})[key]
@@ -59,16 +81,26 @@ def scene_targets():
             targets.append(f"{RESULTS}/analysis/{kind}.nc")
     if "rdf" in analyses:
         targets += rdf_files()
+    if "flow" in config:
+        targets += shear_summaries()
     for fig in config.get("figures", []):
         if fig == "packing":
             targets += [f"{RESULTS}/figures/packing_{s}.png" for s in samples()]
+        elif fig == "phi-kappa":
+            targets += [
+                f"{RESULTS}/figures/phi-kappa_{s}_{c}.png"
+                for c in shear_conditions()
+                if c != "fixed-volume"
+                for s in samples()
+            ]
         else:
             targets.append(f"{RESULTS}/figures/{fig}.png")
     return targets
 
 
 wildcard_constraints:
-    sample="[A-Za-z0-9_-]+",
+    sample="[A-Za-z0-9-]+",
+    condition="fixed-volume|p[0-9.e+-]+",
 
 
 def read_flags(stage):

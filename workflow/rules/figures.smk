@@ -82,3 +82,46 @@ rule plot_rdf:
         "../envs/jamflow.yaml"
     shell:
         "jamflow plot rdf {input} {output.png} > {log} 2>&1"
+
+
+rule plot_stress_strain:
+    input:
+        shear_summaries(),
+    output:
+        png=report(
+            f"{RESULTS}/figures/stress-strain.png",
+            caption="../report/stress-strain.rst",
+            category="Flow",
+        ),
+        pdf=f"{RESULTS}/figures/stress-strain.pdf",
+    log:
+        f"{LOGS}/figures/stress-strain.log",
+    benchmark:
+        f"{BENCH}/figures/stress-strain.tsv"
+    params:
+        labels=shear_labels(),
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow plot stress-strain {input} {output.png} --labels {params.labels} > {log} 2>&1"
+
+
+rule plot_phi_kappa:
+    input:
+        f"{RESULTS}/analysis/{{sample}}/shear_{{condition}}_summary.nc",
+    output:
+        png=report(
+            f"{RESULTS}/figures/phi-kappa_{{sample}}_{{condition}}.png",
+            caption="../report/phi-kappa.rst",
+            category="Flow",
+            subcategory="{sample} {condition}",
+        ),
+        pdf=f"{RESULTS}/figures/phi-kappa_{{sample}}_{{condition}}.pdf",
+    log:
+        f"{LOGS}/figures/phi-kappa_{{sample}}_{{condition}}.log",
+    benchmark:
+        f"{BENCH}/figures/phi-kappa_{{sample}}_{{condition}}.tsv"
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow plot phi-kappa {input} {output.png} > {log} 2>&1"

@@ -1,0 +1,67 @@
+# Event-driven overdamped hard-sphere dynamics (Lerner, During, Wyart): compression as a
+# chain stage, shear (fixed volume or fixed pressure) of every sample's final packing.
+
+
+rule compress:
+    input:
+        previous_stage("compress"),
+    output:
+        packing=packing("{sample}", "compress"),
+        series=f"{RESULTS}/flow/{{sample}}/compress.nc",
+    log:
+        f"{LOGS}/compress/{{sample}}.log",
+    benchmark:
+        f"{BENCH}/compress/{{sample}}.tsv"
+    params:
+        phi=lambda wildcards: opt("compress", "phi"),
+        dt=lambda wildcards: opt("compress", "dt"),
+        correct_every=lambda wildcards: opt("compress", "correct_every"),
+        record_every=lambda wildcards: opt("compress", "record_every"),
+        read=lambda wildcards: read_flags(CHAIN[CHAIN.index("compress") - 1]),
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow compress {input} {output.series} --final {output.packing} --phi {params.phi}"
+        " --dt {params.dt} --correct-every {params.correct_every}"
+        " --record-every {params.record_every} {params.read} --quiet > {log} 2>&1"
+
+
+rule shear:
+    input:
+        packing("{sample}", FINAL),
+    output:
+        series=f"{RESULTS}/flow/{{sample}}/shear_{{condition}}.nc",
+        final=f"{RESULTS}/flow/{{sample}}/shear_{{condition}}_final.nc",
+    log:
+        f"{LOGS}/shear/{{sample}}_{{condition}}.log",
+    benchmark:
+        f"{BENCH}/shear/{{sample}}_{{condition}}.tsv"
+    params:
+        strain=lambda wildcards: opt("flow", "strain"),
+        pressure=lambda wildcards: pressure_option(wildcards.condition),
+        dt=lambda wildcards: opt("flow", "dt"),
+        correct_every=lambda wildcards: opt("flow", "correct_every"),
+        record_every=lambda wildcards: opt("flow", "record_every"),
+        unit=lambda wildcards: opt("flow", "unit"),
+        read=read_flags(FINAL),
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow shear {input} {output.series} --final {output.final} --strain {params.strain}"
+        " {params.pressure} --dt {params.dt} --correct-every {params.correct_every}"
+        " --record-every {params.record_every} --unit {params.unit} {params.read} --quiet > {log} 2>&1"
+
+
+rule flow_summary:
+    input:
+        f"{RESULTS}/flow/{{sample}}/shear_{{condition}}.nc",
+    output:
+        f"{RESULTS}/analysis/{{sample}}/shear_{{condition}}_summary.nc",
+    log:
+        f"{LOGS}/analysis/shear_summary_{{sample}}_{{condition}}.log",
+    benchmark:
+        f"{BENCH}/analysis/shear_summary_{{sample}}_{{condition}}.tsv"
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow flow-summary {input} {output} > {log} 2>&1"
