@@ -1,0 +1,64 @@
+"""Subcommand ``certify``: local, collective or strict jamming certificate of a packing."""
+
+from __future__ import annotations
+
+import argparse
+
+from tqdm import tqdm
+
+from ..io import read_packing, write_dataset
+from ..strict_jamming import DEFAULT_LOADS, DEFAULT_MAX_CLUSTER_FRACTION, DEFAULT_SOLVER, certificate_to_dataset, certify
+from .common import add_command, add_quiet, stage_parameters
+from .packings import add_overlap_option, overlap_tol
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = add_command(
+        sub, "certify", _certify,
+        "certify a packing as not / locally / collectively / strictly jammed (randomized LPs)",
+        description="Jamming certificate after Donev et al., J. Comput. Phys. 197, 139 (2004): "
+                    "rattlers are removed, then random loads of both signs probe for unjamming "
+                    "motions at fixed box (collective) and, with --strict, with a volume-preserving "
+                    "box strain. Writes a dataset with attribute 'classification'.",
+    )
+    p.add_argument("packing", help="input netCDF packing")
+    p.add_argument("out", help="output netCDF certificate")
+    p.add_argument("--strict", action="store_true", help="also test strict jamming (box may deform at fixed volume)")
+    p.add_argument("--gap-tol", type=float, default=None,
+                   help="pairs with relative gap <= T are contacts, with gap-aware constraints; "
+                        "default: the packing's own contacts as exact contacts")
+    p.add_argument("--exact", action="store_true",
+                   help="with --gap-tol: treat the pairs as exact contacts (zero right-hand side)")
+    p.add_argument("--loads", type=int, default=DEFAULT_LOADS,
+                   help=f"random loads per LP kind, each with both signs (default {DEFAULT_LOADS})")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random loads (default 0)")
+    p.add_argument("--max-cluster-fraction", type=float, default=DEFAULT_MAX_CLUSTER_FRACTION,
+                   help="largest non-wrapping moving group removed as a rattling cluster, as a fraction "
+                        f"of the backbone (default {DEFAULT_MAX_CLUSTER_FRACTION})")
+    p.add_argument("--solver", choices=["ipm", "simplex", "choose"], default=DEFAULT_SOLVER,
+                   help=f"HiGHS algorithm for the collective and strict LPs (default {DEFAULT_SOLVER})")
+    add_overlap_option(p)
+    add_quiet(p)
+
+
+def _certify(args: argparse.Namespace) -> int:
+    if args.exact and args.gap_tol is None:
+        raise ValueError("--exact needs --gap-tol (explicit contacts are always exact)")
+    packing = read_packing(args.packing, overlap_tol(args))
+    with tqdm(desc="certify LPs", unit="LP", disable=args.quiet) as bar:
+        cert = certify(
+            packing,
+            strict=args.strict,
+            gap_tol=args.gap_tol,
+            rhs="zero" if args.exact else None,
+            loads=args.loads,
+            seed=args.seed,
+            max_cluster_fraction=args.max_cluster_fraction,
+            solver=args.solver,
+            progress=bar,
+        )
+    write_dataset(certificate_to_dataset(cert, packing, stage_parameters(args, "packing", "out")), args.out)
+    if not args.quiet:
+        print(f"{args.packing}: {cert.classification} ({int(cert.rattler.sum())} rattlers, "
+              f"{len(cert.lp)} LPs)")
+    return 0
