@@ -20,7 +20,12 @@ from jamflow.initial import random_packing
 from jamflow.io import read_dat, read_dataset, write_packing
 from jamflow.lattices import LATTICES, lattice_packing
 from jamflow.packing import near_pairs
-from jamflow.rigidity import positive_self_stress, rigidity_matrix, rigidity_rank, strain_basis
+from jamflow.rigidity import (
+    positive_self_stress,
+    rigidity_matrix,
+    rigidity_rank,
+    strain_basis,
+)
 from jamflow.strict_jamming import CLASSIFICATIONS, certify
 
 DATA = Path("/work/shared/data/calippso-ls")

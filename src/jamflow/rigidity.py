@@ -38,11 +38,11 @@ from scipy.optimize import nnls
 from .packing import Packing
 
 __all__ = [
-    "strain_basis",
     "contact_geometry",
+    "positive_self_stress",
     "rigidity_matrix",
     "rigidity_rank",
-    "positive_self_stress",
+    "strain_basis",
 ]
 
 

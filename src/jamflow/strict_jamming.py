@@ -53,10 +53,10 @@ from .tolerances import CERTIFY_BOUND_TOL, CERTIFY_MOTION_TOL, CONTACT_GAP_TOL
 __all__ = [
     "CLASSIFICATIONS",
     "RATTLER_STAGES",
-    "LPRecord",
     "JammingCertificate",
-    "certify",
+    "LPRecord",
     "certificate_to_dataset",
+    "certify",
 ]
 
 #: Jamming categories, weakest first.
@@ -345,6 +345,7 @@ def certify(
     seed: int = 0,
     max_cluster_fraction: float = DEFAULT_MAX_CLUSTER_FRACTION,
     solver: str = DEFAULT_SOLVER,
+    both_signs: bool = True,
     progress: Any = None,
 ) -> JammingCertificate:
     """Classify a packing in the jamming hierarchy (see module docstring).
@@ -374,6 +375,10 @@ def certify(
     solver : str
         HiGHS ``solver`` option for the collective and strict LPs ("ipm",
         "simplex", "choose"); the decoupled local LPs use simplex.
+    both_signs : bool
+        Solve every load with both signs (Donev et al.). ``False`` is an ablation
+        for benchmarks only: a motion confined to a pointed cone is then missed
+        whenever the load points into its polar cone.
     progress : tqdm-like, optional
         Object with ``update(n)``; advanced once per LP.
 
@@ -405,8 +410,8 @@ def certify(
     searches: list[_Search] = []
     motion = motion_strain = None
     motion_stage = ""
-    params = dict(strict=strict, gap_tol=gap_tol, rhs=rhs, loads=loads, seed=seed,
-                  max_cluster_fraction=max_cluster_fraction, solver=solver)
+    params = {"strict": strict, "gap_tol": gap_tol, "rhs": rhs, "loads": loads, "seed": seed,
+                  "max_cluster_fraction": max_cluster_fraction, "solver": solver, "both_signs": both_signs}
 
     def record(kind: str, rhs_kind: str, k: int, s: int, status: str, obj: float, t: float, it: int,
                size: float) -> None:
@@ -419,7 +424,7 @@ def certify(
         srch = _Search(kind, A, rows_g, upper, n_disp, d, rhs, lp_solver, record)
         searches.append(srch)
         for k, b in enumerate(_loads(rng, A.shape[1], loads)):
-            for s in (1, -1):
+            for s in ((1, -1) if both_signs else (1,)):
                 found = srch.run(k, s, b)
                 if found is not None:
                     return found

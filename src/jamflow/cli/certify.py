@@ -7,7 +7,13 @@ import argparse
 from tqdm import tqdm
 
 from ..io import read_packing, write_dataset
-from ..strict_jamming import DEFAULT_LOADS, DEFAULT_MAX_CLUSTER_FRACTION, DEFAULT_SOLVER, certificate_to_dataset, certify
+from ..strict_jamming import (
+    DEFAULT_LOADS,
+    DEFAULT_MAX_CLUSTER_FRACTION,
+    DEFAULT_SOLVER,
+    certificate_to_dataset,
+    certify,
+)
 from .common import add_command, add_quiet, stage_parameters
 from .packings import add_overlap_option, overlap_tol
 
