@@ -25,15 +25,15 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import xarray as xr  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import xarray as xr
 
-from jamflow.analysis.contacts import summarize  # noqa: E402
-from jamflow.initial import random_packing  # noqa: E402
-from jamflow.io import new_dataset_attrs, write_dataset  # noqa: E402
-from jamflow.soft import FireParameters, fire  # noqa: E402
-from jamflow.soft.jamming import FORCE_TOL_VANDERWERF, jam_to_pressure  # noqa: E402
+from jamflow.analysis.contacts import summarize
+from jamflow.initial import random_packing
+from jamflow.io import new_dataset_attrs, write_dataset
+from jamflow.soft import FireParameters, fire
+from jamflow.soft.jamming import FORCE_TOL_VANDERWERF, jam_to_pressure
 
 OUT = Path(__file__).resolve().parent / "output"
 P0 = 1e-7

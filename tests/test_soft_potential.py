@@ -7,7 +7,12 @@ import pytest
 
 from jamflow.box import Box
 from jamflow.soft.hessian import hessian
-from jamflow.soft.potential import NeighborList, PowerLawPotential, evaluate, overlapping_pairs
+from jamflow.soft.potential import (
+    NeighborList,
+    PowerLawPotential,
+    evaluate,
+    overlapping_pairs,
+)
 from jamflow.soft.shear import affine_shear
 
 
@@ -106,7 +111,7 @@ def test_overlapping_pairs_forces_and_convention():
     x = np.array([[1.0, 1.0], [1.9, 1.0]])
     D = np.ones(2)
     pot = PowerLawPotential(epsilon=3.0)
-    pairs, xi, f = overlapping_pairs(x, box, D, pot)
+    _, xi, f = overlapping_pairs(x, box, D, pot)
     assert xi == pytest.approx([0.1])
     assert f == pytest.approx([0.3])
     ev = evaluate(x, box, D, pot)

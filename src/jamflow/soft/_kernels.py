@@ -24,7 +24,7 @@ def pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial):
     ``-dU/dx`` and ``virial`` (d, d) with ``sum f r_a r_b / r`` (f = repulsive pair
     force magnitude). Returns ``(U, number of overlapping pairs)``.
     """
-    n, d = y.shape
+    d = y.shape[1]
     force[:, :] = 0.0
     virial[:, :] = 0.0
     energy = 0.0
@@ -67,8 +67,7 @@ def _max_force_sq(force):
         f2 = 0.0
         for a in range(force.shape[1]):
             f2 += force[i, a] * force[i, a]
-        if f2 > m:
-            m = f2
+        m = max(m, f2)
     return m
 
 
@@ -85,8 +84,7 @@ def _needs_rebuild(y, y_build, s, s_build, reach, skin, slack):
         for a in range(y.shape[1]):
             dd = y[i, a] - y_build[i, a]
             d2 += dd * dd
-        if d2 > m:
-            m = d2
+        m = max(m, d2)
     return 2.0 * s * np.sqrt(m) + abs(s / s_build - 1.0) * reach + slack >= skin
 
 
@@ -116,7 +114,7 @@ def fire(
     -------
     status, steps, energy, n_contact, max_force_sq, pressure
     """
-    n, d = y.shape
+    d = y.shape[1]
     dt, alpha, npos = fire_state[0], fire_state[1], int(fire_state[2])
     dt_max, dt_min, f_inc, f_dec = fire_params[0], fire_params[1], fire_params[2], fire_params[3]
     alpha0, f_alpha, n_delay = fire_params[4], fire_params[5], int(fire_params[6])

@@ -30,9 +30,9 @@ from numpy.typing import ArrayLike, NDArray
 from ..analysis.contacts import find_rattlers
 from ..box import Box
 from ..neighbors import PairList
-from .potential import PowerLawPotential, overlapping_pairs
+from .potential import HARMONIC, PowerLawPotential, overlapping_pairs
 
-__all__ = ["hessian", "lowest_modes", "ElasticModuli", "elastic_moduli", "backbone_pairs"]
+__all__ = ["ElasticModuli", "backbone_pairs", "elastic_moduli", "hessian", "lowest_modes"]
 
 
 def _pair_blocks(pairs: PairList, diameter: NDArray[np.float64], potential: PowerLawPotential):
@@ -49,7 +49,7 @@ def _pair_blocks(pairs: PairList, diameter: NDArray[np.float64], potential: Powe
 
 
 def backbone_pairs(
-    x: ArrayLike, box: Box, diameter: ArrayLike, potential: PowerLawPotential = PowerLawPotential()
+    x: ArrayLike, box: Box, diameter: ArrayLike, potential: PowerLawPotential = HARMONIC
 ) -> tuple[PairList, NDArray[np.bool_]]:
     """Overlapping pairs between non-rattlers, and the rattler mask (shape (N,))."""
     x = np.asarray(x, dtype=np.float64)
@@ -63,7 +63,7 @@ def hessian(
     x: ArrayLike,
     box: Box,
     diameter: ArrayLike,
-    potential: PowerLawPotential = PowerLawPotential(),
+    potential: PowerLawPotential = HARMONIC,
     pairs: PairList | None = None,
 ) -> sp.csr_matrix:
     """Sparse Hessian ``d^2 U / dx_ia dx_jb``, shape (N d, N d), index ``i * d + a``.
@@ -172,7 +172,7 @@ class ElasticModuli:
 
 
 def elastic_moduli(
-    x: ArrayLike, box: Box, diameter: ArrayLike, potential: PowerLawPotential = PowerLawPotential()
+    x: ArrayLike, box: Box, diameter: ArrayLike, potential: PowerLawPotential = HARMONIC
 ) -> ElasticModuli:
     """Bulk and shear moduli with the non-affine correction (see module doc).
 

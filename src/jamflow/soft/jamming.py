@@ -36,10 +36,10 @@ from ..analysis.contacts import find_rattlers
 from ..box import Box
 from ..packing import Packing, sphere_volume
 from ..tolerances import SOFT_FORCE_TOL
-from .minimize import FireParameters, fire, minimize_enthalpy
-from .potential import NeighborList, PowerLawPotential, overlapping_pairs
+from .minimize import DEFAULT_FIRE, FireParameters, fire, minimize_enthalpy
+from .potential import HARMONIC, NeighborList, PowerLawPotential, overlapping_pairs
 
-__all__ = ["JammingResult", "jam_to_pressure", "soft_packing", "FORCE_TOL_VANDERWERF"]
+__all__ = ["FORCE_TOL_VANDERWERF", "JammingResult", "jam_to_pressure", "soft_packing"]
 
 #: Default final ``max_i |F_i|`` [epsilon / <D>]: VanderWerf et al.'s ``F_i^2 < 1e-25``
 #: with a factor ten to spare (see :data:`jamflow.tolerances.SOFT_FORCE_TOL`).
@@ -99,14 +99,14 @@ def soft_packing(
 def jam_to_pressure(
     packing: Packing,
     pressure: float = 1e-7,
-    potential: PowerLawPotential = PowerLawPotential(),
+    potential: PowerLawPotential = HARMONIC,
     force_tol: float = FORCE_TOL_VANDERWERF,
     pressure_rtol: float = 1e-6,
     delta_phi: float = 1e-3,
     bisection_rtol: float = 0.1,
     bisection_force_factor: float = 1e-2,
     max_steps: int = 20_000_000,
-    fire_params: FireParameters = FireParameters(),
+    fire_params: FireParameters = DEFAULT_FIRE,
     progress: Callable[[dict], None] | None = None,
 ) -> JammingResult:
     """Bring a packing to the jamming onset at pressure ``P0`` (see module doc).

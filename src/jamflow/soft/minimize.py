@@ -20,16 +20,17 @@ from scipy.optimize import minimize as _scipy_minimize
 
 from ..box import Box
 from . import _kernels
-from .potential import NeighborList, PowerLawPotential, evaluate
+from .potential import HARMONIC, NeighborList, PowerLawPotential, evaluate
 
 __all__ = [
+    "DEFAULT_FIRE",
+    "DescentResult",
     "FireParameters",
     "MinimizeResult",
+    "conjugate_gradient",
     "fire",
     "minimize_enthalpy",
     "steepest_descent",
-    "conjugate_gradient",
-    "DescentResult",
 ]
 
 
@@ -56,6 +57,10 @@ class FireParameters:
 
     def as_dict(self) -> dict:
         return asdict(self)
+
+
+#: FIRE 2.0 with the default parameters.
+DEFAULT_FIRE = FireParameters()
 
 
 @dataclass(frozen=True)
@@ -153,10 +158,10 @@ def fire(
     x: ArrayLike,
     box: Box,
     diameter: ArrayLike,
-    potential: PowerLawPotential = PowerLawPotential(),
+    potential: PowerLawPotential = HARMONIC,
     force_tol: float = 1e-12,
     max_steps: int = 1_000_000,
-    params: FireParameters = FireParameters(),
+    params: FireParameters = DEFAULT_FIRE,
     nlist: NeighborList | None = None,
 ) -> MinimizeResult:
     """Minimise the energy at fixed box with FIRE 2.0.
@@ -186,11 +191,11 @@ def minimize_enthalpy(
     box: Box,
     diameter: ArrayLike,
     pressure: float,
-    potential: PowerLawPotential = PowerLawPotential(),
+    potential: PowerLawPotential = HARMONIC,
     force_tol: float = 1e-12,
     pressure_rtol: float = 1e-6,
     max_steps: int = 1_000_000,
-    params: FireParameters = FireParameters(),
+    params: FireParameters = DEFAULT_FIRE,
     nlist: NeighborList | None = None,
 ) -> MinimizeResult:
     """Minimise ``H = U + P0 V`` over centres and an isotropic box scale (FIRE 2.0).
@@ -227,7 +232,7 @@ def steepest_descent(
     x: ArrayLike,
     box: Box,
     diameter: ArrayLike,
-    potential: PowerLawPotential = PowerLawPotential(),
+    potential: PowerLawPotential = HARMONIC,
     dt: float = 0.1,
     force_tol: float = 1e-9,
     max_steps: int = 10_000_000,
@@ -289,7 +294,7 @@ def conjugate_gradient(
     x: ArrayLike,
     box: Box,
     diameter: ArrayLike,
-    potential: PowerLawPotential = PowerLawPotential(),
+    potential: PowerLawPotential = HARMONIC,
     force_tol: float = 1e-12,
     max_steps: int = 100_000,
     nlist: NeighborList | None = None,

@@ -35,12 +35,13 @@ from ..neighbors import PairList, pairs_within
 from . import _kernels
 
 __all__ = [
-    "PowerLawPotential",
-    "NeighborList",
+    "DEFAULT_SKIN",
+    "HARMONIC",
     "Evaluation",
+    "NeighborList",
+    "PowerLawPotential",
     "evaluate",
     "overlapping_pairs",
-    "DEFAULT_SKIN",
 ]
 
 #: Verlet skin as a fraction of the mean diameter: pairs closer than
@@ -87,6 +88,10 @@ class PowerLawPotential:
         pos = xi > 0.0
         out[pos] = self.epsilon * (w - 1.0) * xi[pos] ** (w - 2.0) / np.asarray(sigma)[pos] ** 2
         return out
+
+
+#: The one-sided harmonic potential with ``epsilon = 1`` (the default everywhere).
+HARMONIC = PowerLawPotential()
 
 
 class NeighborList:
@@ -202,7 +207,7 @@ def evaluate(
     x: ArrayLike,
     box: Box,
     diameter: ArrayLike,
-    potential: PowerLawPotential = PowerLawPotential(),
+    potential: PowerLawPotential = HARMONIC,
     nlist: NeighborList | None = None,
 ) -> Evaluation:
     """Energy, forces, stress tensor and pressure (see the module doc for conventions).
@@ -235,7 +240,7 @@ def evaluate(
 
 
 def overlapping_pairs(
-    x: ArrayLike, box: Box, diameter: ArrayLike, potential: PowerLawPotential = PowerLawPotential()
+    x: ArrayLike, box: Box, diameter: ArrayLike, potential: PowerLawPotential = HARMONIC
 ) -> tuple[PairList, NDArray[np.float64], NDArray[np.float64]]:
     """Overlapping pairs with their relative overlaps and repulsive force magnitudes.
 

@@ -36,15 +36,21 @@ from ..io import new_dataset_attrs
 from ..neighbors import pairs_within
 from ..packing import Packing
 from .jamming import soft_packing
-from .minimize import FireParameters, fire, minimize_enthalpy, steepest_descent
-from .potential import NeighborList, PowerLawPotential, evaluate
+from .minimize import (
+    DEFAULT_FIRE,
+    FireParameters,
+    fire,
+    minimize_enthalpy,
+    steepest_descent,
+)
+from .potential import HARMONIC, NeighborList, PowerLawPotential, evaluate
 
 __all__ = [
+    "LERNER_DELTA_R",
     "affine_shear",
     "aqs_shear",
-    "tentative_network_stress",
     "lerner_sd_shear",
-    "LERNER_DELTA_R",
+    "tentative_network_stress",
 ]
 
 #: Lerner et al.'s tentative-contact distance ``delta_r`` [lambda].
@@ -66,12 +72,12 @@ def aqs_shear(
     packing: Packing,
     strain: float,
     step: float,
-    potential: PowerLawPotential = PowerLawPotential(),
+    potential: PowerLawPotential = HARMONIC,
     force_tol: float = 1e-12,
     pressure: float | None = None,
     pressure_rtol: float = 1e-6,
     max_steps: int = 10_000_000,
-    fire_params: FireParameters = FireParameters(),
+    fire_params: FireParameters = DEFAULT_FIRE,
     progress: Callable[[float], None] | None = None,
 ) -> tuple[xr.Dataset, Packing]:
     """Athermal quasistatic shear to accumulated strain ``strain`` in steps ``step``.
