@@ -115,6 +115,10 @@ def test_default_scene_runs_end_to_end(tmp_path):
         assert summary["n_contacts"] >= summary["isostatic_count"] > 0
         assert summary["max_overlap_rel"] < 100 * p0
         assert summary["force_balance_residual"] < 1e-4
+    for path in sorted((out / "analysis").glob("*/certify.nc")):
+        # soft packings at the onset are rigid: at least collectively jammed
+        assert xr.load_dataset(path).attrs["classification"] in ("collectively_jammed", "strictly_jammed")
+    assert len(list((out / "analysis").glob("*/certify.nc"))) == len(scene["system"]["seeds"])
     for kind in ("gaps", "forces"):
         ds = xr.load_dataset(out / "analysis" / f"{kind}.nc")
         assert np.isfinite(ds.attrs["fit_exponent"])

@@ -72,3 +72,23 @@ rule rdf:
         "../envs/jamflow.yaml"
     shell:
         "jamflow rdf {input} {output} {params.read} > {log} 2>&1"
+
+
+rule certify:
+    input:
+        packing("{sample}", FINAL),
+    output:
+        f"{RESULTS}/analysis/{{sample}}/certify.nc",
+    log:
+        f"{LOGS}/analysis/certify_{{sample}}.log",
+    benchmark:
+        f"{BENCH}/analysis/certify_{{sample}}.tsv"
+    params:
+        strict="--strict" if opt("certify", "strict") else "",
+        loads=opt("certify", "loads"),
+        read=read_flags(FINAL),
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow certify {input} {output} {params.strict} --loads {params.loads}"
+        " {params.read} --quiet > {log} 2>&1"

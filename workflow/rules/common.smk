@@ -81,6 +81,8 @@ def scene_targets():
             targets.append(f"{RESULTS}/analysis/{kind}.nc")
     if "rdf" in analyses:
         targets += rdf_files()
+    if "certify" in analyses:
+        targets += [f"{RESULTS}/analysis/{s}/certify.nc" for s in samples()]
     if "flow" in config:
         targets += shear_summaries()
     for fig in config.get("figures", []):
