@@ -72,6 +72,23 @@ def _max_force_sq(force):
 
 
 @njit(cache=True)
+def _dot(a, b):
+    acc = 0.0
+    for i in range(a.shape[0]):
+        for k in range(a.shape[1]):
+            acc += a[i, k] * b[i, k]
+    return acc
+
+
+@njit(cache=True)
+def _axpy(c, a, b):
+    """``b += c * a`` in place."""
+    for i in range(a.shape[0]):
+        for k in range(a.shape[1]):
+            b[i, k] += c * a[i, k]
+
+
+@njit(cache=True)
 def _needs_rebuild(y, y_build, s, s_build, reach, skin, slack):
     """Verlet criterion: twice the largest non-affine displacement plus box deformation.
 
@@ -137,7 +154,7 @@ def fire(
             status = REBUILD
             break
         fq = d * volume * (pressure - pressure0) / q_scale if barostat else 0.0
-        power = s * np.sum(force * v) + fq * vq
+        power = s * _dot(force, v) + fq * vq
         if power > 0.0:
             npos += 1
             if npos > n_delay:
@@ -150,22 +167,25 @@ def fire(
                     dt *= f_dec
                 alpha = alpha0
             # step back half a step and stop: FIRE 2.0 correction of overshoot
-            y -= 0.5 * dt * v
+            _axpy(-0.5 * dt, v, y)
             v[:, :] = 0.0
             if barostat:
                 q -= 0.5 * dt * vq
                 vq = 0.0
-        # semi-implicit Euler with FIRE velocity mixing
-        v += dt * s * force
+        # semi-implicit Euler with FIRE velocity mixing (fused loops: no temporaries)
+        _axpy(dt * s, force, v)
         if barostat:
             vq += dt * fq
-        vnorm = np.sqrt(np.sum(v * v) + vq * vq)
-        fnorm = np.sqrt(s * s * np.sum(force * force) + fq * fq)
-        if fnorm > 0.0:
-            v *= 1.0 - alpha
-            v += alpha * vnorm / fnorm * s * force
-            vq = (1.0 - alpha) * vq + alpha * vnorm / fnorm * fq
-        y += dt * v
+        vnorm = np.sqrt(_dot(v, v) + vq * vq)
+        fnorm = np.sqrt(s * s * _dot(force, force) + fq * fq)
+        mix = alpha * vnorm / fnorm if fnorm > 0.0 else 0.0
+        keep = 1.0 - alpha if fnorm > 0.0 else 1.0
+        vq = keep * vq + mix * fq
+        for i in range(y.shape[0]):
+            for a in range(d):
+                vi = keep * v[i, a] + mix * s * force[i, a]
+                v[i, a] = vi
+                y[i, a] += dt * vi
         if barostat:
             q += dt * vq
             s = np.exp(q / q_scale)
@@ -208,7 +228,7 @@ def steepest_descent(
         if _needs_rebuild(y, y_build, 1.0, 1.0, reach, skin, slack):
             status = REBUILD
             break
-        y += dt * force
+        _axpy(dt, force, y)
         energy, n_contact = pair_forces(y, 1.0, offset, pi, pj, sigma, eps, w, force, virial)
         fmax2 = _max_force_sq(force)
         step += 1
