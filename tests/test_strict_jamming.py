@@ -31,14 +31,14 @@ from jamflow.strict_jamming import CLASSIFICATIONS, certify
 DATA = Path("/work/shared/data/calippso-ls")
 
 
-def _independent(packing, contacts, backbone, strain):
+def _independent(packing, contacts, backbone, strain, method="nnls"):
     """(rank == full, positive self-stress exists) for the backbone network."""
     idx = np.flatnonzero(backbone)
     keep = backbone[contacts[:, 0]] & backbone[contacts[:, 1]]
     R = rigidity_matrix(packing, contacts[keep], strain=strain, particles=idx)
     rank, _ = rigidity_rank(R)
     full = packing.d * (len(idx) - 1) + (R.shape[1] - packing.d * len(idx))
-    return rank == full, positive_self_stress(R) is not None
+    return rank == full, positive_self_stress(R, method=method) is not None
 
 
 def _assert_motion_allowed(packing, cert):
@@ -81,6 +81,20 @@ def test_rigidity_matrix_is_first_order_change_of_distances():
     t = 1e-6
     fd = (dist(t) - dist(-t)) / (2 * t)
     assert np.allclose(lin, fd, rtol=1e-6, atol=1e-8)
+
+
+@pytest.mark.parametrize("max_gap", [0.2, 0.6, 1.0])
+def test_self_stress_searches_agree_and_balance_forces(max_gap):
+    p = random_packing(40, 2, 0.5, "bi", 4, 1.4, 0.5, 0.1)
+    pairs, _ = near_pairs(p, max_gap)
+    R = rigidity_matrix(p, np.stack([pairs.i, pairs.j], axis=1))
+    lam_nnls = positive_self_stress(R)
+    lam_lp = positive_self_stress(R, method="lp", rtol=1e-7)
+    assert (lam_nnls is None) == (lam_lp is None)
+    for lam in (lam_nnls, lam_lp):
+        if lam is not None:
+            assert lam.min() > 0
+            assert np.linalg.norm(R.T @ lam) < 1e-8 * np.linalg.norm(lam)
 
 
 def test_strain_basis_is_traceless_symmetric_and_complete():
@@ -155,22 +169,27 @@ def test_lattice_certificate_agrees_with_rank_and_self_stress(name, cells):
     rigid_strain = all(_independent(p, p.contacts, backbone, strain=True))
     assert (cert.classification in ("collectively_jammed", "strictly_jammed")) == rigid_fixed
     assert (cert.classification == "strictly_jammed") == (rigid_fixed and rigid_strain)
+    # the two self-stress searches (active-set NNLS and LP) agree
+    R = rigidity_matrix(p, p.contacts)
+    assert (positive_self_stress(R) is None) == (positive_self_stress(R, method="lp", rtol=1e-7) is None)
 
 
 # --- soft packings ----------------------------------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def soft_2d():
+@pytest.fixture(scope="module", params=[(2, 64, "bi"), (3, 128, "mono")], ids=["2d-N64", "3d-N128"])
+def soft_jammed(request):
+    """Soft harmonic packing jammed at P0 = 1e-4: overlapping pairs are its contacts."""
     soft = pytest.importorskip("jamflow.soft.jamming")
-    p0 = random_packing(64, 2, 0.3, "bi", 1, 1.4, 0.5, 0.1)
+    d, n, dispersity = request.param
+    p0 = random_packing(n, d, 0.3 if d == 2 else 0.2, dispersity, 1, 1.4, 0.5, 0.1)
     res = soft.jam_to_pressure(p0, pressure=1e-4)
     assert res.converged
     return res.packing
 
 
-def test_soft_jammed_packing_is_collectively_jammed(soft_2d):
-    p = soft_2d
+def test_soft_jammed_packing_is_collectively_jammed(soft_jammed):
+    p = soft_jammed
     cert = certify(p, strict=True)
     assert cert.classification in ("collectively_jammed", "strictly_jammed")
     backbone = ~cert.rattler
@@ -180,19 +199,21 @@ def test_soft_jammed_packing_is_collectively_jammed(soft_2d):
     keep = backbone[p.contacts[:, 0]] & backbone[p.contacts[:, 1]]
     assert np.all(p.force[keep] > 0)
     assert np.max(force_balance_residual(p)[backbone]) < 1e-6
-    # an isostatic fixed-box backbone has too few contacts for the strain degrees of freedom
-    n_s, n_c = int(backbone.sum()), len(cert.backbone_contacts)
-    if n_c < 2 * (n_s - 1) + 2:
+    # a backbone with fewer contacts than d (N_s - 1) + d (d + 1) / 2 - 1 cannot resist
+    # the volume-preserving strains as well
+    d, n_s, n_c = p.d, int(backbone.sum()), len(cert.backbone_contacts)
+    if n_c < d * (n_s - 1) + d * (d + 1) // 2 - 1:
         assert cert.classification == "collectively_jammed"
         _assert_motion_allowed(p, cert)
 
 
-def test_removing_a_backbone_contact_unjams(soft_2d):
-    p = soft_2d
+def test_removing_a_backbone_contact_unjams(soft_jammed):
+    p = soft_jammed
     cert = certify(p)
     bc = cert.backbone_contacts
     n_s = int((~cert.rattler).sum())
-    assert len(bc) == 2 * (n_s - 1) + 1  # isostatic: every contact is needed
+    if len(bc) != p.d * (n_s - 1) + 1:
+        pytest.skip("backbone is hyperstatic: a single contact may be redundant")
     for k in (0, len(bc) // 2):
         cut = p.evolve(contacts=np.delete(p.contacts, np.flatnonzero(
             (p.contacts[:, 0] == bc[k, 0]) & (p.contacts[:, 1] == bc[k, 1])), axis=0), force=None)
@@ -229,7 +250,7 @@ def test_ls_snapshot_near_contact_network_is_jammed():
     p = read_dat(DATA / "Centers-after-LS--N-1024--d-3.dat")
     cert = certify(p, gap_tol=3e-3, strict=True)
     assert cert.classification in ("collectively_jammed", "strictly_jammed")
-    full_rank, positive = _independent(p, cert.contacts, ~cert.rattler, strain=False)
+    full_rank, positive = _independent(p, cert.contacts, ~cert.rattler, strain=False, method="lp")
     assert full_rank and positive
 
 

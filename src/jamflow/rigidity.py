@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
-from scipy.optimize import nnls
+from scipy.optimize import linprog, nnls
 
 from .packing import Packing
 
@@ -156,24 +156,46 @@ def rigidity_rank(R: sp.spmatrix) -> tuple[int, NDArray[np.float64]]:
     return int(np.sum(s > tol)), s
 
 
-def positive_self_stress(R: sp.spmatrix, rtol: float = 1e-9) -> NDArray[np.float64] | None:
-    """A self-stress ``lambda >= 1`` on every contact (``R^T lambda = 0``), or None.
-
-    Any strictly positive self-stress can be scaled to ``min lambda = 1``, so one
-    exists iff ``min_{mu >= 0} |R^T (1 + mu)|`` vanishes; this is a non-negative
-    least-squares problem (Lawson-Hanson active set, independent of the simplex
-    or interior-point LPs of the certificate).
+def positive_self_stress(R: sp.spmatrix, rtol: float = 1e-9, method: str = "nnls") -> NDArray[np.float64] | None:
+    """A self-stress strictly positive on every contact (``R^T lambda = 0``), or None.
 
     Parameters
     ----------
     R : sparse matrix, shape (Nc, n_dof)
     rtol : float
-        Residual ``|R^T lambda| / (|R| |lambda|)`` regarded as zero.
+        ``"nnls"``: residual ``|R^T lambda| / (|R| |lambda|)`` regarded as zero;
+        ``"lp"``: smallest accepted ``min lambda`` when ``max lambda = 1``.
+    method : {"nnls", "lp"}
+        ``"nnls"``: any strictly positive self-stress can be scaled to
+        ``min lambda = 1``, so one exists iff ``min_{mu >= 0} |R^T (1 + mu)|``
+        vanishes, a non-negative least-squares problem (Lawson-Hanson active set,
+        dense; small networks). ``"lp"``: maximise ``t`` subject to
+        ``R^T lambda = 0``, ``t <= lambda <= 1`` (sparse, HiGHS via scipy; the dual
+        certificate of the motion LPs, for large networks).
+
+    Returns
+    -------
+    ndarray, shape (Nc,) or None
+        The self-stress (``min = 1`` for nnls, ``max <= 1`` for lp).
     """
-    A = (R.T.toarray() if sp.issparse(R) else np.asarray(R).T)
-    ones = np.ones(A.shape[1])
-    mu, _ = nnls(A, -A @ ones, maxiter=50 * A.shape[1])
-    lam = ones + mu
-    scale = np.linalg.norm(A, ord=2) * np.linalg.norm(lam)
-    residual = np.linalg.norm(A @ lam)
-    return lam if residual <= rtol * scale else None
+    if method == "nnls":
+        A = (R.T.toarray() if sp.issparse(R) else np.asarray(R).T)
+        ones = np.ones(A.shape[1])
+        mu, _ = nnls(A, -A @ ones, maxiter=50 * A.shape[1])
+        lam = ones + mu
+        scale = np.linalg.norm(A, ord=2) * np.linalg.norm(lam)
+        residual = np.linalg.norm(A @ lam)
+        return lam if residual <= rtol * scale else None
+    if method != "lp":
+        raise ValueError(f"method must be 'nnls' or 'lp', got {method!r}")
+    nc, ndof = R.shape
+    At = sp.csr_matrix(R.T)
+    A_eq = sp.hstack([At, sp.csr_matrix((ndof, 1))], format="csr")
+    A_ub = sp.hstack([-sp.identity(nc, format="csr"), sp.csr_matrix(np.ones((nc, 1)))], format="csr")
+    cost = np.zeros(nc + 1)
+    cost[-1] = -1.0
+    res = linprog(cost, A_ub=A_ub, b_ub=np.zeros(nc), A_eq=A_eq, b_eq=np.zeros(ndof),
+                  bounds=[(0.0, 1.0)] * nc + [(None, None)], method="highs")
+    if res.status != 0:
+        raise RuntimeError(f"self-stress LP failed: {res.message}")
+    return res.x[:nc] if res.x[-1] > rtol else None

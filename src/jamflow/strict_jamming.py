@@ -19,9 +19,12 @@ when no load of either sign finds a motion. With exact contacts the allowed moti
 form a cone ``C``; the optimum for ``+b`` and ``-b`` is zero only when ``b`` is
 orthogonal to ``C``, which has probability zero unless ``C`` is trivial, so one
 load of both signs decides in exact arithmetic; further loads guard against
-motions that round-off hides. With gaps the allowed set is a polytope, bounded
-(every particle rattles in a cage of size of order the gaps) exactly when the cone
-of the same network is trivial; an unjamming motion reaches the bound.
+motions that round-off hides. With gaps the allowed set is a polytope (the
+first-order cage), bounded exactly when the cone of the same network is trivial;
+a load that meets a recession direction drives the solution to the bound. The
+cage of a rigid network can still be much larger than the gaps when the network
+is nearly floppy; its size is reported, and a gap-aware solution at the bound is
+decided by the exact-contact LP with the same load (see :class:`_Search`).
 
 Rattlers are removed in stages and each removal is recorded: (1) particles with
 fewer than ``d + 1`` backbone contacts, (2) particles that move in the local LP
