@@ -433,7 +433,9 @@ def certify(
                     return found
         return None
 
-    collective_jammed = False
+    collective_jammed = strictly_jammed = False
+    strict_motion = None
+    basis = strain_basis(d, volume_preserving=True)
     while True:
         new = _prune_coordination(d, active, contacts)
         stage[new] = RATTLER_STAGES.index("coordination")
@@ -453,12 +455,30 @@ def certify(
             active[idx[moved]] = False
             continue
 
-        # collective jamming: fixed box, the best-connected particle pinned
-        R = rigidity_matrix(packing, contacts[sel], particles=idx)
-        upper = np.ones(n_disp)
+        # the best-connected particle is pinned (removes the translations)
         p = _pin(contacts[sel], idx, n)
-        upper[d * p:d * p + d] = 0.0
-        found = search("collective", R, g[sel], upper, n_disp, solver)
+        found = strict_motion = None
+        if strict:
+            # strain LP first: without a motion there, none exists at fixed box either
+            R = rigidity_matrix(packing, contacts[sel], strain=True, volume_preserving=True, particles=idx)
+            # strain columns carry |r| [length]; per mean diameter like the displacements
+            scale = np.ones(R.shape[1])
+            scale[n_disp:] = 1.0 / unit
+            R = sp.csr_matrix(R @ sp.diags(scale))
+            upper = np.ones(R.shape[1])
+            upper[d * p:d * p + d] = 0.0
+            found = search("strict", R, g[sel], upper, n_disp, solver)
+            if found is None:
+                collective_jammed = strictly_jammed = True
+                break
+            if np.abs(found[1]).max(initial=0.0) > CERTIFY_MOTION_TOL:
+                # the motion needs the strain: the fixed-box test decides the rest
+                strict_motion, found = found, None
+        if found is None:
+            R = rigidity_matrix(packing, contacts[sel], particles=idx)
+            upper = np.ones(n_disp)
+            upper[d * p:d * p + d] = 0.0
+            found = search("collective", R, g[sel], upper, n_disp, solver)
         if found is None:
             collective_jammed = True
             break
@@ -476,30 +496,20 @@ def certify(
         motion_stage = "collective"
         break
 
-    strict_tested = False
     if not active.any():
         classification = "not_jammed"
-    elif not collective_jammed:
-        classification = "locally_jammed"
-    else:
+    elif strictly_jammed:
+        classification = "strictly_jammed"
+    elif collective_jammed:
         classification = "collectively_jammed"
-        if strict:
-            strict_tested = True
-            R = rigidity_matrix(packing, contacts[sel], strain=True, volume_preserving=True, particles=idx)
-            # strain columns carry |r| [length]; per mean diameter like the displacements
-            scale = np.ones(R.shape[1])
-            scale[n_disp:] = 1.0 / unit
-            R = sp.csr_matrix(R @ sp.diags(scale))
-            upper = np.ones(R.shape[1])
-            upper[d * p:d * p + d] = 0.0
-            found = search("strict", R, g[sel], upper, n_disp, solver)
-            if found is None:
-                classification = "strictly_jammed"
-            else:
-                motion = np.zeros((n, d))
-                motion[idx] = found[0]
-                motion_strain = np.einsum("k,kab->ab", found[1], strain_basis(d, volume_preserving=True))
-                motion_stage = "strict"
+        if strict_motion is not None:
+            motion = np.zeros((n, d))
+            motion[idx] = strict_motion[0]
+            motion_strain = np.einsum("k,kab->ab", strict_motion[1], basis)
+            motion_stage = "strict"
+    else:
+        classification = "locally_jammed"
+    strict_tested = strict and collective_jammed
     return JammingCertificate(
         classification=classification,
         contacts=contacts,
