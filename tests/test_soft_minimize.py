@@ -81,3 +81,21 @@ def test_enthalpy_minimisation_rejects_nonpositive_pressure():
     p = _jammed(32, 2, 1e-2, 7)
     with pytest.raises(ValueError):
         minimize_enthalpy(p.position, p.box, p.diameter, 0.0)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_full_box_enthalpy_minimum_has_isotropic_stress_p0(d):
+    """With the whole box free the residual shear stress of a strained packing relaxes:
+    the stress tensor becomes -P0 1 (the isotropic box alone leaves sigma_xy != 0)."""
+    from jamflow.soft.shear import affine_shear
+
+    p = _jammed(48, d, 1e-2, 5)
+    x, box = affine_shear(p.position, p.box, 0.02)
+    p0 = 1e-3
+    full = minimize_enthalpy(x, box, p.diameter, p0, force_tol=1e-13, pressure_rtol=1e-8, box_dof="full")
+    iso = minimize_enthalpy(x, box, p.diameter, p0, force_tol=1e-13, pressure_rtol=1e-8)
+    assert full.converged and iso.converged
+    ev = evaluate(full.position, full.box, p.diameter)
+    np.testing.assert_allclose(ev.stress, -p0 * np.eye(d), atol=1e-8 * p0)
+    assert ev.max_force <= 1e-13
+    assert abs(evaluate(iso.position, iso.box, p.diameter).shear_stress) > 1e-3 * p0

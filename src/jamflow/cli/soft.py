@@ -32,6 +32,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--pressure-rtol", type=float, default=1e-6, help="final |P - P0| / P0 (default 1e-6)")
     p.add_argument("--delta-phi", type=float, default=1e-3, help="first bisection step in packing fraction (default 1e-3)")
     p.add_argument("--exponent", type=float, default=2.0, help="potential exponent w (2 harmonic, 2.5 Hertz)")
+    p.add_argument("--box-dof", choices=["isotropic", "full"], default="isotropic",
+                   help="final enthalpy minimisation over an isotropic box scale (default) or the whole box "
+                        "(stress tensor -P0 1, the box may tilt)")
     p.add_argument("--max-steps", type=int, default=20_000_000, help="FIRE step budget of the whole protocol")
     add_quiet(p)
 
@@ -88,6 +91,7 @@ def _soft_jam(args: argparse.Namespace) -> int:
     result = jam_to_pressure(
         packing, args.pressure, PowerLawPotential(exponent=args.exponent), args.force_tol,
         args.pressure_rtol, args.delta_phi, max_steps=args.max_steps, progress=progress,
+        box_dof=args.box_dof,
     )
     bar.close()
     if not result.converged:

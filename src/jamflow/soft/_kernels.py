@@ -233,3 +233,176 @@ def steepest_descent(
         fmax2 = _max_force_sq(force)
         step += 1
     return status, step, energy, n_contact, fmax2
+
+
+@njit(cache=True)
+def pair_forces_affine(y, A, offset, pi, pj, sigma, eps, w, force, virial):
+    """:func:`pair_forces` for centres ``x = A y`` with a general (upper-triangular) ``A``.
+
+    Pair vectors are ``A (y_j - y_i + offset)``; ``force`` is ``-dU/dx`` (N, d).
+    """
+    d = y.shape[1]
+    force[:, :] = 0.0
+    virial[:, :] = 0.0
+    energy = 0.0
+    n_contact = 0
+    ref = np.empty(d)
+    dx = np.empty(d)
+    harmonic = w == 2.0
+    for p in range(pi.shape[0]):
+        i = pi[p]
+        j = pj[p]
+        for a in range(d):
+            ref[a] = y[j, a] - y[i, a] + offset[p, a]
+        r2 = 0.0
+        for a in range(d):
+            acc = 0.0
+            for b in range(a, d):
+                acc += A[a, b] * ref[b]
+            dx[a] = acc
+            r2 += acc * acc
+        sig = sigma[p]
+        if r2 >= sig * sig:
+            continue
+        r = np.sqrt(r2)
+        xi = 1.0 - r / sig
+        if harmonic:
+            energy += 0.5 * eps * xi * xi
+            fmag = eps * xi / sig
+        else:
+            energy += eps / w * xi**w
+            fmag = eps * xi ** (w - 1.0) / sig
+        n_contact += 1
+        inv_r = 1.0 / r
+        for a in range(d):
+            fa = fmag * dx[a] * inv_r
+            force[j, a] += fa
+            force[i, a] -= fa
+            for b in range(d):
+                virial[a, b] += fmag * dx[a] * dx[b] * inv_r
+    return energy, n_contact
+
+
+@njit(cache=True)
+def _box_force(virial, A, volume, pressure0, q_scale, out):
+    """``-dH/dA`` on the upper triangle, ``(W - P0 V 1) A^-T / q_scale``."""
+    d = A.shape[0]
+    Ainv = np.linalg.inv(A)
+    for a in range(d):
+        for b in range(d):
+            out[a, b] = 0.0
+            if b < a:
+                continue
+            acc = 0.0
+            for c in range(d):
+                stress = virial[a, c] - (pressure0 * volume if a == c else 0.0)
+                acc += stress * Ainv[b, c]
+            out[a, b] = acc / q_scale
+
+
+@njit(cache=True)
+def fire_stress(
+    y, v, A, vA, fire_state, fire_params,
+    offset, pi, pj, sigma, eps, w,
+    y_build, A_build_inv, reach, skin, slack,
+    pressure0, volume_ref, q_scale,
+    force_tol, stress_tol, max_steps, force, virial,
+):
+    """FIRE 2.0 on ``H = U + P0 V`` with centres and the full upper-triangular box.
+
+    Centres are ``x = A y`` and the box ``A h_ref``; the box degrees of freedom are
+    ``q_scale A_ab`` (a <= b) with generalised forces ``(W - P0 V 1) A^-T / q_scale``
+    (``W = sum f R R^T / r``), so at the minimum the stress tensor is ``-P0 1``.
+    Converged when ``max_i |F_i| <= force_tol`` and
+    ``max_ab |W_ab / V - P0 delta_ab| <= stress_tol * P0``.
+
+    Returns
+    -------
+    status, steps, energy, n_contact, max_force_sq, max_stress_error
+    """
+    d = y.shape[1]
+    dt, alpha, npos = fire_state[0], fire_state[1], int(fire_state[2])
+    dt_max, dt_min, f_inc, f_dec = fire_params[0], fire_params[1], fire_params[2], fire_params[3]
+    alpha0, f_alpha, n_delay = fire_params[4], fire_params[5], int(fire_params[6])
+    initial_delay = fire_params[7] > 0.0
+    fA = np.zeros((d, d))
+    fy = np.empty_like(y)
+    status = MAX_STEPS
+    step = 0
+    energy, n_contact = pair_forces_affine(y, A, offset, pi, pj, sigma, eps, w, force, virial)
+    while True:
+        volume = volume_ref * np.prod(np.diag(A))
+        fmax2 = _max_force_sq(force)
+        err = 0.0
+        for a in range(d):
+            for b in range(d):
+                e = abs(virial[a, b] / volume - (pressure0 if a == b else 0.0))
+                err = max(err, e)
+        if fmax2 <= force_tol * force_tol and err <= stress_tol * pressure0:
+            status = CONVERGED
+            break
+        if step >= max_steps:
+            break
+        # rebuild test: non-affine displacement in x plus the box deformation since the build
+        m = 0.0
+        for i in range(y.shape[0]):
+            d2 = 0.0
+            for a in range(d):
+                acc = 0.0
+                for b in range(a, d):
+                    acc += A[a, b] * (y[i, b] - y_build[i, b])
+                d2 += acc * acc
+            m = max(m, d2)
+        deform = A @ A_build_inv
+        dev = 0.0
+        for a in range(d):
+            for b in range(d):
+                e = deform[a, b] - (1.0 if a == b else 0.0)
+                dev += e * e
+        if 2.0 * np.sqrt(m) + np.sqrt(dev) * reach + slack >= skin:
+            status = REBUILD
+            break
+        _box_force(virial, A, volume, pressure0, q_scale, fA)
+        # generalised force on y: A^T F
+        for i in range(y.shape[0]):
+            for b in range(d):
+                acc = 0.0
+                for a in range(b + 1):
+                    acc += A[a, b] * force[i, a]
+                fy[i, b] = acc
+        power = _dot(fy, v) + _dot(fA, vA)
+        if power > 0.0:
+            npos += 1
+            if npos > n_delay:
+                dt = min(dt * f_inc, dt_max)
+                alpha *= f_alpha
+        else:
+            npos = 0
+            if not (initial_delay and step < n_delay):
+                if dt * f_dec >= dt_min:
+                    dt *= f_dec
+                alpha = alpha0
+            _axpy(-0.5 * dt, v, y)
+            _axpy(-0.5 * dt / q_scale, vA, A)
+            v[:, :] = 0.0
+            vA[:, :] = 0.0
+        _axpy(dt, fy, v)
+        _axpy(dt, fA, vA)
+        vnorm = np.sqrt(_dot(v, v) + _dot(vA, vA))
+        fnorm = np.sqrt(_dot(fy, fy) + _dot(fA, fA))
+        mix = alpha * vnorm / fnorm if fnorm > 0.0 else 0.0
+        keep = 1.0 - alpha if fnorm > 0.0 else 1.0
+        for i in range(y.shape[0]):
+            for a in range(d):
+                vi = keep * v[i, a] + mix * fy[i, a]
+                v[i, a] = vi
+                y[i, a] += dt * vi
+        for a in range(d):
+            for b in range(a, d):
+                vab = keep * vA[a, b] + mix * fA[a, b]
+                vA[a, b] = vab
+                A[a, b] += dt * vab / q_scale
+        energy, n_contact = pair_forces_affine(y, A, offset, pi, pj, sigma, eps, w, force, virial)
+        step += 1
+    fire_state[0], fire_state[1], fire_state[2] = dt, alpha, npos
+    return status, step, energy, n_contact, fmax2, err

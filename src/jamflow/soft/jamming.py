@@ -108,6 +108,7 @@ def jam_to_pressure(
     max_steps: int = 20_000_000,
     fire_params: FireParameters = DEFAULT_FIRE,
     progress: Callable[[dict], None] | None = None,
+    box_dof: str = "isotropic",
 ) -> JammingResult:
     """Bring a packing to the jamming onset at pressure ``P0`` (see module doc).
 
@@ -134,6 +135,10 @@ def jam_to_pressure(
     progress : callable, optional
         Called with a dict (``phi``, ``pressure``, ``delta_phi``, ``steps``) after each
         bisection step.
+    box_dof : {"isotropic", "full"}
+        Box freedom of the final enthalpy minimisation: isotropic scale, or the whole
+        upper-triangular box so the final stress tensor is ``-P0 1`` (shear-stress
+        free; the box may tilt). See :func:`~jamflow.soft.minimize.minimize_enthalpy`.
 
     Returns
     -------
@@ -178,7 +183,7 @@ def jam_to_pressure(
         factor = (phi / new_phi) ** (1.0 / d)
         box, x, phi = box.scaled(factor), x * factor, new_phi
     final = minimize_enthalpy(x, box, D, pressure, potential, force_tol, pressure_rtol,
-                              max_steps - steps, fire_params, nlist)
+                              max_steps - steps, fire_params, nlist, box_dof)
     steps += final.steps
     box = final.box
     fmax2 = final.max_force**2
@@ -197,7 +202,7 @@ def jam_to_pressure(
     params = {
         "pressure": pressure, "force_tol": force_tol, "pressure_rtol": pressure_rtol,
         "bisection_rtol": bisection_rtol, "bisection_force_factor": bisection_force_factor,
-        "potential_exponent": potential.exponent, "fire": fire_params.as_dict(),
+        "potential_exponent": potential.exponent, "fire": fire_params.as_dict(), "box_dof": box_dof,
     }
     out = soft_packing(final.position, box, D, potential, packing, ">soft", params, attrs)
     return JammingResult(out, bool(final.converged), history, steps)

@@ -154,6 +154,55 @@ def _run_fire(
     )
 
 
+def _run_fire_full(
+    x: NDArray[np.float64], box: Box, diameter: NDArray[np.float64], potential: PowerLawPotential,
+    force_tol: float, max_steps: int, params: FireParameters, nlist: NeighborList | None,
+    pressure0: float, stress_rtol: float,
+) -> MinimizeResult:
+    d = box.d
+    if nlist is None:
+        nlist = NeighborList(diameter)
+    builds0 = nlist.builds
+    unit = float(diameter.mean()) / np.sqrt(potential.epsilon)
+    h_ref = box
+    y = np.array(x, dtype=np.float64)
+    v = np.zeros_like(y)
+    A = np.eye(d)
+    vA = np.zeros((d, d))
+    q_scale = float(np.sqrt(len(y)) * diameter.mean())
+    fire_state = np.array([params.dt * unit, params.alpha0, 0.0])
+    fparams = _fire_params(params, unit)
+    force = np.zeros_like(y)
+    virial = np.zeros((d, d))
+    steps = 0
+    status = _kernels.MAX_STEPS
+    while True:
+        current = Box(A @ h_ref.matrix)
+        if status == _kernels.REBUILD:
+            nlist.build(y @ A.T, current)
+        else:
+            nlist.update(y @ A.T, current)
+        offset = nlist.image @ h_ref.matrix.T
+        affine, slack = nlist.affine_reference(current)
+        A_inv = np.linalg.inv(A)
+        status, n, energy, n_contacts, fmax2, _ = _kernels.fire_stress(
+            y, v, A, vA, fire_state, fparams, offset, nlist.i, nlist.j, nlist.sigma,
+            potential.epsilon, potential.exponent, affine @ A_inv.T, A_inv, nlist.reach, nlist.skin,
+            slack, pressure0, h_ref.volume, q_scale, float(force_tol), float(stress_rtol),
+            int(max_steps - steps), force, virial,
+        )
+        steps += n
+        if status != _kernels.REBUILD or steps >= max_steps:
+            break
+    final = Box(np.triu(A) @ h_ref.matrix)
+    return MinimizeResult(
+        position=y @ A.T, box=final, energy=float(energy),
+        pressure=float(np.trace(virial) / (d * final.volume)), max_force=float(np.sqrt(fmax2)),
+        n_contacts=int(n_contacts), steps=steps, converged=status == _kernels.CONVERGED,
+        rebuilds=nlist.builds - builds0,
+    )
+
+
 def fire(
     x: ArrayLike,
     box: Box,
@@ -197,8 +246,11 @@ def minimize_enthalpy(
     max_steps: int = 1_000_000,
     params: FireParameters = DEFAULT_FIRE,
     nlist: NeighborList | None = None,
+    box_dof: str = "isotropic",
 ) -> MinimizeResult:
-    """Minimise ``H = U + P0 V`` over centres and an isotropic box scale (FIRE 2.0).
+    """Minimise ``H = U + P0 V`` over centres and the box (FIRE 2.0).
+
+    ``box_dof = "isotropic"``:
 
     The box is ``s h`` with ``s = exp(q / q_s)``, ``q_s = sqrt(N) <D>``, and centres
     ``s y``; ``q`` is one more FIRE degree of freedom with generalised force
@@ -206,16 +258,29 @@ def minimize_enthalpy(
     virial pressure equals ``P0``. The choice of ``q_s`` gives the box mode a
     stiffness of the order of a particle's.
 
+    ``box_dof = "full"``: the whole upper-triangular box ``A h`` is free (``d (d+1)/2``
+    degrees of freedom ``q_s A_ab``, centres ``A y``), with generalised forces
+    ``(W - P0 V 1) A^-T / q_s``, ``W = sum f R R^T / r``. At the minimum the stress
+    tensor is ``-P0 1`` (no residual shear stress); ``pressure_rtol`` then bounds
+    ``max_ab |W_ab / V - P0 delta_ab| / P0``.
+
     Parameters
     ----------
     pressure : float
         Target pressure ``P0`` [epsilon / length^d], > 0.
     pressure_rtol : float
-        Converged also requires ``|P - P0| <= pressure_rtol * P0``.
+        Converged also requires ``|P - P0| <= pressure_rtol * P0`` (isotropic) or the
+        stress-tensor bound above (full).
+    box_dof : {"isotropic", "full"}
     Other parameters as in :func:`fire`.
     """
     if not pressure > 0.0:
         raise ValueError(f"target pressure must be positive, got {pressure}")
+    if box_dof == "full":
+        return _run_fire_full(np.asarray(x, dtype=np.float64), box, np.asarray(diameter, dtype=np.float64),
+                              potential, force_tol, max_steps, params, nlist, float(pressure), pressure_rtol)
+    if box_dof != "isotropic":
+        raise ValueError(f"box_dof must be 'isotropic' or 'full', got {box_dof!r}")
     return _run_fire(np.asarray(x, dtype=np.float64), box, np.asarray(diameter, dtype=np.float64),
                      potential, force_tol, max_steps, params, nlist, float(pressure), pressure_rtol)
 
