@@ -20,8 +20,8 @@ below 1e-25; the default ``force_tol = 1e-13`` gives ``F^2 <= 1e-26``. With
 ``<D> = 1`` and box sides ``L ~ N^(1/d)``, pair vectors carry a round-off of
 ``~ L 2^-53``, so per-particle forces cannot be balanced much below ``~1e-14``.
 Measured (``benchmarks/soft_jamming.py``, 2D N = 1024 at P0 = 1e-7): FIRE reaches
-``max_i |F_i| <= 1e-14`` (``max F^2 = 8e-29``) and stalls near ``F^2 ~ 4e-28`` when
-asked for 1e-15. The 1e-25 criterion is thus met with about three orders of
+``max_i |F_i| <= 1e-14`` (``max F^2 = 9e-29``) and stalls at ``F^2 ~ 2e-28 ... 4e-28``
+(two runs) when asked for 1e-15. The 1e-25 criterion is thus met with about three orders of
 magnitude to spare; pushing below ``F^2 ~ 1e-28`` is not possible in float64.
 """
 
@@ -139,6 +139,8 @@ def jam_to_pressure(
         Box freedom of the final enthalpy minimisation: isotropic scale, or the whole
         upper-triangular box so the final stress tensor is ``-P0 1`` (shear-stress
         free; the box may tilt). See :func:`~jamflow.soft.minimize.minimize_enthalpy`.
+        With the full box free the backbone needs ``d (N_s - 1) + d (d + 1) / 2``
+        contacts instead of ``d (N_s - 1) + 1`` (Dagois-Bohy et al., PRL 109, 095703).
 
     Returns
     -------
