@@ -51,7 +51,7 @@ def shear_conditions():
 
 def pressure_option(condition):
     """The ``jamflow shear`` option of a shear condition."""
-    return "" if condition == "fixed-volume" else f"--pressure {condition.removeprefix('p')}"
+    return "" if condition == "fixed-volume" else optional_flag("--pressure", condition.removeprefix("p"))
 
 
 def shear_summaries(condition=None):
@@ -103,6 +103,11 @@ def scene_targets():
 wildcard_constraints:
     sample="[A-Za-z0-9-]+",
     condition="fixed-volume|p[0-9.e+-]+",
+
+
+def optional_flag(flag, value):
+    """``flag value``, or nothing when the scene leaves the value to the command's default."""
+    return "" if value is None else f"{flag} {value}"
 
 
 def read_flags(stage):

@@ -47,9 +47,9 @@ rule soft_jam:
         f"{BENCH}/soft/{{sample}}.tsv"
     params:
         pressure=lambda wildcards: opt("soft", "pressure"),
-        force_tol=lambda wildcards: opt("soft", "force_tol"),
+        force_tol=lambda wildcards: optional_flag("--force-tol", opt("soft", "force_tol")),
     conda:
         "../envs/jamflow.yaml"
     shell:
         "jamflow soft-jam {input} {output} --pressure {params.pressure}"
-        " --force-tol {params.force_tol} --quiet > {log} 2>&1"
+        " {params.force_tol} --quiet > {log} 2>&1"
