@@ -271,8 +271,21 @@ def plot_stress_strain(datasets: Sequence[xr.Dataset], labels: Sequence[str] | N
     axes[2].set_ylabel(f"friction mu = sigma / p\n{_DL}")
     axes[2].set_xlabel(f"shear strain gamma {_DL}")
     for ax in axes:
+        _widen_flat_axis(ax)
         ax.legend(fontsize=7)
     return fig
+
+
+def _widen_flat_axis(ax) -> None:
+    """Show a signal held constant (a fixed pressure, to 1e-12) as a flat line at its value.
+
+    Without this matplotlib zooms into round-off and labels the axis with an offset.
+    """
+    lo, hi = ax.get_ylim()
+    centre = 0.5 * (lo + hi)
+    if hi - lo < 1e-6 * max(abs(centre), 1e-300):
+        ax.set_ylim(centre - 0.05 * abs(centre), centre + 0.05 * abs(centre))
+    ax.ticklabel_format(axis="y", useOffset=False)
 
 
 def plot_phi_kappa(ds: xr.Dataset) -> Figure:
