@@ -23,6 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 
@@ -33,6 +34,7 @@ from .driving import Drive
 from .jamming import constrained_subset, self_stress
 from .network import (
     SingularNetworkError,
+    _factorize,
     Solution,
     affine_rates,
     pair_vectors,
@@ -426,16 +428,20 @@ class Integrator:
             r = np.linalg.norm(R, axis=1)
             dr = r - st.nl.sigma[st.contact]
             S = s_matrix(pairs, R / r[:, None], self.n)
-            Nmat = (S @ S.T).tocsc()
+            grad = zero
             try:
-                dR = -(S.T @ spla.splu(Nmat, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0).solve(dr))
-            except RuntimeError:
-                # singular N (self-stress): least-squares displacement instead
-                dR = -(S.T @ spla.lsqr(Nmat, dr, atol=1e-15, btol=1e-15)[0])
+                dR = -(S.T @ _factorize(S, self.options.cond_limit).solve(dr))
+            except SingularNetworkError:
+                # a self-stress f0 (jammed network): S^T f0 = 0 makes the error component
+                # along f0 unreachable by particle moves, so the box scale joins the
+                # unknowns (a dilation ds changes every r by ds * r); minimum-norm solution
+                A = sp.hstack([S, sp.csr_matrix(r[:, None])]).tocsr()
+                sol = spla.lsqr(A, -dr, atol=1e-16, btol=1e-16, iter_lim=20 * A.shape[0])[0]
+                dR, grad = sol[:-1], sol[-1] * np.eye(self.d)
             dR = dR.reshape(self.n, self.d)
             saved = (st.x.copy(), st.h.copy(), st.contact.copy(), len(st.events), st.nl.displacement.copy(), st.nl.strain_norm)
-            t, k = next_collision(st.x, st.h, st.nl.pairs, st.nl.images, st.nl.sigma, st.contact, dR, zero, 1.0)
-            self._move(t, dR, zero)
+            t, k = next_collision(st.x, st.h, st.nl.pairs, st.nl.images, st.nl.sigma, st.contact, dR, grad, 1.0)
+            self._move(t, dR, grad)
             if k >= 0:
                 old = st.contact
                 st.contact = old.copy()

@@ -1,0 +1,162 @@
+"""Subcommands of the event-driven overdamped dynamics: shear, compress, drive."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from ..io import read_packing, write_dataset, write_packing
+from ..overdamped.driving import Drive, SelfPropulsion
+from ..overdamped.integrate import FlowOptions
+from ..overdamped.run import LENGTH_UNITS, Stop, run_flow
+from .common import add_command, add_quiet, stage_parameters
+from .packings import add_overlap_option, overlap_tol
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = add_command(sub, "shear", _shear, "event-driven overdamped simple shear (fixed volume or fixed pressure)",
+                    "Lerner-During-Wyart event-driven overdamped hard-sphere shear with Lees-Edwards boundaries.")
+    _io_options(p)
+    p.add_argument("--strain", type=float, required=True, help="total shear strain gamma")
+    p.add_argument("--pressure", type=float, default=None,
+                   help="shear at this fixed pressure (units gamma_dot xi0^-1 lambda^(2-d)); default fixed volume")
+    p.add_argument("--rate", type=float, default=1.0, help="shear rate gamma_dot (default 1)")
+    _common_options(p)
+
+    p = add_command(sub, "compress", _compress, "event-driven overdamped compression (to a packing fraction or jamming)",
+                    "Isotropic compression V_aff = -rate R until the target packing fraction or a jammed packing.")
+    _io_options(p)
+    p.add_argument("--phi", type=float, default=None, help="stop at this packing fraction (default: run to jamming)")
+    p.add_argument("--strain", type=float, default=10.0, help="give up after this compressive strain rate*t (default 10)")
+    p.add_argument("--shear", action="store_true", help="shear while compressing (Sec. IV D: jamming under both)")
+    p.add_argument("--rate", type=float, default=1.0, help="compression rate (default 1)")
+    _common_options(p)
+
+    p = add_command(sub, "drive", _drive, "event-driven overdamped dynamics under external or self-propelling forces")
+    _io_options(p)
+    p.add_argument("--time", type=float, required=True, help="duration in units of tau = lambda/(f_ext xi0)")
+    g = p.add_mutually_exclusive_group(required=True)
+    g.add_argument("--forces", default=None, help="external forces: .npy file of shape (N, d) [input force units]")
+    g.add_argument("--random-forces", type=float, default=None, metavar="F_EXT",
+                   help="constant random forces, components uniform, rms magnitude F_EXT (seeded)")
+    g.add_argument("--self-propelled", type=float, default=None, metavar="F_EXT",
+                   help="self-propelled discs (Sec. V B): rms force F_EXT, redrawn after random persistence times")
+    p.add_argument("--tau-max", type=float, default=10.0, help="persistence times uniform in [0, TAU_MAX tau] (default 10)")
+    _common_options(p)
+
+
+def _io_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("input", help="input packing netCDF (non-overlapping)")
+    p.add_argument("out", help="output time-series netCDF (flow schema)")
+    p.add_argument("--final", default=None, help="write the last (or jammed) packing with contacts and forces here")
+    p.add_argument("--snapshots", type=int, default=0, metavar="N", help="number of evenly spaced packing snapshots")
+    p.add_argument("--snapshot-file", default=None, help="snapshot netCDF (default OUT with suffix .snapshots.nc)")
+    p.add_argument("--checkpoint", default=None, help="checkpoint netCDF: written periodically, resumed from if present")
+    p.add_argument("--seed", type=int, default=0, help="seed of random choices (self-propulsion, random forces)")
+    add_overlap_option(p)
+    add_quiet(p)
+
+
+def _common_options(p: argparse.ArgumentParser) -> None:
+    d = FlowOptions()
+    p.add_argument("--xi0", type=float, default=1.0, help="mobility xi0 (default 1)")
+    p.add_argument("--dt", type=float, default=d.dt_max, dest="dt_max",
+                   help=f"largest integration step in units of 1/rate or tau (default {d.dt_max}; paper 1e-5)")
+    p.add_argument("--steps-per-event", type=float, default=d.steps_per_event,
+                   help=f"target steps between events (default {d.steps_per_event:g})")
+    p.add_argument("--step-drift", type=float, default=d.step_drift,
+                   help=f"largest relative constraint error created per step (default {d.step_drift:g})")
+    p.add_argument("--correct-every", type=int, default=d.correct_every, metavar="M",
+                   help=f"drift correction every M steps, 0 = only on --drift-tol (default {d.correct_every})")
+    p.add_argument("--drift-tol", type=float, default=d.drift_tol,
+                   help=f"constraint error forcing a correction (default {d.drift_tol:g})")
+    p.add_argument("--sync-every", type=int, default=d.sync_every,
+                   help=f"steps between list rebuilds / checkpoints (default {d.sync_every})")
+    p.add_argument("--record-every", type=int, default=1, help="record the time series every K steps (default 1)")
+    p.add_argument("--unit", choices=LENGTH_UNITS, default="small_diameter",
+                   help="length unit lambda (default small_diameter, as in the paper's shear runs)")
+    p.add_argument("--composite", default=None,
+                   help="permanent contacts (composite rigid particles, Sec. V C): text file of 'i j' rows")
+    p.add_argument("--max-steps", type=int, default=None, help="stop this invocation after this many steps (resume later)")
+
+
+def _options(args: argparse.Namespace) -> FlowOptions:
+    return FlowOptions(dt_max=args.dt_max, steps_per_event=args.steps_per_event, step_drift=args.step_drift,
+                       correct_every=args.correct_every, drift_tol=args.drift_tol, sync_every=args.sync_every)
+
+
+def _permanent(args: argparse.Namespace) -> np.ndarray:
+    if args.composite is None:
+        return np.zeros((0, 2), np.int64)
+    pairs = np.loadtxt(args.composite, dtype=np.int64, ndmin=2)
+    if pairs.shape[1] != 2:
+        raise ValueError(f"{args.composite}: expected rows 'i j'")
+    return np.sort(pairs, axis=1)
+
+
+def _run(args: argparse.Namespace, drive: Drive, stop: Stop, packing) -> int:
+    params = stage_parameters(args)
+    bar = None
+    progress = None
+    if not args.quiet:
+        from tqdm import tqdm
+
+        bar = tqdm(total=1000, desc=args.command, unit="‰")
+
+        def progress(frac: float) -> None:
+            bar.update(int(frac * 1000) - bar.n)
+
+    try:
+        res = run_flow(packing, drive, stop, _options(args), unit=args.unit, record_every=args.record_every,
+                       n_snapshots=args.snapshots, checkpoint=args.checkpoint, parameters=params, progress=progress)
+    finally:
+        if bar is not None:
+            bar.close()
+    write_dataset(res.series, args.out)
+    if args.final:
+        write_packing(res.final, args.final, params)
+    if res.snapshots is not None:
+        path = args.snapshot_file or str(Path(args.out).with_suffix(".snapshots.nc"))
+        write_dataset(res.snapshots, path)
+    if not args.quiet:
+        s = res.series
+        print(f"{args.command}: {s.sizes['step']} records, {s.sizes['event']} events, strain {float(s.strain[-1]):.6g}, "
+              f"phi {float(s.packing_fraction[-1]):.6g}, jammed {res.jammed}, complete {res.complete}")
+    return 0
+
+
+def _shear(args: argparse.Namespace) -> int:
+    packing = read_packing(args.input, overlap_tol(args))
+    mode = "shear" if args.pressure is None else "shear_fixed_pressure"
+    drive = Drive(mode, rate=args.rate, xi0=args.xi0, pressure=args.pressure, permanent=_permanent(args))
+    return _run(args, drive, Stop(strain=args.strain, max_steps=args.max_steps), packing)
+
+
+def _compress(args: argparse.Namespace) -> int:
+    packing = read_packing(args.input, overlap_tol(args))
+    if args.phi is not None and args.phi <= packing.packing_fraction:
+        raise ValueError(f"target phi {args.phi} is not above the input's {packing.packing_fraction:.6g}")
+    mode = "shear_compress" if args.shear else "compress"
+    drive = Drive(mode, rate=args.rate, xi0=args.xi0, permanent=_permanent(args))
+    return _run(args, drive, Stop(strain=args.strain, packing_fraction=args.phi, max_steps=args.max_steps), packing)
+
+
+def _drive(args: argparse.Namespace) -> int:
+    packing = read_packing(args.input, overlap_tol(args))
+    n, d = packing.n, packing.d
+    perm = _permanent(args)
+    if args.self_propelled is not None:
+        sp = SelfPropulsion.start(n, d, args.self_propelled, args.tau_max, args.xi0, args.seed)
+        drive = Drive("self_propelled", xi0=args.xi0, propulsion=sp, permanent=perm)
+    else:
+        if args.forces is not None:
+            F = np.load(args.forces)
+            if F.shape != (n, d):
+                raise ValueError(f"{args.forces}: forces must have shape ({n}, {d}), got {F.shape}")
+        else:
+            rng = np.random.Generator(np.random.PCG64(args.seed))
+            F = rng.uniform(-1, 1, size=(n, d)) * args.random_forces * np.sqrt(3.0 / d)
+        drive = Drive("forces", xi0=args.xi0, external=np.asarray(F, dtype=np.float64), permanent=perm)
+    return _run(args, drive, Stop(time=args.time, max_steps=args.max_steps), packing)

@@ -1,0 +1,228 @@
+"""Event-driven overdamped flow: invariants along trajectories, driving modes, jamming, resume.
+
+Physics checked after every step of real trajectories: contacts at contact within the stated drift
+bound, all contact forces positive, no overlap among non-contacts (all pairs, brute force); fixed
+pressure held at every step; trajectories invariant under rescaling gamma_dot and xi0 (Sec. II D);
+compression ends jammed and isostatic with a positive self-stress in force balance; a killed and
+resumed run repeats an uninterrupted one bit for bit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from jamflow.analysis.contacts import force_balance_residual, summarize
+from jamflow.box import Box
+from jamflow.initial import random_packing
+from jamflow.neighbors import pairs_within_brute_force
+from jamflow.overdamped.driving import Drive, SelfPropulsion
+from jamflow.overdamped.integrate import FlowOptions, Integrator
+from jamflow.overdamped.network import pair_vectors, pair_velocities
+from jamflow.overdamped.run import Stop, length_unit, run_flow
+from jamflow.packing import Packing
+
+FAST = FlowOptions(dt_max=1e-2, step_drift=1e-7, drift_tol=1e-6, correct_every=20)
+
+
+def _bidisperse(n: int, seed: int, phi: float = 0.5) -> Packing:
+    """Binary 1 : 1.4 discs with 3 % polydispersity (paper Sec. V A) by RSA."""
+    p = random_packing(n, 2, phi, "bi", seed=seed)
+    rng = np.random.default_rng(seed)
+    return p.evolve(diameter=p.diameter * (1 - 0.03 * rng.uniform(size=p.n)))
+
+
+@pytest.fixture(scope="module")
+def dense32() -> Packing:
+    """N = 32 bidisperse discs compressed by the event-driven dynamics to phi = 0.80."""
+    res = run_flow(_bidisperse(32, seed=3), Drive("compress"), Stop(packing_fraction=0.80), FAST,
+                   unit="small_diameter", record_every=1000)
+    assert res.complete and not res.jammed
+    assert res.series.packing_fraction.values[-1] == pytest.approx(0.80, rel=1e-12)
+    return res.final
+
+
+def _integrator(p: Packing, drive: Drive, options: FlowOptions) -> Integrator:
+    lam = length_unit(p.diameter, "small_diameter")
+    return Integrator.start(p.position / lam, p.box.matrix / lam, p.diameter / (2 * lam), drive, options, p.contacts)
+
+
+def _check_invariants(integ: Integrator) -> None:
+    st = integ.state
+    o = integ.options
+    # (a) contacts at contact within the drift bound
+    assert integ.constraint_error() <= o.drift_tol
+    # (c) positive forces (round-off relative to the largest force)
+    f = integ.solution.force
+    if f.size:
+        assert f.min() > -o.rel_tol * np.abs(f).max()
+        # rigid contacts: dr/dt = 0
+        pairs, images = st.nl.pairs[st.contact], st.nl.images[st.contact]
+        v = pair_velocities(pair_vectors(st.x, st.h, pairs, images), pairs, integ.solution)
+        assert np.max(np.abs(v)) <= 1e-8 * integ.velocity_scale(integ.solution)
+    # (b) no overlaps among non-contacts: every pair, brute force over minimum images
+    box = Box(st.h)
+    pl = pairs_within_brute_force(st.x, box, 2.0 * st.radius.max())
+    gap = pl.distance / (st.radius[pl.i] + st.radius[pl.j]) - 1.0
+    key = set(map(tuple, st.nl.pairs[st.contact].tolist()))
+    free = np.array([(a, b) not in key for a, b in zip(pl.i.tolist(), pl.j.tolist())], bool)
+    assert np.all(gap[free] >= -1e-12)
+
+
+def test_shear_keeps_contacts_forces_and_no_overlaps_after_every_step(dense32):
+    integ = _integrator(dense32, Drive("shear"), FAST)
+    n_events = 0
+    while integ.state.strain < 0.1:
+        collided = integ.step()
+        n_events += collided
+        _check_invariants(integ)
+    assert n_events >= 5  # the check covered real collisions and rewirings
+    assert any(e[4] == -1 for e in integ.state.events)
+
+
+def test_fixed_pressure_holds_pressure_at_every_step(dense32):
+    p_target = 4.0
+    res = run_flow(dense32, Drive("shear_fixed_pressure", pressure=p_target), Stop(strain=0.03), FAST,
+                   unit="small_diameter")
+    s = res.series
+    has = s.n_contacts.values > 0
+    assert has.all()
+    assert np.max(np.abs(s.pressure.values / p_target - 1.0)) < 1e-9
+    assert np.all(np.isfinite(s.kappa.values))
+    # the box volume follows kappa: d ln V / d gamma = -d kappa
+    dlnv = np.diff(np.log(s.volume.values))
+    dg = np.diff(s.strain.values)
+    ok = dg > 0
+    assert np.allclose(dlnv[ok] / dg[ok], -2 * s.kappa.values[:-1][ok], rtol=0.05, atol=1e-3)
+
+
+def test_trajectories_invariant_under_rate_and_mobility(dense32):
+    """Sec. II D: in units of 1/gamma_dot and lambda gamma_dot / xi0 the physics is unchanged."""
+    a = run_flow(dense32, Drive("shear"), Stop(strain=0.02), FAST, unit="small_diameter")
+    b = run_flow(dense32, Drive("shear", rate=2.5, xi0=0.4), Stop(strain=0.02), FAST, unit="small_diameter")
+    sa, sb = a.series, b.series
+    assert sa.sizes == sb.sizes
+    assert np.array_equal(sa.event_i.values, sb.event_i.values)
+    assert np.array_equal(sa.event_kind.values, sb.event_kind.values)
+    assert np.allclose(sa.strain.values, sb.strain.values, rtol=1e-9, atol=1e-12)
+    assert np.allclose(sa.shear_stress.values, sb.shear_stress.values, rtol=1e-7)
+    assert np.allclose(a.final.position, b.final.position, atol=1e-9)
+
+
+def test_drift_correction_restores_constraints(dense32):
+    loose = FlowOptions(dt_max=1e-2, step_drift=1e-5, drift_tol=1.0, correct_every=0)
+    integ = _integrator(dense32, Drive("shear"), loose)
+    while integ.state.strain < 0.01:
+        integ.step()
+    before, after = integ.correct()
+    assert before > 1e-7  # uncorrected Euler steps drift at O(dt^2)
+    assert after < 1e-12
+    _check_invariants(integ)
+
+
+def test_compression_ends_jammed_isostatic_with_positive_self_stress():
+    res = run_flow(_bidisperse(16, seed=2), Drive("compress"), Stop(strain=5.0),
+                   FlowOptions(dt_max=1e-2, step_drift=1e-6, drift_tol=1e-5), unit="small_diameter",
+                   record_every=100)
+    assert res.jammed and res.complete
+    fin = res.final
+    summ = summarize(fin)
+    assert summ.isostatic
+    assert summ.max_overlap_rel < 1e-12
+    stable = ~fin.rattler
+    on_backbone = stable[fin.contacts[:, 0]] & stable[fin.contacts[:, 1]]
+    assert np.all(fin.force[on_backbone] > 0)
+    assert np.max(force_balance_residual(fin)[stable]) < 1e-10
+    assert res.series.z_bar.values[-1] == 4.0
+    assert fin.attrs["constraint_error"] < 1e-12
+
+
+def test_jammed_packing_does_not_depend_on_step_accuracy():
+    """Two step-drift settings reach the same jammed contact network and self-stress."""
+    out = []
+    for sd, tol in ((1e-6, 1e-5), (1e-7, 1e-6)):
+        res = run_flow(_bidisperse(16, seed=2), Drive("compress"), Stop(strain=5.0),
+                       FlowOptions(dt_max=1e-2, step_drift=sd, drift_tol=tol), unit="small_diameter",
+                       record_every=1000)
+        assert res.jammed
+        out.append(res.final)
+    assert np.array_equal(out[0].contacts, out[1].contacts)
+    assert np.allclose(out[0].force, out[1].force, rtol=1e-6, atol=1e-9)
+    assert out[0].packing_fraction == pytest.approx(out[1].packing_fraction, rel=1e-7)
+
+
+def test_checkpoint_resume_is_bitwise_identical(dense32, tmp_path):
+    opts = FlowOptions(dt_max=1e-2, step_drift=1e-7, drift_tol=1e-6, correct_every=20, sync_every=40)
+    stop = Stop(strain=0.04)
+    full = run_flow(dense32, Drive("shear"), stop, opts, unit="small_diameter", n_snapshots=3,
+                    checkpoint=tmp_path / "a.nc")
+    ck = tmp_path / "b.nc"
+    part = run_flow(dense32, Drive("shear"), Stop(strain=0.04, max_steps=130), opts, unit="small_diameter",
+                    n_snapshots=3, checkpoint=ck)
+    assert not part.complete and ck.exists()
+    resumed = run_flow(dense32, Drive("shear"), stop, opts, unit="small_diameter", n_snapshots=3, checkpoint=ck)
+    assert resumed.complete
+    for name in ("strain", "time", "shear_stress", "pressure", "n_contacts", "constraint_error",
+                 "event_i", "event_j", "event_strain"):
+        assert np.array_equal(full.series[name].values, resumed.series[name].values), name
+    assert np.array_equal(full.final.position, resumed.final.position)
+    assert np.array_equal(full.final.force, resumed.final.force)
+    assert np.array_equal(full.snapshots.snapshot_position.values, resumed.snapshots.snapshot_position.values)
+
+
+def test_self_propelled_discs_are_seeded_and_hard(dense32):
+    lo = dense32.evolve(position=dense32.position, contacts=None, force=None)
+    runs = []
+    for _ in range(2):
+        sp = SelfPropulsion.start(lo.n, 2, f_ext=1.0, tau_max=10.0, xi0=1.0, seed=7)
+        integ = _integrator(lo, Drive("self_propelled", propulsion=sp), FAST)
+        while integ.state.time < 0.05:
+            integ.step(integ.next_switch())
+            _check_invariants(integ)
+        runs.append(integ.state.x.copy())
+    assert np.array_equal(runs[0], runs[1])
+
+
+def test_external_forces_velocity_projection_and_hardness(dense32):
+    rng = np.random.default_rng(5)
+    drive = Drive("forces", external=rng.normal(size=(dense32.n, 2)))
+    integ = _integrator(dense32.evolve(contacts=None, force=None), drive, FAST)
+    while integ.state.time < 0.02:
+        integ.step()
+        _check_invariants(integ)
+    assert len(integ.state.events) > 0
+
+
+def test_composite_dimers_stay_rigid_under_shear():
+    """Sec. V C: permanent contacts never break and may carry negative forces."""
+    rng = np.random.default_rng(11)
+    n_dimers, L = 12, 9.0
+    box = Box.cubic(2, L)
+    centres: list = []
+    while len(centres) < 2 * n_dimers:
+        a = rng.uniform(0, L, 2)
+        ang = rng.uniform(0, 2 * np.pi)
+        b = a + np.array([np.cos(ang), np.sin(ang)])  # the two beads touch: r = d_a + d_b = 1
+        if centres:
+            old = np.array(centres)
+            gaps = np.linalg.norm(box.minimum_image(np.array([a, b])[:, None] - old[None]), axis=2)
+            if gaps.min() <= 1.05:
+                continue
+        centres += [a, b]
+    x = np.array(centres)
+    perm = np.array([[2 * k, 2 * k + 1] for k in range(n_dimers)])
+    drive = Drive("shear", permanent=perm)
+    integ = Integrator.start(x, Box.cubic(2, L).matrix, np.full(len(x), 0.5), drive, FAST)
+    seen_negative = False
+    while integ.state.strain < 0.3:
+        integ.step()
+        st = integ.state
+        assert st.contact[st.permanent].all()
+        assert int(st.permanent.sum()) == n_dimers
+        assert integ.constraint_error() <= FAST.drift_tol
+        f = integ.solution.force
+        permanent_in = st.permanent[st.contact]
+        if f.size:
+            assert np.all(f[~permanent_in] > -FAST.rel_tol * np.abs(f).max())
+            seen_negative |= bool(np.any(f[permanent_in] < 0))
+    assert seen_negative
