@@ -226,3 +226,17 @@ def test_composite_dimers_stay_rigid_under_shear():
             assert np.all(f[~permanent_in] > -FAST.rel_tol * np.abs(f).max())
             seen_negative |= bool(np.any(f[permanent_in] < 0))
     assert seen_negative
+
+
+@pytest.mark.slow
+def test_fixed_pressure_kappa_averages_to_zero_in_steady_state(dense32):
+    """Sec. V A 2, Fig. 7: in steady state the volume is stationary, so kappa fluctuates around zero."""
+    res = run_flow(dense32, Drive("shear_fixed_pressure", pressure=4.0), Stop(strain=3.0), FAST,
+                   unit="small_diameter")
+    s = res.series
+    late = s.strain.values > 1.0
+    kappa = s.kappa.values[late]
+    dg = np.gradient(s.strain.values[late])
+    mean = np.sum(kappa * dg) / np.sum(dg)
+    assert abs(mean) < 0.1 * np.sqrt(np.sum(kappa**2 * dg) / np.sum(dg))
+    assert np.max(np.abs(s.pressure.values / 4.0 - 1)) < 1e-9

@@ -206,6 +206,10 @@ class Integrator:
         integ.last_correction = (np.nan, np.nan)
         if contact.any():
             integ._rewire(contact.copy())
+            # the initial network is the reference state, not a sequence of events
+            state.events.clear()
+            state.event_interval = options.dt_max * options.steps_per_event
+            state.last_event_time = 0.0
         else:
             integ.solution = integ._solve(contact)
         return integ

@@ -177,8 +177,8 @@ def solve_network(
         E = np.array(gradient, dtype=np.float64)
         kappa = np.nan
         if pressure is not None:
-            # no contacts carry the imposed pressure: the box cannot be held; expand
-            # nothing, keep kappa = 0 until the first collision (pure shear of a gas)
+            # without contacts no pressure can be carried and Eq. 25 is undefined: the
+            # gas is sheared at fixed volume (kappa = 0) until the first collision
             kappa = 0.0
         return Solution(np.zeros(0), xi0 * ext.copy(), E, kappa)
     R = pair_vectors(x, h, pairs, images)
