@@ -31,15 +31,23 @@ OUT = Path(__file__).resolve().parent / "output"
 PREP = FlowOptions(dt_max=1e-2, step_drift=1e-6, drift_tol=1e-5)
 
 
-def prepare(n: int, phi: float, seed: int = 1) -> tuple[Packing, float]:
-    p = random_packing(n, 2, 0.5, "bi", seed=seed)
-    rng = np.random.default_rng(seed)
-    p = p.evolve(diameter=p.diameter * (1 - 0.03 * rng.uniform(size=p.n)))
-    t0 = time.perf_counter()
-    res = run_flow(p, Drive("compress"), Stop(packing_fraction=phi), PREP, unit="small_diameter", record_every=10_000)
-    if res.jammed:
-        raise RuntimeError(f"N={n} jammed below phi={phi}")
-    return res.final, time.perf_counter() - t0
+def prepare(n: int, phis: list[float], seed: int = 1) -> tuple[dict[float, Packing], float]:
+    """Compress one RSA start through the packing fractions in turn (another seed if it jams)."""
+    for s in range(seed, seed + 10):
+        p = random_packing(n, 2, 0.5, "bi", seed=s)
+        rng = np.random.default_rng(s)
+        p = p.evolve(diameter=p.diameter * (1 - 0.03 * rng.uniform(size=p.n)))
+        t0 = time.perf_counter()
+        out = {}
+        for phi in sorted(phis):
+            res = run_flow(p, Drive("compress"), Stop(packing_fraction=phi), PREP, unit="small_diameter",
+                           record_every=10_000)
+            if res.jammed:
+                break
+            p = out[phi] = res.final
+        else:
+            return out, time.perf_counter() - t0
+    raise RuntimeError(f"N={n}: every seed jammed below phi={max(phis)}")
 
 
 def shear_speed(p: Packing, budget: float, options: FlowOptions = FlowOptions()) -> dict[str, float]:
@@ -55,7 +63,7 @@ def shear_speed(p: Packing, budget: float, options: FlowOptions = FlowOptions())
                    record_every=1000)
     wall = time.perf_counter() - t0
     s = res.series
-    strain = float(s.attrs["n_steps"] and s.strain.values[-1])
+    strain = float(s.strain.values[-1])
     return {"wall": wall, "events_per_s": s.sizes["event"] / wall, "strain_per_min": 60 * strain / wall,
             "steps_per_s": n_steps / wall, "strain": strain, "events": s.sizes["event"]}
 
@@ -99,10 +107,10 @@ def main() -> None:
     args = ap.parse_args()
     OUT.mkdir(exist_ok=True)
     speed = {}
-    for phi in args.phis:
-        for n in args.sizes:
-            p, t_prep = prepare(n, phi)
-            r = shear_speed(p, args.budget)
+    for n in args.sizes:
+        starts, t_prep = prepare(n, args.phis)
+        for phi in args.phis:
+            r = shear_speed(starts[phi], args.budget)
             r["prep_time"] = t_prep
             speed[(n, phi)] = r
             print(f"N={n:5d} phi={phi:.2f}: prep {t_prep:7.1f} s; {r['events_per_s']:8.1f} events/s, "
@@ -117,8 +125,8 @@ def main() -> None:
                 fits[(phi, key)] = float(np.polyfit(np.log(ns), np.log(vals), 1)[0])
                 print(f"phi={phi:.2f}: {key} ~ N^{fits[(phi, key)]:.2f}")
     print("accuracy trade (N=64, phi=0.80), errors against step_drift=1e-11, correction every 10 steps:")
-    p64, _ = prepare(64, 0.80)
-    trade = accuracy_trade(p64, args.trade_strain)
+    p64, _ = prepare(64, [0.80])
+    trade = accuracy_trade(p64[0.80], args.trade_strain)
 
     ds = xr.Dataset(
         {k: (("phi", "N"), np.array([[speed[(n, phi)][k] for n in args.sizes] for phi in args.phis]),

@@ -167,6 +167,9 @@ class Integrator:
         self.n = state.x.shape[0]
         self.base_gradient = drive.gradient(self.d)
         self.pressure_internal = None if drive.pressure is None else drive.pressure * drive.force_unit
+        self._count_key = None
+        self._count = None
+        self._nl_version = 0
         self.solution: Solution = self._solution_now()
         self.last_correction: tuple[float, float] = (np.nan, np.nan)
 
@@ -204,6 +207,9 @@ class Integrator:
         integ.base_gradient = drive.gradient(integ.d)
         integ.pressure_internal = None if drive.pressure is None else drive.pressure * drive.force_unit
         integ.last_correction = (np.nan, np.nan)
+        integ._count_key = None
+        integ._count = None
+        integ._nl_version = 0
         if contact.any():
             integ._rewire(contact.copy())
             # the initial network is the reference state, not a sequence of events
@@ -218,13 +224,22 @@ class Integrator:
     def _pairs(self, mask: NDArray[np.bool_]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         return self.state.nl.pairs[mask], self.state.nl.images[mask]
 
-    def _solve(self, mask: NDArray[np.bool_]) -> Solution:
+    def _solve(self, mask: NDArray[np.bool_], check_pivots: bool = True) -> Solution:
         pairs, images = self._pairs(mask)
         return solve_network(
             self.state.x, self.state.h, pairs, images, self.base_gradient,
             external=self.drive.external_forces(), xi0=self.drive.xi0,
             pressure=self.pressure_internal, rate=self.drive.rate, cond_limit=self.options.cond_limit,
+            check_pivots=check_pivots,
         )
+
+    def count(self, mask: NDArray[np.bool_]):
+        """Constrained subset of the sub-network ``mask`` (memoised on the last mask)."""
+        key = (mask.tobytes(), self._nl_version)
+        if self._count_key != key:
+            self._count_key = key
+            self._count = constrained_subset(self.n, self.d, self.state.nl.pairs[mask])
+        return self._count
 
     def _drive_rates(self, pairs: NDArray[np.int64], images: NDArray[np.int64]) -> NDArray[np.float64]:
         """``S V_aff / xi0 + S F_ext`` on a network (for the self-stress sign)."""
@@ -242,11 +257,13 @@ class Integrator:
     def evaluate(self, mask: NDArray[np.bool_]) -> Evaluation:
         """Forces on the sub-network ``mask``, or its self-stress if potentially jammed."""
         pairs, images = self._pairs(mask)
-        count = constrained_subset(self.n, self.d, pairs)
+        count = self.count(mask)
         singular = count.potentially_jammed and not self.state.permanent.any()
         if not singular:
             try:
-                sol = self._solve(mask)
+                # a self-stress needs an over-constrained subset: check pivots only when
+                # the constrained count is within d of potential jamming, or hyperstatic
+                sol = self._solve(mask, check_pivots=count.excess >= -self.d)
                 return Evaluation(sol.force, sol)
             except SingularNetworkError:
                 singular = True
@@ -405,7 +422,8 @@ class Integrator:
         return stress_tensor(R, self.solution.force, abs(float(np.linalg.det(st.h))))
 
     def z_bar(self) -> float:
-        return constrained_subset(self.n, self.d, self._pairs(self.state.contact)[0]).z_bar
+        """Constrained coordination of the current network (Eq. 29)."""
+        return self.count(self.state.contact).z_bar
 
     # --------------------------------------------------------- drift correction
     def correct(self, max_rounds: int = 50, target: float = 1e-13) -> tuple[float, float]:
@@ -477,6 +495,7 @@ class Integrator:
         st.h = np.array(box.matrix)
         st.x = x
         st.nl = build_neighbor_list(x, box, st.radius, self.options.skin)
+        self._nl_version += 1
         pos = st.nl.index_of(contacts, self.n)
         if np.any(pos < 0):
             raise RuntimeError("a contact fell outside the neighbour list (skin too small)")

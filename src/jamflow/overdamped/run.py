@@ -230,6 +230,7 @@ def run_flow(
             recorder.snapshot(integ, lam)
     target = stop.strain if stop.strain is not None else stop.time
     steps = 0
+    recorded_step = integ.state.step
     while not _done(integ, stop):
         if stop.max_steps is not None and steps >= stop.max_steps:
             break
@@ -238,6 +239,7 @@ def run_flow(
         st = integ.state
         if st.step % record_every == 0 or _done(integ, stop):
             recorder.record(integ)
+            recorded_step = st.step
             if progress is not None and target:
                 progress(min(1.0, (st.strain if stop.strain is not None else st.time / drive.time_unit) / target))
         if n_snapshots and target:
@@ -251,7 +253,7 @@ def run_flow(
     if complete and integ.state.contact.any():
         # the written packing satisfies its contact constraints to round-off (Sec. IV C)
         integ.correct()
-    if complete and recorder.columns["strain"][-1] != integ.state.strain:
+    if complete or integ.state.step != recorded_step:
         recorder.record(integ)
     series = _series_dataset(integ, recorder, params, complete)
     snaps = _snapshot_dataset(recorder, integ, params) if n_snapshots else None
