@@ -89,6 +89,10 @@ def test_fixed_pressure_holds_pressure_at_every_step(dense32):
     assert has.all()
     assert np.max(np.abs(s.pressure.values / p_target - 1.0)) < 1e-9
     assert np.all(np.isfinite(s.kappa.values))
+    # periodic drift corrections are reported and bring the constraints back to round-off
+    assert s.sizes["correction"] > 0
+    assert np.all(s.correction_error_after.values <= s.correction_error_before.values)
+    assert np.max(s.correction_error_after.values) < 1e-12
     # the box volume follows kappa: d ln V / d gamma = -d kappa
     dlnv = np.diff(np.log(s.volume.values))
     dg = np.diff(s.strain.values)
@@ -117,6 +121,7 @@ def test_drift_correction_restores_constraints(dense32):
     before, after = integ.correct()
     assert before > 1e-7  # uncorrected Euler steps drift at O(dt^2)
     assert after < 1e-12
+    assert integ.state.corrections[-1][1:] == (before, after)
     _check_invariants(integ)
 
 
@@ -168,6 +173,7 @@ def test_checkpoint_resume_is_bitwise_identical(dense32, tmp_path):
     assert np.array_equal(full.final.position, resumed.final.position)
     assert np.array_equal(full.final.force, resumed.final.force)
     assert np.array_equal(full.snapshots.snapshot_position.values, resumed.snapshots.snapshot_position.values)
+    assert np.array_equal(full.series.correction_error_after.values, resumed.series.correction_error_after.values)
 
 
 def test_self_propelled_discs_are_seeded_and_hard(dense32):

@@ -47,6 +47,8 @@ def save_checkpoint(path: str | os.PathLike, integ: Integrator, rec: Recorder) -
         "contact": _v(("pair",), st.contact.astype(np.int8), "pair is a contact"),
         "permanent": _v(("pair",), st.permanent.astype(np.int8), "pair is a permanent contact"),
         "events": _v(("event", "event_field"), ev, "events (strain, time, i, j, kind)"),
+        "corrections": _v(("correction", "correction_field"), np.array(st.corrections, dtype=np.float64).reshape(-1, 3),
+                          "drift corrections (strain, error before, error after)"),
     }
     for k in SERIES:
         dv[f"record_{k}"] = _v(("record",), np.asarray(rec.columns[k], dtype=np.float64), f"recorded {k}")
@@ -93,6 +95,7 @@ def load_checkpoint(path: str | os.PathLike, drive: Drive, options: FlowOptions)
         events=[tuple(row) for row in ds["events"].values.reshape(-1, 5)],
     )
     st.events = [(r[0], r[1], int(r[2]), int(r[3]), int(r[4])) for r in st.events]
+    st.corrections = [tuple(float(v) for v in row) for row in ds["corrections"].values.reshape(-1, 3)]
     if drive.propulsion is not None:
         drive.propulsion.force = ds["sp_force"].values.copy()
         drive.propulsion.switch_time = ds["sp_switch_time"].values.copy()

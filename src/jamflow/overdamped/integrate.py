@@ -131,6 +131,11 @@ class FlowState:
         Running mean time between events (dt rule).
     last_event_time : float
     jammed : bool
+    kappa : float
+        Last compression-to-shear rate ratio (fixed pressure).
+    events : list of (strain, time, i, j, kind)
+    corrections : list of (strain, error before, error after)
+        Drift corrections (Sec. IV C) with the largest relative constraint error.
     """
 
     x: NDArray[np.float64]
@@ -147,6 +152,7 @@ class FlowState:
     jammed: bool = False
     kappa: float = np.nan
     events: list = field(default_factory=list)
+    corrections: list = field(default_factory=list)
 
 
 class Integrator:
@@ -479,6 +485,7 @@ class Integrator:
         self._rewire(st.contact.copy())
         after = self.constraint_error()
         self.last_correction = (before, after)
+        st.corrections.append((st.strain, before, after))
         return self.last_correction
 
     # ------------------------------------------------------ neighbour list upkeep

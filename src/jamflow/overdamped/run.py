@@ -285,6 +285,10 @@ def _series_dataset(integ: Integrator, rec: Recorder, params: dict, complete: bo
     data_vars["event_kind"] = (("event",), ev_arr[:, 4].astype(np.int8), {
         "units": "1", "long_name": "contact event kind",
         "flag_values": np.array([1, -1], dtype=np.int8), "flag_meanings": "contact_made contact_broken"})
+    corr = np.array(integ.state.corrections, dtype=np.float64).reshape(-1, 3)
+    data_vars["correction_strain"] = (("correction",), corr[:, 0], {"units": "1", "long_name": "strain of a drift correction (Sec. IV C)"})
+    data_vars["correction_error_before"] = (("correction",), corr[:, 1], {"units": "1", "long_name": "max |r_ij - sigma_ij| / sigma_ij before the drift correction"})
+    data_vars["correction_error_after"] = (("correction",), corr[:, 2], {"units": "1", "long_name": "max |r_ij - sigma_ij| / sigma_ij after the drift correction"})
     coords = {
         "strain": (("step",), np.asarray(cols["strain"]), {"units": "1", "long_name": _SERIES_META["strain"][1]}),
         "time": (("step",), np.asarray(cols["time"]), {"units": "1", "long_name": _SERIES_META["time"][1]}),
