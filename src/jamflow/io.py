@@ -8,6 +8,8 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -69,17 +71,11 @@ def write_dataset(ds: xr.Dataset, path: str | os.PathLike) -> Path:
         for name, var in ds.data_vars.items()
         if var.dtype.kind in "biuf"
     }
-    fd, tmp = _temporary(path)
-    os.close(fd)
-    try:
+    with _atomic(path) as (fd, tmp):
+        os.close(fd)
         ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=encoding)
         with open(tmp, "rb") as fh:
             os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
     return path
 
 
@@ -192,18 +188,29 @@ def write_xyz(packing: Packing, path: str | os.PathLike) -> Path:
 
 def _atomic_text(path: Path, text: str) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = _temporary(path)
-    try:
+    with _atomic(path) as (fd, _):
         with os.fdopen(fd, "w") as fh:
             fh.write(text)
             fh.flush()
             os.fsync(fh.fileno())
+    return path
+
+
+@contextmanager
+def _atomic(path: Path) -> Iterator[tuple[int, str]]:
+    """Yield a temporary file beside ``path``; rename it onto ``path`` on success.
+
+    Any exception (or a kill) leaves ``path`` untouched; the temporary is removed
+    on exceptions.
+    """
+    fd, tmp = _temporary(path)
+    try:
+        yield fd, tmp
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
-    return path
 
 
 def _temporary(path: Path) -> tuple[int, str]:
