@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from jamflow.box import Box
-from jamflow.packing import OverlapError, Packing, max_overlap, near_pairs, sphere_volume
+from jamflow.packing import OverlapError, Packing, length_unit, max_overlap, near_pairs, sphere_volume
 from jamflow.tolerances import OVERLAP_TOL
 
 
@@ -241,3 +241,22 @@ def test_malformed_contact_variables_in_a_dataset() -> None:
     # forces without contacts are an error, not silently dropped
     with pytest.raises(ValueError, match="forces given without contacts"):
         Packing.from_dataset(ds.drop_vars(["contact_i", "contact_j"]))
+
+
+def test_in_units_scales_every_length_and_keeps_phi_and_contacts():
+    box = Box.lees_edwards([2.0, 2.0], 0.3)
+    p = Packing(position=[[0.1, 0.1], [0.5, 0.1], [1.2, 1.5]], diameter=[0.4, 0.56, 0.4], box=box,
+                contacts=[[0, 1]], force=[2.0])
+    lam = length_unit(p.diameter, "small_diameter")
+    assert lam == pytest.approx(0.4)
+    q = p.in_units(lam)
+    assert q.packing_fraction == pytest.approx(p.packing_fraction, rel=1e-14)
+    np.testing.assert_allclose(q.box.matrix, box.matrix / 0.4)
+    np.testing.assert_allclose(q.diameter, [1.0, 1.4, 1.0])
+    np.testing.assert_array_equal(q.contacts, p.contacts)
+    np.testing.assert_array_equal(q.force, p.force)
+    assert length_unit(p.diameter, "mean_diameter") == pytest.approx(np.mean(p.diameter))
+    with pytest.raises(ValueError):
+        p.in_units(0.0)
+    with pytest.raises(ValueError):
+        length_unit(p.diameter, "largest")

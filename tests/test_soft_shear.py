@@ -9,7 +9,10 @@ import pytest
 import scipy.sparse as sp
 
 from jamflow.box import Box
+from jamflow.cli import main
 from jamflow.initial import random_packing
+from jamflow.io import read_dataset, write_packing
+from jamflow.packing import length_unit
 from jamflow.soft.hessian import elastic_moduli
 from jamflow.soft.jamming import jam_to_pressure
 from jamflow.soft.potential import evaluate
@@ -121,3 +124,17 @@ def test_sd_shear_agrees_with_event_driven_shear(tmp_path):
     # event-driven rewiring removes
     later = g > 1e-3
     assert np.mean(np.abs(sd["shear_stress"].values[later] - ref[later])) < 0.02 * np.mean(np.abs(ref[later]))
+
+
+def test_sd_shear_cli_rescales_the_input_to_lambda(tmp_path):
+    """The same configuration in box units and in lambda units gives the same stresses."""
+    in_lambda = _floppy(24)
+    in_box = in_lambda.in_units(1.0 / 0.0371)  # every length times 0.0371
+    assert length_unit(in_box.diameter, "small_diameter") == pytest.approx(0.0371)
+    out = {}
+    for name, p in (("lambda", in_lambda), ("box", in_box)):
+        write_packing(p, tmp_path / f"{name}.nc")
+        assert main(["sd-shear", str(tmp_path / f"{name}.nc"), str(tmp_path / f"{name}_sd.nc"),
+                     "--strain", "0.004", "--step", "1e-3", "--quiet"]) == 0
+        out[name] = read_dataset(tmp_path / f"{name}_sd.nc")["shear_stress"].values
+    np.testing.assert_allclose(out["box"], out["lambda"], rtol=1e-8)

@@ -29,7 +29,12 @@ __all__ = [
     "sphere_volume",
     "near_pairs",
     "max_overlap",
+    "LENGTH_UNITS",
+    "length_unit",
 ]
+
+#: Choices of the unit length lambda of the dynamics (see :func:`length_unit`).
+LENGTH_UNITS = ("mean_diameter", "small_diameter")
 
 
 class OverlapError(ValueError):
@@ -40,6 +45,23 @@ def sphere_volume(d: int, diameter: ArrayLike) -> NDArray[np.float64]:
     """Volume of d-dimensional balls of the given diameters [length^d]."""
     r = 0.5 * np.asarray(diameter, dtype=np.float64)
     return pi ** (d / 2) / gamma(d / 2 + 1) * r**d
+
+
+def length_unit(diameter: NDArray[np.float64], which: str = "mean_diameter") -> float:
+    """The unit lambda in input lengths.
+
+    ``mean_diameter``: mean diameter (self-propelled discs, Sec. V B).
+    ``small_diameter``: mean diameter of the particles below the mean diameter, i.e.
+    the small species of a binary mixture (Sec. V A); the mean for monodisperse input.
+    """
+    if which not in LENGTH_UNITS:
+        raise ValueError(f"length unit must be one of {LENGTH_UNITS}, got {which!r}")
+    D = np.asarray(diameter, dtype=np.float64)
+    if which == "small_diameter":
+        small = D[D < D.mean() * (1 - 1e-12)]
+        if small.size and D.max() / D.min() > 1.2:
+            return float(small.mean())
+    return float(D.mean())
 
 
 @dataclass(frozen=True, eq=False)
@@ -158,6 +180,16 @@ class Packing:
             raise ValueError("packing has no contacts")
         c = self.contacts
         return self.box.minimum_image(self.position[c[:, 1]] - self.position[c[:, 0]])
+
+    def in_units(self, unit: float) -> "Packing":
+        """Same packing with every length divided by ``unit`` (contacts kept).
+
+        Forces are kept as they are: their unit is the producing stage's.
+        """
+        if not (np.isfinite(unit) and unit > 0.0):
+            raise ValueError(f"length unit must be positive and finite, got {unit}")
+        return replace(self, position=self.position / unit, diameter=self.diameter / unit,
+                       box=self.box.scaled(1.0 / unit))
 
     def wrapped(self) -> "Packing":
         """Same packing with centres mapped into the primary cell."""

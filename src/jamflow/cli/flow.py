@@ -10,7 +10,8 @@ import numpy as np
 from ..io import read_packing, write_dataset, write_packing
 from ..overdamped.driving import Drive, SelfPropulsion
 from ..overdamped.integrate import FlowOptions
-from ..overdamped.run import LENGTH_UNITS, Stop, run_flow
+from ..overdamped.run import Stop, run_flow
+from ..packing import LENGTH_UNITS
 from .common import add_command, add_quiet, stage_parameters
 from .packings import add_overlap_option, overlap_tol
 

@@ -9,7 +9,7 @@ import xarray as xr
 from tqdm import tqdm
 
 from ..io import new_dataset_attrs, read_packing, write_dataset, write_packing
-from ..packing import Packing
+from ..packing import LENGTH_UNITS, Packing, length_unit
 from ..soft.hessian import backbone_pairs, elastic_moduli, hessian, lowest_modes
 from ..soft.jamming import FORCE_TOL_VANDERWERF, jam_to_pressure
 from ..soft.potential import PowerLawPotential
@@ -54,7 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p = add_command(sub, "sd-shear", _sd_shear,
                     "Lerner et al. steepest-descent shear with tentative-network hard-sphere stress (flow schema)")
-    p.add_argument("input", help="input netCDF packing (lengths in units of lambda)")
+    p.add_argument("input", help="input netCDF packing")
     p.add_argument("out", help="output netCDF flow time series")
     p.add_argument("--strain", type=float, required=True, help="total strain")
     p.add_argument("--step", type=float, default=1e-6, help="strain step (paper: 1e-6)")
@@ -62,6 +62,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--grad-tol", type=float, default=1e-9, help="max |grad U| stop (paper: 1e-9)")
     p.add_argument("--delta-r", type=float, default=LERNER_DELTA_R, help="tentative network distance (paper: 1e-5)")
     p.add_argument("--max-steps", type=int, default=10_000_000, help="descent steps allowed per strain step")
+    p.add_argument("--unit", choices=LENGTH_UNITS, default="small_diameter",
+                   help="length unit lambda the input is rescaled to (default small_diameter, as jamflow shear)")
     add_quiet(p)
 
     p = add_command(sub, "moduli", _moduli,
@@ -125,6 +127,7 @@ def _aqs(args: argparse.Namespace) -> int:
 
 def _sd_shear(args: argparse.Namespace) -> int:
     packing = read_packing(args.input, None)
+    packing = packing.in_units(length_unit(packing.diameter, args.unit))
     n = int(np.ceil(args.strain / args.step - 1e-9))
     bar = tqdm(total=n + 1, desc="sd-shear", disable=args.quiet)
     ds = lerner_sd_shear(packing, args.strain, args.step, args.dt, args.grad_tol, args.delta_r,

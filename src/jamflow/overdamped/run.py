@@ -22,13 +22,12 @@ from numpy.typing import NDArray
 
 from ..analysis.contacts import find_rattlers
 from ..io import new_dataset_attrs, write_dataset
-from ..packing import Packing, sphere_volume
+from ..packing import LENGTH_UNITS, Packing, length_unit, sphere_volume
 from .driving import Drive
 from .integrate import FlowOptions, Integrator
 
 __all__ = ["Stop", "FlowResult", "length_unit", "run_flow"]
 
-LENGTH_UNITS = ("mean_diameter", "small_diameter")
 
 
 @dataclass(frozen=True)
@@ -74,23 +73,6 @@ class FlowResult:
     snapshots: xr.Dataset | None
     complete: bool
     jammed: bool
-
-
-def length_unit(diameter: NDArray[np.float64], which: str = "mean_diameter") -> float:
-    """The unit lambda in input lengths.
-
-    ``mean_diameter``: mean diameter (self-propelled discs, Sec. V B).
-    ``small_diameter``: mean diameter of the particles below the mean diameter, i.e.
-    the small species of a binary mixture (Sec. V A); the mean for monodisperse input.
-    """
-    if which not in LENGTH_UNITS:
-        raise ValueError(f"length unit must be one of {LENGTH_UNITS}, got {which!r}")
-    D = np.asarray(diameter, dtype=np.float64)
-    if which == "small_diameter":
-        small = D[D < D.mean() * (1 - 1e-12)]
-        if small.size and D.max() / D.min() > 1.2:
-            return float(small.mean())
-    return float(D.mean())
 
 
 @dataclass
