@@ -91,6 +91,29 @@ def test_dry_run_plans_only_what_the_scene_asks_for(tmp_path):
     assert jobs == {"import_dat": 1, "check": 1, "all": 1}
 
 
+def test_gap_scene_plans_no_flow_jobs(tmp_path):
+    work = _workdir(tmp_path)
+    scene = {
+        "scene": "gaps-only",
+        "system": {"d": 2, "n": 32, "phi": 0.4, "dispersity": "bi", "seeds": [1, 2]},
+        "chain": ["soft"],
+        "analyses": ["gaps"],
+        "figures": [],
+    }
+    path = work / "scene.yaml"
+    path.write_text(yaml.safe_dump(scene))
+    assert _planned_jobs(work, "--configfile", str(path)) == {"init": 2, "soft_jam": 2, "gaps": 1, "all": 1}
+
+
+def test_every_scene_validates_and_plans(tmp_path):
+    work = _workdir(tmp_path)
+    scenes = sorted((work / "config" / "scenes").glob("*.yaml"))
+    assert scenes
+    for path in scenes:
+        jobs = _planned_jobs(work, "--configfile", str(path))
+        assert jobs.get("all") == 1, path.name
+
+
 def test_default_scene_runs_end_to_end(tmp_path):
     work = _workdir(tmp_path)
     scene = yaml.safe_load((REPO / "config" / "config.yaml").read_text())

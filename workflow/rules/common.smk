@@ -95,6 +95,8 @@ def scene_targets():
                 if c != "fixed-volume"
                 for s in samples()
             ]
+        elif fig == "ed-vs-sd":
+            targets += [f"{RESULTS}/figures/ed-vs-sd_{s}.png" for s in samples()]
         else:
             targets.append(f"{RESULTS}/figures/{fig}.png")
     return targets

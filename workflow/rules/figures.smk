@@ -125,3 +125,26 @@ rule plot_phi_kappa:
         "../envs/jamflow.yaml"
     shell:
         "jamflow plot phi-kappa {input} {output.png} > {log} 2>&1"
+
+
+rule plot_ed_vs_sd:
+    input:
+        ed=f"{RESULTS}/flow/{{sample}}/shear_fixed-volume.nc",
+        sd=f"{RESULTS}/flow/{{sample}}/sd_fixed-volume.nc",
+    output:
+        png=report(
+            f"{RESULTS}/figures/ed-vs-sd_{{sample}}.png",
+            caption="../report/ed-vs-sd.rst",
+            category="Flow",
+            subcategory="{sample}",
+        ),
+        pdf=f"{RESULTS}/figures/ed-vs-sd_{{sample}}.pdf",
+    log:
+        f"{LOGS}/figures/ed-vs-sd_{{sample}}.log",
+    benchmark:
+        f"{BENCH}/figures/ed-vs-sd_{{sample}}.tsv"
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow plot stress-strain {input.ed} {input.sd} {output.png}"
+        " --labels event-driven steepest-descent > {log} 2>&1"

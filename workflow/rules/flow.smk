@@ -65,3 +65,27 @@ rule flow_summary:
         "../envs/jamflow.yaml"
     shell:
         "jamflow flow-summary {input} {output} > {log} 2>&1"
+
+
+rule sd_shear:
+    input:
+        packing("{sample}", FINAL),
+    output:
+        f"{RESULTS}/flow/{{sample}}/sd_fixed-volume.nc",
+    log:
+        f"{LOGS}/sd_shear/{{sample}}.log",
+    benchmark:
+        f"{BENCH}/sd_shear/{{sample}}.tsv"
+    params:
+        strain=lambda wildcards: opt("flow", "strain"),
+        step=lambda wildcards: opt("sd", "step"),
+        dt=lambda wildcards: opt("sd", "dt"),
+        grad_tol=lambda wildcards: opt("sd", "grad_tol"),
+        delta_r=lambda wildcards: opt("sd", "delta_r"),
+        unit=lambda wildcards: opt("flow", "unit"),
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow sd-shear {input} {output} --strain {params.strain} --step {params.step}"
+        " --dt {params.dt} --grad-tol {params.grad_tol} --delta-r {params.delta_r}"
+        " --unit {params.unit} --quiet > {log} 2>&1"
