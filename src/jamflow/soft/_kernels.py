@@ -16,6 +16,27 @@ from numba import njit
 CONVERGED, REBUILD, MAX_STEPS, STALLED = 0, 1, 2, 3
 
 
+@njit(cache=True, inline="always")
+def _add_pair(i, j, dx, r2, sig, eps, w, harmonic, force, virial):
+    """Add one overlapping pair (``r < sig``) to forces and virial; return its energy."""
+    r = np.sqrt(r2)
+    xi = 1.0 - r / sig
+    if harmonic:
+        energy = 0.5 * eps * xi * xi
+        fmag = eps * xi / sig
+    else:
+        energy = eps / w * xi**w
+        fmag = eps * xi ** (w - 1.0) / sig
+    inv_r = 1.0 / r
+    for a in range(dx.shape[0]):
+        fa = fmag * dx[a] * inv_r
+        force[j, a] += fa
+        force[i, a] -= fa
+        for b in range(dx.shape[0]):
+            virial[a, b] += fmag * dx[a] * dx[b] * inv_r
+    return energy
+
+
 @njit(cache=True)
 def pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial):
     """Energy, forces and virial of the power-law contact potential.
@@ -38,25 +59,9 @@ def pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial):
         for a in range(d):
             dx[a] = s * (y[j, a] - y[i, a] + offset[p, a])
             r2 += dx[a] * dx[a]
-        sig = sigma[p]
-        if r2 >= sig * sig:
-            continue
-        r = np.sqrt(r2)
-        xi = 1.0 - r / sig
-        if harmonic:
-            energy += 0.5 * eps * xi * xi
-            fmag = eps * xi / sig
-        else:
-            energy += eps / w * xi**w
-            fmag = eps * xi ** (w - 1.0) / sig
-        n_contact += 1
-        inv_r = 1.0 / r
-        for a in range(d):
-            fa = fmag * dx[a] * inv_r
-            force[j, a] += fa
-            force[i, a] -= fa
-            for b in range(d):
-                virial[a, b] += fmag * dx[a] * dx[b] * inv_r
+        if r2 < sigma[p] * sigma[p]:
+            energy += _add_pair(i, j, dx, r2, sigma[p], eps, w, harmonic, force, virial)
+            n_contact += 1
     return energy, n_contact
 
 
@@ -261,25 +266,9 @@ def pair_forces_affine(y, A, offset, pi, pj, sigma, eps, w, force, virial):
                 acc += A[a, b] * ref[b]
             dx[a] = acc
             r2 += acc * acc
-        sig = sigma[p]
-        if r2 >= sig * sig:
-            continue
-        r = np.sqrt(r2)
-        xi = 1.0 - r / sig
-        if harmonic:
-            energy += 0.5 * eps * xi * xi
-            fmag = eps * xi / sig
-        else:
-            energy += eps / w * xi**w
-            fmag = eps * xi ** (w - 1.0) / sig
-        n_contact += 1
-        inv_r = 1.0 / r
-        for a in range(d):
-            fa = fmag * dx[a] * inv_r
-            force[j, a] += fa
-            force[i, a] -= fa
-            for b in range(d):
-                virial[a, b] += fmag * dx[a] * dx[b] * inv_r
+        if r2 < sigma[p] * sigma[p]:
+            energy += _add_pair(i, j, dx, r2, sigma[p], eps, w, harmonic, force, virial)
+            n_contact += 1
     return energy, n_contact
 
 
