@@ -14,8 +14,28 @@ __all__ = ["PRESET_NAMES", "PRESETS", "preset_options"]
 
 PRESET_NAMES: tuple[str, ...] = ("fast", "default", "publication")
 
+_FLOW = {
+    # step_drift bounds the relative constraint error one step may create; the stress
+    # error against a 1e-11 reference scales like it (benchmarks/overdamped_speed.py,
+    # N = 64, phi = 0.80: 1e-6 -> 4.7e-3 at 0.004x the reference time, 1e-8 -> 6.3e-4,
+    # 1e-10 -> 4.3e-5 at 0.32x); correct_every caps the accumulated drift.
+    "fast": {"step_drift": 1e-6, "correct_every": 100},
+    "publication": {"step_drift": 1e-10, "correct_every": 10},
+}
+
 #: command -> preset -> {argparse dest: value}
-PRESETS: dict[str, dict[str, dict[str, Any]]] = {}
+PRESETS: dict[str, dict[str, dict[str, Any]]] = {
+    # soft-jam: the final force tolerance costs a few per cent of the time
+    # (benchmarks/soft_jamming.py); below 1e-10 contacts are not resolved reliably
+    "soft-jam": {"fast": {"force_tol": 1e-10}, "publication": {"force_tol": 10**-13.5}},
+    "aqs": {"fast": {"force_tol": 1e-10}, "publication": {"force_tol": 1e-14}},
+    "shear": _FLOW,
+    "compress": _FLOW,
+    "drive": _FLOW,
+    # certify: one load with both signs missed no planted motion (benchmarks/certify.py);
+    # more loads only cost time
+    "certify": {"fast": {"loads": 1}, "publication": {"loads": 4}},
+}
 
 
 def preset_options(command: str, preset: str) -> dict[str, Any]:

@@ -84,11 +84,12 @@ rule certify:
     benchmark:
         f"{BENCH}/analysis/certify_{{sample}}.tsv"
     params:
+        preset=PRESET,
         strict="--strict" if opt("certify", "strict") else "",
-        loads=opt("certify", "loads"),
+        loads=optional_flag("--loads", opt("certify", "loads")),
         read=read_flags(FINAL),
     conda:
         "../envs/jamflow.yaml"
     shell:
-        "jamflow certify {input} {output} {params.strict} --loads {params.loads}"
+        "jamflow certify {input} {output} {params.strict} {params.loads} --preset {params.preset}"
         " {params.read} --quiet > {log} 2>&1"

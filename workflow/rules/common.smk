@@ -7,6 +7,7 @@ BENCH = f"{RESULTS}/benchmarks"
 SOURCE_STAGE = "import" if "import" in config else "init"
 CHAIN = [SOURCE_STAGE, *config.get("chain", [])]
 FINAL = CHAIN[-1]
+PRESET = config["preset"]
 
 
 def samples():

@@ -13,16 +13,17 @@ rule compress:
     benchmark:
         f"{BENCH}/compress/{{sample}}.tsv"
     params:
+        preset=PRESET,
         phi=lambda wildcards: opt("compress", "phi"),
-        dt=lambda wildcards: opt("compress", "dt"),
-        correct_every=lambda wildcards: opt("compress", "correct_every"),
+        dt=lambda wildcards: optional_flag("--dt", opt("compress", "dt")),
+        correct_every=lambda wildcards: optional_flag("--correct-every", opt("compress", "correct_every")),
         record_every=lambda wildcards: opt("compress", "record_every"),
         read=lambda wildcards: read_flags(CHAIN[CHAIN.index("compress") - 1]),
     conda:
         "../envs/jamflow.yaml"
     shell:
         "jamflow compress {input} {output.series} --final {output.packing} --phi {params.phi}"
-        " --dt {params.dt} --correct-every {params.correct_every}"
+        " {params.dt} {params.correct_every} --preset {params.preset}"
         " --record-every {params.record_every} {params.read} --quiet > {log} 2>&1"
 
 
@@ -37,10 +38,11 @@ rule shear:
     benchmark:
         f"{BENCH}/shear/{{sample}}_{{condition}}.tsv"
     params:
+        preset=PRESET,
         strain=lambda wildcards: opt("flow", "strain"),
         pressure=lambda wildcards: pressure_option(wildcards.condition),
-        dt=lambda wildcards: opt("flow", "dt"),
-        correct_every=lambda wildcards: opt("flow", "correct_every"),
+        dt=lambda wildcards: optional_flag("--dt", opt("flow", "dt")),
+        correct_every=lambda wildcards: optional_flag("--correct-every", opt("flow", "correct_every")),
         record_every=lambda wildcards: opt("flow", "record_every"),
         unit=lambda wildcards: opt("flow", "unit"),
         read=read_flags(FINAL),
@@ -48,7 +50,7 @@ rule shear:
         "../envs/jamflow.yaml"
     shell:
         "jamflow shear {input} {output.series} --final {output.final} --strain {params.strain}"
-        " {params.pressure} --dt {params.dt} --correct-every {params.correct_every}"
+        " {params.pressure} {params.dt} {params.correct_every} --preset {params.preset}"
         " --record-every {params.record_every} --unit {params.unit} {params.read} --quiet > {log} 2>&1"
 
 

@@ -46,10 +46,11 @@ rule soft_jam:
     benchmark:
         f"{BENCH}/soft/{{sample}}.tsv"
     params:
+        preset=PRESET,
         pressure=lambda wildcards: opt("soft", "pressure"),
         force_tol=lambda wildcards: optional_flag("--force-tol", opt("soft", "force_tol")),
     conda:
         "../envs/jamflow.yaml"
     shell:
         "jamflow soft-jam {input} {output} --pressure {params.pressure}"
-        " {params.force_tol} --quiet > {log} 2>&1"
+        " {params.force_tol} --preset {params.preset} --quiet > {log} 2>&1"

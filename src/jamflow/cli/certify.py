@@ -14,7 +14,7 @@ from ..strict_jamming import (
     certificate_to_dataset,
     certify,
 )
-from .common import add_command, add_quiet, stage_parameters
+from .common import add_command, add_preset, add_quiet, stage_parameters
 from .packings import add_overlap_option, overlap_tol
 
 
@@ -45,6 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help=f"HiGHS algorithm for the collective and strict LPs (default {DEFAULT_SOLVER})")
     add_overlap_option(p)
     add_quiet(p)
+    add_preset(p)
 
 
 def _certify(args: argparse.Namespace) -> int:

@@ -12,7 +12,7 @@ from ..overdamped.driving import Drive, SelfPropulsion
 from ..overdamped.integrate import FlowOptions
 from ..overdamped.run import Stop, run_flow
 from ..packing import LENGTH_UNITS
-from .common import add_command, add_quiet, stage_parameters
+from .common import add_command, add_preset, add_quiet, stage_parameters
 from .packings import add_overlap_option, overlap_tol
 
 
@@ -58,6 +58,7 @@ def _io_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of random choices (self-propulsion, random forces)")
     add_overlap_option(p)
     add_quiet(p)
+    add_preset(p)
 
 
 def _common_options(p: argparse.ArgumentParser) -> None:

@@ -14,7 +14,7 @@ from ..soft.hessian import backbone_pairs, elastic_moduli, hessian, lowest_modes
 from ..soft.jamming import FORCE_TOL_VANDERWERF, jam_to_pressure
 from ..soft.potential import PowerLawPotential
 from ..soft.shear import LERNER_DELTA_R, aqs_shear, lerner_sd_shear
-from .common import add_command, add_quiet, stage_parameters
+from .common import add_command, add_preset, add_quiet, stage_parameters
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -37,6 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "(stress tensor -P0 1, the box may tilt)")
     p.add_argument("--max-steps", type=int, default=20_000_000, help="FIRE step budget of the whole protocol")
     add_quiet(p)
+    add_preset(p)
 
     p = add_command(sub, "aqs", _aqs, "athermal quasistatic shear of a soft packing (stress-strain time series)")
     p.add_argument("input", help="input netCDF soft packing")
@@ -51,6 +52,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-steps", type=int, default=10_000_000, help="FIRE steps allowed per strain step")
     p.add_argument("--final", default=None, help="also write the last state as a packing netCDF")
     add_quiet(p)
+    add_preset(p)
 
     p = add_command(sub, "sd-shear", _sd_shear,
                     "Lerner et al. steepest-descent shear with tentative-network hard-sphere stress (flow schema)")

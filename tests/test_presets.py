@@ -1,0 +1,34 @@
+"""Accuracy presets: every preset names real options, explicit options win."""
+
+from __future__ import annotations
+
+import pytest
+
+from jamflow.cli import build_parser, main
+from jamflow.presets import PRESET_NAMES, PRESETS, preset_options
+
+
+@pytest.mark.parametrize("command", sorted(PRESETS))
+def test_every_preset_sets_existing_options_of_its_command(command):
+    sub = build_parser().subcommands[command]
+    dests = {a.dest for a in sub._actions}
+    assert "preset" in dests
+    for preset in PRESET_NAMES:
+        assert set(preset_options(command, preset)) <= dests
+
+
+def test_preset_changes_defaults_and_explicit_options_win(monkeypatch):
+    seen = {}
+    parser = build_parser()
+    sub = parser.subcommands["certify"]
+    monkeypatch.setattr(sub, "_defaults", dict(sub._defaults, handler=lambda args: seen.update(vars(args)) or 0))
+    monkeypatch.setattr("jamflow.cli.build_parser", lambda: parser)
+    assert main(["certify", "in.nc", "out.nc", "--preset", "publication"]) == 0
+    assert seen["loads"] == PRESETS["certify"]["publication"]["loads"]
+    assert main(["certify", "in.nc", "out.nc", "--preset", "publication", "--loads", "3"]) == 0
+    assert seen["loads"] == 3
+
+
+def test_unknown_preset_is_refused():
+    with pytest.raises(ValueError):
+        preset_options("certify", "sloppy")
