@@ -10,6 +10,7 @@ its trial budget it raises, and denser states come from compression stages.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Literal
 
 import numpy as np
@@ -92,6 +93,7 @@ def random_packing(
     width: float = 0.1,
     species_spread: float = 0.0,
     max_trials_per_particle: int = 2000,
+    progress: Callable[[int], None] | None = None,
 ) -> Packing:
     """Random non-overlapping packing at packing fraction ``phi`` in a cubic box.
 
@@ -109,6 +111,8 @@ def random_packing(
         Seed of every random choice.
     max_trials_per_particle : int
         RSA trial budget; exceeding it raises :class:`UnreachableError`.
+    progress : callable, optional
+        Called with the number of spheres placed by each batch of trials.
     """
     if d < 2:
         raise ValueError(f"d must be >= 2, got {d}")
@@ -122,7 +126,7 @@ def random_packing(
         raise UnreachableError(
             f"N={n} spheres at phi={phi} in d={d} would have diameter {D.max():.3g} >= half the box; use more particles"
         )
-    x = _rsa(D, d, rng, max_trials_per_particle, phi)
+    x = _rsa(D, d, rng, max_trials_per_particle, phi, progress)
     return Packing(
         position=x,
         diameter=D,
@@ -140,7 +144,8 @@ def random_packing(
 
 
 def _rsa(
-    D: NDArray[np.float64], d: int, rng: np.random.Generator, max_trials: int, phi: float
+    D: NDArray[np.float64], d: int, rng: np.random.Generator, max_trials: int, phi: float,
+    progress: Callable[[int], None] | None = None,
 ) -> NDArray[np.float64]:
     """Place spheres (largest first) by batched random sequential addition.
 
@@ -184,6 +189,8 @@ def _rsa(
             placed += 1
             if placed == n:
                 break
+        if progress is not None:
+            progress(placed - start)
     x = np.empty_like(xs)
     x[order] = xs
     return x

@@ -6,6 +6,8 @@ import argparse
 import json
 import math
 
+from tqdm import tqdm
+
 from ..analysis.contacts import summarize
 from ..initial import random_packing
 from ..io import read_dat, read_packing, write_packing, write_xyz
@@ -60,8 +62,11 @@ def overlap_tol(args: argparse.Namespace) -> float | None:
 
 
 def _init(args: argparse.Namespace) -> int:
-    p = random_packing(args.n, args.d, args.phi, args.dispersity, args.seed,
-                       args.ratio, args.fraction, args.width, args.species_spread)
+    # delay: no bar for quick runs, nor before a one-line error on bad input
+    with tqdm(total=args.n, desc="init (RSA)", unit="sphere", disable=args.quiet, delay=1.0) as bar:
+        p = random_packing(args.n, args.d, args.phi, args.dispersity, args.seed,
+                           args.ratio, args.fraction, args.width, args.species_spread,
+                           progress=bar.update)
     write_packing(p, args.out, stage_parameters(args, "out"))
     return 0
 
