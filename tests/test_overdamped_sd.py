@@ -29,7 +29,7 @@ def start082() -> Packing:
     rng = np.random.default_rng(1)
     p = p.evolve(diameter=p.diameter * (1 - 0.03 * rng.uniform(size=p.n)))
     res = run_flow(p, Drive("compress"), Stop(packing_fraction=0.82),
-                   FlowOptions(dt_max=1e-2, step_drift=1e-6, drift_tol=1e-5), unit="small_diameter",
+                   FlowOptions(dt_max=1e-2, step_drift=1e-7, drift_tol=1e-7), unit="small_diameter",
                    record_every=10_000)
     assert res.complete and not res.jammed
     return res.final
