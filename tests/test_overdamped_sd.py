@@ -17,8 +17,8 @@ from jamflow.overdamped.driving import Drive
 from jamflow.overdamped.integrate import FlowOptions
 from jamflow.overdamped.run import Stop, length_unit, run_flow
 from jamflow.packing import Packing
+from jamflow.soft import shear as soft_shear
 
-soft_shear = pytest.importorskip("jamflow.soft.shear")
 
 SD_STEP = 1e-4
 

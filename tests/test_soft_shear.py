@@ -106,9 +106,6 @@ def test_sd_shear_step_size_convergence():
 def test_sd_shear_agrees_with_event_driven_shear(tmp_path):
     """Lerner et al. Fig. 6: steepest descent and the event-driven scheme give the same
     stress-strain curve (here N = 48, phi = 0.80, delta gamma = 2e-4 instead of 1e-6)."""
-    pytest.importorskip("jamflow.overdamped.run")
-    from jamflow.cli import main
-    from jamflow.io import read_dataset, write_packing
     from jamflow.soft import fire
 
     p = _floppy(48, 0.80, 1)
