@@ -197,7 +197,6 @@ def flow_summary(
     life = contact_lifetimes(ds)
     kind = ds["event_kind"].values
     es = ds["event_strain"].values
-    et = ds["event_time"].values
     inside_ev = (es >= lo) & (es <= hi)
     in_window = (strain >= lo) & (strain <= hi)
     d_strain = hi - lo

@@ -18,11 +18,10 @@ from typing import Any
 
 import numpy as np
 import xarray as xr
-from numpy.typing import NDArray
 
 from ..analysis.contacts import find_rattlers
-from ..io import new_dataset_attrs, write_dataset
-from ..packing import LENGTH_UNITS, Packing, length_unit, sphere_volume
+from ..io import new_dataset_attrs
+from ..packing import Packing, length_unit, sphere_volume
 from .driving import Drive
 from .integrate import FlowOptions, Integrator
 
