@@ -93,6 +93,28 @@ def _axpy(c, a, b):
             b[i, k] += c * a[i, k]
 
 
+@njit(cache=True, inline="always")
+def _fire_adapt(power, step, npos, dt, alpha, n_delay, f_inc, f_dec, f_alpha, alpha0, dt_max, dt_min, initial_delay):
+    """FIRE 2.0 step-size and mixing control; returns ``(npos, dt, alpha)``.
+
+    Downhill (``power > 0``) for more than ``n_delay`` steps grows ``dt`` and shrinks
+    ``alpha``; uphill resets ``npos`` and ``alpha`` and shrinks ``dt`` (not below
+    ``dt_min``, and not during the initial delay).
+    """
+    if power > 0.0:
+        npos += 1
+        if npos > n_delay:
+            dt = min(dt * f_inc, dt_max)
+            alpha *= f_alpha
+    else:
+        npos = 0
+        if not (initial_delay and step < n_delay):
+            if dt * f_dec >= dt_min:
+                dt *= f_dec
+            alpha = alpha0
+    return npos, dt, alpha
+
+
 @njit(cache=True)
 def _needs_rebuild(y, y_build, s, s_build, reach, skin, slack):
     """Verlet criterion: twice the largest non-affine displacement plus box deformation.
@@ -160,17 +182,10 @@ def fire(
             break
         fq = d * volume * (pressure - pressure0) / q_scale if barostat else 0.0
         power = s * _dot(force, v) + fq * vq
-        if power > 0.0:
-            npos += 1
-            if npos > n_delay:
-                dt = min(dt * f_inc, dt_max)
-                alpha *= f_alpha
-        else:
-            npos = 0
-            if not (initial_delay and step < n_delay):
-                if dt * f_dec >= dt_min:
-                    dt *= f_dec
-                alpha = alpha0
+        npos, dt, alpha = _fire_adapt(
+            power, step, npos, dt, alpha, n_delay, f_inc, f_dec, f_alpha, alpha0, dt_max, dt_min, initial_delay
+        )
+        if not power > 0.0:
             # step back half a step and stop: FIRE 2.0 correction of overshoot
             _axpy(-0.5 * dt, v, y)
             v[:, :] = 0.0
@@ -360,17 +375,10 @@ def fire_stress(
                     acc += A[a, b] * force[i, a]
                 fy[i, b] = acc
         power = _dot(fy, v) + _dot(fA, vA)
-        if power > 0.0:
-            npos += 1
-            if npos > n_delay:
-                dt = min(dt * f_inc, dt_max)
-                alpha *= f_alpha
-        else:
-            npos = 0
-            if not (initial_delay and step < n_delay):
-                if dt * f_dec >= dt_min:
-                    dt *= f_dec
-                alpha = alpha0
+        npos, dt, alpha = _fire_adapt(
+            power, step, npos, dt, alpha, n_delay, f_inc, f_dec, f_alpha, alpha0, dt_max, dt_min, initial_delay
+        )
+        if not power > 0.0:
             _axpy(-0.5 * dt, v, y)
             _axpy(-0.5 * dt / q_scale, vA, A)
             v[:, :] = 0.0
