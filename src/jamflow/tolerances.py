@@ -53,3 +53,9 @@ CERTIFY_BOUND_TOL: float = 1e-6
 #: cannot push a stored packing over it. float64 balances forces down to ~1e-14
 #: (measured: 2D N = 1024 reaches max F^2 = 9e-29; asked for less it stalls at 2e-28 ... 4e-28).
 SOFT_FORCE_TOL: float = 1e-13
+
+#: Default ``max_i |F_i|`` [epsilon / <D>] at which a single soft-sphere minimisation
+#: (FIRE, CG, enthalpy, one AQS strain step) counts as converged: ten times the
+#: protocol tolerance :data:`SOFT_FORCE_TOL`, since an intermediate minimum is
+#: refined again by the next step of its protocol.
+MINIMIZE_FORCE_TOL: float = 1e-12

@@ -14,6 +14,7 @@ from ..soft.hessian import backbone_pairs, elastic_moduli, hessian, lowest_modes
 from ..soft.jamming import FORCE_TOL_VANDERWERF, jam_to_pressure
 from ..soft.potential import PowerLawPotential
 from ..soft.shear import LERNER_DELTA_R, aqs_shear, lerner_sd_shear
+from ..tolerances import MINIMIZE_FORCE_TOL
 from .common import add_command, add_preset, add_quiet, stage_parameters
 
 
@@ -47,7 +48,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--fixed-pressure", action="store_true",
                    help="minimise the enthalpy at the input's pressure (or --pressure) after every step")
     p.add_argument("--pressure", type=float, default=None, help="fixed pressure P0 (implies --fixed-pressure)")
-    p.add_argument("--force-tol", type=float, default=1e-12, help="FIRE tolerance on max |F| (default 1e-12)")
+    p.add_argument("--force-tol", type=float, default=MINIMIZE_FORCE_TOL,
+                   help=f"FIRE tolerance on max |F| per strain step (default {MINIMIZE_FORCE_TOL:g})")
     p.add_argument("--exponent", type=float, default=2.0, help="potential exponent w")
     p.add_argument("--max-steps", type=int, default=10_000_000, help="FIRE steps allowed per strain step")
     p.add_argument("--final", default=None, help="also write the last state as a packing netCDF")

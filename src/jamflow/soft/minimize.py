@@ -19,6 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import minimize as _scipy_minimize
 
 from ..box import Box
+from ..tolerances import MINIMIZE_FORCE_TOL
 from . import _kernels
 from .potential import HARMONIC, NeighborList, PowerLawPotential, evaluate
 
@@ -208,7 +209,7 @@ def fire(
     box: Box,
     diameter: ArrayLike,
     potential: PowerLawPotential = HARMONIC,
-    force_tol: float = 1e-12,
+    force_tol: float = MINIMIZE_FORCE_TOL,
     max_steps: int = 1_000_000,
     params: FireParameters = DEFAULT_FIRE,
     nlist: NeighborList | None = None,
@@ -241,7 +242,7 @@ def minimize_enthalpy(
     diameter: ArrayLike,
     pressure: float,
     potential: PowerLawPotential = HARMONIC,
-    force_tol: float = 1e-12,
+    force_tol: float = MINIMIZE_FORCE_TOL,
     pressure_rtol: float = 1e-6,
     max_steps: int = 1_000_000,
     params: FireParameters = DEFAULT_FIRE,
@@ -360,7 +361,7 @@ def conjugate_gradient(
     box: Box,
     diameter: ArrayLike,
     potential: PowerLawPotential = HARMONIC,
-    force_tol: float = 1e-12,
+    force_tol: float = MINIMIZE_FORCE_TOL,
     max_steps: int = 100_000,
     nlist: NeighborList | None = None,
 ) -> MinimizeResult:

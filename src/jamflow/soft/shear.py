@@ -35,6 +35,7 @@ from ..box import Box
 from ..io import new_dataset_attrs
 from ..neighbors import pairs_within
 from ..packing import Packing
+from ..tolerances import MINIMIZE_FORCE_TOL
 from .jamming import soft_packing
 from .minimize import (
     DEFAULT_FIRE,
@@ -73,7 +74,7 @@ def aqs_shear(
     strain: float,
     step: float,
     potential: PowerLawPotential = HARMONIC,
-    force_tol: float = 1e-12,
+    force_tol: float = MINIMIZE_FORCE_TOL,
     pressure: float | None = None,
     pressure_rtol: float = 1e-6,
     max_steps: int = 10_000_000,
