@@ -59,3 +59,8 @@ SOFT_FORCE_TOL: float = 1e-13
 #: protocol tolerance :data:`SOFT_FORCE_TOL`, since an intermediate minimum is
 #: refined again by the next step of its protocol.
 MINIMIZE_FORCE_TOL: float = 1e-12
+
+#: Relative tolerance on diameter ratios when deciding that two packings hold the
+#: same particles (the contact overlap Q): jamming one sample from different target
+#: pressures rescales every diameter by one common factor.
+DIAMETER_RATIO_RTOL: float = 1e-8

@@ -9,7 +9,7 @@ accompanies it (Fig. 3 c–f).
 Two packings are comparable when they have the same N and d and proportional
 diameters: jamming the same sample from different pressures inflates all spheres by
 a common factor, so only the ratios must agree (relative tolerance
-``DIAMETER_RATIO_RTOL``).
+``jamflow.tolerances.DIAMETER_RATIO_RTOL``).
 """
 
 from __future__ import annotations
@@ -22,12 +22,10 @@ from numpy.typing import NDArray
 
 from ..io import new_dataset_attrs
 from ..packing import Packing
+from ..tolerances import DIAMETER_RATIO_RTOL
 from .contacts import contact_network
 
-__all__ = ["DIAMETER_RATIO_RTOL", "check_same_sample", "contact_overlap", "overlap_dataset", "overlap_series"]
-
-#: Relative tolerance on diameter ratios when deciding that two packings hold the same particles.
-DIAMETER_RATIO_RTOL: float = 1e-8
+__all__ = ["check_same_sample", "contact_overlap", "overlap_dataset", "overlap_series"]
 
 
 def check_same_sample(a: Packing, b: Packing) -> None:
