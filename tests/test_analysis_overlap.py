@@ -73,6 +73,17 @@ def test_series_against_largest_target_pressure(rng):
     assert list(ds["p_target"].values) == [1e3, 1e5, 1e7, 1e11]
     assert np.allclose(ds["one_minus_Q"].values, np.array([30, 10, 2, 0]) / nc)
     assert np.all(ds["abs_delta_phi_J"].values == 0.0)
+    assert "n_lp" not in ds and "kappa" not in ds.attrs
+
+
+def test_series_carries_lp_counts_and_growth_rate():
+    ref = lattice_with_contacts()
+    packings = [ref.evolve(attrs={"iterations": n}) for n in (9, 4, 2)]
+    ds = overlap_series(packings, [1e3, 1e5, 1e7], growth_rate=3e-5)
+    assert list(ds["n_lp"].values) == [9, 4, 2]
+    assert ds.attrs["kappa"] == 3e-5
+    mixed = [packings[0], ref, packings[2]]
+    assert "n_lp" not in overlap_series(mixed, [1e3, 1e5, 1e7])
 
 
 def test_overlap_cli(tmp_path):

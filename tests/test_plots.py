@@ -68,9 +68,14 @@ def test_flow_and_overlap_figures(tmp_path, rng):
     check_figure(plots.plot_stress_strain([ds, summary], ["raw", "summary"]), tmp_path / "ss.png")
     check_figure(plots.plot_phi_kappa(summary), tmp_path / "pk.png")
     p = lattice()
-    series = [overlap_series([p.evolve(contacts=p.contacts[k:], force=None), p.evolve(contacts=p.contacts[1:], force=None), p],
-                             [1e4, 1e6, 1e8]) for k in (3, 5)]
-    check_figure(plots.plot_overlap_series(series), tmp_path / "q.png")
+    series = [overlap_series([p.evolve(contacts=p.contacts[k:], force=None, attrs={"iterations": 10 - k}),
+                              p.evolve(contacts=p.contacts[1:], force=None, attrs={"iterations": 3}),
+                              p.evolve(attrs={"iterations": 2})],
+                             [1e4, 1e6, 1e8], growth_rate=kappa) for k in (3, 5) for kappa in (1e-4, 1e-5)]
+    fig = plots.plot_overlap_series(series)
+    assert len(fig.axes) == 4, "phi_J, |Delta phi_J|, 1 - Q and n panels"
+    assert all(len(ax.get_legend().get_texts()) == 2 for ax in fig.axes), "one curve per growth rate"
+    check_figure(fig, tmp_path / "q.png")
 
 
 def test_plot_cli(tmp_path):

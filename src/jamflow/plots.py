@@ -313,28 +313,41 @@ def plot_phi_kappa(ds: xr.Dataset) -> Figure:
 
 
 def plot_overlap_series(datasets: Sequence[xr.Dataset]) -> Figure:
-    """<phi_J>, |Delta phi_J| and 1 - Q against p_target over samples (CALiPPSO Fig. 3 a, c, e).
+    """<phi_J>, |Delta phi_J|, 1 - Q and n against p_target over samples (CALiPPSO Fig. 3).
 
-    One ``jamflow overlap-series`` dataset per sample; points are sample means with
-    standard errors. The reference pressure itself (where |Delta phi_J| = 1 - Q = 0
-    by definition) is left out of the lower two panels.
+    One ``jamflow overlap-series`` dataset per sample. Samples are grouped by their
+    growth rate (attribute ``kappa``, one curve each); points are group means with
+    standard errors over samples. The reference pressure itself (where
+    |Delta phi_J| = 1 - Q = 0 by definition) is left out of the middle panels; the
+    number of LPs is drawn when every dataset has ``n_lp``.
     """
-    merged = xr.concat([ds[["phi_J", "one_minus_Q", "abs_delta_phi_J"]] for ds in datasets], dim="sample")
-    m = len(datasets)
-    fig = Figure(layout="constrained", figsize=(6.4, 8.0))
-    axes = fig.subplots(3, 1, sharex=True)
-    x = merged["p_target"].values
-    panels = ((axes[0], "phi_J", f"<phi_J> {_DL}", np.ones(len(x), dtype=bool)),
-              (axes[1], "abs_delta_phi_J", f"<|Delta phi_J|> {_DL}", x < x.max()),
-              (axes[2], "one_minus_Q", f"1 - <Q> {_DL}", x < x.max()))
-    for ax, name, ylabel, ok in panels:
-        y = merged[name].mean("sample").values
-        e = merged[name].std("sample", ddof=1).values / np.sqrt(m) if m > 1 else np.zeros_like(y)
-        ax.errorbar(x[ok], y[ok], yerr=e[ok], fmt="o-", ms=4, capsize=2, label=f"mean ± s.e. over {m} sample(s)")
+    groups: dict[float, list[xr.Dataset]] = {}
+    for ds in datasets:
+        groups.setdefault(float(ds.attrs.get("kappa", np.nan)), []).append(ds)
+    names = ["phi_J", "abs_delta_phi_J", "one_minus_Q"]
+    ylabels = [f"<phi_J> {_DL}", f"<|Delta phi_J|> {_DL}", f"1 - <Q> {_DL}"]
+    if all("n_lp" in ds for ds in datasets):
+        names.append("n_lp")
+        ylabels.append(f"<n> linear optimisations {_DL}")
+    fig = Figure(layout="constrained", figsize=(6.4, 2.4 * len(names)))
+    axes = fig.subplots(len(names), 1, sharex=True)
+    for kappa, members in sorted(groups.items()):
+        merged = xr.concat([ds[names] for ds in members], dim="sample")
+        m = len(members)
+        x = merged["p_target"].values
+        label = (f"kappa = {kappa:g}, " if np.isfinite(kappa) else "") + f"{m} sample(s)"
+        for ax, name in zip(axes, names):
+            ok = x < x.max() if name in ("abs_delta_phi_J", "one_minus_Q") else np.ones(len(x), dtype=bool)
+            y = merged[name].mean("sample").values.astype(float)
+            e = merged[name].std("sample", ddof=1).values / np.sqrt(m) if m > 1 else np.zeros_like(y)
+            ax.errorbar(x[ok], y[ok], yerr=e[ok], fmt="o-", ms=4, capsize=2, label=label)
+    for ax, name, ylabel in zip(axes, names, ylabels):
         ax.set_xscale("log")
-        if name != "phi_J" and np.any(y[ok] > 0):
-            ax.set_yscale("symlog", linthresh=float(np.min(y[ok][y[ok] > 0])))
+        if name in ("abs_delta_phi_J", "one_minus_Q"):
+            positive = [v for line in ax.get_lines() for v in np.asarray(line.get_ydata(), float) if v > 0]
+            if positive:
+                ax.set_yscale("symlog", linthresh=min(positive))
         ax.set_ylabel(ylabel)
         ax.legend(fontsize=8)
-    axes[2].set_xlabel(f"LS target pressure p_tar {_DL}")
+    axes[-1].set_xlabel(f"LS target pressure p_tar {_DL}")
     return fig

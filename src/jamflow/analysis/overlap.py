@@ -95,22 +95,28 @@ def overlap_series(
     p_target: Sequence[float],
     gap_tol: float | None = None,
     parameters: dict | None = None,
+    growth_rate: float | None = None,
 ) -> xr.Dataset:
-    """Q(p_tar) and |Delta phi_J(p_tar)| of one sample against its largest p_tar.
+    """Q(p_tar), |Delta phi_J(p_tar)| and n(p_tar) of one sample against its largest p_tar.
 
     Parameters
     ----------
     packings : sequence of Packing
         Jammed packings of one sample, each crunched from the target pressure in
-        ``p_target`` (same order).
+        ``p_target`` (same order). When every packing carries the attribute
+        ``iterations`` (written by ``jamflow calippso``), the number of linear
+        optimisations ``n_lp`` is included (Fig. 3 g, h).
     p_target : sequence of float
         Target pressures; the packing at the largest one is the reference.
+    growth_rate : float or None
+        LS growth rate kappa of the sample, stored as attribute ``kappa`` so that
+        samples can be grouped by it (Fig. 3, left column).
 
     Returns
     -------
     xarray.Dataset
         dim ``p_target`` (sorted ascending): ``Q``, ``one_minus_Q``, ``phi_J``,
-        ``abs_delta_phi_J``, ``n_contacts``, ``n_common``.
+        ``abs_delta_phi_J``, ``n_contacts``, ``n_common`` and possibly ``n_lp``.
     """
     p_target = np.asarray(p_target, dtype=np.float64)
     if len(packings) != len(p_target) or len(packings) == 0:
@@ -123,18 +129,24 @@ def overlap_series(
     phi = np.array([packings[k].packing_fraction for k in order])
     q = np.array([r[0] for r in rows])
     one = {"units": "1"}
+    data_vars = {
+        "Q": ("p_target", q, {**one, "long_name": "contact overlap with the packing at the largest p_target"}),
+        "one_minus_Q": ("p_target", 1.0 - q, {**one, "long_name": "1 - Q"}),
+        "phi_J": ("p_target", phi, {**one, "long_name": "jamming packing fraction"}),
+        "abs_delta_phi_J": ("p_target", np.abs(phi - phi[-1]),
+                            {**one, "long_name": "|phi_J(p_max) - phi_J(p_target)|"}),
+        "n_contacts": ("p_target", np.array([r[2] for r in rows]), {**one, "long_name": "number of contacts"}),
+        "n_common": ("p_target", np.array([r[1] for r in rows]),
+                     {**one, "long_name": "contacts shared with the reference"}),
+    }
+    if all("iterations" in packings[k].attrs for k in order):
+        data_vars["n_lp"] = ("p_target", np.array([int(packings[k].attrs["iterations"]) for k in order]),
+                             {**one, "long_name": "number of linear optimisations of CALiPPSO"})
+    extra = {} if growth_rate is None else {"kappa": float(growth_rate)}
     return xr.Dataset(
-        data_vars={
-            "Q": ("p_target", q, {**one, "long_name": "contact overlap with the packing at the largest p_target"}),
-            "one_minus_Q": ("p_target", 1.0 - q, {**one, "long_name": "1 - Q"}),
-            "phi_J": ("p_target", phi, {**one, "long_name": "jamming packing fraction"}),
-            "abs_delta_phi_J": ("p_target", np.abs(phi - phi[-1]),
-                                {**one, "long_name": "|phi_J(p_max) - phi_J(p_target)|"}),
-            "n_contacts": ("p_target", np.array([r[2] for r in rows]), {**one, "long_name": "number of contacts"}),
-            "n_common": ("p_target", np.array([r[1] for r in rows]),
-                         {**one, "long_name": "contacts shared with the reference"}),
-        },
+        data_vars=data_vars,
         coords={"p_target": ("p_target", p_target[order],
                              {"units": "1", "long_name": "target reduced pressure of the LS compression"})},
-        attrs=new_dataset_attrs("jamflow contact overlap series", parameters or {}, p_max=float(p_target[order[-1]])),
+        attrs=new_dataset_attrs("jamflow contact overlap series", parameters or {},
+                                p_max=float(p_target[order[-1]]), **extra),
     )

@@ -71,6 +71,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc", help="jammed packings of one sample, then the output")
     p.add_argument("--p-target", type=float, nargs="+", required=True, help="target pressure of each input, same order")
     p.add_argument("--gap-tol", type=float, default=None, help="contacts from h <= GAP_TOL instead of the stored ones")
+    p.add_argument("--growth-rate", type=float, default=None,
+                   help="LS growth rate kappa of the sample, stored as attribute 'kappa' to group samples in plots")
     add_overlap_option(p)
 
     p = add_command(sub, "rdf", _rdf, "radial distribution g(r) and crystallinity (2D psi6, 3D Q6)")
@@ -145,7 +147,7 @@ def _overlap_series(args: argparse.Namespace) -> int:
     inputs, out = _split(args.paths, "packing")
     packings = _load_all(inputs, overlap_tol(args), True)
     write_dataset(overlap_series(packings, args.p_target, args.gap_tol,
-                                 stage_parameters(args, "paths") | {"inputs": inputs}), out)
+                                 stage_parameters(args, "paths") | {"inputs": inputs}, args.growth_rate), out)
     return 0
 
 
