@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import itertools
 import os
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -34,6 +35,9 @@ __all__ = [
     "plot_stress_strain",
     "plot_phi_kappa",
     "plot_overlap_series",
+    "plot_jamming_table",
+    "plot_eos",
+    "pareto",
 ]
 
 _DL = "(dimensionless)"
@@ -350,4 +354,120 @@ def plot_overlap_series(datasets: Sequence[xr.Dataset]) -> Figure:
         ax.set_ylabel(ylabel)
         ax.legend(fontsize=8)
     axes[-1].set_xlabel(f"LS target pressure p_tar {_DL}")
+    return fig
+
+
+def pareto(ds: xr.Dataset) -> Figure:
+    """Wall time against error of a ``jamflow tradeoff`` sweep, one point per setting.
+
+    Time on a log x axis, the stage's primary error (attribute ``primary_error``) on a
+    log y axis; each point is labelled by its setting, the Pareto front is joined and
+    highlighted, the reference is marked. Errors of exactly zero (e.g. the reference
+    against itself) are drawn on the lower edge at a tenth of the smallest positive
+    error and say so.
+    """
+    name = ds.attrs.get("primary_error", "error")
+    if name not in ds or "time" not in ds or "label" not in ds.coords:
+        raise ValueError("not a tradeoff sweep: needs variables 'time' and the primary error, coordinate 'label'")
+    t = ds["time"].values.astype(float)
+    e = ds[name].values.astype(float)
+    positive = e[np.isfinite(e) & (e > 0)]
+    floor = positive.min() / 10 if positive.size else 1e-16
+    y = np.where(e > 0, e, floor)
+    front = ds["on_front"].values.astype(bool) if "on_front" in ds else np.zeros(len(t), dtype=bool)
+    ref = ds["is_reference"].values.astype(bool) if "is_reference" in ds else np.zeros(len(t), dtype=bool)
+    fig = Figure(layout="constrained", figsize=(7.0, 5.0))
+    ax = fig.subplots()
+    ax.scatter(t[~front], y[~front], s=22, color="0.55", label="setting", zorder=2)
+    order = np.argsort(t[front])
+    ax.plot(t[front][order], y[front][order], "o-", color="C3", ms=6, lw=1.2, label="Pareto front", zorder=3)
+    ax.scatter(t[ref], y[ref], s=120, facecolors="none", edgecolors="k", label="reference", zorder=4)
+    # labels of points closer than ~0.2 decades are stacked instead of overprinted
+    lt, ly = np.log10(t), np.log10(y)
+    for k, label in enumerate(ds["label"].values):
+        crowd = int(np.sum((np.abs(lt[:k] - lt[k]) < 0.4) & (np.abs(ly[:k] - ly[k]) < 0.2)))
+        ax.annotate(str(label) + (" (error 0)" if e[k] == 0 else ""), (t[k], y[k]), fontsize=6,
+                    xytext=(3, 3 - 8 * crowd), textcoords="offset points", color="C3" if front[k] else "0.3")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("wall time [s]")
+    ax.set_ylabel(f"{name} {_DL}\n" + textwrap.fill(ds[name].attrs.get("long_name", ""), 70), fontsize=7)
+    ax.legend(fontsize=7)
+    ax.set_title(f"{ds.attrs.get('stage', '')}: speed against accuracy", fontsize=9)
+    return fig
+
+
+def plot_jamming_table(ds: xr.Dataset) -> Figure:
+    """phi_J^(LS) from Eq. 15 against LS+CALiPPSO phi_J per growth rate (CALiPPSO Table I).
+
+    ``ds`` is a ``jamflow jamming-table`` output. Top: sample means with standard errors,
+    the LS extrapolation as black squares and one marker per target pressure (shifted
+    slightly along kappa for legibility). Bottom: within-sample differences
+    ``phi_J(p_tar) - phi_J^(LS)``.
+    """
+    fig = Figure(layout="constrained", figsize=(6.4, 6.4))
+    top, bottom = fig.subplots(2, 1, sharex=True)
+    kappa = ds["kappa"].values
+    targets = ds["p_target"].values
+    shift = np.exp(0.04 * (np.arange(len(targets) + 1) - len(targets) / 2))
+    n = ds["n_samples"].values
+    top.errorbar(kappa * shift[0], ds["phi_J_LS"].values, yerr=ds["phi_J_LS_err"].values, fmt="ks", ms=6,
+                 capsize=3, label="LS, Eq. 15 extrapolated to 1/p = 0")
+    for b, p in enumerate(targets):
+        top.errorbar(kappa * shift[b + 1], ds["phi_J"].values[:, b], yerr=ds["phi_J_err"].values[:, b], fmt="o",
+                     ms=4, capsize=2, label=f"LS+CALiPPSO from p_tar = {p:g}")
+        bottom.errorbar(kappa * shift[b + 1], ds["difference"].values[:, b], yerr=ds["difference_err"].values[:, b],
+                        fmt="o", ms=4, capsize=2, label=f"p_tar = {p:g}")
+    bottom.axhline(0.0, color="k", lw=0.8, ls=":")
+    top.set_ylabel(f"<phi_J> {_DL}")
+    bottom.set_ylabel(f"<phi_J(p_tar) - phi_J^(LS)> {_DL}")
+    bottom.set_xlabel(f"LS growth rate kappa {_DL}")
+    for ax in (top, bottom):
+        ax.set_xscale("log")
+        ax.legend(fontsize=7)
+    fig.suptitle(f"{int(n.min())}-{int(n.max())} samples per kappa; fit window "
+                 f"{ds.attrs.get('fit_min', float('nan')):g} <= p <= {ds.attrs.get('fit_max', float('nan')):g}",
+                 fontsize=9)
+    return fig
+
+
+def plot_eos(datasets: Sequence[xr.Dataset], labels: Sequence[str] | None = None) -> Figure:
+    """Equation of state of LS compressions (CALiPPSO Fig. 9).
+
+    Left: reduced pressure ``p`` against ``phi`` on a log axis with Carnahan–Starling
+    (d = 3) for the liquid. Right: ``d/p`` against ``phi`` near jamming, where the glass
+    law Eq. 15 is the straight line ``d/p = 1 - phi/phi_J`` (drawn from a fit on
+    ``p >= 1e3`` of each run) reaching zero at ``phi_J``.
+    """
+    from .analysis.eos import carnahan_starling, fit_jamming_density
+
+    fig = Figure(layout="constrained", figsize=(10.0, 4.4))
+    left, right = fig.subplots(1, 2)
+    names = list(labels) if labels else [
+        f"kappa = {ds.attrs['kappa']:g}" if "kappa" in ds.attrs else f"run {k}" for k, ds in enumerate(datasets)]
+    for ds, name in zip(datasets, names):
+        phi, p, d = ds["packing_fraction"].values, ds["pressure"].values, int(ds.attrs["d"])
+        ok = np.isfinite(p) & (p > 0)
+        line = left.plot(phi[ok], p[ok], ".", ms=2, label=name)[0]
+        glass = ok & (p >= 1e3)
+        right.plot(phi[glass], d / p[glass], ".", ms=2, color=line.get_color())
+        try:
+            fit = fit_jamming_density(phi, p, d, p_min=1e3)
+        except ValueError:
+            continue
+        x = np.linspace(phi[glass].min(), fit.phi_j, 50)
+        right.plot(x, 1.0 - x / fit.phi_j, "-", lw=0.8, color=line.get_color(),
+                   label=f"{name}: Eq. 15, phi_J = {fit.phi_j:.5f}")
+    if datasets and int(datasets[0].attrs["d"]) == 3:
+        x = np.linspace(0.05, 0.55, 100)
+        left.plot(x, carnahan_starling(x), "k--", lw=1, label="Carnahan-Starling liquid")
+    left.set_yscale("log")
+    left.set_xlabel(f"packing fraction phi {_DL}")
+    left.set_ylabel(f"reduced pressure p = beta P V / N {_DL}")
+    right.set_xlabel(f"packing fraction phi {_DL}")
+    right.set_ylabel(f"d / p {_DL}")
+    right.axhline(0.0, color="grey", lw=0.8, ls=":")
+    for ax in (left, right):
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
     return fig

@@ -1,4 +1,4 @@
-"""Analysis subcommands: gaps, forces, overlap, overlap-series, rdf, flow-summary, plot."""
+"""Analysis subcommands: gaps, forces, overlap, overlap-series, jamming-table, rdf, flow-summary, plot."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from ..analysis.eos import jamming_table, table_markdown
 from ..analysis.flow import flow_summary
 from ..analysis.forces import force_distribution
 from ..analysis.gaps import gap_distribution
@@ -27,6 +28,9 @@ PLOT_KINDS: dict[str, str] = {
     "stress-strain": "one or more flow time series or `jamflow flow-summary` outputs",
     "phi-kappa": "one flow time series or `jamflow flow-summary` output",
     "overlap": "one or more `jamflow overlap-series` outputs (one per sample)",
+    "pareto": "one `jamflow tradeoff` output",
+    "jamming-table": "one `jamflow jamming-table` output",
+    "eos": "one or more LS equation-of-state datasets (`jamflow ls --eos`)",
 }
 
 
@@ -74,6 +78,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--growth-rate", type=float, default=None,
                    help="LS growth rate kappa of the sample, stored as attribute 'kappa' to group samples in plots")
     add_overlap_option(p)
+
+    p = add_command(sub, "jamming-table", _jamming_table,
+                    "phi_J^(LS) from the LS equation of state against LS+CALiPPSO phi_J, per kappa (Table I)",
+                    "Fits Eq. 15, phi = phi_J (1 - d/p), to each LS run's equation of state on a pressure window and "
+                    "compares the extrapolated phi_J^(LS) with the phi_J of the packings CALiPPSO jams from its "
+                    "snapshots; sample means and standard errors per growth rate. Prints the table as markdown.")
+    p.add_argument("paths", nargs="+", metavar="SERIES.nc ... OUT.nc",
+                   help="overlap-series outputs (one per sample and kappa, with --growth-rate), then the output")
+    p.add_argument("--eos", nargs="+", required=True, help="equation of state of each LS run, same order as the series")
+    p.add_argument("--fit-min", type=float, default=1e5, help="lowest reduced pressure of the fit (default 1e5)")
+    p.add_argument("--fit-max", type=float, default=1e11, help="highest reduced pressure of the fit (default 1e11)")
 
     p = add_command(sub, "rdf", _rdf, "radial distribution g(r) and crystallinity (2D psi6, 3D Q6)")
     p.add_argument("packing", help="input packing (.nc or .dat)")
@@ -151,6 +166,15 @@ def _overlap_series(args: argparse.Namespace) -> int:
     return 0
 
 
+def _jamming_table(args: argparse.Namespace) -> int:
+    inputs, out = _split(args.paths, "overlap series")
+    ds = jamming_table([read_dataset(p) for p in inputs], [read_dataset(p) for p in args.eos], args.fit_min,
+                       args.fit_max, stage_parameters(args, "paths") | {"inputs": inputs})
+    write_dataset(ds, out)
+    print(table_markdown(ds))
+    return 0
+
+
 def _rdf(args: argparse.Namespace) -> int:
     packing = _load_packing(args.packing, overlap_tol(args))
     write_dataset(structure_dataset(packing, args.r_max, args.bins, stage_parameters(args, "out")), args.out)
@@ -172,23 +196,20 @@ def _plot(args: argparse.Namespace) -> int:
         raise ValueError(f"output must end in .png (a .pdf is written beside it), got {out}")
     if args.labels is not None and len(args.labels) != len(inputs):
         raise ValueError(f"--labels needs one label per input ({len(inputs)}), got {len(args.labels)}")
-    single = {"packing", "forces", "phi-kappa"}
+    single = {"packing": None, "forces": plots.plot_forces, "phi-kappa": plots.plot_phi_kappa,
+              "pareto": plots.pareto, "jamming-table": plots.plot_jamming_table}
+    labelled = {"gaps": plots.plot_gaps, "rdf": plots.plot_rdf, "stress-strain": plots.plot_stress_strain,
+                "eos": plots.plot_eos}
     if args.kind in single and len(inputs) != 1:
         raise ValueError(f"plot {args.kind} takes one input, got {len(inputs)}")
     if args.kind == "packing":
         fig = plots.plot_packing(_load_packing(inputs[0], overlap_tol(args)), args.slab_axis)
     else:
         data = [read_dataset(p) for p in inputs]
-        if args.kind == "gaps":
-            fig = plots.plot_gaps(data, args.labels)
-        elif args.kind == "forces":
-            fig = plots.plot_forces(data[0])
-        elif args.kind == "rdf":
-            fig = plots.plot_rdf(data, args.labels)
-        elif args.kind == "stress-strain":
-            fig = plots.plot_stress_strain(data, args.labels)
-        elif args.kind == "phi-kappa":
-            fig = plots.plot_phi_kappa(data[0])
+        if args.kind in single:
+            fig = single[args.kind](data[0])
+        elif args.kind in labelled:
+            fig = labelled[args.kind](data, args.labels)
         else:
             fig = plots.plot_overlap_series(data)
     plots.save_figure(fig, out)
