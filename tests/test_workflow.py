@@ -105,6 +105,44 @@ def test_gap_scene_plans_no_flow_jobs(tmp_path):
     assert _planned_jobs(work, "--configfile", str(path)) == {"init": 2, "soft_jam": 2, "gaps": 1, "all": 1}
 
 
+def test_ls_calippso_scene_plans_one_ls_run_per_sample_and_rate(tmp_path):
+    work = _workdir(tmp_path)
+    scene = {
+        "scene": "ls-route",
+        "system": {"d": 3, "n": 32, "phi": 0.3, "seeds": [1, 2]},
+        "chain": ["ls", "calippso"],
+        "ls": {"growth_rates": [1e-3, 1e-4], "p_targets": [1e3, 1e5, 1e7]},
+        "analyses": ["overlap", "jamming-table", "gaps"],
+        "figures": ["phi-j-series", "gaps-ls-vs-calippso", "jamming-table", "eos"],
+    }
+    path = work / "scene.yaml"
+    path.write_text(yaml.safe_dump(scene))
+    assert _planned_jobs(work, "--configfile", str(path)) == {
+        "init": 2, "ls": 4, "calippso": 12, "overlap_series": 4, "jamming_table": 1, "gaps": 6, "ls_gaps": 6,
+        "plot_phi_j_series": 1, "plot_gaps_ls_vs_calippso": 1, "plot_jamming_table": 1, "plot_eos": 1, "all": 1,
+    }
+
+
+@pytest.mark.parametrize(
+    "patch, message",
+    [
+        ({"chain": ["soft", "ls"], "ls": {"growth_rates": [1e-3], "p_targets": [1e3]}}, "ls must come first"),
+        ({"chain": ["ls", "soft"], "ls": {"growth_rates": [1e-3], "p_targets": [1e3]}}, "only calippso may follow ls"),
+        ({"chain": ["soft"], "analyses": ["overlap"]}, "need(s) the chain [ls, calippso]"),
+        ({"chain": ["ls", "calippso"], "ls": {"growth_rates": [1e-3], "p_targets": [1e3]}, "analyses": ["overlap"]},
+         "at least two LS p_targets"),
+    ],
+)
+def test_impossible_stage_orders_fail_at_start(tmp_path, patch, message):
+    work = _workdir(tmp_path)
+    scene = {"scene": "bad", "system": {"d": 2, "n": 16, "phi": 0.3, "seeds": [1]}, "figures": [], **patch}
+    path = work / "scene.yaml"
+    path.write_text(yaml.safe_dump(scene))
+    res = _snakemake(work, "-n", "--configfile", str(path))
+    assert res.returncode != 0
+    assert message in res.stderr + res.stdout
+
+
 def test_every_scene_validates_and_plans(tmp_path):
     work = _workdir(tmp_path)
     scenes = sorted((work / "config" / "scenes").glob("*.yaml"))

@@ -11,7 +11,7 @@ rule check:
     benchmark:
         f"{BENCH}/check/{{sample}}_{{stage}}.tsv"
     wildcard_constraints:
-        stage="[a-z]+",
+        stage="[a-z]+(_k[0-9.e+-]+_p[0-9.e+-]+)?",
     conda:
         "../envs/jamflow.yaml"
     params:
@@ -22,13 +22,13 @@ rule check:
 
 rule gaps:
     input:
-        final_packings(),
+        lambda wildcards: final_packings(wildcards.variant),
     output:
-        f"{RESULTS}/analysis/gaps.nc",
+        f"{RESULTS}/analysis/gaps{{variant}}.nc",
     log:
-        f"{LOGS}/analysis/gaps.log",
+        f"{LOGS}/analysis/gaps{{variant}}.log",
     benchmark:
-        f"{BENCH}/analysis/gaps.tsv"
+        f"{BENCH}/analysis/gaps{{variant}}.tsv"
     params:
         read=read_flags(FINAL),
         fit_min=opt("gaps", "fit_min"),
@@ -42,13 +42,13 @@ rule gaps:
 
 rule forces:
     input:
-        final_packings(),
+        lambda wildcards: final_packings(wildcards.variant),
     output:
-        f"{RESULTS}/analysis/forces.nc",
+        f"{RESULTS}/analysis/forces{{variant}}.nc",
     log:
-        f"{LOGS}/analysis/forces.log",
+        f"{LOGS}/analysis/forces{{variant}}.log",
     benchmark:
-        f"{BENCH}/analysis/forces.tsv"
+        f"{BENCH}/analysis/forces{{variant}}.tsv"
     params:
         read=read_flags(FINAL),
     conda:
@@ -59,13 +59,13 @@ rule forces:
 
 rule rdf:
     input:
-        packing("{sample}", FINAL),
+        packing("{sample}", f"{FINAL}{{variant}}"),
     output:
-        f"{RESULTS}/analysis/{{sample}}/rdf.nc",
+        f"{RESULTS}/analysis/{{sample}}/rdf{{variant}}.nc",
     log:
-        f"{LOGS}/analysis/rdf_{{sample}}.log",
+        f"{LOGS}/analysis/rdf_{{sample}}{{variant}}.log",
     benchmark:
-        f"{BENCH}/analysis/rdf_{{sample}}.tsv"
+        f"{BENCH}/analysis/rdf_{{sample}}{{variant}}.tsv"
     params:
         read=read_flags(FINAL),
     conda:
@@ -76,13 +76,13 @@ rule rdf:
 
 rule certify:
     input:
-        packing("{sample}", FINAL),
+        packing("{sample}", f"{FINAL}{{variant}}"),
     output:
-        f"{RESULTS}/analysis/{{sample}}/certify.nc",
+        f"{RESULTS}/analysis/{{sample}}/certify{{variant}}.nc",
     log:
-        f"{LOGS}/analysis/certify_{{sample}}.log",
+        f"{LOGS}/analysis/certify_{{sample}}{{variant}}.log",
     benchmark:
-        f"{BENCH}/analysis/certify_{{sample}}.tsv"
+        f"{BENCH}/analysis/certify_{{sample}}{{variant}}.tsv"
     params:
         preset=PRESET,
         strict="--strict" if opt("certify", "strict") else "",
@@ -93,3 +93,61 @@ rule certify:
     shell:
         "jamflow certify {input} {output} {params.strict} {params.loads} --preset {params.preset}"
         " {params.read} --quiet > {log} 2>&1"
+
+
+rule ls_gaps:
+    input:
+        lambda wildcards: [packing(s, f"ls{wildcards.variant}") for s in samples()],
+    output:
+        f"{RESULTS}/analysis/ls-gaps{{variant}}.nc",
+    log:
+        f"{LOGS}/analysis/ls-gaps{{variant}}.log",
+    benchmark:
+        f"{BENCH}/analysis/ls-gaps{{variant}}.tsv"
+    params:
+        fit_min=opt("gaps", "fit_min"),
+        fit_max=opt("gaps", "fit_max"),
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        # an LS snapshot at finite pressure has no contacts: every positive gap is binned
+        "jamflow gaps {input} {output} --gap-tol 0 --fit-min {params.fit_min} --fit-max {params.fit_max}"
+        " --quiet > {log} 2>&1"
+
+
+rule overlap_series:
+    input:
+        lambda wildcards: [packing(wildcards.sample, f"{FINAL}{ls_variant(float(wildcards.kappa), p)}") for p in LS_TARGETS],
+    output:
+        f"{RESULTS}/analysis/{{sample}}/overlap_k{{kappa}}.nc",
+    log:
+        f"{LOGS}/analysis/overlap_{{sample}}_k{{kappa}}.log",
+    benchmark:
+        f"{BENCH}/analysis/overlap_{{sample}}_k{{kappa}}.tsv"
+    params:
+        targets=" ".join(f"{p:g}" for p in LS_TARGETS),
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow overlap-series {input} {output} --p-target {params.targets}"
+        " --growth-rate {wildcards.kappa} > {log} 2>&1"
+
+
+rule jamming_table:
+    input:
+        series=overlap_series_files(),
+        eos=eos_files(),
+    output:
+        f"{RESULTS}/analysis/jamming-table.nc",
+    log:
+        f"{LOGS}/analysis/jamming-table.log",
+    benchmark:
+        f"{BENCH}/analysis/jamming-table.tsv"
+    params:
+        p_min=opt("jamming_table", "fit_min"),
+        p_max=opt("jamming_table", "fit_max"),
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow jamming-table {input.series} {output} --eos {input.eos}"
+        " --fit-min {params.p_min} --fit-max {params.p_max} > {log} 2>&1"

@@ -8,6 +8,44 @@ SOURCE_STAGE = "import" if "import" in config else "init"
 CHAIN = [SOURCE_STAGE, *config.get("chain", [])]
 FINAL = CHAIN[-1]
 PRESET = config["preset"]
+LS_TARGETS = config.get("ls", {}).get("p_targets", [])
+LS_RATES = config.get("ls", {}).get("growth_rates", [])
+
+
+def check_chain():
+    """Stage orders the rules can build: LS compresses a random start and only CALiPPSO may follow it."""
+    wanted = set(config.get("analyses", [])) | set(config.get("figures", []))
+    needs_crunch = wanted & {"overlap", "jamming-table", "phi-j-series", "gaps-ls-vs-calippso"}
+    if needs_crunch and CHAIN[-2:] != ["ls", "calippso"]:
+        raise ValueError(f"{', '.join(sorted(needs_crunch))} need(s) the chain [ls, calippso]")
+    if "eos" in wanted and "ls" not in CHAIN:
+        raise ValueError("the eos figure needs ls in the chain")
+    if wanted & {"overlap", "phi-j-series"} and len(LS_TARGETS) < 2:
+        raise ValueError("overlap and phi-j-series compare packings from at least two LS p_targets")
+    if "ls" not in CHAIN:
+        return
+    if SOURCE_STAGE != "init" or CHAIN[1] != "ls":
+        raise ValueError("chain: ls must come first and needs a random system (an LS snapshot is not a start)")
+    if any(stage != "calippso" for stage in CHAIN[2:]):
+        raise ValueError("chain: only calippso may follow ls")
+    if "ls" not in config:
+        raise ValueError("chain has ls but the scene has no 'ls' section with p_targets")
+    if "flow" in config:
+        raise ValueError("flow needs one final packing per sample; a chain with ls gives one per (kappa, p_target)")
+
+
+check_chain()
+
+
+def variants():
+    """Suffixes of a sample's final packings: one per (kappa, p_target) after LS, else one empty."""
+    if "ls" not in CHAIN:
+        return [""]
+    return [ls_variant(k, p) for k in LS_RATES for p in LS_TARGETS]
+
+
+def ls_variant(kappa, p_target):
+    return f"_k{kappa:g}_p{p_target:g}"
 
 
 def samples():
@@ -28,20 +66,38 @@ def packing(sample, stage):
 
 
 def previous_stage(stage):
-    """Input packing of a stage in this scene's chain, as an input function."""
+    """Input packing of a stage in this scene's chain, as an input function.
+
+    After LS the wildcard ``variant`` (``_k<kappa>_p<p_target>``) names the snapshot.
+    """
 
     def _input(wildcards):
-        return packing(wildcards.sample, CHAIN[CHAIN.index(stage) - 1])
+        return packing(wildcards.sample, f"{CHAIN[CHAIN.index(stage) - 1]}{wildcards.get('variant', '')}")
 
     return _input
 
 
-def final_packings():
-    return [packing(s, FINAL) for s in samples()]
+def final_packings(variant=None):
+    """Final packings of every sample, of one variant or of all."""
+    chosen = variants() if variant is None else [variant]
+    return [packing(s, f"{FINAL}{v}") for s in samples() for v in chosen]
 
 
 def rdf_files():
-    return [f"{RESULTS}/analysis/{s}/rdf.nc" for s in samples()]
+    return [f"{RESULTS}/analysis/{s}/rdf{v}.nc" for s in samples() for v in variants()]
+
+
+def ls_snapshots(sample, kappa):
+    """The LS run of one sample at one growth rate writes one snapshot per target pressure."""
+    return [packing(sample, f"ls{ls_variant(float(kappa), p)}") for p in LS_TARGETS]
+
+
+def overlap_series_files():
+    return [f"{RESULTS}/analysis/{s}/overlap_k{k:g}.nc" for k in LS_RATES for s in samples()]
+
+
+def eos_files():
+    return [f"{RESULTS}/packings/{s}/ls_k{k:g}.eos.nc" for k in LS_RATES for s in samples()]
 
 
 def shear_conditions():
@@ -71,24 +127,35 @@ def opt(section, key):
     return config.get(section, {})[key]
 
 
+def variant_labels():
+    """Legend labels of the variants, e.g. ``kappa=1e-05,p_tar=1000``."""
+    if "ls" not in CHAIN:
+        return [FINAL]
+    return [f"kappa={k:g},p_tar={p:g}" for k in LS_RATES for p in LS_TARGETS]
+
+
 def scene_targets():
     """Everything the scene asks for, and nothing else."""
     targets = final_packings()
     analyses = config.get("analyses", [])
     if "check" in analyses:
-        targets += [f"{RESULTS}/analysis/{s}/{FINAL}.check.json" for s in samples()]
+        targets += [f"{RESULTS}/analysis/{s}/{FINAL}{v}.check.json" for s in samples() for v in variants()]
     for kind in ("gaps", "forces"):
         if kind in analyses:
-            targets.append(f"{RESULTS}/analysis/{kind}.nc")
+            targets += [f"{RESULTS}/analysis/{kind}{v}.nc" for v in variants()]
     if "rdf" in analyses:
         targets += rdf_files()
     if "certify" in analyses:
-        targets += [f"{RESULTS}/analysis/{s}/certify.nc" for s in samples()]
+        targets += [f"{RESULTS}/analysis/{s}/certify{v}.nc" for s in samples() for v in variants()]
+    if "overlap" in analyses:
+        targets += overlap_series_files()
+    if "jamming-table" in analyses:
+        targets.append(f"{RESULTS}/analysis/jamming-table.nc")
     if "flow" in config:
         targets += shear_summaries()
     for fig in config.get("figures", []):
         if fig == "packing":
-            targets += [f"{RESULTS}/figures/packing_{s}.png" for s in samples()]
+            targets += [f"{RESULTS}/figures/packing_{s}{variants()[-1]}.png" for s in samples()]
         elif fig == "phi-kappa":
             targets += [
                 f"{RESULTS}/figures/phi-kappa_{s}_{c}.png"
@@ -105,6 +172,8 @@ def scene_targets():
 
 wildcard_constraints:
     sample="[A-Za-z0-9-]+",
+    variant="(_k[0-9.e+-]+_p[0-9.e+-]+)?",
+    kappa="[0-9.e+-]+",
     condition="fixed-volume|p[0-9.e+-]+",
 
 

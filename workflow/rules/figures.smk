@@ -3,19 +3,19 @@
 
 rule plot_packing:
     input:
-        packing("{sample}", FINAL),
+        packing("{sample}", f"{FINAL}{{variant}}"),
     output:
         png=report(
-            f"{RESULTS}/figures/packing_{{sample}}.png",
+            f"{RESULTS}/figures/packing_{{sample}}{{variant}}.png",
             caption="../report/packing.rst",
             category="Packings",
             subcategory="{sample}",
         ),
-        pdf=f"{RESULTS}/figures/packing_{{sample}}.pdf",
+        pdf=f"{RESULTS}/figures/packing_{{sample}}{{variant}}.pdf",
     log:
-        f"{LOGS}/figures/packing_{{sample}}.log",
+        f"{LOGS}/figures/packing_{{sample}}{{variant}}.log",
     benchmark:
-        f"{BENCH}/figures/packing_{{sample}}.tsv"
+        f"{BENCH}/figures/packing_{{sample}}{{variant}}.tsv"
     conda:
         "../envs/jamflow.yaml"
     params:
@@ -26,7 +26,7 @@ rule plot_packing:
 
 rule plot_gaps:
     input:
-        f"{RESULTS}/analysis/gaps.nc",
+        [f"{RESULTS}/analysis/gaps{v}.nc" for v in variants()],
     output:
         png=report(
             f"{RESULTS}/figures/gaps.png",
@@ -40,13 +40,16 @@ rule plot_gaps:
         f"{BENCH}/figures/gaps.tsv"
     conda:
         "../envs/jamflow.yaml"
+    params:
+        labels=" ".join(variant_labels()),
     shell:
-        "jamflow plot gaps {input} {output.png} > {log} 2>&1"
+        "jamflow plot gaps {input} {output.png} --labels {params.labels} > {log} 2>&1"
 
 
 rule plot_forces:
     input:
-        f"{RESULTS}/analysis/forces.nc",
+        # after LS: the packings crunched from the largest target pressure
+        f"{RESULTS}/analysis/forces{variants()[-1]}.nc",
     output:
         png=report(
             f"{RESULTS}/figures/forces.png",
@@ -148,3 +151,86 @@ rule plot_ed_vs_sd:
     shell:
         "jamflow plot stress-strain {input.ed} {input.sd} {output.png}"
         " --labels event-driven steepest-descent > {log} 2>&1"
+
+
+rule plot_phi_j_series:
+    input:
+        overlap_series_files(),
+    output:
+        png=report(
+            f"{RESULTS}/figures/phi-j-series.png",
+            caption="../report/phi-j-series.rst",
+            category="LS+CALiPPSO",
+        ),
+        pdf=f"{RESULTS}/figures/phi-j-series.pdf",
+    log:
+        f"{LOGS}/figures/phi-j-series.log",
+    benchmark:
+        f"{BENCH}/figures/phi-j-series.tsv"
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow plot overlap {input} {output.png} > {log} 2>&1"
+
+
+rule plot_gaps_ls_vs_calippso:
+    input:
+        ls=[f"{RESULTS}/analysis/ls-gaps{v}.nc" for v in variants()],
+        jammed=[f"{RESULTS}/analysis/gaps{v}.nc" for v in variants()],
+    output:
+        png=report(
+            f"{RESULTS}/figures/gaps-ls-vs-calippso.png",
+            caption="../report/gaps-ls-vs-calippso.rst",
+            category="LS+CALiPPSO",
+        ),
+        pdf=f"{RESULTS}/figures/gaps-ls-vs-calippso.pdf",
+    log:
+        f"{LOGS}/figures/gaps-ls-vs-calippso.log",
+    benchmark:
+        f"{BENCH}/figures/gaps-ls-vs-calippso.tsv"
+    params:
+        labels=" ".join([*(f"LS:{v}" for v in variant_labels()), *(f"CALiPPSO:{v}" for v in variant_labels())]),
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow plot gaps {input.ls} {input.jammed} {output.png} --labels {params.labels} > {log} 2>&1"
+
+
+rule plot_jamming_table:
+    input:
+        f"{RESULTS}/analysis/jamming-table.nc",
+    output:
+        png=report(
+            f"{RESULTS}/figures/jamming-table.png",
+            caption="../report/jamming-table.rst",
+            category="LS+CALiPPSO",
+        ),
+        pdf=f"{RESULTS}/figures/jamming-table.pdf",
+    log:
+        f"{LOGS}/figures/jamming-table.log",
+    benchmark:
+        f"{BENCH}/figures/jamming-table.tsv"
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow plot jamming-table {input} {output.png} > {log} 2>&1"
+
+
+rule plot_eos:
+    input:
+        eos_files(),
+    output:
+        png=report(
+            f"{RESULTS}/figures/eos.png",
+            caption="../report/eos.rst",
+            category="LS+CALiPPSO",
+        ),
+        pdf=f"{RESULTS}/figures/eos.pdf",
+    log:
+        f"{LOGS}/figures/eos.log",
+    benchmark:
+        f"{BENCH}/figures/eos.tsv"
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow plot eos {input} {output.png} > {log} 2>&1"

@@ -54,3 +54,51 @@ rule soft_jam:
     shell:
         "jamflow soft-jam {input} {output} --pressure {params.pressure}"
         " {params.force_tol} --preset {params.preset} --quiet > {log} 2>&1"
+
+
+rule ls:
+    input:
+        packing("{sample}", "init"),
+    output:
+        snapshots=[packing("{sample}", f"ls_k{{kappa}}_p{p:g}") for p in LS_TARGETS],
+        eos=f"{RESULTS}/packings/{{sample}}/ls_k{{kappa}}.eos.nc",
+    log:
+        f"{LOGS}/ls/{{sample}}_k{{kappa}}.log",
+    benchmark:
+        f"{BENCH}/ls/{{sample}}_k{{kappa}}.tsv"
+    params:
+        seed=seed_of,
+        targets=" ".join(f"{p:g}" for p in LS_TARGETS),
+        fast=lambda wildcards: optional_flag("--fast-growth-rate", opt("ls", "fast_growth_rate")),
+        fast_until=lambda wildcards: opt("ls", "fast_until"),
+        beta=lambda wildcards: opt("ls", "beta"),
+        max_collisions=lambda wildcards: optional_flag("--max-collisions", opt("ls", "max_collisions")),
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow ls {input} {output.snapshots} --growth-rate {wildcards.kappa} --p-target {params.targets}"
+        " {params.fast} --fast-until {params.fast_until} --beta {params.beta} {params.max_collisions}"
+        " --seed {params.seed} --eos {output.eos} --quiet > {log} 2>&1"
+
+
+rule calippso:
+    input:
+        previous_stage("calippso"),
+    output:
+        packing("{sample}", "calippso{variant}"),
+    log:
+        f"{LOGS}/calippso/{{sample}}{{variant}}.log",
+    benchmark:
+        f"{BENCH}/calippso/{{sample}}{{variant}}.tsv"
+    params:
+        preset=PRESET,
+        tol_s=lambda wildcards: optional_flag("--tol-s", opt("calippso", "tol_s")),
+        tol_gamma=lambda wildcards: optional_flag("--tol-gamma", opt("calippso", "tol_gamma")),
+        solver=lambda wildcards: optional_flag("--solver", opt("calippso", "solver")),
+        walls="--walls" if opt("calippso", "walls") else "",
+        read=read_flags(CHAIN[CHAIN.index("calippso") - 1]) if "calippso" in CHAIN else "",
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow calippso {input} {output} {params.tol_s} {params.tol_gamma} {params.solver}"
+        " {params.walls} {params.read} --preset {params.preset} --quiet > {log} 2>&1"
