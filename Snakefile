@@ -21,6 +21,7 @@ include: "workflow/rules/pack.smk"
 include: "workflow/rules/flow.smk"
 include: "workflow/rules/analysis.smk"
 include: "workflow/rules/figures.smk"
+include: "workflow/rules/tradeoff.smk"
 
 
 rule all:

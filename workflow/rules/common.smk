@@ -49,10 +49,12 @@ def ls_variant(kappa, p_target):
 
 
 def samples():
-    """Sample names: seed<S> per seed of a random system, or the import keys."""
+    """Sample names: seed<S> per seed of a random system, or the import keys (none for a tradeoff-only scene)."""
     if "import" in config:
         return sorted(config["import"])
-    return [f"seed{s}" for s in config["system"]["seeds"]]
+    if "system" in config:
+        return [f"seed{s}" for s in config["system"]["seeds"]]
+    return []
 
 
 def seed_of(wildcards):
@@ -153,6 +155,8 @@ def scene_targets():
         targets.append(f"{RESULTS}/analysis/jamming-table.nc")
     if "flow" in config:
         targets += shear_summaries()
+    for stage in config.get("tradeoff", {}).get("stages", []):
+        targets += [f"{RESULTS}/tradeoff/{stage}.nc", f"{RESULTS}/figures/pareto_{stage}.png"]
     for fig in config.get("figures", []):
         if fig == "packing":
             targets += [f"{RESULTS}/figures/packing_{s}{variants()[-1]}.png" for s in samples()]

@@ -1,0 +1,42 @@
+# Speed against accuracy: one sweep per stage (jamflow tradeoff) and its Pareto plot.
+
+
+rule tradeoff:
+    output:
+        f"{RESULTS}/tradeoff/{{stage}}.nc",
+    log:
+        f"{LOGS}/tradeoff/{{stage}}.log",
+    benchmark:
+        f"{BENCH}/tradeoff/{{stage}}.tsv"
+    wildcard_constraints:
+        stage="[a-z]+",
+    params:
+        quick=lambda wildcards: "--quick" if opt("tradeoff", "quick") else "",
+        seed=lambda wildcards: opt("tradeoff", "seed"),
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow tradeoff {wildcards.stage} {output} {params.quick} --seed {params.seed} > {log} 2>&1"
+
+
+rule plot_pareto:
+    input:
+        f"{RESULTS}/tradeoff/{{stage}}.nc",
+    output:
+        png=report(
+            f"{RESULTS}/figures/pareto_{{stage}}.png",
+            caption="../report/pareto.rst",
+            category="Speed versus accuracy",
+            subcategory="{stage}",
+        ),
+        pdf=f"{RESULTS}/figures/pareto_{{stage}}.pdf",
+    log:
+        f"{LOGS}/figures/pareto_{{stage}}.log",
+    benchmark:
+        f"{BENCH}/figures/pareto_{{stage}}.tsv"
+    wildcard_constraints:
+        stage="[a-z]+",
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow plot pareto {input} {output.png} > {log} 2>&1"
