@@ -1,0 +1,86 @@
+"""Subcommand ``ls``: Lubachevsky–Stillinger compression to one or several pressures."""
+
+from __future__ import annotations
+
+import argparse
+
+from tqdm import tqdm
+
+from ..io import read_packing, write_dataset, write_packing
+from ..ls import DEFAULT_BETA, DEFAULT_FAST_GROWTH_RATE, DEFAULT_FAST_UNTIL, compress
+from .common import add_command, add_quiet, stage_parameters
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = add_command(
+        sub, "ls", _ls,
+        "Lubachevsky-Stillinger compression (event-driven hard spheres with growing diameters)",
+        description="Compress a hard-sphere packing by event-driven molecular dynamics with "
+                    "diameters growing at rate --growth-rate (CALiPPSO paper Sec. III, App. C): "
+                    "first at --fast-growth-rate until p = --fast-until, then at --growth-rate up "
+                    "to each --p-target in turn. One sample, several targets: give one output "
+                    "file per pressure target, in the order of the targets (OUT1 for P1, OUT2 for "
+                    "P2, ...); with --phi-target and no pressure target give one output for the "
+                    "state at that packing fraction.",
+    )
+    p.add_argument("packing", help="input netCDF packing (orthogonal periodic box, no overlaps)")
+    p.add_argument("out", nargs="+",
+                   help="output netCDF packings: one per --p-target, in the same order "
+                        "(or one for --phi-target alone)")
+    p.add_argument("--growth-rate", type=float, required=True,
+                   help="slow growth rate kappa of the mean diameter [input length per time unit, "
+                        "mass 1, k_B T = 1/beta], e.g. 1e-4")
+    p.add_argument("--p-target", type=float, nargs="+", default=[],
+                   help="strictly increasing reduced pressures beta P V / N; a snapshot is written "
+                        "when each is first reached")
+    p.add_argument("--phi-target", type=float, default=None, help="stop at this packing fraction")
+    p.add_argument("--max-collisions", type=int, default=None, help="collision budget")
+    p.add_argument("--max-time", type=float, default=None, help="simulated-time budget")
+    p.add_argument("--fast-growth-rate", type=float, default=DEFAULT_FAST_GROWTH_RATE,
+                   help=f"growth rate of the fast first stage (default {DEFAULT_FAST_GROWTH_RATE:g}; "
+                        "0 skips the stage, as the paper does in d >= 4)")
+    p.add_argument("--fast-until", type=float, default=DEFAULT_FAST_UNTIL,
+                   help=f"reduced pressure ending the fast stage (default {DEFAULT_FAST_UNTIL:g})")
+    p.add_argument("--beta", type=float, default=DEFAULT_BETA,
+                   help=f"inverse temperature set at every velocity rescaling (default {DEFAULT_BETA:g})")
+    p.add_argument("--seed", type=int, default=0, help="seed of the initial velocities (default 0)")
+    p.add_argument("--eos", default=None, help="also write the equation of state (p vs phi) as netCDF")
+    add_quiet(p)
+
+
+def _ls(args: argparse.Namespace) -> int:
+    expected = len(args.p_target) if args.p_target else (1 if args.phi_target is not None else 0)
+    if expected == 0:
+        raise ValueError("give --p-target P [P ...] (one output each) or --phi-target")
+    if len(args.out) != expected:
+        raise ValueError(f"{len(args.out)} output file(s) for {expected} target(s): give one output per "
+                         "--p-target, in the order of the targets")
+    packing = read_packing(args.packing)
+    params = stage_parameters(args, "packing", "out", "eos")
+    with tqdm(desc="LS", unit="coll", unit_scale=True, disable=args.quiet) as bar:
+        def progress(info: dict[str, float]) -> None:
+            bar.update(int(info["collisions"]) - bar.n)
+            bar.set_postfix(p=f"{info['p']:.3g}", phi=f"{info['phi']:.6f}", refresh=False)
+
+        result = compress(
+            packing, args.growth_rate, args.p_target,
+            phi_target=args.phi_target, max_collisions=args.max_collisions, max_time=args.max_time,
+            beta=args.beta, fast_growth_rate=args.fast_growth_rate or None,
+            fast_until=args.fast_until, seed=args.seed, progress=progress,
+        )
+    kind = "p" if args.p_target else "phi"
+    snapshots = [s for s in result.snapshots if s.attrs["target_kind"] == kind]
+    for snap, path in zip(snapshots, args.out, strict=False):
+        write_packing(snap, path, params)
+    if args.eos is not None:
+        write_dataset(result.eos, args.eos)
+    if len(snapshots) < expected:
+        missing = args.out[len(snapshots):]
+        raise RuntimeError(f"stopped by {result.stop_reason} before reaching every target; "
+                           f"not written: {', '.join(missing)}")
+    if not args.quiet:
+        for snap, path in zip(snapshots, args.out, strict=True):
+            print(f"{path}: p = {snap.pressure:.6g}, phi = {snap.packing_fraction:.8f}, "
+                  f"collisions = {snap.attrs['collisions']}")
+        print(f"{result.collisions} collisions, {result.collisions_per_second:.3g} per CPU-second")
+    return 0

@@ -1,0 +1,552 @@
+"""Lubachevsky–Stillinger (LS) compression: event-driven hard spheres with growing diameters.
+
+CALiPPSO paper (Artiaco et al.), Sec. III and Appendix C: hard spheres move ballistically
+and collide elastically while every diameter grows linearly in time; the velocities are
+rescaled to the temperature ``1/beta`` at regular intervals and the reduced pressure
+``p = beta P V / N`` is measured from the collision virial. The run stops when ``p``
+reaches each target of an increasing list (one snapshot per target from the *same*
+sample), a packing fraction, or a budget of collisions or time. The paper's two-stage
+protocol is a fast growth ``kappa0 = 5e-3`` until ``p = 500`` followed by the slow rate
+``kappa`` up to the targets.
+
+Units
+-----
+Lengths are those of the input packing (the side of the unit box for packings from
+:func:`jamflow.initial.random_packing` and the CALiPPSO/LS data, as in the paper's
+LS code), masses are 1 and ``k_B T = 1 / beta``; the time unit follows.
+
+Growth law
+----------
+``sigma_i(t) = a_i s(t)`` with ``a_i = D_i / <D>`` the diameters of the input relative
+to their mean and ``s(t) = <D>(t)`` growing linearly, ``ds/dt = kappa``: the mean
+diameter grows at the paper's uniform rate ``sigma_dot = kappa`` (exactly the paper's law
+for monodisperse systems). Polydisperse diameters grow *proportionally*
+(``sigma_dot_i = kappa a_i``), as in the LS code of Skoge et al. used by the paper,
+so the size distribution (e.g. the ratio 1:1.4 of a binary mixture) is preserved and
+the packing fraction is ``phi(t) = phi(0) (s(t) / s(0))^d``.
+
+Dynamics
+--------
+Exact collision times of growing spheres: ``|r + u t|^2 = (sigma + g t)^2`` with
+``g = (a_i + a_j) kappa / 2`` is solved in cancellation-free form (see
+:func:`jamflow._ls_kernels.collision_time`). At contact the impulse ``J = g - u_n``
+along the unit vector ``n`` reverses the rate of change of the gap,
+``u_n - g -> -(u_n - g)`` (``u_n`` the normal relative velocity): the pair separates
+faster than it grows, the kinetic energy rises by ``J g``, and momentum is conserved.
+Events use cell lists (cells at least one largest diameter wide, rebuilt when the
+diameters outgrow them), per-particle predictions with collision counters to discard
+outdated ones, and a binary tournament tree; positions are updated lazily.
+
+Pressure
+--------
+Over a measuring window of ``window`` collisions (default ``WINDOW_COLLISIONS_PER_PARTICLE
+N``) lasting ``Delta t``, the virial theorem gives
+
+    p = beta P V / N = 1 + sum_c r_c J_c / (2 int K dt)
+
+with ``J_c`` the impulse and ``r_c`` the centre distance of collision ``c`` (growth part
+of the impulse included) and ``K`` the kinetic energy, i.e. ``k_B T`` is the kinetic
+temperature ``2 K / (d N)`` time-averaged over the window. At the end of each window the
+velocities are rescaled to ``K = d N / (2 beta)`` and the record (time, mid-window
+packing fraction, p, collisions) is appended to the equation of state.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from itertools import pairwise
+from typing import Any
+
+import numpy as np
+import xarray as xr
+from numpy.typing import NDArray
+
+from . import _ls_kernels as _k
+from .io import new_dataset_attrs
+from .packing import Packing, sphere_volume
+from .tolerances import OVERLAP_TOL
+
+__all__ = [
+    "CELL_SLACK",
+    "CRYSTAL_FRACTION_THRESHOLD",
+    "DEFAULT_BETA",
+    "DEFAULT_FAST_GROWTH_RATE",
+    "DEFAULT_FAST_UNTIL",
+    "PSI6_CRYSTAL_THRESHOLD",
+    "WINDOW_COLLISIONS_PER_PARTICLE",
+    "LSResult",
+    "carnahan_starling",
+    "compress",
+    "crystal_fraction",
+    "fit_jamming_density",
+]
+
+#: Inverse temperature of the paper's LS runs.
+DEFAULT_BETA: float = 10.0
+#: Growth rate of the fast first stage (paper, Sec. III step 2).
+DEFAULT_FAST_GROWTH_RATE: float = 5e-3
+#: Reduced pressure ending the fast stage (paper, Sec. III step 2).
+DEFAULT_FAST_UNTIL: float = 500.0
+#: Collisions per particle in one pressure window (and between velocity rescalings).
+WINDOW_COLLISIONS_PER_PARTICLE: int = 10
+#: Cells are built this factor wider than the largest diameter, so that the grid is
+#: rebuilt only after the diameters have grown by this factor.
+CELL_SLACK: float = 1.02
+#: Fraction of ten Wolde–Frenkel crystal-like particles above which a 3D packing counts
+#: as crystallised. Random close packed and glassy monodisperse spheres have a few
+#: per cent at most; a crystallised LS run has a large fraction.
+CRYSTAL_FRACTION_THRESHOLD: float = 0.2
+#: 2D: a particle is crystal-like (locally hexagonal) when its local ``|psi6|`` exceeds this.
+PSI6_CRYSTAL_THRESHOLD: float = 0.7
+
+
+@dataclass
+class LSResult:
+    """Outcome of :func:`compress`.
+
+    Attributes
+    ----------
+    snapshots : list of Packing
+        One per reached pressure target, in the order of the targets, then one at the
+        packing-fraction target if the run stopped there. Any stop ends the run: all
+        pressure targets reached, ``phi_target``, ``max_collisions`` or ``max_time``.
+        Each has ``pressure`` set and attrs ``p, phi, kappa, collisions, time,
+        cpu_time``, ``target_kind`` (``"p"`` or ``"phi"``) and ``target``; protocol
+        ``<input>>ls``.
+    eos : xarray.Dataset
+        Equation of state along the run, dim ``record`` (one per window): ``time``,
+        ``packing_fraction``, ``pressure``, ``collisions``, ``growth_rate``,
+        ``temperature`` (kinetic, before rescaling).
+    final : Packing
+        State at the end of the run.
+    stop_reason : str
+        ``"p_targets"``, ``"phi_target"``, ``"max_collisions"`` or ``"max_time"``.
+    collisions : int
+    cpu_time : float
+        Process CPU time of the run [s].
+    collisions_per_second : float
+        Collisions per CPU-second.
+    """
+
+    snapshots: list[Packing]
+    eos: xr.Dataset
+    final: Packing
+    stop_reason: str
+    collisions: int
+    cpu_time: float
+    collisions_per_second: float
+
+
+class _State:
+    """Arrays of the event-driven simulation (see :mod:`jamflow._ls_kernels`)."""
+
+    def __init__(self, packing: Packing, beta: float, rng: np.random.Generator) -> None:
+        n, d = packing.n, packing.d
+        self.n, self.d = n, d
+        self.L = packing.box.lengths
+        self.invL = 1.0 / self.L
+        self.x = packing.box.wrap(packing.position)
+        mean_D = float(packing.diameter.mean())
+        self.a = packing.diameter / mean_D
+        self.phi_unit = float(sphere_volume(d, self.a).sum() / packing.box.volume)
+        v = rng.standard_normal((n, d))
+        v -= v.mean(axis=0)
+        self.v = v
+        self.K_target = 0.5 * d * n / beta
+        self.v *= math.sqrt(self.K_target / _k.kinetic_energy(self.v))
+        self.tl = np.zeros(n)
+        # [t, s_w, rate, K, Kint, virial]
+        self.sc = np.array([0.0, mean_D, 0.0, _k.kinetic_energy(self.v), 0.0, 0.0])
+        self.count = np.zeros(n, dtype=np.int64)
+        self.coll_time = np.empty(n)
+        self.coll_partner = np.empty(n, dtype=np.int64)
+        self.coll_pcount = np.zeros(n, dtype=np.int64)
+        self.cross_time = np.empty(n)
+        self.cross_dim = np.empty(n, dtype=np.int64)
+        self.ev_time = np.empty(n + 1)
+        self.M = 1 << max(1, (n - 1).bit_length())
+        self.tree = np.empty(2 * self.M, dtype=np.int64)
+        self.cc = np.empty((n, d), dtype=np.int64)
+        self.cell = np.empty(n, dtype=np.int64)
+        self.nxt = np.empty(n, dtype=np.int64)
+        self.prv = np.empty(n, dtype=np.int64)
+        self.t_rebuild = math.inf
+        self.window_coll = 0
+
+    # scale and packing fraction --------------------------------------------------
+    @property
+    def t(self) -> float:
+        return float(self.sc[0])
+
+    def scale(self, t: float | None = None) -> float:
+        """Mean diameter s at window time t (default: now)."""
+        t = self.t if t is None else t
+        return float(self.sc[1] + self.sc[2] * t)
+
+    def phi(self, t: float | None = None) -> float:
+        return self.phi_unit * self.scale(t) ** self.d
+
+    # cells and events --------------------------------------------------------------
+    def rebuild(self) -> None:
+        """Sync positions, wrap them, size the cell grid for the current diameters."""
+        _k.sync_all(self.sc[0], self.x, self.v, self.tl)
+        self.x -= self.L * np.floor(self.x * self.invL)
+        self.x[self.x >= self.L] = 0.0
+        sig_max = float(self.a.max()) * self.scale()
+        ncell = np.maximum(np.floor(self.L / (sig_max * CELL_SLACK)).astype(np.int64), 1)
+        self.ncell = ncell
+        self.w = self.L / ncell
+        self.stride = np.cumprod(np.concatenate([[1], ncell[:-1]])).astype(np.int64)
+        self.head = np.empty(int(np.prod(ncell)), dtype=np.int64)
+        per_axis = [np.array([-1, 0, 1]) if m >= 3 else np.arange(m) for m in ncell]
+        grids = np.meshgrid(*per_axis, indexing="ij")
+        self.offs = np.stack([g.ravel() for g in grids], axis=1).astype(np.int64)
+        _k.build_cells(self.x, self.L, self.ncell, self.cc, self.cell, self.stride,
+                       self.head, self.nxt, self.prv)
+        constrained = ncell >= 3
+        if np.any(constrained) and self.sc[2] > 0.0:
+            w_min = float(self.w[constrained].min())
+            self.t_rebuild = self.t + (w_min / float(self.a.max()) - self.scale()) / self.sc[2]
+        else:
+            self.t_rebuild = math.inf
+        self.predict()
+
+    def predict(self) -> None:
+        _k.init_events(self.sc[0], self.x, self.v, self.tl, self.a, self.L, self.invL, self.w,
+                       self.scale(), self.sc[2], self.cc, self.ncell, self.stride, self.offs,
+                       self.head, self.nxt, self.count, self.coll_time, self.coll_partner,
+                       self.coll_pcount, self.cross_time, self.cross_dim, self.ev_time,
+                       self.tree, self.M)
+
+    def run(self, max_coll: int, t_limit: float) -> tuple[int, int]:
+        return _k.run_events(max_coll, t_limit, self.sc, self.x, self.v, self.tl, self.a, self.L,
+                             self.invL, self.w, self.cc, self.cell, self.ncell, self.stride,
+                             self.offs, self.head, self.nxt, self.prv, self.count, self.coll_time,
+                             self.coll_partner, self.coll_pcount, self.cross_time, self.cross_dim,
+                             self.ev_time, self.tree, self.M)
+
+    def set_rate(self, rate: float) -> None:
+        self.sc[2] = rate
+        self.rebuild()
+
+    def new_window(self, rescale: bool) -> None:
+        """Sync everything, restart the window clock at 0, rescale velocities."""
+        t = self.t
+        _k.sync_all(t, self.x, self.v, self.tl)
+        self.sc[1] = self.scale(t)
+        self.tl[:] = 0.0
+        self.sc[0] = 0.0
+        self.t_rebuild -= t
+        if rescale:
+            self.v *= math.sqrt(self.K_target / self.sc[3])
+            self.sc[3] = _k.kinetic_energy(self.v)
+        self.sc[4] = 0.0
+        self.sc[5] = 0.0
+        self.predict()
+
+    def packing(self, template: Packing, **attrs: Any) -> Packing:
+        """The current configuration as a packing (centres wrapped into the box)."""
+        dt = self.t - self.tl
+        x = self.x + self.v * dt[:, None]
+        x -= self.L * np.floor(x * self.invL)
+        x[x >= self.L] = 0.0
+        return Packing(
+            position=x,
+            diameter=self.a * self.scale(),
+            box=template.box,
+            pressure=attrs.get("p"),
+            protocol=f"{template.protocol}>ls",
+            seed=attrs.get("seed", template.seed),
+            parameters=attrs.pop("parameters", {}),
+            attrs={k: v for k, v in attrs.items() if k != "seed"},
+        )
+
+
+def _check_inputs(packing: Packing, growth_rate: float, p_targets: Sequence[float],
+                  phi_target: float | None, max_collisions: int | None, max_time: float | None,
+                  beta: float, fast_growth_rate: float | None, fast_until: float) -> list[float]:
+    if packing.d < 2:
+        raise ValueError(f"LS needs d >= 2, got d={packing.d}")
+    if not packing.box.is_orthogonal:
+        raise ValueError("LS runs in orthogonal periodic boxes only; the input box is sheared "
+                         f"(strain {packing.box.shear_strain:g})")
+    if not (math.isfinite(growth_rate) and growth_rate >= 0.0):
+        raise ValueError(f"growth rate kappa must be finite and >= 0, got {growth_rate}")
+    if fast_growth_rate is not None and not (math.isfinite(fast_growth_rate) and fast_growth_rate >= 0.0):
+        raise ValueError(f"fast growth rate must be finite and >= 0 (or None to skip), got {fast_growth_rate}")
+    if not (math.isfinite(beta) and beta > 0.0):
+        raise ValueError(f"beta must be positive and finite, got {beta}")
+    if not (math.isfinite(fast_until) and fast_until > 0.0):
+        raise ValueError(f"fast_until must be positive, got {fast_until}")
+    targets = [float(p) for p in p_targets]
+    if any(not (math.isfinite(p) and p > 0.0) for p in targets):
+        raise ValueError(f"pressure targets must be positive and finite, got {targets}")
+    if any(b <= a for a, b in pairwise(targets)):
+        raise ValueError(f"pressure targets must be strictly increasing, got {targets}")
+    if phi_target is not None:
+        if not 0.0 < phi_target < 1.0:
+            raise ValueError(f"phi_target must lie in (0, 1), got {phi_target}")
+        if phi_target <= packing.packing_fraction:
+            raise ValueError(f"phi_target {phi_target} is not above the input packing fraction "
+                             f"{packing.packing_fraction:.6g}")
+    if max_collisions is not None and max_collisions < 1:
+        raise ValueError(f"max_collisions must be >= 1, got {max_collisions}")
+    if max_time is not None and not max_time > 0.0:
+        raise ValueError(f"max_time must be > 0, got {max_time}")
+    if not targets and phi_target is None and max_collisions is None and max_time is None:
+        raise ValueError("give at least one stop: p_targets, phi_target, max_collisions or max_time")
+    if growth_rate == 0.0 and max_collisions is None and max_time is None:
+        raise ValueError("with growth rate 0 the pressure and density never rise: give max_collisions or max_time")
+    try:
+        packing.validate(OVERLAP_TOL)
+    except ValueError as exc:
+        raise ValueError(f"LS input: {exc}") from exc
+    return targets
+
+
+def compress(
+    packing: Packing,
+    growth_rate: float,
+    p_targets: Sequence[float] = (),
+    *,
+    phi_target: float | None = None,
+    max_collisions: int | None = None,
+    max_time: float | None = None,
+    beta: float = DEFAULT_BETA,
+    fast_growth_rate: float | None = DEFAULT_FAST_GROWTH_RATE,
+    fast_until: float = DEFAULT_FAST_UNTIL,
+    seed: int = 0,
+    progress: Callable[[dict[str, float]], None] | None = None,
+    window: int | None = None,
+) -> LSResult:
+    """Compress a hard-sphere packing by LS event-driven dynamics with growing spheres.
+
+    Parameters
+    ----------
+    packing : Packing
+        Non-overlapping start (relative overlaps up to ``OVERLAP_TOL``) in an orthogonal
+        periodic box, any dimension >= 2, any diameters.
+    growth_rate : float
+        Slow growth rate ``kappa`` of the mean diameter [length/time] (see the module
+        docstring for units); 0 runs plain hard-sphere dynamics.
+    p_targets : sequence of float
+        Strictly increasing reduced pressures; a snapshot is taken at the end of the
+        first window whose pressure is ``>= target``.
+    phi_target : float, optional
+        Stop (with a snapshot) when the packing fraction reaches this value (exactly).
+    max_collisions : int, optional
+        Stop after this many collisions (checked at window ends).
+    max_time : float, optional
+        Stop at this simulated time [time unit].
+    beta : float
+        Inverse temperature ``1 / k_B T`` set at every rescaling.
+    fast_growth_rate : float or None
+        Growth rate of the first stage, run until ``p >= fast_until``; ``None`` or 0
+        skips it (paper: skippable in d >= 4).
+    fast_until : float
+        Reduced pressure ending the fast stage.
+    seed : int
+        Seed of the initial Maxwell–Boltzmann velocities.
+    progress : callable, optional
+        Called after every window with a dict ``collisions, time, phi, p, kappa``.
+    window : int, optional
+        Collisions per pressure window; default ``WINDOW_COLLISIONS_PER_PARTICLE * N``.
+
+    Returns
+    -------
+    LSResult
+    """
+    targets = _check_inputs(packing, growth_rate, p_targets, phi_target, max_collisions, max_time,
+                            beta, fast_growth_rate, fast_until)
+    n, d = packing.n, packing.d
+    window = WINDOW_COLLISIONS_PER_PARTICLE * n if window is None else int(window)
+    if window < 1:
+        raise ValueError(f"window must be >= 1 collision, got {window}")
+    parameters = {
+        "growth_rate": growth_rate, "p_targets": targets, "phi_target": phi_target,
+        "max_collisions": max_collisions, "max_time": max_time, "beta": beta,
+        "fast_growth_rate": fast_growth_rate, "fast_until": fast_until, "seed": seed,
+        "window": window, "growth_law": "proportional: sigma_i = a_i s(t), ds/dt = kappa (mean diameter)",
+    }
+    state = _State(packing, beta, np.random.default_rng(seed))
+    fast = fast_growth_rate is not None and fast_growth_rate > 0.0
+    rate = fast_growth_rate if fast else growth_rate
+    state.sc[2] = rate
+    state.rebuild()
+
+    cpu0 = time.process_time()
+    elapsed = 0.0  # simulated time before the current window
+    collisions = 0
+    records: dict[str, list[float]] = {k: [] for k in
+                                       ("time", "packing_fraction", "pressure", "collisions",
+                                        "growth_rate", "temperature")}
+    snapshots: list[Packing] = []
+    next_target = 0
+    stop_reason = ""
+    last_p = math.nan
+
+    def snapshot(p: float, kind: str, target: float) -> Packing:
+        snap = state.packing(
+            packing, p=p, phi=state.phi(), kappa=float(state.sc[2]), collisions=collisions,
+            target_kind=kind, target=target,
+            time=elapsed + state.t, cpu_time=time.process_time() - cpu0,
+            parameters=parameters,
+        )
+        snap.validate(OVERLAP_TOL)
+        return snap
+
+    while True:
+        t_limit = state.t_rebuild
+        limit_kind = "rebuild"
+        if max_time is not None and max_time - elapsed < t_limit:
+            t_limit, limit_kind = max_time - elapsed, "max_time"
+        if phi_target is not None and state.sc[2] > 0.0:
+            t_phi = ((phi_target / state.phi_unit) ** (1.0 / d) - state.sc[1]) / state.sc[2]
+            if t_phi < t_limit:
+                t_limit, limit_kind = t_phi, "phi_target"
+        todo = window - state.window_coll
+        status, ncoll = state.run(todo, t_limit)
+        collisions += ncoll
+        state.window_coll += ncoll
+        if status == _k.TIME_LIMIT and limit_kind == "rebuild":
+            state.rebuild()
+            continue
+        dt = state.t
+        if dt > 0.0 and state.sc[4] > 0.0 and state.window_coll > 0:
+            p = 1.0 + state.sc[5] / (2.0 * state.sc[4])
+            temperature = 2.0 * state.sc[4] / dt / (d * n)
+            records["time"].append(elapsed + 0.5 * dt)
+            records["packing_fraction"].append(state.phi(0.5 * dt))
+            records["pressure"].append(p)
+            records["collisions"].append(collisions)
+            records["growth_rate"].append(float(state.sc[2]))
+            records["temperature"].append(temperature)
+            last_p = p
+        else:
+            p = math.nan
+        if progress is not None:
+            progress({"collisions": collisions, "time": elapsed + dt, "phi": state.phi(),
+                      "p": last_p, "kappa": float(state.sc[2])})
+        while next_target < len(targets) and p >= targets[next_target]:
+            snapshots.append(snapshot(p, "p", targets[next_target]))
+            next_target += 1
+        if targets and next_target == len(targets):
+            stop_reason = "p_targets"
+        elif status == _k.TIME_LIMIT and limit_kind == "phi_target":
+            snapshots.append(snapshot(last_p, "phi", float(phi_target)))
+            stop_reason = "phi_target"
+        elif status == _k.TIME_LIMIT and limit_kind == "max_time":
+            stop_reason = "max_time"
+        elif max_collisions is not None and collisions >= max_collisions:
+            stop_reason = "max_collisions"
+        if stop_reason:
+            break
+        switch = fast and state.sc[2] == fast_growth_rate and p >= fast_until
+        elapsed += state.t
+        state.window_coll = 0
+        state.new_window(rescale=True)
+        if switch:
+            state.set_rate(growth_rate)
+
+    cpu = time.process_time() - cpu0
+    final = state.packing(packing, p=last_p, phi=state.phi(), kappa=float(state.sc[2]),
+                          collisions=collisions, time=elapsed + state.t, cpu_time=cpu,
+                          parameters=parameters)
+    eos = xr.Dataset(
+        {
+            "time": ("record", np.array(records["time"]),
+                     {"units": "1", "long_name": "simulated time at the middle of the window",
+                      "comment": "unit: length unit * sqrt(mass / (k_B T)) with mass 1, k_B T = 1/beta"}),
+            "packing_fraction": ("record", np.array(records["packing_fraction"]),
+                                 {"units": "1", "long_name": "packing fraction at the middle of the window"}),
+            "pressure": ("record", np.array(records["pressure"]),
+                         {"units": "1", "long_name": "reduced pressure beta P V / N from the collision virial"}),
+            "collisions": ("record", np.array(records["collisions"], dtype=np.int64),
+                           {"units": "1", "long_name": "collisions since the start at the end of the window"}),
+            "growth_rate": ("record", np.array(records["growth_rate"]),
+                            {"units": "1", "long_name": "growth rate kappa of the mean diameter"}),
+            "temperature": ("record", np.array(records["temperature"]),
+                            {"units": "1", "long_name": "time-averaged kinetic temperature 2K/(dN) before rescaling"}),
+        },
+        attrs=new_dataset_attrs(
+            "LS equation of state", parameters, N=n, d=d, beta=beta, stop_reason=stop_reason,
+            collisions=collisions, cpu_time=cpu,
+            collisions_per_second=collisions / cpu if cpu > 0 else math.nan,
+        ),
+    )
+    return LSResult(
+        snapshots=snapshots, eos=eos, final=final, stop_reason=stop_reason, collisions=collisions,
+        cpu_time=cpu, collisions_per_second=collisions / cpu if cpu > 0 else math.nan,
+    )
+
+
+def carnahan_starling(phi: NDArray[np.float64] | float) -> NDArray[np.float64]:
+    """Carnahan–Starling reduced pressure of the 3D hard-sphere liquid,
+    ``(1 + phi + phi^2 - phi^3) / (1 - phi)^3``."""
+    phi = np.asarray(phi, dtype=np.float64)
+    return (1.0 + phi + phi**2 - phi**3) / (1.0 - phi) ** 3
+
+
+def fit_jamming_density(phi: NDArray[np.float64], p: NDArray[np.float64], d: int,
+                        p_min: float = 1e3) -> tuple[float, float]:
+    """Fit the glass equation of state ``p = d / (1 - phi / phi_J)`` (paper Eq. 15).
+
+    Eq. 15 is linear in ``1/p``: ``d / p = c0 + c1 phi`` with ``c0 = 1`` and
+    ``c1 = -1 / phi_J``. The line is fitted to the records with ``p >= p_min`` (the glass
+    branch) by weighted least squares with weights ``p`` (each window measures ``p``
+    with a similar *relative* error, so the error of ``d / p`` scales as ``1 / p``); the
+    intercept is left free, so deviations from Eq. 15 do not bias ``phi_J = -c0 / c1``,
+    the zero of ``1/p``. The error is the standard error propagated from the fit
+    covariance (residual-scaled).
+
+    Parameters
+    ----------
+    phi, p : ndarray, shape (R,)
+        Packing fractions and reduced pressures of the equation of state.
+    d : int
+        Dimension.
+    p_min : float
+        Smallest pressure used.
+
+    Returns
+    -------
+    phi_J, phi_J_err : float
+    """
+    phi = np.asarray(phi, dtype=np.float64)
+    p = np.asarray(p, dtype=np.float64)
+    keep = np.isfinite(phi) & np.isfinite(p) & (p >= p_min)
+    if keep.sum() < 3:
+        raise ValueError(f"need at least 3 records with p >= {p_min:g} to fit Eq. 15, got {int(keep.sum())}")
+    wts = p[keep]
+    y = d / p[keep] * wts
+    X = np.stack([np.ones(keep.sum()), phi[keep]], axis=1) * wts[:, None]
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    resid = y - X @ coef
+    dof = max(1, len(y) - 2)
+    cov = np.linalg.inv(X.T @ X) * float(resid @ resid) / dof
+    c0, c1 = coef
+    if c1 >= 0.0:
+        raise ValueError("1/p does not decrease with phi on the selected records: not a glass branch")
+    phi_J = -c0 / c1
+    grad = np.array([-1.0 / c1, c0 / c1**2])
+    return float(phi_J), float(np.sqrt(grad @ cov @ grad))
+
+
+def crystal_fraction(packing: Packing) -> float:
+    """Crystallisation indicator: fraction of crystal-like particles.
+
+    3D: ten Wolde–Frenkel crystal-like particles from q6 over 12 neighbours
+    (:func:`jamflow.analysis.structure.crystal_like`); 2D: fraction of particles with
+    local ``|psi6| > PSI6_CRYSTAL_THRESHOLD`` (:func:`jamflow.analysis.structure.hexatic_order`). A packing
+    counts as crystallised above :data:`CRYSTAL_FRACTION_THRESHOLD`.
+    """
+    from .analysis.structure import crystal_like, hexatic_order
+
+    if packing.d == 3:
+        return float(np.mean(crystal_like(packing)[0]))
+    if packing.d == 2:
+        return float(np.mean(np.abs(hexatic_order(packing)) > PSI6_CRYSTAL_THRESHOLD))
+    raise ValueError(f"crystal fraction is defined for d = 2, 3, got d={packing.d}")
