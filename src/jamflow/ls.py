@@ -520,18 +520,23 @@ def fit_jamming_density(phi: NDArray[np.float64], p: NDArray[np.float64], d: int
     keep = np.isfinite(phi) & np.isfinite(p) & (p >= p_min)
     if keep.sum() < 3:
         raise ValueError(f"need at least 3 records with p >= {p_min:g} to fit Eq. 15, got {int(keep.sum())}")
-    wts = p[keep]
-    y = d / p[keep] * wts
-    X = np.stack([np.ones(keep.sum()), phi[keep]], axis=1) * wts[:, None]
+    # weights relative to the largest pressure and phi centred and scaled, so that the
+    # normal matrix stays well conditioned for records spanning p = 1e3 ... 1e12
+    wts = p[keep] / p[keep].max()
+    mean_phi = float(phi[keep].mean())
+    scale_phi = float(phi[keep].std()) or 1.0
+    z = (phi[keep] - mean_phi) / scale_phi
+    X = np.stack([wts, wts * z], axis=1)
+    y = wts * d / p[keep]
     coef, *_ = np.linalg.lstsq(X, y, rcond=None)
     resid = y - X @ coef
     dof = max(1, len(y) - 2)
-    cov = np.linalg.inv(X.T @ X) * float(resid @ resid) / dof
-    c0, c1 = coef
-    if c1 >= 0.0:
+    cov = np.linalg.pinv(X.T @ X) * float(resid @ resid) / dof
+    b0, b1 = coef
+    if b1 >= 0.0:
         raise ValueError("1/p does not decrease with phi on the selected records: not a glass branch")
-    phi_J = -c0 / c1
-    grad = np.array([-1.0 / c1, c0 / c1**2])
+    phi_J = mean_phi - scale_phi * b0 / b1
+    grad = np.array([-scale_phi / b1, scale_phi * b0 / b1**2])
     return float(phi_J), float(np.sqrt(grad @ cov @ grad))
 
 
