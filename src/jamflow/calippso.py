@@ -1,0 +1,891 @@
+"""CALiPPSO: jam hard spheres exactly by a chain of linear programs.
+
+Implements Algorithm 1 of Artiaco, Díaz Hernández Rojas, Parisi and Ricci-Tersenghi,
+Phys. Rev. E 106, 055310 (2022) (Sec. II, III, IV, App. A), with HiGHS via
+``highspy``, for mono-, bi- and polydisperse spheres in d >= 2, in a periodic box or
+between hard walls on the faces of an orthogonal box.
+
+The LP (paper Eq. 2)
+--------------------
+Each LP maximises the inflation factor ``Gamma`` over displacements ``s`` subject
+to the linearised non-overlap constraint of every pair closer than the cutoff ``ell``::
+
+    F_ij = -2 r_ij . (s_i - s_j) + Gamma sigma_ij^2 - |r_ij|^2 <= 0,   r_ij = r_i - r_j.
+
+``G_ij = F_ij - |s_ij|^2`` is the exact constraint, so an LP solution never creates
+an overlap among listed pairs. Rows are built as whole arrays (one CSC matrix, no
+per-row Python loop) in a well-scaled form: every row is divided by
+``sigma_ij^2``, displacements are measured in mean diameters (``u = s / <D>``) and
+the variable is ``g = Gamma - 1`` so that the right-hand side is the small number
+``(|r_ij|^2 - sigma_ij^2) / sigma_ij^2`` (about twice the relative gap) instead of
+``|r_ij|^2``, whose leading digits would cancel against ``Gamma sigma^2``::
+
+    2 <D> / sigma_ij^2 (x_j - x_i) . (u_i - u_j) + g <= (|r_ij|^2 - sigma_ij^2) / sigma_ij^2.
+
+``g >= -1`` (``Gamma >= 0``, not ``>= 1``: a round-off overlap of 1e-13 must not make
+the LP infeasible). In a periodic box the global translation is removed by fixing
+the displacement of one *anchor* particle (the particle with most contacts in the
+previous LP, initially the one with most neighbours); every reported displacement is
+taken relative to the mean displacement of the stable particles, so the choice of
+anchor changes no reported number. With ``walls=True`` the box faces are hard walls
+(paper text after Eq. 1): for a particle at distance ``a = x_{i,mu}`` from the lower
+face the exact constraint ``Gamma sigma_i^2 / 4 <= (a + s_{i,mu})^2`` is linearised in
+the same conservative way, ``-2 a s_{i,mu} + Gamma sigma_i^2 / 4 - a^2 <= 0`` (and
+likewise for the upper face with ``L_mu - x_{i,mu}``); walls remove the translation
+symmetry, so no particle is fixed.
+
+Duals, contacts and forces
+--------------------------
+The row duals ``mu_k >= 0`` of the scaled rows are ``mu = lambda sigma_ij^2`` in terms
+of the paper's multipliers, and the dual constraint of the column ``g`` is
+``sum_k mu_k = 1`` (paper Eq. 9). Contacts are rows with
+``mu_k > CONTACT_DUAL_REL_TOL * max(mu)``: a vertex solution (simplex, or interior
+point with crossover) has inactive duals exactly zero and active ones of order
+``1 / N_c`` down to ~1e-4 of that in the tail of the force distribution, so a relative
+threshold of 1e-10 sits orders of magnitude inside the gap; the smallest active and
+largest inactive dual are recorded after every LP. Forces follow paper Eq. 11,
+``f_ij = lambda_ij sigma_ij = mu_k / sigma_ij`` (a wall contact: ``mu_k / (sigma_i/2)``),
+in units of 1/length, normalised by Eq. 9 as ``sum_c f_c sigma_c = 1``.
+
+Iteration
+---------
+``r <- r + s*`` and every diameter ``sigma <- sqrt(Gamma*) sigma`` (the box is kept;
+the packing fraction rises by ``Gamma^(d/2)``), or with the Sec. IV relaxation
+``sigma <- sqrt(1 + c g*) sigma``. The displacement bound and the neighbour cutoff
+follow the reference implementation's schedule (bound ``far`` while
+``sqrt(Gamma*) - 1 > 5e-4``, 0.1 R while ``> 1e-5``, then 0.01 R, R = mean radius),
+with hysteresis: the phase only tightens. Convergence (Algorithm 1, line 15) needs
+``sqrt(Gamma*) - 1 < tol_gamma`` and ``max_i |s_i| < tol_s`` over stable particles
+[mean diameters]. The LP that certifies convergence is always solved without
+displacement bounds (paper Sec. II C: an active bound acts as an external force);
+after it the contact network is checked for isostaticity, force balance and, over
+all pairs, overlaps.
+
+Robustness
+----------
+After each LP: a status other than optimal, an LP with unbounded displacements that
+HiGHS reports unbounded, or an update that creates an overlap beyond
+:data:`~jamflow.tolerances.OVERLAP_TOL` in the all-pairs check is undone and retried
+with a cutoff larger by :data:`CUTOFF_GROWTH` and a bound smaller by
+:data:`BOUND_SHRINK`, up to :data:`MAX_RECOVERIES` times in a row. A converged LP
+whose network is not isostatic (and not the hyperstatic 2D-monodisperse case of
+App. A) or whose dual contacts disagree with the geometry is re-solved with a
+larger cutoff and the dual simplex. When recovery fails a ``RuntimeError`` carries
+the diagnostics; a non-jammed packing is never returned as jammed.
+"""
+
+from __future__ import annotations
+
+import resource
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import highspy
+import numpy as np
+import scipy.sparse as sp
+import xarray as xr
+from numpy.typing import NDArray
+
+from .analysis.contacts import find_rattlers, isostatic_count
+from .packing import Packing, max_overlap, near_pairs
+from .neighbors import pairs_within
+from .tolerances import OVERLAP_TOL
+
+__all__ = [
+    "CalippsoResult",
+    "SOLVERS",
+    "calippso",
+    "result_to_dataset",
+]
+
+#: Solver strategies. ``ipm``: HiGHS interior point with crossover (vertex duals),
+#: cold every LP; ``simplex``: dual simplex, warm-started from the previous basis
+#: whenever the rows are unchanged; ``hybrid``: interior point while
+#: ``sqrt(Gamma*) - 1 > HYBRID_SWITCH``, then warm dual simplex.
+SOLVERS: tuple[str, ...] = ("ipm", "simplex", "hybrid")
+
+#: Default solver, chosen by ``benchmarks/calippso.py``.
+DEFAULT_SOLVER: str = "ipm"
+
+#: Convergence: largest displacement of a stable particle [mean diameters].
+DEFAULT_TOL_S: float = 1e-9
+
+#: Convergence: ``sqrt(Gamma*) - 1`` (relative growth of the diameters in one LP).
+DEFAULT_TOL_GAMMA: float = 1e-12
+
+#: HiGHS primal and dual feasibility tolerance. Rows are relative-gap sized, so a
+#: violation of 1e-9 is a relative overlap of ~5e-10 (below OVERLAP_TOL = 1e-8).
+SOLVER_TOL: float = 1e-10
+
+#: Default neighbour cutoff ``ell`` [current largest diameters]: the reference
+#: implementation's 3.4 R. (The paper's "3.5 sigma" costs ~4x more rows for no
+#: fewer LPs.)
+DEFAULT_CUTOFF: float = 1.7
+
+#: Cutoff in the last bound phase and for unbounded LPs [current largest diameters]:
+#: there displacements are at most ~0.005 diameters, so the first shell (and the
+#: cage of a rattler) suffices; the paper uses 1.4 sigma, the reference 2.7 R.
+DEFAULT_CUTOFF_NEAR: float = 1.4
+
+#: Smallest usable cutoff [largest diameters] (the periodic box must hold it).
+MIN_CUTOFF: float = 1.1
+
+#: Displacement bound schedule: ``(threshold on sqrt(Gamma*) - 1, bound)`` with the
+#: bound in mean radii; the first phase (``far``) bound is derived from the cutoff.
+DEFAULT_BOUND_SCHEDULE: tuple[tuple[float, float], ...] = ((5e-4, 0.1), (1e-5, 0.01))
+
+#: Largest growth of the diameters allowed in one LP far from jamming,
+#: ``sqrt(Gamma) <= FAR_GROWTH``; it fixes the far bound through the cutoff (see
+#: :func:`_far_bound`) so that no pair beyond the cutoff can overlap.
+FAR_GROWTH: float = 1.2
+
+#: Contacts: rows whose dual exceeds this fraction of the largest dual.
+CONTACT_DUAL_REL_TOL: float = 1e-10
+
+#: ``hybrid``: switch from interior point to warm dual simplex below this ``sqrt(Gamma*) - 1``.
+HYBRID_SWITCH: float = 1e-5
+
+#: Rows (the pair list) are reused while every particle moved less than this fraction
+#: of ``ell - sigma_max`` since they were built (lets the simplex warm start).
+REUSE_FRACTION: float = 0.05
+
+#: Recovery: cutoff growth and bound shrink factors per failed LP, and how many
+#: consecutive recoveries are allowed before giving up.
+CUTOFF_GROWTH: float = 1.3
+BOUND_SHRINK: float = 0.25
+MAX_RECOVERIES: int = 4
+
+#: In the last bound phase the next LP is solved without bounds once the stable
+#: particles moved less than this fraction of the bound (the bound is then inactive
+#: for them and only holds rattlers).
+UNBOUND_FRACTION: float = 1e-3
+
+#: Default largest number of LPs.
+DEFAULT_MAX_ITERATIONS: int = 1000
+
+#: A packing counts as jammed-looking in the fixed-point sense when a converged LP
+#: yields ``max|s|`` and ``sqrt(Gamma)-1`` below the tolerances; the geometric
+#: contact check uses pairs with relative gap below this value.
+GEOMETRIC_CONTACT_GAP: float = 1e-9
+
+#: Face codes of wall contacts: ``2 * axis + (0 lower, 1 upper)``.
+_LOWER, _UPPER = 0, 1
+
+
+@dataclass(frozen=True)
+class IterationRecord:
+    """One LP of the chain (units: displacements in mean diameters)."""
+
+    iteration: int
+    sqrt_gamma_minus_1: float
+    max_displacement: float
+    max_displacement_stable: float
+    n_constraints: int
+    n_contacts: int
+    n_stable: int
+    isostatic: bool
+    lp_status: str
+    lp_time: float
+    solver: str
+    cutoff: float  # [current largest diameters]
+    bound: float  # [mean diameters]; inf = unbounded
+    min_active_dual: float  # relative to the largest dual
+    max_inactive_dual: float  # relative to the largest dual
+    accepted: bool
+
+
+@dataclass(frozen=True)
+class CalippsoResult:
+    """Outcome of :func:`calippso`.
+
+    Attributes
+    ----------
+    packing : Packing
+        Jammed packing: contacts (pairs from duals), forces (paper Eq. 11, 1/length,
+        ``sum_c f_c sigma_c = 1`` including wall contacts), rattlers, protocol
+        ``'...>calippso'`` and attrs (``phi_J``, counts, residuals).
+    history : xarray.Dataset
+        Per-LP records on dimension ``iteration``.
+    converged : bool
+    iterations : int
+        Number of LPs solved (including rejected ones).
+    wall_contacts : ndarray of int64, shape (Nw, 2)
+        ``(particle, face)`` with face ``2 * axis + (0 lower, 1 upper)``; empty
+        without walls.
+    wall_force : ndarray, shape (Nw,)
+    diagnostics : dict
+        Final checks: counts, isostaticity, residuals, overlaps, timings, memory.
+    """
+
+    packing: Packing
+    history: xr.Dataset
+    converged: bool
+    iterations: int
+    wall_contacts: NDArray[np.int64]
+    wall_force: NDArray[np.float64]
+    diagnostics: dict[str, Any] = field(default_factory=dict)
+
+
+# --- rows ------------------------------------------------------------------------------
+
+
+@dataclass
+class _Rows:
+    """Constraint rows: particle pairs then wall rows."""
+
+    i: NDArray[np.int64]
+    j: NDArray[np.int64]
+    wall_particle: NDArray[np.int64]
+    wall_face: NDArray[np.int64]
+    x_build: NDArray[np.float64]
+    cutoff: float  # absolute [length]
+
+    @property
+    def n_pairs(self) -> int:
+        return len(self.i)
+
+    def __len__(self) -> int:
+        return len(self.i) + len(self.wall_particle)
+
+
+def _find_rows(x: NDArray[np.float64], D: NDArray[np.float64], packing: Packing, cutoff: float, walls: bool) -> _Rows:
+    pairs = pairs_within(x, packing.box, cutoff)
+    i, j = pairs.i, pairs.j
+    if walls:
+        # no periodic images through the walls: keep only pairs whose direct
+        # separation is the minimum-image one
+        direct = x[j] - x[i]
+        keep = np.all(np.abs(direct - pairs.dx) < 1e-12 * packing.box.lengths.max(), axis=1)
+        i, j = i[keep], j[keep]
+        L = packing.box.lengths
+        near_low = x <= cutoff - 0.5 * D[:, None]
+        near_up = (L - x) <= cutoff - 0.5 * D[:, None]
+        pl, al = np.nonzero(near_low)
+        pu, au = np.nonzero(near_up)
+        wp = np.concatenate([pl, pu]).astype(np.int64)
+        wf = np.concatenate([2 * al + _LOWER, 2 * au + _UPPER]).astype(np.int64)
+    else:
+        wp = wf = np.empty(0, np.int64)
+    return _Rows(i, j, wp, wf, x.copy(), cutoff)
+
+
+def _row_geometry(rows: _Rows, x: NDArray[np.float64], D: NDArray[np.float64], packing: Packing):
+    """Pair vectors, contact distances and right-hand sides for the current state."""
+    dx = packing.box.minimum_image(x[rows.j] - x[rows.i]) if rows.n_pairs else np.empty((0, x.shape[1]))
+    sig = 0.5 * (D[rows.i] + D[rows.j])
+    r = np.linalg.norm(dx, axis=1)
+    rhs = (r - sig) * (r + sig) / sig**2
+    axis = rows.wall_face // 2
+    upper = rows.wall_face % 2 == _UPPER
+    xa = x[rows.wall_particle, axis]
+    a = np.where(upper, packing.box.lengths[axis] - xa, xa)
+    rad = 0.5 * D[rows.wall_particle]
+    wrhs = (a - rad) * (a + rad) / rad**2
+    return dx, sig, np.concatenate([rhs, wrhs]), a, rad
+
+
+def _matrix(rows: _Rows, dx, sig, a, rad, n: int, d: int, unit: float) -> sp.csc_matrix:
+    """Scaled constraint matrix (rows x (d N + 1)), column ``d N`` is ``g``."""
+    P = rows.n_pairs
+    coef = 2.0 * unit * dx / sig[:, None] ** 2  # (P, d)
+    k = np.arange(d)
+    r_pair = np.repeat(np.arange(P), d)
+    ci = (rows.i[:, None] * d + k).ravel()
+    cj = (rows.j[:, None] * d + k).ravel()
+    W = len(rows.wall_particle)
+    axis = rows.wall_face // 2
+    sign = np.where(rows.wall_face % 2 == _UPPER, 1.0, -1.0)
+    wcoef = sign * 2.0 * unit * a / rad**2
+    r_wall = P + np.arange(W)
+    cw = rows.wall_particle * d + axis
+    m = P + W
+    row = np.concatenate([r_pair, r_pair, r_wall, np.arange(m)])
+    col = np.concatenate([ci, cj, cw, np.full(m, d * n)])
+    val = np.concatenate([coef.ravel(), -coef.ravel(), wcoef, np.ones(m)])
+    A = sp.csc_matrix((val, (row, col)), shape=(m, d * n + 1))
+    A.sort_indices()
+    return A
+
+
+# --- LP solve --------------------------------------------------------------------------
+
+
+class _Solver:
+    """One HiGHS instance; keeps the last basis for warm starts on unchanged rows."""
+
+    def __init__(self, threads: int = 1) -> None:
+        self.h = highspy.Highs()
+        self.h.setOptionValue("output_flag", False)
+        self.h.setOptionValue("threads", threads)
+        self.h.setOptionValue("primal_feasibility_tolerance", SOLVER_TOL)
+        self.h.setOptionValue("dual_feasibility_tolerance", SOLVER_TOL)
+        self.h.setOptionValue("ipm_optimality_tolerance", SOLVER_TOL)
+        self.basis = None
+        self.basis_rows: _Rows | None = None
+
+    def solve(self, A: sp.csc_matrix, rhs, col_lower, col_upper, method: str, rows: _Rows):
+        lp = highspy.HighsLp()
+        lp.num_col_, lp.num_row_ = A.shape[1], A.shape[0]
+        cost = np.zeros(A.shape[1])
+        cost[-1] = -1.0  # minimise -g
+        lp.col_cost_ = cost
+        lp.col_lower_ = col_lower
+        lp.col_upper_ = col_upper
+        lp.row_lower_ = np.full(A.shape[0], -highspy.kHighsInf)
+        lp.row_upper_ = rhs
+        lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
+        lp.a_matrix_.start_ = A.indptr.astype(np.int32)
+        lp.a_matrix_.index_ = A.indices.astype(np.int32)
+        lp.a_matrix_.value_ = A.data.astype(np.float64)
+        h = self.h
+        h.clearSolver()
+        if method == "ipm":
+            h.setOptionValue("solver", "ipm")
+            h.setOptionValue("run_crossover", "on")
+        else:
+            h.setOptionValue("solver", "simplex")
+            h.setOptionValue("simplex_strategy", 1)  # dual simplex
+        h.passModel(lp)
+        warm = method == "simplex" and self.basis is not None and self.basis_rows is rows
+        if warm:
+            h.setBasis(self.basis)
+        t0 = time.perf_counter()
+        h.run()
+        elapsed = time.perf_counter() - t0
+        status = h.getModelStatus()
+        name = h.modelStatusToString(status)
+        if status != highspy.HighsModelStatus.kOptimal:
+            self.basis = None
+            return name, elapsed, None, None, warm
+        sol = h.getSolution()
+        self.basis = h.getBasis()
+        self.basis_rows = rows
+        return name, elapsed, np.asarray(sol.col_value), -np.asarray(sol.row_dual), warm
+
+
+# --- rattlers and counts -----------------------------------------------------------------
+
+
+def _rattlers(n: int, d: int, contacts: NDArray[np.int64], wall_particle: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """Iterated ``z < d + 1`` removal; wall contacts count and never become rattlers."""
+    if len(wall_particle) == 0:
+        return find_rattlers(n, d, contacts)
+    zw = np.bincount(wall_particle, minlength=n)
+    rattler = np.zeros(n, dtype=bool)
+    active = np.ones(len(contacts), dtype=bool)
+    while True:
+        z = np.bincount(contacts[active].ravel(), minlength=n) + zw
+        new = (~rattler) & (z < d + 1)
+        if not np.any(new):
+            return rattler
+        rattler |= new
+        active &= ~(rattler[contacts[:, 0]] | rattler[contacts[:, 1]])
+
+
+def _n_dof(d: int, n_stable: int, walls: bool) -> int:
+    """Isostatic contact count: ``d (N_s - 1) + 1`` periodic, ``d N_s + 1`` between walls."""
+    if walls:
+        return d * n_stable + 1 if n_stable > 0 else 0
+    return isostatic_count(d, n_stable)
+
+
+# --- schedules -----------------------------------------------------------------------------
+
+
+def _far_bound(cutoff: float, d: int) -> float:
+    """Far-phase bound [current largest diameters] so that, with ``sqrt(Gamma) <= FAR_GROWTH``,
+    no pair beyond the cutoff can reach contact: ``cutoff - 2 sqrt(d) b >= FAR_GROWTH``."""
+    return max((cutoff - FAR_GROWTH) / (2.0 * np.sqrt(d)), 0.0)
+
+
+@dataclass
+class _State:
+    x: NDArray[np.float64]
+    D: NDArray[np.float64]
+
+
+def calippso(
+    packing: Packing,
+    *,
+    tol_s: float = DEFAULT_TOL_S,
+    tol_gamma: float = DEFAULT_TOL_GAMMA,
+    solver: str = DEFAULT_SOLVER,
+    cutoff: float = DEFAULT_CUTOFF,
+    cutoff_near: float = DEFAULT_CUTOFF_NEAR,
+    bound: tuple[tuple[float, float], ...] = DEFAULT_BOUND_SCHEDULE,
+    relax: float | None = None,
+    walls: bool = False,
+    max_iterations: int = DEFAULT_MAX_ITERATIONS,
+    require_isostatic: bool = True,
+    threads: int = 1,
+    progress: Callable[[IterationRecord], None] | None = None,
+) -> CalippsoResult:
+    """Jam ``packing`` by CALiPPSO (Algorithm 1), see the module docstring.
+
+    Parameters
+    ----------
+    packing : Packing
+        Non-overlapping start (relative overlap at most ``OVERLAP_TOL``); periodic, or
+        with ``walls=True`` an orthogonal box whose faces are hard walls and every
+        sphere inside (``sigma_i / 2 <= x_{i,mu} <= L_mu - sigma_i / 2``).
+    tol_s : float
+        Convergence: largest displacement of a stable particle in the last LP
+        [mean diameters].
+    tol_gamma : float
+        Convergence: ``sqrt(Gamma*) - 1`` of the last LP (dimensionless).
+    solver : {"ipm", "simplex", "hybrid"}
+        See :data:`SOLVERS`.
+    cutoff : float
+        Neighbour cutoff ``ell`` [current largest diameters] far from jamming, > 1.2.
+    cutoff_near : float
+        Cutoff in the last bound phase and for unbounded LPs [current largest diameters].
+    bound : tuple of (threshold, bound)
+        Bound schedule: below each ``sqrt(Gamma*) - 1`` threshold the displacement
+        bound (per coordinate) becomes ``bound`` mean radii; above the first threshold
+        it is derived from the cutoff. The converging LP is always unbounded.
+    relax : float or None
+        Sec. IV relaxation ``sigma <- sqrt(1 + c g*) sigma`` with ``c = relax`` in (0, 1].
+    walls : bool
+        Hard walls on the box faces instead of periodic boundaries.
+    max_iterations : int
+        Largest number of LPs.
+    require_isostatic : bool
+        Raise when the converged network is neither isostatic nor the App. A
+        hyperstatic case; False returns it with ``converged`` and the flags set.
+    threads : int
+        HiGHS threads.
+    progress : callable, optional
+        Called with each :class:`IterationRecord`.
+
+    Returns
+    -------
+    CalippsoResult
+
+    Raises
+    ------
+    ValueError
+        Bad input (overlaps, walls crossing particles, bad options).
+    RuntimeError
+        The chain did not converge, or the converged network failed its checks after
+        the recoveries.
+    """
+    _check_options(packing, tol_s, tol_gamma, solver, min(cutoff, cutoff_near), bound, relax, walls, max_iterations)
+    t_start = time.perf_counter()
+    d, n = packing.d, packing.n
+    x = packing.position.copy() if walls else packing.box.wrap(packing.position)
+    D = packing.diameter.copy()
+    solver_obj = _Solver(threads)
+    records: list[IterationRecord] = []
+    rows: _Rows | None = None
+    phase = 0  # 0 far, 1.. schedule entries; only tightens (hysteresis)
+    cut_factor = 1.0
+    bound_factor = 1.0
+    recoveries = 0
+    anchor = -1
+    prev_rattler: NDArray[np.bool_] | None = None
+    final_attempts = 0
+    converged = False
+    unbounded_next = False
+    last: dict[str, Any] = {}
+    it = 0
+    while it < max_iterations:
+        it += 1
+        unit = float(D.mean())
+        sig_max = float(D.max())
+        c_rel = cutoff_near if (phase == len(bound) or unbounded_next) else cutoff
+        ell = min(c_rel * cut_factor * sig_max, 0.499 * float(np.min(packing.box.widths)))
+        if ell < MIN_CUTOFF * sig_max:
+            raise RuntimeError(
+                f"CALiPPSO failed: largest diameter {sig_max:.4g} is too close to half the box width "
+                f"({0.5 * float(np.min(packing.box.widths)):.4g}) for a neighbour cutoff; use more particles"
+            )
+        # bound for this LP [mean diameters]
+        if unbounded_next:
+            b = np.inf
+        elif phase == 0:
+            b = _far_bound(ell / sig_max, d) * sig_max / unit * bound_factor  # [mean diameters]
+        else:
+            b = 0.5 * bound[phase - 1][1] * bound_factor
+        # rows: reuse while displacements since the build are small
+        if rows is None or rows.cutoff != ell or _moved(rows, x, packing, walls) > REUSE_FRACTION * (ell - sig_max):
+            rows = _find_rows(x, D, packing, ell, walls)
+        dx, sig, rhs, a, rad = _row_geometry(rows, x, D, packing)
+        A = _matrix(rows, dx, sig, a, rad, n, d, unit)
+        # per-particle bound: the previous LP's rattlers get the far bound, so that a
+        # rattler is not pinned on its bound (an active bound is an external force that
+        # it would pass on to the stable particle it touches)
+        b_far = _far_bound(ell / sig_max, d) * sig_max / unit
+        b_part = np.full(n, b)
+        if prev_rattler is not None and np.isfinite(b):
+            b_part[prev_rattler] = max(b, b_far)
+        col_upper = np.append(np.repeat(b_part, d), 0.0)
+        col_lower = -col_upper
+        if not walls:
+            if anchor < 0:
+                anchor = int(np.argmax(np.bincount(np.concatenate([rows.i, rows.j]), minlength=n)))
+            col_lower[anchor * d:(anchor + 1) * d] = 0.0
+            col_upper[anchor * d:(anchor + 1) * d] = 0.0
+        col_lower[-1] = -1.0
+        # g cap: sqrt(Gamma) <= min(FAR_GROWTH, (ell - 2 sqrt(d) b) / sigma_max) keeps every
+        # pair beyond the cutoff apart in a bounded LP
+        b_max = float(b_part.max())
+        reach = (ell - 2.0 * np.sqrt(d) * b_max * unit) / sig_max if np.isfinite(b_max) else FAR_GROWTH
+        col_upper[-1] = min(FAR_GROWTH, max(reach, 1.0)) ** 2 - 1.0
+        method = _method(solver, records)
+        status, lp_time, col, dual, _ = solver_obj.solve(A, rhs, col_lower, col_upper, method, rows)
+        if col is None:
+            rec = _record(it, np.nan, np.nan, np.nan, len(rows), 0, 0, False, status, lp_time, method, ell / sig_max, b, np.nan, np.nan, False)
+            records.append(rec)
+            if progress:
+                progress(rec)
+            recoveries += 1
+            if recoveries > MAX_RECOVERIES:
+                raise RuntimeError(_diagnose(f"LP status {status!r} after {MAX_RECOVERIES} recoveries", records))
+            cut_factor *= CUTOFF_GROWTH
+            bound_factor *= BOUND_SHRINK
+            unbounded_next = False
+            rows = None
+            continue
+        u = col[:-1].reshape(n, d)
+        g = float(col[-1])
+        # contacts from duals
+        mu = np.maximum(dual, 0.0)
+        mu_max = float(mu.max()) if len(mu) else 0.0
+        active = mu > CONTACT_DUAL_REL_TOL * mu_max if mu_max > 0 else np.zeros(len(mu), bool)
+        min_act = float(mu[active].min() / mu_max) if np.any(active) else np.nan
+        max_inact = float(mu[~active].max() / mu_max) if (mu_max > 0 and np.any(~active)) else 0.0
+        P = rows.n_pairs
+        pair_act = active[:P]
+        wall_act = active[P:]
+        contacts = np.stack([rows.i[pair_act], rows.j[pair_act]], axis=1)
+        wall_particle = rows.wall_particle[wall_act]
+        rattler = _rattlers(n, d, contacts, wall_particle)
+        stable = ~rattler
+        n_s = int(stable.sum())
+        backbone = stable[contacts[:, 0]] & stable[contacts[:, 1]]
+        n_c = int(backbone.sum()) + int(stable[wall_particle].sum())
+        iso = n_s > 0 and n_c == _n_dof(d, n_s, walls)
+        ref = u[stable].mean(axis=0) if (n_s and not walls) else np.zeros(d)
+        rel = np.linalg.norm(u - ref, axis=1)
+        max_s = float(rel.max())
+        max_s_stable = float(rel[stable].max()) if n_s else max_s
+        sg = g / (1.0 + np.sqrt(1.0 + g))
+        # update and all-pairs overlap check
+        growth = np.sqrt(1.0 + (relax if relax is not None else 1.0) * g)
+        x_new = x + u * unit
+        D_new = D * growth
+        trial = _as_packing(packing, x_new, D_new, walls)
+        ov = _max_overlap(trial, walls)
+        accepted = ov <= OVERLAP_TOL
+        rec = _record(it, sg, max_s, max_s_stable, len(rows), n_c, n_s, iso, status, lp_time, method, ell / sig_max, b, min_act, max_inact, accepted)
+        records.append(rec)
+        if progress:
+            progress(rec)
+        if not accepted:
+            recoveries += 1
+            if recoveries > MAX_RECOVERIES:
+                raise RuntimeError(_diagnose(f"update overlaps by {ov:.3g} (relative) after {MAX_RECOVERIES} recoveries", records))
+            cut_factor *= CUTOFF_GROWTH
+            bound_factor *= BOUND_SHRINK
+            unbounded_next = False
+            rows = None
+            continue
+        recoveries = 0
+        prev_rattler = rattler
+        x = x_new if walls else packing.box.wrap(x_new)
+        D = D_new
+        if not walls and len(contacts):
+            zc = np.bincount(contacts[backbone].ravel(), minlength=n)
+            anchor = int(np.argmax(zc))
+        # phase schedule with hysteresis
+        while phase < len(bound) and sg <= bound[phase][0]:
+            phase += 1
+        small = sg < tol_gamma and max_s_stable < tol_s
+        if small and np.isinf(b):
+            last = dict(contacts=contacts, mu=mu, active=active, rows=rows, dx=dx, sig=sig, a=a, rad=rad,
+                        rattler=rattler, iso=iso, n_c=n_c, n_s=n_s, u=u, wall_particle=wall_particle)
+            ok, why = _final_checks(packing, x, D, walls, last)
+            if ok or not require_isostatic or final_attempts >= 2:
+                converged = ok
+                last["why"] = why
+                break
+            # recovery for a converged but failing network: larger cutoff, dual simplex
+            final_attempts += 1
+            cut_factor *= CUTOFF_GROWTH
+            rows = None
+            last["why"] = why
+            continue
+        # the converging LP must be unbounded: go unbounded once the tightest bound is
+        # far from active for the stable particles
+        # (never twice in a row unless converging: the unbounded vertex need not be small)
+        tight = 0.5 * bound[-1][1]
+        unbounded_next = small or (
+            phase == len(bound) and np.isfinite(b) and max_s_stable < UNBOUND_FRACTION * tight
+        )
+    total = time.perf_counter() - t_start
+    history = _history(records)
+    if not last:
+        raise RuntimeError(_diagnose(f"not converged in {max_iterations} LPs", records))
+    if not converged and require_isostatic:
+        raise RuntimeError(_diagnose(f"converged LP failed the final checks: {last['why']}", records))
+    return _result(packing, x, D, walls, last, records, history, converged, total, dict(
+        tol_s=tol_s, tol_gamma=tol_gamma, solver=solver, cutoff=cutoff, cutoff_near=cutoff_near, bound=[list(b) for b in bound],
+        relax=relax, walls=walls, max_iterations=max_iterations, threads=threads))
+
+
+def _method(solver: str, records: list[IterationRecord]) -> str:
+    if solver == "hybrid":
+        accepted = [r for r in records if r.accepted]
+        if accepted and accepted[-1].sqrt_gamma_minus_1 <= HYBRID_SWITCH:
+            return "simplex"
+        return "ipm"
+    return solver
+
+
+def _moved(rows: _Rows, x: NDArray[np.float64], packing: Packing, walls: bool) -> float:
+    dxs = x - rows.x_build
+    if not walls:
+        dxs = packing.box.minimum_image(dxs)
+    return float(np.sqrt(np.max(np.einsum("ij,ij->i", dxs, dxs))))
+
+
+def _as_packing(packing: Packing, x, D, walls: bool) -> Packing:
+    return replace(packing, position=x if walls else packing.box.wrap(x), diameter=D,
+                   contacts=None, force=None, rattler=None)
+
+
+def _max_overlap(p: Packing, walls: bool) -> float:
+    """Largest relative overlap over ALL pairs (and walls), 0 if none."""
+    pairs, h = near_pairs(p, 0.0)
+    if walls and len(h):
+        direct = p.position[pairs.j] - p.position[pairs.i]
+        keep = np.all(np.abs(direct - pairs.dx) < 1e-12 * p.box.lengths.max(), axis=1)
+        h = h[keep]
+    ov = max(0.0, -float(h.min())) if len(h) else 0.0
+    if walls:
+        rad = 0.5 * p.diameter[:, None]
+        L = p.box.lengths
+        wall_gap = np.minimum(p.position, L - p.position) / rad - 1.0
+        ov = max(ov, -float(wall_gap.min()))
+    return ov
+
+
+def _final_checks(packing: Packing, x, D, walls: bool, last: dict[str, Any]) -> tuple[bool, str]:
+    """Isostaticity (or App. A hyperstaticity), force balance and dual-vs-gap contacts."""
+    d, n = packing.d, packing.n
+    forces, net = _forces(packing, x, D, walls, last)
+    last.update(forces)
+    last["force_balance_residual"] = net
+    rattler, stable = last["rattler"], ~last["rattler"]
+    c = last["contacts"]
+    iso_n = _n_dof(d, last["n_s"], walls)
+    # App. A counting: contacts between stable particles and between a stable particle
+    # and a force-bearing rattler, all rattlers out of the degrees of freedom
+    touches_stable = stable[c[:, 0]] | stable[c[:, 1]]
+    n_c_a = int(touches_stable.sum()) + int(stable[last["wall_particle"]].sum())
+    fb_rattler = np.zeros(n, bool)
+    both_r = rattler[c[:, 0]] | rattler[c[:, 1]]
+    fb_rattler[c[both_r].ravel()] = True
+    fb_rattler &= rattler
+    last["n_contacts_with_rattlers"] = n_c_a
+    last["n_force_bearing_rattlers"] = int(fb_rattler.sum())
+    last["isostatic_count"] = iso_n
+    hyper = last["n_c"] > iso_n
+    last["hyperstatic"] = bool(hyper)
+    last["isostatic_appendix_a"] = bool(n_c_a == iso_n)
+    # dual contacts vs geometric contacts (gap below GEOMETRIC_CONTACT_GAP)
+    p = _as_packing(packing, x, D, walls)
+    pairs, h = near_pairs(p, GEOMETRIC_CONTACT_GAP)
+    if walls and len(h):
+        direct = p.position[pairs.j] - p.position[pairs.i]
+        keep = np.all(np.abs(direct - pairs.dx) < 1e-12 * p.box.lengths.max(), axis=1)
+        pairs = pairs.select(keep)
+    geo = set(zip(pairs.i.tolist(), pairs.j.tolist()))
+    dual = set(map(tuple, c.tolist()))
+    last["dual_not_geometric"] = len(dual - geo)
+    last["geometric_not_dual"] = len(geo - dual)
+    reasons = []
+    if last["dual_not_geometric"]:
+        reasons.append(f"{last['dual_not_geometric']} dual contact(s) with gap > {GEOMETRIC_CONTACT_GAP:g}")
+    if not (last["iso"] or (hyper and last["isostatic_appendix_a"])):
+        reasons.append(f"N_c = {last['n_c']} but d(N_s-1)+1 = {iso_n} (N_s = {last['n_s']})")
+    return not reasons, "; ".join(reasons) or "ok"
+
+
+def _forces(packing: Packing, x, D, walls: bool, last: dict[str, Any]):
+    """Forces from duals (paper Eq. 11) and the per-particle force-balance residual."""
+    d, n = packing.d, packing.n
+    rows, active, mu = last["rows"], last["active"], last["mu"]
+    P = rows.n_pairs
+    pa = active[:P]
+    wa = active[P:]
+    f_pair = mu[:P][pa] / last["sig"][pa]
+    f_wall = mu[P:][wa] / last["rad"][wa]
+    # directions on the updated configuration
+    c = last["contacts"]
+    dxc = packing.box.minimum_image(x[c[:, 1]] - x[c[:, 0]]) if len(c) else np.empty((0, d))
+    nij = dxc / np.linalg.norm(dxc, axis=1)[:, None] if len(c) else dxc
+    net = np.zeros((n, d))
+    np.add.at(net, c[:, 0], -f_pair[:, None] * nij)
+    np.add.at(net, c[:, 1], f_pair[:, None] * nij)
+    faces = rows.wall_face[wa]
+    wp = rows.wall_particle[wa]
+    push = np.where(faces % 2 == _LOWER, 1.0, -1.0) * f_wall
+    np.add.at(net, (wp, faces // 2), push)
+    scale = float(np.mean(np.concatenate([f_pair, f_wall]))) if len(f_pair) + len(f_wall) else 1.0
+    resid = np.linalg.norm(net, axis=1) / scale
+    stable = ~last["rattler"]
+    # rattlers may carry forces only in the App. A case; residual over all particles
+    return dict(f_pair=f_pair, f_wall=f_wall, wall_faces=faces, wall_particles=wp,
+                residual_stable=float(resid[stable].max(initial=0.0))), float(resid.max(initial=0.0))
+
+
+def _record(*args: Any) -> IterationRecord:
+    return IterationRecord(*args)
+
+
+def _history(records: list[IterationRecord]) -> xr.Dataset:
+    def col(name):
+        return np.array([getattr(r, name) for r in records])
+
+    spec = {
+        "sqrt_gamma_minus_1": ("1", "sqrt(Gamma*) - 1 of the LP"),
+        "max_displacement": ("1", "largest displacement relative to the stable mean [mean diameters]"),
+        "max_displacement_stable": ("1", "largest displacement of a stable particle [mean diameters]"),
+        "n_constraints": ("1", "LP rows (pairs within the cutoff, plus wall rows)"),
+        "n_contacts": ("1", "contacts (active duals) of the backbone"),
+        "n_stable": ("1", "stable (non-rattler) particles"),
+        "lp_time": ("s", "LP wall time"),
+        "cutoff": ("1", "neighbour cutoff [largest diameters]"),
+        "bound": ("1", "displacement bound per coordinate [mean diameters]; inf = none"),
+        "min_active_dual": ("1", "smallest active dual / largest dual"),
+        "max_inactive_dual": ("1", "largest inactive dual / largest dual"),
+    }
+    data = {k: (("iteration",), col(k).astype(float if k not in ("n_constraints", "n_contacts", "n_stable") else np.int64),
+                {"units": u, "long_name": ln}) for k, (u, ln) in spec.items()}
+    data["isostatic"] = (("iteration",), col("isostatic").astype(np.int8), {"units": "1", "long_name": "N_c == isostatic count after the LP (1 = yes)"})
+    data["accepted"] = (("iteration",), col("accepted").astype(np.int8), {"units": "1", "long_name": "update accepted (0 = undone by a recovery)"})
+    data["lp_status"] = (("iteration",), col("lp_status").astype(str), {"long_name": "HiGHS model status"})
+    data["solver"] = (("iteration",), col("solver").astype(str), {"long_name": "HiGHS method of the LP"})
+    return xr.Dataset(data, coords={"iteration": np.arange(1, len(records) + 1)})
+
+
+def _diagnose(message: str, records: list[IterationRecord]) -> str:
+    tail = records[-3:]
+    info = "; ".join(
+        f"LP {r.iteration}: {r.lp_status}, sqrtG-1={r.sqrt_gamma_minus_1:.3g}, max|s|={r.max_displacement_stable:.3g}, "
+        f"Nc={r.n_contacts}, Ns={r.n_stable}, iso={int(r.isostatic)}, cutoff={r.cutoff:.3g}, bound={r.bound:.3g}"
+        for r in tail
+    )
+    return f"CALiPPSO failed: {message} [{info}]"
+
+
+def _result(packing, x, D, walls, last, records, history, converged, total, settings) -> CalippsoResult:
+    contacts = last["contacts"]
+    p = _as_packing(packing, x, D, walls)
+    ov_abs, ov_rel = max_overlap(p) if not walls else (np.nan, _max_overlap(p, walls))
+    ov_rel = _max_overlap(p, walls)
+    n_rattlers = int(last["rattler"].sum())
+    attrs = dict(packing.attrs)
+    attrs.update(
+        phi_J=p.packing_fraction,
+        phi_initial=packing.packing_fraction,
+        iterations=len(records),
+        converged=int(converged),
+        n_contacts=int(last["n_c"]),
+        n_stable=int(last["n_s"]),
+        n_rattlers=n_rattlers,
+        isostatic_count=int(last["isostatic_count"]),
+        isostatic=int(last["iso"]),
+        hyperstatic=int(last["hyperstatic"]),
+        isostatic_appendix_a=int(last["isostatic_appendix_a"]),
+        n_contacts_with_rattlers=int(last["n_contacts_with_rattlers"]),
+        n_force_bearing_rattlers=int(last["n_force_bearing_rattlers"]),
+        force_balance_residual=float(last["force_balance_residual"]),
+        max_overlap=float(ov_rel),
+        dual_not_geometric=int(last["dual_not_geometric"]),
+        geometric_not_dual=int(last["geometric_not_dual"]),
+        boundary="walls" if walls else "periodic",
+        force_unit="CALiPPSO dual scaling (paper Eq. 11): f = lambda sigma_ij [1/length], sum_c f_c sigma_c = 1",
+        total_time=total,
+        peak_memory=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024.0,
+        lp_time_total=float(np.nansum(history["lp_time"].values)),
+    )
+    if walls:
+        attrs["walls"] = "hard walls on every face of the orthogonal box [0, L_mu]; wall contacts in wall_contact_*"
+    out = Packing(
+        position=p.position,
+        diameter=D,
+        box=packing.box,
+        contacts=contacts,
+        force=last["f_pair"],
+        rattler=last["rattler"],
+        pressure=None,
+        protocol=f"{packing.protocol}>calippso",
+        seed=packing.seed,
+        parameters=settings,
+        attrs=attrs,
+    )
+    wc = np.stack([last["wall_particles"], last["wall_faces"]], axis=1).astype(np.int64)
+    diag = {k: attrs[k] for k in ("phi_J", "n_contacts", "n_stable", "isostatic_count", "isostatic", "hyperstatic",
+                                  "force_balance_residual", "max_overlap", "total_time", "peak_memory")}
+    diag["residual_stable"] = last["residual_stable"]
+    diag["why"] = last.get("why", "ok")
+    del ov_abs
+    return CalippsoResult(out, history, converged, len(records), wc, last["f_wall"], diag)
+
+
+def _check_options(packing, tol_s, tol_gamma, solver, cutoff, bound, relax, walls, max_iterations) -> None:
+    if not isinstance(packing, Packing):
+        raise ValueError(f"calippso needs a Packing, got {type(packing).__name__}")
+    if not (np.isfinite(tol_s) and tol_s > 0):
+        raise ValueError(f"tol_s must be positive and finite, got {tol_s}")
+    if not (np.isfinite(tol_gamma) and tol_gamma > 0):
+        raise ValueError(f"tol_gamma must be positive and finite, got {tol_gamma}")
+    if solver not in SOLVERS:
+        raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
+    if not (np.isfinite(cutoff) and cutoff > FAR_GROWTH):
+        raise ValueError(f"cutoff must exceed {FAR_GROWTH} largest diameters, got {cutoff}")
+    th = [t for t, _ in bound]
+    if any(not (np.isfinite(v) and v > 0) for pair in bound for v in pair) or th != sorted(th, reverse=True):
+        raise ValueError(f"bound schedule must be positive (threshold, bound) pairs with decreasing thresholds, got {bound}")
+    if relax is not None and not (0.0 < relax <= 1.0):
+        raise ValueError(f"relax must lie in (0, 1], got {relax}")
+    if max_iterations < 1:
+        raise ValueError(f"max_iterations must be >= 1, got {max_iterations}")
+    if packing.n < 2:
+        raise ValueError("CALiPPSO needs at least two particles")
+    if walls:
+        if not packing.box.is_orthogonal:
+            raise ValueError("walls need an orthogonal box")
+        rad = 0.5 * packing.diameter[:, None]
+        L = packing.box.lengths
+        out = (packing.position < rad * (1 - OVERLAP_TOL)) | (packing.position > L - rad * (1 - OVERLAP_TOL))
+        if np.any(out):
+            bad = np.flatnonzero(out.any(axis=1))
+            raise ValueError(f"{bad.size} sphere(s) cross a wall (e.g. index {bad[0]}); walls need every sphere inside the box")
+    ov = _max_overlap(_as_packing(packing, packing.position, packing.diameter, walls), walls)
+    if ov > OVERLAP_TOL:
+        raise ValueError(f"input overlaps by {ov:.3g} (relative) > {OVERLAP_TOL:g}: CALiPPSO needs a hard-sphere start")
+
+
+def result_to_dataset(result: CalippsoResult, stage_parameters: dict[str, Any] | None = None) -> xr.Dataset:
+    """The jammed packing (``Packing.to_dataset``) plus the history on ``iteration``.
+
+    Wall contacts (``walls=True``) are stored as ``wall_contact_particle``,
+    ``wall_contact_face`` (``2 * axis + 0 lower / 1 upper``) and ``wall_force`` on the
+    dimension ``wall_contact``; ``jamflow.io.read_packing`` ignores them.
+    """
+    ds = result.packing.to_dataset(stage_parameters)
+    for name in result.history.data_vars:
+        ds[name] = result.history[name]
+    ds = ds.assign_coords(iteration=result.history["iteration"].values)
+    if len(result.wall_contacts) or result.packing.attrs.get("boundary") == "walls":
+        ds["wall_contact_particle"] = (("wall_contact",), result.wall_contacts[:, 0], {"units": "1", "long_name": "particle of a wall contact"})
+        ds["wall_contact_face"] = (("wall_contact",), result.wall_contacts[:, 1], {"units": "1", "long_name": "wall face: 2*axis + (0 lower at 0, 1 upper at L)"})
+        ds["wall_force"] = (("wall_contact",), result.wall_force, {"units": "1", "long_name": "wall contact force (paper Eq. 11 scaling)"})
+    ds.attrs["converged"] = int(result.converged)
+    ds.attrs["iterations"] = int(result.iterations)
+    return ds

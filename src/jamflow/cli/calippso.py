@@ -1,0 +1,80 @@
+"""Subcommand ``calippso``: jam a hard-sphere packing by a chain of LPs (CALiPPSO)."""
+
+from __future__ import annotations
+
+import argparse
+
+from tqdm import tqdm
+
+from ..calippso import (
+    DEFAULT_CUTOFF,
+    DEFAULT_CUTOFF_NEAR,
+    DEFAULT_MAX_ITERATIONS,
+    DEFAULT_SOLVER,
+    DEFAULT_TOL_GAMMA,
+    DEFAULT_TOL_S,
+    SOLVERS,
+    calippso,
+    result_to_dataset,
+)
+from ..io import read_packing, write_dataset
+from .common import add_command, add_preset, add_quiet, stage_parameters
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = add_command(
+        sub, "calippso", _calippso,
+        "jam a hard-sphere packing exactly by a chain of linear programs (CALiPPSO)",
+        description="CALiPPSO (Artiaco et al., PRE 106, 055310 (2022), Algorithm 1): inflate the "
+                    "spheres and move them by successive LPs until sqrt(Gamma)-1 < tol-gamma and "
+                    "max|s| < tol-s; contacts and forces from the LP duals. Writes the jammed packing "
+                    "with the per-LP history.",
+    )
+    p.add_argument("packing", help="input netCDF packing (no overlaps)")
+    p.add_argument("out", help="output netCDF jammed packing")
+    p.add_argument("--tol-s", type=float, default=DEFAULT_TOL_S,
+                   help=f"convergence: largest stable displacement in mean diameters (default {DEFAULT_TOL_S:g})")
+    p.add_argument("--tol-gamma", type=float, default=DEFAULT_TOL_GAMMA,
+                   help=f"convergence: sqrt(Gamma)-1 (default {DEFAULT_TOL_GAMMA:g})")
+    p.add_argument("--solver", choices=SOLVERS, default=DEFAULT_SOLVER,
+                   help=f"HiGHS strategy (default {DEFAULT_SOLVER})")
+    p.add_argument("--cutoff", type=float, default=DEFAULT_CUTOFF,
+                   help=f"neighbour cutoff far from jamming, in largest diameters (default {DEFAULT_CUTOFF})")
+    p.add_argument("--cutoff-near", type=float, default=DEFAULT_CUTOFF_NEAR,
+                   help=f"neighbour cutoff close to jamming, in largest diameters (default {DEFAULT_CUTOFF_NEAR})")
+    p.add_argument("--bound", type=float, nargs=2, default=None, metavar=("MID", "NEAR"),
+                   help="displacement bounds in mean radii for 5e-4 >= sqrt(Gamma)-1 > 1e-5 and below "
+                        "(default 0.1 0.01)")
+    p.add_argument("--relax", type=float, default=None,
+                   help="Sec. IV relaxation: sigma <- sqrt(1 + c gamma) sigma with 0 < c <= 1 (default off)")
+    p.add_argument("--walls", action="store_true", help="hard walls on the box faces instead of periodic boundaries")
+    p.add_argument("--max-iterations", type=int, default=DEFAULT_MAX_ITERATIONS,
+                   help=f"largest number of LPs (default {DEFAULT_MAX_ITERATIONS})")
+    p.add_argument("--threads", type=int, default=1, help="HiGHS threads (default 1)")
+    add_quiet(p)
+    add_preset(p)
+
+
+def _calippso(args: argparse.Namespace) -> int:
+    packing = read_packing(args.packing)
+    kwargs = {}
+    if args.bound is not None:
+        kwargs["bound"] = ((5e-4, args.bound[0]), (1e-5, args.bound[1]))
+    with tqdm(desc="calippso", unit=" LP", disable=args.quiet) as bar:
+        def progress(rec) -> None:
+            bar.update(1)
+            bar.set_postfix(sqrtG_1=f"{rec.sqrt_gamma_minus_1:.2e}", s=f"{rec.max_displacement_stable:.2e}",
+                            Nc=rec.n_contacts)
+
+        result = calippso(
+            packing, tol_s=args.tol_s, tol_gamma=args.tol_gamma, solver=args.solver, cutoff=args.cutoff,
+            cutoff_near=args.cutoff_near, relax=args.relax, walls=args.walls,
+            max_iterations=args.max_iterations, threads=args.threads, progress=progress, **kwargs,
+        )
+    write_dataset(result_to_dataset(result, stage_parameters(args, "packing", "out")), args.out)
+    if not args.quiet:
+        a = result.packing.attrs
+        print(f"{args.packing}: phi_J = {a['phi_J']:.10f} after {result.iterations} LPs, N_c = {a['n_contacts']} "
+              f"(isostatic {a['isostatic_count']}), {a['n_rattlers']} rattlers, max overlap {a['max_overlap']:.2g}, "
+              f"force balance {a['force_balance_residual']:.2g}, {a['total_time']:.1f} s")
+    return 0

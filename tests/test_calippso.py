@@ -1,0 +1,201 @@
+"""CALiPPSO: jamming by a chain of LPs (jamflow.calippso).
+
+Every jammed packing is checked with independent tools: isostaticity with
+jamflow.analysis.contacts, force balance with force_balance_residual, overlaps over
+all pairs with jamflow.packing.max_overlap, contacts from duals against contacts
+from gaps, and the duality identity sum_c f_c sigma_c = 1 (paper Eq. 9).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from jamflow.analysis.contacts import contacts_from_gaps, force_balance_residual, summarize
+from jamflow.analysis.overlap import contact_overlap
+from jamflow.box import Box
+from jamflow.calippso import calippso
+from jamflow.cli import main
+from jamflow.initial import random_packing
+from jamflow.io import read_dat, read_dataset, read_packing, write_packing
+from jamflow.packing import Packing, max_overlap
+from jamflow.tolerances import FORCE_BALANCE_TOL, OVERLAP_TOL
+
+LS = Path(__file__).resolve().parents[2] / "shared" / "data" / "calippso-ls"
+if not LS.is_dir():
+    LS = Path("/work/shared/data/calippso-ls")
+
+#: two independent contact definitions agree: pairs closer than this relative gap
+GEOMETRIC_GAP = 1e-9
+
+
+def _check_jammed(res, start: Packing, walls: bool = False) -> None:
+    p = res.packing
+    assert res.converged
+    # isostaticity counted independently from the stored contacts
+    if not walls:
+        s = summarize(p)
+        assert s.isostatic, (s.n_contacts, s.isostatic_count)
+        assert s.n_contacts == p.attrs["n_contacts"]
+        # force balance on every stable particle, independent residual
+        r = force_balance_residual(p)[~p.rattler]
+        assert r.max() < FORCE_BALANCE_TOL
+    # no overlap over all pairs
+    _, rel = max_overlap(p)
+    assert rel < OVERLAP_TOL
+    assert p.packing_fraction > start.packing_fraction
+    # duality (paper Eq. 9): sum_c f_c sigma_c = 1
+    sig = p.sigma(p.contacts[:, 0], p.contacts[:, 1])
+    total = float(np.sum(p.force * sig))
+    if walls:
+        total += float(np.sum(res.wall_force * 0.5 * p.diameter[res.wall_contacts[:, 0]]))
+    assert total == pytest.approx(1.0, rel=1e-6)
+    assert np.all(p.force > 0)
+    # dual contacts == geometric contacts (gap < 1e-9) between stable particles, two
+    # independent methods (a rattler may touch a neighbour with zero force)
+    if not walls:
+        geo = contacts_from_gaps(p, GEOMETRIC_GAP)
+        stable = ~p.rattler
+        geo = geo[stable[geo[:, 0]] & stable[geo[:, 1]]]
+        dual = p.contacts[stable[p.contacts[:, 0]] & stable[p.contacts[:, 1]]]
+        assert set(map(tuple, geo.tolist())) == set(map(tuple, dual.tolist()))
+
+
+def test_ls_d3_jams():
+    start = read_dat(LS / "Centers-after-LS--N-1024--d-3.dat")
+    res = calippso(start)
+    _check_jammed(res, start)
+    assert res.iterations <= 8
+    hist = res.history
+    assert hist.sizes["iteration"] == res.iterations
+    assert float(hist["bound"].values[-1]) == np.inf  # the converging LP is unbounded
+    assert hist["sqrt_gamma_minus_1"].values[-1] < 1e-12
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("d", [4, 5])
+def test_ls_high_d_jams(d):
+    start = read_dat(LS / f"Centers-after-LS--N-1024--d-{d}.dat")
+    res = calippso(start)
+    _check_jammed(res, start)
+
+
+def test_random_2d_bidisperse():
+    start = random_packing(128, 2, 0.4, "bi", seed=3, ratio=1.4)
+    res = calippso(start)
+    _check_jammed(res, start)
+    assert 0.80 < res.packing.packing_fraction < 0.87
+
+
+def test_random_3d_mono():
+    start = random_packing(128, 3, 0.25, "mono", seed=5)
+    res = calippso(start)
+    _check_jammed(res, start)
+    assert 0.60 < res.packing.packing_fraction < 0.68
+
+
+def test_polydisperse_small_and_fixed_point():
+    start = random_packing(16, 2, 0.3, "poly", seed=2, width=0.2)
+    res = calippso(start)
+    _check_jammed(res, start)
+    # fed back, the jammed packing is a fixed point: 1-2 LPs, same network (Q = 1)
+    again = calippso(res.packing.evolve(contacts=None, force=None, rattler=None))
+    assert again.iterations <= 2
+    q, *_ = contact_overlap(res.packing, again.packing)
+    assert q == 1.0
+    assert again.packing.packing_fraction == pytest.approx(res.packing.packing_fraction, rel=1e-9)
+
+
+@pytest.mark.parametrize("n,d", [(8, 2), (32, 2), (32, 3)])
+def test_small_n(n, d):
+    start = random_packing(n, d, 0.3, "bi", seed=n, ratio=1.4)
+    res = calippso(start)
+    _check_jammed(res, start)
+
+
+def test_walls_2d():
+    start = random_packing(64, 2, 0.3, "bi", seed=7, ratio=1.4)
+    D = start.diameter * 0.8
+    x = 0.5 * D.max() + start.position * (1.0 - D.max())
+    start = start.evolve(position=x, diameter=D)
+    res = calippso(start, walls=True)
+    _check_jammed(res, start, walls=True)
+    p = res.packing
+    assert len(res.wall_contacts) > 0
+    # every sphere inside the walls
+    rad = 0.5 * p.diameter[:, None]
+    assert np.all(p.position >= rad * (1 - OVERLAP_TOL)) and np.all(p.position <= 1 - rad * (1 - OVERLAP_TOL))
+    # isostatic between walls: no translation symmetry, N_c = d N_s + 1
+    assert p.attrs["n_contacts"] == 2 * p.attrs["n_stable"] + 1
+    assert p.attrs["force_balance_residual"] < FORCE_BALANCE_TOL
+
+
+def test_2d_monodisperse_reported():
+    start = random_packing(64, 2, 0.5, "mono", seed=11)
+    res = calippso(start)  # never a crash; hyperstaticity (App. A) is reported
+    a = res.packing.attrs
+    assert res.converged
+    assert a["isostatic"] == 1 or (a["hyperstatic"] == 1 and a["isostatic_appendix_a"] == 1)
+    for key in ("n_contacts_with_rattlers", "n_force_bearing_rattlers"):
+        assert key in a
+    _, rel = max_overlap(res.packing)
+    assert rel < OVERLAP_TOL
+
+
+def test_bad_inputs():
+    start = random_packing(16, 2, 0.3, "mono", seed=1)
+    with pytest.raises(ValueError, match="solver"):
+        calippso(start, solver="pdlp-magic")
+    with pytest.raises(ValueError, match="tol_s"):
+        calippso(start, tol_s=-1.0)
+    with pytest.raises(ValueError, match="relax"):
+        calippso(start, relax=1.5)
+    with pytest.raises(ValueError, match="cutoff"):
+        calippso(start, cutoff=1.0)
+    x = start.position.copy()
+    x[1] = x[0] + 0.5 * start.diameter[0] * np.array([1.0, 0.0])
+    with pytest.raises(ValueError, match="overlap"):
+        calippso(start.evolve(position=Box.cubic(2).wrap(x)))
+    with pytest.raises(ValueError, match="wall"):
+        calippso(start, walls=True)  # spheres cross the faces of the unit box
+
+
+def test_max_iterations_error_is_clear():
+    start = random_packing(64, 3, 0.2, "mono", seed=1)
+    with pytest.raises(RuntimeError, match="not converged in 2 LPs"):
+        calippso(start, max_iterations=2)
+
+
+def test_relaxation_option():
+    start = random_packing(64, 3, 0.3, "mono", seed=4)
+    res = calippso(start, relax=0.5)
+    _check_jammed(res, start)
+
+
+@pytest.mark.parametrize("solver", ["simplex", "hybrid"])
+def test_solvers_agree(solver):
+    start = random_packing(48, 3, 0.3, "mono", seed=9)
+    a = calippso(start)
+    b = calippso(start, solver=solver)
+    _check_jammed(b, start)
+    # different vertex paths may reach different jammed states; both must be valid
+    assert abs(a.packing.packing_fraction - b.packing.packing_fraction) < 0.05
+
+
+def test_cli_roundtrip(tmp_path):
+    start = random_packing(48, 2, 0.4, "bi", seed=6, ratio=1.4)
+    src = write_packing(start, tmp_path / "in.nc")
+    out = tmp_path / "out.nc"
+    assert main(["calippso", str(src), str(out), "--quiet"]) == 0
+    p = read_packing(out)
+    ds = read_dataset(out)
+    assert ds.attrs["converged"] == 1
+    assert ds.attrs["protocol"].endswith(">calippso")
+    assert "sqrt_gamma_minus_1" in ds and ds.sizes["iteration"] == ds.attrs["iterations"]
+    assert summarize(p).isostatic
+    assert ds.attrs["phi_J"] == pytest.approx(p.packing_fraction)
+    # result_to_dataset carries the history and the settings
+    assert "lp_time" in ds and "tol_s" in ds.attrs["parameters"]
+    assert main(["calippso", str(tmp_path / "missing.nc"), str(out), "--quiet"]) == 1
