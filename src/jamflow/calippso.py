@@ -162,6 +162,11 @@ MAX_RECOVERIES: int = 4
 #: for them and only holds rattlers).
 UNBOUND_FRACTION: float = 1e-3
 
+#: In the last bound phase a stable particle moving by more than this fraction of the
+#: bound means the bound is active (an external force, non-isostatic network): the
+#: next LP is then tried without bounds, which typically lands on the jammed vertex.
+BOUND_ACTIVE_FRACTION: float = 0.5
+
 #: Default largest number of LPs.
 DEFAULT_MAX_ITERATIONS: int = 1000
 
@@ -622,7 +627,8 @@ def calippso(
         # (never twice in a row unless converging: the unbounded vertex need not be small)
         tight = 0.5 * bound[-1][1]
         unbounded_next = small or (
-            phase == len(bound) and np.isfinite(b) and max_s_stable < UNBOUND_FRACTION * tight
+            phase == len(bound) and np.isfinite(b)
+            and (max_s_stable < UNBOUND_FRACTION * tight or max_s_stable > BOUND_ACTIVE_FRACTION * tight)
         )
     total = time.perf_counter() - t_start
     history = _history(records)
