@@ -69,7 +69,8 @@ rule ls:
     params:
         seed=seed_of,
         targets=" ".join(f"{p:g}" for p in LS_TARGETS),
-        fast=lambda wildcards: optional_flag("--fast-growth-rate", opt("ls", "fast_growth_rate")),
+        # null in the scene skips the fast stage, which the command spells as rate 0
+        fast=lambda wildcards: opt("ls", "fast_growth_rate") or 0,
         fast_until=lambda wildcards: opt("ls", "fast_until"),
         beta=lambda wildcards: opt("ls", "beta"),
         max_collisions=lambda wildcards: optional_flag("--max-collisions", opt("ls", "max_collisions")),
@@ -77,7 +78,7 @@ rule ls:
         "../envs/jamflow.yaml"
     shell:
         "jamflow ls {input} {output.snapshots} --growth-rate {wildcards.kappa} --p-target {params.targets}"
-        " {params.fast} --fast-until {params.fast_until} --beta {params.beta} {params.max_collisions}"
+        " --fast-growth-rate {params.fast} --fast-until {params.fast_until} --beta {params.beta} {params.max_collisions}"
         " --seed {params.seed} --eos {output.eos} --quiet > {log} 2>&1"
 
 
