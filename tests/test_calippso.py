@@ -13,7 +13,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from jamflow.analysis.contacts import contacts_from_gaps, force_balance_residual, summarize
+from jamflow.analysis.contacts import (
+    contacts_from_gaps,
+    force_balance_residual,
+    summarize,
+)
 from jamflow.analysis.overlap import contact_overlap
 from jamflow.box import Box
 from jamflow.calippso import calippso

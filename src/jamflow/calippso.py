@@ -89,13 +89,13 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from .analysis.contacts import find_rattlers, isostatic_count
-from .packing import Packing, max_overlap, near_pairs
 from .neighbors import pairs_within
+from .packing import Packing, near_pairs
 from .tolerances import OVERLAP_TOL
 
 __all__ = [
-    "CalippsoResult",
     "SOLVERS",
+    "CalippsoResult",
     "calippso",
     "result_to_dataset",
 ]
@@ -491,6 +491,7 @@ def calippso(
     anchor = -1
     prev_rattler: NDArray[np.bool_] | None = None
     final_attempts = 0
+    force_simplex = False
     converged = False
     unbounded_next = False
     last: dict[str, Any] = {}
@@ -538,10 +539,10 @@ def calippso(
         b_max = float(b_part.max())
         reach = (ell - 2.0 * np.sqrt(d) * b_max * unit) / sig_max if np.isfinite(b_max) else FAR_GROWTH
         col_upper[-1] = min(FAR_GROWTH, max(reach, 1.0)) ** 2 - 1.0
-        method = _method(solver, records)
+        method = "simplex" if force_simplex else _method(solver, records)
         status, lp_time, col, dual, _ = solver_obj.solve(A, rhs, col_lower, col_upper, method, rows)
         if col is None:
-            rec = _record(it, np.nan, np.nan, np.nan, len(rows), 0, 0, False, status, lp_time, method, ell / sig_max, b, np.nan, np.nan, False)
+            rec = IterationRecord(it, np.nan, np.nan, np.nan, len(rows), 0, 0, False, status, lp_time, method, ell / sig_max, b, np.nan, np.nan, False)
             records.append(rec)
             if progress:
                 progress(rec)
@@ -584,7 +585,7 @@ def calippso(
         trial = _as_packing(packing, x_new, D_new, walls)
         ov = _max_overlap(trial, walls)
         accepted = ov <= OVERLAP_TOL
-        rec = _record(it, sg, max_s, max_s_stable, len(rows), n_c, n_s, iso, status, lp_time, method, ell / sig_max, b, min_act, max_inact, accepted)
+        rec = IterationRecord(it, sg, max_s, max_s_stable, len(rows), n_c, n_s, iso, status, lp_time, method, ell / sig_max, b, min_act, max_inact, accepted)
         records.append(rec)
         if progress:
             progress(rec)
@@ -619,6 +620,7 @@ def calippso(
             # recovery for a converged but failing network: larger cutoff, dual simplex
             final_attempts += 1
             cut_factor *= CUTOFF_GROWTH
+            force_simplex = True
             rows = None
             last["why"] = why
             continue
@@ -748,10 +750,6 @@ def _forces(packing: Packing, x, D, walls: bool, last: dict[str, Any]):
                 residual_stable=float(resid[stable].max(initial=0.0))), float(resid.max(initial=0.0))
 
 
-def _record(*args: Any) -> IterationRecord:
-    return IterationRecord(*args)
-
-
 def _history(records: list[IterationRecord]) -> xr.Dataset:
     def col(name):
         return np.array([getattr(r, name) for r in records])
@@ -791,7 +789,6 @@ def _diagnose(message: str, records: list[IterationRecord]) -> str:
 def _result(packing, x, D, walls, last, records, history, converged, total, settings) -> CalippsoResult:
     contacts = last["contacts"]
     p = _as_packing(packing, x, D, walls)
-    ov_abs, ov_rel = max_overlap(p) if not walls else (np.nan, _max_overlap(p, walls))
     ov_rel = _max_overlap(p, walls)
     n_rattlers = int(last["rattler"].sum())
     attrs = dict(packing.attrs)
@@ -839,7 +836,6 @@ def _result(packing, x, D, walls, last, records, history, converged, total, sett
                                   "force_balance_residual", "max_overlap", "total_time", "peak_memory")}
     diag["residual_stable"] = last["residual_stable"]
     diag["why"] = last.get("why", "ok")
-    del ov_abs
     return CalippsoResult(out, history, converged, len(records), wc, last["f_wall"], diag)
 
 
