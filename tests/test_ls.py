@@ -241,7 +241,7 @@ def test_budget_stops():
     pk = random_packing(64, 3, 0.3, seed=10)
     res = compress(pk, 1e-3, [1e9], max_collisions=3000, fast_growth_rate=None)
     assert res.stop_reason == "max_collisions" and res.snapshots == []
-    assert 3000 <= res.collisions < 3000 + 10 * 64
+    assert res.collisions == 3000
     res = compress(pk, 1e-3, [1e9], max_time=0.5, fast_growth_rate=None)
     assert res.stop_reason == "max_time"
     assert res.final.attrs["time"] == pytest.approx(0.5, rel=1e-12)
@@ -253,8 +253,8 @@ def test_crystallisation_detector_slow_versus_fast_compression():
     # 3D monodisperse: slow compression without the fast stage crystallises; the paper's
     # fast stage to p = 500 keeps the glass amorphous
     pk = random_packing(512, 3, 0.3, seed=12)
-    slow = compress(pk, 2e-5, [1e3], fast_growth_rate=None, seed=0).snapshots[0]
-    fast = compress(pk, 5e-3, [1e3], fast_growth_rate=None, seed=0).snapshots[0]
+    slow = compress(pk, 1e-4, [300.0], fast_growth_rate=None, seed=0).snapshots[0]
+    fast = compress(pk, 5e-3, [300.0], fast_growth_rate=None, seed=0).snapshots[0]
     f_slow, f_fast = crystal_fraction(slow), crystal_fraction(fast)
     print(f"crystal fraction: slow {f_slow:.3f} (phi {slow.packing_fraction:.4f}), "
           f"fast {f_fast:.3f} (phi {fast.packing_fraction:.4f})")

@@ -333,12 +333,13 @@ def compress(
         Slow growth rate ``kappa`` of the mean diameter [length/time] (see the module
         docstring for units); 0 runs plain hard-sphere dynamics.
     p_targets : sequence of float
-        Strictly increasing reduced pressures; a snapshot is taken at the end of the
-        first window whose pressure is ``>= target``.
+        Strictly increasing reduced pressures; the snapshot of a target is the
+        configuration at the end of the first window whose mean pressure is ``>= target``
+        (several targets may share a window).
     phi_target : float, optional
         Stop (with a snapshot) when the packing fraction reaches this value (exactly).
     max_collisions : int, optional
-        Stop after this many collisions (checked at window ends).
+        Stop after exactly this many collisions (the last window may be shorter).
     max_time : float, optional
         Stop at this simulated time [time unit].
     beta : float
@@ -408,6 +409,8 @@ def compress(
             if t_phi < t_limit:
                 t_limit, limit_kind = t_phi, "phi_target"
         todo = window - state.window_coll
+        if max_collisions is not None:
+            todo = min(todo, max_collisions - collisions)
         status, ncoll = state.run(todo, t_limit)
         collisions += ncoll
         state.window_coll += ncoll
