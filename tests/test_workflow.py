@@ -158,33 +158,37 @@ def test_default_scene_runs_end_to_end(tmp_path):
     res = _snakemake(work, "--workflow-profile", "workflow/profiles/default", timeout=900)
     assert res.returncode == 0, res.stderr[-4000:]
     out = work / "results" / scene["scene"]
-    finals = sorted((out / "packings").glob("*/*.nc"))
-    assert finals, "the default scene produced no packing"
-    for path in finals:
-        ds = xr.load_dataset(path)
-        assert ds.attrs["N"] == scene["system"]["n"]
-        assert ds.attrs["d"] == scene["system"]["d"]
-        assert set(ds.position.dims) == {"particle", "spatial"}
-    checks = sorted((out / "analysis").glob("*/*.check.json"))
-    assert len(checks) == len(scene["system"]["seeds"])
-    p0 = scene["soft"]["pressure"]
+    seeds = scene["system"]["seeds"]
+    (kappa,) = scene["ls"]["growth_rates"]
+    variants = [f"_k{kappa:g}_p{p:g}" for p in scene["ls"]["p_targets"]]
+    for stage in ("ls", "calippso"):
+        for s in seeds:
+            for v in variants:
+                ds = xr.load_dataset(out / "packings" / f"seed{s}" / f"{stage}{v}.nc")
+                assert ds.attrs["N"] == scene["system"]["n"] and ds.attrs["d"] == scene["system"]["d"]
+                assert set(ds.position.dims) == {"particle", "spatial"}
+    checks = sorted((out / "analysis").glob("*/calippso_*.check.json"))
+    assert len(checks) == len(seeds) * len(variants)
     for path in checks:
         summary = json.loads(path.read_text())
-        # a soft packing at the jamming onset: a rigid backbone with at least the
-        # isostatic number of contacts, overlaps of the order of P0 (harmonic springs),
-        # and forces balanced to the minimiser's tolerance
-        assert summary["n_contacts"] >= summary["isostatic_count"] > 0
-        assert summary["max_overlap_rel"] < 100 * p0
-        assert summary["force_balance_residual"] < 1e-4
-    for path in sorted((out / "analysis").glob("*/certify.nc")):
-        # soft packings at the onset are rigid: at least collectively jammed
+        # LS + CALiPPSO: exactly isostatic backbones, no overlap, balanced forces
+        assert summary["isostatic"] and summary["n_contacts"] == summary["isostatic_count"] > 0
+        assert summary["max_overlap_rel"] < 1e-8
+        assert summary["force_balance_residual"] < 1e-8
+    certificates = sorted((out / "analysis").glob("*/certify_*.nc"))
+    assert len(certificates) == len(seeds) * len(variants)
+    for path in certificates:
         assert xr.load_dataset(path).attrs["classification"] in ("collectively_jammed", "strictly_jammed")
-    assert len(list((out / "analysis").glob("*/certify.nc"))) == len(scene["system"]["seeds"])
+    for s in seeds:
+        series = xr.load_dataset(out / "analysis" / f"seed{s}" / f"overlap_k{kappa:g}.nc")
+        assert series["Q"].values[-1] == 1.0 and np.all((series["Q"] >= 0) & (series["Q"] <= 1))
+        assert np.all(series["n_lp"].values >= 1)
     for kind in ("gaps", "forces"):
-        ds = xr.load_dataset(out / "analysis" / f"{kind}.nc")
+        ds = xr.load_dataset(out / "analysis" / f"{kind}{variants[-1]}.nc")
         assert np.isfinite(ds.attrs["fit_exponent"])
     pngs = sorted((out / "figures").glob("*.png"))
-    expected = {f"packing_seed{s}.png" for s in scene["system"]["seeds"]} | {"gaps.png", "forces.png", "rdf.png"}
+    expected = {f"packing_seed{s}{variants[-1]}.png" for s in seeds} | {
+        f"{f}.png" for f in ("gaps", "forces", "rdf", "phi-j-series", "gaps-ls-vs-calippso", "eos")}
     assert {p.name for p in pngs} == expected
     assert all(p.stat().st_size > 1000 and p.with_suffix(".pdf").is_file() for p in pngs)
     report = _snakemake(work, "--report", "report.html")

@@ -344,13 +344,17 @@ def plot_overlap_series(datasets: Sequence[xr.Dataset]) -> Figure:
             ok = x < x.max() if name in ("abs_delta_phi_J", "one_minus_Q") else np.ones(len(x), dtype=bool)
             y = merged[name].mean("sample").values.astype(float)
             e = merged[name].std("sample", ddof=1).values / np.sqrt(m) if m > 1 else np.zeros_like(y)
-            ax.errorbar(x[ok], y[ok], yerr=e[ok], fmt="o-", ms=4, capsize=2, label=label)
+            # non-negative quantities: the lower error bar stops at zero
+            lower = np.minimum(e, y) if name != "phi_J" else e
+            ax.errorbar(x[ok], y[ok], yerr=[lower[ok], e[ok]], fmt="o-", ms=4, capsize=2, label=label)
     for ax, name, ylabel in zip(axes, names, ylabels):
         ax.set_xscale("log")
         if name in ("abs_delta_phi_J", "one_minus_Q"):
             positive = [v for line in ax.get_lines() for v in np.asarray(line.get_ydata(), float) if v > 0]
             if positive:
+                # logarithmic above the smallest nonzero mean, linear down to an exact 0 (Q = 1)
                 ax.set_yscale("symlog", linthresh=min(positive))
+            ax.set_ylim(bottom=0.0)
         ax.set_ylabel(ylabel)
         ax.legend(fontsize=8)
     axes[-1].set_xlabel(f"LS target pressure p_tar {_DL}")

@@ -232,5 +232,7 @@ rule plot_eos:
         f"{BENCH}/figures/eos.tsv"
     conda:
         "../envs/jamflow.yaml"
+    params:
+        labels=" ".join(f"{s}:kappa={k:g}" for k in LS_RATES for s in samples()),
     shell:
-        "jamflow plot eos {input} {output.png} > {log} 2>&1"
+        "jamflow plot eos {input} {output.png} --labels {params.labels} > {log} 2>&1"
