@@ -279,3 +279,18 @@ def test_cli_writes_one_output_per_target_and_eos(tmp_path):
     # the number of outputs must match the targets
     assert main(["ls", str(src), str(outs[0]), "--growth-rate", "2e-3", "--p-target", "100", "1000",
                  "--quiet"]) == 1
+
+
+def test_real_ls_configurations_stay_without_overlap(calippso_ls_file):
+    # the CALiPPSO authors' LS packings (N = 1024, d = 3, 4, 5, relative gaps down to
+    # ~1e-11): hard-sphere dynamics at fixed diameters keeps energy, momentum and
+    # non-overlap, and measures a pressure in the glass regime (p >> 1) in both windows
+    from jamflow.io import read_dat
+
+    pk = read_dat(calippso_ls_file)
+    res = compress(pk, 0.0, max_collisions=20 * pk.n, fast_growth_rate=None, seed=0)
+    p = res.eos.pressure.values
+    assert len(p) == 2 and np.all(p > 1e4)
+    assert p[1] == pytest.approx(p[0], rel=0.2)
+    assert np.allclose(res.eos.temperature.values, 0.1, rtol=1e-12)  # no growth: no heating
+    assert max_overlap(res.final)[1] <= OVERLAP_TOL

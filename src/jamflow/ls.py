@@ -23,7 +23,9 @@ diameter grows at the paper's uniform rate ``sigma_dot = kappa`` (exactly the pa
 for monodisperse systems). Polydisperse diameters grow *proportionally*
 (``sigma_dot_i = kappa a_i``), as in the LS code of Skoge et al. used by the paper,
 so the size distribution (e.g. the ratio 1:1.4 of a binary mixture) is preserved and
-the packing fraction is ``phi(t) = phi(0) (s(t) / s(0))^d``.
+the packing fraction is ``phi(t) = phi(0) (s(t) / s(0))^d``. (That LS code grows
+*radii* at its parameter ``growthrate``; if a quoted rate is that parameter, the
+diameter rate here is twice it.)
 
 Dynamics
 --------
