@@ -347,11 +347,35 @@ class Integrator:
                 dt = min(dt, np.sqrt(2.0 * o.step_drift) / w)
         return float(max(o.dt_min * self.drive.time_unit, dt))
 
+    def list_horizon(self, sol: Solution) -> float:
+        """Longest straight-line move under ``sol`` after which the Verlet list is still valid.
+
+        Collisions are predicted among listed pairs only, so a step must not move any
+        particle so far that an unlisted pair could meet (the bound of
+        :attr:`NeighborList.valid`, extended by the step: non-affine displacements grow
+        by ``t max|U|``, the accumulated strain norm by ``t |E|_2``).
+        """
+        nl = self.state.nl
+        a = float(np.sqrt(np.max(np.einsum("nk,nk->n", nl.displacement, nl.displacement), initial=0.0)))
+        u = float(np.sqrt(np.max(np.einsum("nk,nk->n", sol.velocity, sol.velocity), initial=0.0)))
+        g = float(np.linalg.norm(sol.gradient, 2))
+        s0, c = nl.strain_norm, nl.cutoff
+        # 2 (a + t u) + (s0 + t g) (1 + s0 + t g) c < skin, a quadratic A t^2 + B t + C < 0
+        A = g * g * c
+        B = 2.0 * u + g * c * (1.0 + 2.0 * s0)
+        C = 2.0 * a + s0 * (1.0 + s0) * c - nl.skin
+        if C >= 0.0:
+            return 0.0
+        if A > 0.0:
+            return float(2.0 * -C / (B + np.sqrt(B * B - 4.0 * A * C)))
+        return float(-C / B) if B > 0.0 else np.inf
+
     def step(self, horizon: float = np.inf) -> bool:
         """One integration step, at most to ``time + horizon``. Returns True on a collision."""
         st = self.state
         sol = self.solution
-        tmax = min(self.dt(), horizon)
+        limit = self.list_horizon(sol)
+        tmax = min(self.dt(), horizon, limit)
         t, k = next_collision(st.x, st.h, st.nl.pairs, st.nl.images, st.nl.sigma, st.contact,
                               sol.velocity, sol.gradient, tmax)
         self._move(t, sol.velocity, sol.gradient)
@@ -376,7 +400,9 @@ class Integrator:
             self.correct()
         if st.step % self.options.sync_every == 0:
             self.synchronize()
-        elif not st.nl.valid:
+        elif not st.nl.valid or (k < 0 and t >= limit):
+            # a step cut short by the list horizon ends on a rebuild (else the next
+            # steps would shrink towards the same horizon)
             self.rebuild()
         return k >= 0
 

@@ -21,7 +21,8 @@ import xarray as xr
 
 from ..analysis.contacts import find_rattlers
 from ..io import new_dataset_attrs
-from ..packing import Packing, length_unit, sphere_volume
+from ..packing import Packing, length_unit, near_pairs, sphere_volume
+from ..tolerances import OVERLAP_TOL
 from .driving import Drive
 from .integrate import FlowOptions, Integrator
 
@@ -129,6 +130,26 @@ _SERIES_META = {
 }
 
 
+def check_overlaps(packing: Packing, options: FlowOptions) -> None:
+    """Refuse a start with interpenetrating hard spheres (ValueError naming the worst pairs).
+
+    The packing's own contacts may overlap by up to the drift tolerance (the dynamics
+    corrects them, Sec. IV C); any other pair by at most
+    :data:`~jamflow.tolerances.OVERLAP_TOL` (relative).
+    """
+    pairs, h = near_pairs(packing.wrapped(), 0.0)
+    allowed = np.full(len(h), OVERLAP_TOL)
+    if packing.contacts is not None and len(packing.contacts) and len(h):
+        key = pairs.i.astype(np.int64) * packing.n + pairs.j
+        given = np.isin(key, packing.contacts[:, 0] * packing.n + packing.contacts[:, 1])
+        allowed[given] = max(options.drift_tol, OVERLAP_TOL)
+    bad = np.flatnonzero(-h > allowed)
+    if bad.size:
+        worst = bad[np.argsort(h[bad])[:3]]
+        named = ", ".join(f"({pairs.i[k]}, {pairs.j[k]}): {-h[k]:.3g}" for k in worst)
+        raise ValueError(f"{bad.size} pair(s) of hard spheres overlap beyond the tolerance (relative); worst {named}")
+
+
 def _horizon(integ: Integrator, stop: Stop) -> float:
     st = integ.state
     drive = integ.drive
@@ -204,6 +225,7 @@ def run_flow(
     if checkpoint is not None and Path(checkpoint).exists():
         integ, recorder = load_checkpoint(checkpoint, drive, options)
     else:
+        check_overlaps(packing, options)
         integ = Integrator.start(packing.position / lam, packing.box.matrix / lam,
                                  packing.diameter / (2 * lam), drive, options, packing.contacts)
         recorder.record(integ)
