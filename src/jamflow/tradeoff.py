@@ -384,6 +384,93 @@ def _certify_grid(quick: bool) -> list[dict[str, Any]]:
     return [{"solver": s, "loads": k} for s in ("ipm", "simplex", "choose") for k in (1, 2, 4)]
 
 
+# --- CALiPPSO ---------------------------------------------------------------------------
+
+#: LS pressure of the CALiPPSO sweep's start.
+CALIPPSO_START_P: float = 1e3
+
+
+def _calippso_prepare(seed: int, quick: bool) -> Packing:
+    from .ls import compress
+
+    start = random_packing(64 if quick else 256, 2, 0.5, "bi", seed=seed)
+    return compress(start, 1e-3, p_targets=[CALIPPSO_START_P], seed=seed).snapshots[0]
+
+
+def _calippso_run(start: Packing, knobs: dict[str, Any], quick: bool):
+    from .calippso import calippso
+
+    return calippso(start, tol_s=knobs["tol_s"], tol_gamma=knobs["tol_gamma"], solver=knobs["solver"])
+
+
+def _calippso_compare(out, ref) -> dict[str, float]:
+    p, pr = out.packing, ref.packing
+    rel_phi = abs(p.packing_fraction - pr.packing_fraction) / pr.packing_fraction
+    one_minus_q = 1.0 - _q(p, pr)
+    diag = out.diagnostics
+    return {
+        "error": max(rel_phi, one_minus_q),
+        "phi_J_error": rel_phi,
+        "one_minus_Q": one_minus_q,
+        "n_lp": float(out.iterations),
+        "max_overlap": float(diag["max_overlap"]),
+        "force_balance_residual": float(diag["force_balance_residual"]),
+        "not_isostatic": float(not diag["isostatic"]),
+    }
+
+
+_CALIPPSO_METRICS = {
+    "error": "max(phi_J_error, one_minus_Q)",
+    "phi_J_error": "|phi_J - phi_J(reference)| / phi_J(reference)",
+    "one_minus_Q": "1 - Q of the jammed contact network against the reference's",
+    "n_lp": "number of LPs solved",
+    "max_overlap": "largest relative overlap of the jammed packing",
+    "force_balance_residual": "force-balance residual of the jammed packing (CALiPPSO diagnostics)",
+    "not_isostatic": "1 if the backbone is not isostatic",
+}
+
+
+def _calippso_grid(quick: bool) -> list[dict[str, Any]]:
+    tols = [(1e-5, 1e-8), (1e-7, 1e-10), (1e-9, 1e-12)] + ([] if quick else [(1e-10, 1e-13)])
+    return [{"tol_s": a, "tol_gamma": b, "solver": sv} for sv in ("simplex", "ipm", "hybrid") for a, b in tols]
+
+
+# --- LS compression ---------------------------------------------------------------------
+
+
+def _ls_prepare(seed: int, quick: bool) -> Packing:
+    return random_packing(64 if quick else 128, 2, 0.5, "bi", seed=seed)
+
+
+def _ls_run(start: Packing, knobs: dict[str, Any], quick: bool) -> Packing:
+    from .calippso import calippso
+    from .ls import compress
+
+    snap = compress(start, knobs["growth_rate"], p_targets=[knobs["p_target"]], seed=0).snapshots[0]
+    return calippso(snap).packing
+
+
+def _ls_compare(out: Packing, ref: Packing) -> dict[str, float]:
+    from .ls import crystal_fraction
+
+    rel_phi = abs(out.packing_fraction - ref.packing_fraction) / ref.packing_fraction
+    return {"error": rel_phi, "phi_J": out.packing_fraction, "crystal_fraction": crystal_fraction(out)}
+
+
+_LS_METRICS = {
+    "error": "|phi_J - phi_J(reference)| / phi_J(reference), phi_J after CALiPPSO (a slower compression "
+             "jams denser: the distance from the slowest protocol, not a numerical error)",
+    "phi_J": "jamming packing fraction after CALiPPSO (default settings)",
+    "crystal_fraction": "fraction of crystal-like particles (jamflow.ls.crystal_fraction)",
+}
+
+
+def _ls_grid(quick: bool) -> list[dict[str, Any]]:
+    rates = (1e-2, 1e-3) if quick else (3e-2, 1e-2, 3e-3, 1e-3)
+    ps = (1e3, 1e5) if quick else (1e3, 1e5, 1e7)
+    return [{"growth_rate": k, "p_target": p} for k in rates for p in ps]
+
+
 #: The registry: stage name -> sweep.
 STAGES: dict[str, StageSweep] = {
     "soft": StageSweep(
@@ -457,6 +544,42 @@ STAGES: dict[str, StageSweep] = {
         grid=_certify_grid,
         run=_certify_run,
         compare=_certify_compare,
+    ),
+    "calippso": StageSweep(
+        name="calippso",
+        description="CALiPPSO from an LS snapshot at p = 1e3 (growth rate 1e-3) of 2D 1:1.4 bidisperse discs "
+                    "(N = 64 quick, 256 full); the HiGHS feasibility tolerances are the module's fixed ones",
+        commands=("calippso",),
+        knobs={"tol_s": "convergence: largest stable displacement of the last LP [mean diameters]",
+               "tol_gamma": "convergence: sqrt(Gamma*) - 1 of the last LP",
+               "solver": "HiGHS strategy (jamflow.calippso.SOLVERS)"},
+        preset_options={"tol_s": "tol_s", "tol_gamma": "tol_gamma", "solver": "solver"},
+        metrics=_CALIPPSO_METRICS,
+        primary="error",
+        thresholds={"fast": {"error": 1e-3, "not_isostatic": 0.0}, "default": {"error": 1e-6, "not_isostatic": 0.0},
+                    "publication": {"error": 1e-9, "not_isostatic": 0.0}},
+        prepare=_calippso_prepare,
+        reference=lambda quick: {"tol_s": 1e-11, "tol_gamma": 1e-14, "solver": "simplex"},
+        grid=_calippso_grid,
+        run=_calippso_run,
+        compare=_calippso_compare,
+    ),
+    "ls": StageSweep(
+        name="ls",
+        description="LS compression of a 2D 1:1.4 bidisperse RSA start (N = 64 quick, 128 full, phi = 0.5) to "
+                    "p_target, then CALiPPSO with its defaults; time = LS + CALiPPSO",
+        commands=("ls",),
+        knobs={"growth_rate": "LS growth rate kappa (after the fast phase to p = 500)",
+               "p_target": "LS target pressure handed to CALiPPSO"},
+        preset_options={},
+        metrics=_LS_METRICS,
+        primary="error",
+        thresholds={"fast": {"error": 1e-2}, "default": {"error": 3e-3}, "publication": {"error": 1e-3}},
+        prepare=_ls_prepare,
+        reference=lambda quick: {"growth_rate": 1e-4, "p_target": 1e7},
+        grid=_ls_grid,
+        run=_ls_run,
+        compare=_ls_compare,
     ),
 }
 
