@@ -170,7 +170,12 @@ def plot_gaps(datasets: Sequence[xr.Dataset], labels: Sequence[str] | None = Non
     ax.set_yscale("log")
     ax.set_xlabel("relative gap h = r/sigma - 1 (dimensionless)")
     ax.set_ylabel("p(h): neighbours per particle per unit h (dimensionless)")
-    ax.legend(fontsize=8)
+    if len(datasets) > 2:
+        # many curves: the legend goes below the axes instead of over the data
+        fig.set_size_inches(6.4, 4.8 + 0.17 * (2 * len(datasets) + 1))
+        fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", fontsize=7, ncols=2)
+    else:
+        ax.legend(fontsize=8)
     ax.grid(True, which="major", alpha=0.3)
     return fig
 
