@@ -194,3 +194,10 @@ def test_default_scene_runs_end_to_end(tmp_path):
     report = _snakemake(work, "--report", "report.html")
     assert report.returncode == 0, report.stderr[-4000:]
     assert (work / "report.html").stat().st_size > 10_000
+
+
+def test_scene_schema_offers_exactly_the_tradeoff_stages():
+    from jamflow.tradeoff import STAGES
+
+    schema = yaml.safe_load((REPO / "workflow" / "schemas" / "config.schema.yaml").read_text())
+    assert schema["properties"]["tradeoff"]["properties"]["stages"]["items"]["enum"] == list(STAGES)
