@@ -104,7 +104,7 @@ def main() -> None:
         data[f"ls_{key}"] = (("d",), np.array([r[key] for r in ls], float))
     # 3. solvers on the d = 3 LS example (quick: N = 256 random start)
     base = read_dat(LS / "Centers-after-LS--N-1024--d-3.dat") if not args.quick else random_packing(128, 3, 0.3, "mono", seed=1)
-    solvers = ["ipm", "simplex", "hybrid"]
+    solvers = ["ipm", "simplex", "hybrid", "ipm-center"]
     sol = []
     for s in solvers:
         print(f"solver {s}", flush=True)

@@ -178,7 +178,7 @@ def test_relaxation_option():
     _check_jammed(res, start)
 
 
-@pytest.mark.parametrize("solver", ["simplex", "hybrid"])
+@pytest.mark.parametrize("solver", ["ipm", "simplex", "ipm-center"])
 def test_solvers_agree(solver):
     start = random_packing(48, 3, 0.3, "mono", seed=9)
     a = calippso(start)

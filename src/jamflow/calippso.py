@@ -103,11 +103,19 @@ __all__ = [
 #: Solver strategies. ``ipm``: HiGHS interior point with crossover (vertex duals),
 #: cold every LP; ``simplex``: dual simplex, warm-started from the previous basis
 #: whenever the rows are unchanged; ``hybrid``: interior point while
-#: ``sqrt(Gamma*) - 1 > HYBRID_SWITCH``, then warm dual simplex.
-SOLVERS: tuple[str, ...] = ("ipm", "simplex", "hybrid")
+#: ``sqrt(Gamma*) - 1 > HYBRID_SWITCH``, then dual simplex warm-started from the
+#: previous basis (interior point with crossover whenever the rows changed); ``ipm-center``:
+#: interior point without crossover on every bounded LP (a point inside the optimal
+#: face: displacements along directions that do not change Gamma are not pushed onto
+#: the bound as at a vertex) and with crossover on every unbounded LP, the only ones
+#: whose duals give the contacts of the result.
+SOLVERS: tuple[str, ...] = ("ipm", "simplex", "hybrid", "ipm-center")
 
-#: Default solver, chosen by ``benchmarks/calippso.py``.
-DEFAULT_SOLVER: str = "ipm"
+#: Default solver, chosen by ``benchmarks/calippso.py``: on the d = 3 LS example
+#: (N = 1024) hybrid took 11.0 s against 16.6 s for ipm in the same run (same 5 LPs,
+#: same phi_J and network; warm simplex LPs 0.2-1.4 s against ~3 s); cold simplex LPs
+#: took 20-80 s.
+DEFAULT_SOLVER: str = "hybrid"
 
 #: Convergence: largest displacement of a stable particle [mean diameters].
 DEFAULT_TOL_S: float = 1e-9
@@ -199,6 +207,7 @@ class IterationRecord:
     min_active_dual: float  # relative to the largest dual
     max_inactive_dual: float  # relative to the largest dual
     accepted: bool
+    warm_start: bool = False  # simplex started from the previous LP's basis
 
 
 @dataclass(frozen=True)
@@ -346,9 +355,9 @@ class _Solver:
         lp.a_matrix_.value_ = A.data.astype(np.float64)
         h = self.h
         h.clearSolver()
-        if method == "ipm":
+        if method in ("ipm", "ipm-nox"):
             h.setOptionValue("solver", "ipm")
-            h.setOptionValue("run_crossover", "on")
+            h.setOptionValue("run_crossover", "on" if method == "ipm" else "off")
         else:
             h.setOptionValue("solver", "simplex")
             h.setOptionValue("simplex_strategy", 1)  # dual simplex
@@ -361,11 +370,15 @@ class _Solver:
         elapsed = time.perf_counter() - t0
         status = h.getModelStatus()
         name = h.modelStatusToString(status)
-        if status != highspy.HighsModelStatus.kOptimal:
+        # without crossover HiGHS may stop with status "Unknown" at a primal-feasible
+        # interior point; only its primal part is used (the overlap check follows)
+        interior_ok = (method == "ipm-nox" and status == highspy.HighsModelStatus.kUnknown
+                       and int(h.getInfo().primal_solution_status) == 2)
+        if status != highspy.HighsModelStatus.kOptimal and not interior_ok:
             self.basis = None
             return name, elapsed, None, None, warm
         sol = h.getSolution()
-        self.basis = h.getBasis()
+        self.basis = h.getBasis() if method == "simplex" or method == "ipm" else None
         self.basis_rows = rows
         return name, elapsed, np.asarray(sol.col_value), -np.asarray(sol.row_dual), warm
 
@@ -515,8 +528,14 @@ def calippso(
         else:
             b = 0.5 * bound[phase - 1][1] * bound_factor
         # rows: reuse while displacements since the build are small
-        if rows is None or rows.cutoff != ell or _moved(rows, x, packing, walls) > REUSE_FRACTION * (ell - sig_max):
+        # rows (and with them a simplex basis) are kept while the cutoff changed by less
+        # than REUSE_FRACTION relatively and every particle moved less than
+        # REUSE_FRACTION (ell - sigma_max) since they were built
+        if rows is None or abs(rows.cutoff / ell - 1.0) > REUSE_FRACTION or _moved(
+            rows, x, packing, walls, prev_rattler
+        ) > REUSE_FRACTION * (ell - sig_max):
             rows = _find_rows(x, D, packing, ell, walls)
+        ell = rows.cutoff
         dx, sig, rhs, a, rad = _row_geometry(rows, x, D, packing)
         A = _matrix(rows, dx, sig, a, rad, n, d, unit)
         # per-particle bound: the previous LP's rattlers get the far bound, so that a
@@ -539,10 +558,12 @@ def calippso(
         b_max = float(b_part.max())
         reach = (ell - 2.0 * np.sqrt(d) * b_max * unit) / sig_max if np.isfinite(b_max) else FAR_GROWTH
         col_upper[-1] = min(FAR_GROWTH, max(reach, 1.0)) ** 2 - 1.0
-        method = "simplex" if force_simplex else _method(solver, records)
-        status, lp_time, col, dual, _ = solver_obj.solve(A, rhs, col_lower, col_upper, method, rows)
+        method = "simplex" if force_simplex else _method(solver, records, bool(np.isfinite(b)))
+        if solver == "hybrid" and method == "simplex" and solver_obj.basis_rows is not rows:
+            method = "ipm"  # new rows: a cold simplex is slower than ipm; its crossover basis warms the next LP
+        status, lp_time, col, dual, warm = solver_obj.solve(A, rhs, col_lower, col_upper, method, rows)
         if col is None:
-            rec = IterationRecord(it, np.nan, np.nan, np.nan, len(rows), 0, 0, False, status, lp_time, method, ell / sig_max, b, np.nan, np.nan, False)
+            rec = IterationRecord(it, np.nan, np.nan, np.nan, len(rows), 0, 0, False, status, lp_time, method, ell / sig_max, b, np.nan, np.nan, False, warm)
             records.append(rec)
             if progress:
                 progress(rec)
@@ -585,7 +606,7 @@ def calippso(
         trial = _as_packing(packing, x_new, D_new, walls)
         ov = _max_overlap(trial, walls)
         accepted = ov <= OVERLAP_TOL
-        rec = IterationRecord(it, sg, max_s, max_s_stable, len(rows), n_c, n_s, iso, status, lp_time, method, ell / sig_max, b, min_act, max_inact, accepted)
+        rec = IterationRecord(it, sg, max_s, max_s_stable, len(rows), n_c, n_s, iso, status, lp_time, method, ell / sig_max, b, min_act, max_inact, accepted, warm)
         records.append(rec)
         if progress:
             progress(rec)
@@ -605,7 +626,8 @@ def calippso(
         if not walls and len(contacts):
             zc = np.bincount(contacts[backbone].ravel(), minlength=n)
             anchor = int(np.argmax(zc))
-        # phase schedule with hysteresis
+        # phase schedule with hysteresis: a phase never loosens (measured: loosening
+        # again above 10x the threshold cost more LPs from random starts)
         while phase < len(bound) and sg <= bound[phase][0]:
             phase += 1
         small = sg < tol_gamma and max_s_stable < tol_s
@@ -643,7 +665,9 @@ def calippso(
         relax=relax, walls=walls, max_iterations=max_iterations, threads=threads))
 
 
-def _method(solver: str, records: list[IterationRecord]) -> str:
+def _method(solver: str, records: list[IterationRecord], bounded: bool) -> str:
+    if solver == "ipm-center":
+        return "ipm-nox" if bounded else "ipm"
     if solver == "hybrid":
         accepted = [r for r in records if r.accepted]
         if accepted and accepted[-1].sqrt_gamma_minus_1 <= HYBRID_SWITCH:
@@ -652,11 +676,18 @@ def _method(solver: str, records: list[IterationRecord]) -> str:
     return solver
 
 
-def _moved(rows: _Rows, x: NDArray[np.float64], packing: Packing, walls: bool) -> float:
+def _moved(rows: _Rows, x: NDArray[np.float64], packing: Packing, walls: bool,
+           rattler: NDArray[np.bool_] | None) -> float:
+    """Largest displacement since the rows were built [length]; a rattler of the last
+    LP counts with a tenth of its displacement (it roams its cage; an overlap it
+    might cause with an unlisted pair is caught by the all-pairs check)."""
     dxs = x - rows.x_build
     if not walls:
         dxs = packing.box.minimum_image(dxs)
-    return float(np.sqrt(np.max(np.einsum("ij,ij->i", dxs, dxs))))
+    m = np.sqrt(np.einsum("ij,ij->i", dxs, dxs))
+    if rattler is not None:
+        m[rattler] *= 0.1
+    return float(m.max())
 
 
 def _as_packing(packing: Packing, x, D, walls: bool) -> Packing:
@@ -771,6 +802,7 @@ def _history(records: list[IterationRecord]) -> xr.Dataset:
                 {"units": u, "long_name": ln}) for k, (u, ln) in spec.items()}
     data["isostatic"] = (("iteration",), col("isostatic").astype(np.int8), {"units": "1", "long_name": "N_c == isostatic count after the LP (1 = yes)"})
     data["accepted"] = (("iteration",), col("accepted").astype(np.int8), {"units": "1", "long_name": "update accepted (0 = undone by a recovery)"})
+    data["warm_start"] = (("iteration",), col("warm_start").astype(np.int8), {"units": "1", "long_name": "simplex warm-started from the previous basis (1 = yes)"})
     data["lp_status"] = (("iteration",), col("lp_status").astype(str), {"long_name": "HiGHS model status"})
     data["solver"] = (("iteration",), col("solver").astype(str), {"long_name": "HiGHS method of the LP"})
     return xr.Dataset(data, coords={"iteration": np.arange(1, len(records) + 1)})
