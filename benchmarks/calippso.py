@@ -3,9 +3,8 @@
 Parts (all d = 3 monodisperse unless stated; one run, ratios measured in the same run):
 
 1. ``scaling``: time to jam, number of LPs and median LP time against N from a random
-   start (RSA at phi0 = 0.3) and from a near-jamming start (the jammed packing of the
-   random start with diameters reduced by 1e-4 relatively and centres displaced by
-   up to 1e-5 mean diameters at random; for N = 1024 also the LS example), with
+   start (RSA at phi0 = 0.3, N = 256..1024) and from a near-jamming start (the LS
+   example tiled 1, 2, 4 times: N = 1024..4096, box 1x1x1 .. 2x2x1), with
    least-squares exponents next to the paper's (total ~ N^3, t_LP ~ N^2.34, n ~ N^1.04).
 2. ``ls``: the LS examples of the CALiPPSO authors (N = 1024, d = 3, 4, 5).
 3. ``solvers``: ipm (with crossover), dual simplex (warm), hybrid, on one input.
@@ -32,10 +31,11 @@ import numpy as np
 import xarray as xr
 
 from jamflow.analysis.contacts import force_balance_residual, summarize
+from jamflow.box import Box
 from jamflow.calippso import calippso
 from jamflow.initial import random_packing
 from jamflow.io import new_dataset_attrs, read_dat, write_dataset
-from jamflow.packing import max_overlap
+from jamflow.packing import Packing, max_overlap
 
 OUT = Path(__file__).resolve().parent / "output"
 LS = Path(__file__).resolve().parents[2] / "shared" / "data" / "calippso-ls"
@@ -61,12 +61,15 @@ def run(p, **kw) -> dict:
     return out
 
 
-def near_start(jammed, seed: int):
-    rng = np.random.default_rng(seed)
-    D = jammed.diameter * (1 - 1e-4)
-    x = jammed.position + rng.uniform(-1, 1, jammed.position.shape) * 1e-5 * D.mean() / np.sqrt(jammed.d)
-    return jammed.evolve(position=jammed.box.wrap(x), diameter=D, contacts=None, force=None, rattler=None,
-                         protocol="near-jamming")
+def tiled_ls(k: int):
+    """The d = 3 LS example (N = 1024) repeated k times along x, then y, then z."""
+    p = read_dat(LS / "Centers-after-LS--N-1024--d-3.dat")
+    reps = [1, 1, 1]
+    for i in range(int(np.log2(k))):
+        reps[i % 3] *= 2
+    shifts = np.stack(np.meshgrid(*[np.arange(r) for r in reps], indexing="ij"), -1).reshape(-1, 3)
+    x = (p.position[None, :, :] + shifts[:, None, :]).reshape(-1, 3)
+    return Packing(position=x, diameter=np.full(len(x), p.diameter[0]), box=Box.orthogonal(reps), protocol="ls-tiled")
 
 
 def fit(N, y):
@@ -78,21 +81,22 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="small sizes only (a few minutes)")
     args = ap.parse_args()
-    sizes = np.array([128, 256] if args.quick else [256, 512, 1024, 2048, 4096])
+    sizes = np.array([128, 256] if args.quick else [256, 512, 1024])
+    near_sizes = np.array([1024, 2048] if args.quick else [1024, 2048, 4096])
     data = {}
-    # 1. scaling
-    rows = {k: [] for k in ("random", "near")}
+    # 1. scaling: random starts, and near-jamming starts (the LS example tiled)
+    rows = {"random": [], "near": []}
     for n in sizes:
         print(f"N = {n} random start phi0 = 0.3", flush=True)
-        a = run(random_packing(int(n), 3, 0.3, "mono", seed=1))
-        rows["random"].append(a)
-        print(f"N = {n} near-jamming start", flush=True)
-        b = run(near_start(a["result"].packing, 2)) if "result" in a else a
-        rows["near"].append(b)
+        rows["random"].append(run(random_packing(int(n), 3, 0.3, "mono", seed=1)))
+    for n in near_sizes:
+        print(f"N = {n} near-jamming start (LS example tiled {n // 1024}x)", flush=True)
+        rows["near"].append(run(tiled_ls(int(n) // 1024)))
     for start, rs in rows.items():
         for key in ("time", "lps", "t_lp"):
-            data[f"{start}_{key}"] = (("N",), np.array([r[key] for r in rs], float))
-    exps = {f"exponent_{s}_{k}": fit(sizes, data[f"{s}_{k}"][1]) for s in rows for k in ("time", "lps", "t_lp")}
+            data[f"{start}_{key}"] = ((f"N_{start}",), np.array([r[key] for r in rs], float))
+    exps = {f"exponent_{s}_{k}": fit(sizes if s == "random" else near_sizes, data[f"{s}_{k}"][1])
+            for s in rows for k in ("time", "lps", "t_lp")}
     print("fitted exponents:", {k: round(v, 2) for k, v in exps.items()}, "(paper: time 3, t_LP 2.34, n 1.04)")
     # 2. LS examples
     ds_ls = [3] if args.quick else [3, 4, 5]
@@ -131,7 +135,7 @@ def main() -> None:
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024.0
     ds = xr.Dataset(
         {k: (v[0], v[1], {"long_name": k.replace("_", " ")}) for k, v in data.items()},
-        coords={"N": sizes, "d": ds_ls, "solver": solvers, "relax": relaxes,
+        coords={"N_random": sizes, "N_near": near_sizes, "d": ds_ls, "solver": solvers, "relax": relaxes,
                 "tol_s": ("tolerance", [t[0] for t in tols]), "tol_gamma": ("tolerance", [t[1] for t in tols])},
         attrs=new_dataset_attrs("CALiPPSO benchmark", {"quick": args.quick}, peak_memory=peak, **exps),
     )
@@ -139,8 +143,9 @@ def main() -> None:
     write_dataset(ds, OUT / "calippso.nc")
     fig, ax = plt.subplots(1, 3, figsize=(13, 4))
     for s, m in (("random", "o"), ("near", "s")):
-        ax[0].loglog(sizes, ds[f"{s}_time"], m + "-", label=f"{s}: total")
-        ax[0].loglog(sizes, ds[f"{s}_t_lp"], m + "--", label=f"{s}: median LP")
+        nn = sizes if s == "random" else near_sizes
+        ax[0].loglog(nn, ds[f"{s}_time"], m + "-", label=f"{s}: total")
+        ax[0].loglog(nn, ds[f"{s}_t_lp"], m + "--", label=f"{s}: median LP")
     ax[0].set_xlabel("N"); ax[0].set_ylabel("time [s]"); ax[0].legend(fontsize=7)
     ax[1].bar(solvers, ds["solver_time"]); ax[1].set_ylabel("time to jam [s]"); ax[1].set_title("solvers")
     ax[2].loglog(ds["tol_time"], ds["tol_overlap"], "o-", label="max overlap")

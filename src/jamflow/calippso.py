@@ -59,19 +59,28 @@ with hysteresis: the phase only tightens. Convergence (Algorithm 1, line 15) nee
 [mean diameters]. The LP that certifies convergence is always solved without
 displacement bounds (paper Sec. II C: an active bound acts as an external force);
 after it the contact network is checked for isostaticity, force balance and, over
-all pairs, overlaps.
+all pairs, overlaps. In the last bound phase an unbounded LP is also tried when the
+stable particles moved by less than :data:`UNBOUND_FRACTION` of the bound or by more
+than :data:`BOUND_ACTIVE_FRACTION` of it (never twice in a row unless converging),
+and the previous LP's rattlers get the far bound so that they are not pinned on it.
+The cutoff is ``cutoff`` (1.7 largest diameters) far from jamming and
+``cutoff_near`` (1.4) in the last phase; rows are kept from LP to LP (which lets the
+dual simplex start from the previous basis) while the particles moved little.
 
 Robustness
 ----------
-After each LP: a status other than optimal, an LP with unbounded displacements that
-HiGHS reports unbounded, or an update that creates an overlap beyond
+After each LP: a status other than optimal (e.g. an LP without bounds that HiGHS
+reports unbounded because a particle has no cage within the cutoff), or an update
+that creates an overlap beyond
 :data:`~jamflow.tolerances.OVERLAP_TOL` in the all-pairs check is undone and retried
 with a cutoff larger by :data:`CUTOFF_GROWTH` and a bound smaller by
 :data:`BOUND_SHRINK`, up to :data:`MAX_RECOVERIES` times in a row. A converged LP
 whose network is not isostatic (and not the hyperstatic 2D-monodisperse case of
 App. A) or whose dual contacts disagree with the geometry is re-solved with a
-larger cutoff and the dual simplex. When recovery fails a ``RuntimeError`` carries
-the diagnostics; a non-jammed packing is never returned as jammed.
+larger cutoff and the dual simplex (twice at most). When recovery fails a
+``RuntimeError`` carries the diagnostics; a non-jammed packing is never returned as
+jammed (``require_isostatic=False`` returns it with ``converged = False``). A stall
+(no convergence) ends at ``max_iterations`` with the same kind of error.
 """
 
 from __future__ import annotations
