@@ -10,15 +10,10 @@ import pytest
 
 from jamflow import _ls_kernels as kern
 from jamflow.box import Box
+from jamflow.analysis.eos import carnahan_starling, fit_jamming_density
+from jamflow.analysis.structure import CRYSTAL_FRACTION_THRESHOLD, crystal_fraction
 from jamflow.initial import random_packing
-from jamflow.ls import (
-    CRYSTAL_FRACTION_THRESHOLD,
-    _State,
-    carnahan_starling,
-    compress,
-    crystal_fraction,
-    fit_jamming_density,
-)
+from jamflow.ls import _State, compress
 from jamflow.packing import Packing, max_overlap
 from jamflow.tolerances import OVERLAP_TOL
 
@@ -196,8 +191,10 @@ def test_glass_branch_follows_eq15():
     pk = random_packing(128, 3, 0.3, seed=8)
     res = compress(pk, 1e-3, [1e7], fast_growth_rate=5e-3, fast_until=500.0, seed=0)
     eos = res.eos
-    phi_J, err = fit_jamming_density(eos.packing_fraction.values, eos.pressure.values, 3, p_min=1e3)
-    print(f"phi_J = {phi_J:.6f} +- {err:.1e}")
+    fit = fit_jamming_density(eos.packing_fraction.values, eos.pressure.values, 3, p_min=1e3)
+    phi_J = fit.phi_j
+    print(f"phi_J = {phi_J:.6f} +- {fit.phi_j_err:.1e}, prefactor {fit.prefactor:.3f} (Eq. 15: 3)")
+    assert eos.attrs["kappa"] == 1e-3
     snap = res.snapshots[0]
     # the fit extrapolates beyond the last state and stays below random close packing-ish bounds
     assert snap.packing_fraction < phi_J < 0.75
@@ -209,8 +206,8 @@ def test_glass_branch_follows_eq15():
 def test_fit_jamming_density_recovers_eq15():
     phi = np.linspace(0.60, 0.639, 40)
     p = 3.0 / (1.0 - phi / 0.64)
-    phi_J, _ = fit_jamming_density(phi, p, 3, p_min=1e2)
-    assert phi_J == pytest.approx(0.64, rel=1e-10)
+    fit = fit_jamming_density(phi, p, 3, p_min=1e2)
+    assert fit.phi_j == pytest.approx(0.64, rel=1e-10) and fit.prefactor == pytest.approx(3.0, rel=1e-8)
     with pytest.raises(ValueError, match="at least 3"):
         fit_jamming_density(phi[:2], p[:2], 3, p_min=1.0)
 

@@ -64,7 +64,6 @@ from typing import Any
 
 import numpy as np
 import xarray as xr
-from numpy.typing import NDArray
 
 from . import _ls_kernels as _k
 from .io import new_dataset_attrs
@@ -73,17 +72,12 @@ from .tolerances import OVERLAP_TOL
 
 __all__ = [
     "CELL_SLACK",
-    "CRYSTAL_FRACTION_THRESHOLD",
     "DEFAULT_BETA",
     "DEFAULT_FAST_GROWTH_RATE",
     "DEFAULT_FAST_UNTIL",
-    "PSI6_CRYSTAL_THRESHOLD",
     "WINDOW_COLLISIONS_PER_PARTICLE",
     "LSResult",
-    "carnahan_starling",
     "compress",
-    "crystal_fraction",
-    "fit_jamming_density",
 ]
 
 #: Inverse temperature of the paper's LS runs.
@@ -97,12 +91,6 @@ WINDOW_COLLISIONS_PER_PARTICLE: int = 10
 #: Cells are built this factor wider than the largest diameter, so that the grid is
 #: rebuilt only after the diameters have grown by this factor.
 CELL_SLACK: float = 1.02
-#: Fraction of ten Wolde–Frenkel crystal-like particles above which a 3D packing counts
-#: as crystallised. Random close packed and glassy monodisperse spheres have a few
-#: per cent at most; a crystallised LS run has a large fraction.
-CRYSTAL_FRACTION_THRESHOLD: float = 0.2
-#: 2D: a particle is crystal-like (locally hexagonal) when its local ``|psi6|`` exceeds this.
-PSI6_CRYSTAL_THRESHOLD: float = 0.7
 
 
 @dataclass
@@ -477,7 +465,7 @@ def compress(
                             {"units": "1", "long_name": "time-averaged kinetic temperature 2K/(dN) before rescaling"}),
         },
         attrs=new_dataset_attrs(
-            "LS equation of state", parameters, N=n, d=d, beta=beta, stop_reason=stop_reason,
+            "LS equation of state", parameters, N=n, d=d, beta=beta, kappa=growth_rate, stop_reason=stop_reason,
             collisions=collisions, cpu_time=cpu,
             collisions_per_second=collisions / cpu if cpu > 0 else math.nan,
         ),
@@ -486,77 +474,3 @@ def compress(
         snapshots=snapshots, eos=eos, final=final, stop_reason=stop_reason, collisions=collisions,
         cpu_time=cpu, collisions_per_second=collisions / cpu if cpu > 0 else math.nan,
     )
-
-
-def carnahan_starling(phi: NDArray[np.float64] | float) -> NDArray[np.float64]:
-    """Carnahan–Starling reduced pressure of the 3D hard-sphere liquid,
-    ``(1 + phi + phi^2 - phi^3) / (1 - phi)^3``."""
-    phi = np.asarray(phi, dtype=np.float64)
-    return (1.0 + phi + phi**2 - phi**3) / (1.0 - phi) ** 3
-
-
-def fit_jamming_density(phi: NDArray[np.float64], p: NDArray[np.float64], d: int,
-                        p_min: float = 1e3) -> tuple[float, float]:
-    """Fit the glass equation of state ``p = d / (1 - phi / phi_J)`` (paper Eq. 15).
-
-    Eq. 15 is linear in ``1/p``: ``d / p = c0 + c1 phi`` with ``c0 = 1`` and
-    ``c1 = -1 / phi_J``. The line is fitted to the records with ``p >= p_min`` (the glass
-    branch) by weighted least squares with weights ``p`` (each window measures ``p``
-    with a similar *relative* error, so the error of ``d / p`` scales as ``1 / p``); the
-    intercept is left free, so deviations from Eq. 15 do not bias ``phi_J = -c0 / c1``,
-    the zero of ``1/p``. The error is the standard error propagated from the fit
-    covariance (residual-scaled).
-
-    Parameters
-    ----------
-    phi, p : ndarray, shape (R,)
-        Packing fractions and reduced pressures of the equation of state.
-    d : int
-        Dimension.
-    p_min : float
-        Smallest pressure used.
-
-    Returns
-    -------
-    phi_J, phi_J_err : float
-    """
-    phi = np.asarray(phi, dtype=np.float64)
-    p = np.asarray(p, dtype=np.float64)
-    keep = np.isfinite(phi) & np.isfinite(p) & (p >= p_min)
-    if keep.sum() < 3:
-        raise ValueError(f"need at least 3 records with p >= {p_min:g} to fit Eq. 15, got {int(keep.sum())}")
-    # weights relative to the largest pressure and phi centred and scaled, so that the
-    # normal matrix stays well conditioned for records spanning p = 1e3 ... 1e12
-    wts = p[keep] / p[keep].max()
-    mean_phi = float(phi[keep].mean())
-    scale_phi = float(phi[keep].std()) or 1.0
-    z = (phi[keep] - mean_phi) / scale_phi
-    X = np.stack([wts, wts * z], axis=1)
-    y = wts * d / p[keep]
-    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
-    resid = y - X @ coef
-    dof = max(1, len(y) - 2)
-    cov = np.linalg.pinv(X.T @ X) * float(resid @ resid) / dof
-    b0, b1 = coef
-    if b1 >= 0.0:
-        raise ValueError("1/p does not decrease with phi on the selected records: not a glass branch")
-    phi_J = mean_phi - scale_phi * b0 / b1
-    grad = np.array([-scale_phi / b1, scale_phi * b0 / b1**2])
-    return float(phi_J), float(np.sqrt(grad @ cov @ grad))
-
-
-def crystal_fraction(packing: Packing) -> float:
-    """Crystallisation indicator: fraction of crystal-like particles.
-
-    3D: ten Wolde–Frenkel crystal-like particles from q6 over 12 neighbours
-    (:func:`jamflow.analysis.structure.crystal_like`); 2D: fraction of particles with
-    local ``|psi6| > PSI6_CRYSTAL_THRESHOLD`` (:func:`jamflow.analysis.structure.hexatic_order`). A packing
-    counts as crystallised above :data:`CRYSTAL_FRACTION_THRESHOLD`.
-    """
-    from .analysis.structure import crystal_like, hexatic_order
-
-    if packing.d == 3:
-        return float(np.mean(crystal_like(packing)[0]))
-    if packing.d == 2:
-        return float(np.mean(np.abs(hexatic_order(packing)) > PSI6_CRYSTAL_THRESHOLD))
-    raise ValueError(f"crystal fraction is defined for d = 2, 3, got d={packing.d}")

@@ -452,7 +452,7 @@ def _ls_run(start: Packing, knobs: dict[str, Any], quick: bool) -> Packing:
 
 
 def _ls_compare(out: Packing, ref: Packing) -> dict[str, float]:
-    from .ls import crystal_fraction
+    from .analysis.structure import crystal_fraction
 
     rel_phi = abs(out.packing_fraction - ref.packing_fraction) / ref.packing_fraction
     return {"error": rel_phi, "phi_J": out.packing_fraction, "crystal_fraction": crystal_fraction(out)}
@@ -462,7 +462,7 @@ _LS_METRICS = {
     "error": "|phi_J - phi_J(reference)| / phi_J(reference), phi_J after CALiPPSO (a slower compression "
              "jams denser: the distance from the slowest protocol, not a numerical error)",
     "phi_J": "jamming packing fraction after CALiPPSO (default settings)",
-    "crystal_fraction": "fraction of crystal-like particles (jamflow.ls.crystal_fraction)",
+    "crystal_fraction": "fraction of crystal-like particles (jamflow.analysis.structure.crystal_fraction)",
 }
 
 

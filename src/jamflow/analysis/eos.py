@@ -5,10 +5,10 @@ The reduced pressure is ``p = beta P V / N`` (CALiPPSO paper, Sec. III). Two law
 * the liquid, Carnahan–Starling (d = 3): ``p = (1 + phi + phi^2 - phi^3) / (1 - phi)^3``;
 * the glass near jamming, the free-volume law (paper Eq. 15): ``p = d / (1 - phi/phi_J)``.
 
-Eq. 15 is linear in ``x = d/p``: ``phi = phi_J (1 - x)``. :func:`fit_jamming_density`
-fits this one-parameter law by least squares on a window of pressures, which stays
-well conditioned as ``p -> infinity`` (``x -> 0``) where fitting ``p`` itself would
-weight the noisiest, most divergent points most. :func:`jamming_table` compares the
+Eq. 15 is linear in ``1/p``: ``d/p = c0 + c1 phi`` with ``c0 = 1`` and
+``c1 = -1/phi_J``. :func:`fit_jamming_density` fits this line on a window of pressures,
+which stays well conditioned as ``p -> infinity`` where fitting ``p`` itself would
+weight the most divergent points most; :func:`jamming_table` compares the
 extrapolated ``phi_J^(LS)`` with the ``phi_J`` of LS+CALiPPSO per growth rate
 (paper Table I).
 """
@@ -47,31 +47,43 @@ class EosFit:
     phi_j : float
         Extrapolated jamming packing fraction (``1/p = 0``).
     phi_j_err : float
-        Standard error of ``phi_j`` from the scatter of the points about the law. Points
-        along one compression are correlated, so this is a lower bound; the spread over
-        samples is the honest error (:func:`jamming_table`).
+        Standard error of ``phi_j`` propagated from the fit covariance (scaled by the
+        residuals). Points along one compression are correlated, so this is a lower
+        bound; the spread over samples is the honest error (:func:`jamming_table`).
+    prefactor : float
+        Fitted prefactor ``A`` of ``p = A / (1 - phi/phi_J)``; Eq. 15 says ``A = d``.
     n_points : int
         Points in the pressure window.
     """
 
     phi_j: float
     phi_j_err: float
+    prefactor: float
     n_points: int
 
 
 def fit_jamming_density(
     phi: ArrayLike, p: ArrayLike, d: int, p_min: float = 1e5, p_max: float = np.inf
 ) -> EosFit:
-    """Fit ``phi = phi_J (1 - d/p)`` (paper Eq. 15) on ``p_min <= p <= p_max``.
+    """Fit the glass equation of state ``p = d / (1 - phi/phi_J)`` (paper Eq. 15).
+
+    The line ``d/p = c0 + c1 phi`` is fitted to the points with ``p_min <= p <= p_max``
+    by weighted least squares with weights ``p``: each pressure window of an LS run
+    measures ``p`` with a similar *relative* error, so the error of ``d/p`` scales as
+    ``1/p``. The intercept is left free, so a prefactor other than ``d`` does not bias
+    ``phi_J = -c0/c1``, the zero of ``1/p``; it is reported as ``prefactor = d/c0``.
+    Weights are taken relative to the largest pressure and ``phi`` is centred and
+    scaled, which keeps the normal equations well conditioned for windows spanning
+    ``p = 1e3 ... 1e12``.
 
     Parameters
     ----------
     phi, p : array_like, shape (M,)
         Packing fraction and reduced pressure along a compression.
     d : int
-        Spatial dimension (the prefactor of Eq. 15).
+        Spatial dimension.
     p_min, p_max : float
-        Pressure window (paper: 1e5 .. 1e11).
+        Pressure window (paper Table I: 1e5 .. 1e11).
 
     Returns
     -------
@@ -85,16 +97,25 @@ def fit_jamming_density(
         raise ValueError(f"empty pressure window [{p_min:g}, {p_max:g}]")
     keep = np.isfinite(phi) & np.isfinite(p) & (p >= p_min) & (p <= p_max)
     n = int(keep.sum())
-    if n < 2:
-        raise ValueError(f"{n} point(s) with {p_min:g} <= p <= {p_max:g}: the compression did not reach "
-                         "the fit window (raise the LS target pressure or lower fit_min)")
-    u = 1.0 - d / p[keep]
-    y = phi[keep]
-    suu = float(u @ u)
-    phi_j = float(u @ y) / suu
-    resid = y - phi_j * u
-    err = float(np.sqrt(resid @ resid / (n - 1) / suu))
-    return EosFit(phi_j, err, n)
+    if n < 3:
+        raise ValueError(f"{n} point(s) with {p_min:g} <= p <= {p_max:g}, need at least 3: the compression "
+                         "did not reach the fit window (raise the LS target pressure or lower fit_min)")
+    w = p[keep] / p[keep].max()
+    centre = float(phi[keep].mean())
+    scale = float(phi[keep].std()) or 1.0
+    z = (phi[keep] - centre) / scale
+    X = np.stack([w, w * z], axis=1)
+    y = w * d / p[keep]
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    resid = y - X @ coef
+    cov = np.linalg.pinv(X.T @ X) * float(resid @ resid) / max(1, n - 2)
+    b0, b1 = coef
+    if b1 >= 0.0:
+        raise ValueError("1/p does not decrease with phi in the fit window: not a glass branch")
+    phi_j = centre - scale * b0 / b1
+    grad = np.array([-scale / b1, scale * b0 / b1**2])
+    c0 = b0 - b1 * centre / scale
+    return EosFit(float(phi_j), float(np.sqrt(grad @ cov @ grad)), float(d / c0), n)
 
 
 def _sem(x: NDArray[np.float64]) -> float:

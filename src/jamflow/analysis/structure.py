@@ -36,13 +36,22 @@ __all__ = [
     "steinhardt_q",
     "crystal_like",
     "crystal_like_from",
+    "crystal_fraction",
     "structure_dataset",
+    "CRYSTAL_FRACTION_THRESHOLD",
+    "PSI6_CRYSTAL_THRESHOLD",
 ]
 
 #: ten Wolde–Frenkel threshold on the normalised q6(i)·q6(j)* for a connected bond.
 TWF_DOT_THRESHOLD: float = 0.7
 #: Connected bonds (out of 12 neighbours) that make a particle crystal-like.
 TWF_MIN_CONNECTED: int = 7
+#: Fraction of ten Wolde–Frenkel crystal-like particles above which a 3D packing counts
+#: as crystallised. Random close packed and glassy monodisperse spheres have a few
+#: per cent at most; a crystallised LS run has a large fraction.
+CRYSTAL_FRACTION_THRESHOLD: float = 0.2
+#: 2D: a particle is crystal-like (locally hexagonal) when its local ``|psi6|`` exceeds this.
+PSI6_CRYSTAL_THRESHOLD: float = 0.7
 
 
 def _half_width(packing: Packing) -> float:
@@ -199,6 +208,22 @@ def crystal_like_from(
     dots = np.real(np.sum(unit[:, None, :] * np.conj(unit[neighbours]), axis=2))
     connected = np.sum(dots > dot_threshold, axis=1)
     return connected >= min_connected, connected
+
+
+def crystal_fraction(packing: Packing) -> float:
+    """Crystallisation indicator: fraction of crystal-like particles.
+
+    3D: ten Wolde–Frenkel crystal-like particles from q6 over 12 neighbours
+    (:func:`crystal_like`); 2D: fraction of particles with local
+    ``|psi6| > PSI6_CRYSTAL_THRESHOLD`` (:func:`hexatic_order`; meaningful for
+    monodisperse discs). A packing counts as crystallised above
+    :data:`CRYSTAL_FRACTION_THRESHOLD`.
+    """
+    if packing.d == 3:
+        return float(np.mean(crystal_like(packing)[0]))
+    if packing.d == 2:
+        return float(np.mean(np.abs(hexatic_order(packing)) > PSI6_CRYSTAL_THRESHOLD))
+    raise ValueError(f"crystal fraction is defined for d = 2, 3, got d={packing.d}")
 
 
 def structure_dataset(packing: Packing, r_max: float = 3.0, bins: int = 150, parameters: dict | None = None) -> xr.Dataset:
