@@ -338,6 +338,7 @@ def warm_up(d: int) -> None:
 # --- the benchmark --------------------------------------------------------------------------
 def run_case(name: str, case: Case, bin_dir: Path, targets: tuple[float, ...], work: Path) -> dict:
     tag = f"{case.d}d"
+    load = os.getloadavg()[0]
     xyzd = make_start(case, bin_dir / f"PackingGeneration{tag}.exe", work / "fba")
     start, s0 = start_packing(case, xyzd)
     print(f"[{name}] start phi = {start.packing_fraction:.4f} (s0 = {s0:.12g})", flush=True)
@@ -348,7 +349,8 @@ def run_case(name: str, case: Case, bin_dir: Path, targets: tuple[float, ...], w
     window = max(1, round(ref["collisions_per_step"]))
     jf = jamflow_side(start, case, targets, window)
     print(f"[{name}] jamflow:   {jf['collisions']} collisions, {jf['cpu_time']:.2f} CPU-s", flush=True)
-    return {"name": name, "case": case, "start_phi": start.packing_fraction, "ref": ref, "jf": jf}
+    return {"name": name, "case": case, "start_phi": start.packing_fraction, "ref": ref, "jf": jf,
+            "load": (load, os.getloadavg()[0])}
 
 
 def to_dataset(results: list[dict], targets: tuple[float, ...], parameters: dict) -> xr.Dataset:
@@ -391,11 +393,13 @@ def to_dataset(results: list[dict], targets: tuple[float, ...], parameters: dict
             "jamflow_growth_rate": (("case",), np.array([r["jf"]["kappa"] for r in results]), {"units": "1", "long_name": "jamflow kappa (mean-diameter growth rate, reference length and time units)"}),
             "jamflow_window": (("case",), np.array([r["jf"]["window"] for r in results]), {"units": "1", "long_name": "jamflow collisions per pressure window (= reference mean collisions per step)"}),
             "reference_events": (("case",), np.array([int(r["ref"]["events"][-1]) for r in results]), {"units": "1", "long_name": "reference events (all types) to the highest target"}),
+            "load_average": (("case", "moment"), np.array([r["load"] for r in results]), {"units": "1", "long_name": "1-minute load average of the machine (2 cores) before and after the case: CPU times are per process, but a loaded machine slows both codes"}),
             "dimension": (("case",), np.array([r["case"].d for r in results]), {"units": "1", "long_name": "dimension d"}),
             "n_particles": (("case",), np.array([r["case"].n for r in results]), {"units": "1", "long_name": "number of particles N"}),
             "size_ratio": (("case",), np.array([r["case"].size_ratio for r in results]), {"units": "1", "long_name": "large/small diameter ratio"}),
         },
-        coords={"case": [r["name"] for r in results], "code": codes, "p_target": list(targets)},
+        coords={"case": [r["name"] for r in results], "code": codes, "p_target": list(targets),
+                "moment": ["before", "after"]},
         attrs=new_dataset_attrs("LS compression: jamflow against PackingGeneration (C++), same start and protocol", parameters),
     )
     ds.p_target.attrs.update(units="1", long_name="reduced pressure target")
