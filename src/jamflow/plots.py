@@ -434,7 +434,8 @@ def plot_jamming_table(ds: xr.Dataset) -> Figure:
     for ax in (top, bottom):
         ax.set_xscale("log")
         ax.legend(fontsize=7)
-    fig.suptitle(f"{int(n.min())}-{int(n.max())} samples per kappa; fit window "
+    counts = f"{int(n.min())}" if n.min() == n.max() else f"{int(n.min())}-{int(n.max())}"
+    fig.suptitle(f"{counts} samples per kappa; fit window "
                  f"{ds.attrs.get('fit_min', float('nan')):g} <= p <= {ds.attrs.get('fit_max', float('nan')):g}",
                  fontsize=9)
     return fig
