@@ -25,7 +25,7 @@ import xarray as xr
 
 from jamflow import plots
 from jamflow.cli import build_parser
-from jamflow.io import write_dataset
+from jamflow.io import read_dataset, write_dataset
 from jamflow.presets import PRESETS
 from jamflow.tradeoff import STAGES, recommend, sweep
 
@@ -83,7 +83,7 @@ def main() -> None:
     ap.add_argument("--stages", nargs="+", choices=sorted(STAGES), default=list(STAGES))
     args = ap.parse_args()
     OUT.mkdir(parents=True, exist_ok=True)
-    md = ["# Speed against accuracy (`python benchmarks/tradeoff.py" + (" --quick" if args.quick else "") + "`)", "",
+    md = ["# Speed against accuracy (`python benchmarks/tradeoff.py [--quick] [--stages ...]`)", "",
           ("Wall times on the machine that ran it (2 shared cores); errors against a tight reference run on the "
            "same input. Recommended setting per preset: the fastest setting meeting every limit of the preset "
            "(the reference if none does). `front`: on the Pareto front of time and the primary error."), ""]
@@ -94,7 +94,12 @@ def main() -> None:
         plots.save_figure(plots.pareto(ds), OUT / f"tradeoff_{name}.png")
         print(f"{name}: {time.perf_counter() - t0:.1f} s; " + "; ".join(f"{p} -> {lab}" for p, lab in recommend(ds).items()),
               flush=True)
-        md += stage_markdown(ds)
+    # the summary covers every stage swept so far (a run of some stages keeps the others')
+    for name in STAGES:
+        if (OUT / f"tradeoff_{name}.nc").exists():
+            ds = read_dataset(OUT / f"tradeoff_{name}.nc")
+            run = json.loads(ds.attrs["parameters"])
+            md += [*stage_markdown(ds), f"(`{name}` measured with quick = {bool(run['quick'])}, seed {run['seed']}.)", ""]
     path = OUT / "tradeoff.md"
     path.write_text("\n".join(md) + "\n")
     print(f"wrote {path}")
