@@ -32,3 +32,13 @@ def test_preset_changes_defaults_and_explicit_options_win(monkeypatch):
 def test_unknown_preset_is_refused():
     with pytest.raises(ValueError):
         preset_options("certify", "sloppy")
+
+
+@pytest.mark.parametrize("command", ["soft-jam", "aqs", "compress", "shear", "drive", "certify", "calippso", "ls"])
+def test_every_stage_command_takes_a_preset(command):
+    assert command in PRESETS
+    assert "preset" in {a.dest for a in build_parser().subcommands[command]._actions}
+
+
+def test_ls_presets_leave_the_dynamics_alone():
+    assert all(preset_options("ls", name) == {} for name in PRESET_NAMES)

@@ -68,6 +68,7 @@ rule ls:
         f"{BENCH}/ls/{{sample}}_k{{kappa}}.tsv"
     params:
         seed=seed_of,
+        preset=PRESET,
         targets=" ".join(f"{p:g}" for p in LS_TARGETS),
         # null in the scene skips the fast stage, which the command spells as rate 0
         fast=lambda wildcards: opt("ls", "fast_growth_rate") or 0,
@@ -79,7 +80,7 @@ rule ls:
     shell:
         "jamflow ls {input} {output.snapshots} --growth-rate {wildcards.kappa} --p-target {params.targets}"
         " --fast-growth-rate {params.fast} --fast-until {params.fast_until} --beta {params.beta} {params.max_collisions}"
-        " --seed {params.seed} --eos {output.eos} --quiet > {log} 2>&1"
+        " --seed {params.seed} --eos {output.eos} --preset {params.preset} --quiet > {log} 2>&1"
 
 
 rule calippso:

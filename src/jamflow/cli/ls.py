@@ -8,7 +8,7 @@ from tqdm import tqdm
 
 from ..io import read_packing, write_dataset, write_packing
 from ..ls import DEFAULT_BETA, DEFAULT_FAST_GROWTH_RATE, DEFAULT_FAST_UNTIL, compress
-from .common import add_command, add_quiet, stage_parameters
+from .common import add_command, add_preset, add_quiet, stage_parameters
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -46,6 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the initial velocities (default 0)")
     p.add_argument("--eos", default=None, help="also write the equation of state (p vs phi) as netCDF")
     add_quiet(p)
+    add_preset(p)
 
 
 def _ls(args: argparse.Namespace) -> int:
