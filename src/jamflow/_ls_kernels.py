@@ -187,6 +187,17 @@ def _update_tree(i, ev_time, tree, M):
         pos >>= 1
 
 
+@njit(cache=True, inline="always")
+def _link(i, cid, cell, head, nxt, prv):
+    """Put particle i at the head of cell cid's doubly linked list."""
+    cell[i] = cid
+    prv[i] = -1
+    nxt[i] = head[cid]
+    if head[cid] >= 0:
+        prv[head[cid]] = i
+    head[cid] = i
+
+
 @njit(cache=True)
 def build_cells(x, L, ncell, cc, cell, stride, head, nxt, prv):
     """Assign every particle (positions already in [0, L)) to its cell."""
@@ -202,12 +213,7 @@ def build_cells(x, L, ncell, cc, cell, stride, head, nxt, prv):
                 c = ncell[k] - 1
             cc[i, k] = c
             cid += c * stride[k]
-        cell[i] = cid
-        prv[i] = -1
-        nxt[i] = head[cid]
-        if head[cid] >= 0:
-            prv[head[cid]] = i
-        head[cid] = i
+        _link(i, cid, cell, head, nxt, prv)
 
 
 @njit(cache=True)
@@ -311,12 +317,7 @@ def run_events(max_coll, t_limit, sc, x, v, tl, a, L, invL, w, cc, cell, ncell, 
                 x[i, k] += L[k]
             cid += (c - cc[i, k]) * stride[k]
             cc[i, k] = c
-            cell[i] = cid
-            prv[i] = -1
-            nxt[i] = head[cid]
-            if head[cid] >= 0:
-                prv[head[cid]] = i
-            head[cid] = i
+            _link(i, cid, cell, head, nxt, prv)
             _cross(i, t, x, v, tl, cc, w, cross_time, cross_dim)
             if ncell[k] >= 3:
                 _scan(i, t, k, off, x, v, tl, a, L, invL, s_t, rate, cc, ncell, stride, offs,

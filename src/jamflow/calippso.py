@@ -576,11 +576,8 @@ def calippso(
             records.append(rec)
             if progress:
                 progress(rec)
-            recoveries += 1
-            if recoveries > MAX_RECOVERIES:
-                raise RuntimeError(_diagnose(f"LP status {status!r} after {MAX_RECOVERIES} recoveries", records))
-            cut_factor *= CUTOFF_GROWTH
-            bound_factor *= BOUND_SHRINK
+            recoveries, cut_factor, bound_factor = _retry(recoveries, cut_factor, bound_factor,
+                                                          f"LP status {status!r}", records)
             unbounded_next = False
             rows = None
             continue
@@ -620,11 +617,8 @@ def calippso(
         if progress:
             progress(rec)
         if not accepted:
-            recoveries += 1
-            if recoveries > MAX_RECOVERIES:
-                raise RuntimeError(_diagnose(f"update overlaps by {ov:.3g} (relative) after {MAX_RECOVERIES} recoveries", records))
-            cut_factor *= CUTOFF_GROWTH
-            bound_factor *= BOUND_SHRINK
+            recoveries, cut_factor, bound_factor = _retry(recoveries, cut_factor, bound_factor,
+                                                          f"update overlaps by {ov:.3g} (relative)", records)
             unbounded_next = False
             rows = None
             continue
@@ -672,6 +666,14 @@ def calippso(
     return _result(packing, x, D, walls, last, records, history, converged, total, dict(
         tol_s=tol_s, tol_gamma=tol_gamma, solver=solver, cutoff=cutoff, cutoff_near=cutoff_near, bound=[list(b) for b in bound],
         relax=relax, walls=walls, max_iterations=max_iterations, threads=threads))
+
+
+def _retry(recoveries: int, cut_factor: float, bound_factor: float, reason: str,
+           records: list[IterationRecord]) -> tuple[int, float, float]:
+    """One more recovery: a larger cutoff and a smaller bound, or the diagnostics when spent."""
+    if recoveries + 1 > MAX_RECOVERIES:
+        raise RuntimeError(_diagnose(f"{reason} after {MAX_RECOVERIES} recoveries", records))
+    return recoveries + 1, cut_factor * CUTOFF_GROWTH, bound_factor * BOUND_SHRINK
 
 
 def _method(solver: str, records: list[IterationRecord], bounded: bool) -> str:
