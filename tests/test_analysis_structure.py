@@ -127,3 +127,19 @@ def test_rdf_cli_in_four_dimensions_reports_g_only(tmp_path):
     assert "not computed" in ds.attrs["crystallinity"]
     assert set(ds.data_vars) == {"g", "r_lower"}
     assert all("units" in v.attrs and "long_name" in v.attrs for v in ds.data_vars.values())
+
+
+def test_a_2d_packing_never_reaches_the_3d_code_paths(monkeypatch):
+    # "model only what a scene requires": the 2D crystallinity analyses use psi6 only
+    import jamflow.analysis.structure as structure
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError("3D Steinhardt code called for a 2D packing")
+
+    monkeypatch.setattr(structure, "steinhardt_q", forbidden)
+    monkeypatch.setattr(structure, "crystal_like", forbidden)
+    monkeypatch.setattr(structure, "bond_order_vectors", forbidden)
+    p = triangular(12, 12)
+    ds = structure.structure_dataset(p, 2.5, 100)
+    assert "psi6_abs" in ds and "Q6_global" not in ds.attrs
+    assert structure.crystal_fraction(p) == 1.0
