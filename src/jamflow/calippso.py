@@ -99,7 +99,7 @@ from numpy.typing import NDArray
 
 from .analysis.contacts import find_rattlers, isostatic_count
 from .neighbors import pairs_within
-from .packing import Packing, near_pairs
+from .packing import Packing, max_overlap, near_pairs
 from .tolerances import OVERLAP_TOL
 
 __all__ = [
@@ -708,18 +708,18 @@ def _as_packing(packing: Packing, x, D, walls: bool) -> Packing:
 
 def _max_overlap(p: Packing, walls: bool) -> float:
     """Largest relative overlap over ALL pairs (and walls), 0 if none."""
+    if not walls:
+        return max_overlap(p)[1]
     pairs, h = near_pairs(p, 0.0)
-    if walls and len(h):
+    if len(h):
         direct = p.position[pairs.j] - p.position[pairs.i]
         keep = np.all(np.abs(direct - pairs.dx) < 1e-12 * p.box.lengths.max(), axis=1)
         h = h[keep]
     ov = max(0.0, -float(h.min())) if len(h) else 0.0
-    if walls:
-        rad = 0.5 * p.diameter[:, None]
-        L = p.box.lengths
-        wall_gap = np.minimum(p.position, L - p.position) / rad - 1.0
-        ov = max(ov, -float(wall_gap.min()))
-    return ov
+    rad = 0.5 * p.diameter[:, None]
+    L = p.box.lengths
+    wall_gap = np.minimum(p.position, L - p.position) / rad - 1.0
+    return max(ov, -float(wall_gap.min()))
 
 
 def _final_checks(packing: Packing, x, D, walls: bool, last: dict[str, Any]) -> tuple[bool, str]:
