@@ -15,7 +15,9 @@ import pytest
 
 from jamflow.analysis.contacts import (
     contacts_from_gaps,
+    find_rattlers,
     force_balance_residual,
+    isostatic_count,
     summarize,
 )
 from jamflow.analysis.overlap import contact_overlap
@@ -24,7 +26,7 @@ from jamflow.calippso import calippso
 from jamflow.cli import main
 from jamflow.initial import random_packing
 from jamflow.io import read_dat, read_dataset, read_packing, write_packing
-from jamflow.packing import Packing, max_overlap
+from jamflow.packing import Packing, max_overlap, near_pairs
 from jamflow.tolerances import FORCE_BALANCE_TOL, OVERLAP_TOL
 
 LS = Path(__file__).resolve().parents[2] / "shared" / "data" / "calippso-ls"
@@ -141,7 +143,18 @@ def test_2d_monodisperse_reported():
     res = calippso(start)  # never a crash; hyperstaticity (App. A) is reported
     a = res.packing.attrs
     assert res.converged
-    assert a["isostatic"] == 1 or (a["hyperstatic"] == 1 and a["isostatic_appendix_a"] == 1)
+    # independent count of the geometric network (gaps below 1e-9 relative)
+    p = res.packing
+    pairs, _ = near_pairs(p, 1e-9)
+    geo = np.stack([pairs.i, pairs.j], axis=1)
+    stable = ~find_rattlers(p.n, 2, geo)
+    n_c_geo = int((stable[geo[:, 0]] & stable[geo[:, 1]]).sum())
+    assert (a["n_contacts_geometric"], a["n_stable_geometric"]) == (n_c_geo, int(stable.sum()))
+    geo_hyper = n_c_geo > isostatic_count(2, int(stable.sum()))
+    # every dual contact touches; the dual network is isostatic, or the packing is
+    # hyperstatic (App. A count, or a degenerate crystal whose geometric network is)
+    assert a["dual_not_geometric"] == 0
+    assert a["isostatic"] == 1 or (a["hyperstatic"] == 1 and (a["isostatic_appendix_a"] == 1 or geo_hyper))
     for key in ("n_contacts_with_rattlers", "n_force_bearing_rattlers"):
         assert key in a
     _, rel = max_overlap(res.packing)

@@ -59,10 +59,13 @@ with hysteresis: the phase only tightens. Convergence (Algorithm 1, line 15) nee
 [mean diameters]. The LP that certifies convergence is always solved without
 displacement bounds (paper Sec. II C: an active bound acts as an external force);
 after it the contact network is checked for isostaticity, force balance and, over
-all pairs, overlaps. In the last bound phase an unbounded LP is also tried when the
-stable particles moved by less than :data:`UNBOUND_FRACTION` of the bound or by more
-than :data:`BOUND_ACTIVE_FRACTION` of it (never twice in a row unless converging),
-and the previous LP's rattlers get the far bound so that they are not pinned on it.
+all pairs, overlaps. In the last bound phase the next LP is unbounded whenever the
+last one gave an isostatic network (the bound then holds no stable particle: an
+active bound would be an extra constraint), and also after a bounded LP whose stable
+particles moved by less than :data:`UNBOUND_FRACTION` of the bound or by more than
+:data:`BOUND_ACTIVE_FRACTION` of it; a non-isostatic unbounded LP is followed by a
+bounded one. The previous LP's rattlers get the far bound so that they are not
+pinned on it.
 The cutoff is ``cutoff`` (1.7 largest diameters) far from jamming and
 ``cutoff_near`` (1.4) in the last phase; rows are kept from LP to LP (which lets the
 dual simplex start from the previous basis) while the particles moved little.
@@ -75,9 +78,13 @@ that creates an overlap beyond
 :data:`~jamflow.tolerances.OVERLAP_TOL` in the all-pairs check is undone and retried
 with a cutoff larger by :data:`CUTOFF_GROWTH` and a bound smaller by
 :data:`BOUND_SHRINK`, up to :data:`MAX_RECOVERIES` times in a row. A converged LP
-whose network is not isostatic (and not the hyperstatic 2D-monodisperse case of
-App. A) or whose dual contacts disagree with the geometry is re-solved with a
-larger cutoff and the dual simplex (twice at most). When recovery fails a
+whose network is not isostatic (and not hyperstatic as in App. A: either the dual
+count with force-bearing rattlers is isostatic, or the geometric network of gaps
+below :data:`GEOMETRIC_CONTACT_GAP` is hyperstatic and holds every dual contact, a
+degenerate crystalline packing whose vertex duals leave some contacts without
+force) or whose dual contacts disagree with the geometry is re-solved with a
+larger cutoff, cold: by interior point with crossover, then by the dual simplex
+(:data:`FINAL_RECOVERY_METHODS`). When recovery fails a
 ``RuntimeError`` carries the diagnostics; a non-jammed packing is never returned as
 jammed (``require_isostatic=False`` returns it with ``converged = False``). A stall
 (no convergence) ends at ``max_iterations`` with the same kind of error.
@@ -163,6 +170,18 @@ CONTACT_DUAL_REL_TOL: float = 1e-10
 
 #: ``hybrid``: switch from interior point to warm dual simplex below this ``sqrt(Gamma*) - 1``.
 HYBRID_SWITCH: float = 1e-5
+
+#: A warm dual simplex may take this multiple of the last interior point solve (and
+#: at least :data:`WARM_TIME_MIN` seconds) before the LP is re-solved by interior
+#: point. Measured on the d = 4 LS example: warm simplex LPs took 0.4 s when the
+#: previous basis was nearly optimal but 26-41 s (against 5.6 s for interior point)
+#: after displacements of 3e-5 diameters.
+WARM_TIME_FACTOR: float = 1.0
+WARM_TIME_MIN: float = 0.5
+
+#: Methods of the cold re-solves after a converged LP failed its final checks:
+#: interior point with crossover, then the dual simplex.
+FINAL_RECOVERY_METHODS: tuple[str, ...] = ("ipm", "dual")
 
 #: Rows (the pair list) are reused while every particle moved less than this fraction
 #: of ``ell - sigma_max`` since they were built (lets the simplex warm start).
@@ -272,6 +291,10 @@ class _Rows:
     def __len__(self) -> int:
         return len(self.i) + len(self.wall_particle)
 
+    def keys(self, n: int) -> NDArray[np.int64]:
+        """One integer per row naming its pair ``(i, j)`` or its wall ``(particle, face)``."""
+        return np.concatenate([self.i * n + self.j, n * n + 64 * self.wall_particle + self.wall_face])
+
 
 def _find_rows(x: NDArray[np.float64], D: NDArray[np.float64], packing: Packing, cutoff: float, walls: bool) -> _Rows:
     pairs = pairs_within(x, packing.box, cutoff)
@@ -336,7 +359,12 @@ def _matrix(rows: _Rows, dx, sig, a, rad, n: int, d: int, unit: float) -> sp.csc
 
 
 class _Solver:
-    """One HiGHS instance; keeps the last basis for warm starts on unchanged rows."""
+    """One HiGHS instance; keeps the last basis for warm starts on unchanged rows.
+
+    A warm dual simplex is given :data:`WARM_TIME_FACTOR` times the last interior
+    point solve; when it runs out the LP is solved by interior point instead, so a
+    warm start that does not pay never costs more than that factor.
+    """
 
     def __init__(self, threads: int = 1) -> None:
         self.h = highspy.Highs()
@@ -347,8 +375,12 @@ class _Solver:
         self.h.setOptionValue("ipm_optimality_tolerance", SOLVER_TOL)
         self.basis = None
         self.basis_rows: _Rows | None = None
+        self.ipm_time: float | None = None
+        #: hybrid: a simplex LP without a basis to carry is solved by interior point
+        self.cold_simplex_as_ipm = False
 
     def solve(self, A: sp.csc_matrix, rhs, col_lower, col_upper, method: str, rows: _Rows):
+        """Solve; returns ``(status, seconds, columns or None, row duals or None, warm, method)``."""
         lp = highspy.HighsLp()
         lp.num_col_, lp.num_row_ = A.shape[1], A.shape[0]
         cost = np.zeros(A.shape[1])
@@ -362,22 +394,19 @@ class _Solver:
         lp.a_matrix_.start_ = A.indptr.astype(np.int32)
         lp.a_matrix_.index_ = A.indices.astype(np.int32)
         lp.a_matrix_.value_ = A.data.astype(np.float64)
+        cold = method == "dual"
+        method = "simplex" if cold else method
+        basis = self._carried_basis(rows, A.shape[1]) if method == "simplex" and not cold else None
+        warm = basis is not None
+        if method == "simplex" and not warm and not cold and self.cold_simplex_as_ipm:
+            method = "ipm"
+        status, elapsed = self._run(lp, method, basis)
+        if warm and status == highspy.HighsModelStatus.kTimeLimit:
+            warm = False
+            method = "simplex>ipm"
+            status, t_ipm = self._run(lp, "ipm", None)
+            elapsed += t_ipm
         h = self.h
-        h.clearSolver()
-        if method in ("ipm", "ipm-nox"):
-            h.setOptionValue("solver", "ipm")
-            h.setOptionValue("run_crossover", "on" if method == "ipm" else "off")
-        else:
-            h.setOptionValue("solver", "simplex")
-            h.setOptionValue("simplex_strategy", 1)  # dual simplex
-        h.passModel(lp)
-        warm = method == "simplex" and self.basis is not None and self.basis_rows is rows
-        if warm:
-            h.setBasis(self.basis)
-        t0 = time.perf_counter()
-        h.run()
-        elapsed = time.perf_counter() - t0
-        status = h.getModelStatus()
         name = h.modelStatusToString(status)
         # without crossover HiGHS may stop with status "Unknown" at a primal-feasible
         # interior point; only its primal part is used (the overlap check follows)
@@ -385,11 +414,66 @@ class _Solver:
                        and int(h.getInfo().primal_solution_status) == 2)
         if status != highspy.HighsModelStatus.kOptimal and not interior_ok:
             self.basis = None
-            return name, elapsed, None, None, warm
+            return name, elapsed, None, None, warm, method
         sol = h.getSolution()
-        self.basis = h.getBasis() if method == "simplex" or method == "ipm" else None
+        self.basis = h.getBasis() if method != "ipm-nox" else None
         self.basis_rows = rows
-        return name, elapsed, np.asarray(sol.col_value), -np.asarray(sol.row_dual), warm
+        return name, elapsed, np.asarray(sol.col_value), -np.asarray(sol.row_dual), warm, method
+
+    def _carried_basis(self, rows: _Rows, n_cols: int):
+        """The last basis carried over to ``rows``: rows kept by pair keep their status,
+        new rows enter with a basic slack (inactive); None when there is no basis or
+        the carried one does not have one basic variable per row."""
+        if self.basis is None or self.basis_rows is None:
+            return None
+        if rows is self.basis_rows:
+            return self.basis
+        col = self.basis.col_status
+        if len(col) != n_cols:
+            return None
+        n = len(rows.x_build)
+        old_keys = self.basis_rows.keys(n)
+        old_status = np.array([int(v) for v in self.basis.row_status], dtype=np.int64)
+        order = np.argsort(old_keys)
+        new_keys = rows.keys(n)
+        pos = np.clip(np.searchsorted(old_keys, new_keys, sorter=order), 0, max(len(old_keys) - 1, 0))
+        found = old_keys[order[pos]] == new_keys if len(old_keys) else np.zeros(len(new_keys), bool)
+        basic = int(highspy.HighsBasisStatus.kBasic)
+        status = np.where(found, old_status[order[pos]], basic)
+        n_basic = int(np.sum(status == basic)) + sum(1 for v in col if v == highspy.HighsBasisStatus.kBasic)
+        if n_basic != len(rows):
+            return None
+        carried = highspy.HighsBasis()
+        carried.col_status = list(col)
+        carried.row_status = [highspy.HighsBasisStatus(int(v)) for v in status]
+        carried.valid = True
+        return carried
+
+    def _run(self, lp: highspy.HighsLp, method: str, basis):
+        h = self.h
+        h.clearSolver()
+        if method in ("ipm", "ipm-nox"):
+            h.setOptionValue("solver", "ipm")
+            h.setOptionValue("run_crossover", "on" if method == "ipm" else "off")
+        else:
+            # from a carried basis the primal simplex needs a few pivots where the
+            # dual simplex needed thousands (d = 4 LS example: 2 against 5184)
+            h.setOptionValue("solver", "simplex")
+            h.setOptionValue("simplex_strategy", 4 if basis is not None else 1)
+        h.passModel(lp)
+        limit = highspy.kHighsInf
+        if basis is not None:
+            h.setBasis(basis)
+            if self.ipm_time is not None:
+                # HiGHS's run clock accumulates over runs of one instance
+                limit = h.getRunTime() + max(WARM_TIME_FACTOR * self.ipm_time, WARM_TIME_MIN)
+        h.setOptionValue("time_limit", limit)
+        t0 = time.perf_counter()
+        h.run()
+        elapsed = time.perf_counter() - t0
+        if method == "ipm":
+            self.ipm_time = elapsed
+        return h.getModelStatus(), elapsed
 
 
 # --- rattlers and counts -----------------------------------------------------------------
@@ -504,6 +588,7 @@ def calippso(
     x = packing.position.copy() if walls else packing.box.wrap(packing.position)
     D = packing.diameter.copy()
     solver_obj = _Solver(threads)
+    solver_obj.cold_simplex_as_ipm = solver == "hybrid"  # a cold simplex is slower than ipm
     records: list[IterationRecord] = []
     rows: _Rows | None = None
     phase = 0  # 0 far, 1.. schedule entries; only tightens (hysteresis)
@@ -513,7 +598,7 @@ def calippso(
     anchor = -1
     prev_rattler: NDArray[np.bool_] | None = None
     final_attempts = 0
-    force_simplex = False
+    recovery_method: str | None = None  # cold solve forced by a failed final check
     converged = False
     unbounded_next = False
     last: dict[str, Any] = {}
@@ -567,10 +652,8 @@ def calippso(
         b_max = float(b_part.max())
         reach = (ell - 2.0 * np.sqrt(d) * b_max * unit) / sig_max if np.isfinite(b_max) else FAR_GROWTH
         col_upper[-1] = min(FAR_GROWTH, max(reach, 1.0)) ** 2 - 1.0
-        method = "simplex" if force_simplex else _method(solver, records, bool(np.isfinite(b)))
-        if solver == "hybrid" and method == "simplex" and solver_obj.basis_rows is not rows:
-            method = "ipm"  # new rows: a cold simplex is slower than ipm; its crossover basis warms the next LP
-        status, lp_time, col, dual, warm = solver_obj.solve(A, rhs, col_lower, col_upper, method, rows)
+        method = recovery_method or _method(solver, records, bool(np.isfinite(b)))
+        status, lp_time, col, dual, warm, method = solver_obj.solve(A, rhs, col_lower, col_upper, method, rows)
         if col is None:
             rec = IterationRecord(it, np.nan, np.nan, np.nan, len(rows), 0, 0, False, status, lp_time, method, ell / sig_max, b, np.nan, np.nan, False, warm)
             records.append(rec)
@@ -645,18 +728,19 @@ def calippso(
             # recovery for a converged but failing network: larger cutoff, dual simplex
             final_attempts += 1
             cut_factor *= CUTOFF_GROWTH
-            force_simplex = True
+            # a degenerate (e.g. App. A hyperstatic) LP has many dual optima: re-solve
+            # cold, by interior point with crossover, then by the dual simplex
+            recovery_method = FINAL_RECOVERY_METHODS[final_attempts - 1]
             rows = None
             last["why"] = why
             continue
-        # the converging LP must be unbounded: go unbounded once the tightest bound is
-        # far from active for the stable particles
-        # (never twice in a row unless converging: the unbounded vertex need not be small)
+        # the converging LP must be unbounded: go unbounded once the network is
+        # isostatic or the tightest bound is far from active for the stable particles
+        # (a non-isostatic unbounded vertex need not be small: bounded again after it)
         tight = 0.5 * bound[-1][1]
-        unbounded_next = small or (
-            phase == len(bound) and np.isfinite(b)
-            and (max_s_stable < UNBOUND_FRACTION * tight or max_s_stable > BOUND_ACTIVE_FRACTION * tight)
-        )
+        unbounded_next = small or (phase == len(bound) and (iso or (
+            np.isfinite(b)
+            and (max_s_stable < UNBOUND_FRACTION * tight or max_s_stable > BOUND_ACTIVE_FRACTION * tight))))
     total = time.perf_counter() - t_start
     history = _history(records)
     if not last:
@@ -743,7 +827,6 @@ def _final_checks(packing: Packing, x, D, walls: bool, last: dict[str, Any]) -> 
     last["n_force_bearing_rattlers"] = int(fb_rattler.sum())
     last["isostatic_count"] = iso_n
     hyper = last["n_c"] > iso_n
-    last["hyperstatic"] = bool(hyper)
     last["isostatic_appendix_a"] = bool(n_c_a == iso_n)
     # dual contacts vs geometric contacts (gap below GEOMETRIC_CONTACT_GAP)
     p = _as_packing(packing, x, D, walls)
@@ -756,10 +839,22 @@ def _final_checks(packing: Packing, x, D, walls: bool, last: dict[str, Any]) -> 
     dual = set(map(tuple, c.tolist()))
     last["dual_not_geometric"] = len(dual - geo)
     last["geometric_not_dual"] = len(geo - dual)
+    # the geometric network: a degenerate (crystalline) jammed packing has more
+    # contacts than force-bearing duals at any vertex of its LP (App. A)
+    geo_c = np.stack([pairs.i, pairs.j], axis=1)
+    geo_rattler = _rattlers(n, d, geo_c, last["wall_particle"])
+    geo_stable = ~geo_rattler
+    last["n_stable_geometric"] = int(geo_stable.sum())
+    last["n_contacts_geometric"] = (int((geo_stable[geo_c[:, 0]] & geo_stable[geo_c[:, 1]]).sum())
+                                    + int(geo_stable[last["wall_particle"]].sum()))
+    geo_hyper = last["n_contacts_geometric"] > _n_dof(d, last["n_stable_geometric"], walls)
+    hyper = hyper or geo_hyper
+    last["hyperstatic"] = bool(hyper)
+    degenerate = geo_hyper and not last["dual_not_geometric"]
     reasons = []
     if last["dual_not_geometric"]:
         reasons.append(f"{last['dual_not_geometric']} dual contact(s) with gap > {GEOMETRIC_CONTACT_GAP:g}")
-    if not (last["iso"] or (hyper and last["isostatic_appendix_a"])):
+    if not (last["iso"] or (hyper and last["isostatic_appendix_a"]) or degenerate):
         reasons.append(f"N_c = {last['n_c']} but d(N_s-1)+1 = {iso_n} (N_s = {last['n_s']})")
     return not reasons, "; ".join(reasons) or "ok"
 
@@ -853,6 +948,8 @@ def _result(packing, x, D, walls, last, records, history, converged, total, sett
         max_overlap=float(ov_rel),
         dual_not_geometric=int(last["dual_not_geometric"]),
         geometric_not_dual=int(last["geometric_not_dual"]),
+        n_contacts_geometric=int(last["n_contacts_geometric"]),
+        n_stable_geometric=int(last["n_stable_geometric"]),
         boundary="walls" if walls else "periodic",
         force_unit="CALiPPSO dual scaling (paper Eq. 11): f = lambda sigma_ij [1/length], sum_c f_c sigma_c = 1",
         total_time=total,
