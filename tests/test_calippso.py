@@ -22,7 +22,8 @@ from jamflow.analysis.contacts import (
 )
 from jamflow.analysis.overlap import contact_overlap
 from jamflow.box import Box
-from jamflow.calippso import calippso
+import jamflow.calippso as cal
+from jamflow.calippso import IterationRecord, calippso
 from jamflow.cli import main
 from jamflow.initial import random_packing
 from jamflow.io import read_dat, read_dataset, read_packing, write_packing
@@ -216,3 +217,32 @@ def test_cli_roundtrip(tmp_path):
     # result_to_dataset carries the history and the settings
     assert "lp_time" in ds and "tol_s" in ds.attrs["parameters"]
     assert main(["calippso", str(tmp_path / "missing.nc"), str(out), "--quiet"]) == 1
+
+
+def _record(it: int, sg: float, accepted: bool = True) -> IterationRecord:
+    return IterationRecord(it, sg, 0.0, 0.0, 10, 0, 0, False, "Optimal", 0.0, "ipm", 1.7, 0.1,
+                           np.nan, np.nan, accepted)
+
+
+def test_stall_test_compares_window_with_earlier_best(monkeypatch):
+    monkeypatch.setattr(cal, "STALL_WINDOW", 3)
+    falling = [_record(k, 10.0 ** -k) for k in range(1, 8)]
+    assert not cal._stalled(falling, 0)
+    plateau = [_record(k, 1e-3 * (1 + 0.1 * (k % 2))) for k in range(1, 8)]
+    assert cal._stalled(plateau, 0)
+    # rejected LPs do not count, and nothing before ``start`` is compared
+    assert not cal._stalled(plateau[:3] + [_record(9, 1e-9, accepted=False)], 0)
+    assert not cal._stalled(plateau, 4)
+
+
+def test_stalled_chain_recovers_unbounded_then_raises(monkeypatch):
+    # every window counts as a stall: the first gets an unbounded LP, the third raises
+    monkeypatch.setattr(cal, "STALL_WINDOW", 1)
+    monkeypatch.setattr(cal, "STALL_PROGRESS", -np.inf)
+    monkeypatch.setattr(cal, "MAX_STALL_RECOVERIES", 2)
+    seen = []
+    start = random_packing(64, 2, 0.4, "bi", seed=3)
+    with pytest.raises(RuntimeError, match="stalled"):
+        calippso(start, progress=seen.append)
+    assert len(seen) == 6  # stalls after LPs 2, 4 and 6
+    assert np.isinf(seen[2].bound) and np.isinf(seen[4].bound)

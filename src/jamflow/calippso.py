@@ -87,7 +87,9 @@ larger cutoff, cold: by interior point with crossover, then by the dual simplex
 (:data:`FINAL_RECOVERY_METHODS`). When recovery fails a
 ``RuntimeError`` carries the diagnostics; a non-jammed packing is never returned as
 jammed (``require_isostatic=False`` returns it with ``converged = False``). A stall
-(no convergence) ends at ``max_iterations`` with the same kind of error.
+(:func:`_stalled`: no halving of ``sqrt(Gamma*) - 1`` in :data:`STALL_WINDOW` LPs)
+gets an unbounded LP with fresh rows; after :data:`MAX_STALL_RECOVERIES` stalls, or at
+``max_iterations``, the chain stops with the same kind of error.
 """
 
 from __future__ import annotations
@@ -202,6 +204,16 @@ UNBOUND_FRACTION: float = 1e-3
 #: bound means the bound is active (an external force, non-isostatic network): the
 #: next LP is then tried without bounds, which typically lands on the jammed vertex.
 BOUND_ACTIVE_FRACTION: float = 0.5
+
+#: Stall test: a chain stalls when the smallest ``sqrt(Gamma*) - 1`` of its last
+#: STALL_WINDOW accepted LPs exceeds STALL_PROGRESS times the smallest before them.
+#: Each stall gets one recovery (an unbounded LP with fresh rows, counted anew);
+#: after MAX_STALL_RECOVERIES the chain stops with a RuntimeError. Healthy chains
+#: from random starts hover at 1e-5..1e-4 for up to ~100 LPs before converging
+#: (3D N = 256, seed 1: 156 LPs), hence the window.
+STALL_WINDOW: int = 100
+STALL_PROGRESS: float = 0.5
+MAX_STALL_RECOVERIES: int = 3
 
 #: Default largest number of LPs.
 DEFAULT_MAX_ITERATIONS: int = 1000
@@ -603,6 +615,8 @@ def calippso(
     unbounded_next = False
     last: dict[str, Any] = {}
     it = 0
+    stalls = 0
+    stall_from = 0  # records before this index are not compared by the stall test
     while it < max_iterations:
         it += 1
         unit = float(D.mean())
@@ -741,6 +755,15 @@ def calippso(
         unbounded_next = small or (phase == len(bound) and (iso or (
             np.isfinite(b)
             and (max_s_stable < UNBOUND_FRACTION * tight or max_s_stable > BOUND_ACTIVE_FRACTION * tight))))
+        if _stalled(records, stall_from):
+            stalls += 1
+            if stalls > MAX_STALL_RECOVERIES:
+                raise RuntimeError(_diagnose(
+                    f"stalled: sqrt(Gamma*)-1 did not halve in {STALL_WINDOW} LPs, {MAX_STALL_RECOVERIES} times", records))
+            # recovery: an unbounded LP (no bound pins floppy motions) with fresh rows
+            stall_from = len(records)
+            unbounded_next = True
+            rows = None
     total = time.perf_counter() - t_start
     history = _history(records)
     if not last:
@@ -758,6 +781,16 @@ def _retry(recoveries: int, cut_factor: float, bound_factor: float, reason: str,
     if recoveries + 1 > MAX_RECOVERIES:
         raise RuntimeError(_diagnose(f"{reason} after {MAX_RECOVERIES} recoveries", records))
     return recoveries + 1, cut_factor * CUTOFF_GROWTH, bound_factor * BOUND_SHRINK
+
+
+def _stalled(records: list[IterationRecord], start: int) -> bool:
+    """No progress: the smallest ``sqrt(Gamma*) - 1`` of the last :data:`STALL_WINDOW`
+    accepted LPs is above :data:`STALL_PROGRESS` times the smallest before them
+    (only LPs from index ``start`` on count)."""
+    sg = [r.sqrt_gamma_minus_1 for r in records[start:] if r.accepted]
+    if len(sg) <= STALL_WINDOW:
+        return False
+    return min(sg[-STALL_WINDOW:]) > STALL_PROGRESS * min(sg[:-STALL_WINDOW])
 
 
 def _method(solver: str, records: list[IterationRecord], bounded: bool) -> str:
