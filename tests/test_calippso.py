@@ -170,6 +170,8 @@ def test_bad_inputs():
         calippso(start, tol_s=-1.0)
     with pytest.raises(ValueError, match="relax"):
         calippso(start, relax=1.5)
+    with pytest.raises(ValueError, match="solver_tol"):
+        calippso(start, solver_tol=1e-6)  # row violations of 1e-6 are overlaps of ~5e-7
     with pytest.raises(ValueError, match="cutoff"):
         calippso(start, cutoff=1.0)
     x = start.position.copy()
@@ -246,3 +248,13 @@ def test_stalled_chain_recovers_unbounded_then_raises(monkeypatch):
         calippso(start, progress=seen.append)
     assert len(seen) == 6  # stalls after LPs 2, 4 and 6
     assert np.isinf(seen[2].bound) and np.isinf(seen[4].bound)
+
+
+def test_loosest_solver_tolerance_still_jams_without_overlap():
+    # solver_tol = 2 OVERLAP_TOL: row violations up to 2e-8, i.e. overlaps up to ~1e-8
+    start = random_packing(64, 2, 0.4, "bi", seed=5)
+    res = calippso(start, solver_tol=cal.MAX_SOLVER_TOL)
+    s = summarize(res.packing)
+    assert res.converged and s.isostatic
+    assert max_overlap(res.packing)[1] <= OVERLAP_TOL
+    assert force_balance_residual(res.packing)[~res.packing.rattler].max() < FORCE_BALANCE_TOL

@@ -141,9 +141,13 @@ DEFAULT_TOL_S: float = 1e-9
 #: Convergence: ``sqrt(Gamma*) - 1`` (relative growth of the diameters in one LP).
 DEFAULT_TOL_GAMMA: float = 1e-12
 
-#: HiGHS primal and dual feasibility tolerance. Rows are relative-gap sized, so a
-#: violation of 1e-9 is a relative overlap of ~5e-10 (below OVERLAP_TOL = 1e-8).
+#: HiGHS primal and dual feasibility (and interior point optimality) tolerance, the
+#: default of ``solver_tol``. Rows are relative-gap sized, so a row violation v is a
+#: relative overlap of ~v / 2: ``solver_tol`` may range from HiGHS's smallest
+#: feasibility tolerance, 1e-10, up to ``2 OVERLAP_TOL`` (overlaps up to OVERLAP_TOL).
 SOLVER_TOL: float = 1e-10
+MIN_SOLVER_TOL: float = 1e-10
+MAX_SOLVER_TOL: float = 2.0 * OVERLAP_TOL
 
 #: Default neighbour cutoff ``ell`` [current largest diameters]: the reference
 #: implementation's 3.4 R. (The paper's "3.5 sigma" costs ~4x more rows for no
@@ -378,13 +382,13 @@ class _Solver:
     warm start that does not pay never costs more than that factor.
     """
 
-    def __init__(self, threads: int = 1) -> None:
+    def __init__(self, threads: int = 1, tol: float = SOLVER_TOL) -> None:
         self.h = highspy.Highs()
         self.h.setOptionValue("output_flag", False)
         self.h.setOptionValue("threads", threads)
-        self.h.setOptionValue("primal_feasibility_tolerance", SOLVER_TOL)
-        self.h.setOptionValue("dual_feasibility_tolerance", SOLVER_TOL)
-        self.h.setOptionValue("ipm_optimality_tolerance", SOLVER_TOL)
+        for option in ("primal_feasibility_tolerance", "dual_feasibility_tolerance", "ipm_optimality_tolerance"):
+            if self.h.setOptionValue(option, tol) != highspy.HighsStatus.kOk:
+                raise ValueError(f"HiGHS refused {option} = {tol:g}")
         self.basis = None
         self.basis_rows: _Rows | None = None
         self.ipm_time: float | None = None
@@ -535,6 +539,7 @@ def calippso(
     tol_s: float = DEFAULT_TOL_S,
     tol_gamma: float = DEFAULT_TOL_GAMMA,
     solver: str = DEFAULT_SOLVER,
+    solver_tol: float = SOLVER_TOL,
     cutoff: float = DEFAULT_CUTOFF,
     cutoff_near: float = DEFAULT_CUTOFF_NEAR,
     bound: tuple[tuple[float, float], ...] = DEFAULT_BOUND_SCHEDULE,
@@ -558,8 +563,12 @@ def calippso(
         [mean diameters].
     tol_gamma : float
         Convergence: ``sqrt(Gamma*) - 1`` of the last LP (dimensionless).
-    solver : {"ipm", "simplex", "hybrid"}
+    solver : {"ipm", "simplex", "hybrid", "ipm-center"}
         See :data:`SOLVERS`.
+    solver_tol : float
+        HiGHS primal/dual feasibility and interior point optimality tolerance, in
+        units of the scaled rows (~2x relative gap), between :data:`MIN_SOLVER_TOL`
+        and :data:`MAX_SOLVER_TOL`.
     cutoff : float
         Neighbour cutoff ``ell`` [current largest diameters] far from jamming, > 1.2.
     cutoff_near : float
@@ -595,11 +604,13 @@ def calippso(
         the recoveries.
     """
     _check_options(packing, tol_s, tol_gamma, solver, min(cutoff, cutoff_near), bound, relax, walls, max_iterations)
+    if not (MIN_SOLVER_TOL <= solver_tol <= MAX_SOLVER_TOL):
+        raise ValueError(f"solver_tol must lie in [{MIN_SOLVER_TOL:g}, {MAX_SOLVER_TOL:g}], got {solver_tol}")
     t_start = time.perf_counter()
     d, n = packing.d, packing.n
     x = packing.position.copy() if walls else packing.box.wrap(packing.position)
     D = packing.diameter.copy()
-    solver_obj = _Solver(threads)
+    solver_obj = _Solver(threads, solver_tol)
     solver_obj.cold_simplex_as_ipm = solver == "hybrid"  # a cold simplex is slower than ipm
     records: list[IterationRecord] = []
     rows: _Rows | None = None
@@ -771,7 +782,7 @@ def calippso(
     if not converged and require_isostatic:
         raise RuntimeError(_diagnose(f"converged LP failed the final checks: {last['why']}", records))
     return _result(packing, x, D, walls, last, records, history, converged, total, dict(
-        tol_s=tol_s, tol_gamma=tol_gamma, solver=solver, cutoff=cutoff, cutoff_near=cutoff_near, bound=[list(b) for b in bound],
+        tol_s=tol_s, tol_gamma=tol_gamma, solver=solver, solver_tol=solver_tol, cutoff=cutoff, cutoff_near=cutoff_near, bound=[list(b) for b in bound],
         relax=relax, walls=walls, max_iterations=max_iterations, threads=threads))
 
 

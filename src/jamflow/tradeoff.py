@@ -401,7 +401,8 @@ def _calippso_prepare(seed: int, quick: bool) -> Packing:
 def _calippso_run(start: Packing, knobs: dict[str, Any], quick: bool):
     from .calippso import calippso
 
-    return calippso(start, tol_s=knobs["tol_s"], tol_gamma=knobs["tol_gamma"], solver=knobs["solver"])
+    return calippso(start, tol_s=knobs["tol_s"], tol_gamma=knobs["tol_gamma"], solver=knobs["solver"],
+                    solver_tol=knobs["solver_tol"])
 
 
 def _calippso_compare(out, ref) -> dict[str, float]:
@@ -432,8 +433,13 @@ _CALIPPSO_METRICS = {
 
 
 def _calippso_grid(quick: bool) -> list[dict[str, Any]]:
+    from .calippso import SOLVER_TOL
+
     tols = [(1e-5, 1e-8), (1e-7, 1e-10), (1e-9, 1e-12)] + ([] if quick else [(1e-10, 1e-13)])
-    return [{"tol_s": a, "tol_gamma": b, "solver": sv} for sv in ("simplex", "ipm", "hybrid") for a, b in tols]
+    grid = [{"tol_s": a, "tol_gamma": b, "solver": sv, "solver_tol": SOLVER_TOL}
+            for sv in ("simplex", "ipm", "hybrid") for a, b in tols]
+    # the HiGHS tolerances at the paper's convergence tolerances
+    return grid + [{"tol_s": 1e-9, "tol_gamma": 1e-12, "solver": "hybrid", "solver_tol": t} for t in (1e-9, 1e-8)]
 
 
 # --- LS compression ---------------------------------------------------------------------
@@ -549,18 +555,19 @@ STAGES: dict[str, StageSweep] = {
     "calippso": StageSweep(
         name="calippso",
         description="CALiPPSO from an LS snapshot at p = 1e3 (growth rate 1e-3) of 2D 1:1.4 bidisperse discs "
-                    "(N = 64 quick, 256 full); the HiGHS feasibility tolerances are the module's fixed ones",
+                    "(N = 64 quick, 256 full)",
         commands=("calippso",),
         knobs={"tol_s": "convergence: largest stable displacement of the last LP [mean diameters]",
                "tol_gamma": "convergence: sqrt(Gamma*) - 1 of the last LP",
-               "solver": "HiGHS strategy (jamflow.calippso.SOLVERS)"},
-        preset_options={"tol_s": "tol_s", "tol_gamma": "tol_gamma", "solver": "solver"},
+               "solver": "HiGHS strategy (jamflow.calippso.SOLVERS)",
+               "solver_tol": "HiGHS primal/dual feasibility and IPM optimality tolerance (scaled rows)"},
+        preset_options={"tol_s": "tol_s", "tol_gamma": "tol_gamma", "solver": "solver", "solver_tol": "solver_tol"},
         metrics=_CALIPPSO_METRICS,
         primary="error",
         thresholds={"fast": {"error": 1e-3, "not_isostatic": 0.0}, "default": {"error": 1e-6, "not_isostatic": 0.0},
                     "publication": {"error": 1e-9, "not_isostatic": 0.0}},
         prepare=_calippso_prepare,
-        reference=lambda quick: {"tol_s": 1e-11, "tol_gamma": 1e-14, "solver": "simplex"},
+        reference=lambda quick: {"tol_s": 1e-11, "tol_gamma": 1e-14, "solver": "simplex", "solver_tol": 1e-10},
         grid=_calippso_grid,
         run=_calippso_run,
         compare=_calippso_compare,

@@ -97,10 +97,11 @@ rule calippso:
         tol_s=lambda wildcards: optional_flag("--tol-s", opt("calippso", "tol_s")),
         tol_gamma=lambda wildcards: optional_flag("--tol-gamma", opt("calippso", "tol_gamma")),
         solver=lambda wildcards: optional_flag("--solver", opt("calippso", "solver")),
+        solver_tol=lambda wildcards: optional_flag("--solver-tol", opt("calippso", "solver_tol")),
         walls="--walls" if opt("calippso", "walls") else "",
         read=read_flags(CHAIN[CHAIN.index("calippso") - 1]) if "calippso" in CHAIN else "",
     conda:
         "../envs/jamflow.yaml"
     shell:
-        "jamflow calippso {input} {output} {params.tol_s} {params.tol_gamma} {params.solver}"
+        "jamflow calippso {input} {output} {params.tol_s} {params.tol_gamma} {params.solver} {params.solver_tol}"
         " {params.walls} {params.read} --preset {params.preset} --quiet > {log} 2>&1"

@@ -13,6 +13,7 @@ from ..calippso import (
     DEFAULT_SOLVER,
     DEFAULT_TOL_GAMMA,
     DEFAULT_TOL_S,
+    SOLVER_TOL,
     SOLVERS,
     calippso,
     result_to_dataset,
@@ -38,6 +39,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help=f"convergence: sqrt(Gamma)-1 (default {DEFAULT_TOL_GAMMA:g})")
     p.add_argument("--solver", choices=SOLVERS, default=DEFAULT_SOLVER,
                    help=f"HiGHS strategy (default {DEFAULT_SOLVER})")
+    p.add_argument("--solver-tol", type=float, default=SOLVER_TOL,
+                   help=f"HiGHS feasibility/optimality tolerance of the scaled rows, 1e-10..2e-8 (default {SOLVER_TOL:g})")
     p.add_argument("--cutoff", type=float, default=DEFAULT_CUTOFF,
                    help=f"neighbour cutoff far from jamming, in largest diameters (default {DEFAULT_CUTOFF})")
     p.add_argument("--cutoff-near", type=float, default=DEFAULT_CUTOFF_NEAR,
@@ -67,7 +70,7 @@ def _calippso(args: argparse.Namespace) -> int:
                             Nc=rec.n_contacts)
 
         result = calippso(
-            packing, tol_s=args.tol_s, tol_gamma=args.tol_gamma, solver=args.solver, cutoff=args.cutoff,
+            packing, tol_s=args.tol_s, tol_gamma=args.tol_gamma, solver=args.solver, solver_tol=args.solver_tol, cutoff=args.cutoff,
             cutoff_near=args.cutoff_near, relax=args.relax, walls=args.walls,
             max_iterations=args.max_iterations, threads=args.threads, progress=progress, **kwargs,
         )
