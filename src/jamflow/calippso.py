@@ -59,12 +59,13 @@ with hysteresis: the phase only tightens. Convergence (Algorithm 1, line 15) nee
 [mean diameters]. The LP that certifies convergence is always solved without
 displacement bounds (paper Sec. II C: an active bound acts as an external force);
 after it the contact network is checked for isostaticity, force balance and, over
-all pairs, overlaps. In the last bound phase the next LP is unbounded whenever the
-last one gave an isostatic network (the bound then holds no stable particle: an
-active bound would be an extra constraint), and also after a bounded LP whose stable
-particles moved by less than :data:`UNBOUND_FRACTION` of the bound or by more than
-:data:`BOUND_ACTIVE_FRACTION` of it; a non-isostatic unbounded LP is followed by a
-bounded one. The previous LP's rattlers get the far bound so that they are not
+all pairs, overlaps. In the last bound phase a bounded LP is followed by an
+unbounded one when it gave an isostatic network (the bound then holds no stable
+particle) or its stable particles moved by less than :data:`UNBOUND_FRACTION` of
+the bound or by more than :data:`BOUND_ACTIVE_FRACTION` of it; an unbounded LP is
+followed by another only when it was isostatic and its stable particles moved by at
+most :data:`BOUND_ACTIVE_FRACTION` of the bound (larger moves wander along soft
+directions). The previous LP's rattlers get the far bound so that they are not
 pinned on it.
 The cutoff is ``cutoff`` (1.7 largest diameters) far from jamming and
 ``cutoff_near`` (1.4) in the last phase; rows are kept from LP to LP (which lets the
@@ -119,20 +120,22 @@ __all__ = [
 ]
 
 #: Solver strategies. ``ipm``: HiGHS interior point with crossover (vertex duals),
-#: cold every LP; ``simplex``: dual simplex, warm-started from the previous basis
-#: whenever the rows are unchanged; ``hybrid``: interior point while
-#: ``sqrt(Gamma*) - 1 > HYBRID_SWITCH``, then dual simplex warm-started from the
-#: previous basis (interior point with crossover whenever the rows changed); ``ipm-center``:
+#: cold every LP; ``simplex``: the primal simplex from the previous LP's basis,
+#: carried over to the new rows by pair (the cold first LP by the dual simplex);
+#: ``hybrid``: interior point while ``sqrt(Gamma*) - 1 > HYBRID_SWITCH``, then the
+#: warm primal simplex (a warm start slower than the last interior point solve is
+#: abandoned for interior point, see :data:`WARM_TIME_FACTOR`); ``ipm-center``:
 #: interior point without crossover on every bounded LP (a point inside the optimal
 #: face: displacements along directions that do not change Gamma are not pushed onto
 #: the bound as at a vertex) and with crossover on every unbounded LP, the only ones
 #: whose duals give the contacts of the result.
 SOLVERS: tuple[str, ...] = ("ipm", "simplex", "hybrid", "ipm-center")
 
-#: Default solver, chosen by ``benchmarks/calippso.py``: on the d = 3 LS example
-#: (N = 1024) hybrid took 11.0 s against 16.6 s for ipm in the same run (same 5 LPs,
-#: same phi_J and network; warm simplex LPs 0.2-1.4 s against ~3 s); cold simplex LPs
-#: took 20-80 s.
+#: Default solver, chosen by ``benchmarks/calippso.py`` (part ``solvers``): on the
+#: d = 3 LS example (N = 1024) hybrid needs 2-3 interior point LPs (~1.5 s each) and
+#: then warm primal simplex LPs of 0.07-0.8 s; a cold simplex LP takes 20-80 s. From
+#: a carried basis the primal simplex needs a few pivots where the dual simplex needs
+#: thousands (d = 4 example: 2 against 5184 pivots, 0.4 s against 26 s).
 DEFAULT_SOLVER: str = "hybrid"
 
 #: Convergence: largest displacement of a stable particle [mean diameters].
@@ -760,12 +763,15 @@ def calippso(
             last["why"] = why
             continue
         # the converging LP must be unbounded: go unbounded once the network is
-        # isostatic or the tightest bound is far from active for the stable particles
-        # (a non-isostatic unbounded vertex need not be small: bounded again after it)
+        # isostatic or the tightest bound is far from active for the stable particles;
+        # stay unbounded only while isostatic with moves the bound would have allowed
+        # (a large unbounded move wanders along soft directions: bounded again after it)
         tight = 0.5 * bound[-1][1]
-        unbounded_next = small or (phase == len(bound) and (iso or (
-            np.isfinite(b)
-            and (max_s_stable < UNBOUND_FRACTION * tight or max_s_stable > BOUND_ACTIVE_FRACTION * tight))))
+        if np.isfinite(b):
+            leave_bound = iso or max_s_stable < UNBOUND_FRACTION * tight or max_s_stable > BOUND_ACTIVE_FRACTION * tight
+        else:
+            leave_bound = iso and max_s_stable <= BOUND_ACTIVE_FRACTION * tight
+        unbounded_next = small or (phase == len(bound) and leave_bound)
         if _stalled(records, stall_from):
             stalls += 1
             if stalls > MAX_STALL_RECOVERIES:
