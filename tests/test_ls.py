@@ -76,19 +76,32 @@ def test_collision_time_near_contact_is_accurate():
     assert kern.collision_time(dx, np.array([1e-5, 0.0, 0.0]), sigma, 1e-4) > 0.0
 
 
-def _state(packing, rate, seed=0, beta=10.0):
-    st = _State(packing, beta, np.random.default_rng(seed))
+def _state(packing, rate, seed=0, beta=10.0, neighbor_list=None):
+    st = _State(packing, beta, np.random.default_rng(seed), neighbor_list)
     st.sc[2] = rate
     st.rebuild()
     return st
 
 
-def test_energy_and_momentum_conserved_without_growth():
+def _run(st, max_coll, t_limit):
+    """Run like the driver: rebuild whenever the kernel stops for cells or lists."""
+    total = 0
+    while total < max_coll:
+        status, ncoll = st.run(max_coll - total, min(t_limit, st.t_rebuild))
+        total += ncoll
+        if status == kern.WINDOW_DONE or st.t >= t_limit:
+            break
+        st.rebuild()
+    return total
+
+
+@pytest.mark.parametrize("neighbor_list", [False, True])
+def test_energy_and_momentum_conserved_without_growth(neighbor_list):
     pk = random_packing(200, 3, 0.35, seed=3)
-    st = _state(pk, 0.0)
+    st = _state(pk, 0.0, neighbor_list=neighbor_list)
     K0 = kern.kinetic_energy(st.v)
     P0 = st.v.sum(axis=0)
-    _, ncoll = st.run(20_000, math.inf)
+    ncoll = _run(st, 20_000, math.inf)
     assert ncoll == 20_000
     assert kern.kinetic_energy(st.v) == pytest.approx(K0, rel=1e-12)
     assert np.abs(st.v.sum(axis=0) - P0).max() < 1e-12
@@ -97,15 +110,16 @@ def test_energy_and_momentum_conserved_without_growth():
     assert max_overlap(snap)[1] <= OVERLAP_TOL
 
 
-def test_energy_gain_with_growth_is_growth_rate_times_impulse():
+@pytest.mark.parametrize("neighbor_list", [False, True])
+def test_energy_gain_with_growth_is_growth_rate_times_impulse(neighbor_list):
     # monodisperse: every collision adds J g with g = kappa, and the virial sums r J with
     # r = sigma(t_c) between sigma(0) and sigma(t): so dK / kappa lies in [vir/sigma(t), vir/sigma(0)]
     pk = random_packing(200, 3, 0.35, seed=4)
     kappa = 5e-3
-    st = _state(pk, kappa)
+    st = _state(pk, kappa, neighbor_list=neighbor_list)
     K0 = kern.kinetic_energy(st.v)
     s0 = st.scale()
-    _, ncoll = st.run(5_000, st.t_rebuild)
+    ncoll = _run(st, 5_000, math.inf)
     assert ncoll > 1000
     K1 = kern.kinetic_energy(st.v)
     assert K1 == pytest.approx(st.sc[3], rel=1e-12)  # bookkeeping of the kernel

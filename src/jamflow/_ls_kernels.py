@@ -18,6 +18,21 @@ State (all float64 unless stated; ``N`` particles, ``d`` dimensions):
   kept in a complete binary tournament tree ``tree`` (leaves ``M + i``, root 1).
   A collision is valid only if the partner has not collided since it was predicted
   (counter ``count``); otherwise the particle is rescanned (Isobe's scheme).
+* Verlet neighbour lists (``use_nl``; the cells then only serve to build them): the
+  partners of ``i`` are ``nl_idx[nl_start[i]:nl_start[i + 1]]`` (CSR, symmetric), every
+  ``j`` with ``|r_ij| < sigma_ij(t_b) + delta`` at the build time ``t_b``, where ``xb``
+  are the positions at the build. ``nlp = [t_b, delta / 2, g_max]`` with
+  ``g_max = rate max(a) / 2``. Positions are not wrapped in this mode (no cell
+  crossings; the minimum image takes care of the periodicity), and ``cross_time`` holds
+  each particle's *leave* time (``cross_dim = -1``): the first time at which
+  ``|x_i(t) - xb_i| + g_max (t - t_b)`` may reach ``delta / 2``, bounded linearly from
+  ``|v_i|`` after every velocity change. The first leave event ends :func:`run_events`
+  with :data:`LIST_EXPIRED`, and the caller rebuilds all lists.
+
+  Guarantee: a pair not in the list cannot touch before the first leave event. It had
+  ``|r_ij(t_b)| >= sigma_ij(t_b) + delta``; until then each particle moved less than
+  ``delta / 2 - g_max (t - t_b)``, so ``|r_ij(t)| > sigma_ij(t_b) + 2 g_max (t - t_b)
+  >= sigma_ij(t_b) + (a_i + a_j) rate (t - t_b) / 2 = sigma_ij(t)``.
 
 Collision rule for growing spheres (equal masses ``m = 1``): with ``n`` the unit
 vector from ``i`` to ``j``, ``u_n = (v_j - v_i) . n`` and ``g = d sigma_ij / dt``,
@@ -32,8 +47,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-#: Status codes of :func:`run_events`.
-WINDOW_DONE, TIME_LIMIT = 0, 1
+#: Status codes of :func:`run_events`: collision budget used, time limit reached, a
+#: particle may leave the neighbour-list skin (rebuild the lists before continuing).
+WINDOW_DONE, TIME_LIMIT, LIST_EXPIRED = 0, 1, 2
 
 
 @njit(cache=True, inline="always")
@@ -120,9 +136,12 @@ def _scan(i, t, only_dim, only_off, x, v, tl, a, L, invL, s_t, rate, cc, ncell, 
 
     ``only_dim < 0``: all neighbour cells, starting from no prediction. Otherwise only
     the cells at offset ``only_off`` along axis ``only_dim`` (the layer that became
-    adjacent after a cell crossing), keeping the current prediction.
+    adjacent after a cell crossing), keeping the current prediction together with its
+    partner counter: re-stamping that counter would validate a prediction that the
+    partner's own collision since then has made stale.
     """
     d = x.shape[1]
+    found = False
     if only_dim < 0:
         best = np.inf
         partner = -1
@@ -147,11 +166,56 @@ def _scan(i, t, only_dim, only_off, x, v, tl, a, L, invL, s_t, rate, cc, ncell, 
                 if tc < best:
                     best = tc
                     partner = j
+                    found = True
             j = nxt[j]
+    coll_time[i] = best
+    coll_partner[i] = partner
+    if found:
+        coll_pcount[i] = count[partner]
+
+
+@njit(cache=True)
+def _scan_list(i, t, x, v, tl, a, L, invL, s_t, rate, nl_start, nl_idx, count, coll_time,
+               coll_partner, coll_pcount):
+    """Predict particle i's next collision from its neighbour list."""
+    best = np.inf
+    partner = -1
+    for q in range(nl_start[i], nl_start[i + 1]):
+        j = nl_idx[q]
+        tc = _pair(i, j, t, x, v, tl, a, L, invL, s_t, rate)
+        if tc < best:
+            best = tc
+            partner = j
     coll_time[i] = best
     coll_partner[i] = partner
     if partner >= 0:
         coll_pcount[i] = count[partner]
+
+
+@njit(cache=True)
+def _leave(i, t, x, v, tl, xb, nlp, cross_time, cross_dim):
+    """Conservative time at which particle i may exhaust its half skin.
+
+    With ``D = |x_i(t) - xb_i|`` and ``r = delta / 2 - D - g_max (t - t_b)``, the bound
+    ``|x_i(t + tau) - xb_i| <= D + |v_i| tau`` gives the leave time
+    ``t + r / (|v_i| + g_max)`` (``t`` if ``r <= 0``; never if nothing moves or grows).
+    """
+    dt = t - tl[i]
+    disp2 = 0.0
+    v2 = 0.0
+    for k in range(x.shape[1]):
+        dk = x[i, k] + v[i, k] * dt - xb[i, k]
+        disp2 += dk * dk
+        v2 += v[i, k] * v[i, k]
+    rest = nlp[1] - np.sqrt(disp2) - nlp[2] * (t - nlp[0])
+    speed = np.sqrt(v2) + nlp[2]
+    if rest <= 0.0:
+        cross_time[i] = t
+    elif speed > 0.0:
+        cross_time[i] = t + rest / speed
+    else:
+        cross_time[i] = np.inf
+    cross_dim[i] = -1
 
 
 @njit(cache=True)
@@ -217,14 +281,125 @@ def build_cells(x, L, ncell, cc, cell, stride, head, nxt, prv):
 
 
 @njit(cache=True)
+def build_neighbor_lists(x, a, L, invL, s_t, skin, cell, ncell, stride, offs):
+    """Symmetric CSR neighbour lists: all j with ``|r_ij| < sigma_ij + skin``.
+
+    The particles are counting-sorted by cell into contiguous copies of their positions
+    and diameters; every pair of neighbour cells ``c <= c'`` is then swept once over
+    contiguous ranges (cells at least ``max sigma + skin`` wide, positions synced), and
+    a counting sort of the pairs gives the CSR arrays. Cost ``O(N * stencil)``; the
+    contiguous, branch-free inner loop is about four times faster in 5D than walking
+    the linked cell lists.
+
+    Parameters
+    ----------
+    x : ndarray, shape (N, d)
+        Positions [length].
+    a : ndarray, shape (N,)
+        Diameter ratios.
+    L, invL : ndarray, shape (d,)
+        Box lengths [length] and their inverses.
+    s_t : float
+        Diameter scale now [length] (``sigma_ij = (a_i + a_j) s_t / 2``).
+    skin : float
+        Skin ``delta`` [length].
+    cell : ndarray of int64, shape (N,)
+        Flat cell index of every particle (:func:`build_cells`).
+
+    Returns
+    -------
+    nl_start : ndarray of int64, shape (N + 1,)
+    nl_idx : ndarray of int64, shape (nl_start[N],)
+        Partners of ``i`` are ``nl_idx[nl_start[i]:nl_start[i + 1]]``.
+    """
+    n, d = x.shape
+    ncells = 1
+    for k in range(d):
+        ncells *= ncell[k]
+    cstart = np.zeros(ncells + 1, dtype=np.int64)
+    for i in range(n):
+        cstart[cell[i] + 1] += 1
+    for c in range(ncells):
+        cstart[c + 1] += cstart[c]
+    order = np.empty(n, dtype=np.int64)
+    slot = cstart[:ncells].copy()
+    for i in range(n):
+        order[slot[cell[i]]] = i
+        slot[cell[i]] += 1
+    xs = np.empty((n, d))
+    as_ = np.empty(n)
+    for p in range(n):
+        xs[p] = x[order[p]]
+        as_[p] = a[order[p]]
+    pairs = np.empty((8 * n, 2), dtype=np.int64)
+    npair = 0
+    ccoord = np.empty(d, dtype=np.int64)
+    for ci in range(ncells):
+        if cstart[ci] == cstart[ci + 1]:
+            continue
+        for k in range(d):
+            ccoord[k] = (ci // stride[k]) % ncell[k]
+        for q in range(offs.shape[0]):
+            cj = 0
+            for k in range(d):
+                c = ccoord[k] + offs[q, k]
+                if c < 0:
+                    c += ncell[k]
+                elif c >= ncell[k]:
+                    c -= ncell[k]
+                cj += c * stride[k]
+            if cj < ci:
+                continue
+            for p in range(cstart[ci], cstart[ci + 1]):
+                lo = p + 1 if cj == ci else cstart[cj]
+                for r in range(lo, cstart[cj + 1]):
+                    r2 = 0.0
+                    for k in range(d):
+                        dx = xs[r, k] - xs[p, k]
+                        dx -= L[k] * np.floor(dx * invL[k] + 0.5)
+                        r2 += dx * dx
+                    lim = 0.5 * (as_[p] + as_[r]) * s_t + skin
+                    if r2 < lim * lim:
+                        if npair == pairs.shape[0]:
+                            grown = np.empty((2 * npair, 2), dtype=np.int64)
+                            grown[:npair] = pairs
+                            pairs = grown
+                        pairs[npair, 0] = order[p]
+                        pairs[npair, 1] = order[r]
+                        npair += 1
+    nl_start = np.zeros(n + 1, dtype=np.int64)
+    for p in range(npair):
+        nl_start[pairs[p, 0] + 1] += 1
+        nl_start[pairs[p, 1] + 1] += 1
+    for i in range(n):
+        nl_start[i + 1] += nl_start[i]
+    nl_idx = np.empty(nl_start[n], dtype=np.int64)
+    fill = nl_start[:n].copy()
+    for p in range(npair):
+        i = pairs[p, 0]
+        j = pairs[p, 1]
+        nl_idx[fill[i]] = j
+        fill[i] += 1
+        nl_idx[fill[j]] = i
+        fill[j] += 1
+    return nl_start, nl_idx
+
+
+@njit(cache=True)
 def init_events(t, x, v, tl, a, L, invL, w, s_t, rate, cc, ncell, stride, offs, head, nxt, count,
-                coll_time, coll_partner, coll_pcount, cross_time, cross_dim, ev_time, tree, M):
+                coll_time, coll_partner, coll_pcount, cross_time, cross_dim, ev_time, tree, M,
+                use_nl, nl_start, nl_idx, xb, nlp):
     """Predict every particle's next events at time t and build the tree."""
     n = x.shape[0]
     for i in range(n):
-        _scan(i, t, -1, 0, x, v, tl, a, L, invL, s_t, rate, cc, ncell, stride, offs,
-              head, nxt, count, coll_time, coll_partner, coll_pcount)
-        _cross(i, t, x, v, tl, cc, w, cross_time, cross_dim)
+        if use_nl:
+            _scan_list(i, t, x, v, tl, a, L, invL, s_t, rate, nl_start, nl_idx, count,
+                       coll_time, coll_partner, coll_pcount)
+            _leave(i, t, x, v, tl, xb, nlp, cross_time, cross_dim)
+        else:
+            _scan(i, t, -1, 0, x, v, tl, a, L, invL, s_t, rate, cc, ncell, stride, offs,
+                  head, nxt, count, coll_time, coll_partner, coll_pcount)
+            _cross(i, t, x, v, tl, cc, w, cross_time, cross_dim)
         ev_time[i] = min(coll_time[i], cross_time[i])
     ev_time[n] = np.inf
     for p in range(M):
@@ -259,17 +434,20 @@ def kinetic_energy(v):
 @njit(cache=True)
 def run_events(max_coll, t_limit, sc, x, v, tl, a, L, invL, w, cc, cell, ncell, stride, offs,
                head, nxt, prv, count, coll_time, coll_partner, coll_pcount, cross_time, cross_dim,
-               ev_time, tree, M):
+               ev_time, tree, M, use_nl, nl_start, nl_idx, xb, nlp):
     """Process events until ``max_coll`` collisions or time ``t_limit``.
 
     ``sc`` holds ``[t, s_w, rate, K, Kint, virial]`` (time, diameter scale at t = 0,
     d s/dt, kinetic energy, its time integral over the window, and the sum of
-    ``r_ij J`` over collisions) and is updated in place.
+    ``r_ij J`` over collisions) and is updated in place. With ``use_nl`` the partners
+    come from the neighbour lists ``nl_start, nl_idx`` built at positions ``xb`` and
+    ``nlp = [t_b, delta / 2, g_max]`` (module docstring); otherwise from the cells.
 
     Returns
     -------
     status : int
-        :data:`WINDOW_DONE` or :data:`TIME_LIMIT` (then ``t = t_limit``).
+        :data:`WINDOW_DONE`, :data:`TIME_LIMIT` (then ``t = t_limit``) or
+        :data:`LIST_EXPIRED` (then ``t`` is the first leave time; rebuild the lists).
     ncoll : int
         Collisions processed.
     """
@@ -294,6 +472,9 @@ def run_events(max_coll, t_limit, sc, x, v, tl, a, L, invL, w, cc, cell, ncell, 
         t = te
         s_t = s_w + rate * t
         if cross_time[i] <= coll_time[i]:
+            if use_nl:
+                status = LIST_EXPIRED
+                break
             # cell crossing of particle i
             dt = t - tl[i]
             for k in range(d):
@@ -328,8 +509,12 @@ def run_events(max_coll, t_limit, sc, x, v, tl, a, L, invL, w, cc, cell, ncell, 
         j = coll_partner[i]
         if count[j] != coll_pcount[i]:
             # the partner collided since the prediction: predict again
-            _scan(i, t, -1, 0, x, v, tl, a, L, invL, s_t, rate, cc, ncell, stride, offs,
-                  head, nxt, count, coll_time, coll_partner, coll_pcount)
+            if use_nl:
+                _scan_list(i, t, x, v, tl, a, L, invL, s_t, rate, nl_start, nl_idx, count,
+                           coll_time, coll_partner, coll_pcount)
+            else:
+                _scan(i, t, -1, 0, x, v, tl, a, L, invL, s_t, rate, cc, ncell, stride, offs,
+                      head, nxt, count, coll_time, coll_partner, coll_pcount)
             ev_time[i] = min(coll_time[i], cross_time[i])
             _update_tree(i, ev_time, tree, M)
             continue
@@ -367,9 +552,14 @@ def run_events(max_coll, t_limit, sc, x, v, tl, a, L, invL, w, cc, cell, ncell, 
             count[j] += 1
             ncoll += 1
         for p in (i, j):
-            _scan(p, t, -1, 0, x, v, tl, a, L, invL, s_t, rate, cc, ncell, stride, offs,
-                  head, nxt, count, coll_time, coll_partner, coll_pcount)
-            _cross(p, t, x, v, tl, cc, w, cross_time, cross_dim)
+            if use_nl:
+                _scan_list(p, t, x, v, tl, a, L, invL, s_t, rate, nl_start, nl_idx, count,
+                           coll_time, coll_partner, coll_pcount)
+                _leave(p, t, x, v, tl, xb, nlp, cross_time, cross_dim)
+            else:
+                _scan(p, t, -1, 0, x, v, tl, a, L, invL, s_t, rate, cc, ncell, stride, offs,
+                      head, nxt, count, coll_time, coll_partner, coll_pcount)
+                _cross(p, t, x, v, tl, cc, w, cross_time, cross_dim)
             ev_time[p] = min(coll_time[p], cross_time[p])
             _update_tree(p, ev_time, tree, M)
     sc[0] = t
