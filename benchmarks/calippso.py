@@ -1,25 +1,39 @@
-"""CALiPPSO: time to jam, LP counts, solver strategies, relaxation, tolerances.
+"""CALiPPSO: time to jam, LP counts, scaling with N, solver strategies, relaxation, tolerances.
 
-Parts (all d = 3 monodisperse unless stated; one run, ratios measured in the same run):
+Every timed run is the whole ``jamflow calippso IN OUT`` command in a child process
+(its wall time and peak resident memory from ``os.wait4``), as in the issue's targets.
+Parts (d = 3 monodisperse unless stated):
 
-1. ``scaling``: time to jam, number of LPs and median LP time against N from a random
-   start (RSA at phi0 = 0.3, N = 256..1024) and from a near-jamming start (the LS
-   example tiled 1, 2, 4 times: N = 1024..4096, box 1x1x1 .. 2x2x1), with
-   least-squares exponents next to the paper's (total ~ N^3, t_LP ~ N^2.34, n ~ N^1.04).
-2. ``ls``: the LS examples of the CALiPPSO authors (N = 1024, d = 3, 4, 5).
-3. ``solvers``: ipm (with crossover), dual simplex (warm), hybrid, on one input.
-4. ``relax``: LP counts with and without the Sec. IV relaxation c.
-5. ``tolerances``: tol_s / tol_gamma sweep: time against max overlap, force-balance
-   residual and isostaticity.
+``scaling``
+    Time to jam, number of LPs and median LP time against N = 256 ... 4096 from a
+    random start (RSA at phi0 = 0.3) and from a near-jamming start (an LS compression,
+    fast stage kappa0 = 5e-3 to p = 500 then kappa = 1e-3, to p = ``NEAR_PRESSURE``),
+    with least-squares exponents next to the paper's (total ~ N^3, t_LP ~ N^2.34,
+    n ~ N^1.04).
+``ls``
+    The LS examples of the CALiPPSO authors (N = 1024, d = 3, 4, 5) against the
+    targets 10 s, 40 s and 120 s.
+``large``
+    N = 16384 (``--large-n``) from a near-jamming start: target 30 min, 8 GB.
+``solvers``
+    ipm, simplex, hybrid and ipm-center on the d = 3 LS example.
+``relax``
+    LP counts with and without the Sec. IV relaxation c = 0.5 (random starts).
+``tolerances``
+    tol_s / tol_gamma and the HiGHS tolerance: time against max overlap, force-balance
+    residual and isostaticity on the d = 3 LS example.
 
-Writes ``benchmarks/output/calippso.nc`` and ``calippso.png``; peak memory from
-``resource.getrusage``. Run: ``python benchmarks/calippso.py [--quick]``.
+Each part writes ``benchmarks/output/calippso_<part>.nc``; ``calippso.png`` plots
+every part found. Starts are cached as ``benchmarks/output/calippso_start_*.nc``.
+Run: ``python benchmarks/calippso.py [--quick] [--parts PART ...]``.
 """
 
 from __future__ import annotations
 
 import argparse
-import resource
+import os
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -31,129 +45,211 @@ import numpy as np
 import xarray as xr
 
 from jamflow.analysis.contacts import force_balance_residual, summarize
-from jamflow.box import Box
-from jamflow.calippso import calippso
 from jamflow.initial import random_packing
-from jamflow.io import new_dataset_attrs, read_dat, write_dataset
-from jamflow.packing import Packing, max_overlap
+from jamflow.io import new_dataset_attrs, read_dat, read_dataset, read_packing, write_dataset, write_packing
+from jamflow.ls import compress
+from jamflow.packing import max_overlap
 
 OUT = Path(__file__).resolve().parent / "output"
 LS = Path(__file__).resolve().parents[2] / "shared" / "data" / "calippso-ls"
 if not LS.is_dir():
     LS = Path("/work/shared/data/calippso-ls")
 
+PARTS = ("scaling", "ls", "solvers", "relax", "tolerances", "large")
+#: LS pressure of the near-jamming starts (the authors' d = 3 example gives
+#: sqrt(Gamma*) - 1 = 1e-5 in its first LP, ours at 1e6 about 1e-6).
+NEAR_PRESSURE = 1e6
+#: Issue targets for the whole command on the LS examples [s].
+LS_TARGETS = {3: 10.0, 4: 40.0, 5: 120.0}
+PAPER_EXPONENTS = {"time": 3.0, "t_lp": 2.34, "lps": 1.04}
+METRICS = ("time", "peak_memory", "lps", "t_lp", "phi", "overlap", "fb", "iso")
 
-def run(p, **kw) -> dict:
+
+def command(start: Path, tag: str, *options: str) -> dict[str, float]:
+    """Run ``jamflow calippso`` on ``start``; wall time, peak memory and the checks."""
+    out = OUT / f"calippso_out_{tag}.nc"
     t0 = time.perf_counter()
-    try:
-        r = calippso(p, **kw)
-    except RuntimeError as exc:
-        print("   failed:", str(exc)[:200], flush=True)
-        return dict(time=time.perf_counter() - t0, lps=np.nan, t_lp=np.nan, overlap=np.nan, fb=np.nan, iso=0, phi=np.nan)
-    t = time.perf_counter() - t0
-    q = r.packing
+    proc = subprocess.Popen([sys.executable, "-m", "jamflow", "calippso", str(start), str(out), "--quiet", *options])
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    row = dict.fromkeys(METRICS, np.nan)
+    row.update(time=wall, peak_memory=usage.ru_maxrss * 1024.0)
+    if os.waitstatus_to_exitcode(status) != 0:
+        print(f"   {tag}: failed after {wall:.1f} s", flush=True)
+        return row
+    ds = read_dataset(out)
+    q = read_packing(out)
     s = summarize(q)
-    fb = float(force_balance_residual(q)[~q.rattler].max())
-    out = dict(time=t, lps=r.iterations, t_lp=float(np.median(r.history["lp_time"].values)),
-               overlap=max_overlap(q)[1], fb=fb, iso=int(s.isostatic), phi=q.packing_fraction, result=r)
-    print(f"   {t:7.2f} s  {r.iterations:3d} LPs  median LP {out['t_lp']:.3f} s  phi_J {out['phi']:.6f}  "
-          f"iso {s.isostatic} (Nc {s.n_contacts} vs {s.isostatic_count})  overlap {out['overlap']:.1e}  fb {fb:.1e}", flush=True)
-    return out
+    row.update(lps=float(ds.attrs["iterations"]), t_lp=float(np.median(ds["lp_time"].values)), phi=q.packing_fraction,
+               overlap=max_overlap(q)[1], fb=float(force_balance_residual(q)[~q.rattler].max()), iso=float(s.isostatic))
+    print(f"   {tag}: {wall:7.2f} s  {int(row['lps']):3d} LPs  median LP {row['t_lp']:.3f} s  phi_J {row['phi']:.7f}  "
+          f"iso {s.isostatic} (Nc {s.n_contacts} vs {s.isostatic_count})  overlap {row['overlap']:.1e}  "
+          f"fb {row['fb']:.1e}  peak {row['peak_memory'] / 2**30:.2f} GiB", flush=True)
+    return row
 
 
-def tiled_ls(k: int):
-    """The d = 3 LS example (N = 1024) repeated k times along x, then y, then z."""
-    p = read_dat(LS / "Centers-after-LS--N-1024--d-3.dat")
-    reps = [1, 1, 1]
-    for i in range(int(np.log2(k))):
-        reps[i % 3] *= 2
-    shifts = np.stack(np.meshgrid(*[np.arange(r) for r in reps], indexing="ij"), -1).reshape(-1, 3)
-    x = (p.position[None, :, :] + shifts[:, None, :]).reshape(-1, 3)
-    return Packing(position=x, diameter=np.full(len(x), p.diameter[0]), box=Box.orthogonal(reps), protocol="ls-tiled")
+def random_start(n: int, seed: int = 1) -> Path:
+    path = OUT / f"calippso_start_random_N{n}_s{seed}.nc"
+    if not path.exists():
+        write_packing(random_packing(n, 3, 0.3, "mono", seed=seed), path)
+    return path
 
 
-def fit(N, y):
+def near_start(n: int, seed: int = 1) -> Path:
+    path = OUT / f"calippso_start_ls_N{n}_s{seed}.nc"
+    if not path.exists():
+        t0 = time.perf_counter()
+        snap = compress(random_packing(n, 3, 0.3, "mono", seed=seed), 1e-3, [NEAR_PRESSURE], seed=seed).snapshots[0]
+        write_packing(snap, path)
+        print(f"   LS start N = {n}: p = {snap.pressure:.3g}, phi = {snap.packing_fraction:.5f} "
+              f"({time.perf_counter() - t0:.0f} s)", flush=True)
+    return path
+
+
+def ls_example(d: int) -> Path:
+    path = OUT / f"calippso_start_authors_d{d}.nc"
+    if not path.exists():
+        write_packing(read_dat(LS / f"Centers-after-LS--N-1024--d-{d}.dat"), path)
+    return path
+
+
+def table(rows: list[dict[str, float]], dim: str, coords, attrs: dict) -> xr.Dataset:
+    units = {"time": "s", "peak_memory": "B", "t_lp": "s"}
+    data = {m: ((dim,), np.array([r[m] for r in rows], float), {"units": units.get(m, "1")}) for m in METRICS}
+    return xr.Dataset(data, coords={dim: coords}, attrs=attrs)
+
+
+def fit(n, y) -> float:
     ok = np.isfinite(y)
-    return float(np.polyfit(np.log(N[ok]), np.log(y[ok]), 1)[0]) if ok.sum() >= 2 else np.nan
+    return float(np.polyfit(np.log(n[ok]), np.log(y[ok]), 1)[0]) if ok.sum() >= 2 else np.nan
+
+
+def part_scaling(quick: bool, max_random: int) -> xr.Dataset:
+    sizes = np.array([128, 256] if quick else [256, 512, 1024, 2048, 4096])
+    parts = []
+    for kind, start in (("random", random_start), ("near", near_start)):
+        rows = []
+        for n in sizes:
+            if kind == "random" and n > max_random:
+                rows.append(dict.fromkeys(METRICS, np.nan))
+                continue
+            print(f"N = {n}, {kind} start", flush=True)
+            rows.append(command(start(int(n)), f"{kind}_N{n}"))
+        ds = table(rows, "N", sizes, {})
+        parts.append(ds.expand_dims(start=[kind]))
+    ds = xr.concat(parts, "start")
+    exps = {f"exponent_{s}_{k}": fit(sizes, ds[k].sel(start=s).values) for s in ("random", "near") for k in PAPER_EXPONENTS}
+    print("fitted exponents:", {k: round(v, 2) for k, v in exps.items()}, "paper:", PAPER_EXPONENTS, flush=True)
+    ds.attrs.update(new_dataset_attrs("CALiPPSO scaling with N", {"quick": quick, "near_pressure": NEAR_PRESSURE},
+                                      **exps, **{f"paper_exponent_{k}": v for k, v in PAPER_EXPONENTS.items()}))
+    return ds
+
+
+def part_ls(quick: bool) -> xr.Dataset:
+    dims = [3] if quick else [3, 4, 5]
+    rows = []
+    for d in dims:
+        print(f"LS example d = {d} (target {LS_TARGETS[d]:g} s)", flush=True)
+        rows.append(command(ls_example(d), f"authors_d{d}"))
+    ds = table(rows, "d", dims, new_dataset_attrs("CALiPPSO on the authors' LS examples", {"quick": quick}))
+    ds["target_time"] = (("d",), np.array([LS_TARGETS[d] for d in dims]), {"units": "s"})
+    return ds
+
+
+def part_large(n: int) -> xr.Dataset:
+    print(f"N = {n}, near-jamming start (target 1800 s, 8 GiB)", flush=True)
+    row = command(near_start(n), f"near_N{n}")
+    return table([row], "N", [n], new_dataset_attrs("CALiPPSO at large N", {"near_pressure": NEAR_PRESSURE}))
+
+
+def part_solvers(quick: bool) -> xr.Dataset:
+    start = random_start(128) if quick else ls_example(3)
+    solvers = ["ipm", "simplex", "hybrid", "ipm-center"]
+    rows = []
+    for s in solvers:
+        print(f"solver {s}", flush=True)
+        rows.append(command(start, f"solver_{s}", "--solver", s))
+    return table(rows, "solver", solvers, new_dataset_attrs("CALiPPSO solver strategies", {"start": start.name}))
+
+
+def part_relax(quick: bool) -> xr.Dataset:
+    seeds = [3] if quick else [1, 2, 3]
+    n = 128 if quick else 256
+    parts = []
+    for c in (1.0, 0.5):
+        rows = []
+        for seed in seeds:
+            print(f"relax c = {c}, seed {seed}", flush=True)
+            rows.append(command(random_start(n, seed), f"relax{c}_s{seed}", *(() if c == 1.0 else ("--relax", str(c)))))
+        parts.append(table(rows, "seed", seeds, {}).expand_dims(relax=[c]))
+    return xr.concat(parts, "relax").assign_attrs(new_dataset_attrs("CALiPPSO Sec. IV relaxation", {"N": n}))
+
+
+def part_tolerances(quick: bool) -> xr.Dataset:
+    start = random_start(128) if quick else ls_example(3)
+    settings = [(1e-6, 1e-9, 1e-10), (1e-7, 1e-10, 1e-10), (1e-9, 1e-12, 1e-10), (1e-9, 1e-12, 1e-9), (1e-9, 1e-12, 2e-8)]
+    rows = []
+    for ts, tg, tl in settings:
+        print(f"tol_s {ts:g}, tol_gamma {tg:g}, solver_tol {tl:g}", flush=True)
+        rows.append(command(start, f"tol_{ts:g}_{tg:g}_{tl:g}", "--tol-s", str(ts), "--tol-gamma", str(tg),
+                            "--solver-tol", str(tl)))
+    ds = table(rows, "setting", np.arange(len(settings)), new_dataset_attrs("CALiPPSO tolerances", {"start": start.name}))
+    for k, name in enumerate(("tol_s", "tol_gamma", "solver_tol")):
+        ds = ds.assign_coords({name: ("setting", [s[k] for s in settings])})
+    return ds
+
+
+def plot() -> None:
+    found = {p: xr.open_dataset(OUT / f"calippso_{p}.nc") for p in PARTS if (OUT / f"calippso_{p}.nc").exists()}
+    fig, ax = plt.subplots(1, 4, figsize=(18, 4))
+    if "scaling" in found:
+        ds = found["scaling"]
+        for s, m in (("random", "o"), ("near", "s")):
+            sel = ds.sel(start=s)
+            ax[0].loglog(ds["N"], sel["time"], m + "-", label=f"{s}: total")
+            ax[0].loglog(ds["N"], sel["t_lp"], m + "--", label=f"{s}: median LP")
+        if "large" in found:
+            ax[0].loglog(found["large"]["N"], found["large"]["time"], "s", color="C1", mfc="none", label="near: large N")
+        ax[0].set_xlabel("N"); ax[0].set_ylabel("time [s]"); ax[0].legend(fontsize=7); ax[0].set_title("d = 3 scaling")
+    if "ls" in found:
+        ds = found["ls"]
+        ax[1].bar(ds["d"] - 0.2, ds["time"], 0.4, label="measured")
+        ax[1].bar(ds["d"] + 0.2, ds["target_time"], 0.4, label="target")
+        ax[1].set_xlabel("d"); ax[1].set_ylabel("time [s]"); ax[1].legend(fontsize=7); ax[1].set_title("authors' LS examples")
+    if "solvers" in found:
+        ds = found["solvers"]
+        ax[2].bar([str(s) for s in ds["solver"].values], ds["time"]); ax[2].set_ylabel("time to jam [s]")
+        ax[2].set_title("solver strategies")
+    if "tolerances" in found:
+        ds = found["tolerances"]
+        ax[3].loglog(ds["time"], ds["overlap"], "o", label="max overlap")
+        ax[3].loglog(ds["time"], ds["fb"], "s", label="force-balance residual")
+        for k in range(ds.sizes["setting"]):
+            ax[3].annotate(f"{float(ds.tol_s[k]):g}/{float(ds.tol_gamma[k]):g}/{float(ds.solver_tol[k]):g}",
+                           (float(ds["time"][k]), float(ds["fb"][k])), fontsize=6)
+        ax[3].set_xlabel("time [s]"); ax[3].legend(fontsize=7); ax[3].set_title("tol_s / tol_gamma / solver_tol")
+    fig.tight_layout()
+    fig.savefig(OUT / "calippso.png", dpi=120)
+    print(f"wrote {OUT / 'calippso.png'} from parts {', '.join(found)}")
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="small sizes only (a few minutes)")
+    ap.add_argument("--parts", nargs="+", choices=PARTS, default=[p for p in PARTS],
+                    help="parts to run (default all; 'large' takes tens of minutes)")
+    ap.add_argument("--large-n", type=int, default=16384, help="N of the 'large' part (default 16384)")
+    ap.add_argument("--max-random", type=int, default=4096,
+                    help="largest N of the random starts in 'scaling' (3D N = 1024 takes ~200 LPs, ~6 min)")
     args = ap.parse_args()
-    sizes = np.array([128, 256] if args.quick else [256, 512, 1024])
-    near_sizes = np.array([1024, 2048] if args.quick else [1024, 2048, 4096])
-    data = {}
-    # 1. scaling: random starts, and near-jamming starts (the LS example tiled)
-    rows = {"random": [], "near": []}
-    for n in sizes:
-        print(f"N = {n} random start phi0 = 0.3", flush=True)
-        rows["random"].append(run(random_packing(int(n), 3, 0.3, "mono", seed=1)))
-    for n in near_sizes:
-        print(f"N = {n} near-jamming start (LS example tiled {n // 1024}x)", flush=True)
-        rows["near"].append(run(tiled_ls(int(n) // 1024)))
-    for start, rs in rows.items():
-        for key in ("time", "lps", "t_lp"):
-            data[f"{start}_{key}"] = ((f"N_{start}",), np.array([r[key] for r in rs], float))
-    exps = {f"exponent_{s}_{k}": fit(sizes if s == "random" else near_sizes, data[f"{s}_{k}"][1])
-            for s in rows for k in ("time", "lps", "t_lp")}
-    print("fitted exponents:", {k: round(v, 2) for k, v in exps.items()}, "(paper: time 3, t_LP 2.34, n 1.04)")
-    # 2. LS examples
-    ds_ls = [3] if args.quick else [3, 4, 5]
-    ls = []
-    for d in ds_ls:
-        print(f"LS example d = {d}", flush=True)
-        ls.append(run(read_dat(LS / f"Centers-after-LS--N-1024--d-{d}.dat")))
-    for key in ("time", "lps", "t_lp", "overlap", "fb", "iso", "phi"):
-        data[f"ls_{key}"] = (("d",), np.array([r[key] for r in ls], float))
-    # 3. solvers on the d = 3 LS example (quick: N = 256 random start)
-    base = read_dat(LS / "Centers-after-LS--N-1024--d-3.dat") if not args.quick else random_packing(128, 3, 0.3, "mono", seed=1)
-    solvers = ["ipm", "simplex", "hybrid", "ipm-center"]
-    sol = []
-    for s in solvers:
-        print(f"solver {s}", flush=True)
-        sol.append(run(base, solver=s))
-    for key in ("time", "lps", "t_lp", "overlap", "fb", "iso"):
-        data[f"solver_{key}"] = (("solver",), np.array([r[key] for r in sol], float))
-    # 4. relaxation
-    relaxes = [1.0, 0.5]
-    rel = []
-    for c in relaxes:
-        print(f"relax c = {c}", flush=True)
-        rel.append(run(random_packing(128 if args.quick else 256, 3, 0.3, "mono", seed=3), relax=None if c == 1.0 else c))
-    data["relax_lps"] = (("relax",), np.array([r["lps"] for r in rel], float))
-    data["relax_time"] = (("relax",), np.array([r["time"] for r in rel], float))
-    # 5. tolerances
-    tols = [(1e-6, 1e-9), (1e-7, 1e-10), (1e-9, 1e-12)]
-    tol_in = base
-    tl = []
-    for ts, tg in tols:
-        print(f"tol_s {ts:g} tol_gamma {tg:g}", flush=True)
-        tl.append(run(tol_in, tol_s=ts, tol_gamma=tg))
-    for key in ("time", "lps", "overlap", "fb", "iso"):
-        data[f"tol_{key}"] = (("tolerance",), np.array([r[key] for r in tl], float))
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024.0
-    ds = xr.Dataset(
-        {k: (v[0], v[1], {"long_name": k.replace("_", " ")}) for k, v in data.items()},
-        coords={"N_random": sizes, "N_near": near_sizes, "d": ds_ls, "solver": solvers, "relax": relaxes,
-                "tol_s": ("tolerance", [t[0] for t in tols]), "tol_gamma": ("tolerance", [t[1] for t in tols])},
-        attrs=new_dataset_attrs("CALiPPSO benchmark", {"quick": args.quick}, peak_memory=peak, **exps),
-    )
     OUT.mkdir(exist_ok=True)
-    write_dataset(ds, OUT / "calippso.nc")
-    fig, ax = plt.subplots(1, 3, figsize=(13, 4))
-    for s, m in (("random", "o"), ("near", "s")):
-        nn = sizes if s == "random" else near_sizes
-        ax[0].loglog(nn, ds[f"{s}_time"], m + "-", label=f"{s}: total")
-        ax[0].loglog(nn, ds[f"{s}_t_lp"], m + "--", label=f"{s}: median LP")
-    ax[0].set_xlabel("N"); ax[0].set_ylabel("time [s]"); ax[0].legend(fontsize=7)
-    ax[1].bar(solvers, ds["solver_time"]); ax[1].set_ylabel("time to jam [s]"); ax[1].set_title("solvers")
-    ax[2].loglog(ds["tol_time"], ds["tol_overlap"], "o-", label="max overlap")
-    ax[2].loglog(ds["tol_time"], ds["tol_fb"], "s-", label="force-balance residual")
-    ax[2].set_xlabel("time [s]"); ax[2].legend(fontsize=7); ax[2].set_title("tol_s / tol_gamma sweep")
-    fig.tight_layout()
-    fig.savefig(OUT / "calippso.png", dpi=120)
-    print(f"peak memory {peak / 2**30:.2f} GiB; wrote {OUT / 'calippso.nc'} and calippso.png")
+    runners = {"scaling": lambda: part_scaling(args.quick, args.max_random), "ls": lambda: part_ls(args.quick),
+               "solvers": lambda: part_solvers(args.quick), "relax": lambda: part_relax(args.quick),
+               "tolerances": lambda: part_tolerances(args.quick),
+               "large": lambda: part_large(1024 if args.quick else args.large_n)}
+    for part in args.parts:
+        write_dataset(runners[part](), OUT / f"calippso_{part}.nc")
+    plot()
 
 
 if __name__ == "__main__":
