@@ -124,7 +124,7 @@ __all__ = [
 #: carried over to the new rows by pair (the cold first LP by the dual simplex);
 #: ``hybrid``: interior point while ``sqrt(Gamma*) - 1 > HYBRID_SWITCH``, then the
 #: warm primal simplex (a warm start slower than the last interior point solve is
-#: abandoned for interior point, see :data:`WARM_TIME_FACTOR`); ``ipm-center``:
+#: abandoned for interior point, see :data:`WARM_PIVOTS_PER_ROW`); ``ipm-center``:
 #: interior point without crossover on every bounded LP (a point inside the optimal
 #: face: displacements along directions that do not change Gamma are not pushed onto
 #: the bound as at a vertex) and with crossover on every unbounded LP, the only ones
@@ -180,17 +180,20 @@ CONTACT_DUAL_REL_TOL: float = 1e-10
 #: ``hybrid``: switch from interior point to warm dual simplex below this ``sqrt(Gamma*) - 1``.
 HYBRID_SWITCH: float = 1e-5
 
-#: A warm dual simplex may take this multiple of the last interior point solve (and
-#: at least :data:`WARM_TIME_MIN` seconds) before the LP is re-solved by interior
-#: point. Measured on the d = 4 LS example: warm simplex LPs took 0.4 s when the
-#: previous basis was nearly optimal but 26-41 s (against 5.6 s for interior point)
-#: after displacements of 3e-5 diameters.
-WARM_TIME_FACTOR: float = 1.0
-WARM_TIME_MIN: float = 0.5
+#: A warm simplex may take this many pivots per row before the LP is re-solved by
+#: interior point (a pivot limit, not a time limit, so that the same input always
+#: gives the same chain). Measured on the d = 4 LS example (13826 rows): a warm
+#: start that pays needs a few pivots (0.4 s); the dual simplex that did not needed
+#: 5184 pivots and 26 s against 5.6 s for interior point. From a random start (3D
+#: N = 512) a limit of 0.25 per row sent 20 LPs to interior point and needed 454 LPs
+#: (89 s), a limit of 1 per row none and 305 LPs (47 s).
+WARM_PIVOTS_PER_ROW: float = 1.0
 
 #: Methods of the cold re-solves after a converged LP failed its final checks:
 #: interior point with crossover, then the dual simplex.
 FINAL_RECOVERY_METHODS: tuple[str, ...] = ("ipm", "dual")
+
+_NO_PIVOT_LIMIT: int = 2**31 - 1  # HiGHS's default simplex_iteration_limit
 
 #: Rows (the pair list) are reused while every particle moved less than this fraction
 #: of ``ell - sigma_max`` since they were built (lets the simplex warm start).
@@ -380,9 +383,9 @@ def _matrix(rows: _Rows, dx, sig, a, rad, n: int, d: int, unit: float) -> sp.csc
 class _Solver:
     """One HiGHS instance; keeps the last basis for warm starts on unchanged rows.
 
-    A warm dual simplex is given :data:`WARM_TIME_FACTOR` times the last interior
-    point solve; when it runs out the LP is solved by interior point instead, so a
-    warm start that does not pay never costs more than that factor.
+    A warm simplex is given :data:`WARM_PIVOTS_PER_ROW` pivots per row; when they run
+    out the LP is solved by interior point instead, so a warm start that does not
+    pay costs about one interior point solve more.
     """
 
     def __init__(self, threads: int = 1, tol: float = SOLVER_TOL) -> None:
@@ -394,7 +397,6 @@ class _Solver:
                 raise ValueError(f"HiGHS refused {option} = {tol:g}")
         self.basis = None
         self.basis_rows: _Rows | None = None
-        self.ipm_time: float | None = None
         #: hybrid: a simplex LP without a basis to carry is solved by interior point
         self.cold_simplex_as_ipm = False
 
@@ -420,7 +422,7 @@ class _Solver:
         if method == "simplex" and not warm and not cold and self.cold_simplex_as_ipm:
             method = "ipm"
         status, elapsed = self._run(lp, method, basis)
-        if warm and status == highspy.HighsModelStatus.kTimeLimit:
+        if warm and status == highspy.HighsModelStatus.kIterationLimit:
             warm = False
             method = "simplex>ipm"
             status, t_ipm = self._run(lp, "ipm", None)
@@ -480,19 +482,14 @@ class _Solver:
             h.setOptionValue("solver", "simplex")
             h.setOptionValue("simplex_strategy", 4 if basis is not None else 1)
         h.passModel(lp)
-        limit = highspy.kHighsInf
+        limit = _NO_PIVOT_LIMIT
         if basis is not None:
             h.setBasis(basis)
-            if self.ipm_time is not None:
-                # HiGHS's run clock accumulates over runs of one instance
-                limit = h.getRunTime() + max(WARM_TIME_FACTOR * self.ipm_time, WARM_TIME_MIN)
-        h.setOptionValue("time_limit", limit)
+            limit = max(int(WARM_PIVOTS_PER_ROW * lp.num_row_), 1)
+        h.setOptionValue("simplex_iteration_limit", limit)
         t0 = time.perf_counter()
         h.run()
-        elapsed = time.perf_counter() - t0
-        if method == "ipm":
-            self.ipm_time = elapsed
-        return h.getModelStatus(), elapsed
+        return h.getModelStatus(), time.perf_counter() - t0
 
 
 # --- rattlers and counts -----------------------------------------------------------------
