@@ -385,6 +385,22 @@ def build_neighbor_lists(x, a, L, invL, s_t, skin, cell, ncell, stride, offs):
     return nl_start, nl_idx
 
 
+@njit(cache=True, inline="always")
+def _predict(i, t, x, v, tl, a, L, invL, s_t, rate, w, cc, ncell, stride, offs, head, nxt, count,
+             coll_time, coll_partner, coll_pcount, cross_time, cross_dim, ev_time,
+             use_nl, nl_start, nl_idx, xb, nlp):
+    """Predict particle i's next collision and its list-leave (or cell-crossing) time."""
+    if use_nl:
+        _scan_list(i, t, x, v, tl, a, L, invL, s_t, rate, nl_start, nl_idx, count,
+                   coll_time, coll_partner, coll_pcount)
+        _leave(i, t, x, v, tl, xb, nlp, cross_time, cross_dim)
+    else:
+        _scan(i, t, -1, 0, x, v, tl, a, L, invL, s_t, rate, cc, ncell, stride, offs,
+              head, nxt, count, coll_time, coll_partner, coll_pcount)
+        _cross(i, t, x, v, tl, cc, w, cross_time, cross_dim)
+    ev_time[i] = min(coll_time[i], cross_time[i])
+
+
 @njit(cache=True)
 def init_events(t, x, v, tl, a, L, invL, w, s_t, rate, cc, ncell, stride, offs, head, nxt, count,
                 coll_time, coll_partner, coll_pcount, cross_time, cross_dim, ev_time, tree, M,
@@ -392,15 +408,9 @@ def init_events(t, x, v, tl, a, L, invL, w, s_t, rate, cc, ncell, stride, offs, 
     """Predict every particle's next events at time t and build the tree."""
     n = x.shape[0]
     for i in range(n):
-        if use_nl:
-            _scan_list(i, t, x, v, tl, a, L, invL, s_t, rate, nl_start, nl_idx, count,
-                       coll_time, coll_partner, coll_pcount)
-            _leave(i, t, x, v, tl, xb, nlp, cross_time, cross_dim)
-        else:
-            _scan(i, t, -1, 0, x, v, tl, a, L, invL, s_t, rate, cc, ncell, stride, offs,
-                  head, nxt, count, coll_time, coll_partner, coll_pcount)
-            _cross(i, t, x, v, tl, cc, w, cross_time, cross_dim)
-        ev_time[i] = min(coll_time[i], cross_time[i])
+        _predict(i, t, x, v, tl, a, L, invL, s_t, rate, w, cc, ncell, stride, offs, head, nxt, count,
+                 coll_time, coll_partner, coll_pcount, cross_time, cross_dim, ev_time,
+                 use_nl, nl_start, nl_idx, xb, nlp)
     ev_time[n] = np.inf
     for p in range(M):
         tree[M + p] = min(p, n)
@@ -552,15 +562,9 @@ def run_events(max_coll, t_limit, sc, x, v, tl, a, L, invL, w, cc, cell, ncell, 
             count[j] += 1
             ncoll += 1
         for p in (i, j):
-            if use_nl:
-                _scan_list(p, t, x, v, tl, a, L, invL, s_t, rate, nl_start, nl_idx, count,
-                           coll_time, coll_partner, coll_pcount)
-                _leave(p, t, x, v, tl, xb, nlp, cross_time, cross_dim)
-            else:
-                _scan(p, t, -1, 0, x, v, tl, a, L, invL, s_t, rate, cc, ncell, stride, offs,
-                      head, nxt, count, coll_time, coll_partner, coll_pcount)
-                _cross(p, t, x, v, tl, cc, w, cross_time, cross_dim)
-            ev_time[p] = min(coll_time[p], cross_time[p])
+            _predict(p, t, x, v, tl, a, L, invL, s_t, rate, w, cc, ncell, stride, offs, head, nxt, count,
+                     coll_time, coll_partner, coll_pcount, cross_time, cross_dim, ev_time,
+                     use_nl, nl_start, nl_idx, xb, nlp)
             _update_tree(p, ev_time, tree, M)
     sc[0] = t
     sc[3] = K
