@@ -425,6 +425,7 @@ def compress(
         "max_collisions": max_collisions, "max_time": max_time, "beta": beta,
         "fast_growth_rate": fast_growth_rate, "fast_until": fast_until, "seed": seed,
         "window": window, "growth_law": "proportional: sigma_i = a_i s(t), ds/dt = kappa (mean diameter)",
+        "neighbor_list": "auto" if neighbor_list is None else bool(neighbor_list),
     }
     state = _State(packing, beta, np.random.default_rng(seed), neighbor_list)
     fast = fast_growth_rate is not None and fast_growth_rate > 0.0
