@@ -23,7 +23,7 @@ from jamflow.analysis.contacts import (
 from jamflow.analysis.overlap import contact_overlap
 from jamflow.box import Box
 import jamflow.calippso as cal
-from jamflow.calippso import IterationRecord, calippso
+from jamflow.calippso import WARM_PIVOTS_PER_ROW, IterationRecord, calippso
 from jamflow.cli import main
 from jamflow.initial import random_packing
 from jamflow.io import read_dat, read_dataset, read_packing, write_packing
@@ -79,6 +79,15 @@ def test_ls_d3_jams():
     assert hist.sizes["iteration"] == res.iterations
     assert float(hist["bound"].values[-1]) == np.inf  # the converging LP is unbounded
     assert hist["sqrt_gamma_minus_1"].values[-1] < 1e-12
+    # iteration counts: interior point LPs iterate, warm simplex LPs pivot within the
+    # per-row limit and never reach the interior point fallback
+    solver = hist["solver"].values
+    ipm_lp = solver == "ipm"
+    warm = hist["warm_start"].values.astype(bool)
+    assert ipm_lp.any() and warm.any()
+    assert np.all(hist["ipm_iterations"].values[ipm_lp] > 0)
+    assert np.all(hist["ipm_iterations"].values[warm] == 0)
+    assert np.all(hist["simplex_iterations"].values[warm] <= WARM_PIVOTS_PER_ROW * hist["n_constraints"].values[warm])
 
 
 @pytest.mark.slow
@@ -268,3 +277,4 @@ def test_same_input_same_chain():
     assert np.array_equal(a.packing.position, b.packing.position)
     assert np.array_equal(a.history["sqrt_gamma_minus_1"].values, b.history["sqrt_gamma_minus_1"].values)
     assert list(a.history["solver"].values) == list(b.history["solver"].values)
+    assert np.array_equal(a.history["simplex_iterations"].values, b.history["simplex_iterations"].values)

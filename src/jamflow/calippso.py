@@ -258,6 +258,8 @@ class IterationRecord:
     max_inactive_dual: float  # relative to the largest dual
     accepted: bool
     warm_start: bool = False  # simplex started from the previous LP's basis
+    simplex_iterations: int = 0  # simplex pivots, crossover pivots included
+    ipm_iterations: int = 0
 
 
 @dataclass(frozen=True)
@@ -380,6 +382,22 @@ def _matrix(rows: _Rows, dx, sig, a, rad, n: int, d: int, unit: float) -> sp.csc
 # --- LP solve --------------------------------------------------------------------------
 
 
+@dataclass(frozen=True)
+class _Solution:
+    """Outcome of one LP: HiGHS status, wall time [s], columns and row duals (None
+    unless optimal), whether the simplex started warm, the method that produced it
+    and the iterations it took."""
+
+    status: str
+    seconds: float
+    col: NDArray[np.float64] | None
+    dual: NDArray[np.float64] | None
+    warm: bool
+    method: str
+    simplex_iterations: int
+    ipm_iterations: int
+
+
 class _Solver:
     """One HiGHS instance; keeps the last basis for warm starts on unchanged rows.
 
@@ -400,8 +418,8 @@ class _Solver:
         #: hybrid: a simplex LP without a basis to carry is solved by interior point
         self.cold_simplex_as_ipm = False
 
-    def solve(self, A: sp.csc_matrix, rhs, col_lower, col_upper, method: str, rows: _Rows):
-        """Solve; returns ``(status, seconds, columns or None, row duals or None, warm, method)``."""
+    def solve(self, A: sp.csc_matrix, rhs, col_lower, col_upper, method: str, rows: _Rows) -> _Solution:
+        """Solve the LP ``min -g`` s.t. ``A z <= rhs``, ``col_lower <= z <= col_upper``."""
         lp = highspy.HighsLp()
         lp.num_col_, lp.num_row_ = A.shape[1], A.shape[0]
         cost = np.zeros(A.shape[1])
@@ -422,11 +440,14 @@ class _Solver:
         if method == "simplex" and not warm and not cold and self.cold_simplex_as_ipm:
             method = "ipm"
         status, elapsed = self._run(lp, method, basis)
+        pivots, ipm_its = self._iterations()
         if warm and status == highspy.HighsModelStatus.kIterationLimit:
             warm = False
             method = "simplex>ipm"
             status, t_ipm = self._run(lp, "ipm", None)
             elapsed += t_ipm
+            more_pivots, ipm_its = self._iterations()
+            pivots += more_pivots
         h = self.h
         name = h.modelStatusToString(status)
         # without crossover HiGHS may stop with status "Unknown" at a primal-feasible
@@ -435,11 +456,18 @@ class _Solver:
                        and int(h.getInfo().primal_solution_status) == 2)
         if status != highspy.HighsModelStatus.kOptimal and not interior_ok:
             self.basis = None
-            return name, elapsed, None, None, warm, method
+            return _Solution(name, elapsed, None, None, warm, method, pivots, ipm_its)
         sol = h.getSolution()
         self.basis = h.getBasis() if method != "ipm-nox" else None
         self.basis_rows = rows
-        return name, elapsed, np.asarray(sol.col_value), -np.asarray(sol.row_dual), warm, method
+        return _Solution(name, elapsed, np.asarray(sol.col_value), -np.asarray(sol.row_dual), warm, method,
+                         pivots, ipm_its)
+
+    def _iterations(self) -> tuple[int, int]:
+        """Simplex pivots (crossover included) and interior point iterations of the last run."""
+        info = self.h.getInfo()
+        return (max(int(info.simplex_iteration_count), 0) + max(int(info.crossover_iteration_count), 0),
+                max(int(info.ipm_iteration_count), 0))
 
     def _carried_basis(self, rows: _Rows, n_cols: int):
         """The last basis carried over to ``rows``: rows kept by pair keep their status,
@@ -678,9 +706,12 @@ def calippso(
         reach = (ell - 2.0 * np.sqrt(d) * b_max * unit) / sig_max if np.isfinite(b_max) else FAR_GROWTH
         col_upper[-1] = min(FAR_GROWTH, max(reach, 1.0)) ** 2 - 1.0
         method = recovery_method or _method(solver, records, bool(np.isfinite(b)))
-        status, lp_time, col, dual, warm, method = solver_obj.solve(A, rhs, col_lower, col_upper, method, rows)
+        lp_sol = solver_obj.solve(A, rhs, col_lower, col_upper, method, rows)
+        status, lp_time, col, dual, method = lp_sol.status, lp_sol.seconds, lp_sol.col, lp_sol.dual, lp_sol.method
+        counts = dict(warm_start=lp_sol.warm, simplex_iterations=lp_sol.simplex_iterations,
+                      ipm_iterations=lp_sol.ipm_iterations)
         if col is None:
-            rec = IterationRecord(it, np.nan, np.nan, np.nan, len(rows), 0, 0, False, status, lp_time, method, ell / sig_max, b, np.nan, np.nan, False, warm)
+            rec = IterationRecord(it, np.nan, np.nan, np.nan, len(rows), 0, 0, False, status, lp_time, method, ell / sig_max, b, np.nan, np.nan, False, **counts)
             records.append(rec)
             if progress:
                 progress(rec)
@@ -720,7 +751,7 @@ def calippso(
         trial = _as_packing(packing, x_new, D_new, walls)
         ov = _max_overlap(trial, walls)
         accepted = ov <= OVERLAP_TOL
-        rec = IterationRecord(it, sg, max_s, max_s_stable, len(rows), n_c, n_s, iso, status, lp_time, method, ell / sig_max, b, min_act, max_inact, accepted, warm)
+        rec = IterationRecord(it, sg, max_s, max_s_stable, len(rows), n_c, n_s, iso, status, lp_time, method, ell / sig_max, b, min_act, max_inact, accepted, **counts)
         records.append(rec)
         if progress:
             progress(rec)
@@ -934,6 +965,9 @@ def _forces(packing: Packing, x, D, walls: bool, last: dict[str, Any]):
                 residual_stable=float(resid[stable].max(initial=0.0))), float(resid.max(initial=0.0))
 
 
+_COUNTS = ("n_constraints", "n_contacts", "n_stable", "simplex_iterations", "ipm_iterations")
+
+
 def _history(records: list[IterationRecord]) -> xr.Dataset:
     def col(name):
         return np.array([getattr(r, name) for r in records])
@@ -945,13 +979,15 @@ def _history(records: list[IterationRecord]) -> xr.Dataset:
         "n_constraints": ("1", "LP rows (pairs within the cutoff, plus wall rows)"),
         "n_contacts": ("1", "contacts (active duals) of the backbone"),
         "n_stable": ("1", "stable (non-rattler) particles"),
+        "simplex_iterations": ("1", "simplex pivots of the LP (crossover pivots included)"),
+        "ipm_iterations": ("1", "interior point iterations of the LP"),
         "lp_time": ("s", "LP wall time"),
         "cutoff": ("1", "neighbour cutoff [largest diameters]"),
         "bound": ("1", "displacement bound per coordinate [mean diameters]; inf = none"),
         "min_active_dual": ("1", "smallest active dual / largest dual"),
         "max_inactive_dual": ("1", "largest inactive dual / largest dual"),
     }
-    data = {k: (("iteration",), col(k).astype(float if k not in ("n_constraints", "n_contacts", "n_stable") else np.int64),
+    data = {k: (("iteration",), col(k).astype(np.int64 if k in _COUNTS else float),
                 {"units": u, "long_name": ln}) for k, (u, ln) in spec.items()}
     data["isostatic"] = (("iteration",), col("isostatic").astype(np.int8), {"units": "1", "long_name": "N_c == isostatic count after the LP (1 = yes)"})
     data["accepted"] = (("iteration",), col("accepted").astype(np.int8), {"units": "1", "long_name": "update accepted (0 = undone by a recovery)"})
