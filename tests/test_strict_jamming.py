@@ -27,7 +27,7 @@ from jamflow.rigidity import (
     strain_basis,
 )
 from jamflow.soft.jamming import jam_to_pressure
-from jamflow.strict_jamming import CLASSIFICATIONS, certify
+from jamflow.strict_jamming import CLASSIFICATIONS, _MotionLP, certify
 
 DATA = Path("/work/shared/data/calippso-ls")
 
@@ -286,3 +286,30 @@ def test_cli_certify_writes_dataset(tmp_path, capsys):
         assert "units" in v.attrs and "long_name" in v.attrs
     assert main(["certify", str(src), str(out), "--exact"]) == 1
     assert "--exact needs --gap-tol" in capsys.readouterr().err
+
+
+def test_warm_primal_cone_solves_match_cold_solves(soft_jammed):
+    """Loads change only the costs: on the cone LP of a jammed network the primal
+    simplex from the previous basis must reach the same optimum (no motion) as a cold
+    dual simplex, in fewer pivots."""
+    p = soft_jammed
+    cert = certify(p)
+    A = rigidity_matrix(p, cert.backbone_contacts, particles=np.flatnonzero(~cert.rattler))
+    zero, upper = np.zeros(A.shape[0]), np.ones(A.shape[1])
+    rng = np.random.default_rng(5)
+    loads = [s * rng.standard_normal(A.shape[1]) for _ in range(3) for s in (1, -1)]
+    warm = _MotionLP(A, zero, upper, "simplex")
+    warm_its = cold_its = 0
+    for k, load in enumerate(loads):
+        _, obj_warm, y, _, it_warm = warm.solve(load)
+        _, obj_cold, _, _, it_cold = _MotionLP(A, zero, upper, "simplex").solve(load)
+        # jammed: the only first-order motions are translations, which a load can
+        # exploit only through its net component
+        net = np.abs(load.reshape(-1, p.d).sum(axis=0)).sum()
+        assert obj_cold == pytest.approx(net, rel=1e-7)
+        assert obj_warm == pytest.approx(obj_cold, abs=1e-9 * net)
+        assert np.all(A @ y >= -1e-9) and np.all(np.abs(y) <= 1 + 1e-9)
+        if k:
+            warm_its += it_warm
+            cold_its += it_cold
+    assert warm_its < cold_its

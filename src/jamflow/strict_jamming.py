@@ -75,9 +75,15 @@ LP_STAGES: tuple[str, ...] = ("local", "collective", "strict")
 DEFAULT_LOADS: int = 2
 
 #: Default HiGHS algorithm for the collective and strict LPs: the cone LPs are
-#: massively degenerate (every constraint is tight at y = 0) and the interior-point
-#: method was ~4x faster than dual simplex on N = 1024, d = 3.
+#: massively degenerate (every constraint is tight at y = 0); the interior-point
+#: method without crossover (cold for every load) beat the simplex (a cold dual
+#: simplex, then primal simplex warm starts) on 3D soft packings at P0 = 1e-5
+#: (``benchmarks/certify.py``): 8.9 s against 15.0 s at N = 1024, and the simplex's
+#: cold first solve at N = 4096 took more than 15 min. When interior point fails
+#: (status not optimal) the LP falls back to the simplex and stays there.
 DEFAULT_SOLVER: str = "ipm"
+
+_DUAL, _PRIMAL = 1, 4  # HiGHS simplex_strategy values
 
 #: Default largest rattling cluster, as a fraction of the current backbone.
 DEFAULT_MAX_CLUSTER_FRACTION: float = 0.05
@@ -201,24 +207,44 @@ class _MotionLP:
         self.h.passModel(lp)
         self.n = csc.shape[1]
         self._idx = np.arange(self.n, dtype=np.int32)
+        # primal simplex from the last optimal basis, for the cone LPs only (rhs = 0;
+        # see solve); False until a simplex solve left an optimal basis
+        self._cone = not np.any(rhs)
+        self._warm = False
 
     def solve(self, load: NDArray[np.float64]) -> tuple[str, float, NDArray[np.float64], float, int]:
-        """Maximise ``load . y``; returns status, optimum, y, wall time, iterations."""
+        """Maximise ``load . y``; returns status, optimum, y, wall time, iterations.
+
+        Loads change only the costs, so the last optimal simplex basis stays primal
+        feasible. For a cone LP (rhs = 0) of a jammed network every load has its optimum
+        at ``y = 0``, and the primal simplex from that basis needs a few pivots where a
+        cold dual simplex needed thousands (3D N = 1024: 5 against 4285; N = 2048: 4
+        against 7632). Loose gap LPs move their optimum to another corner of the
+        displacement box with every load; there the cold dual simplex is faster
+        (3D N = 96 at gap 0.1: 412 against 994 pivots), so they always start cold.
+        """
         self.h.changeColsCost(self.n, self._idx, -load)
         t0 = time.perf_counter()
-        self.h.run()
+        self._run()
         if self.h.getModelStatus() != highspy.HighsModelStatus.kOptimal and self.solver != "simplex":
             self.solver = "simplex"
             self.h.setOptionValue("solver", "simplex")
             self.h.setOptionValue("presolve", "choose")
-            self.h.run()
+            self._run()
         elapsed = time.perf_counter() - t0
         status = self.h.modelStatusToString(self.h.getModelStatus())
         if self.h.getModelStatus() != highspy.HighsModelStatus.kOptimal:
             raise RuntimeError(f"jamming LP not solved to optimality: HiGHS status {status!r}")
+        self._warm = self._cone and self.solver == "simplex"
         info = self.h.getInfo()
         y = np.asarray(self.h.getSolution().col_value, dtype=np.float64)
         return status, -float(info.objective_function_value), y, elapsed, int(info.simplex_iteration_count + info.ipm_iteration_count)
+
+
+    def _run(self) -> None:
+        if self.solver == "simplex":
+            self.h.setOptionValue("simplex_strategy", _PRIMAL if self._warm else _DUAL)
+        self.h.run()
 
 
 # --- helpers -------------------------------------------------------------------------
