@@ -21,7 +21,9 @@ Parts (d = 3 monodisperse unless stated):
     converged near-start output of ``scaling`` the final basis (the isostatic contact
     rows over the stable particles' coordinates and ``g``, a square sparse matrix) is
     factorised by HiGHS (a run stopped after its first factorisation) and by SuperLU
-    (COLAMD ordering), with the fill of the LU factors and fitted exponents.
+    with the COLAMD ordering and, when ``pymetis`` is installed (``pip install -e
+    ".[bench]"``), with a METIS nested-dissection ordering of the contact graph, with
+    the fill of the LU factors and fitted exponents.
 ``solvers``
     ipm, simplex, hybrid and ipm-center on the d = 3 LS example.
 ``relax``
@@ -53,6 +55,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 import xarray as xr
+from numpy.typing import NDArray
 
 from jamflow.analysis.contacts import force_balance_residual, summarize
 from jamflow.initial import random_packing
@@ -225,6 +228,36 @@ def basis_kernel(out: Path) -> sp.csc_matrix:
     return sp.hstack([R, np.ones((R.shape[0], 1))], format="csc")
 
 
+def nested_dissection_columns(out: Path) -> NDArray[np.int64] | None:
+    """Columns of :func:`basis_kernel` in METIS nested-dissection order of the stable
+    particles' contact graph (each particle's coordinates together, ``g`` last), or
+    None without ``pymetis``."""
+    try:
+        import pymetis
+    except ImportError:
+        return None
+    q = read_packing(out)
+    stable = np.flatnonzero(~q.rattler)
+    col_of = np.full(q.n, -1)
+    col_of[stable] = np.arange(len(stable))
+    c = q.contacts[~q.rattler[q.contacts[:, 0]] & ~q.rattler[q.contacts[:, 1]]]
+    i, j = col_of[c[:, 0]], col_of[c[:, 1]]
+    G = sp.coo_matrix((np.ones(len(i)), (i, j)), shape=(len(stable), len(stable)))
+    G = (G + G.T).tocsr()
+    perm, _ = pymetis.nested_dissection(adjacency=pymetis.CSRAdjacency(G.indptr, G.indices))
+    perm = np.asarray(perm)
+    perm = perm[perm > 0] - 1  # the anchor (first stable particle) has no columns
+    cols = (q.d * perm[:, None] + np.arange(q.d)).ravel()
+    return np.append(cols, q.d * (len(stable) - 1))
+
+
+def superlu(K: sp.csc_matrix, permc_spec: str) -> tuple[float, int]:
+    """Seconds and nnz(L + U) of a SuperLU factorisation."""
+    t0 = time.perf_counter()
+    lu = sla.splu(K, permc_spec=permc_spec)
+    return time.perf_counter() - t0, lu.L.nnz + lu.U.nnz
+
+
 def highs_factor_time(K: sp.csc_matrix) -> float:
     """Seconds of a HiGHS primal simplex run from the all-structural basis of ``K``
     stopped by a zero pivot limit: setup plus the first factorisation of the basis."""
@@ -263,16 +296,18 @@ def part_factor(quick: bool) -> xr.Dataset:
             command(near_start(n), f"near_N{n}")
         K = basis_kernel(out)
         t_highs = highs_factor_time(K)
-        t0 = time.perf_counter()
-        lu = sla.splu(K, permc_spec="COLAMD")
-        t_superlu = time.perf_counter() - t0
-        rows.append(dict(size=K.shape[0], nnz=K.nnz, highs=t_highs, superlu=t_superlu, fill=lu.L.nnz + lu.U.nnz))
+        t_colamd, fill_colamd = superlu(K, "COLAMD")
+        nd = nested_dissection_columns(out)
+        t_nd, fill_nd = superlu(K[:, nd].tocsc(), "NATURAL") if nd is not None else (np.nan, np.nan)
+        rows.append(dict(size=K.shape[0], nnz=K.nnz, highs=t_highs, superlu=t_colamd, fill=fill_colamd,
+                         superlu_nd=t_nd, fill_nd=fill_nd))
         print(f"   N = {n}: basis {K.shape[0]}x{K.shape[1]}, nnz {K.nnz}; HiGHS factorisation {t_highs:.3f} s; "
-              f"SuperLU {t_superlu:.3f} s, nnz(L+U) {rows[-1]['fill']}", flush=True)
-    units = {"highs": "s", "superlu": "s"}
+              f"SuperLU COLAMD {t_colamd:.3f} s, nnz(L+U) {fill_colamd}; METIS ND {t_nd:.3f} s, nnz(L+U) {fill_nd}",
+              flush=True)
+    units = {"highs": "s", "superlu": "s", "superlu_nd": "s"}
     data = {k: (("N",), np.array([r[k] for r in rows], float), {"units": units.get(k, "1")}) for k in rows[0]}
     n = np.array(sizes)
-    exps = {f"exponent_{k}": fit(n, data[k][1]) for k in ("highs", "superlu", "fill")}
+    exps = {f"exponent_{k}": fit(n, data[k][1]) for k in ("highs", "superlu", "fill", "superlu_nd", "fill_nd")}
     print("fitted exponents:", {k: round(v, 2) for k, v in exps.items()}, flush=True)
     return xr.Dataset(data, coords={"N": n}, attrs=new_dataset_attrs(
         "Factorisation of the final CALiPPSO simplex basis (near starts, d = 3)", {"quick": quick}, **exps))
@@ -311,6 +346,7 @@ def plot() -> None:
         ds = found["factor"]
         ax[4].loglog(ds["N"], ds["highs"], "o-", label="HiGHS factorisation [s]")
         ax[4].loglog(ds["N"], ds["superlu"], "s-", label="SuperLU COLAMD [s]")
+        ax[4].loglog(ds["N"], ds["superlu_nd"], "D-", label="SuperLU METIS ND [s]")
         ax[4].loglog(ds["N"], ds["fill"] / ds["nnz"], "^--", label="SuperLU fill nnz(L+U)/nnz")
         ax[4].set_xlabel("N"); ax[4].legend(fontsize=7); ax[4].set_title("warm LP: basis factorisation")
     fig.tight_layout()
