@@ -26,6 +26,12 @@ Parts (d = 3 monodisperse unless stated):
     the fill of the LU factors and fitted exponents.
 ``solvers``
     ipm, simplex, hybrid and ipm-center on the d = 3 LS example.
+``lp``
+    One LP, the first of the d = 3 LS example (``jamming_lp``), by every HiGHS method:
+    interior point with and without crossover, PDLP, cold dual and primal simplex.
+    Time, status, g and how the row duals split into active and inactive (counts
+    above 1e-10, 1e-6 and 1e-3 of the largest): only a vertex solution has inactive
+    duals exactly zero, which the contact detection needs.
 ``relax``
     LP counts with and without the Sec. IV relaxation c = 0.5 (random starts).
 ``tolerances``
@@ -58,6 +64,7 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from jamflow.analysis.contacts import force_balance_residual, summarize
+from jamflow.calippso import CONTACT_DUAL_REL_TOL, SOLVER_TOL, jamming_lp
 from jamflow.initial import random_packing
 from jamflow.io import new_dataset_attrs, read_dat, read_dataset, read_packing, write_dataset, write_packing
 from jamflow.ls import compress
@@ -69,7 +76,7 @@ LS = Path(__file__).resolve().parents[2] / "shared" / "data" / "calippso-ls"
 if not LS.is_dir():
     LS = Path("/work/shared/data/calippso-ls")
 
-PARTS = ("scaling", "ls", "solvers", "relax", "tolerances", "large", "factor")
+PARTS = ("scaling", "ls", "solvers", "lp", "relax", "tolerances", "large", "factor")
 #: LS pressure of the near-jamming starts: the paper's Sec. IV value. (At 1e6 the
 #: chain is longer: 3D N = 2048 needed 220 LPs from p = 1e6 and 86 from 1e7 of the
 #: same compression.) The growth rate is kappa = 1e-3, not the paper's 1e-5: LS at
@@ -186,6 +193,49 @@ def part_solvers(quick: bool) -> xr.Dataset:
         print(f"solver {s}", flush=True)
         rows.append(command(start, f"solver_{s}", "--solver", s))
     return table(rows, "solver", solvers, new_dataset_attrs("CALiPPSO solver strategies", {"start": start.name}))
+
+
+#: HiGHS settings of each LP method of part ``lp``.
+LP_METHODS = {
+    "ipm": {"solver": "ipm", "run_crossover": "on"},
+    "ipm-nox": {"solver": "ipm", "run_crossover": "off"},
+    "pdlp": {"solver": "pdlp"},
+    "dual": {"solver": "simplex", "simplex_strategy": 1},
+    "primal": {"solver": "simplex", "simplex_strategy": 4},
+}
+#: Relative dual levels of part ``lp``.
+DUAL_LEVELS = (CONTACT_DUAL_REL_TOL, 1e-6, 1e-3)
+
+
+def part_lp(quick: bool) -> xr.Dataset:
+    start = random_start(128) if quick else ls_example(3)
+    lp = jamming_lp(read_packing(start))
+    rows = []
+    for name, options in LP_METHODS.items():
+        h = highspy.Highs()
+        for key, value in {"output_flag": False, "threads": 1, "time_limit": 600.0,
+                           "primal_feasibility_tolerance": SOLVER_TOL, "dual_feasibility_tolerance": SOLVER_TOL,
+                           **options}.items():
+            h.setOptionValue(key, value)
+        h.passModel(lp.to_highs())
+        t0 = time.perf_counter()
+        h.run()
+        wall = time.perf_counter() - t0
+        mu = np.maximum(-np.asarray(h.getSolution().row_dual), 0.0)
+        counts = [int(np.sum(mu > level * mu.max())) if mu.max() > 0 else 0 for level in DUAL_LEVELS]
+        g = float(h.getSolution().col_value[-1])
+        rows.append(dict(time=wall, g=g, status=h.modelStatusToString(h.getModelStatus()), counts=counts))
+        print(f"   {name:8s} {wall:7.2f} s  {rows[-1]['status']:10s} sqrt(Gamma)-1 {np.sqrt(1 + g) - 1:.6e}  "
+              f"duals above {', '.join(f'{lv:g}: {c}' for lv, c in zip(DUAL_LEVELS, counts))}", flush=True)
+    names = list(LP_METHODS)
+    return xr.Dataset(
+        {"time": (("method",), np.array([r["time"] for r in rows]), {"units": "s"}),
+         "g": (("method",), np.array([r["g"] for r in rows]), {"units": "1", "long_name": "Gamma* - 1"}),
+         "status": (("method",), np.array([r["status"] for r in rows]), {"long_name": "HiGHS model status"}),
+         "n_duals_above": (("method", "level"), np.array([r["counts"] for r in rows]),
+                           {"units": "1", "long_name": "row duals above level x largest dual"})},
+        coords={"method": names, "level": list(DUAL_LEVELS)},
+        attrs=new_dataset_attrs("One CALiPPSO LP by every HiGHS method", {"start": start.name, "rows": lp.A.shape[0]}))
 
 
 def part_relax(quick: bool) -> xr.Dataset:
@@ -365,7 +415,8 @@ def main() -> None:
     args = ap.parse_args()
     OUT.mkdir(exist_ok=True)
     runners = {"scaling": lambda: part_scaling(args.quick, args.max_random), "ls": lambda: part_ls(args.quick),
-               "solvers": lambda: part_solvers(args.quick), "relax": lambda: part_relax(args.quick),
+               "solvers": lambda: part_solvers(args.quick), "lp": lambda: part_lp(args.quick),
+               "relax": lambda: part_relax(args.quick),
                "tolerances": lambda: part_tolerances(args.quick),
                "large": lambda: part_large(1024 if args.quick else args.large_n),
                "factor": lambda: part_factor(args.quick)}

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import highspy
 import numpy as np
 import pytest
 
@@ -23,7 +24,7 @@ from jamflow.analysis.contacts import (
 from jamflow.analysis.overlap import contact_overlap
 from jamflow.box import Box
 import jamflow.calippso as cal
-from jamflow.calippso import WARM_PIVOTS_PER_ROW, IterationRecord, calippso
+from jamflow.calippso import WARM_PIVOTS_PER_ROW, IterationRecord, calippso, jamming_lp
 from jamflow.cli import main
 from jamflow.initial import random_packing
 from jamflow.io import read_dat, read_dataset, read_packing, write_packing
@@ -278,3 +279,24 @@ def test_same_input_same_chain():
     assert np.array_equal(a.history["sqrt_gamma_minus_1"].values, b.history["sqrt_gamma_minus_1"].values)
     assert list(a.history["solver"].values) == list(b.history["solver"].values)
     assert np.array_equal(a.history["simplex_iterations"].values, b.history["simplex_iterations"].values)
+
+
+def test_jamming_lp_is_the_first_lp_of_the_chain():
+    """``jamming_lp`` rebuilds the chain's first LP: solved independently it gives the
+    chain's first sqrt(Gamma*) - 1, and its solution creates no overlap (the
+    linearisation is conservative)."""
+    start = random_packing(64, 3, 0.3, "mono", seed=2)
+    lp = jamming_lp(start)
+    h = highspy.Highs()
+    h.setOptionValue("output_flag", False)
+    h.setOptionValue("solver", "ipm")
+    h.passModel(lp.to_highs())
+    h.run()
+    assert h.getModelStatus() == highspy.HighsModelStatus.kOptimal
+    z = np.asarray(h.getSolution().col_value)
+    g = z[-1]
+    res = calippso(start)
+    assert np.sqrt(1.0 + g) - 1.0 == pytest.approx(float(res.history["sqrt_gamma_minus_1"].values[0]), rel=1e-7)
+    moved = start.evolve(position=start.position + z[:-1].reshape(start.n, 3) * start.diameter.mean(),
+                         diameter=start.diameter * np.sqrt(1.0 + g))
+    assert max_overlap(moved)[1] <= OVERLAP_TOL

@@ -115,7 +115,9 @@ from .tolerances import OVERLAP_TOL
 __all__ = [
     "SOLVERS",
     "CalippsoResult",
+    "JammingLP",
     "calippso",
+    "jamming_lp",
     "result_to_dataset",
 ]
 
@@ -135,7 +137,12 @@ SOLVERS: tuple[str, ...] = ("ipm", "simplex", "hybrid", "ipm-center")
 #: d = 3 LS example (N = 1024) hybrid needs 2-3 interior point LPs (~1.5 s each) and
 #: then warm primal simplex LPs of 0.07-0.8 s; a cold simplex LP takes 20-80 s. From
 #: a carried basis the primal simplex needs a few pivots where the dual simplex needs
-#: thousands (d = 4 example: 2 against 5184 pivots, 0.4 s against 26 s).
+#: thousands (d = 4 example: 2 against 5184 pivots, 0.4 s against 26 s). PDLP is not
+#: a strategy: on the first LP of the d = 3 example (part ``lp``) it took 11.7 s
+#: against 1.5 s for interior point with crossover and its duals are not a vertex's
+#: (3003 above 1e-10 of the largest, against 3004 for every vertex method); interior
+#: point without crossover leaves 10302 duals above 1e-10 (no gap between active and
+#: inactive rows).
 DEFAULT_SOLVER: str = "hybrid"
 
 #: Convergence: largest displacement of a stable particle [mean diameters].
@@ -379,6 +386,94 @@ def _matrix(rows: _Rows, dx, sig, a, rad, n: int, d: int, unit: float) -> sp.csc
     return A
 
 
+def _most_neighbours(rows: _Rows, n: int) -> int:
+    """The first anchor: the particle with most rows."""
+    return int(np.argmax(np.bincount(np.concatenate([rows.i, rows.j]), minlength=n)))
+
+
+def _column_bounds(b_part: NDArray[np.float64], d: int, anchor: int, ell: float, sig_max: float,
+                   unit: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Column bounds: per-particle displacement bounds ``b_part`` [mean diameters] on
+    every coordinate, the anchor fixed (``anchor < 0``: none), ``g >= -1`` and the cap
+    ``sqrt(Gamma) <= min(FAR_GROWTH, (ell - 2 sqrt(d) b) / sigma_max)`` that keeps
+    every pair beyond the cutoff apart in a bounded LP."""
+    col_upper = np.append(np.repeat(b_part, d), 0.0)
+    col_lower = -col_upper
+    if anchor >= 0:
+        col_lower[anchor * d:(anchor + 1) * d] = 0.0
+        col_upper[anchor * d:(anchor + 1) * d] = 0.0
+    col_lower[-1] = -1.0
+    b_max = float(b_part.max())
+    reach = (ell - 2.0 * np.sqrt(d) * b_max * unit) / sig_max if np.isfinite(b_max) else FAR_GROWTH
+    col_upper[-1] = min(FAR_GROWTH, max(reach, 1.0)) ** 2 - 1.0
+    return col_lower, col_upper
+
+
+@dataclass(frozen=True)
+class JammingLP:
+    """One jamming LP in the scaled form of the module docstring: minimise ``-g``
+    subject to ``A z <= rhs`` and ``col_lower <= z <= col_upper``, with
+    ``z = (u_1, ..., u_N, g)`` (displacements in mean diameters, particle-major).
+
+    Attributes
+    ----------
+    A : scipy.sparse.csc_matrix, shape (M, d N + 1)
+    rhs : ndarray, shape (M,)
+    col_lower, col_upper : ndarray, shape (d N + 1,)
+    pairs : ndarray of int64, shape (P, 2)
+        Particle pairs of the first P rows (wall rows follow).
+    """
+
+    A: sp.csc_matrix
+    rhs: NDArray[np.float64]
+    col_lower: NDArray[np.float64]
+    col_upper: NDArray[np.float64]
+    pairs: NDArray[np.int64]
+
+    def to_highs(self) -> highspy.HighsLp:
+        """The LP as a ``highspy.HighsLp``."""
+        return _highs_lp(self.A, self.rhs, self.col_lower, self.col_upper)
+
+
+def _highs_lp(A: sp.csc_matrix, rhs, col_lower, col_upper) -> highspy.HighsLp:
+    """``min -g`` s.t. ``A z <= rhs``, ``col_lower <= z <= col_upper`` (``g`` last)."""
+    lp = highspy.HighsLp()
+    lp.num_col_, lp.num_row_ = A.shape[1], A.shape[0]
+    cost = np.zeros(A.shape[1])
+    cost[-1] = -1.0
+    lp.col_cost_ = cost
+    lp.col_lower_ = col_lower
+    lp.col_upper_ = col_upper
+    lp.row_lower_ = np.full(A.shape[0], -highspy.kHighsInf)
+    lp.row_upper_ = rhs
+    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
+    lp.a_matrix_.start_ = A.indptr.astype(np.int32)
+    lp.a_matrix_.index_ = A.indices.astype(np.int32)
+    lp.a_matrix_.value_ = A.data.astype(np.float64)
+    return lp
+
+
+def jamming_lp(packing: Packing, cutoff: float = DEFAULT_CUTOFF, walls: bool = False) -> JammingLP:
+    """The first LP :func:`calippso` solves for ``packing``: rows within ``cutoff``
+    [largest diameters], the far-phase displacement bound and, in a periodic box, the
+    particle with most neighbours fixed (for comparing LP methods on a real instance).
+    """
+    _check_options(packing, DEFAULT_TOL_S, DEFAULT_TOL_GAMMA, DEFAULT_SOLVER, cutoff, DEFAULT_BOUND_SCHEDULE,
+                   None, walls, 1)
+    d, n = packing.d, packing.n
+    x = packing.position.copy() if walls else packing.box.wrap(packing.position)
+    D = packing.diameter
+    unit, sig_max = float(D.mean()), float(D.max())
+    ell = min(cutoff * sig_max, 0.499 * float(np.min(packing.box.widths)))
+    rows = _find_rows(x, D, packing, ell, walls)
+    dx, sig, rhs, a, rad = _row_geometry(rows, x, D, packing)
+    A = _matrix(rows, dx, sig, a, rad, n, d, unit)
+    b_part = np.full(n, _far_bound(ell / sig_max, d) * sig_max / unit)
+    anchor = -1 if walls else _most_neighbours(rows, n)
+    col_lower, col_upper = _column_bounds(b_part, d, anchor, ell, sig_max, unit)
+    return JammingLP(A, rhs, col_lower, col_upper, np.stack([rows.i, rows.j], axis=1))
+
+
 # --- LP solve --------------------------------------------------------------------------
 
 
@@ -420,19 +515,7 @@ class _Solver:
 
     def solve(self, A: sp.csc_matrix, rhs, col_lower, col_upper, method: str, rows: _Rows) -> _Solution:
         """Solve the LP ``min -g`` s.t. ``A z <= rhs``, ``col_lower <= z <= col_upper``."""
-        lp = highspy.HighsLp()
-        lp.num_col_, lp.num_row_ = A.shape[1], A.shape[0]
-        cost = np.zeros(A.shape[1])
-        cost[-1] = -1.0  # minimise -g
-        lp.col_cost_ = cost
-        lp.col_lower_ = col_lower
-        lp.col_upper_ = col_upper
-        lp.row_lower_ = np.full(A.shape[0], -highspy.kHighsInf)
-        lp.row_upper_ = rhs
-        lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
-        lp.a_matrix_.start_ = A.indptr.astype(np.int32)
-        lp.a_matrix_.index_ = A.indices.astype(np.int32)
-        lp.a_matrix_.value_ = A.data.astype(np.float64)
+        lp = _highs_lp(A, rhs, col_lower, col_upper)
         cold = method == "dual"
         method = "simplex" if cold else method
         basis = self._carried_basis(rows, A.shape[1]) if method == "simplex" and not cold else None
@@ -692,19 +775,9 @@ def calippso(
         b_part = np.full(n, b)
         if prev_rattler is not None and np.isfinite(b):
             b_part[prev_rattler] = max(b, b_far)
-        col_upper = np.append(np.repeat(b_part, d), 0.0)
-        col_lower = -col_upper
-        if not walls:
-            if anchor < 0:
-                anchor = int(np.argmax(np.bincount(np.concatenate([rows.i, rows.j]), minlength=n)))
-            col_lower[anchor * d:(anchor + 1) * d] = 0.0
-            col_upper[anchor * d:(anchor + 1) * d] = 0.0
-        col_lower[-1] = -1.0
-        # g cap: sqrt(Gamma) <= min(FAR_GROWTH, (ell - 2 sqrt(d) b) / sigma_max) keeps every
-        # pair beyond the cutoff apart in a bounded LP
-        b_max = float(b_part.max())
-        reach = (ell - 2.0 * np.sqrt(d) * b_max * unit) / sig_max if np.isfinite(b_max) else FAR_GROWTH
-        col_upper[-1] = min(FAR_GROWTH, max(reach, 1.0)) ** 2 - 1.0
+        if not walls and anchor < 0:
+            anchor = _most_neighbours(rows, n)
+        col_lower, col_upper = _column_bounds(b_part, d, -1 if walls else anchor, ell, sig_max, unit)
         method = recovery_method or _method(solver, records, bool(np.isfinite(b)))
         lp_sol = solver_obj.solve(A, rhs, col_lower, col_upper, method, rows)
         status, lp_time, col, dual, method = lp_sol.status, lp_sol.seconds, lp_sol.col, lp_sol.dual, lp_sol.method
