@@ -8,7 +8,8 @@ gap <= 3e-3 as exact contacts) replicated 2 x 2 x 1 for N = 4096. The interior-p
 solver without crossover (default, cold for every load) is compared with the simplex
 (a cold dual simplex for the first load, then the primal simplex from the last basis,
 since loads change only the costs) on the same inputs in the same run (simplex only
-at N = 1024: its cold first solve grows too fast; soft N = 4096 took > 15 min).
+at N = 1024: its cold first solve grows too fast; at soft N = 4096 it was stopped
+after 14 min).
 
 Part 2 (loads). Packings with planted unjamming motions; for each number of loads K
 and with or without the opposite sign of every load, the fraction of seeds for which

@@ -78,8 +78,9 @@ DEFAULT_LOADS: int = 2
 #: massively degenerate (every constraint is tight at y = 0); the interior-point
 #: method without crossover (cold for every load) beat the simplex (a cold dual
 #: simplex, then primal simplex warm starts) on 3D soft packings at P0 = 1e-5
-#: (``benchmarks/certify.py``): 8.9 s against 15.0 s at N = 1024, and the simplex's
-#: cold first solve at N = 4096 took more than 15 min. When interior point fails
+#: (``benchmarks/certify.py``): 6.9 s against 15.1 s at N = 1024, and the simplex's
+#: cold first solve at N = 4096 was stopped after 14 min (interior point: 552 s for
+#: the whole certificate). When interior point fails
 #: (status not optimal) the LP falls back to the simplex and stays there.
 DEFAULT_SOLVER: str = "ipm"
 
@@ -216,9 +217,9 @@ class _MotionLP:
         """Maximise ``load . y``; returns status, optimum, y, wall time, iterations.
 
         Loads change only the costs, so the last optimal simplex basis stays primal
-        feasible. For a cone LP (rhs = 0) of a jammed network every load has its optimum
-        at ``y = 0``, and the primal simplex from that basis needs a few pivots where a
-        cold dual simplex needed thousands (3D N = 1024: 5 against 4285; N = 2048: 4
+        feasible. For a cone LP (rhs = 0) of a jammed network the optimum of every load
+        is a rigid translation (no relative motion), and the primal simplex from the
+        last basis needs a few pivots where a cold dual simplex needed thousands (3D N = 1024: 5 against 4285; N = 2048: 4
         against 7632). Loose gap LPs move their optimum to another corner of the
         displacement box with every load; there the cold dual simplex is faster
         (3D N = 96 at gap 0.1: 412 against 994 pivots), so they always start cold.
@@ -239,7 +240,6 @@ class _MotionLP:
         info = self.h.getInfo()
         y = np.asarray(self.h.getSolution().col_value, dtype=np.float64)
         return status, -float(info.objective_function_value), y, elapsed, int(info.simplex_iteration_count + info.ipm_iteration_count)
-
 
     def _run(self) -> None:
         if self.solver == "simplex":
