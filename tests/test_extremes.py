@@ -89,9 +89,11 @@ def test_soft_jamming_3d_n4096():
 
     N P0^(1/2) ~ 0.4 excess contacts are possible at this pressure; seed 1 has none
     (measured: N_c = 11776 = 3 (3926 - 1) + 1, weakest force 1.8e-12 against the force
-    tolerance 1e-13). Slow: jamming ~22 min and certificate ~28 min on 2 loaded cores,
-    the latter almost all in the collective LP (HiGHS IPX makes no progress, the dual
-    simplex fallback needs ~1e5 iterations per load sign); see docs/extremes.md.
+    tolerance 1e-13). Slow: 34 min as one run (2036 s; jamming under 26 min), down
+    from ~50 min (jamming ~22 min, certificate ~28 min on 2 loaded cores) since the
+    certificate's cone LP re-solves each load sign by the primal simplex from the
+    previous basis; its cost is the collective LP (HiGHS IPX makes no progress, the
+    cold dual simplex fallback needs ~1e5 iterations once); see docs/extremes.md.
     """
     p = jam_to_pressure(random_packing(4096, 3, 0.3, "bi", seed=1), onset_pressure(4096)).packing
     _check_jammed_isostatic(p)
