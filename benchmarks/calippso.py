@@ -68,7 +68,7 @@ from jamflow.calippso import CONTACT_DUAL_REL_TOL, SOLVER_TOL, JammingLP, jammin
 from jamflow.initial import random_packing
 from jamflow.io import new_dataset_attrs, read_dat, read_dataset, read_packing, write_dataset, write_packing
 from jamflow.ls import compress
-from jamflow.packing import max_overlap
+from jamflow.packing import Packing, max_overlap
 from jamflow.rigidity import rigidity_matrix
 
 OUT = Path(__file__).resolve().parent / "output"
@@ -265,20 +265,24 @@ def part_tolerances(quick: bool) -> xr.Dataset:
     return ds
 
 
-def basis_kernel(out: Path) -> sp.csc_matrix:
-    """The simplex basis of the converged LP in ``out`` without its slack part: the
+def backbone(q: Packing) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Stable particles and the contacts between them of a CALiPPSO output."""
+    stable = np.flatnonzero(~q.rattler)
+    return stable, q.contacts[~q.rattler[q.contacts[:, 0]] & ~q.rattler[q.contacts[:, 1]]]
+
+
+def basis_kernel(q: Packing) -> sp.csc_matrix:
+    """The simplex basis of the converged LP of ``q`` without its slack part: the
     backbone contact rows over the stable particles' coordinates (one anchor particle
     fixed) and the column of ``g``; square for an isostatic network. Rows are
     rigidity-matrix rows (the LP's rows up to a positive factor per row, the same
     sparsity)."""
-    q = read_packing(out)
-    stable = np.flatnonzero(~q.rattler)
-    c = q.contacts[~q.rattler[q.contacts[:, 0]] & ~q.rattler[q.contacts[:, 1]]]
+    stable, c = backbone(q)
     R = rigidity_matrix(q, c, particles=stable).tocsc()[:, q.d:]
     return sp.hstack([R, np.ones((R.shape[0], 1))], format="csc")
 
 
-def nested_dissection_columns(out: Path) -> NDArray[np.int64] | None:
+def nested_dissection_columns(q: Packing) -> NDArray[np.int64] | None:
     """Columns of :func:`basis_kernel` in METIS nested-dissection order of the stable
     particles' contact graph (each particle's coordinates together, ``g`` last), or
     None without ``pymetis``."""
@@ -286,11 +290,9 @@ def nested_dissection_columns(out: Path) -> NDArray[np.int64] | None:
         import pymetis
     except ImportError:
         return None
-    q = read_packing(out)
-    stable = np.flatnonzero(~q.rattler)
+    stable, c = backbone(q)
     col_of = np.full(q.n, -1)
     col_of[stable] = np.arange(len(stable))
-    c = q.contacts[~q.rattler[q.contacts[:, 0]] & ~q.rattler[q.contacts[:, 1]]]
     i, j = col_of[c[:, 0]], col_of[c[:, 1]]
     G = sp.coo_matrix((np.ones(len(i)), (i, j)), shape=(len(stable), len(stable)))
     G = (G + G.T).tocsr()
@@ -338,11 +340,12 @@ def part_factor(quick: bool) -> xr.Dataset:
         out = OUT / f"calippso_out_near_N{n}.nc"
         if not out.exists():
             command(near_start(n), f"near_N{n}")
-        K = basis_kernel(out)
+        q = read_packing(out)
+        K = basis_kernel(q)
         # best of FACTOR_REPEATS: the first call of each library includes its set-up
         t_highs = min(highs_factor_time(K) for _ in range(FACTOR_REPEATS))
         t_colamd, fill_colamd = min(superlu(K, "COLAMD") for _ in range(FACTOR_REPEATS))
-        nd = nested_dissection_columns(out)
+        nd = nested_dissection_columns(q)
         t_nd, fill_nd = (min(superlu(K[:, nd].tocsc(), "NATURAL") for _ in range(FACTOR_REPEATS))
                          if nd is not None else (np.nan, np.nan))
         rows.append(dict(size=K.shape[0], nnz=K.nnz, highs=t_highs, superlu=t_colamd, fill=fill_colamd,

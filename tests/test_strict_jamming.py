@@ -290,8 +290,8 @@ def test_cli_certify_writes_dataset(tmp_path, capsys):
 
 def test_warm_primal_cone_solves_match_cold_solves(soft_jammed):
     """Loads change only the costs: on the cone LP of a jammed network the primal
-    simplex from the previous basis must reach the same optimum (no motion) as a cold
-    dual simplex, in fewer pivots."""
+    simplex from the previous basis must reach the same optimum (a rigid translation,
+    no relative motion) as a cold dual simplex, in fewer pivots."""
     p = soft_jammed
     cert = certify(p)
     A = rigidity_matrix(p, cert.backbone_contacts, particles=np.flatnonzero(~cert.rattler))
