@@ -20,7 +20,8 @@ from jamflow.tolerances import FORCE_BALANCE_TOL
 
 SUMMARY_KEYS = {
     "N", "d", "phi", "pressure", "n_contacts", "n_rattlers", "n_stable", "isostatic",
-    "isostatic_count", "z", "max_overlap", "max_overlap_rel", "force_balance_residual", "contact_source",
+    "isostatic_count", "counting", "z", "max_overlap", "max_overlap_rel", "force_balance_residual",
+    "contact_source",
 }
 
 
@@ -200,6 +201,8 @@ def test_summary_keys_and_values_of_a_real_ls_packing(calippso_ls_file) -> None:
     assert out["phi"] == p.packing_fraction
     assert out["n_stable"] + out["n_rattlers"] == 1024
     assert out["isostatic_count"] == isostatic_count(p.d, out["n_stable"])
+    expected = ("hypostatic", "isostatic", "hyperstatic")[int(np.sign(out["n_contacts"] - out["isostatic_count"])) + 1]
+    assert out["counting"] == expected
     assert out["z"] == pytest.approx(2 * out["n_contacts"] / out["n_stable"])
     # an LS packing near jamming: mean backbone coordination close to 2d, few rattlers
     assert 2 * p.d - 0.5 < out["z"] < 2 * p.d + 1.0

@@ -47,6 +47,26 @@ largest inactive dual are recorded after every LP. Forces follow paper Eq. 11,
 ``f_ij = lambda_ij sigma_ij = mu_k / sigma_ij`` (a wall contact: ``mu_k / (sigma_i/2)``),
 in units of 1/length, normalised by Eq. 9 as ``sum_c f_c sigma_c = 1``.
 
+Degenerate (hyperstatic) packings
+---------------------------------
+The support of a dual vertex is the contact network only when the LP is not
+degenerate. A crystal or a 2D monodisperse packing with crystalline patches is
+hyperstatic: more pairs touch than the ``d (N_s - 1) + 1`` a vertex can hold
+forces on, and the vertex leaves the others at zero dual, so its support can strip
+force-bearing particles into "rattlers" (a perfect triangular crystal came back
+with no contact). After convergence the geometric network, every pair (and wall)
+with relative gap at most :data:`~jamflow.tolerances.CONTACT_GAP_TOL`, is compared
+with the dual one. When both give the same rattlers and the same contacts between
+non-rattlers (an isostatic packing: only rattlers resting on a neighbour with zero
+dual differ), the dual contacts and forces are stored unchanged
+(``force_assignment = "lp_dual_vertex"``). Otherwise the geometric contacts are
+stored, rattlers are the particles with fewer than ``d + 1`` of them (iterated,
+:func:`jamflow.analysis.contacts.find_rattlers`), and the forces are the
+minimum-norm non-negative forces that balance every particle with the same
+normalisation (:mod:`jamflow.force_network`, ``force_assignment =
+"min_norm_balanced"``; a perfect crystal gets equal forces); the dual vertex keeps
+its counts in ``n_contacts_dual`` and ``n_rattlers_dual``.
+
 Iteration
 ---------
 ``r <- r + s*`` and every diameter ``sigma <- sqrt(Gamma*) sigma`` (the box is kept;
@@ -80,10 +100,9 @@ that creates an overlap beyond
 with a cutoff larger by :data:`CUTOFF_GROWTH` and a bound smaller by
 :data:`BOUND_SHRINK`, up to :data:`MAX_RECOVERIES` times in a row. A converged LP
 whose network is not isostatic (and not hyperstatic as in App. A: either the dual
-count with force-bearing rattlers is isostatic, or the geometric network of gaps
-below :data:`GEOMETRIC_CONTACT_GAP` is hyperstatic and holds every dual contact, a
-degenerate crystalline packing whose vertex duals leave some contacts without
-force) or whose dual contacts disagree with the geometry is re-solved with a
+count with force-bearing rattlers is isostatic, or the geometric network, which
+holds every dual contact, has at least the isostatic count of contacts) or whose
+dual contacts disagree with the geometry is re-solved with a
 larger cutoff, cold: by interior point with crossover, then by the dual simplex
 (:data:`FINAL_RECOVERY_METHODS`). When recovery fails a
 ``RuntimeError`` carries the diagnostics; a non-jammed packing is never returned as
@@ -108,9 +127,11 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from .analysis.contacts import find_rattlers, isostatic_count
+from .force_network import MIN_NORM, balance_matrix, min_norm_forces
 from .neighbors import pairs_within
 from .packing import Packing, max_overlap, near_pairs
-from .tolerances import OVERLAP_TOL
+from .rigidity import contact_geometry
+from .tolerances import CONTACT_GAP_TOL, OVERLAP_TOL
 
 __all__ = [
     "SOLVERS",
@@ -235,10 +256,17 @@ MAX_STALL_RECOVERIES: int = 3
 #: Default largest number of LPs.
 DEFAULT_MAX_ITERATIONS: int = 1000
 
-#: A packing counts as jammed-looking in the fixed-point sense when a converged LP
-#: yields ``max|s|`` and ``sqrt(Gamma)-1`` below the tolerances; the geometric
-#: contact check uses pairs with relative gap below this value.
-GEOMETRIC_CONTACT_GAP: float = 1e-9
+#: ``force_assignment`` of a result whose forces are the LP's dual vertex (paper Eq. 11).
+DUAL_VERTEX: str = "lp_dual_vertex"
+
+#: What each ``force_assignment`` means (stored as ``force_assignment_comment``).
+FORCE_ASSIGNMENTS: dict[str, str] = {
+    DUAL_VERTEX: "forces are the duals of the converged LP's vertex (paper Eq. 11); contacts are the "
+                 "active rows with positive dual",
+    MIN_NORM: "contacts are the pairs with relative gap <= contact_gap_tol (the dual vertex of this "
+              "degenerate, hyperstatic packing leaves some without force); forces are the minimum-norm "
+              "non-negative forces balancing every particle with sum_c f_c sigma_c = 1",
+}
 
 #: Face codes of wall contacts: ``2 * axis + (0 lower, 1 upper)``.
 _LOWER, _UPPER = 0, 1
@@ -276,9 +304,10 @@ class CalippsoResult:
     Attributes
     ----------
     packing : Packing
-        Jammed packing: contacts (pairs from duals), forces (paper Eq. 11, 1/length,
-        ``sum_c f_c sigma_c = 1`` including wall contacts), rattlers, protocol
-        ``'...>calippso'`` and attrs (``phi_J``, counts, residuals).
+        Jammed packing: contacts (pairs from duals, or the geometric network of a
+        degenerate packing), forces (paper Eq. 11, 1/length, ``sum_c f_c sigma_c = 1``
+        including wall contacts; ``attrs["force_assignment"]`` says which), rattlers,
+        protocol ``'...>calippso'`` and attrs (``phi_J``, counts, residuals).
     history : xarray.Dataset
         Per-LP records on dimension ``iteration``.
     converged : bool
@@ -606,22 +635,6 @@ class _Solver:
 # --- rattlers and counts -----------------------------------------------------------------
 
 
-def _rattlers(n: int, d: int, contacts: NDArray[np.int64], wall_particle: NDArray[np.int64]) -> NDArray[np.bool_]:
-    """Iterated ``z < d + 1`` removal; wall contacts count and never become rattlers."""
-    if len(wall_particle) == 0:
-        return find_rattlers(n, d, contacts)
-    zw = np.bincount(wall_particle, minlength=n)
-    rattler = np.zeros(n, dtype=bool)
-    active = np.ones(len(contacts), dtype=bool)
-    while True:
-        z = np.bincount(contacts[active].ravel(), minlength=n) + zw
-        new = (~rattler) & (z < d + 1)
-        if not np.any(new):
-            return rattler
-        rattler |= new
-        active &= ~(rattler[contacts[:, 0]] | rattler[contacts[:, 1]])
-
-
 def _n_dof(d: int, n_stable: int, walls: bool) -> int:
     """Isostatic contact count: ``d (N_s - 1) + 1`` periodic, ``d N_s + 1`` between walls."""
     if walls:
@@ -806,7 +819,7 @@ def calippso(
         wall_act = active[P:]
         contacts = np.stack([rows.i[pair_act], rows.j[pair_act]], axis=1)
         wall_particle = rows.wall_particle[wall_act]
-        rattler = _rattlers(n, d, contacts, wall_particle)
+        rattler = find_rattlers(n, d, contacts, wall_particle)
         stable = ~rattler
         n_s = int(stable.sum())
         backbone = stable[contacts[:, 0]] & stable[contacts[:, 1]]
@@ -958,11 +971,18 @@ def _max_overlap(p: Packing, walls: bool) -> float:
 
 
 def _final_checks(packing: Packing, x, D, walls: bool, last: dict[str, Any]) -> tuple[bool, str]:
-    """Isostaticity (or App. A hyperstaticity), force balance and dual-vs-gap contacts."""
+    """Isostaticity (or App. A hyperstaticity), force balance and dual-vs-gap contacts.
+
+    When the geometric network (gaps below :data:`~jamflow.tolerances.CONTACT_GAP_TOL`)
+    has another backbone than the dual vertex (a degenerate, hyperstatic packing),
+    ``last`` is switched to the geometric network with a balanced force assignment
+    (:func:`_store_geometric`); otherwise the dual contacts and forces stay as they are.
+    """
     d, n = packing.d, packing.n
     forces, net = _forces(packing, x, D, walls, last)
     last.update(forces)
     last["force_balance_residual"] = net
+    last["force_assignment"] = DUAL_VERTEX
     rattler, stable = last["rattler"], ~last["rattler"]
     c = last["contacts"]
     iso_n = _n_dof(d, last["n_s"], walls)
@@ -977,37 +997,116 @@ def _final_checks(packing: Packing, x, D, walls: bool, last: dict[str, Any]) -> 
     last["n_contacts_with_rattlers"] = n_c_a
     last["n_force_bearing_rattlers"] = int(fb_rattler.sum())
     last["isostatic_count"] = iso_n
+    last["n_contacts_dual"] = last["n_c"]
+    last["n_rattlers_dual"] = int(rattler.sum())
     hyper = last["n_c"] > iso_n
     last["isostatic_appendix_a"] = bool(n_c_a == iso_n)
-    # dual contacts vs geometric contacts (gap below GEOMETRIC_CONTACT_GAP)
+    # dual contacts vs geometric contacts (gap below CONTACT_GAP_TOL)
     p = _as_packing(packing, x, D, walls)
-    pairs, h = near_pairs(p, GEOMETRIC_CONTACT_GAP)
-    if walls and len(h):
-        direct = p.position[pairs.j] - p.position[pairs.i]
-        keep = np.all(np.abs(direct - pairs.dx) < 1e-12 * p.box.lengths.max(), axis=1)
-        pairs = pairs.select(keep)
-    geo = set(zip(pairs.i.tolist(), pairs.j.tolist()))
+    geo_c, geo_wp, geo_wf = _geometric_network(p, walls)
+    geo = set(zip(geo_c[:, 0].tolist(), geo_c[:, 1].tolist()))
     dual = set(map(tuple, c.tolist()))
     last["dual_not_geometric"] = len(dual - geo)
     last["geometric_not_dual"] = len(geo - dual)
     # the geometric network: a degenerate (crystalline) jammed packing has more
     # contacts than force-bearing duals at any vertex of its LP (App. A)
-    geo_c = np.stack([pairs.i, pairs.j], axis=1)
-    geo_rattler = _rattlers(n, d, geo_c, last["wall_particle"])
+    geo_rattler = find_rattlers(n, d, geo_c, geo_wp)
     geo_stable = ~geo_rattler
-    last["n_stable_geometric"] = int(geo_stable.sum())
-    last["n_contacts_geometric"] = (int((geo_stable[geo_c[:, 0]] & geo_stable[geo_c[:, 1]]).sum())
-                                    + int(geo_stable[last["wall_particle"]].sum()))
-    geo_hyper = last["n_contacts_geometric"] > _n_dof(d, last["n_stable_geometric"], walls)
-    hyper = hyper or geo_hyper
+    n_s_geo = int(geo_stable.sum())
+    n_c_geo = (int((geo_stable[geo_c[:, 0]] & geo_stable[geo_c[:, 1]]).sum())
+               + int(geo_stable[geo_wp].sum()))
+    last["n_stable_geometric"] = n_s_geo
+    last["n_contacts_geometric"] = n_c_geo
+    geo_rigid_count = n_s_geo > 0 and n_c_geo >= _n_dof(d, n_s_geo, walls)
+    hyper = hyper or n_c_geo > _n_dof(d, n_s_geo, walls)
     last["hyperstatic"] = bool(hyper)
-    degenerate = geo_hyper and not last["dual_not_geometric"]
     reasons = []
     if last["dual_not_geometric"]:
-        reasons.append(f"{last['dual_not_geometric']} dual contact(s) with gap > {GEOMETRIC_CONTACT_GAP:g}")
-    if not (last["iso"] or (hyper and last["isostatic_appendix_a"]) or degenerate):
+        reasons.append(f"{last['dual_not_geometric']} dual contact(s) with gap > {CONTACT_GAP_TOL:g}")
+    elif not _same_backbone(last, geo_c, geo_wp, geo_wf, geo_rattler):
+        _store_geometric(p, walls, last, geo_c, geo_wp, geo_wf, geo_rattler)
+        if not geo_rigid_count:
+            reasons.append(f"geometric network: N_c = {n_c_geo} but isostatic count "
+                           f"{_n_dof(d, n_s_geo, walls)} (N_s = {n_s_geo})")
+        return not reasons, "; ".join(reasons) or "ok"
+    if not (last["iso"] or (hyper and last["isostatic_appendix_a"])):
         reasons.append(f"N_c = {last['n_c']} but d(N_s-1)+1 = {iso_n} (N_s = {last['n_s']})")
     return not reasons, "; ".join(reasons) or "ok"
+
+
+def _geometric_network(p: Packing, walls: bool) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    """Pairs (P, 2) and wall contacts (particles, faces) with relative gap at most
+    :data:`~jamflow.tolerances.CONTACT_GAP_TOL`; between walls only direct pairs."""
+    pairs, h = near_pairs(p, CONTACT_GAP_TOL)
+    if not walls:
+        return np.stack([pairs.i, pairs.j], axis=1), np.empty(0, np.int64), np.empty(0, np.int64)
+    if len(h):
+        direct = p.position[pairs.j] - p.position[pairs.i]
+        keep = np.all(np.abs(direct - pairs.dx) < 1e-12 * p.box.lengths.max(), axis=1)
+        pairs = pairs.select(keep)
+    rad = 0.5 * p.diameter[:, None]
+    gap = np.stack([p.position / rad - 1.0, (p.box.lengths - p.position) / rad - 1.0], axis=2)  # (N, d, 2)
+    wp, axis, side = np.nonzero(gap <= CONTACT_GAP_TOL)
+    return np.stack([pairs.i, pairs.j], axis=1), wp.astype(np.int64), (2 * axis + side).astype(np.int64)
+
+
+def _same_backbone(last: dict[str, Any], geo_c, geo_wp, geo_wf, geo_rattler) -> bool:
+    """Whether the dual vertex and the geometry give the same rattlers and backbone
+    contacts (pairs and walls); a rattler resting on a neighbour with zero force
+    makes no difference."""
+    rattler = last["rattler"]
+    if not np.array_equal(rattler, geo_rattler):
+        return False
+    stable = ~rattler
+
+    def backbone(c, wp, wf):
+        pairs = {tuple(v) for v in c[stable[c[:, 0]] & stable[c[:, 1]]].tolist()}
+        keep = stable[wp]
+        return pairs, set(zip(wp[keep].tolist(), wf[keep].tolist()))
+
+    return backbone(last["contacts"], last["wall_particles"], last["wall_faces"]) == backbone(geo_c, geo_wp, geo_wf)
+
+
+def _store_geometric(p: Packing, walls: bool, last: dict[str, Any], geo_c, geo_wp, geo_wf, geo_rattler) -> None:
+    """Replace the dual network in ``last`` by the geometric one, with rattlers from
+    the geometric coordination and the minimum-norm balanced forces
+    (:func:`jamflow.force_network.min_norm_forces`, normalised like the duals,
+    ``sum_c f_c sigma_c = 1``); when that QP fails, the dual vertex forces (zero on
+    the contacts outside its support) are stored and ``force_assignment`` says so."""
+    d, n = p.d, p.n
+    unit, _ = contact_geometry(p, geo_c)
+    B = balance_matrix(unit, geo_c, n, d, geo_wp, geo_wf)
+    weight = np.concatenate([p.sigma(geo_c[:, 0], geo_c[:, 1]), 0.5 * p.diameter[geo_wp]])
+    try:
+        f, _ = min_norm_forces(B, weight, d)
+        last["force_assignment"] = MIN_NORM
+    except RuntimeError as exc:
+        f = _dual_on(last, geo_c, geo_wp, geo_wf)
+        last["force_assignment"] = DUAL_VERTEX
+        last["force_assignment_note"] = str(exc)
+    n_pairs = len(geo_c)
+    stable = ~geo_rattler
+    net = np.linalg.norm(np.asarray(B @ f).reshape(n, d), axis=1) / float(f.mean())
+    n_s = int(stable.sum())
+    n_c = int((stable[geo_c[:, 0]] & stable[geo_c[:, 1]]).sum()) + int(stable[geo_wp].sum())
+    iso_n = _n_dof(d, n_s, walls)
+    last.update(
+        contacts=geo_c, f_pair=f[:n_pairs], rattler=geo_rattler, wall_particle=geo_wp, wall_particles=geo_wp,
+        wall_faces=geo_wf, f_wall=f[n_pairs:], n_c=n_c, n_s=n_s, iso=n_s > 0 and n_c == iso_n,
+        isostatic_count=iso_n, hyperstatic=n_c > iso_n, force_balance_residual=float(net.max(initial=0.0)),
+        residual_stable=float(net[stable].max(initial=0.0)),
+    )
+
+
+def _dual_on(last: dict[str, Any], geo_c, geo_wp, geo_wf) -> NDArray[np.float64]:
+    """The dual vertex forces on the geometric contacts (pairs then walls), zero off its support."""
+    n = len(last["rattler"])
+    key_pair = {k: v for k, v in zip((last["contacts"] @ [n, 1]).tolist(), last["f_pair"].tolist())}
+    key_wall = {k: v for k, v in zip((last["wall_particles"] * 64 + last["wall_faces"]).tolist(),
+                                     last["f_wall"].tolist())}
+    fp = [key_pair.get(k, 0.0) for k in (geo_c @ [n, 1]).tolist()]
+    fw = [key_wall.get(k, 0.0) for k in (geo_wp * 64 + geo_wf).tolist()]
+    return np.array(fp + fw, dtype=np.float64)
 
 
 def _forces(packing: Packing, x, D, walls: bool, last: dict[str, Any]):
@@ -1106,6 +1205,13 @@ def _result(packing, x, D, walls, last, records, history, converged, total, sett
         geometric_not_dual=int(last["geometric_not_dual"]),
         n_contacts_geometric=int(last["n_contacts_geometric"]),
         n_stable_geometric=int(last["n_stable_geometric"]),
+        contact_gap_tol=CONTACT_GAP_TOL,
+        n_contacts_dual=int(last["n_contacts_dual"]),
+        n_rattlers_dual=int(last["n_rattlers_dual"]),
+        force_assignment=last["force_assignment"],
+        force_assignment_comment=FORCE_ASSIGNMENTS[last["force_assignment"]]
+        + last.get("force_assignment_note", ""),
+        n_zero_force_contacts=int(np.sum(last["f_pair"] <= 0.0) + np.sum(last["f_wall"] <= 0.0)),
         boundary="walls" if walls else "periodic",
         force_unit="CALiPPSO dual scaling (paper Eq. 11): f = lambda sigma_ij [1/length], sum_c f_c sigma_c = 1",
         total_time=total,

@@ -26,6 +26,7 @@ __all__ = [
     "contact_network",
     "find_rattlers",
     "isostatic_count",
+    "rigidity_counting",
     "force_balance_residual",
     "summarize",
 ]
@@ -49,18 +50,24 @@ def contact_network(packing: Packing, gap_tol: float | None = None) -> NDArray[n
     return contacts_from_gaps(packing, CONTACT_GAP_TOL if gap_tol is None else gap_tol)
 
 
-def find_rattlers(n: int, d: int, contacts: NDArray[np.int64]) -> NDArray[np.bool_]:
+def find_rattlers(n: int, d: int, contacts: NDArray[np.int64],
+                  wall_particles: NDArray[np.int64] | None = None) -> NDArray[np.bool_]:
     """Iteratively flag particles with fewer than ``d + 1`` contacts.
 
     A particle with at most ``d`` contacts cannot be held in place by frictionless
     contacts; removing it may leave neighbours under-coordinated, so the removal
-    repeats until no particle changes.
+    repeats until no particle changes. This is the one coordination pruning of the
+    package (CALiPPSO, the jamming certificate and ``jamflow check`` call it).
 
     Parameters
     ----------
     n, d : int
         Number of particles and dimension.
     contacts : ndarray of int, shape (Nc, 2)
+        Particle pairs in contact.
+    wall_particles : ndarray of int, shape (Nw,), optional
+        The particle of each contact with a hard wall; a wall never rattles, so these
+        contacts always count.
 
     Returns
     -------
@@ -68,10 +75,12 @@ def find_rattlers(n: int, d: int, contacts: NDArray[np.int64]) -> NDArray[np.boo
         True for rattlers.
     """
     contacts = np.asarray(contacts, dtype=np.int64).reshape(-1, 2)
+    z_wall = (np.zeros(n, dtype=np.int64) if wall_particles is None
+              else np.bincount(np.asarray(wall_particles, dtype=np.int64), minlength=n))
     rattler = np.zeros(n, dtype=bool)
     active = np.ones(len(contacts), dtype=bool)
     while True:
-        z = np.bincount(contacts[active].ravel(), minlength=n)
+        z = np.bincount(contacts[active].ravel(), minlength=n) + z_wall
         new = (~rattler) & (z < d + 1)
         if not np.any(new):
             return rattler
@@ -82,6 +91,14 @@ def find_rattlers(n: int, d: int, contacts: NDArray[np.int64]) -> NDArray[np.boo
 def isostatic_count(d: int, n_stable: int) -> int:
     """Contacts of an isostatic backbone, ``d (N_s - 1) + 1`` (see module docstring)."""
     return d * (n_stable - 1) + 1 if n_stable > 0 else 0
+
+
+def rigidity_counting(n_contacts: int, n_isostatic: int) -> str:
+    """``"hypostatic"``, ``"isostatic"`` or ``"hyperstatic"``: backbone contacts below,
+    at or above the isostatic count."""
+    if n_contacts < n_isostatic:
+        return "hypostatic"
+    return "isostatic" if n_contacts == n_isostatic else "hyperstatic"
 
 
 def force_balance_residual(packing: Packing) -> NDArray[np.float64]:
@@ -117,6 +134,7 @@ class ContactSummary:
     n_stable: int
     isostatic: bool
     isostatic_count: int
+    counting: str  # "hypostatic", "isostatic", "hyperstatic" or "no backbone"
     z: float
     max_overlap: float  # largest sigma_ij - r_ij [length]
     max_overlap_rel: float  # max_overlap / mean diameter
@@ -133,7 +151,8 @@ def summarize(packing: Packing, gap_tol: float | None = None) -> ContactSummary:
     Contacts come from the packing when it has them, else from ``gap_tol``
     (default :data:`~jamflow.tolerances.CONTACT_GAP_TOL`). ``n_contacts`` counts the
     backbone after rattler removal; ``isostatic`` compares it with
-    :func:`isostatic_count`.
+    :func:`isostatic_count` and ``counting`` says on which side it lies (a
+    crystal's backbone is hyperstatic).
     """
     explicit = gap_tol is None and packing.contacts is not None
     contacts = contact_network(packing, gap_tol)
@@ -156,6 +175,7 @@ def summarize(packing: Packing, gap_tol: float | None = None) -> ContactSummary:
         n_stable=n_s,
         isostatic=bool(n_s > 0 and n_c == iso),
         isostatic_count=iso,
+        counting=rigidity_counting(n_c, iso) if n_s else "no backbone",
         z=2.0 * n_c / n_s if n_s else 0.0,
         max_overlap=overlap_abs,
         max_overlap_rel=overlap_abs / float(np.mean(packing.diameter)),

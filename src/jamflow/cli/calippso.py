@@ -28,8 +28,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "jam a hard-sphere packing exactly by a chain of linear programs (CALiPPSO)",
         description="CALiPPSO (Artiaco et al., PRE 106, 055310 (2022), Algorithm 1): inflate the "
                     "spheres and move them by successive LPs until sqrt(Gamma)-1 < tol-gamma and "
-                    "max|s| < tol-s; contacts and forces from the LP duals. Writes the jammed packing "
-                    "with the per-LP history.",
+                    "max|s| < tol-s; contacts and forces from the LP duals; a degenerate (hyperstatic, "
+                    "crystalline) packing stores its geometric contacts with minimum-norm balanced forces "
+                    "(attribute force_assignment). Writes the jammed packing with the per-LP history.",
     )
     p.add_argument("packing", help="input netCDF packing (no overlaps)")
     p.add_argument("out", help="output netCDF jammed packing")
@@ -77,7 +78,12 @@ def _calippso(args: argparse.Namespace) -> int:
     write_dataset(result_to_dataset(result, stage_parameters(args, "packing", "out")), args.out)
     if not args.quiet:
         a = result.packing.attrs
+        counting = "hyperstatic" if a["hyperstatic"] else "isostatic" if a["isostatic"] else "not isostatic"
         print(f"{args.packing}: phi_J = {a['phi_J']:.10f} after {result.iterations} LPs, N_c = {a['n_contacts']} "
-              f"(isostatic {a['isostatic_count']}), {a['n_rattlers']} rattlers, max overlap {a['max_overlap']:.2g}, "
-              f"force balance {a['force_balance_residual']:.2g}, {a['total_time']:.1f} s")
+              f"(isostatic {a['isostatic_count']}: {counting}), {a['n_rattlers']} rattlers, "
+              f"max overlap {a['max_overlap']:.2g}, force balance {a['force_balance_residual']:.2g}, "
+              f"{a['total_time']:.1f} s")
+        print(f"forces: {a['force_assignment']} ({a['n_contacts_dual']} backbone contacts carry a dual at the LP "
+              f"vertex, {a['n_zero_force_contacts']} stored contacts have zero force; contacts: gap <= "
+              f"{a['contact_gap_tol']:g} or positive dual)")
     return 0

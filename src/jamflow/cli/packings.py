@@ -95,12 +95,15 @@ def _check(args: argparse.Namespace) -> int:
         ("pressure", "unknown" if s.pressure is None else f"{s.pressure:.6g}"),
         ("contacts (backbone)", f"{s.n_contacts}  [{s.contact_source}]"),
         ("rattlers", s.n_rattlers), ("non-rattlers", s.n_stable),
-        ("isostatic", f"{str(s.isostatic).lower()}  (N_c = {s.n_contacts}, d(N_s-1)+1 = {s.isostatic_count})"),
+        ("isostatic", f"{str(s.isostatic).lower()}  (N_c = {s.n_contacts}, d(N_s-1)+1 = {s.isostatic_count}: "
+                      f"{s.counting})"),
         ("coordination z", f"{s.z:.6f}"),
         ("max overlap", f"{s.max_overlap:.3e} (relative to the mean diameter: {s.max_overlap_rel:.3e})"),
         ("max force-balance residual", "no forces" if s.force_balance_residual is None
          else f"{s.force_balance_residual:.3e} (relative to mean force)"),
     ]
+    if s.force_balance_residual is not None and "force_assignment" in packing.attrs:
+        rows.append(("force assignment", packing.attrs["force_assignment"]))
     width = max(len(k) for k, _ in rows)
     for k, v in rows:
         print(f"{k:<{width}}  {v}")

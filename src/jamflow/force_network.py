@@ -1,0 +1,177 @@
+"""Balanced non-negative contact forces on a given (possibly hyperstatic) network.
+
+A jammed hard-sphere packing whose contact network is hyperstatic (a crystal, a 2D
+monodisperse packing with crystalline patches) has a whole polytope of contact
+forces that balance every particle: non-negative ``f`` with ``B f = 0``, ``B`` the
+balance matrix (the transpose of the rigidity matrix, :mod:`jamflow.rigidity`), and
+a normalisation. A vertex of the jamming LP, which is what CALiPPSO's duals are,
+puts zero force on all but about ``d (N - 1) + 1`` of the contacts; its support is
+not the contact network. This module picks one well-defined member of the polytope,
+the **minimum-norm** assignment::
+
+    minimise |f|^2   subject to   B f = 0,   sum_c w_c f_c = 1,   f >= 0,
+
+with ``w_c = sigma_ij`` for a pair and ``sigma_i / 2`` for a wall contact, the
+normalisation of CALiPPSO's forces (paper Eq. 9: ``sum_c f_c sigma_c = 1``, forces
+in units of 1/length). The objective is strictly convex, so the assignment is
+unique and inherits every symmetry of the packing (a perfect crystal gets equal
+forces on equal contacts); on an isostatic network with a unique positive solution
+it is that solution. It is a convex quadratic program, solved by HiGHS; the
+support found is then polished by the minimum-norm solution of the equality
+constraints restricted to it (LSQR), which balances forces to round-off.
+"""
+
+from __future__ import annotations
+
+import highspy
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+from scipy.sparse.linalg import lsqr
+
+from .tolerances import FORCE_BALANCE_TOL
+
+__all__ = ["MIN_NORM", "balance_matrix", "min_norm_forces"]
+
+#: Name of the assignment of :func:`min_norm_forces` (stored as ``force_assignment``).
+MIN_NORM: str = "min_norm_balanced"
+
+#: HiGHS feasibility and optimality tolerance of the QP, in units of the rescaled
+#: forces (mean 1); the polish step then restores balance to round-off.
+_QP_TOL: float = 1e-10
+
+
+def balance_matrix(
+    unit: NDArray[np.float64],
+    contacts: NDArray[np.int64],
+    n: int,
+    d: int,
+    wall_particles: NDArray[np.int64] | None = None,
+    wall_faces: NDArray[np.int64] | None = None,
+) -> sp.csr_matrix:
+    """Net force on every particle per unit contact force, shape (d n, Nc + Nw).
+
+    Parameters
+    ----------
+    unit : ndarray, shape (Nc, d)
+        Unit vectors ``n_ij`` from ``i`` to ``j`` of the pair contacts.
+    contacts : ndarray of int, shape (Nc, 2)
+    n, d : int
+        Number of particles and dimension.
+    wall_particles, wall_faces : ndarray of int, shape (Nw,), optional
+        Wall contacts: particle and face ``2 * axis + (0 lower, 1 upper)``; a lower
+        wall pushes along ``+axis``, an upper one along ``-axis``.
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix
+        Row ``d i + a`` is component ``a`` of the net force on ``i``: a repulsive pair
+        force ``f`` adds ``-f n_ij`` on ``i`` and ``+f n_ij`` on ``j``.
+    """
+    unit = np.asarray(unit, dtype=np.float64).reshape(-1, d)
+    c = np.asarray(contacts, dtype=np.int64).reshape(-1, 2)
+    nc = len(c)
+    axis = np.arange(d)
+    rows = np.concatenate([(d * c[:, 0:1] + axis).ravel(), (d * c[:, 1:2] + axis).ravel()])
+    cols = np.concatenate([np.repeat(np.arange(nc), d)] * 2)
+    vals = np.concatenate([-unit.ravel(), unit.ravel()])
+    if wall_particles is not None and len(wall_particles):
+        wp = np.asarray(wall_particles, dtype=np.int64)
+        wf = np.asarray(wall_faces, dtype=np.int64)
+        rows = np.concatenate([rows, d * wp + wf // 2])
+        cols = np.concatenate([cols, nc + np.arange(len(wp))])
+        vals = np.concatenate([vals, np.where(wf % 2 == 0, 1.0, -1.0)])
+        nc += len(wp)
+    return sp.csr_matrix((vals, (rows, cols)), shape=(d * n, nc))
+
+
+def min_norm_forces(B: sp.spmatrix, weight: NDArray[np.float64], d: int) -> tuple[NDArray[np.float64], float]:
+    """The minimum-norm non-negative balanced forces (see module docstring).
+
+    Parameters
+    ----------
+    B : sparse matrix, shape (d N, Nc)
+        Balance matrix (:func:`balance_matrix`).
+    weight : ndarray, shape (Nc,)
+        Normalisation weights ``w_c`` [length] (``sum_c w_c f_c = 1``).
+    d : int
+        Dimension (rows of ``B`` per particle).
+
+    Returns
+    -------
+    f : ndarray, shape (Nc,)
+        Forces [1/length], every one ``>= 0``.
+    residual : float
+        Largest net force on a particle divided by the mean force.
+
+    Raises
+    ------
+    RuntimeError
+        The QP has no solution (no balanced non-negative forces exist on this
+        network) or HiGHS does not solve it; or the result is not balanced to
+        :data:`~jamflow.tolerances.FORCE_BALANCE_TOL`.
+    """
+    B = sp.csr_matrix(B)
+    w = np.asarray(weight, dtype=np.float64)
+    nc = B.shape[1]
+    if nc == 0:
+        raise RuntimeError("no contacts to carry forces")
+    # variables phi = f / f0 with f0 = 1 / sum(w): the uniform assignment is phi = 1
+    f0 = 1.0 / float(w.sum())
+    wn = w / float(w.mean())
+    A = sp.vstack([B, sp.csr_matrix(wn[None, :])], format="csc")
+    A.sort_indices()
+    rhs = np.zeros(A.shape[0])
+    rhs[-1] = float(nc)
+    lp = highspy.HighsLp()
+    lp.num_col_, lp.num_row_ = nc, A.shape[0]
+    lp.col_cost_ = np.zeros(nc)
+    lp.col_lower_ = np.zeros(nc)
+    lp.col_upper_ = np.full(nc, highspy.kHighsInf)
+    lp.row_lower_ = rhs
+    lp.row_upper_ = rhs
+    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
+    lp.a_matrix_.start_ = A.indptr.astype(np.int32)
+    lp.a_matrix_.index_ = A.indices.astype(np.int32)
+    lp.a_matrix_.value_ = A.data.astype(np.float64)
+    hess = highspy.HighsHessian()
+    hess.dim_ = nc
+    hess.format_ = highspy.HessianFormat.kTriangular
+    hess.start_ = np.arange(nc + 1, dtype=np.int32)
+    hess.index_ = np.arange(nc, dtype=np.int32)
+    hess.value_ = np.ones(nc)
+    h = highspy.Highs()
+    h.setOptionValue("output_flag", False)
+    for option in ("primal_feasibility_tolerance", "dual_feasibility_tolerance"):
+        h.setOptionValue(option, _QP_TOL)
+    h.passModel(lp)
+    h.passHessian(hess)
+    h.run()
+    status = h.getModelStatus()
+    if status != highspy.HighsModelStatus.kOptimal:
+        raise RuntimeError(f"minimum-norm force QP not solved: HiGHS status {h.modelStatusToString(status)!r}")
+    phi = np.maximum(np.asarray(h.getSolution().col_value, dtype=np.float64), 0.0)
+    phi = _polish(A, rhs, phi)
+    f = phi * f0
+    net = np.linalg.norm(np.asarray(B @ f).reshape(-1, d), axis=1)
+    residual = float(net.max(initial=0.0)) / float(f.mean())
+    if not residual <= FORCE_BALANCE_TOL:
+        raise RuntimeError(f"minimum-norm forces balance only to {residual:.3g} relative (> {FORCE_BALANCE_TOL:g})")
+    return f, residual
+
+
+def _polish(A: sp.csc_matrix, rhs: NDArray[np.float64], phi: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Minimum-norm solution of the equalities on the QP's support, if it stays >= 0.
+
+    On the optimal face (``phi_c = 0`` off the support ``S``, ``phi_S > 0``) the QP
+    optimum is the minimum-norm solution of ``A_S phi_S = rhs``; LSQR from zero
+    converges to it and removes the QP's feasibility error. A support misjudged by
+    the QP tolerance would give a negative component: the QP solution is kept then.
+    """
+    support = phi > _QP_TOL * float(phi.max(initial=0.0))
+    sol = lsqr(A[:, support], rhs, atol=1e-15, btol=1e-15, conlim=0.0, iter_lim=20 * A.shape[0])[0]
+    if np.all(sol >= 0.0):
+        out = np.zeros_like(phi)
+        out[support] = sol
+        return out
+    return phi
