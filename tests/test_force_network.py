@@ -1,0 +1,52 @@
+"""Minimum-norm balanced contact forces (jamflow.force_network)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from jamflow.analysis.contacts import contacts_from_gaps
+from jamflow.calippso import calippso
+from jamflow.force_network import balance_matrix, min_norm_forces
+from jamflow.initial import random_packing
+from jamflow.rigidity import contact_geometry, rigidity_matrix
+
+
+def test_balance_matrix_is_the_transpose_of_the_rigidity_matrix():
+    p = random_packing(20, 2, 0.45, "bi", seed=4, ratio=1.4)
+    c = contacts_from_gaps(p, 0.3)
+    unit, _ = contact_geometry(p, c)
+    B = balance_matrix(unit, c, p.n, p.d)
+    # the net force of repulsive contact forces f is R^T f (virtual work: a motion y
+    # that opens contacts, R y > 0, is pushed along by them)
+    np.testing.assert_allclose(B.toarray(), rigidity_matrix(p, c).toarray().T, atol=1e-15)
+
+
+def test_isostatic_network_gets_its_unique_dual_forces():
+    """On an isostatic network the balanced forces are unique: the QP must return
+    CALiPPSO's dual vertex forces (two independent solutions)."""
+    res = calippso(random_packing(32, 2, 0.3, "bi", seed=32, ratio=1.4))
+    p = res.packing
+    assert p.attrs["force_assignment"] == "lp_dual_vertex" and p.attrs["isostatic"] == 1
+    stable = ~p.rattler
+    c = p.contacts[stable[p.contacts[:, 0]] & stable[p.contacts[:, 1]]]
+    f_dual = p.force[stable[p.contacts[:, 0]] & stable[p.contacts[:, 1]]]
+    unit, _ = contact_geometry(p, c)
+    f, residual = min_norm_forces(balance_matrix(unit, c, p.n, p.d), p.sigma(c[:, 0], c[:, 1]), p.d)
+    np.testing.assert_allclose(f, f_dual, rtol=1e-8)
+    assert residual < 1e-12
+
+
+def test_particle_between_two_walls_gets_equal_forces():
+    # one particle touching the lower and upper x walls: equal and opposite pushes
+    B = balance_matrix(np.zeros((0, 2)), np.zeros((0, 2), int), 1, 2, np.array([0, 0]), np.array([0, 1]))
+    np.testing.assert_array_equal(B.toarray(), [[1.0, -1.0], [0.0, 0.0]])
+    f, _ = min_norm_forces(B, np.array([0.5, 0.5]), 2)
+    np.testing.assert_allclose(f, [1.0, 1.0], rtol=1e-12)
+
+
+def test_network_without_balanced_forces_is_an_error():
+    # a lone pair cannot carry a balanced non-zero force with sum w f = 1
+    B = balance_matrix(np.array([[1.0, 0.0]]), np.array([[0, 1]]), 2, 2)
+    with pytest.raises(RuntimeError, match="not solved|balance"):
+        min_norm_forces(B, np.array([1.0]), 2)
