@@ -31,6 +31,7 @@ from jamflow.analysis.contacts import (
 )
 from jamflow.calippso import calippso
 from jamflow.cli import main
+from jamflow.initial import random_packing
 from jamflow.io import read_dataset, read_packing, write_packing
 from jamflow.lattices import lattice_packing
 from jamflow.packing import near_pairs
@@ -190,3 +191,41 @@ def test_mono_ls_check_and_certify_agree(mono, tmp_path, capsys):
     assert certify(p.evolve(contacts=None, force=None), gap_tol=CONTACT_GAP_TOL, seed=1).classification \
         in ("collectively_jammed", "strictly_jammed")
     assert p.packing_fraction > src.packing_fraction
+
+
+# --- between hard walls ------------------------------------------------------------------
+
+
+def test_walls_mono_stores_geometric_pair_and_wall_contacts():
+    """2D monodisperse between walls (seed 2: the dual vertex left 15 rattlers)."""
+    p0 = random_packing(64, 2, 0.5, "mono", seed=2)
+    D = 0.9 * p0.diameter
+    res = calippso(p0.evolve(position=0.5 * D.max() + p0.position * (1.0 - D.max()), diameter=D), walls=True)
+    p, wc, fw = res.packing, res.wall_contacts, res.wall_force
+    assert res.converged
+    # geometric pairs (direct separations only: no periodic images through a wall)
+    i, j = np.triu_indices(p.n, 1)
+    dx = p.position[j] - p.position[i]
+    h = np.linalg.norm(dx, axis=1) / p.sigma(i, j) - 1.0
+    assert _pairs(p.contacts) == _pairs(np.stack([i[h <= CONTACT_GAP_TOL], j[h <= CONTACT_GAP_TOL]], axis=1))
+    rad = 0.5 * p.diameter[:, None]
+    gap = np.stack([p.position / rad - 1.0, (1.0 - p.position) / rad - 1.0], axis=2)
+    wp, axis, side = np.nonzero(gap <= CONTACT_GAP_TOL)
+    assert _pairs(wc) == _pairs(np.stack([wp, 2 * axis + side], axis=1))
+    np.testing.assert_array_equal(p.rattler, find_rattlers(p.n, 2, p.contacts, wc[:, 0]))
+    assert p.attrs["n_rattlers"] < p.attrs["n_rattlers_dual"]
+    assert p.attrs["force_assignment"] == "min_norm_balanced"
+    # balanced with the wall pushes, non-negative, sum f sigma + sum f_w sigma_i / 2 = 1
+    assert np.all(p.force >= 0) and np.all(fw >= 0)
+    unit = p.contact_vectors() / np.linalg.norm(p.contact_vectors(), axis=1)[:, None]
+    net = np.zeros((p.n, 2))
+    np.add.at(net, p.contacts[:, 0], -p.force[:, None] * unit)
+    np.add.at(net, p.contacts[:, 1], p.force[:, None] * unit)
+    np.add.at(net, (wc[:, 0], wc[:, 1] // 2), np.where(wc[:, 1] % 2 == 0, 1.0, -1.0) * fw)
+    mean_f = np.mean(np.concatenate([p.force, fw]))
+    assert np.linalg.norm(net, axis=1).max() / mean_f < FORCE_BALANCE_TOL
+    total = np.sum(p.force * p.sigma(p.contacts[:, 0], p.contacts[:, 1])) + np.sum(fw * 0.5 * p.diameter[wc[:, 0]])
+    assert total == pytest.approx(1.0, rel=1e-12)
+    # between walls the isostatic count is d N_s + 1
+    n_s = int((~p.rattler).sum())
+    assert p.attrs["n_contacts"] > 2 * n_s + 1
