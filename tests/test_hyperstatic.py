@@ -229,3 +229,21 @@ def test_walls_mono_stores_geometric_pair_and_wall_contacts():
     # between walls the isostatic count is d N_s + 1
     n_s = int((~p.rattler).sum())
     assert p.attrs["n_contacts"] > 2 * n_s + 1
+
+
+def test_failed_force_qp_falls_back_to_the_dual_vertex_and_says_so(monkeypatch):
+    """Should the QP fail, the geometric contacts carry the vertex's (balanced) duals."""
+    import jamflow.calippso as cal
+
+    def fail(*args, **kwargs):
+        raise RuntimeError("minimum-norm force QP not solved: HiGHS status 'Infeasible'")
+
+    monkeypatch.setattr(cal, "min_norm_forces", fail)
+    lattice = lattice_packing("triangular", (8, 4))
+    res = calippso(lattice.evolve(contacts=None))
+    p = res.packing
+    assert p.attrs["force_assignment"] == "lp_dual_vertex_on_geometric"
+    assert "Infeasible" in p.attrs["force_assignment_comment"]
+    assert _pairs(p.contacts) == _pairs(lattice.contacts) and not p.rattler.any()
+    _balanced_and_normalised(p)
+    assert p.attrs["n_zero_force_contacts"] == 192 - p.attrs["n_contacts_dual"]

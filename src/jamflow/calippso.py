@@ -64,8 +64,11 @@ stored, rattlers are the particles with fewer than ``d + 1`` of them (iterated,
 :func:`jamflow.analysis.contacts.find_rattlers`), and the forces are the
 minimum-norm non-negative forces that balance every particle with the same
 normalisation (:mod:`jamflow.force_network`, ``force_assignment =
-"min_norm_balanced"``; a perfect crystal gets equal forces); the dual vertex keeps
-its counts in ``n_contacts_dual`` and ``n_rattlers_dual``.
+"min_norm_balanced"``; a perfect crystal gets equal forces). Attributes record
+the choice: ``force_assignment`` (and a ``force_assignment_comment``),
+``contact_gap_tol``, ``n_contacts_dual`` (pair and wall contacts with a positive
+dual at the vertex), ``n_rattlers_dual`` (rattlers of that support) and
+``n_zero_force_contacts`` (stored contacts without force).
 
 Iteration
 ---------
@@ -259,6 +262,10 @@ DEFAULT_MAX_ITERATIONS: int = 1000
 #: ``force_assignment`` of a result whose forces are the LP's dual vertex (paper Eq. 11).
 DUAL_VERTEX: str = "lp_dual_vertex"
 
+#: ``force_assignment`` of a degenerate packing whose minimum-norm QP failed: its
+#: geometric contacts carry the dual vertex forces (zero off the vertex's support).
+DUAL_VERTEX_ON_GEOMETRIC: str = "lp_dual_vertex_on_geometric"
+
 #: What each ``force_assignment`` means (stored as ``force_assignment_comment``).
 FORCE_ASSIGNMENTS: dict[str, str] = {
     DUAL_VERTEX: "forces are the duals of the converged LP's vertex (paper Eq. 11); contacts are the "
@@ -266,6 +273,9 @@ FORCE_ASSIGNMENTS: dict[str, str] = {
     MIN_NORM: "contacts are the pairs with relative gap <= contact_gap_tol (the dual vertex of this "
               "degenerate, hyperstatic packing leaves some without force); forces are the minimum-norm "
               "non-negative forces balancing every particle with sum_c f_c sigma_c = 1",
+    DUAL_VERTEX_ON_GEOMETRIC: "contacts are the pairs with relative gap <= contact_gap_tol; forces are the "
+                              "duals of the converged LP's vertex (paper Eq. 11), zero on the contacts outside "
+                              "its support, because the minimum-norm force QP failed",
 }
 
 #: Face codes of wall contacts: ``2 * axis + (0 lower, 1 upper)``.
@@ -997,7 +1007,7 @@ def _final_checks(packing: Packing, x, D, walls: bool, last: dict[str, Any]) -> 
     last["n_contacts_with_rattlers"] = n_c_a
     last["n_force_bearing_rattlers"] = int(fb_rattler.sum())
     last["isostatic_count"] = iso_n
-    last["n_contacts_dual"] = last["n_c"]
+    last["n_contacts_dual"] = len(c) + len(last["wall_particle"])  # the vertex's support
     last["n_rattlers_dual"] = int(rattler.sum())
     hyper = last["n_c"] > iso_n
     last["isostatic_appendix_a"] = bool(n_c_a == iso_n)
@@ -1072,7 +1082,8 @@ def _store_geometric(p: Packing, walls: bool, last: dict[str, Any], geo_c, geo_w
     the geometric coordination and the minimum-norm balanced forces
     (:func:`jamflow.force_network.min_norm_forces`, normalised like the duals,
     ``sum_c f_c sigma_c = 1``); when that QP fails, the dual vertex forces (zero on
-    the contacts outside its support) are stored and ``force_assignment`` says so."""
+    the contacts outside its support) are stored and ``force_assignment`` says so
+    (:data:`DUAL_VERTEX_ON_GEOMETRIC`)."""
     d, n = p.d, p.n
     unit, _ = contact_geometry(p, geo_c)
     B = balance_matrix(unit, geo_c, n, d, geo_wp, geo_wf)
@@ -1082,8 +1093,8 @@ def _store_geometric(p: Packing, walls: bool, last: dict[str, Any], geo_c, geo_w
         last["force_assignment"] = MIN_NORM
     except RuntimeError as exc:
         f = _dual_on(last, geo_c, geo_wp, geo_wf)
-        last["force_assignment"] = DUAL_VERTEX
-        last["force_assignment_note"] = str(exc)
+        last["force_assignment"] = DUAL_VERTEX_ON_GEOMETRIC
+        last["force_assignment_note"] = f" ({exc})"
     n_pairs = len(geo_c)
     stable = ~geo_rattler
     net = np.linalg.norm(np.asarray(B @ f).reshape(n, d), axis=1) / float(f.mean())

@@ -83,7 +83,7 @@ def _calippso(args: argparse.Namespace) -> int:
               f"(isostatic {a['isostatic_count']}: {counting}), {a['n_rattlers']} rattlers, "
               f"max overlap {a['max_overlap']:.2g}, force balance {a['force_balance_residual']:.2g}, "
               f"{a['total_time']:.1f} s")
-        print(f"forces: {a['force_assignment']} ({a['n_contacts_dual']} backbone contacts carry a dual at the LP "
-              f"vertex, {a['n_zero_force_contacts']} stored contacts have zero force; contacts: gap <= "
-              f"{a['contact_gap_tol']:g} or positive dual)")
+        print(f"forces: {a['force_assignment']} ({a['n_contacts_dual']} contacts carry a dual at the LP vertex, "
+              f"{a['n_contacts_geometric']} backbone contacts have gap <= {a['contact_gap_tol']:g}, "
+              f"{a['n_zero_force_contacts']} stored contacts have zero force)")
     return 0
