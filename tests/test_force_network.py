@@ -50,3 +50,20 @@ def test_network_without_balanced_forces_is_an_error():
     B = balance_matrix(np.array([[1.0, 0.0]]), np.array([[0, 1]]), 2, 2)
     with pytest.raises(RuntimeError, match="not solved|balance"):
         min_norm_forces(B, np.array([1.0]), 2)
+
+
+def test_newton_and_highs_qp_give_the_same_minimum_norm_forces():
+    """Two independent solvers of the same strictly convex QP agree, on a degenerate
+    2D monodisperse network where some contacts end up without force."""
+    res = calippso(random_packing(64, 2, 0.5, "mono", seed=3))
+    p = res.packing
+    assert p.attrs["force_assignment"] == "min_norm_balanced"
+    unit, _ = contact_geometry(p, p.contacts)
+    B = balance_matrix(unit, p.contacts, p.n, p.d)
+    w = p.sigma(p.contacts[:, 0], p.contacts[:, 1])
+    f_newton, r_newton = min_norm_forces(B, w, p.d)
+    f_qp, r_qp = min_norm_forces(B, w, p.d, method="qp")
+    assert (f_newton == 0).sum() > 0 and (f_newton >= 0).all()
+    np.testing.assert_allclose(f_newton, f_qp, rtol=0, atol=1e-9 * f_qp.max())
+    assert max(r_newton, r_qp) < 1e-11
+    np.testing.assert_allclose(p.force, f_newton, rtol=0, atol=1e-12 * f_qp.max())
