@@ -108,6 +108,18 @@ def test_rattlers_in_three_dimensions() -> None:
     assert find_rattlers(4, 2, np.zeros((0, 2), int)).all()
 
 
+def test_wall_contacts_count_and_never_rattle() -> None:
+    # d = 2, the chain of the cascade test: a wall under 6 and two walls at 7 (a
+    # corner) hold the chain end, so nothing cascades; the wall contacts of a
+    # particle that still rattles do not hold it
+    core = [[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]]
+    chain = [[0, 4], [1, 4], [4, 5], [2, 5], [5, 6], [6, 7]]
+    c = np.array(core + chain)
+    assert not find_rattlers(8, 2, c, np.array([6, 7, 7])).any()
+    np.testing.assert_array_equal(np.flatnonzero(find_rattlers(8, 2, c, np.array([7, 7]))), [4, 5, 6, 7])
+    np.testing.assert_array_equal(find_rattlers(8, 2, c, np.zeros(0, int)), find_rattlers(8, 2, c))
+
+
 def test_isostatic_count() -> None:
     assert isostatic_count(2, 10) == 19
     assert isostatic_count(3, 4) == 10
