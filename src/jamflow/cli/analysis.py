@@ -27,6 +27,7 @@ PLOT_KINDS: dict[str, str] = {
     "packing": "one packing netCDF",
     "gaps": "one or more `jamflow gaps` outputs",
     "forces": "one `jamflow forces` output",
+    "fit-windows": "one `jamflow gaps` or `jamflow forces` output (exponent against fit window)",
     "rdf": "one or more `jamflow rdf` outputs",
     "stress-strain": "one or more flow time series or `jamflow flow-summary` outputs",
     "phi-kappa": "one flow time series or `jamflow flow-summary` output",
@@ -252,7 +253,8 @@ def _plot(args: argparse.Namespace) -> int:
         raise ValueError(f"output must end in .png (a .pdf is written beside it), got {out}")
     if args.labels is not None and len(args.labels) != len(inputs):
         raise ValueError(f"--labels needs one label per input ({len(inputs)}), got {len(args.labels)}")
-    single = {"packing": None, "forces": plots.plot_forces, "phi-kappa": plots.plot_phi_kappa,
+    single = {"packing": None, "forces": plots.plot_forces, "fit-windows": plots.plot_fit_windows,
+              "phi-kappa": plots.plot_phi_kappa,
               "pareto": plots.pareto, "jamming-table": plots.plot_jamming_table}
     labelled = {"gaps": plots.plot_gaps, "rdf": plots.plot_rdf, "stress-strain": plots.plot_stress_strain,
                 "eos": plots.plot_eos}
