@@ -232,6 +232,8 @@ class ExponentAnalysis:
     """Exponent ``alpha`` of ``p(x) ∝ x^alpha`` with its errors and window scan.
 
     ``alpha`` is NaN when refused; ``reason`` then says why (empty otherwise).
+    ``break_z`` is the largest split z-score in the searched range; ``break_at`` the
+    most likely break, NaN unless ``break_detected``.
     ``scan_*`` arrays, shape (W,), hold every window of the systematic scan.
     """
 
@@ -350,7 +352,8 @@ def analyse_exponent(
                 break
             b = s_w
     n_in = int(np.sum((pooled >= a) & (pooled <= b)))
-    common = dict(x_min=a, x_max=b, n_in_window=n_in, break_detected=bool(broken), break_at=split, break_z=z,
+    common = dict(x_min=a, x_max=b, n_in_window=n_in, break_detected=bool(broken),
+                  break_at=split if broken else np.nan, break_z=z,
                   range_min=float(lo), range_max=float(hi), n_boot=n_boot, seed=seed)
     if n_in < min_count:
         return ExponentAnalysis(alpha=np.nan, stat=np.nan, sys=np.nan,
