@@ -187,9 +187,11 @@ def _exponent_label(ds: xr.Dataset, name: str, symbol: str) -> str:
     a = ds.attrs
     value = a.get(name, np.nan)
     if not np.isfinite(value):
-        return f"{symbol}: no fit ({a.get(f'{name}_reason', 'not fitted')})"
+        return (f"{symbol}: no fit ({a.get(f'{name}_n_in_window', 0)} samples in the window, "
+                f"fewer than {a.get('fit_min_in_window', '?')})")
     stat, sys_ = a.get(f"{name}_stat", np.nan), a.get(f"{name}_sys", np.nan)
-    return f"{symbol} = {value:.3f} ± {stat:.3f} (stat) ± {sys_:.3f} (sys)"
+    sys_text = f"± {sys_:.3f} (sys)" if np.isfinite(sys_) else "(sys undefined: window too short to scan)"
+    return f"{symbol} = {value:.3f} ± {stat:.3f} (stat) {sys_text}"
 
 
 def plot_gaps(datasets: Sequence[xr.Dataset], labels: Sequence[str] | None = None) -> Figure:
@@ -204,8 +206,10 @@ def plot_gaps(datasets: Sequence[xr.Dataset], labels: Sequence[str] | None = Non
         y, e = ds["gap_density"].values, ds["gap_density_err"].values
         ok = y > 0
         rattlers = "" if not ds.attrs.get("rattlers_included", 0) else " (with rattlers)"
+        refused = "" if np.isfinite(ds.attrs.get("fit_exponent", np.nan)) else (
+            ": " + _exponent_label(ds, "fit_exponent", "gamma"))
         bars = ax.errorbar(ds["h"].values[ok], y[ok], yerr=np.minimum(e[ok], 0.999 * y[ok]), fmt="o", ms=3,
-                           capsize=2, label=label + rattlers)
+                           capsize=2, label=label + rattlers + refused)
         if np.isfinite(ds.attrs.get("fit_exponent", np.nan)):
             hf = np.logspace(np.log10(ds.attrs["fit_min"]), np.log10(ds.attrs["fit_max"]), 20)
             ax.plot(hf, ds.attrs["fit_prefactor"] * hf ** (-ds.attrs["fit_exponent"]), "-",
@@ -433,6 +437,19 @@ def plot_phi_kappa(ds: xr.Dataset) -> Figure:
     return fig
 
 
+def _symlog_to_zero(ax, smallest: float, largest: float) -> None:
+    """Logarithmic y above a decade below ``smallest``, linear down to 0, up to ``largest``.
+
+    At most five decade ticks (plus 0), so the labels of a wide range do not overlap.
+    """
+    low = np.floor(np.log10(smallest)) - 1
+    high = np.ceil(np.log10(largest))
+    ax.set_yscale("symlog", linthresh=10.0**low)
+    step = max(1, int(np.ceil((high - low) / 4)))
+    ax.set_yticks([0.0, *(10.0 ** np.arange(low, high + 1, step))])
+    ax.set_ylim(0.0, 10.0**high)
+
+
 def plot_overlap_series(datasets: Sequence[xr.Dataset]) -> Figure:
     """<phi_J>, |Delta phi_J|, 1 - Q and n against p_target over samples (CALiPPSO Fig. 3).
 
@@ -446,12 +463,14 @@ def plot_overlap_series(datasets: Sequence[xr.Dataset]) -> Figure:
     for ds in datasets:
         groups.setdefault(float(ds.attrs.get("kappa", np.nan)), []).append(ds)
     names = ["phi_J", "abs_delta_phi_J", "one_minus_Q"]
-    ylabels = [f"<phi_J> {_DL}", f"<|Delta phi_J|> {_DL}", f"1 - <Q> {_DL}"]
+    ylabels = [f"<phi_J>\n{_DL}", f"<|Delta phi_J|>\n{_DL}", f"1 - <Q>\n{_DL}"]
     if all("n_lp" in ds for ds in datasets):
         names.append("n_lp")
-        ylabels.append(f"<n> linear optimisations {_DL}")
+        ylabels.append(f"<n> linear\noptimisations {_DL}")
     fig = Figure(layout="constrained", figsize=(6.4, 2.4 * len(names)))
     axes = fig.subplots(len(names), 1, sharex=True)
+    means: dict[str, list[float]] = {name: [] for name in names}
+    tops: dict[str, list[float]] = {name: [] for name in names}
     for kappa, members in sorted(groups.items()):
         merged = xr.concat([ds[names] for ds in members], dim="sample")
         m = len(members)
@@ -464,16 +483,18 @@ def plot_overlap_series(datasets: Sequence[xr.Dataset]) -> Figure:
             # non-negative quantities: the lower error bar stops at zero
             lower = np.minimum(e, y) if name != "phi_J" else e
             ax.errorbar(x[ok], y[ok], yerr=[lower[ok], e[ok]], fmt="o-", ms=4, capsize=2, label=label)
+            means[name] += list(y[ok])
+            tops[name] += list((y + e)[ok])
     for ax, name, ylabel in zip(axes, names, ylabels):
         ax.set_xscale("log")
         if name in ("abs_delta_phi_J", "one_minus_Q"):
-            positive = [v for line in ax.get_lines() for v in np.asarray(line.get_ydata(), float) if v > 0]
+            positive = [v for v in means[name] if v > 0]
             if positive:
-                # logarithmic above the smallest nonzero mean, linear down to an exact 0 (Q = 1)
-                ax.set_yscale("symlog", linthresh=min(positive))
+                _symlog_to_zero(ax, min(positive), max(tops[name]))
             ax.set_ylim(bottom=0.0)
         ax.set_ylabel(ylabel)
         ax.legend(fontsize=8)
+    fig.align_ylabels(axes)
     axes[-1].set_xlabel(f"LS target pressure p_tar {_DL}")
     return fig
 

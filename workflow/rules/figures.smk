@@ -124,8 +124,11 @@ rule plot_rdf:
         f"{BENCH}/figures/rdf.tsv"
     conda:
         "../envs/jamflow.yaml"
+    params:
+        # same order as rdf_files(): samples outer, variants inner
+        labels=" ".join(f"{s}:{v}" for s in samples() for v in variant_labels()),
     shell:
-        "jamflow plot rdf {input} {output.png} > {log} 2>&1"
+        "jamflow plot rdf {input} {output.png} --labels {params.labels} > {log} 2>&1"
 
 
 rule plot_stress_strain:
