@@ -228,8 +228,10 @@ def plot_gaps(datasets: Sequence[xr.Dataset], labels: Sequence[str] | None = Non
     ax.set_ylabel("gap density: non-contact neighbours\nper particle per unit h (dimensionless)")
     if len(datasets) > 2:
         # many curves: the legend goes below the axes instead of over the data
-        fig.set_size_inches(6.4, 4.8 + 0.17 * (2 * len(datasets) + 1))
-        fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", fontsize=7, ncols=2)
+        handles, texts = ax.get_legend_handles_labels()
+        ncols = 1 if max(len(t) for t in texts) > 60 else 2
+        fig.set_size_inches(6.4, 4.8 + 0.17 * (len(texts) / ncols + 1))
+        fig.legend(handles, texts, loc="outside lower center", fontsize=7, ncols=ncols)
     else:
         ax.legend(fontsize=7)
     ax.grid(True, which="major", alpha=0.3)
