@@ -400,6 +400,7 @@ def plot_stress_strain(datasets: Sequence[xr.Dataset], labels: Sequence[str] | N
     for ax in axes:
         _widen_flat_axis(ax)
         ax.legend(fontsize=7)
+    fig.align_ylabels(axes)
     return fig
 
 
@@ -422,7 +423,7 @@ def plot_phi_kappa(ds: xr.Dataset) -> Figure:
     s = ds["strain"].values
     ax1.plot(s, ds["packing_fraction"].values, lw=0.9)
     _window(ax1, ds, "packing_fraction")
-    ax1.set_ylabel(f"packing fraction phi {_DL}")
+    ax1.set_ylabel(f"packing fraction phi\n{_DL}")
     if "kappa" in ds and np.any(np.isfinite(ds["kappa"].values)):
         ax2.plot(s, ds["kappa"].values, lw=0.9)
         _window(ax2, ds, "kappa")
@@ -434,8 +435,11 @@ def plot_phi_kappa(ds: xr.Dataset) -> Figure:
     for ax in (ax1, ax2):
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7)
+    fig.align_ylabels((ax1, ax2))
     p = ds.attrs.get("mean_pressure")
-    fig.suptitle(f"mode {ds.attrs.get('mode', '?')}" + (f", <p> = {p:.4g}" if p is not None else ""), fontsize=9)
+    unit = ds["pressure"].attrs.get("units", "1") if "pressure" in ds else "1"
+    unit = "" if unit == "1" else f" [{unit}]"
+    fig.suptitle(f"mode {ds.attrs.get('mode', '?')}" + (f", <p> = {p:.4g}{unit}" if p is not None else ""), fontsize=9)
     return fig
 
 
