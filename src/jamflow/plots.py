@@ -21,6 +21,7 @@ import xarray as xr
 from matplotlib.collections import EllipseCollection, LineCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Polygon
+from matplotlib.ticker import NullFormatter
 
 from .analysis.contacts import contact_network, find_rattlers
 from .analysis.forces import THETA_EXTENDED, THETA_LOCALISED
@@ -568,11 +569,15 @@ def plot_jamming_table(ds: xr.Dataset) -> Figure:
                         fmt="o", ms=4, capsize=2, label=f"p_tar = {p:g}")
     bottom.axhline(0.0, color="k", lw=0.8, ls=":")
     top.set_ylabel(f"<phi_J> {_DL}")
-    bottom.set_ylabel(f"<phi_J(p_tar) - phi_J^(LS)> {_DL}")
+    bottom.set_ylabel(f"<phi_J(p_tar) - phi_J^(LS)>\n{_DL}")
     bottom.set_xlabel(f"LS growth rate kappa {_DL}")
     for ax in (top, bottom):
         ax.set_xscale("log")
+        # one labelled tick per growth rate; minor-tick labels of a narrow log range overprint
+        ax.set_xticks(kappa, [f"{k:g}" for k in kappa])
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.legend(fontsize=7)
+    fig.align_ylabels((top, bottom))
     counts = f"{int(n.min())}" if n.min() == n.max() else f"{int(n.min())}-{int(n.max())}"
     fig.suptitle(f"{counts} samples per kappa; fit window "
                  f"{ds.attrs.get('fit_min', float('nan')):g} <= p <= {ds.attrs.get('fit_max', float('nan')):g}",
