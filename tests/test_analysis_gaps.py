@@ -163,11 +163,15 @@ def test_rattler_exclusion_without_a_contact_network_is_an_error():
 
 
 @pytest.mark.parametrize("command", ["gaps", "forces"])
-def test_inverted_fit_window_is_a_one_line_error(tmp_path, calippso_ls_file, capsys, command):
+def test_inverted_fit_window_is_a_one_line_error(tmp_path, capsys, command):
     from jamflow.cli import main
+    from jamflow.io import write_packing
 
+    x, box = triangular(6, 6)
+    packing = tmp_path / "p.nc"
+    write_packing(Packing(x, np.full(len(x), 0.99), box), packing)
     out = tmp_path / "out.nc"
-    assert main([command, str(calippso_ls_file), str(out), "--fit-min", "1e-2", "--fit-max", "1e-5", "--quiet"]) == 1
+    assert main([command, str(packing), str(out), "--fit-min", "1e-2", "--fit-max", "1e-5", "--quiet"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--fit-min/--fit-max" in err[0] and "fit-min < fit-max" in err[0]
     assert not out.exists()
