@@ -131,3 +131,17 @@ def test_hypostatic_network_needs_all_contacts(rng):
     ds = force_distribution([q], backbone_only=False)
     assert ds.attrs["n_forces"] == len(horizontal) == 100
     assert ds.attrs["buckler_fraction"] == 0.0  # every particle has 2 contacts, none has d + 1 = 3
+
+
+def test_theta_refuses_too_few_forces_in_window(tmp_path, rng, capsys):
+    # 300 contacts with a uniform P(f): ~5 forces below 0.1 <f>, far too few for theta
+    p = lattice(10, 10)
+    q = with_forces(p, rng.random(len(p.contacts)))
+    ds = force_distribution([q], fit_min=1e-3, fit_max=1e-1)
+    assert ds.attrs["fit_exponent_n_in_window"] < 50
+    assert np.isnan(ds.attrs["fit_exponent"]) and "fewer than the minimum" in ds.attrs["fit_exponent_reason"]
+    write_packing(q, tmp_path / "p.nc")
+    from jamflow.cli import main
+
+    assert main(["forces", str(tmp_path / "p.nc"), str(tmp_path / "f.nc"), "--quiet"]) == 0
+    assert "warning: theta (all)" in capsys.readouterr().err

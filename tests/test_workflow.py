@@ -123,7 +123,8 @@ def test_ls_calippso_scene_plans_one_ls_run_per_sample_and_rate(tmp_path):
     path.write_text(yaml.safe_dump(scene))
     assert _planned_jobs(work, "--configfile", str(path)) == {
         "init": 2, "ls": 4, "calippso": 12, "overlap_series": 4, "jamming_table": 1, "gaps": 6, "ls_gaps": 6,
-        "plot_phi_j_series": 1, "plot_gaps_ls_vs_calippso": 1, "plot_jamming_table": 1, "plot_eos": 1, "all": 1,
+        "plot_phi_j_series": 1, "plot_gaps_ls_vs_calippso": 1, "plot_gap_windows": 1, "plot_jamming_table": 1,
+        "plot_eos": 1, "all": 1,
     }
 
 
@@ -198,10 +199,16 @@ def test_default_scene_runs_end_to_end(tmp_path):
         assert np.all(series["n_lp"].values >= 1)
     for kind in ("gaps", "forces"):
         ds = xr.load_dataset(out / "analysis" / f"{kind}{variants[-1]}.nc")
-        assert np.isfinite(ds.attrs["fit_exponent"])
+        # N = 64 x 3 samples: an exponent only with enough samples in its window, else NaN and why
+        enough = ds.attrs["fit_exponent_n_in_window"] >= ds.attrs["fit_min_in_window"]
+        assert np.isfinite(ds.attrs["fit_exponent"]) == enough
+        assert enough or "fewer than the minimum" in ds.attrs["fit_exponent_reason"]
+        assert ds.attrs["fit_min"] < ds.attrs["fit_max"] and "maximum likelihood" in ds.attrs["fit_method"]
+    assert xr.load_dataset(out / "analysis" / f"gaps{variants[-1]}.nc").attrs["rattlers_included"] == 0
     pngs = sorted((out / "figures").glob("*.png"))
     expected = {f"packing_seed{s}{variants[-1]}.png" for s in seeds} | {
-        f"{f}.png" for f in ("gaps", "forces", "rdf", "phi-j-series", "gaps-ls-vs-calippso", "eos")}
+        f"{f}.png" for f in ("gaps", "forces", "gaps-windows", "forces-windows", "rdf", "phi-j-series",
+                             "gaps-ls-vs-calippso", "eos")}
     assert {p.name for p in pngs} == expected
     assert all(p.stat().st_size > 1000 and p.with_suffix(".pdf").is_file() for p in pngs)
     report = _snakemake(work, "--report", "report.html")

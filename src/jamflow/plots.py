@@ -2,14 +2,16 @@
 
 Figures are built on ``matplotlib.figure.Figure`` directly (no pyplot state, no GUI
 backend), so they render headless and in parallel jobs. :func:`save_figure`
-writes a PNG and a PDF next to each other. Axes are labelled with their units or
-"(dimensionless)"; lengths are in the packing's length unit.
+writes a PNG and a PDF next to each other. Every axis names a quantity and its unit:
+a dimensional quantity carries the unit its dataset states (``units`` attribute),
+a ratio says "(dimensionless)"; lengths are in the packing's length unit.
 """
 
 from __future__ import annotations
 
 import itertools
 import os
+import re
 import textwrap
 from collections.abc import Sequence
 from pathlib import Path
@@ -19,6 +21,7 @@ import xarray as xr
 from matplotlib.collections import EllipseCollection, LineCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Polygon
+from matplotlib.ticker import NullFormatter
 
 from .analysis.contacts import contact_network, find_rattlers
 from .analysis.forces import THETA_EXTENDED, THETA_LOCALISED
@@ -27,10 +30,12 @@ from .packing import Packing
 from .tolerances import CONTACT_GAP_TOL
 
 __all__ = [
+    "unlabelled_axes",
     "save_figure",
     "plot_packing",
     "plot_gaps",
     "plot_forces",
+    "plot_fit_windows",
     "plot_rdf",
     "plot_stress_strain",
     "plot_phi_kappa",
@@ -43,8 +48,42 @@ __all__ = [
 _DL = "(dimensionless)"
 
 
+#: An axis label states its unit as "[unit]" or says "(dimensionless)".
+_UNIT = re.compile(r"\[[^\]]+\]|\(dimensionless\)")
+
+
+def unlabelled_axes(fig: Figure) -> list[str]:
+    """Axes of ``fig`` whose x or y label is empty or names no unit (empty list: all fine).
+
+    An x axis shared with a labelled sibling (stacked panels) counts as labelled;
+    a colour bar needs a label with a unit on its long axis.
+    """
+    problems = []
+    for k, ax in enumerate(fig.axes):
+        if ax.get_label() == "<colorbar>":
+            label = ax.get_ylabel() or ax.get_xlabel()
+            if not _UNIT.search(label):
+                problems.append(f"colour bar {k}: label {label!r} has no quantity with a unit")
+            continue
+        x_labels = [ax.get_xlabel()] + [o.get_xlabel() for o in ax.get_shared_x_axes().get_siblings(ax)]
+        if not any(_UNIT.search(t) for t in x_labels):
+            problems.append(f"axes {k}: x label {ax.get_xlabel()!r} has no quantity with a unit")
+        if not _UNIT.search(ax.get_ylabel()):
+            problems.append(f"axes {k}: y label {ax.get_ylabel()!r} has no quantity with a unit")
+    return problems
+
+
 def save_figure(fig: Figure, path: str | os.PathLike, dpi: int = 150) -> tuple[Path, Path]:
-    """Write ``fig`` as ``<stem>.png`` and ``<stem>.pdf``; returns both paths."""
+    """Write ``fig`` as ``<stem>.png`` and ``<stem>.pdf``; returns both paths.
+
+    Raises
+    ------
+    ValueError
+        An axis has no label with a unit (:func:`unlabelled_axes`); nothing is written.
+    """
+    problems = unlabelled_axes(fig)
+    if problems:
+        raise ValueError(f"figure {path} not saved: " + "; ".join(problems))
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     png, pdf = path.with_suffix(".png"), path.with_suffix(".pdf")
@@ -144,20 +183,38 @@ def _labels(datasets: Sequence[xr.Dataset], labels: Sequence[str] | None) -> lis
     return list(labels) if labels else [f"{ds.attrs.get('n_samples', 1)} sample(s), d={ds.attrs.get('d', '?')}" for ds in datasets]
 
 
+def _exponent_label(ds: xr.Dataset, name: str, symbol: str) -> str:
+    """``symbol = value ± stat (stat) ± sys (sys)``, or why it is missing."""
+    a = ds.attrs
+    value = a.get(name, np.nan)
+    if not np.isfinite(value):
+        return (f"{symbol}: no fit ({a.get(f'{name}_n_in_window', 0)} samples in the window, "
+                f"fewer than {a.get('fit_min_in_window', '?')})")
+    stat, sys_ = a.get(f"{name}_stat", np.nan), a.get(f"{name}_sys", np.nan)
+    sys_text = f"± {sys_:.3f} (sys)" if np.isfinite(sys_) else "(sys undefined: window too short to scan)"
+    return f"{symbol} = {value:.3f} ± {stat:.3f} (stat) {sys_text}"
+
+
 def plot_gaps(datasets: Sequence[xr.Dataset], labels: Sequence[str] | None = None) -> Figure:
-    """Gap distributions (``jamflow gaps`` outputs) on log–log axes with fits (CALiPPSO Fig. 10)."""
+    """Gap distributions (``jamflow gaps`` outputs) on log–log axes with fits (CALiPPSO Fig. 10).
+
+    Each fit is drawn over its chosen window, with gamma, its statistical and
+    systematic errors in the legend; the mean-field slope is a guide to the eye.
+    """
     fig = Figure(layout="constrained", figsize=(6.4, 4.8))
     ax = fig.add_subplot()
     for ds, label in zip(datasets, _labels(datasets, labels)):
         y, e = ds["gap_density"].values, ds["gap_density_err"].values
         ok = y > 0
+        rattlers = "" if not ds.attrs.get("rattlers_included", 0) else " (with rattlers)"
+        refused = "" if np.isfinite(ds.attrs.get("fit_exponent", np.nan)) else (
+            ": " + _exponent_label(ds, "fit_exponent", "gamma"))
         bars = ax.errorbar(ds["h"].values[ok], y[ok], yerr=np.minimum(e[ok], 0.999 * y[ok]), fmt="o", ms=3,
-                           capsize=2, label=label)
-        g, ge = ds.attrs.get("fit_exponent", np.nan), ds.attrs.get("fit_exponent_err", np.nan)
-        if np.isfinite(g):
+                           capsize=2, label=label + rattlers + refused)
+        if np.isfinite(ds.attrs.get("fit_exponent", np.nan)):
             hf = np.logspace(np.log10(ds.attrs["fit_min"]), np.log10(ds.attrs["fit_max"]), 20)
-            ax.plot(hf, ds.attrs["fit_prefactor"] * hf ** (-g), "-", color=bars[0].get_color(),
-                    label=f"{label}: fit gamma = {g:.3f} ± {ge:.3f}")
+            ax.plot(hf, ds.attrs["fit_prefactor"] * hf ** (-ds.attrs["fit_exponent"]), "-",
+                    color=bars[0].get_color(), label=f"{label}: " + _exponent_label(ds, "fit_exponent", "gamma"))
     h_all = np.concatenate([ds["h"].values[ds["gap_density"].values > 0] for ds in datasets])
     if len(h_all):
         ref = datasets[0]
@@ -165,18 +222,81 @@ def plot_gaps(datasets: Sequence[xr.Dataset], labels: Sequence[str] | None = Non
         k = int(np.argmin(np.abs(np.log(ref["h"].values / 1e-2)) + np.where(y0 > 0, 0, np.inf)))
         hh = np.logspace(np.log10(h_all.min()), np.log10(h_all.max()), 20)
         ax.plot(hh, 0.5 * y0[k] * (hh / ref["h"].values[k]) ** (-MEAN_FIELD_GAP_EXPONENT), "k--", lw=1,
-                label=f"mean field h^-{MEAN_FIELD_GAP_EXPONENT}")
+                label=f"mean field h^-{MEAN_FIELD_GAP_EXPONENT} (guide, shifted down)")
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel("relative gap h = r/sigma - 1 (dimensionless)")
-    ax.set_ylabel("p(h): neighbours per particle per unit h (dimensionless)")
+    ax.set_xlabel("relative gap h = r_ij/sigma_ij - 1 (dimensionless)")
+    ax.set_ylabel("gap density: non-contact neighbours\nper particle per unit h (dimensionless)")
     if len(datasets) > 2:
         # many curves: the legend goes below the axes instead of over the data
-        fig.set_size_inches(6.4, 4.8 + 0.17 * (2 * len(datasets) + 1))
-        fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", fontsize=7, ncols=2)
+        handles, texts = ax.get_legend_handles_labels()
+        ncols = 1 if max(len(t) for t in texts) > 60 else 2
+        fig.set_size_inches(6.4, 4.8 + 0.17 * (len(texts) / ncols + 1))
+        fig.legend(handles, texts, loc="outside lower center", fontsize=7, ncols=ncols)
     else:
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=7)
     ax.grid(True, which="major", alpha=0.3)
+    return fig
+
+
+def plot_fit_windows(ds: xr.Dataset) -> Figure:
+    """Exponent against fit window: the diagnostic behind its systematic error.
+
+    ``ds`` is a ``jamflow gaps`` (gamma) or ``jamflow forces`` (theta) output. Left:
+    the exponent of every scanned window (spanning at least 1.5 decades) against its
+    lower edge, one line per upper edge, coloured by the upper edge. Right: the same
+    against the upper edge, coloured by the lower edge. Bands: the reported value ±
+    its statistical error (dark) and ± the combined error (light); dotted lines mark
+    the chosen window, an orange line a detected power-law break.
+    """
+    from matplotlib import colormaps
+    from matplotlib.colors import LogNorm
+
+    gaps = "gap_density" in ds
+    symbol, variable = ("gamma", "relative gap h") if gaps else ("theta", "f / <f>")
+    fig = Figure(layout="constrained", figsize=(11.0, 4.6))
+    left, right = fig.subplots(1, 2)
+    a = ds.attrs
+    lo, hi, g = ds["window_lower"].values, ds["window_upper"].values, ds["window_exponent"].values
+    err = ds["window_exponent_err"].values
+    cmap = colormaps["viridis"]
+    for ax, x, key, other in ((left, lo, hi, "upper"), (right, hi, lo, "lower")):
+        if len(g) == 0:
+            ax.text(0.5, 0.5, textwrap.fill(a.get("fit_exponent_reason", "") or "no window scanned", 50),
+                    ha="center", va="center", transform=ax.transAxes, fontsize=8)
+            continue
+        norm = LogNorm(key.min(), key.max() * (1 + 1e-9))
+        for u in np.unique(key):
+            sel = key == u
+            ax.errorbar(x[sel], g[sel], yerr=err[sel], fmt="o-", ms=3, lw=0.8, capsize=1.5, color=cmap(norm(u)))
+        bar = fig.colorbar(ax.scatter([], [], c=[], cmap=cmap, norm=norm), ax=ax, pad=0.01)
+        bar.set_label(f"{other} edge of the window, {variable} (dimensionless)", fontsize=8)
+    value = a.get("fit_exponent", np.nan)
+    refs = ([(MEAN_FIELD_GAP_EXPONENT, "mean field")] if gaps else
+            [(THETA_EXTENDED, "extended, mean field"), (THETA_LOCALISED, "localised")])
+    for ax in (left, right):
+        if np.isfinite(value):
+            total = a.get("fit_exponent_err", np.nan)
+            if np.isfinite(total):
+                ax.axhspan(value - total, value + total, color="grey", alpha=0.12, label="± combined error")
+            ax.axhspan(value - a["fit_exponent_stat"], value + a["fit_exponent_stat"], color="grey", alpha=0.3,
+                       label="± statistical error")
+            ax.axhline(value, color="k", lw=1, label=f"reported {symbol} = {value:.3f}")
+        for ref, name in refs:
+            ax.axhline(ref, color="C3", ls="--", lw=1, label=f"{name} {ref}")
+        ax.set_xscale("log")
+        ax.set_ylabel(f"{symbol} fitted on the window (dimensionless)")
+    left.axvline(a["fit_min"], color="k", ls=":", lw=1, label="chosen lower edge")
+    right.axvline(a["fit_max"], color="k", ls=":", lw=1, label="chosen upper edge")
+    if a.get("fit_break_detected", 0):
+        right.axvline(a["fit_break_at"], color="C1", lw=1.2, label=f"power-law break (z = {a['fit_break_z']:.1f})")
+    left.set_xlabel(f"lower edge of the fit window, {variable} (dimensionless)")
+    right.set_xlabel(f"upper edge of the fit window, {variable} (dimensionless)")
+    for ax in (left, right):
+        ax.legend(fontsize=7)
+    fig.suptitle(f"{_exponent_label(ds, 'fit_exponent', symbol)} on [{a['fit_min']:.3g}, {a['fit_max']:.3g}], "
+                 f"{a.get('fit_exponent_n_in_window', 0)} samples; {len(g)} windows spanning >= 1.5 decades",
+                 fontsize=9)
     return fig
 
 
@@ -186,8 +306,8 @@ def plot_forces(ds: xr.Dataset) -> Figure:
     ax1, ax2 = fig.subplots(1, 2)
     ax1.errorbar(ds["f"].values, ds["P_linear"].values, yerr=ds["P_linear_err"].values, fmt="o-", ms=3, capsize=2,
                  label=f"{ds.attrs.get('contacts_used', 'backbone contacts')} ({ds.attrs.get('n_samples', 1)} sample(s))")
-    ax1.set_xlabel("f / <f> (dimensionless)")
-    ax1.set_ylabel("P(f / <f>) (dimensionless)")
+    ax1.set_xlabel("contact force f / <f> (dimensionless)")
+    ax1.set_ylabel("probability density P(f / <f>) (dimensionless)")
     ax1.set_yscale("log")
     ax1.legend(fontsize=8)
     x = ds["f_log"].values
@@ -200,8 +320,7 @@ def plot_forces(ds: xr.Dataset) -> Figure:
         if not np.any(ok):
             continue
         th = ds.attrs.get(f"fit_exponent{name}", np.nan)
-        the = ds.attrs.get(f"fit_exponent{name}_err", np.nan)
-        fit = f", theta = {th:.3f} ± {the:.3f}" if np.isfinite(th) else ""
+        fit = ": " + _exponent_label(ds, f"fit_exponent{name}", "theta")
         bars = ax2.errorbar(x[ok], y[ok], yerr=np.minimum(e[ok], 0.999 * y[ok]), fmt=marker, ms=4, mfc="none",
                             capsize=2, label=label + fit)
         if np.isfinite(th):
@@ -214,11 +333,11 @@ def plot_forces(ds: xr.Dataset) -> Figure:
         ax2.plot(xx, 0.5 * y0 * (xx / hi) ** THETA_EXTENDED, "k--", lw=1,
                  label=f"f^{THETA_EXTENDED} (extended, mean field)")
         ax2.plot(xx, 0.5 * y0 * (xx / hi) ** THETA_LOCALISED, "k:", lw=1, label=f"f^{THETA_LOCALISED} (localised)")
-    ax2.axvspan(lo, hi, color="grey", alpha=0.1, label="fit window")
+    ax2.axvspan(lo, hi, color="grey", alpha=0.1, label="chosen fit window")
     ax2.set_xscale("log")
     ax2.set_yscale("log")
-    ax2.set_xlabel("f / <f> (dimensionless)")
-    ax2.set_ylabel("P(f / <f>) (dimensionless)")
+    ax2.set_xlabel("contact force f / <f> (dimensionless)")
+    ax2.set_ylabel("probability density P(f / <f>) (dimensionless)")
     ax2.legend(fontsize=7)
     fig.suptitle(f"buckler fraction {ds.attrs.get('buckler_fraction', np.nan):.3f} of non-rattlers", fontsize=9)
     return fig
@@ -282,6 +401,7 @@ def plot_stress_strain(datasets: Sequence[xr.Dataset], labels: Sequence[str] | N
     for ax in axes:
         _widen_flat_axis(ax)
         ax.legend(fontsize=7)
+    fig.align_ylabels(axes)
     return fig
 
 
@@ -304,7 +424,7 @@ def plot_phi_kappa(ds: xr.Dataset) -> Figure:
     s = ds["strain"].values
     ax1.plot(s, ds["packing_fraction"].values, lw=0.9)
     _window(ax1, ds, "packing_fraction")
-    ax1.set_ylabel(f"packing fraction phi {_DL}")
+    ax1.set_ylabel(f"packing fraction phi\n{_DL}")
     if "kappa" in ds and np.any(np.isfinite(ds["kappa"].values)):
         ax2.plot(s, ds["kappa"].values, lw=0.9)
         _window(ax2, ds, "kappa")
@@ -316,9 +436,25 @@ def plot_phi_kappa(ds: xr.Dataset) -> Figure:
     for ax in (ax1, ax2):
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7)
+    fig.align_ylabels((ax1, ax2))
     p = ds.attrs.get("mean_pressure")
-    fig.suptitle(f"mode {ds.attrs.get('mode', '?')}" + (f", <p> = {p:.4g}" if p is not None else ""), fontsize=9)
+    unit = ds["pressure"].attrs.get("units", "1") if "pressure" in ds else "1"
+    unit = "" if unit == "1" else f" [{unit}]"
+    fig.suptitle(f"mode {ds.attrs.get('mode', '?')}" + (f", <p> = {p:.4g}{unit}" if p is not None else ""), fontsize=9)
     return fig
+
+
+def _symlog_to_zero(ax, smallest: float, largest: float) -> None:
+    """Logarithmic y above a decade below ``smallest``, linear down to 0, up to ``largest``.
+
+    At most five decade ticks (plus 0), so the labels of a wide range do not overlap.
+    """
+    low = np.floor(np.log10(smallest)) - 1
+    high = np.ceil(np.log10(largest))
+    ax.set_yscale("symlog", linthresh=10.0**low)
+    step = max(1, int(np.ceil((high - low) / 4)))
+    ax.set_yticks([0.0, *(10.0 ** np.arange(low, high + 1, step))])
+    ax.set_ylim(0.0, 10.0**high)
 
 
 def plot_overlap_series(datasets: Sequence[xr.Dataset]) -> Figure:
@@ -334,12 +470,14 @@ def plot_overlap_series(datasets: Sequence[xr.Dataset]) -> Figure:
     for ds in datasets:
         groups.setdefault(float(ds.attrs.get("kappa", np.nan)), []).append(ds)
     names = ["phi_J", "abs_delta_phi_J", "one_minus_Q"]
-    ylabels = [f"<phi_J> {_DL}", f"<|Delta phi_J|> {_DL}", f"1 - <Q> {_DL}"]
+    ylabels = [f"<phi_J>\n{_DL}", f"<|Delta phi_J|>\n{_DL}", f"1 - <Q>\n{_DL}"]
     if all("n_lp" in ds for ds in datasets):
         names.append("n_lp")
-        ylabels.append(f"<n> linear optimisations {_DL}")
+        ylabels.append(f"<n> linear\noptimisations {_DL}")
     fig = Figure(layout="constrained", figsize=(6.4, 2.4 * len(names)))
     axes = fig.subplots(len(names), 1, sharex=True)
+    means: dict[str, list[float]] = {name: [] for name in names}
+    tops: dict[str, list[float]] = {name: [] for name in names}
     for kappa, members in sorted(groups.items()):
         merged = xr.concat([ds[names] for ds in members], dim="sample")
         m = len(members)
@@ -352,16 +490,18 @@ def plot_overlap_series(datasets: Sequence[xr.Dataset]) -> Figure:
             # non-negative quantities: the lower error bar stops at zero
             lower = np.minimum(e, y) if name != "phi_J" else e
             ax.errorbar(x[ok], y[ok], yerr=[lower[ok], e[ok]], fmt="o-", ms=4, capsize=2, label=label)
+            means[name] += list(y[ok])
+            tops[name] += list((y + e)[ok])
     for ax, name, ylabel in zip(axes, names, ylabels):
         ax.set_xscale("log")
         if name in ("abs_delta_phi_J", "one_minus_Q"):
-            positive = [v for line in ax.get_lines() for v in np.asarray(line.get_ydata(), float) if v > 0]
+            positive = [v for v in means[name] if v > 0]
             if positive:
-                # logarithmic above the smallest nonzero mean, linear down to an exact 0 (Q = 1)
-                ax.set_yscale("symlog", linthresh=min(positive))
+                _symlog_to_zero(ax, min(positive), max(tops[name]))
             ax.set_ylim(bottom=0.0)
         ax.set_ylabel(ylabel)
         ax.legend(fontsize=8)
+    fig.align_ylabels(axes)
     axes[-1].set_xlabel(f"LS target pressure p_tar {_DL}")
     return fig
 
@@ -429,11 +569,15 @@ def plot_jamming_table(ds: xr.Dataset) -> Figure:
                         fmt="o", ms=4, capsize=2, label=f"p_tar = {p:g}")
     bottom.axhline(0.0, color="k", lw=0.8, ls=":")
     top.set_ylabel(f"<phi_J> {_DL}")
-    bottom.set_ylabel(f"<phi_J(p_tar) - phi_J^(LS)> {_DL}")
+    bottom.set_ylabel(f"<phi_J(p_tar) - phi_J^(LS)>\n{_DL}")
     bottom.set_xlabel(f"LS growth rate kappa {_DL}")
     for ax in (top, bottom):
         ax.set_xscale("log")
+        # one labelled tick per growth rate; minor-tick labels of a narrow log range overprint
+        ax.set_xticks(kappa, [f"{k:g}" for k in kappa])
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.legend(fontsize=7)
+    fig.align_ylabels((top, bottom))
     counts = f"{int(n.min())}" if n.min() == n.max() else f"{int(n.min())}-{int(n.max())}"
     fig.suptitle(f"{counts} samples per kappa; fit window "
                  f"{ds.attrs.get('fit_min', float('nan')):g} <= p <= {ds.attrs.get('fit_max', float('nan')):g}",

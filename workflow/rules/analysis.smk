@@ -110,8 +110,8 @@ rule ls_gaps:
     conda:
         "../envs/jamflow.yaml"
     shell:
-        # an LS snapshot at finite pressure has no contacts: every positive gap is binned
-        "jamflow gaps {input} {output} --gap-tol 0 --fit-min {params.fit_min} --fit-max {params.fit_max}"
+        # an LS snapshot at finite pressure has no contacts (so no rattlers): every positive gap is binned
+        "jamflow gaps {input} {output} --gap-tol 0 --include-rattlers --fit-min {params.fit_min} --fit-max {params.fit_max}"
         " --quiet > {log} 2>&1"
 
 

@@ -171,6 +171,9 @@ def scene_targets():
             targets += [f"{RESULTS}/figures/ed-vs-sd_{s}.png" for s in samples()]
         else:
             targets.append(f"{RESULTS}/figures/{fig}.png")
+        if fig in ("gaps", "forces", "gaps-ls-vs-calippso"):
+            # the exponent-against-window diagnostic goes with every fitted distribution
+            targets.append(f"{RESULTS}/figures/{fig.removesuffix('-ls-vs-calippso')}-windows.png")
     return targets
 
 

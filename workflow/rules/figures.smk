@@ -67,6 +67,47 @@ rule plot_forces:
         "jamflow plot forces {input} {output.png} > {log} 2>&1"
 
 
+rule plot_gap_windows:
+    input:
+        # the packings jammed from the largest target pressure (after LS), as in plot_forces
+        f"{RESULTS}/analysis/gaps{variants()[-1]}.nc",
+    output:
+        png=report(
+            f"{RESULTS}/figures/gaps-windows.png",
+            caption="../report/fit-windows.rst",
+            category="Analyses",
+        ),
+        pdf=f"{RESULTS}/figures/gaps-windows.pdf",
+    log:
+        f"{LOGS}/figures/gaps-windows.log",
+    benchmark:
+        f"{BENCH}/figures/gaps-windows.tsv"
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow plot fit-windows {input} {output.png} > {log} 2>&1"
+
+
+rule plot_force_windows:
+    input:
+        f"{RESULTS}/analysis/forces{variants()[-1]}.nc",
+    output:
+        png=report(
+            f"{RESULTS}/figures/forces-windows.png",
+            caption="../report/fit-windows.rst",
+            category="Analyses",
+        ),
+        pdf=f"{RESULTS}/figures/forces-windows.pdf",
+    log:
+        f"{LOGS}/figures/forces-windows.log",
+    benchmark:
+        f"{BENCH}/figures/forces-windows.tsv"
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow plot fit-windows {input} {output.png} > {log} 2>&1"
+
+
 rule plot_rdf:
     input:
         rdf_files(),
@@ -83,8 +124,11 @@ rule plot_rdf:
         f"{BENCH}/figures/rdf.tsv"
     conda:
         "../envs/jamflow.yaml"
+    params:
+        # same order as rdf_files(): samples outer, variants inner
+        labels=" ".join(f"{s}:{v}" for s in samples() for v in variant_labels()),
     shell:
-        "jamflow plot rdf {input} {output.png} > {log} 2>&1"
+        "jamflow plot rdf {input} {output.png} --labels {params.labels} > {log} 2>&1"
 
 
 rule plot_stress_strain:

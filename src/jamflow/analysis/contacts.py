@@ -25,6 +25,7 @@ __all__ = [
     "contacts_from_gaps",
     "contact_network",
     "find_rattlers",
+    "rattler_mask",
     "isostatic_count",
     "rigidity_counting",
     "force_balance_residual",
@@ -86,6 +87,21 @@ def find_rattlers(n: int, d: int, contacts: NDArray[np.int64],
             return rattler
         rattler |= new
         active &= ~(rattler[contacts[:, 0]] | rattler[contacts[:, 1]])
+
+
+def rattler_mask(packing: Packing, contacts: NDArray[np.int64] | None = None) -> NDArray[np.bool_]:
+    """Rattlers of ``packing`` for the contact network ``contacts``, shape (N,).
+
+    ``None`` (or the packing's own contacts) uses the rattlers the producing stage
+    stored, when it stored them; otherwise :func:`find_rattlers` on the network.
+    """
+    own = contacts is None or contacts is packing.contacts
+    if own and packing.rattler is not None:
+        return packing.rattler
+    network = packing.contacts if contacts is None else contacts
+    if network is None:
+        raise ValueError("packing has no contact network to find rattlers from")
+    return find_rattlers(packing.n, packing.d, network)
 
 
 def isostatic_count(d: int, n_stable: int) -> int:

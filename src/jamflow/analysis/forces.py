@@ -15,6 +15,14 @@ two particles is a buckler; all other backbone contacts are **extended**. The
 distribution of each population is normalised by its own number of contacts (so
 each integrates to one) and by the mean force of *all* backbone contacts of the
 sample (one force scale per packing).
+
+The exponents are maximum-likelihood fits to the pooled forces of all packings
+(:mod:`jamflow.analysis.fitting`, no binning), with a bootstrap statistical error
+over packings and contacts and a systematic error from a scan of fit windows. The
+window is chosen on all backbone contacts and used for both populations. With fewer
+than :data:`~jamflow.analysis.fitting.MIN_IN_WINDOW` forces in the window an
+exponent is NaN and ``fit_exponent*_reason`` says why (a few hundred contacts hold
+only a handful of forces below 0.1 <f>).
 """
 
 from __future__ import annotations
@@ -27,8 +35,9 @@ from numpy.typing import NDArray
 
 from ..io import new_dataset_attrs
 from ..packing import Packing
-from .contacts import find_rattlers
-from .gaps import fit_power_law, log_bin_edges, sample_average
+from .contacts import rattler_mask
+from .fitting import analyse_exponent, check_window, density_prefactor
+from .gaps import log_bin_edges, sample_average
 
 __all__ = [
     "THETA_EXTENDED",
@@ -49,8 +58,7 @@ def _backbone(packing: Packing, backbone_only: bool = True) -> tuple[NDArray[np.
         raise ValueError("the force distribution needs a packing with contacts and forces")
     if not backbone_only:
         return packing.contacts, packing.force, np.zeros(packing.n, dtype=bool)
-    rattler = (packing.rattler if packing.rattler is not None
-               else find_rattlers(packing.n, packing.d, packing.contacts))
+    rattler = rattler_mask(packing)
     c = packing.contacts
     keep = ~(rattler[c[:, 0]] | rattler[c[:, 1]])
     return c[keep], packing.force[keep], rattler
@@ -107,6 +115,8 @@ def force_distribution(
     fit_max: float = 1e-1,
     backbone_only: bool = True,
     parameters: dict | None = None,
+    n_boot: int = 200,
+    seed: int = 0,
 ) -> xr.Dataset:
     """Sample-averaged P(f / <f>) on linear and logarithmic bins, with tail fits.
 
@@ -121,29 +131,34 @@ def force_distribution(
     log_min, bins_per_decade : float, int
         Logarithmic bins on ``[log_min, f_max]``.
     fit_min, fit_max : float
-        Window of the fits ``P(f) ~ f^theta`` on the logarithmic histogram.
+        Scaling range searched for ``P(f) ~ f^theta`` (:mod:`jamflow.analysis.fitting`).
     backbone_only : bool
         True (jammed packings): contacts between non-rattlers only, rattlers from
         the packing or from iterative removal. False: every contact, no rattlers —
         for flowing, hypostatic networks, which iterative removal empties.
     parameters : dict or None
         Stage parameters recorded in the provenance attributes.
+    n_boot, seed : int
+        Bootstrap resamples of the statistical error and their seed.
 
     Returns
     -------
     xarray.Dataset
         dims ``fbin`` (linear), ``logbin`` (logarithmic): ``P_linear``, ``P_log`` and
         their errors for all backbone contacts, ``P_log_buckler`` /
-        ``P_log_extended`` for the two populations (see module docstring). Each
-        distribution is normalised by the number of its forces, so its integral over
-        all f is 1 (the fraction beyond ``f_max`` is the attribute
-        ``fraction_above_f_max``). Attributes ``fit_exponent`` (theta, all),
-        ``fit_exponent_err``, ``fit_exponent_buckler``, ``fit_exponent_extended``
-        (+ ``_err``), ``fit_min``, ``fit_max``, ``buckler_fraction`` (bucklers over
-        non-rattlers), ``buckler_contact_fraction``.
+        ``P_log_extended`` for the two populations (see module docstring); dim
+        ``window``: the scanned fit windows of all contacts. Each distribution is
+        normalised by the number of its forces, so its integral over all f is 1 (the
+        fraction beyond ``f_max`` is the attribute ``fraction_above_f_max``).
+        Attributes ``fit_exponent`` (theta, all; NaN and ``fit_exponent_reason``
+        when refused), ``_stat``, ``_sys``, ``_err``, ``_n_in_window``, the same for
+        ``fit_exponent_buckler`` and ``fit_exponent_extended``, ``fit_min``,
+        ``fit_max`` (chosen window), ``fit_method``, ``buckler_fraction`` (bucklers
+        over non-rattlers), ``buckler_contact_fraction``.
     """
     if len(packings) == 0:
         raise ValueError("force_distribution needs at least one packing")
+    check_window(fit_min, fit_max)
     per_sample = [normalised_forces(p, backbone_only) for p in packings]
     allf = [f for f, _ in per_sample]
     buck = [f[b] for f, b in per_sample]
@@ -156,6 +171,7 @@ def force_distribution(
     out_vars: dict = {}
     fits: dict = {}
     log_centre = np.sqrt(log_edges[:-1] * log_edges[1:])
+    main = analyse_exponent(allf, fit_min, fit_max, n_boot=n_boot, seed=seed)
     for name, values in (("", allf), ("_buckler", buck), ("_extended", ext)):
         dens, cnt = _densities(values, log_edges)
         mean, err, _ = sample_average(dens, cnt)
@@ -163,15 +179,12 @@ def force_distribution(
                  "_extended": "contacts not involving a buckler"}[name]
         out_vars[f"P_log{name}"] = ("logbin", mean, {"units": "1", "long_name": f"P(f/<f>) on log bins, {label}"})
         out_vars[f"P_log{name}_err"] = ("logbin", err, {"units": "1", "long_name": f"standard error of P_log{name}"})
-        try:
-            fit = fit_power_law(log_centre, mean, err, fit_min, fit_max)
-            fits[f"fit_exponent{name}"] = fit.slope
-            fits[f"fit_exponent{name}_err"] = fit.slope_err
-            fits[f"fit_prefactor{name}"] = fit.prefactor
-        except ValueError:
-            fits[f"fit_prefactor{name}"] = np.nan
-            fits[f"fit_exponent{name}"] = np.nan
-            fits[f"fit_exponent{name}_err"] = np.nan
+        fit = main if name == "" else analyse_exponent(values, main.x_min, main.x_max, choose_window=False,
+                                                       n_boot=n_boot, seed=seed)
+        fits.update(fit.exponent_attrs(f"fit_exponent{name}"))
+        n_pop = sum(len(v) for v in values)
+        fits[f"fit_prefactor{name}"] = (density_prefactor(fit.alpha, fit.x_min, fit.x_max, fit.n_in_window / n_pop)
+                                        if np.isfinite(fit.alpha) and n_pop else np.nan)
     n_nonrattler = n_buckler = 0
     for p in packings:
         b = bucklers(p, backbone_only)
@@ -190,8 +203,7 @@ def force_distribution(
         buckler_definition="non-rattler particle with exactly d+1 backbone contacts; a buckler contact "
                            "has at least one buckler among its two particles (Charbonneau et al. PRL 2015)",
         error_method=method,
-        fit_min=float(fit_min),
-        fit_max=float(fit_max),
+        **main.window_attrs("fit"),
         theta_extended_mean_field=THETA_EXTENDED,
         theta_localised_mean_field=THETA_LOCALISED,
         buckler_fraction=n_buckler / n_nonrattler if n_nonrattler else np.nan,
@@ -206,6 +218,7 @@ def force_distribution(
             "P_linear": ("fbin", lin_mean, {**one, "long_name": "P(f/<f>) on linear bins, all backbone contacts"}),
             "P_linear_err": ("fbin", lin_err, {**one, "long_name": "standard error of P_linear"}),
             **out_vars,
+            **main.scan_variables(1.0, "theta", "1"),
         },
         coords={
             "f": ("fbin", 0.5 * (lin_edges[:-1] + lin_edges[1:]), {**one, "long_name": "f/<f>, linear bin centre"}),

@@ -3,14 +3,17 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
+import numpy as np
 from tqdm import tqdm
 
 from ..analysis.eos import jamming_table, table_markdown
+from ..analysis.fitting import check_window
 from ..analysis.flow import flow_summary
-from ..analysis.forces import force_distribution
-from ..analysis.gaps import gap_distribution
+from ..analysis.forces import THETA_EXTENDED, THETA_LOCALISED, force_distribution
+from ..analysis.gaps import MEAN_FIELD_GAP_EXPONENT, gap_distribution
 from ..analysis.overlap import overlap_dataset, overlap_series
 from ..analysis.structure import structure_dataset
 from ..io import read_dat, read_dataset, read_packing, write_dataset
@@ -24,6 +27,7 @@ PLOT_KINDS: dict[str, str] = {
     "packing": "one packing netCDF",
     "gaps": "one or more `jamflow gaps` outputs",
     "forces": "one `jamflow forces` output",
+    "fit-windows": "one `jamflow gaps` or `jamflow forces` output (exponent against fit window)",
     "rdf": "one or more `jamflow rdf` outputs",
     "stress-strain": "one or more flow time series or `jamflow flow-summary` outputs",
     "phi-kappa": "one flow time series or `jamflow flow-summary` output",
@@ -36,17 +40,24 @@ PLOT_KINDS: dict[str, str] = {
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "gaps", _gaps, "gap distribution p(h) over samples with a power-law fit",
-                    "Gap distribution p(h), h = r/sigma_ij - 1, of non-contact near pairs on logarithmic bins, "
-                    "averaged over samples (one file = one sample), with p(h) ~ h^-gamma fitted on a window.")
+                    "Gap distribution p(h), h = r/sigma_ij - 1, of non-contact near pairs between stable "
+                    "particles (rattlers removed iteratively; --include-rattlers keeps them) on logarithmic bins, "
+                    "averaged over samples (one file = one sample). gamma of p(h) ~ h^-gamma by maximum "
+                    "likelihood on the pooled gaps in a window chosen inside [fit-min, fit-max] (raised to 1/p "
+                    "for LS snapshots, lowered to a power-law break), with a bootstrap statistical error and a "
+                    "systematic error from a scan of windows spanning >= 1.5 decades.")
     p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc", help="input packings (.nc or .dat), then the output")
     p.add_argument("--max-gap", type=float, default=0.1, help="largest gap binned (default 0.1)")
     p.add_argument("--min-gap", type=float, default=1e-13, help="smallest gap binned (default 1e-13)")
     p.add_argument("--bins-per-decade", type=int, default=5, help="logarithmic bins per decade (default 5)")
-    p.add_argument("--fit-min", type=float, default=1e-5, help="lower end of the fit window (default 1e-5)")
-    p.add_argument("--fit-max", type=float, default=1e-2, help="upper end of the fit window (default 1e-2)")
+    p.add_argument("--fit-min", type=float, default=1e-5, help="lower end of the scaling range (default 1e-5)")
+    p.add_argument("--fit-max", type=float, default=1e-2, help="upper end of the scaling range (default 1e-2)")
     p.add_argument("--gap-tol", type=float, default=None,
                    help="pairs with h <= GAP_TOL are contacts; default: the packing's own contacts, "
                         "else jamflow.tolerances.CONTACT_GAP_TOL")
+    p.add_argument("--include-rattlers", action="store_true",
+                   help="keep pairs with a rattler (needed for LS snapshots, which have no contact network)")
+    _add_fit_options(p)
     add_overlap_option(p)
     add_quiet(p)
 
@@ -56,10 +67,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--linear-bins", type=int, default=60, help="linear bins on [0, f_max] (default 60)")
     p.add_argument("--log-min", type=float, default=1e-6, help="lower end of the log bins (default 1e-6)")
     p.add_argument("--bins-per-decade", type=int, default=5, help="log bins per decade (default 5)")
-    p.add_argument("--fit-min", type=float, default=1e-3, help="lower end of the tail fit window (default 1e-3)")
-    p.add_argument("--fit-max", type=float, default=1e-1, help="upper end of the tail fit window (default 1e-1)")
+    p.add_argument("--fit-min", type=float, default=1e-3, help="lower end of the small-force scaling range (default 1e-3)")
+    p.add_argument("--fit-max", type=float, default=1e-1, help="upper end of the small-force scaling range (default 1e-1)")
     p.add_argument("--all-contacts", action="store_true",
                    help="use every contact, no rattler removal (flowing, hypostatic networks)")
+    _add_fit_options(p)
     add_overlap_option(p)
     add_quiet(p)
 
@@ -114,6 +126,34 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_overlap_option(p)
 
 
+def _add_fit_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--bootstrap", type=int, default=200,
+                   help="bootstrap resamples (packings, then samples within packings) of the statistical error "
+                        "(default 200)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the bootstrap (default 0)")
+
+
+def _report_exponent(ds, name: str, symbol: str, reference: str) -> None:
+    """Print an exponent with its errors and window; a refusal or missing error goes to stderr as a warning."""
+    a = ds.attrs
+    value = a[name]
+    window = f"window [{a['fit_min']:.3g}, {a['fit_max']:.3g}] ({a[f'{name}_n_in_window']} samples)"
+    if np.isfinite(value):
+        print(f"{symbol} = {value:.4f} ± {a[f'{name}_stat']:.4f} (stat) ± {a[f'{name}_sys']:.4f} (sys, "
+              f"{a[f'{name}_n_windows']} windows) on {window}; {reference}")
+    else:
+        print(f"{symbol} = nan on {window}")
+    if a[f"{name}_reason"]:
+        print(f"jamflow: warning: {symbol}: {a[f'{name}_reason']}", file=sys.stderr)
+
+
+def _report_break(ds) -> None:
+    a = ds.attrs
+    if a["fit_break_detected"]:
+        print(f"power-law break at {a['fit_break_at']:.3g} (z = {a['fit_break_z']:.1f}) inside "
+              f"[{a['fit_scaling_range_min']:.3g}, {a['fit_scaling_range_max']:.3g}]")
+
+
 def _split(paths: list[str], what: str) -> tuple[list[str], str]:
     if len(paths) < 2:
         raise ValueError(f"give at least one {what} and an output path")
@@ -134,19 +174,36 @@ def _load_all(paths: list[str], tol: float | None, quiet: bool) -> list[Packing]
 
 def _gaps(args: argparse.Namespace) -> int:
     inputs, out = _split(args.paths, "packing")
+    check_window(args.fit_min, args.fit_max, "--fit-min/--fit-max")
     ds = gap_distribution(_load_all(inputs, overlap_tol(args), args.quiet), args.max_gap, args.min_gap,
                           args.bins_per_decade, args.fit_min, args.fit_max, args.gap_tol,
-                          stage_parameters(args, "paths") | {"inputs": inputs})
+                          stage_parameters(args, "paths") | {"inputs": inputs}, args.include_rattlers,
+                          args.bootstrap, args.seed)
     write_dataset(ds, out)
+    a = ds.attrs
+    print(f"{a['n_samples']} packing(s), {a['n_particles_counted']} particles counted, "
+          f"rattlers {'included' if a['rattlers_included'] else 'excluded'}, "
+          f"{int(ds['count'].sum())} gaps binned")
+    _report_exponent(ds, "fit_exponent", "gamma", f"mean field {MEAN_FIELD_GAP_EXPONENT}")
+    _report_break(ds)
     return 0
 
 
 def _forces(args: argparse.Namespace) -> int:
     inputs, out = _split(args.paths, "packing")
+    check_window(args.fit_min, args.fit_max, "--fit-min/--fit-max")
     ds = force_distribution(_load_all(inputs, overlap_tol(args), args.quiet), args.f_max, args.linear_bins,
                             args.log_min, args.bins_per_decade, args.fit_min, args.fit_max,
-                            not args.all_contacts, stage_parameters(args, "paths") | {"inputs": inputs})
+                            not args.all_contacts, stage_parameters(args, "paths") | {"inputs": inputs},
+                            args.bootstrap, args.seed)
     write_dataset(ds, out)
+    a = ds.attrs
+    print(f"{a['n_samples']} packing(s), {a['n_forces']} forces ({a['contacts_used']}), "
+          f"buckler fraction {a['buckler_fraction']:.3f}")
+    _report_exponent(ds, "fit_exponent", "theta (all)", f"mean field extended {THETA_EXTENDED}")
+    _report_exponent(ds, "fit_exponent_buckler", "theta (buckler contacts)", f"localised {THETA_LOCALISED}")
+    _report_exponent(ds, "fit_exponent_extended", "theta (extended contacts)", f"mean field {THETA_EXTENDED}")
+    _report_break(ds)
     return 0
 
 
@@ -196,7 +253,8 @@ def _plot(args: argparse.Namespace) -> int:
         raise ValueError(f"output must end in .png (a .pdf is written beside it), got {out}")
     if args.labels is not None and len(args.labels) != len(inputs):
         raise ValueError(f"--labels needs one label per input ({len(inputs)}), got {len(args.labels)}")
-    single = {"packing": None, "forces": plots.plot_forces, "phi-kappa": plots.plot_phi_kappa,
+    single = {"packing": None, "forces": plots.plot_forces, "fit-windows": plots.plot_fit_windows,
+              "phi-kappa": plots.plot_phi_kappa,
               "pareto": plots.pareto, "jamming-table": plots.plot_jamming_table}
     labelled = {"gaps": plots.plot_gaps, "rdf": plots.plot_rdf, "stress-strain": plots.plot_stress_strain,
                 "eos": plots.plot_eos}

@@ -119,8 +119,8 @@ SERIES = ("strain", "time", "shear_stress", "pressure", "packing_fraction", "kap
 _SERIES_META = {
     "strain": ("1", "accumulated imposed strain gamma (rate * time; shear strain for shear modes)"),
     "time": ("1", "time in units of 1/gamma_dot (deformation) or lambda/(f_ext xi0) (forces)"),
-    "shear_stress": ("1", "shear stress -(1/Omega) sum f r_x r_y / r (Eq. 30), units of gamma_dot/(xi0 lambda^(d-2))"),
-    "pressure": ("1", "pressure <f|r>/(Omega d) (Eq. 24), units of gamma_dot/(xi0 lambda^(d-2))"),
+    "shear_stress": ("stress", "shear stress -(1/Omega) sum f r_x r_y / r (Eq. 30)"),
+    "pressure": ("stress", "pressure <f|r>/(Omega d) (Eq. 24)"),
     "packing_fraction": ("1", "packing fraction"),
     "kappa": ("1", "ratio of isotropic compression rate to shear rate (Eq. 25); NaN unless fixed pressure"),
     "n_contacts": ("1", "number of contacts in the network"),
@@ -243,8 +243,9 @@ def run_flow(
         if st.step % record_every == 0 or _done(integ, stop):
             recorder.record(integ)
             recorded_step = st.step
-            if progress is not None and target:
-                progress(min(1.0, (st.strain if stop.strain is not None else st.time / drive.time_unit) / target))
+            if progress is not None:
+                progress(fraction_done(st.strain if stop.strain is not None else st.time / drive.time_unit,
+                                       recorder.columns["packing_fraction"], stop))
         if n_snapshots and target:
             position = st.strain if stop.strain is not None else st.time / drive.time_unit
             while recorder.next_snapshot < n_snapshots and position >= (recorder.next_snapshot + 1) * target / n_snapshots * (1 - 1e-12):
@@ -264,6 +265,48 @@ def run_flow(
     return FlowResult(series, final, snaps, complete, integ.state.jammed)
 
 
+def fraction_done(position: float, phi: list[float], stop: Stop) -> float:
+    """Fraction of a run done, for progress bars, in [0, 1].
+
+    ``position`` is the strain (or time) reached. With a target packing fraction the
+    fraction is the way travelled from the first recorded ``phi`` to the target (a
+    compression stops there long before its strain limit, so the strain alone would
+    sit near 0 % and jump); it is never less than the strain (time) fraction.
+    """
+    target = stop.strain if stop.strain is not None else stop.time
+    done = position / target if target else 0.0
+    if stop.packing_fraction is not None and phi:
+        span = stop.packing_fraction - phi[0]
+        if span > 0:
+            done = max(done, (phi[-1] - phi[0]) / span)
+    return float(min(1.0, max(0.0, done)))
+
+
+#: Reference jamming densities of frictionless spheres per dimension (2D: bidisperse
+#: 1:1.4 discs; 3D: monodisperse; 4D, 5D: Charbonneau et al. PRE 2011/CALiPPSO Table I ballpark).
+PHI_J_REFERENCE: dict[int, float] = {2: 0.84, 3: 0.64, 4: 0.46, 5: 0.31}
+#: A start below this fraction of the reference phi_J, without contacts, is "far below jamming".
+DILUTE_FRACTION: float = 0.9
+
+
+def dilute_start(packing: Packing) -> str | None:
+    """Why a shear start is far below jamming, or None when it is dense or jammed.
+
+    Lerner et al.'s shear flow is a dense-suspension model: its stress comes from the
+    contact network. A start without contacts and at ``phi < DILUTE_FRACTION *
+    PHI_J_REFERENCE[d]`` shears a gas of spheres that rarely touch, and the stress and
+    friction of that trajectory say nothing about the jammed or dense states the
+    method is for.
+    """
+    ref = PHI_J_REFERENCE.get(packing.d)
+    n_contacts = 0 if packing.contacts is None else len(packing.contacts)
+    if ref is None or n_contacts > 0 or packing.packing_fraction >= DILUTE_FRACTION * ref:
+        return None
+    return (f"start is far below jamming: phi = {packing.packing_fraction:.4f} < {DILUTE_FRACTION} x "
+            f"{ref} (reference phi_J, d = {packing.d}) and no contacts; compress it first (jamflow compress) "
+            f"or start from a jammed packing")
+
+
 def _mode_name(drive: Drive) -> str:
     if drive.mode in ("forces", "self_propelled"):
         return "drive"
@@ -272,12 +315,24 @@ def _mode_name(drive: Drive) -> str:
     return drive.mode
 
 
+def stress_unit(drive: Drive, d: int) -> str:
+    """Unit of the recorded stresses: the force unit of Sec. II D per ``lambda^(d-1)``.
+
+    Deformation: forces in ``lambda gamma_dot / xi0`` (``xi0`` the mobility of Eq. 31),
+    so stress in ``gamma_dot / (xi0 lambda^(d-2))``; driven by forces: ``f_ext / lambda^(d-1)``.
+    """
+    if drive.deforms:
+        return "gamma_dot / xi0" if d == 2 else f"gamma_dot / (xi0 lambda^{d - 2})"
+    return f"f_ext / lambda^{d - 1}"
+
+
 def _series_dataset(integ: Integrator, rec: Recorder, params: dict, complete: bool) -> xr.Dataset:
     cols = rec.columns
     data_vars = {}
     for k in SERIES[2:]:
         dtype = np.int64 if k == "n_contacts" else np.float64
         units, long_name = _SERIES_META[k]
+        units = stress_unit(integ.drive, integ.d) if units == "stress" else units
         data_vars[k] = (("step",), np.asarray(cols[k], dtype=dtype), {"units": units, "long_name": long_name})
     ev = integ.state.events
     ev_arr = np.array(ev, dtype=np.float64).reshape(-1, 5)

@@ -163,12 +163,13 @@ def aqs_shear(
             progress(total)
     phi = packing.packing_fraction * packing.box.volume / np.asarray(rows["volume"])
     length = packing.attrs.get("length_unit", "packing length unit")
-    stress_units = "epsilon / length^d"
+    # energies in epsilon of the pair potential, lengths in the packing's unit (mean diameter)
+    stress_units = f"epsilon / length^{packing.d}"
     ds = xr.Dataset(
         data_vars={
-            "shear_stress": _var(rows["shear_stress"], "1", "shear stress sigma_xy = (1/V) dU/dgamma",
-                                 comment=f"{stress_units}; length unit: {length}"),
-            "pressure": _var(rows["pressure"], "1", "virial pressure", comment=f"{stress_units}"),
+            "shear_stress": _var(rows["shear_stress"], stress_units, "shear stress sigma_xy = (1/V) dU/dgamma",
+                                 comment=f"length unit: {length}"),
+            "pressure": _var(rows["pressure"], stress_units, "virial pressure", comment=f"length unit: {length}"),
             "energy": _var(rows["energy"], "1", "potential energy U", comment="epsilon"),
             "n_contacts": _var(np.asarray(rows["n_contacts"], np.int64), "1", "overlapping pairs"),
             "packing_fraction": _var(phi, "1", "packing fraction"),
@@ -340,13 +341,15 @@ def lerner_sd_shear(
     strain_arr = np.asarray(rows["strain"])
     phi = packing.packing_fraction * packing.box.volume / np.asarray(rows["volume"])
     stress_comment = "units lambda gamma_dot / xi_0 per lambda^(d-1), xi_0 = gamma_dot = 1"
+    # Lerner et al. Sec. II D: forces in lambda gamma_dot / xi_0, stress per lambda^(d-1)
+    sd_units = "gamma_dot / xi0" if packing.d == 2 else f"gamma_dot / (xi0 lambda^{packing.d - 2})"
     ev_strain = np.asarray(events["strain"], dtype=np.float64)
     ds = xr.Dataset(
         data_vars={
-            "shear_stress": _var(rows["shear_stress"], "1",
+            "shear_stress": _var(rows["shear_stress"], sd_units,
                                  "shear stress of hard-sphere forces on the tentative network (Lerner Eq. 30)",
                                  comment=stress_comment),
-            "pressure": _var(rows["pressure"], "1", "pressure of hard-sphere forces on the tentative network (Eq. 24)",
+            "pressure": _var(rows["pressure"], sd_units, "pressure of hard-sphere forces on the tentative network (Eq. 24)",
                              comment=stress_comment),
             "packing_fraction": _var(phi, "1", "packing fraction"),
             "kappa": _var(np.full(len(strain_arr), np.nan), "1", "compression to shear rate ratio (NaN: fixed volume)"),

@@ -1,0 +1,98 @@
+"""Every figure kind of ``jamflow plot`` labels every axis with a quantity and a unit.
+
+The check lives in :func:`jamflow.plots.save_figure` (a figure with an unlabelled axis
+is not written); here every kind is drawn on small synthetic inputs and saved.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import xarray as xr
+from matplotlib.figure import Figure
+
+from jamflow import plots
+from jamflow.analysis.eos import jamming_table
+from jamflow.analysis.flow import flow_summary
+from jamflow.analysis.forces import force_distribution
+from jamflow.analysis.gaps import gap_histogram
+from jamflow.analysis.overlap import overlap_series
+from jamflow.analysis.structure import structure_dataset
+from jamflow.cli.analysis import PLOT_KINDS
+
+from test_analysis_eos import eos_run, series
+from test_analysis_flow import flow_dataset
+from test_plots import lattice
+
+
+def _gaps(rng) -> xr.Dataset:
+    h = [(1e-9 ** 0.6 + rng.random(3000) * (0.1 ** 0.6 - 1e-9 ** 0.6)) ** (1 / 0.6) for _ in range(3)]
+    ds, summary = gap_histogram(h, [500] * 3, fit_min=1e-8, fit_max=1e-2, n_boot=20)
+    ds.attrs.update(summary)
+    return ds
+
+
+def _forces(rng) -> xr.Dataset:
+    p = lattice(20, 20)
+    return force_distribution([p.evolve(force=rng.random(len(p.contacts))) for _ in range(3)], n_boot=20)
+
+
+def _figures(rng) -> dict[str, Figure]:
+    s = np.linspace(0, 1, 201)
+    run = flow_dataset(s, 1 + 0.1 * rng.standard_normal(201), 5 + 0.1 * rng.standard_normal(201), [],
+                       kappa=0.01 * rng.standard_normal(201), mode="shear_fixed_pressure")
+    run["shear_stress"].attrs["units"] = "gamma_dot / xi0"
+    p = lattice()
+    overlaps = [overlap_series([p.evolve(contacts=p.contacts[3:], force=None, attrs={"iterations": 4}), p],
+                               [1e4, 1e8], growth_rate=1e-4)]
+    eos = [eos_run(0.643, 3, rng, 1e-4), eos_run(0.644, 3, rng, 1e-4)]
+    table = jamming_table([series([0.643, 0.643], 1e-4), series([0.644, 0.644], 1e-4)], eos)
+    tradeoff = xr.Dataset({"time": ("setting", [1.0, 2.0, 4.0]), "err": ("setting", [1e-3, 1e-6, 0.0]),
+                           "on_front": ("setting", [True, True, True]),
+                           "is_reference": ("setting", [False, False, True])},
+                          coords={"label": ("setting", ["a", "b", "ref"])},
+                          attrs={"primary_error": "err", "stage": "synthetic"})
+    gaps, forces = _gaps(rng), _forces(rng)
+    return {
+        "packing": plots.plot_packing(p),
+        "gaps": plots.plot_gaps([gaps], ["synthetic"]),
+        "forces": plots.plot_forces(forces),
+        "fit-windows": plots.plot_fit_windows(gaps),
+        "rdf": plots.plot_rdf([structure_dataset(lattice(12, 12), 2.5, 100)]),
+        "stress-strain": plots.plot_stress_strain([run, flow_summary(run)]),
+        "phi-kappa": plots.plot_phi_kappa(flow_summary(run)),
+        "overlap": plots.plot_overlap_series(overlaps),
+        "pareto": plots.pareto(tradeoff),
+        "jamming-table": plots.plot_jamming_table(table),
+        "eos": plots.plot_eos(eos),
+        "fit-windows (forces)": plots.plot_fit_windows(forces),
+    }
+
+
+def test_every_plot_kind_labels_every_axis_with_a_unit(tmp_path, rng):
+    figures = _figures(rng)
+    assert set(PLOT_KINDS) <= set(figures), "a plot kind without a label test"
+    for kind, fig in figures.items():
+        assert plots.unlabelled_axes(fig) == [], kind
+        png, _ = plots.save_figure(fig, tmp_path / f"{kind.split()[0]}.png")
+        assert png.stat().st_size > 5_000
+
+
+def test_stress_axis_carries_the_stage_unit(rng):
+    s = np.linspace(0, 1, 51)
+    run = flow_dataset(s, np.ones(51), np.ones(51), [])
+    run["shear_stress"].attrs["units"] = "epsilon / length^2"
+    fig = plots.plot_stress_strain([run])
+    assert "[epsilon / length^2]" in fig.axes[0].get_ylabel()
+
+
+@pytest.mark.parametrize("xlabel, ylabel", [("", "y (dimensionless)"), ("time [s]", ""), ("time", "y [m]")])
+def test_save_refuses_a_figure_without_unit_labels(tmp_path, xlabel, ylabel):
+    fig = Figure()
+    ax = fig.add_subplot()
+    ax.plot([1, 2], [1, 2])
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    with pytest.raises(ValueError, match="no quantity with a unit"):
+        plots.save_figure(fig, tmp_path / "bad.png")
+    assert not (tmp_path / "bad.png").exists()
