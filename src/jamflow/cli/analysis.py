@@ -15,7 +15,7 @@ from ..analysis.overlap import overlap_dataset, overlap_series
 from ..analysis.structure import structure_dataset
 from ..io import read_dat, read_dataset, read_packing, write_dataset
 from ..packing import Packing
-from .common import add_command, add_quiet, stage_parameters
+from .common import add_command, add_quiet, print_summary, stage_parameters
 from .packings import add_overlap_option, overlap_tol
 
 
@@ -69,6 +69,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("out", help="output netCDF")
     p.add_argument("--gap-tol", type=float, default=None, help="contacts from h <= GAP_TOL instead of the stored ones")
     add_overlap_option(p)
+    add_quiet(p)
 
     p = add_command(sub, "overlap-series", _overlap_series,
                     "Q(p_tar) and |Delta phi_J| of one sample against its largest p_tar")
@@ -78,6 +79,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--growth-rate", type=float, default=None,
                    help="LS growth rate kappa of the sample, stored as attribute 'kappa' to group samples in plots")
     add_overlap_option(p)
+    add_quiet(p)
 
     p = add_command(sub, "jamming-table", _jamming_table,
                     "phi_J^(LS) from the LS equation of state against LS+CALiPPSO phi_J, per kappa (Table I)",
@@ -89,6 +91,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--eos", nargs="+", required=True, help="equation of state of each LS run, same order as the series")
     p.add_argument("--fit-min", type=float, default=1e5, help="lowest reduced pressure of the fit (default 1e5)")
     p.add_argument("--fit-max", type=float, default=1e11, help="highest reduced pressure of the fit (default 1e11)")
+    add_quiet(p)
 
     p = add_command(sub, "rdf", _rdf, "radial distribution g(r) and crystallinity (2D psi6, 3D Q6)")
     p.add_argument("packing", help="input packing (.nc or .dat)")
@@ -96,6 +99,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--r-max", type=float, default=3.0, help="largest r in mean diameters (default 3)")
     p.add_argument("--bins", type=int, default=150, help="number of r bins (default 150)")
     add_overlap_option(p)
+    add_quiet(p)
 
     p = add_command(sub, "flow-summary", _flow_summary,
                     "stress-strain, friction, steady-state averages, contact lifetimes, event rates of a flow run")
@@ -104,6 +108,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--strain-min", type=float, default=None, help="start of the steady-state window (default: mid run)")
     p.add_argument("--strain-max", type=float, default=None, help="end of the steady-state window (default: end)")
     p.add_argument("--blocks", type=int, default=10, help="blocks of the error estimate (default 10)")
+    add_quiet(p)
 
     p = add_command(sub, "plot", _plot, "draw a figure (writes OUT.png and OUT.pdf)",
                     "Kinds: " + "; ".join(f"{k}: {v}" for k, v in PLOT_KINDS.items()))
@@ -112,6 +117,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--labels", nargs="+", default=None, help="legend label per input")
     p.add_argument("--slab-axis", type=int, default=2, help="packing, d >= 3: axis normal to the drawn slab (default 2)")
     add_overlap_option(p)
+    add_quiet(p)
 
 
 def _split(paths: list[str], what: str) -> tuple[list[str], str]:
@@ -138,6 +144,14 @@ def _gaps(args: argparse.Namespace) -> int:
                           args.bins_per_decade, args.fit_min, args.fit_max, args.gap_tol,
                           stage_parameters(args, "paths") | {"inputs": inputs})
     write_dataset(ds, out)
+    a = ds.attrs
+    print_summary(args, out, [
+        ("samples", a["n_samples"]),
+        ("gap exponent gamma", f"{a['fit_exponent']:.4g} +- {a['fit_exponent_err']:.2g} "
+                               f"(mean field {a['mean_field_exponent']:.5g})"),
+        ("fit window", f"{a['fit_min']:g} <= h <= {a['fit_max']:g}, {a['fit_n_bins']} bins, "
+                       f"chi2_reduced {a['fit_chi2_reduced']:.3g}"),
+    ])
     return 0
 
 
@@ -147,6 +161,17 @@ def _forces(args: argparse.Namespace) -> int:
                             args.log_min, args.bins_per_decade, args.fit_min, args.fit_max,
                             not args.all_contacts, stage_parameters(args, "paths") | {"inputs": inputs})
     write_dataset(ds, out)
+    a = ds.attrs
+    print_summary(args, out, [
+        ("samples, forces", f"{a['n_samples']}, {a['n_forces']}"),
+        ("small-force exponent theta", f"{a['fit_exponent']:.4g} +- {a['fit_exponent_err']:.2g} (all contacts)"),
+        ("theta_e (extended)", f"{a['fit_exponent_extended']:.4g} +- {a['fit_exponent_extended_err']:.2g} "
+                               f"(mean field {a['theta_extended_mean_field']:.5g})"),
+        ("theta_l (bucklers)", f"{a['fit_exponent_buckler']:.4g} +- {a['fit_exponent_buckler_err']:.2g} "
+                               f"(mean field {a['theta_localised_mean_field']:.5g})"),
+        ("buckler fraction", f"{a['buckler_fraction']:.4g}"),
+        ("fit window", f"{a['fit_min']:g} <= f/<f> <= {a['fit_max']:g}"),
+    ])
     return 0
 
 
@@ -155,14 +180,24 @@ def _overlap(args: argparse.Namespace) -> int:
     ds = overlap_dataset(_load_packing(args.a, tol), _load_packing(args.b, tol), args.gap_tol,
                          stage_parameters(args, "out"))
     write_dataset(ds, args.out)
+    a = ds.attrs
+    print_summary(args, args.out, [("Q", f"{a['Q']:.6g} ({a['n_common']} of {a['n_contacts_b']} contacts)"),
+                                   ("|Delta phi|", f"{a['abs_delta_phi']:.3g}")])
     return 0
 
 
 def _overlap_series(args: argparse.Namespace) -> int:
     inputs, out = _split(args.paths, "packing")
     packings = _load_all(inputs, overlap_tol(args), True)
-    write_dataset(overlap_series(packings, args.p_target, args.gap_tol,
-                                 stage_parameters(args, "paths") | {"inputs": inputs}, args.growth_rate), out)
+    ds = overlap_series(packings, args.p_target, args.gap_tol,
+                        stage_parameters(args, "paths") | {"inputs": inputs}, args.growth_rate)
+    write_dataset(ds, out)
+    rows = []
+    for k in range(ds.sizes["p_target"]):
+        r = ds.isel(p_target=k)
+        lps = f", LPs = {int(r.n_lp)}" if "n_lp" in r else ""
+        rows.append((f"p_tar = {float(r.p_target):g}", f"Q = {float(r.Q):.6g}, phi_J = {float(r.phi_J):.10f}{lps}"))
+    print_summary(args, out, rows)
     return 0
 
 
@@ -171,13 +206,20 @@ def _jamming_table(args: argparse.Namespace) -> int:
     ds = jamming_table([read_dataset(p) for p in inputs], [read_dataset(p) for p in args.eos], args.fit_min,
                        args.fit_max, stage_parameters(args, "paths") | {"inputs": inputs})
     write_dataset(ds, out)
-    print(table_markdown(ds))
+    print_summary(args, out)
+    if not args.quiet:
+        print(table_markdown(ds))
     return 0
 
 
 def _rdf(args: argparse.Namespace) -> int:
     packing = _load_packing(args.packing, overlap_tol(args))
-    write_dataset(structure_dataset(packing, args.r_max, args.bins, stage_parameters(args, "out")), args.out)
+    ds = structure_dataset(packing, args.r_max, args.bins, stage_parameters(args, "out"))
+    write_dataset(ds, args.out)
+    crystal = [(k, f"{ds.attrs[k]:.4g}") for k in ("psi6_global", "psi6_local_mean", "Q6_global", "q6_local_mean",
+                                                    "crystal_fraction") if k in ds.attrs]
+    print_summary(args, args.out, [("g(r)", f"{ds.sizes['r']} bins up to r = {args.r_max:g} mean diameters"),
+                                   ("packing fraction", f"{ds.attrs['packing_fraction']:.10f}"), *crystal])
     return 0
 
 
@@ -185,6 +227,14 @@ def _flow_summary(args: argparse.Namespace) -> int:
     ds = flow_summary(read_dataset(args.run), args.strain_min, args.strain_max, args.blocks,
                       stage_parameters(args, "out"))
     write_dataset(ds, args.out)
+    a = ds.attrs
+    print_summary(args, args.out, [
+        ("steady window", f"strain {a['window_strain_min']:.6g} .. {a['window_strain_max']:.6g}"),
+        *((f"<{q}>", f"{m:.6g} +- {e:.2g}")
+          for q, m, e in zip(ds.quantity.values, ds.steady_mean.values, ds.steady_err.values, strict=True)),
+        ("friction <sigma>/<p>", f"{a['friction_ratio_of_means']:.6g}"),
+        ("contact lifetimes", f"{a['n_lifetimes']} (mean {a['mean_lifetime_strain']:.3g} strain)"),
+    ])
     return 0
 
 
@@ -213,4 +263,5 @@ def _plot(args: argparse.Namespace) -> int:
         else:
             fig = plots.plot_overlap_series(data)
     plots.save_figure(fig, out)
+    print_summary(args, f"{out} and {Path(out).with_suffix('.pdf')}")
     return 0

@@ -19,7 +19,7 @@ from ..calippso import (
     result_to_dataset,
 )
 from ..io import read_packing, write_dataset
-from .common import add_command, add_preset, add_quiet, stage_parameters
+from .common import add_command, add_preset, add_quiet, print_summary, stage_parameters
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -75,9 +75,15 @@ def _calippso(args: argparse.Namespace) -> int:
             max_iterations=args.max_iterations, threads=args.threads, progress=progress, **kwargs,
         )
     write_dataset(result_to_dataset(result, stage_parameters(args, "packing", "out")), args.out)
-    if not args.quiet:
-        a = result.packing.attrs
-        print(f"{args.packing}: phi_J = {a['phi_J']:.10f} after {result.iterations} LPs, N_c = {a['n_contacts']} "
-              f"(isostatic {a['isostatic_count']}), {a['n_rattlers']} rattlers, max overlap {a['max_overlap']:.2g}, "
-              f"force balance {a['force_balance_residual']:.2g}, {a['total_time']:.1f} s")
+    a = result.packing.attrs
+    print_summary(args, args.out, [
+        ("phi_J", f"{a['phi_J']:.10f}"),
+        ("LPs", f"{result.iterations} (converged {bool(result.converged)})"),
+        ("contacts N_c", f"{a['n_contacts']} (isostatic count d(N_s-1)+1 = {a['isostatic_count']}, "
+                         f"isostatic {bool(a['isostatic'])})"),
+        ("rattlers", a["n_rattlers"]),
+        ("max overlap", f"{a['max_overlap']:.3g} (relative)"),
+        ("force-balance residual", f"{a['force_balance_residual']:.3g}"),
+        ("time", f"{a['total_time']:.1f} s"),
+    ])
     return 0

@@ -12,7 +12,7 @@ from ..analysis.contacts import summarize
 from ..initial import random_packing
 from ..io import read_dat, read_packing, write_packing, write_xyz
 from ..tolerances import OVERLAP_TOL
-from .common import add_command, add_quiet, stage_parameters
+from .common import add_command, add_quiet, format_rows, packing_rows, print_summary, stage_parameters
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -39,6 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("packing", help="input netCDF packing")
     p.add_argument("out", help="output .xyz")
     add_overlap_option(p)
+    add_quiet(p)
 
     p = add_command(sub, "check", _check, "contacts, rattlers, isostaticity, overlaps, force balance")
     p.add_argument("packing", help="input netCDF packing")
@@ -46,6 +47,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="relative gap counted as contact; default: the packing's own contacts, "
                         "else jamflow.tolerances.CONTACT_GAP_TOL")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--quiet", action="store_true",
+                   help="accepted like every command's --quiet; check has no progress output and always "
+                        "prints its report, which is its result")
     add_overlap_option(p, default=None)
 
 
@@ -68,16 +72,21 @@ def _init(args: argparse.Namespace) -> int:
                            args.ratio, args.fraction, args.width, args.species_spread,
                            progress=bar.update)
     write_packing(p, args.out, stage_parameters(args, "out"))
+    print_summary(args, args.out, packing_rows(p))
     return 0
 
 
 def _import_dat(args: argparse.Namespace) -> int:
-    write_packing(read_dat(args.dat), args.out)
+    packing = read_dat(args.dat)
+    write_packing(packing, args.out)
+    print_summary(args, args.out, packing_rows(packing))
     return 0
 
 
 def _export_xyz(args: argparse.Namespace) -> int:
-    write_xyz(read_packing(args.packing, overlap_tol(args)), args.out)
+    packing = read_packing(args.packing, overlap_tol(args))
+    write_xyz(packing, args.out)
+    print_summary(args, args.out, packing_rows(packing))
     return 0
 
 
@@ -101,7 +110,5 @@ def _check(args: argparse.Namespace) -> int:
         ("max force-balance residual", "no forces" if s.force_balance_residual is None
          else f"{s.force_balance_residual:.3e} (relative to mean force)"),
     ]
-    width = max(len(k) for k, _ in rows)
-    for k, v in rows:
-        print(f"{k:<{width}}  {v}")
+    print(format_rows(rows))
     return 0
