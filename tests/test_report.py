@@ -65,3 +65,12 @@ def test_every_referenced_caption_exists_and_every_caption_is_used():
             referenced.add(name)
     assert referenced, "no report() captions found in workflow/rules"
     assert referenced == {p.name for p in CAPTIONS}
+
+
+def test_the_package_depends_on_what_snakemake_report_needs():
+    # `snakemake --report` imports pygments, which only snakemake's [reports] extra installs
+    import tomllib
+
+    deps = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["dependencies"]
+    snakemake = [d for d in deps if d.replace(" ", "").startswith("snakemake[")]
+    assert snakemake and "reports" in snakemake[0].split("[", 1)[1].split("]", 1)[0].split(",")
