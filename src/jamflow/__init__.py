@@ -2,5 +2,6 @@
 
 from .box import Box
 from .packing import Packing
+from .summary import load_scene
 
-__all__ = ["Box", "Packing"]
+__all__ = ["Box", "Packing", "load_scene"]

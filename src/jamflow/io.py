@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 import xarray as xr
 
 from .box import Box
@@ -30,6 +31,7 @@ __all__ = [
     "read_dat",
     "write_dat",
     "write_xyz",
+    "write_table",
 ]
 
 
@@ -184,6 +186,19 @@ def write_xyz(packing: Packing, path: str | os.PathLike) -> Path:
     radius = 0.5 * packing.diameter
     lines += [f"S {p[0]!r} {p[1]!r} {p[2]!r} {r!r}" for p, r in zip(pos.tolist(), radius.tolist())]
     return _atomic_text(Path(path), "\n".join(lines) + "\n")
+
+
+def write_table(table: pd.DataFrame, path: str | os.PathLike) -> Path:
+    """Write a table atomically as CSV (``.csv``) or JSON records (``.json``; NaN as null)."""
+    path = Path(path)
+    if path.suffix == ".csv":
+        text = table.to_csv(index=False)
+    elif path.suffix == ".json":
+        records = table.astype(object).where(table.notna(), None).to_dict(orient="records")
+        text = json.dumps(records, indent=1, default=_netcdf_attr)
+    else:
+        raise ValueError(f"{path}: a table is written as .csv or .json")
+    return _atomic_text(path, text)
 
 
 def _atomic_text(path: Path, text: str) -> Path:
