@@ -64,3 +64,8 @@ MINIMIZE_FORCE_TOL: float = 1e-12
 #: same particles (the contact overlap Q): jamming one sample from different target
 #: pressures rescales every diameter by one common factor.
 DIAMETER_RATIO_RTOL: float = 1e-8
+
+#: Relative diameter difference below which two particles belong to one size class
+#: (``jamflow export-xyz`` particle types). Every stage scales all diameters by one
+#: common factor, so the classes of a mono- or bidisperse packing stay exact to rounding.
+SIZE_CLASS_RTOL: float = 1e-8
