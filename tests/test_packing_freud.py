@@ -68,3 +68,18 @@ def test_freud_counts_the_contacts_of_a_jammed_packing():
     # CALiPPSO's contacts touch to ~1e-9; in float32 a touching pair has |h| within a few roundings
     touching = {(min(a, b), max(a, b)) for a, b, g in zip(i, j, h) if abs(g) <= TOL / p.diameter.min()}
     assert {tuple(c) for c in p.contacts.tolist()} <= touching
+
+
+def test_freud_hexatic_order_equals_jamflows_in_a_sheared_box():
+    # two independent psi6 codes on one sheared packing: they agree where the 6th neighbour is unambiguous
+    from jamflow.analysis.structure import hexatic_order, nearest_neighbours
+
+    p = _sheared(2, seed=11)
+    box, points = p.to_freud()
+    op = freud.order.Hexatic(k=6)
+    op.compute((box, points), neighbors={"num_neighbors": 6})
+    _, dx = nearest_neighbours(p, 7)
+    r = np.linalg.norm(dx, axis=2)
+    clear = r[:, 6] - r[:, 5] > 100 * TOL  # float32 distances cannot swap the 6th and 7th neighbours
+    assert clear.sum() > 0.8 * p.n
+    np.testing.assert_allclose(op.particle_order[clear], hexatic_order(p)[clear], atol=100 * TOL)
