@@ -9,7 +9,7 @@ The public API, importable from the package itself::
 
 Every stage is a plain function on a :class:`Packing` (the same function its ``jamflow``
 command calls). Names are resolved on first use, so ``import jamflow`` stays cheap: the
-numba kernels, HiGHS and matplotlib load only with the stage that needs them.
+numba kernels and matplotlib load only with the stage that needs them.
 """
 
 from __future__ import annotations
@@ -18,6 +18,10 @@ import importlib
 from typing import Any
 
 from .box import Box
+
+# ``calippso`` is also a submodule's name: importing ``jamflow.calippso`` anywhere would
+# rebind the package attribute to the module, so the function is bound here, after it
+from .calippso import calippso
 from .packing import Packing
 
 #: Public name -> module (relative to this package) that defines it.
@@ -25,7 +29,6 @@ _LAZY: dict[str, str] = {
     # stages: Packing -> Packing / result / Dataset
     "random_packing": ".initial",
     "ls_compress": ".ls",
-    "calippso": ".calippso",
     "jam_to_pressure": ".soft.jamming",
     "aqs_shear": ".soft.shear",
     "lerner_sd_shear": ".soft.shear",
@@ -59,7 +62,7 @@ _LAZY: dict[str, str] = {
 #: Names whose defining module calls them differently.
 _RENAMED: dict[str, str] = {"ls_compress": "compress"}
 
-__all__ = ["Box", "Packing", *_LAZY]
+__all__ = ["Box", "Packing", "calippso", *_LAZY]
 
 
 def __getattr__(name: str) -> Any:
