@@ -26,7 +26,7 @@ def test_unknown_names_raise_attribute_error():
 
 
 def test_import_is_cheap():
-    code = ("import sys, jamflow; heavy = [m for m in ('numba', 'matplotlib', 'yaml') "
+    code = ("import sys, jamflow; heavy = [m for m in ('numba', 'highspy', 'matplotlib', 'yaml') "
             "if m in sys.modules]; print(','.join(heavy))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == ""
@@ -46,7 +46,7 @@ def test_public_names_survive_importing_the_submodules():
 
 def test_the_public_api_jams_a_packing_isostatically(tmp_path):
     start = jamflow.random_packing(24, 2, 0.5, "bi", seed=3)
-    jammed = jamflow.calippso(start).packing
+    jammed = jamflow.calippso_jam(start).packing
     path = jamflow.write_packing(jammed, tmp_path / "j.nc")
     s = jamflow.summarize(jamflow.read_packing(path))
     # LP jamming of frictionless discs: an isostatic backbone, N_c = d (N_s - 1) + 1, no overlap

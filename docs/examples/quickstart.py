@@ -26,7 +26,7 @@ def main(out: Path) -> dict[str, float]:
     ls = jamflow.ls_compress(start, 1e-2, [1e4], seed=7)
     (snapshot,) = ls.snapshots
     # CALiPPSO: jam exactly by a chain of linear programs; contacts and forces from the duals
-    result = jamflow.calippso(snapshot)
+    result = jamflow.calippso_jam(snapshot)
     jammed = result.packing
     path = jamflow.write_packing(jammed, out / "jammed.nc")
     jamflow.write_xyz(jammed, out / "jammed.xyz")

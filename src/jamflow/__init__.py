@@ -4,12 +4,12 @@ The public API, importable from the package itself::
 
     import jamflow
     p = jamflow.random_packing(64, 2, 0.4, "bi", seed=1)
-    jammed = jamflow.calippso(p).packing
+    jammed = jamflow.calippso_jam(p).packing
     jamflow.write_packing(jammed, "jammed.nc")
 
 Every stage is a plain function on a :class:`Packing` (the same function its ``jamflow``
 command calls). Names are resolved on first use, so ``import jamflow`` stays cheap: the
-numba kernels and matplotlib load only with the stage that needs them.
+numba kernels, HiGHS and matplotlib load only with the stage that needs them.
 """
 
 from __future__ import annotations
@@ -18,10 +18,6 @@ import importlib
 from typing import Any
 
 from .box import Box
-
-# ``calippso`` is also a submodule's name: importing ``jamflow.calippso`` anywhere would
-# rebind the package attribute to the module, so the function is bound here, after it
-from .calippso import calippso
 from .packing import Packing
 
 #: Public name -> module (relative to this package) that defines it.
@@ -29,6 +25,7 @@ _LAZY: dict[str, str] = {
     # stages: Packing -> Packing / result / Dataset
     "random_packing": ".initial",
     "ls_compress": ".ls",
+    "calippso_jam": ".calippso",
     "jam_to_pressure": ".soft.jamming",
     "aqs_shear": ".soft.shear",
     "lerner_sd_shear": ".soft.shear",
@@ -59,10 +56,11 @@ _LAZY: dict[str, str] = {
     "load_scene": ".summary",
 }
 
-#: Names whose defining module calls them differently.
-_RENAMED: dict[str, str] = {"ls_compress": "compress"}
+#: Names whose defining module calls them differently. A public name never equals a
+#: submodule's (``jamflow.calippso`` is the module; importing it rebinds that attribute).
+_RENAMED: dict[str, str] = {"ls_compress": "compress", "calippso_jam": "calippso"}
 
-__all__ = ["Box", "Packing", "calippso", *_LAZY]
+__all__ = ["Box", "Packing", *_LAZY]
 
 
 def __getattr__(name: str) -> Any:
