@@ -308,10 +308,12 @@ def _parse_extxyz(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[
             value, _, rest = rest.partition(" ")
         fields[key.strip()] = value
         rest = rest.strip()
-    assert fields["Properties"] == "species:S:1:pos:R:3:radius:R:1"
+    assert fields["Properties"] == "type:S:1:pos:R:3:radius:R:1"
     lattice = np.array([float(v) for v in fields["Lattice"].split()]).reshape(3, 3)
     rows = [ln.split() for ln in lines[2 : 2 + n]]
     assert all(len(r) == 5 for r in rows)
+    # size classes, never a chemical symbol (the old files said "S": sulfur)
+    assert {r[0] for r in rows} <= {"sphere", "small", "large", "poly"}
     pos = np.array([[float(v) for v in r[1:4]] for r in rows])
     radius = np.array([float(r[4]) for r in rows])
     return lattice, pos, radius, fields["pbc"].split(), fields
@@ -346,7 +348,8 @@ def test_xyz_of_a_sheared_2d_packing(tmp_path: Path) -> None:
 
 
 def test_xyz_read_by_ase(tmp_path: Path) -> None:
-    ase_io = pytest.importorskip("ase.io")
+    import ase.io as ase_io
+
     box = Box.lees_edwards([1.0, 1.2, 0.8], 0.3)
     rng = np.random.default_rng(1)
     p = Packing(box.wrap(box.to_cartesian(rng.random((11, 3)))), rng.uniform(0.01, 0.02, 11), box)

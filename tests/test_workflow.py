@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import base64
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -213,7 +215,19 @@ def test_default_scene_runs_end_to_end(tmp_path):
     assert all(p.stat().st_size > 1000 and p.with_suffix(".pdf").is_file() for p in pngs)
     report = _snakemake(work, "--report", "report.html")
     assert report.returncode == 0, report.stderr[-4000:]
-    assert (work / "report.html").stat().st_size > 10_000
+    _assert_report_has_every_figure(work / "report.html", pngs, work)
+
+
+def _assert_report_has_every_figure(report: Path, pngs: list[Path], work: Path) -> None:
+    """Each figure is embedded byte for byte (base64) under its path, and no caption has a Docutils error."""
+    html = report.read_text()
+    for png in pngs:
+        rel = png.relative_to(work).as_posix()
+        assert f'"{rel}": {{"name": "{png.name}"' in html, f"{rel} is not an entry of the report"
+        assert base64.b64encode(png.read_bytes()).decode() in html, f"{rel} is not embedded in the report"
+    captions = re.findall(r'"caption": "((?:[^"\\]|\\.)*)"', html)
+    assert len(captions) >= len(pngs)
+    assert not [c for c in captions if "system-message" in c or "problematic" in c]
 
 
 def test_scene_schema_offers_exactly_the_tradeoff_stages():

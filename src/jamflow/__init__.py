@@ -1,6 +1,75 @@
-"""jamflow: jammed packings of frictionless hard spheres, driven, certified and analysed."""
+"""jamflow: jammed packings of frictionless hard spheres, driven, certified and analysed.
+
+The public API, importable from the package itself::
+
+    import jamflow
+    p = jamflow.random_packing(64, 2, 0.4, "bi", seed=1)
+    jammed = jamflow.calippso_jam(p).packing
+    jamflow.write_packing(jammed, "jammed.nc")
+
+Every stage is a plain function on a :class:`Packing` (the same function its ``jamflow``
+command calls). Names are resolved on first use, so ``import jamflow`` stays cheap: the
+numba kernels, HiGHS and matplotlib load only with the stage that needs them.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
 
 from .box import Box
 from .packing import Packing
 
-__all__ = ["Box", "Packing"]
+#: Public name -> module (relative to this package) that defines it.
+_LAZY: dict[str, str] = {
+    # stages: Packing -> Packing / result / Dataset
+    "random_packing": ".initial",
+    "ls_compress": ".ls",
+    "calippso_jam": ".calippso",
+    "jam_to_pressure": ".soft.jamming",
+    "aqs_shear": ".soft.shear",
+    "lerner_sd_shear": ".soft.shear",
+    "elastic_moduli": ".soft.hessian",
+    "run_flow": ".overdamped.run",
+    "Drive": ".overdamped.driving",
+    "Stop": ".overdamped.run",
+    "FlowOptions": ".overdamped.integrate",
+    "certify": ".strict_jamming",
+    # analyses
+    "summarize": ".analysis.contacts",
+    "gap_distribution": ".analysis.gaps",
+    "force_distribution": ".analysis.forces",
+    "overlap_dataset": ".analysis.overlap",
+    "overlap_series": ".analysis.overlap",
+    "structure_dataset": ".analysis.structure",
+    "flow_summary": ".analysis.flow",
+    "jamming_table": ".analysis.eos",
+    # readers and writers
+    "read_packing": ".io",
+    "write_packing": ".io",
+    "read_dataset": ".io",
+    "write_dataset": ".io",
+    "read_dat": ".io",
+    "write_dat": ".io",
+    "write_xyz": ".io",
+    "write_table": ".io",
+    "load_scene": ".summary",
+}
+
+#: Names whose defining module calls them differently. A public name never equals a
+#: submodule's (``jamflow.calippso`` is the module; importing it rebinds that attribute).
+_RENAMED: dict[str, str] = {"ls_compress": "compress", "calippso_jam": "calippso"}
+
+__all__ = ["Box", "Packing", *_LAZY]
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _LAZY:
+        raise AttributeError(f"module 'jamflow' has no attribute {name!r}")
+    value = getattr(importlib.import_module(_LAZY[name], __name__), _RENAMED.get(name, name))
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -8,18 +8,19 @@ from __future__ import annotations
 import json
 import os
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 import xarray as xr
 
 from .box import Box
 from .packing import Packing
 from .provenance import provenance_attrs
-from .tolerances import OVERLAP_TOL
+from .tolerances import OVERLAP_TOL, SIZE_CLASS_RTOL
 
 __all__ = [
     "write_dataset",
@@ -30,6 +31,8 @@ __all__ = [
     "read_dat",
     "write_dat",
     "write_xyz",
+    "size_classes",
+    "write_table",
 ]
 
 
@@ -159,31 +162,111 @@ def write_dat(packing: Packing, path: str | os.PathLike) -> Path:
 # --- extended XYZ (OVITO) -------------------------------------------------------------
 
 
-def write_xyz(packing: Packing, path: str | os.PathLike) -> Path:
-    """Write extended XYZ with a ``Radius`` column, readable by OVITO and ASE.
+#: More distinct diameters than this are a continuous size distribution: one particle type.
+MAX_SIZE_CLASSES: int = 8
 
-    2D packings get a zero z column and a thin third lattice vector so viewers that
-    expect 3D still open them; d > 3 keeps only the first three coordinates and says
-    so in the comment line.
+
+def size_classes(diameter: np.ndarray) -> tuple[list[str], np.ndarray]:
+    """Particle-type names by size class and each particle's class, for viewers.
+
+    Diameters equal to :data:`~jamflow.tolerances.SIZE_CLASS_RTOL` form one class,
+    named in increasing size: ``sphere`` (monodisperse), ``small``/``large``
+    (bidisperse), ``size1`` ... ``sizeK`` (up to :data:`MAX_SIZE_CLASSES`). A wider
+    (continuous) distribution is one type ``poly``: the radius column carries each
+    size. None of these names is a chemical symbol, so viewers do not draw the
+    particles as an element.
+
+    Returns
+    -------
+    names : list of str
+    index : ndarray of int, shape (N,)
+        Class of each particle (into ``names``).
     """
-    d = packing.d
-    h = np.zeros((3, 3))
-    k = min(d, 3)
-    h[:k, :k] = packing.box.matrix[:k, :k]
-    if d == 2:
-        h[2, 2] = float(packing.diameter.max())
-    pos = np.zeros((packing.n, 3))
-    pos[:, :k] = packing.box.wrap(packing.position)[:, :k]
-    lattice = " ".join(repr(float(v)) for v in h.T.ravel())
-    note = f' projection="first 3 of {d} coordinates"' if d > 3 else ""
-    lines = [
-        str(packing.n),
-        f'Lattice="{lattice}" Properties=species:S:1:pos:R:3:radius:R:1 pbc="T T {"T" if d > 2 else "F"}"'
-        f' phi={packing.packing_fraction!r}{note}',
-    ]
-    radius = 0.5 * packing.diameter
-    lines += [f"S {p[0]!r} {p[1]!r} {p[2]!r} {r!r}" for p, r in zip(pos.tolist(), radius.tolist())]
+    order = np.argsort(diameter, kind="stable")
+    d = diameter[order]
+    new_class = np.concatenate([[True], np.diff(d) > SIZE_CLASS_RTOL * d[1:]])
+    k = np.cumsum(new_class) - 1
+    n_classes = int(k[-1]) + 1
+    if n_classes > MAX_SIZE_CLASSES:
+        return ["poly"], np.zeros(len(diameter), dtype=np.int64)
+    names = {1: ["sphere"], 2: ["small", "large"]}.get(n_classes, [f"size{c + 1}" for c in range(n_classes)])
+    index = np.empty(len(diameter), dtype=np.int64)
+    index[order] = k
+    return names, index
+
+
+def write_xyz(frames: Packing | Sequence[Packing], path: str | os.PathLike, pos_2d: bool = False) -> Path:
+    """Write extended XYZ readable by OVITO and ASE: one frame per packing.
+
+    Columns: ``type`` (size class, :func:`size_classes`; OVITO's particle type, ASE's
+    ``atoms.arrays["type"]`` with chemically neutral ``X`` atoms), ``pos``, ``radius``;
+    with rattler flags ``rattler`` (0/1); with contact forces ``force_sum`` (sum of
+    the magnitudes of the particle's contact forces, in the dataset's force unit) and
+    ``force_residual`` (norm of the vector sum of its contact forces relative to the
+    mean contact force: the per-particle force-balance residual of ``jamflow check``).
+    Each frame's header has ``Lattice`` (box vectors), ``pbc``, ``phi`` and, when
+    known, ``strain``, ``time`` and ``pressure``.
+
+    2D packings are written with ``pbc="T T F"``, ``z = 0`` and a third lattice vector
+    ``(0, 0, max diameter)``: ASE reads them as periodic in x and y only, and OVITO
+    needs every lattice vector non-zero to load the cell. OVITO marks a system 2D only
+    when the file has no z column; ``pos_2d=True`` writes ``pos:R:2`` for that (ASE
+    cannot read such files). d > 3 keeps the first three coordinates and says so.
+    """
+    from .analysis.contacts import force_balance_residual
+
+    frames = [frames] if isinstance(frames, Packing) else list(frames)
+    if not frames:
+        raise ValueError("no packing to write")
+    lines: list[str] = []
+    for packing in frames:
+        d, n = packing.d, packing.n
+        k = min(d, 3)
+        h = np.zeros((3, 3))
+        h[:k, :k] = packing.box.matrix[:k, :k]
+        if d == 2:
+            h[2, 2] = float(packing.diameter.max())
+        pos = np.zeros((n, 3))
+        pos[:, :k] = packing.box.wrap(packing.position)[:, :k]
+        names, index = size_classes(packing.diameter)
+        width = 2 if (d == 2 and pos_2d) else 3
+        props = [f"type:S:1:pos:R:{width}:radius:R:1"]
+        columns: list[np.ndarray] = [pos[:, :width], 0.5 * packing.diameter[:, None]]
+        if packing.rattler is not None:
+            props.append("rattler:I:1")
+            columns.append(packing.rattler.astype(np.int64)[:, None])
+        if packing.force is not None:
+            load = np.zeros(n)
+            np.add.at(load, packing.contacts[:, 0], np.abs(packing.force))
+            np.add.at(load, packing.contacts[:, 1], np.abs(packing.force))
+            props.append("force_sum:R:1:force_residual:R:1")
+            columns += [load[:, None], force_balance_residual(packing)[:, None]]
+        info = [f'Lattice="{" ".join(repr(float(v)) for v in h.T.ravel())}"', f"Properties={':'.join(props)}",
+                f'pbc="T T {"T" if d > 2 else "F"}"', f"phi={packing.packing_fraction!r}"]
+        info += [f"{key}={float(packing.attrs[key])!r}" for key in ("strain", "time") if key in packing.attrs]
+        if packing.pressure is not None and np.isfinite(packing.pressure):
+            info.append(f"pressure={float(packing.pressure)!r}")
+        if d > 3:
+            info.append(f'projection="first 3 of {d} coordinates"')
+        table = np.hstack(columns)
+        kinds = [c.dtype.kind for c in columns for _ in range(c.shape[1])]
+        lines += [str(n), " ".join(info)]
+        lines += [" ".join([names[t], *(str(int(v)) if kind == "i" else repr(float(v)) for v, kind in zip(row, kinds))])
+                  for t, row in zip(index.tolist(), table.tolist())]
     return _atomic_text(Path(path), "\n".join(lines) + "\n")
+
+
+def write_table(table: pd.DataFrame, path: str | os.PathLike) -> Path:
+    """Write a table atomically as CSV (``.csv``) or JSON records (``.json``; NaN as null)."""
+    path = Path(path)
+    if path.suffix == ".csv":
+        text = table.to_csv(index=False)
+    elif path.suffix == ".json":
+        records = table.astype(object).where(table.notna(), None).to_dict(orient="records")
+        text = json.dumps(records, indent=1, default=_netcdf_attr)
+    else:
+        raise ValueError(f"{path}: a table is written as .csv or .json")
+    return _atomic_text(path, text)
 
 
 def _atomic_text(path: Path, text: str) -> Path:

@@ -242,6 +242,55 @@ class Packing:
         """Inverse of :meth:`to_dataset` (no overlap validation; see ``io``)."""
         return packing_from_dataset(ds)
 
+    # freud (optional extra ``freud``) -----------------------------------------------
+    def to_freud(self) -> tuple[Any, NDArray[np.float64]]:
+        """The box and points in freud's conventions, so freud's analyses run on this packing.
+
+        freud boxes are centred on the origin (points in ``[-L/2, L/2)`` along each
+        lattice vector) with tilt factors ``xy``, ``xz``, ``yz`` relative to the box
+        lengths; jamflow's primary cell is ``[0, 1)`` in fractional coordinates. The
+        lattice vectors are the same, so a Lees-Edwards tilt carries over; 2D packings
+        give a 2D freud box and points with ``z = 0``. Only d = 2 and 3.
+
+        Returns
+        -------
+        box : freud.box.Box
+        points : ndarray, shape (N, 3)
+            Centres shifted by minus the box centre [length].
+        """
+        import freud  # optional extra: pip install "jamflow[freud]"
+
+        if self.d not in (2, 3):
+            raise ValueError(f"freud handles d = 2 and 3, got d = {self.d}")
+        matrix = np.zeros((3, 3))
+        matrix[: self.d, : self.d] = self.box.matrix
+        box = freud.box.Box.from_matrix(matrix, dimensions=self.d)
+        points = np.zeros((self.n, 3))
+        points[:, : self.d] = self.box.wrap(self.position) - self.box.to_cartesian(np.full(self.d, 0.5))
+        return box, points
+
+    @classmethod
+    def from_freud(cls, box: Any, points: ArrayLike, diameter: ArrayLike, **fields: Any) -> "Packing":
+        """A packing from a freud box and points (inverse of :meth:`to_freud`).
+
+        Parameters
+        ----------
+        box : freud.box.Box or anything ``freud.box.Box.from_box`` accepts
+        points : array_like, shape (N, 3)
+            Centres in freud's origin-centred cell [length]; ``z`` ignored for 2D boxes.
+        diameter : array_like, shape (N,)
+            Diameters [length].
+        **fields
+            Further :class:`Packing` fields (``protocol``, ``seed``, ...).
+        """
+        import freud  # optional extra: pip install "jamflow[freud]"
+
+        box = freud.box.Box.from_box(box)
+        d = box.dimensions
+        jbox = Box(np.asarray(box.to_matrix(), dtype=np.float64)[:d, :d])
+        x = np.asarray(points, dtype=np.float64)[:, :d] + jbox.to_cartesian(np.full(d, 0.5))
+        return cls(position=jbox.wrap(x), diameter=diameter, box=jbox, **fields)
+
 
 def near_pairs(packing: Packing, max_gap: float) -> tuple[PairList, NDArray[np.float64]]:
     """Pairs with relative gap ``h = r / sigma_ij - 1`` at most ``max_gap``.

@@ -68,3 +68,13 @@ MINIMIZE_FORCE_TOL: float = 1e-12
 #: same particles (the contact overlap Q): jamming one sample from different target
 #: pressures rescales every diameter by one common factor.
 DIAMETER_RATIO_RTOL: float = 1e-8
+
+#: Relative diameter difference below which two particles belong to one size class
+#: (``jamflow export-xyz`` particle types). Every stage scales all diameters by one
+#: common factor, so the classes of a mono- or bidisperse packing stay exact to rounding.
+SIZE_CLASS_RTOL: float = 1e-8
+
+#: Relative rounding of single precision (float32 machine epsilon, 2^-23): freud stores
+#: boxes and points in float32, so lengths exchanged with freud agree to this relative
+#: accuracy (per coordinate; a distance between two points to a few times it).
+FLOAT32_RTOL: float = 2.0**-23

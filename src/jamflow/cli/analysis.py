@@ -18,7 +18,7 @@ from ..analysis.overlap import overlap_dataset, overlap_series
 from ..analysis.structure import structure_dataset
 from ..io import read_dat, read_dataset, read_packing, write_dataset
 from ..packing import Packing
-from .common import add_command, add_quiet, stage_parameters
+from .common import add_command, add_quiet, print_summary, stage_parameters
 from .packings import add_overlap_option, overlap_tol
 
 
@@ -81,6 +81,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("out", help="output netCDF")
     p.add_argument("--gap-tol", type=float, default=None, help="contacts from h <= GAP_TOL instead of the stored ones")
     add_overlap_option(p)
+    add_quiet(p)
 
     p = add_command(sub, "overlap-series", _overlap_series,
                     "Q(p_tar) and |Delta phi_J| of one sample against its largest p_tar")
@@ -90,6 +91,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--growth-rate", type=float, default=None,
                    help="LS growth rate kappa of the sample, stored as attribute 'kappa' to group samples in plots")
     add_overlap_option(p)
+    add_quiet(p)
 
     p = add_command(sub, "jamming-table", _jamming_table,
                     "phi_J^(LS) from the LS equation of state against LS+CALiPPSO phi_J, per kappa (Table I)",
@@ -101,6 +103,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--eos", nargs="+", required=True, help="equation of state of each LS run, same order as the series")
     p.add_argument("--fit-min", type=float, default=1e5, help="lowest reduced pressure of the fit (default 1e5)")
     p.add_argument("--fit-max", type=float, default=1e11, help="highest reduced pressure of the fit (default 1e11)")
+    add_quiet(p)
 
     p = add_command(sub, "rdf", _rdf, "radial distribution g(r) and crystallinity (2D psi6, 3D Q6)")
     p.add_argument("packing", help="input packing (.nc or .dat)")
@@ -108,6 +111,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--r-max", type=float, default=3.0, help="largest r in mean diameters (default 3)")
     p.add_argument("--bins", type=int, default=150, help="number of r bins (default 150)")
     add_overlap_option(p)
+    add_quiet(p)
 
     p = add_command(sub, "flow-summary", _flow_summary,
                     "stress-strain, friction, steady-state averages, contact lifetimes, event rates of a flow run")
@@ -116,6 +120,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--strain-min", type=float, default=None, help="start of the steady-state window (default: mid run)")
     p.add_argument("--strain-max", type=float, default=None, help="end of the steady-state window (default: end)")
     p.add_argument("--blocks", type=int, default=10, help="blocks of the error estimate (default 10)")
+    add_quiet(p)
 
     p = add_command(sub, "plot", _plot, "draw a figure (writes OUT.png and OUT.pdf)",
                     "Kinds: " + "; ".join(f"{k}: {v}" for k, v in PLOT_KINDS.items()))
@@ -124,6 +129,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--labels", nargs="+", default=None, help="legend label per input")
     p.add_argument("--slab-axis", type=int, default=2, help="packing, d >= 3: axis normal to the drawn slab (default 2)")
     add_overlap_option(p)
+    add_quiet(p)
 
 
 def _add_fit_options(p: argparse.ArgumentParser) -> None:
@@ -133,25 +139,25 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the bootstrap (default 0)")
 
 
-def _report_exponent(ds, name: str, symbol: str, reference: str) -> None:
-    """Print an exponent with its errors and window; a refusal or missing error goes to stderr as a warning."""
+def _exponent_rows(ds, name: str, symbol: str, reference: str) -> list[tuple[str, str]]:
+    """Summary rows of a fitted exponent with its errors and window; a refusal or a
+    missing error is also warned about on stderr."""
     a = ds.attrs
     value = a[name]
-    window = f"window [{a['fit_min']:.3g}, {a['fit_max']:.3g}] ({a[f'{name}_n_in_window']} samples)"
-    if np.isfinite(value):
-        print(f"{symbol} = {value:.4f} ± {a[f'{name}_stat']:.4f} (stat) ± {a[f'{name}_sys']:.4f} (sys, "
-              f"{a[f'{name}_n_windows']} windows) on {window}; {reference}")
-    else:
-        print(f"{symbol} = nan on {window}")
+    rows = [(symbol, f"{value:.4f} ± {a[f'{name}_stat']:.4f} (stat) ± {a[f'{name}_sys']:.4f} "
+                     f"(sys, {a[f'{name}_n_windows']} windows); {reference}" if np.isfinite(value) else "nan"),
+            (f"{symbol} window", f"[{a['fit_min']:.3g}, {a['fit_max']:.3g}] ({a[f'{name}_n_in_window']} samples)")]
     if a[f"{name}_reason"]:
         print(f"jamflow: warning: {symbol}: {a[f'{name}_reason']}", file=sys.stderr)
+    return rows
 
 
-def _report_break(ds) -> None:
+def _break_rows(ds) -> list[tuple[str, str]]:
     a = ds.attrs
-    if a["fit_break_detected"]:
-        print(f"power-law break at {a['fit_break_at']:.3g} (z = {a['fit_break_z']:.1f}) inside "
-              f"[{a['fit_scaling_range_min']:.3g}, {a['fit_scaling_range_max']:.3g}]")
+    if not a["fit_break_detected"]:
+        return []
+    return [("power-law break", f"at {a['fit_break_at']:.3g} (z = {a['fit_break_z']:.1f}) inside "
+                                f"[{a['fit_scaling_range_min']:.3g}, {a['fit_scaling_range_max']:.3g}]")]
 
 
 def _split(paths: list[str], what: str) -> tuple[list[str], str]:
@@ -181,11 +187,12 @@ def _gaps(args: argparse.Namespace) -> int:
                           args.bootstrap, args.seed)
     write_dataset(ds, out)
     a = ds.attrs
-    print(f"{a['n_samples']} packing(s), {a['n_particles_counted']} particles counted, "
-          f"rattlers {'included' if a['rattlers_included'] else 'excluded'}, "
-          f"{int(ds['count'].sum())} gaps binned")
-    _report_exponent(ds, "fit_exponent", "gamma", f"mean field {MEAN_FIELD_GAP_EXPONENT}")
-    _report_break(ds)
+    print_summary(args, out, [
+        ("samples", f"{a['n_samples']} packing(s), {a['n_particles_counted']} particles counted, rattlers "
+                    f"{'included' if a['rattlers_included'] else 'excluded'}, {int(ds['count'].sum())} gaps binned"),
+        *_exponent_rows(ds, "fit_exponent", "gap exponent gamma", f"mean field {MEAN_FIELD_GAP_EXPONENT}"),
+        *_break_rows(ds),
+    ])
     return 0
 
 
@@ -198,12 +205,14 @@ def _forces(args: argparse.Namespace) -> int:
                             args.bootstrap, args.seed)
     write_dataset(ds, out)
     a = ds.attrs
-    print(f"{a['n_samples']} packing(s), {a['n_forces']} forces ({a['contacts_used']}), "
-          f"buckler fraction {a['buckler_fraction']:.3f}")
-    _report_exponent(ds, "fit_exponent", "theta (all)", f"mean field extended {THETA_EXTENDED}")
-    _report_exponent(ds, "fit_exponent_buckler", "theta (buckler contacts)", f"localised {THETA_LOCALISED}")
-    _report_exponent(ds, "fit_exponent_extended", "theta (extended contacts)", f"mean field {THETA_EXTENDED}")
-    _report_break(ds)
+    print_summary(args, out, [
+        ("samples, forces", f"{a['n_samples']}, {a['n_forces']} ({a['contacts_used']})"),
+        ("buckler fraction", f"{a['buckler_fraction']:.4g}"),
+        *_exponent_rows(ds, "fit_exponent", "theta (all)", f"mean field extended {THETA_EXTENDED}"),
+        *_exponent_rows(ds, "fit_exponent_buckler", "theta (buckler contacts)", f"localised {THETA_LOCALISED}"),
+        *_exponent_rows(ds, "fit_exponent_extended", "theta (extended contacts)", f"mean field {THETA_EXTENDED}"),
+        *_break_rows(ds),
+    ])
     return 0
 
 
@@ -212,14 +221,24 @@ def _overlap(args: argparse.Namespace) -> int:
     ds = overlap_dataset(_load_packing(args.a, tol), _load_packing(args.b, tol), args.gap_tol,
                          stage_parameters(args, "out"))
     write_dataset(ds, args.out)
+    a = ds.attrs
+    print_summary(args, args.out, [("Q", f"{a['Q']:.6g} ({a['n_common']} of {a['n_contacts_b']} contacts)"),
+                                   ("|Delta phi|", f"{a['abs_delta_phi']:.3g}")])
     return 0
 
 
 def _overlap_series(args: argparse.Namespace) -> int:
     inputs, out = _split(args.paths, "packing")
     packings = _load_all(inputs, overlap_tol(args), True)
-    write_dataset(overlap_series(packings, args.p_target, args.gap_tol,
-                                 stage_parameters(args, "paths") | {"inputs": inputs}, args.growth_rate), out)
+    ds = overlap_series(packings, args.p_target, args.gap_tol,
+                        stage_parameters(args, "paths") | {"inputs": inputs}, args.growth_rate)
+    write_dataset(ds, out)
+    rows = []
+    for k in range(ds.sizes["p_target"]):
+        r = ds.isel(p_target=k)
+        lps = f", LPs = {int(r.n_lp)}" if "n_lp" in r else ""
+        rows.append((f"p_tar = {float(r.p_target):g}", f"Q = {float(r.Q):.6g}, phi_J = {float(r.phi_J):.10f}{lps}"))
+    print_summary(args, out, rows)
     return 0
 
 
@@ -228,13 +247,20 @@ def _jamming_table(args: argparse.Namespace) -> int:
     ds = jamming_table([read_dataset(p) for p in inputs], [read_dataset(p) for p in args.eos], args.fit_min,
                        args.fit_max, stage_parameters(args, "paths") | {"inputs": inputs})
     write_dataset(ds, out)
-    print(table_markdown(ds))
+    print_summary(args, out)
+    if not args.quiet:
+        print(table_markdown(ds))
     return 0
 
 
 def _rdf(args: argparse.Namespace) -> int:
     packing = _load_packing(args.packing, overlap_tol(args))
-    write_dataset(structure_dataset(packing, args.r_max, args.bins, stage_parameters(args, "out")), args.out)
+    ds = structure_dataset(packing, args.r_max, args.bins, stage_parameters(args, "out"))
+    write_dataset(ds, args.out)
+    crystal = [(k, f"{ds.attrs[k]:.4g}") for k in ("psi6_global", "psi6_local_mean", "Q6_global", "q6_local_mean",
+                                                    "crystal_fraction") if k in ds.attrs]
+    print_summary(args, args.out, [("g(r)", f"{ds.sizes['r']} bins up to r = {args.r_max:g} mean diameters"),
+                                   ("packing fraction", f"{ds.attrs['packing_fraction']:.10f}"), *crystal])
     return 0
 
 
@@ -242,6 +268,14 @@ def _flow_summary(args: argparse.Namespace) -> int:
     ds = flow_summary(read_dataset(args.run), args.strain_min, args.strain_max, args.blocks,
                       stage_parameters(args, "out"))
     write_dataset(ds, args.out)
+    a = ds.attrs
+    print_summary(args, args.out, [
+        ("steady window", f"strain {a['window_strain_min']:.6g} .. {a['window_strain_max']:.6g}"),
+        *((f"<{q}>", f"{m:.6g} +- {e:.2g}")
+          for q, m, e in zip(ds.quantity.values, ds.steady_mean.values, ds.steady_err.values, strict=True)),
+        ("friction <sigma>/<p>", f"{a['friction_ratio_of_means']:.6g}"),
+        ("contact lifetimes", f"{a['n_lifetimes']} (mean {a['mean_lifetime_strain']:.3g} strain)"),
+    ])
     return 0
 
 
@@ -271,4 +305,5 @@ def _plot(args: argparse.Namespace) -> int:
         else:
             fig = plots.plot_overlap_series(data)
     plots.save_figure(fig, out)
+    print_summary(args, f"{out} and {Path(out).with_suffix('.pdf')}")
     return 0

@@ -19,7 +19,7 @@ from ..calippso import (
     result_to_dataset,
 )
 from ..io import read_packing, write_dataset
-from .common import add_command, add_preset, add_quiet, stage_parameters
+from .common import add_command, add_preset, add_quiet, print_summary, stage_parameters
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -76,14 +76,18 @@ def _calippso(args: argparse.Namespace) -> int:
             max_iterations=args.max_iterations, threads=args.threads, progress=progress, **kwargs,
         )
     write_dataset(result_to_dataset(result, stage_parameters(args, "packing", "out")), args.out)
-    if not args.quiet:
-        a = result.packing.attrs
-        counting = "hyperstatic" if a["hyperstatic"] else "isostatic" if a["isostatic"] else "not isostatic"
-        print(f"{args.packing}: phi_J = {a['phi_J']:.10f} after {result.iterations} LPs, N_c = {a['n_contacts']} "
-              f"(isostatic {a['isostatic_count']}: {counting}), {a['n_rattlers']} rattlers, "
-              f"max overlap {a['max_overlap']:.2g}, force balance {a['force_balance_residual']:.2g}, "
-              f"{a['total_time']:.1f} s")
-        print(f"forces: {a['force_assignment']} ({a['n_contacts_dual']} contacts carry a dual at the LP vertex, "
-              f"{a['n_contacts_geometric']} backbone contacts have gap <= {a['contact_gap_tol']:g}, "
-              f"{a['n_zero_force_contacts']} stored contacts have zero force)")
+    a = result.packing.attrs
+    counting = "hyperstatic" if a["hyperstatic"] else "isostatic" if a["isostatic"] else "not isostatic"
+    print_summary(args, args.out, [
+        ("phi_J", f"{a['phi_J']:.10f}"),
+        ("LPs", f"{result.iterations} (converged {bool(result.converged)})"),
+        ("contacts N_c", f"{a['n_contacts']} (isostatic count d(N_s-1)+1 = {a['isostatic_count']}: {counting})"),
+        ("rattlers", a["n_rattlers"]),
+        ("forces", f"{a['force_assignment']} ({a['n_contacts_dual']} contacts carry a dual at the LP vertex, "
+                   f"{a['n_contacts_geometric']} backbone contacts have gap <= {a['contact_gap_tol']:g}, "
+                   f"{a['n_zero_force_contacts']} stored contacts have zero force)"),
+        ("max overlap", f"{a['max_overlap']:.3g} (relative)"),
+        ("force-balance residual", f"{a['force_balance_residual']:.3g}"),
+        ("time", f"{a['total_time']:.1f} s"),
+    ])
     return 0

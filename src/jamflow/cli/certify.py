@@ -14,7 +14,7 @@ from ..strict_jamming import (
     certificate_to_dataset,
     certify,
 )
-from .common import add_command, add_preset, add_quiet, stage_parameters
+from .common import add_command, add_preset, add_quiet, print_summary, stage_parameters
 from .packings import add_overlap_option, overlap_tol
 
 
@@ -65,7 +65,6 @@ def _certify(args: argparse.Namespace) -> int:
             progress=bar,
         )
     write_dataset(certificate_to_dataset(cert, packing, stage_parameters(args, "packing", "out")), args.out)
-    if not args.quiet:
-        print(f"{args.packing}: {cert.classification} ({int(cert.rattler.sum())} rattlers, "
-              f"{len(cert.lp)} LPs)")
+    print_summary(args, args.out, [("classification", cert.classification),
+                                   ("rattlers", int(cert.rattler.sum())), ("LPs", len(cert.lp))])
     return 0

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+from collections.abc import Iterable
 from typing import Any
 
-__all__ = ["add_command", "add_quiet", "add_preset", "stage_parameters"]
+__all__ = ["add_command", "add_quiet", "add_preset", "stage_parameters", "format_rows", "print_summary",
+           "packing_rows"]
 
 
 def add_command(sub: Any, name: str, handler: Any, help: str, description: str | None = None) -> argparse.ArgumentParser:
@@ -17,7 +19,8 @@ def add_command(sub: Any, name: str, handler: Any, help: str, description: str |
 
 def add_quiet(parser: argparse.ArgumentParser) -> None:
     """``--quiet``: no progress bars."""
-    parser.add_argument("--quiet", action="store_true", help="no progress bars or progress messages")
+    parser.add_argument("--quiet", action="store_true",
+                        help="no progress bars and no printed summary (the output files hold every number)")
 
 
 def add_preset(parser: argparse.ArgumentParser) -> None:
@@ -34,3 +37,40 @@ def stage_parameters(args: argparse.Namespace, *exclude: str) -> dict[str, Any]:
     """The parsed options of a stage as a JSON-able dict (for dataset provenance)."""
     skip = {"handler", "command", "quiet", *exclude}
     return {k: v for k, v in vars(args).items() if k not in skip}
+
+
+def format_rows(rows: Iterable[tuple[str, Any]], indent: str = "") -> str:
+    """``name  value`` lines with the names left-aligned in one column."""
+    rows = [(str(k), str(v)) for k, v in rows]
+    if not rows:
+        return ""
+    width = max(len(k) for k, _ in rows)
+    return "\n".join(f"{indent}{k:<{width}}  {v}" for k, v in rows)
+
+
+def print_summary(args: argparse.Namespace, what: str, rows: Iterable[tuple[str, Any]] = ()) -> None:
+    """Print what a command computed, on stdout, unless ``--quiet``.
+
+    One header line ``<command>: <what>`` (``what`` is usually the output path), then
+    one indented ``name  value`` row per number. Snakemake rules send stdout to the
+    job's ``log:``, so the numbers are readable without opening the netCDF attributes.
+    """
+    if getattr(args, "quiet", False):
+        return
+    print(f"{args.command}: {what}")
+    text = format_rows(rows, indent="  ")
+    if text:
+        print(text, flush=True)
+
+
+def packing_rows(packing: Any) -> list[tuple[str, Any]]:
+    """Summary rows of a :class:`~jamflow.packing.Packing`: N, d, phi, pressure, contacts, rattlers."""
+    rows: list[tuple[str, Any]] = [("N, d", f"{packing.n}, {packing.d}"),
+                                   ("packing fraction", f"{packing.packing_fraction:.10f}")]
+    if packing.pressure is not None:
+        rows.append(("pressure", f"{packing.pressure:.6g}"))
+    if packing.contacts is not None:
+        rows.append(("contacts", len(packing.contacts)))
+    if packing.rattler is not None:
+        rows.append(("rattlers", int(packing.rattler.sum())))
+    return rows

@@ -13,7 +13,7 @@ from ..overdamped.driving import Drive, SelfPropulsion
 from ..overdamped.integrate import FlowOptions
 from ..overdamped.run import Stop, dilute_start, run_flow
 from ..packing import LENGTH_UNITS
-from .common import add_command, add_preset, add_quiet, stage_parameters
+from .common import add_command, add_preset, add_quiet, print_summary, stage_parameters
 from .packings import add_overlap_option, overlap_tol
 
 
@@ -126,10 +126,14 @@ def _run(args: argparse.Namespace, drive: Drive, stop: Stop, packing) -> int:
     if res.snapshots is not None:
         path = args.snapshot_file or str(Path(args.out).with_suffix(".snapshots.nc"))
         write_dataset(res.snapshots, path)
-    if not args.quiet:
-        s = res.series
-        print(f"{args.command}: {s.sizes['step']} records, {s.sizes['event']} events, strain {float(s.strain[-1]):.6g}, "
-              f"phi {float(s.packing_fraction[-1]):.6g}, jammed {res.jammed}, complete {res.complete}")
+    s = res.series
+    rows = [("records, events", f"{s.sizes['step']}, {s.sizes['event']}"),
+            ("strain", f"{float(s.strain[-1]):.6g}"), ("time", f"{float(s.time[-1]):.6g}"),
+            ("packing fraction", f"{float(s.packing_fraction[-1]):.10f}")]
+    rows += [(name.replace("_", " "), f"{float(s[name][-1]):.6g}")
+             for name in ("pressure", "shear_stress", "n_contacts") if name in s]
+    rows += [("jammed, complete", f"{res.jammed}, {res.complete}")]
+    print_summary(args, args.out, rows)
     return 0
 
 

@@ -8,7 +8,7 @@ from tqdm import tqdm
 
 from ..io import read_packing, write_dataset, write_packing
 from ..ls import DEFAULT_BETA, DEFAULT_FAST_GROWTH_RATE, DEFAULT_FAST_UNTIL, compress
-from .common import add_command, add_preset, add_quiet, stage_parameters
+from .common import add_command, add_preset, add_quiet, print_summary, stage_parameters
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -79,9 +79,9 @@ def _ls(args: argparse.Namespace) -> int:
         missing = args.out[len(snapshots):]
         raise RuntimeError(f"stopped by {result.stop_reason} before reaching every target; "
                            f"not written: {', '.join(missing)}")
-    if not args.quiet:
-        for snap, path in zip(snapshots, args.out, strict=True):
-            print(f"{path}: p = {snap.pressure:.6g}, phi = {snap.packing_fraction:.8f}, "
-                  f"collisions = {snap.attrs['collisions']}")
-        print(f"{result.collisions} collisions, {result.collisions_per_second:.3g} per CPU-second")
+    print_summary(args, f"{len(snapshots)} snapshot(s) of {args.packing}", [
+        *((path, f"p = {snap.pressure:.6g}, phi = {snap.packing_fraction:.10f}, "
+                 f"collisions = {snap.attrs['collisions']}") for snap, path in zip(snapshots, args.out, strict=True)),
+        ("collisions", f"{result.collisions} ({result.collisions_per_second:.3g} per CPU-second)"),
+    ])
     return 0

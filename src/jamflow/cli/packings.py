@@ -10,9 +10,10 @@ from tqdm import tqdm
 
 from ..analysis.contacts import summarize
 from ..initial import random_packing
-from ..io import read_dat, read_packing, write_packing, write_xyz
+from ..io import read_dat, read_dataset, read_packing, size_classes, write_packing, write_xyz
+from ..overdamped.run import snapshot_packings
 from ..tolerances import OVERLAP_TOL
-from .common import add_command, add_quiet, stage_parameters
+from .common import add_command, add_quiet, format_rows, packing_rows, print_summary, stage_parameters
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -35,10 +36,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("out", help="output netCDF")
     add_quiet(p)
 
-    p = add_command(sub, "export-xyz", _export_xyz, "write extended XYZ (OVITO) with a radius column")
-    p.add_argument("packing", help="input netCDF packing")
+    p = add_command(sub, "export-xyz", _export_xyz,
+                    "write extended XYZ for OVITO and ASE: size-class types, radius, rattler and force columns",
+                    "One frame for a packing; one frame per snapshot for a flow snapshot file (OUT.snapshots.nc "
+                    "of compress, shear or drive --snapshots N). Columns: type (size class: sphere, small/large, "
+                    "size1..sizeK, or poly), pos, radius, rattler (0/1, when known), force_sum (sum of contact-force "
+                    "magnitudes) and force_residual (|net contact force| / mean force), when the input has forces.")
+    p.add_argument("packing", help="input netCDF packing or flow snapshot file")
     p.add_argument("out", help="output .xyz")
+    p.add_argument("--pos-2d", action="store_true",
+                   help="2D: write x and y only (pos:R:2), which OVITO reads as a 2D system; ASE cannot read it")
     add_overlap_option(p)
+    add_quiet(p)
 
     p = add_command(sub, "check", _check, "contacts, rattlers, isostaticity, overlaps, force balance")
     p.add_argument("packing", help="input netCDF packing")
@@ -46,6 +55,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="relative gap counted as contact; default: the packing's own contacts, "
                         "else jamflow.tolerances.CONTACT_GAP_TOL")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--quiet", action="store_true",
+                   help="accepted like every command's --quiet; check has no progress output and always "
+                        "prints its report, which is its result")
     add_overlap_option(p, default=None)
 
 
@@ -68,16 +80,35 @@ def _init(args: argparse.Namespace) -> int:
                            args.ratio, args.fraction, args.width, args.species_spread,
                            progress=bar.update)
     write_packing(p, args.out, stage_parameters(args, "out"))
+    print_summary(args, args.out, packing_rows(p))
     return 0
 
 
 def _import_dat(args: argparse.Namespace) -> int:
-    write_packing(read_dat(args.dat), args.out)
+    packing = read_dat(args.dat)
+    write_packing(packing, args.out)
+    print_summary(args, args.out, packing_rows(packing))
     return 0
 
 
 def _export_xyz(args: argparse.Namespace) -> int:
-    write_xyz(read_packing(args.packing, overlap_tol(args)), args.out)
+    ds = read_dataset(args.packing)
+    if "snapshot_position" in ds:
+        frames = snapshot_packings(ds)
+        for frame in frames:
+            frame.validate(overlap_tol(args))
+    elif "step" in ds.dims:
+        raise ValueError(f"{args.packing} is a flow time series without positions; export its snapshot file "
+                         "(run with --snapshots N, written to OUT.snapshots.nc)")
+    else:
+        frames = [read_packing(args.packing, overlap_tol(args))]
+    if args.pos_2d and frames[0].d != 2:
+        raise ValueError(f"--pos-2d is for 2D packings, got d = {frames[0].d}")
+    write_xyz(frames, args.out, pos_2d=args.pos_2d)
+    names, _ = size_classes(frames[0].diameter)
+    rows = packing_rows(frames[0]) if len(frames) == 1 else [("frames", len(frames)), ("N, d", f"{frames[0].n}, "
+                                                                                             f"{frames[0].d}")]
+    print_summary(args, args.out, [*rows, ("particle types", " ".join(names))])
     return 0
 
 
@@ -104,7 +135,5 @@ def _check(args: argparse.Namespace) -> int:
     ]
     if s.force_balance_residual is not None and "force_assignment" in packing.attrs:
         rows.append(("force assignment", packing.attrs["force_assignment"]))
-    width = max(len(k) for k, _ in rows)
-    for k, v in rows:
-        print(f"{k:<{width}}  {v}")
+    print(format_rows(rows))
     return 0

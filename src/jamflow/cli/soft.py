@@ -15,7 +15,8 @@ from ..soft.jamming import FORCE_TOL_VANDERWERF, jam_to_pressure
 from ..soft.potential import PowerLawPotential
 from ..soft.shear import LERNER_DELTA_R, aqs_shear, lerner_sd_shear
 from ..tolerances import MINIMIZE_FORCE_TOL
-from .common import add_command, add_preset, add_quiet, stage_parameters
+from ..analysis.contacts import summarize
+from .common import add_command, add_preset, add_quiet, print_summary, stage_parameters
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -76,6 +77,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("out", help="output netCDF dataset")
     p.add_argument("--modes", type=int, default=10, help="number of lowest non-translational eigenvalues")
     p.add_argument("--exponent", type=float, default=2.0, help="potential exponent w")
+    add_quiet(p)
+
+
+def _series_rows(ds: xr.Dataset) -> list[tuple[str, str]]:
+    """Last row of a shear time series: strain, stresses, contacts."""
+    rows = [("strain steps", f"{ds.sizes['step']} (final strain {float(ds.strain[-1]):.6g})")]
+    rows += [(f"final {name.replace('_', ' ')}", f"{float(ds[name][-1]):.6g}")
+             for name in ("shear_stress", "pressure", "packing_fraction", "n_contacts") if name in ds]
+    return rows
 
 
 def _random_start(packing: Packing, seed: int) -> Packing:
@@ -106,6 +116,16 @@ def _soft_jam(args: argparse.Namespace) -> int:
             f"{args.pressure_rtol:g} within {args.max_steps} steps"
         )
     write_packing(result.packing, args.out, stage_parameters(args, "input", "out"))
+    s = summarize(result.packing)
+    print_summary(args, args.out, [
+        ("phi_J", f"{s.phi:.10f}"),
+        ("pressure", f"{result.packing.pressure:.6g} (target {args.pressure:g}) epsilon / mean diameter^d"),
+        ("contacts N_c (backbone)", f"{s.n_contacts} (isostatic count {s.isostatic_count}, "
+                                    f"excess {s.n_contacts - s.isostatic_count})"),
+        ("rattlers", s.n_rattlers),
+        ("max |F|", f"{result.packing.attrs['max_force_sq'] ** 0.5:.3g} epsilon / mean diameter"),
+        ("FIRE steps", result.steps),
+    ])
     return 0
 
 
@@ -126,6 +146,7 @@ def _aqs(args: argparse.Namespace) -> int:
     write_dataset(ds, args.out)
     if args.final:
         write_packing(final, args.final, stage_parameters(args, "input", "out", "final"))
+    print_summary(args, args.out, _series_rows(ds))
     return 0
 
 
@@ -138,6 +159,7 @@ def _sd_shear(args: argparse.Namespace) -> int:
                          max_steps=args.max_steps, progress=lambda _: bar.update(1))
     bar.close()
     write_dataset(ds, args.out)
+    print_summary(args, args.out, _series_rows(ds))
     return 0
 
 
@@ -165,4 +187,12 @@ def _moduli(args: argparse.Namespace) -> int:
                                 protocol=packing.protocol, length_unit=packing.attrs.get("length_unit", "")),
     )
     write_dataset(ds, args.out)
+    print_summary(args, args.out, [
+        ("bulk modulus B", f"{m.bulk:.6g} (affine {m.bulk_affine:.6g}) {unit}"),
+        ("shear modulus G", f"{m.shear:.6g} (affine {m.shear_affine:.6g}) {unit}"),
+        ("G / B", f"{m.shear / m.bulk:.4g}" if m.bulk else "undefined (B = 0)"),
+        ("pressure", f"{m.pressure:.6g} {unit}"),
+        ("rattlers", m.n_rattlers),
+        ("lowest eigenvalue", f"{eigenvalues[0]:.4g} epsilon / length^2" if len(eigenvalues) else "none"),
+    ])
     return 0

@@ -8,7 +8,7 @@ from tqdm import tqdm
 
 from ..io import write_dataset
 from ..tradeoff import STAGES, recommend, sweep
-from .common import add_command, add_quiet
+from .common import add_command, add_quiet, print_summary
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -37,7 +37,5 @@ def _tradeoff(args: argparse.Namespace) -> int:
 
         ds = sweep(args.stage, seed=args.seed, quick=args.quick, progress=step)
     write_dataset(ds, args.out)
-    if not args.quiet:
-        for preset, label in recommend(ds).items():
-            print(f"{args.stage} {preset}: {label}")
+    print_summary(args, f"{args.out} (recommended settings of {args.stage})", recommend(ds).items())
     return 0

@@ -20,13 +20,14 @@ import numpy as np
 import xarray as xr
 
 from ..analysis.contacts import find_rattlers
+from ..box import Box
 from ..io import new_dataset_attrs
 from ..packing import Packing, length_unit, near_pairs, sphere_volume
 from ..tolerances import OVERLAP_TOL
 from .driving import Drive
 from .integrate import FlowOptions, Integrator
 
-__all__ = ["Stop", "FlowResult", "length_unit", "run_flow"]
+__all__ = ["Stop", "FlowResult", "length_unit", "run_flow", "snapshot_packings"]
 
 
 
@@ -389,14 +390,37 @@ def _snapshot_dataset(rec: Recorder, integ: Integrator, params: dict) -> xr.Data
     return xr.Dataset(data_vars=data_vars, attrs=attrs)
 
 
+def snapshot_packings(ds: xr.Dataset) -> list[Packing]:
+    """The packings of a snapshot dataset (``--snapshots N`` of compress, shear, drive), in order.
+
+    Each packing holds the snapshot's centres, box (with its Lees-Edwards tilt), contacts
+    and contact forces (force unit of the time series); ``attrs`` carry its ``strain``
+    and ``time``. Lengths are the dataset's (input length units).
+    """
+    missing = [v for v in ("snapshot_position", "snapshot_box", "snapshot_contact_count", "diameter") if v not in ds]
+    if missing:
+        raise ValueError(f"not a flow snapshot dataset: missing variable(s) {', '.join(missing)}")
+    ends = np.cumsum(ds["snapshot_contact_count"].values)
+    starts = ends - ds["snapshot_contact_count"].values
+    pairs = np.stack([ds["snapshot_contact_i"].values, ds["snapshot_contact_j"].values], axis=1)
+    frames = []
+    for k in range(ds.sizes["snapshot"]):
+        box = Box(ds["snapshot_box"].values[k])
+        frames.append(Packing(
+            position=box.wrap(ds["snapshot_position"].values[k]), diameter=ds["diameter"].values, box=box,
+            contacts=pairs[starts[k]:ends[k]], force=ds["snapshot_force"].values[starts[k]:ends[k]],
+            protocol=str(ds.attrs.get("title", "flow snapshot")),
+            attrs={"strain": float(ds["snapshot_strain"].values[k]), "time": float(ds["snapshot_time"].values[k])},
+        ))
+    return frames
+
+
 def _final_packing(integ: Integrator, packing: Packing, lam: float, params: dict) -> Packing:
     st = integ.state
     pairs = st.nl.pairs[st.contact]
     force = integ.solution.force / integ.drive.force_unit
     sig = integ.stress() / integ.drive.force_unit
     x = (st.x * lam)
-    from ..box import Box
-
     box = Box(st.h * lam)
     return Packing(
         position=box.wrap(x), diameter=packing.diameter, box=box, contacts=pairs, force=force,

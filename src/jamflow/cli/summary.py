@@ -1,0 +1,60 @@
+"""Subcommand ``summary``: one table of a whole scene (a row per packing or flow run)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import pandas as pd
+
+from ..io import write_table
+from ..summary import load_scene
+from .common import add_command, add_quiet
+
+#: Columns printed (those with at least one value); --json / --csv write every column.
+PRINTED = ("kind", "sample", "stage", "kappa", "p_target", "N", "d", "phi", "phi_J", "pressure", "n_contacts",
+           "isostatic_count", "n_rattlers", "n_lp", "classification", "gamma", "gamma_err", "theta", "theta_err",
+           "strain", "shear_stress", "friction")
+#: Significant digits of printed floats: packing fractions in full, exponents and the rest short.
+DIGITS = {"phi": 10, "phi_J": 10}
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = add_command(
+        sub, "summary", _summary, "one table of a whole scene: a row per packing or flow run with its key numbers",
+        description="Reads results/<scene> (or the results of a scene YAML, relative to the current directory) and "
+                    "prints one row per packing and per flow run: parameters (sample, stage, kappa, p_target) and "
+                    "numbers (phi, phi_J, pressure, backbone contacts, isostatic count, rattlers, LPs, certificate, "
+                    "the scene's gap exponent gamma and force exponent theta with their errors). The same table "
+                    "from Python: jamflow.load_scene(PATH).",
+    )
+    p.add_argument("path", help="a scene's results folder (results/<scene>) or its scene YAML")
+    p.add_argument("--json", default=None, metavar="OUT.json", help="also write every column as JSON records")
+    p.add_argument("--csv", default=None, metavar="OUT.csv", help="also write every column as CSV")
+    add_quiet(p)
+
+
+def _format(column: str, value: object) -> str:
+    """A table cell: '-' for missing, integers without a decimal point, floats to DIGITS digits."""
+    if isinstance(value, float):
+        if math.isnan(value):
+            return "-"
+        if value.is_integer() and column not in DIGITS and abs(value) < 1e15:
+            return str(int(value))
+        return f"{value:.{DIGITS.get(column, 4)}g}"
+    return str(value) if value != "" else "-"
+
+
+def _summary(args: argparse.Namespace) -> int:
+    table = load_scene(args.path)
+    if args.json:
+        write_table(table, args.json)
+    if args.csv:
+        write_table(table, args.csv)
+    if args.quiet:
+        return 0
+    shown = [c for c in PRINTED if table[c].replace("", pd.NA).notna().any()]
+    text = table[shown].apply(lambda col: col.map(lambda v: _format(col.name, v))).to_string(index=False)
+    print(f"summary: {table['scene'].iloc[0]} ({len(table)} rows)")
+    print(text)
+    return 0

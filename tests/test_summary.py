@@ -1,0 +1,153 @@
+"""The scene table (``jamflow summary``, ``jamflow.load_scene``) equals the datasets' own numbers."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import xarray as xr
+
+import jamflow
+from jamflow.cli import main
+from jamflow.io import write_dataset
+
+KAPPA, P_TARGETS = 1e-2, (1e3, 1e6)
+VARIANTS = [f"_k{KAPPA:g}_p{p:g}" for p in P_TARGETS]
+
+
+def _cli(*argv: object) -> None:
+    assert main([str(a) for a in argv]) == 0
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """results/<scene> laid out as the workflow lays it out: 2 samples, init -> ls -> calippso, analyses, a run."""
+    root = tmp_path_factory.mktemp("results") / "mini"
+    for seed in (1, 2):
+        pk = root / "packings" / f"seed{seed}"
+        pk.mkdir(parents=True)
+        _cli("init", pk / "init.nc", "--d", "2", "--n", "16", "--phi", "0.5", "--dispersity", "bi",
+             "--seed", seed, "--quiet")
+        _cli("ls", pk / "init.nc", *(pk / f"ls{v}.nc" for v in VARIANTS), "--growth-rate", KAPPA,
+             "--p-target", *P_TARGETS, "--seed", seed, "--quiet")
+        for v in VARIANTS:
+            _cli("calippso", pk / f"ls{v}.nc", pk / f"calippso{v}.nc", "--quiet")
+    v = VARIANTS[-1]
+    _cli("certify", root / "packings" / "seed1" / f"calippso{v}.nc", root / "analysis" / "seed1" / f"certify{v}.nc",
+         "--quiet")
+    finals = [root / "packings" / f"seed{s}" / f"calippso{v}.nc" for s in (1, 2)]
+    # 16 discs give few gaps: a wide window on coarse bins so the fit has populated bins
+    _cli("gaps", *finals, root / "analysis" / f"gaps{v}.nc", "--fit-min", "1e-10", "--fit-max", "1e-1",
+         "--bins-per-decade", "1", "--quiet")
+    _cli("forces", *finals, root / "analysis" / f"forces{v}.nc", "--quiet")
+    lss = [root / "packings" / f"seed{s}" / f"ls{v}.nc" for s in (1, 2)]
+    _cli("gaps", *lss, root / "analysis" / f"ls-gaps{v}.nc", "--gap-tol", "1e-4", "--fit-min", "1e-4",
+         "--fit-max", "1e-1", "--bins-per-decade", "2", "--quiet")
+    # a flow time series in the flow schema's variables (its values are what the table must report)
+    steps = np.arange(5.0)
+    series = xr.Dataset(
+        {name: ("step", values) for name, values in {
+            "packing_fraction": 0.8 + 1e-3 * steps, "pressure": 3.0 + steps, "shear_stress": 0.1 * steps,
+            "n_contacts": 20 + steps}.items()},
+        coords={"strain": ("step", 0.01 * steps), "time": ("step", 0.02 * steps)},
+        attrs={"N": 16, "d": 2, "mode": "shear"},
+    )
+    write_dataset(series, root / "flow" / "seed1" / "shear_fixed-volume.nc")
+    return root
+
+
+def _attrs(root: Path, rel: str) -> dict:
+    return xr.load_dataset(root / rel).attrs
+
+
+def test_one_row_per_packing_and_run_with_the_datasets_numbers(scene):
+    table = jamflow.load_scene(scene)
+    packings = table[table.kind == "packing"]
+    assert len(packings) == 2 * (1 + 2 * len(VARIANTS))
+    assert list(packings[packings["sample"] == "seed1"].stage) == ["init", "ls", "ls", "calippso", "calippso"]
+    for row in packings.itertuples():
+        a = _attrs(scene, row.file)
+        assert row.phi == a["packing_fraction"] and row.N == a["N"] and row.d == a["d"]
+        if row.stage == "calippso":
+            assert row.phi_J == a["phi_J"] and row.n_lp == a["iterations"]
+            assert row.n_contacts == a["n_contacts"] and row.n_rattlers == a["n_rattlers"]
+            # LS + CALiPPSO: isostatic backbone, N_c = d (N_s - 1) + 1
+            assert row.isostatic == 1 and row.n_contacts == row.isostatic_count == 2 * (16 - row.n_rattlers - 1) + 1
+            assert row.max_overlap == a["max_overlap"]
+        if row.stage in ("ls", "calippso"):
+            assert row.kappa == KAPPA and row.p_target == a["target"] and row.p_target in P_TARGETS
+        if row.stage == "ls":
+            assert row.pressure == a["pressure"] >= row.p_target
+            assert np.isnan(row.phi_J) and np.isnan(row.n_contacts)
+
+
+def test_scene_level_exponents_and_certificate_land_on_their_stage_and_variant(scene):
+    table = jamflow.load_scene(scene).set_index(["sample", "stage", "p_target"])
+    gaps = _attrs(scene, f"analysis/gaps{VARIANTS[-1]}.nc")
+    forces = _attrs(scene, f"analysis/forces{VARIANTS[-1]}.nc")
+    ls_gaps = _attrs(scene, f"analysis/ls-gaps{VARIANTS[-1]}.nc")
+    p_max = P_TARGETS[-1]
+    assert np.isfinite([gaps["fit_exponent"], ls_gaps["fit_exponent"]]).all()
+    for sample in ("seed1", "seed2"):
+        final = table.loc[(sample, "calippso", p_max)]
+        assert final.gamma == gaps["fit_exponent"] and final.gamma_err == gaps["fit_exponent_err"]
+        assert final.theta == pytest.approx(forces["fit_exponent"], nan_ok=True)
+        assert table.loc[(sample, "ls", p_max)].gamma == ls_gaps["fit_exponent"]
+        # no analysis was run for the lower target: nothing attached there
+        assert np.isnan(table.loc[(sample, "calippso", P_TARGETS[0])].gamma)
+    cert = _attrs(scene, f"analysis/seed1/certify{VARIANTS[-1]}.nc")["classification"]
+    assert table.loc[("seed1", "calippso", p_max)].classification == cert
+    # the certificate is of the CALiPPSO packing, not of the LS snapshot with the same variant
+    assert table.loc[("seed1", "ls", p_max)].classification == ""
+    assert table.loc[("seed2", "calippso", p_max)].classification == ""
+
+
+def test_a_run_row_reports_the_last_record(scene):
+    table = jamflow.load_scene(scene)
+    (run,) = table[table.kind == "run"].itertuples()
+    assert (run.stage, run.strain, run.time, run.pressure, run.phi, run.n_contacts) == (
+        "shear_fixed-volume", 0.04, 0.08, 7.0, 0.804, 24.0)
+
+
+def test_dataset_form_has_the_same_values_and_long_names(scene):
+    table = jamflow.load_scene(scene)
+    ds = jamflow.load_scene(scene, as_="dataset")
+    assert ds.sizes["row"] == len(table)
+    np.testing.assert_array_equal(ds["phi"].values, table["phi"].values)
+    assert all("long_name" in ds[c].attrs for c in table.columns)
+
+
+def test_cli_prints_phi_j_and_gamma_and_writes_json_and_csv(scene, tmp_path, capsys):
+    _cli("summary", scene, "--json", tmp_path / "s.json", "--csv", tmp_path / "s.csv")
+    out = capsys.readouterr().out
+    table = jamflow.load_scene(scene)
+    header = out.splitlines()[1].split()
+    assert {"phi_J", "gamma", "gamma_err", "n_contacts", "isostatic_count", "classification"} <= set(header)
+    final = table[(table.stage == "calippso") & (table.p_target == P_TARGETS[-1])].iloc[0]
+    assert f"{final.phi_J:.10g}" in out and f"{final.gamma:.4g}" in out
+    records = json.loads((tmp_path / "s.json").read_text())
+    assert len(records) == len(table)
+    assert records[0]["kappa"] is None  # NaN is written as null
+    csv = pd.read_csv(tmp_path / "s.csv", keep_default_na=False, na_values=[""])
+    np.testing.assert_array_equal(csv["phi"].values, table["phi"].values)
+
+
+def test_scene_yaml_resolves_to_results_of_its_scene(scene, tmp_path, monkeypatch):
+    (tmp_path / "results").mkdir()
+    (tmp_path / "results" / "mini").symlink_to(scene)
+    (tmp_path / "s.yaml").write_text("scene: mini\n")
+    monkeypatch.chdir(tmp_path)
+    assert len(jamflow.load_scene("s.yaml")) == len(jamflow.load_scene(scene))
+
+
+@pytest.mark.parametrize("bad", ["missing-dir", "empty"])
+def test_bad_paths_fail_with_one_line(tmp_path, capsys, bad):
+    path = tmp_path / bad
+    if bad == "empty":
+        path.mkdir()
+    assert main(["summary", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("jamflow summary: error:") and str(path) in err and err.count("\n") == 1
