@@ -225,10 +225,14 @@ def stage_options(section, **flags):
 # its expectation, at least RUNTIME_FLOOR_MIN, and a retry (profile `retries`) asks for
 # `attempt` times both runtime and memory.
 RUNTIME_SAFETY = 5
-#: LS CPU seconds per sphere and per decade of pressure at kappa = 1e-3, per dimension
-LS_SECONDS_PER_SPHERE = {2: 0.01, 3: 0.01, 4: 0.01, 5: 0.01}
-#: overdamped flow of N = 100 discs: compression to its target, shear per unit strain
-COMPRESS_SECONDS = 60
+#: LS CPU seconds per sphere and per decade of pressure above the fast stage at
+#: kappa = 1e-3 (cost ~ N / kappa per decade): 2D N = 1024 to p = 1e11 in 8.6 s, 3D
+#: N = 1024 in 17 s; 5D bounded by the extremes suite's N = 1024 run, 4D in between
+LS_SECONDS_PER_SPHERE = {2: 1e-3, 3: 2e-3, 4: 8e-3, 5: 3e-2}
+#: overdamped flow of N = 100 2D discs: compression from phi = 0.5 to 0.83 took 75 CPU-s,
+#: shear at fixed volume 31 CPU-s for strain 0.05; scaled as N^2 (events per strain ~N,
+#: each event re-solves the contact network), an assumption, not a fit
+COMPRESS_SECONDS = 75
 SHEAR_SECONDS_PER_STRAIN = 600
 FLOW_EXPONENT = 2
 #: HiGHS threads of a CALiPPSO job (the only solver that takes threads)
@@ -268,7 +272,9 @@ def expected_cpu_seconds(stage, wildcards):
     n, d = scene_size()
     if stage == "ls":
         kappa = float(wildcards.kappa)
-        decades = math.log10(max(LS_TARGETS) / opt("ls", "fast_until")) if LS_TARGETS else 1.0
+        # the slow stage starts at the end of the fast one (p ~ 1 without a fast stage)
+        slow_from = opt("ls", "fast_until") if opt("ls", "fast_growth_rate") else 1.0
+        decades = math.log10(max(LS_TARGETS) / slow_from)
         return LS_SECONDS_PER_SPHERE[d] * n * (1 + max(decades, 0.0)) * (1e-3 / kappa)
     if stage == "calippso":
         # near starts (LS snapshots, imports): 694 s at N = 4096, ~N^3; a random start

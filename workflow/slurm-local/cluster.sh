@@ -7,7 +7,8 @@
 #   workflow/slurm-local/cluster.sh env STATE_DIR    print the line that points clients at it
 #
 # After `up`, `export SLURM_CONF=STATE_DIR/etc/slurm.conf` (what `env` prints) and sinfo,
-# sbatch, srun, squeue and sacct talk to this cluster. Account `jamflow`, partition `debug`
+# sbatch, srun, squeue and sacct talk to this cluster; /etc/slurm/slurm.conf links to it
+# while it is up (job steps need it there, see below), and munged serves /run/munge. Account `jamflow`, partition `debug`
 # (the default), cluster `jamflow`; associations are enforced, as on a real site.
 #
 # Needs root and apt-get (Debian/Ubuntu packages slurmctld slurmd slurm-client munge
@@ -30,6 +31,7 @@ DB_PORT=${JAMFLOW_MARIADB_PORT:-3306}
 # daemons in start order; `down` stops them in reverse
 DAEMONS=(munged mariadbd slurmdbd slurmctld slurmd)
 MUNGE_RUN=/run/munge
+SYSTEM_CONF=/etc/slurm/slurm.conf
 
 die() { echo "cluster.sh: $*" >&2; exit 1; }
 unavailable() { echo "cluster.sh: $*" >&2; exit 77; }
@@ -139,6 +141,8 @@ AccountingStorageHost=localhost
 AccountingStoragePort=$DBD_PORT
 AccountingStorageEnforce=associations,limits
 JobCompType=jobcomp/none
+# sacct shows the comment snakemake gives every job (its rule and wildcards)
+AccountingStoreFlags=job_comment
 $node State=UNKNOWN
 PartitionName=$PARTITION Nodes=ALL Default=YES MaxTime=7-00:00:00 State=UP
 EOF
@@ -179,8 +183,16 @@ up() {
     chmod 755 "$STATE"
     chown munge:munge "$STATE/munge"
     chown mysql:mysql "$STATE/mysql"
+    # snakemake-executor-plugin-slurm-jobstep 0.6.1 drops SLURM_CONF from the environment
+    # of the srun inside each job, so srun there needs slurm.conf at its default place, as
+    # on a real site: a link to ours, removed by `down`; an existing slurm.conf is kept
+    if [[ -e $SYSTEM_CONF || -L $SYSTEM_CONF ]] && [[ $(readlink "$SYSTEM_CONF") != "$ETC/slurm.conf" ]]; then
+        die "$SYSTEM_CONF exists and is not this cluster's: not replacing a real SLURM configuration"
+    fi
     trap 'status=$?; if [[ $status -ne 0 ]]; then echo "cluster.sh: start failed, stopping what was started" >&2; down; fi' EXIT
     write_configs
+    mkdir -p "$(dirname "$SYSTEM_CONF")"
+    ln -sfn "$ETC/slurm.conf" "$SYSTEM_CONF"
 
     # Slurm's clients reach munged at its default socket only (AuthInfo=socket= is not used
     # for the slurmdbd connection in 22.05); a munged already serving it is used, not started
@@ -247,6 +259,9 @@ down() {
         fi
         rm -f "$PIDS/$name.pid"
     done
+    if [[ -L $SYSTEM_CONF && $(readlink "$SYSTEM_CONF") == "$ETC/slurm.conf" ]]; then
+        rm -f "$SYSTEM_CONF"
+    fi
 }
 
 case $ACTION in
