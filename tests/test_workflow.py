@@ -7,6 +7,7 @@ import os
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -229,7 +230,9 @@ def slurm_cluster():
 
     script = REPO / "workflow" / "slurm-local" / "cluster.sh"
     state = Path(tempfile.mkdtemp(prefix="jamflow-slurm-", dir="/tmp"))
+    started = time.perf_counter()
     up = subprocess.run([str(script), "up", str(state)], capture_output=True, text=True, timeout=900)
+    print(f"cluster up: {time.perf_counter() - started:.0f} s wall; {up.stderr.strip()}")
     try:
         if up.returncode == 77:
             pytest.skip(up.stderr.strip().splitlines()[-1])
@@ -286,6 +289,7 @@ def test_slurm_run_submits_every_job_and_matches_a_local_run(tmp_path, slurm_clu
         work = _workdir(tmp_path / mode)
         scene = work / "scene.yaml"
         scene.write_text(yaml.safe_dump(SLURM_SCENE))
+        started = time.perf_counter()
         if mode == "local":
             res = _snakemake(work, "--workflow-profile", "workflow/profiles/default", "--configfile", str(scene))
         else:
@@ -299,6 +303,7 @@ def test_slurm_run_submits_every_job_and_matches_a_local_run(tmp_path, slurm_clu
                 cwd=work, capture_output=True, text=True, env=env,
             )
         assert res.returncode == 0, res.stderr[-6000:]
+        print(f"{mode} run: {time.perf_counter() - started:.0f} s wall")
         out = work / "results" / SLURM_SCENE["scene"]
         outputs[mode] = out
         # the rules no longer silence the commands: a job's log holds what it printed

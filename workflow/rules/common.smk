@@ -1,7 +1,9 @@
 # Helpers shared by the rules: sample names, stage chain, target list, options, resources.
 # Stage outputs live under results/<scene>/; rules only call the jamflow CLI.
 
+import functools
 import math
+import os
 
 RESULTS = f"results/{config['scene']}"
 LOGS = f"{RESULTS}/logs"
@@ -244,11 +246,14 @@ MEM_FLOOR_MB = 1000
 
 def _dat_header(path):
     """(N, d) of a CALiPPSO .dat file: line 1 is d, line 2 is N."""
+    if not os.path.isfile(path):
+        raise ValueError(f"import: {path} not found")
     with open(path) as fh:
         d, n = int(fh.readline()), int(fh.readline())
     return n, d
 
 
+@functools.cache
 def scene_size():
     """(N, d) of the scene's packings: the system's, the largest import, or a small stand-in
     for a tradeoff-only scene (its sweeps choose their own inputs)."""
