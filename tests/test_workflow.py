@@ -348,3 +348,32 @@ def _minutes(limit: str) -> int:
     days, _, clock = limit.rpartition("-")
     h, m, s = (int(x) for x in clock.split(":"))
     return (int(days or 0) * 24 + h) * 60 + m + (s > 0)
+
+
+def test_jobs_ask_for_resources_that_grow_with_the_scene(tmp_path):
+    """Every job asks for runtime and memory; LS asks for more at a lower growth rate and
+    CALiPPSO at a larger N, so a long job is not killed at a flat default; no rule
+    silences its command (--quiet emptied every log)."""
+    work = _workdir(tmp_path)
+    small = work / "config" / "config.yaml"
+    res = _snakemake(work, "-n", "-p", "--configfile", str(small))
+    assert res.returncode == 0, res.stderr
+    commands = [line for line in res.stdout.splitlines() if line.startswith("Shell command: jamflow")]
+    assert commands and not any("--quiet" in c for c in commands)
+    assert all("> results/" in c and " 2>" in c for c in commands)  # output goes to the log
+    base = _planned_resources(work, small)
+    assert all(runtime >= 10 and mem >= 1000 for jobs in base.values() for runtime, mem in jobs)
+
+    def plan(n, kappa):
+        scene = {"scene": f"big{n}", "system": {"d": 3, "n": n, "phi": 0.3, "seeds": [1]},
+                 "chain": ["ls", "calippso"], "ls": {"growth_rates": [kappa], "p_targets": [1e6, 1e7]},
+                 "analyses": ["check"], "figures": []}
+        path = work / f"scene{n}_{kappa:g}.yaml"
+        path.write_text(yaml.safe_dump(scene))
+        return _planned_resources(work, path)
+
+    fast, slow, large = plan(1024, 1e-3), plan(1024, 1e-5), plan(4096, 1e-5)
+    assert slow["ls"][0][0] > fast["ls"][0][0] and large["ls"][0][0] > slow["ls"][0][0]
+    assert max(r for r, _ in large["calippso"]) > max(r for r, _ in slow["calippso"])
+    assert max(m for _, m in large["calippso"]) > max(m for _, m in slow["calippso"])
+    assert max(m for _, m in large["calippso"]) > max(m for _, m in large["check"])
