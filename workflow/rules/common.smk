@@ -227,6 +227,9 @@ def stage_options(section, **flags):
 # its expectation, at least RUNTIME_FLOOR_MIN, and a retry (profile `retries`) asks for
 # `attempt` times both runtime and memory.
 RUNTIME_SAFETY = 5
+RUNTIME_FLOOR_MIN = 10
+#: every jamflow process holds ~0.25 GB (Python, numpy, xarray, numba, matplotlib)
+MEM_FLOOR_MB = 1000
 #: LS CPU seconds per sphere and per decade of pressure above the fast stage at
 #: kappa = 1e-3 (cost ~ N / kappa per decade): 2D N = 1024 to p = 1e11 in 8.6 s, 3D
 #: N = 1024 in 17 s; 5D bounded by the extremes suite's N = 1024 run, 4D in between
@@ -237,11 +240,11 @@ LS_SECONDS_PER_SPHERE = {2: 1e-3, 3: 2e-3, 4: 8e-3, 5: 3e-2}
 COMPRESS_SECONDS = 75
 SHEAR_SECONDS_PER_STRAIN = 600
 FLOW_EXPONENT = 2
-#: HiGHS threads of a CALiPPSO job (the only solver that takes threads)
+#: Threads per stage (default 1): the LS, FIRE and event-driven kernels are serial numba,
+#: and `jamflow calippso --threads 2` took the same 7.7 CPU-s as 1 on the authors' 3D
+#: N = 1024 LS packing (HiGHS's IPX and simplex are serial); the calippso rule passes its
+#: threads to HiGHS, so raising this entry reaches the solver
 STAGE_THREADS = {"calippso": 1}
-RUNTIME_FLOOR_MIN = 10
-#: every jamflow process holds ~0.25 GB (Python, numpy, xarray, numba, matplotlib)
-MEM_FLOOR_MB = 1000
 
 
 def _dat_header(path):
@@ -319,7 +322,7 @@ def extra_memory_mb(stage):
 
 
 def job_threads(stage):
-    """Threads of a job: one everywhere (see THREADS_NOTE in the README)."""
+    """Threads of a job of ``stage``: one unless STAGE_THREADS says otherwise."""
     return STAGE_THREADS.get(stage, 1)
 
 
