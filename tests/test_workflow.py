@@ -9,6 +9,7 @@ import re
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -235,3 +236,178 @@ def test_scene_schema_offers_exactly_the_tradeoff_stages():
 
     schema = yaml.safe_load((REPO / "workflow" / "schemas" / "config.schema.yaml").read_text())
     assert schema["properties"]["tradeoff"]["properties"]["stages"]["items"]["enum"] == list(STAGES)
+
+
+# --- a real SLURM cluster (workflow/slurm-local/cluster.sh) --------------------------------
+
+#: A tiny LS + CALiPPSO scene: one 2D sample, two LS targets, checked (6 cluster jobs).
+SLURM_SCENE = {
+    "scene": "slurm-check",
+    "system": {"d": 2, "n": 32, "phi": 0.4, "dispersity": "bi", "seeds": [1]},
+    "chain": ["ls", "calippso"],
+    "ls": {"growth_rates": [1e-3], "p_targets": [1e3, 1e6]},
+    "analyses": ["check"],
+    "figures": [],
+}
+#: rules of that scene that run on the submitting host (localrules in common.smk)
+SLURM_SCENE_LOCAL_RULES = {"all"}
+
+
+@pytest.fixture(scope="module")
+def slurm_cluster():
+    """A one-node SLURM cluster with accounting, up for this module, torn down after.
+
+    Yields the environment that points SLURM clients at it. The state folder lives under
+    /tmp (not pytest's private tmp_path) because munge and mysql must reach it.
+    """
+    import tempfile
+
+    script = REPO / "workflow" / "slurm-local" / "cluster.sh"
+    state = Path(tempfile.mkdtemp(prefix="jamflow-slurm-", dir="/tmp"))
+    started = time.perf_counter()
+    up = subprocess.run([str(script), "up", str(state)], capture_output=True, text=True, timeout=900)
+    print(f"cluster up: {time.perf_counter() - started:.0f} s wall; {up.stderr.strip()}")
+    try:
+        if up.returncode == 77:
+            pytest.skip(up.stderr.strip().splitlines()[-1])
+        assert up.returncode == 0, up.stderr[-4000:]
+        env = dict(os.environ)
+        env["SLURM_CONF"] = str(state / "etc" / "slurm.conf")
+        env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
+        yield env
+    finally:
+        subprocess.run([str(script), "down", str(state)], capture_output=True, text=True, timeout=300)
+        shutil.rmtree(state, ignore_errors=True)
+
+
+def _sacct_jobs(env: dict[str, str]) -> dict[str, dict[str, str]]:
+    """Allocations (not steps) the accounting database knows: JobID -> fields."""
+    fields = ["JobID", "State", "ExitCode", "Account", "Partition", "Timelimit", "ReqMem", "ReqCPUS", "Comment"]
+    res = subprocess.run(
+        ["sacct", "-X", "-n", "-P", "--starttime", "2000-01-01", "-o", ",".join(f + "%400" for f in fields)],
+        capture_output=True, text=True, env=env, check=True,
+    )
+    rows = [dict(zip(fields, line.split("|"))) for line in res.stdout.splitlines() if line.strip()]
+    return {row["JobID"]: row for row in rows}
+
+
+def _planned_resources(work: Path, scene: Path) -> dict[str, list[tuple[int, int]]]:
+    """Rule -> (runtime [min], mem_mb) of each job from a dry run's job blocks."""
+    res = _snakemake(work, "-n", "--configfile", str(scene))
+    assert res.returncode == 0, res.stderr + res.stdout
+    planned: dict[str, list[tuple[int, int]]] = {}
+    rule = None
+    for line in (res.stdout + res.stderr).splitlines():
+        line = line.strip()
+        if line.startswith(("rule ", "localrule ")) and line.endswith(":"):
+            rule = line.split()[1].rstrip(":")
+        elif line.startswith("resources:") and rule is not None:
+            values = dict(item.split("=", 1) for item in line.removeprefix("resources:").replace(" ", "").split(","))
+            if "runtime" in values:  # the target rule `all` asks for nothing
+                planned.setdefault(rule, []).append((int(values["runtime"]), int(values["mem_mb"])))
+            rule = None
+    return planned
+
+
+@pytest.mark.slow
+def test_slurm_run_submits_every_job_and_matches_a_local_run(tmp_path, slurm_cluster):
+    """The SLURM profile on a real SLURM with accounting: every non-local job goes through
+    sbatch with the rule's runtime and memory, and the packings are the local run's, bit for bit
+    (LS is seeded and event-driven, CALiPPSO's HiGHS solves are deterministic: same input,
+    same numbers), except the LP wall times."""
+    env = slurm_cluster
+    outputs = {}
+    before = set(_sacct_jobs(env))
+    for mode in ("local", "slurm"):
+        (tmp_path / mode).mkdir()
+        work = _workdir(tmp_path / mode)
+        scene = work / "scene.yaml"
+        scene.write_text(yaml.safe_dump(SLURM_SCENE))
+        started = time.perf_counter()
+        if mode == "local":
+            res = _snakemake(work, "--workflow-profile", "workflow/profiles/default", "--configfile", str(scene))
+        else:
+            planned = _planned_resources(work, scene)
+            # `timeout -s INT`: SIGINT lets snakemake cancel its SLURM jobs; plain SIGTERM does not stop it
+            res = subprocess.run(
+                ["timeout", "-s", "INT", "-k", "10", "900", sys.executable, "-m", "snakemake",
+                 "--workflow-profile", "workflow/profiles/slurm", "--configfile", str(scene),
+                 "--default-resources", "slurm_account=jamflow", "slurm_partition=debug",
+                 "--slurm-init-seconds-before-status-checks", "2", "--latency-wait", "5"],
+                cwd=work, capture_output=True, text=True, env=env,
+            )
+        assert res.returncode == 0, res.stderr[-6000:]
+        print(f"{mode} run: {time.perf_counter() - started:.0f} s wall")
+        out = work / "results" / SLURM_SCENE["scene"]
+        outputs[mode] = out
+        # the rules no longer silence the commands: a job's log holds what it printed
+        for stage in ("ls", "calippso"):
+            logs = sorted((out / "logs" / stage).glob("*.log"))
+            assert logs and all(log.stat().st_size > 0 for log in logs), (mode, stage)
+
+    jobs = {k: v for k, v in _sacct_jobs(env).items() if k not in before}
+    by_rule: dict[str, list[dict[str, str]]] = {}
+    for job in jobs.values():
+        # the plugin's comment: rule_<name>_wildcards_<...>
+        rule = job["Comment"].removeprefix("rule_").split("_wildcards_")[0]
+        by_rule.setdefault(rule, []).append(job)
+    cluster_planned = {r: v for r, v in planned.items() if r not in SLURM_SCENE_LOCAL_RULES}
+    assert {r: len(v) for r, v in by_rule.items()} == {r: len(v) for r, v in cluster_planned.items()}
+    for rule, submitted in by_rule.items():
+        for job in submitted:
+            assert job["State"] == "COMPLETED" and job["ExitCode"] == "0:0", job
+            assert job["Account"] == "jamflow" and job["Partition"] == "debug", job
+        # each job asked SLURM for what the rule's resources say
+        asked = sorted((_minutes(j["Timelimit"]), int(j["ReqMem"].rstrip("M"))) for j in submitted)
+        assert asked == sorted(cluster_planned[rule]), (rule, asked, cluster_planned[rule])
+
+    local, slurm = (sorted(p.relative_to(outputs[m]) for p in outputs[m].rglob("packings/**/*.nc"))
+                    for m in ("local", "slurm"))
+    assert local == slurm and len(local) == 6  # init, two LS snapshots, LS equation of state, two CALiPPSO
+    for rel in local:
+        a, b = xr.load_dataset(outputs["local"] / rel), xr.load_dataset(outputs["slurm"] / rel)
+        assert set(a.data_vars) == set(b.data_vars)
+        # wall-clock durations (units s, CALiPPSO's lp_time) differ between any two runs
+        clocks = {name for name in a.data_vars if a[name].attrs.get("units") == "s"}
+        assert clocks <= {"lp_time"}, clocks
+        for name in set(a.data_vars) - clocks:
+            np.testing.assert_array_equal(a[name].values, b[name].values, err_msg=f"{rel}:{name}")
+    for check in sorted((outputs["local"] / "analysis").rglob("*.check.json")):
+        assert json.loads(check.read_text()) == json.loads(
+            (outputs["slurm"] / check.relative_to(outputs["local"])).read_text())
+
+
+def _minutes(limit: str) -> int:
+    """Minutes of a SLURM time limit ``[D-]HH:MM:SS``."""
+    days, _, clock = limit.rpartition("-")
+    h, m, s = (int(x) for x in clock.split(":"))
+    return (int(days or 0) * 24 + h) * 60 + m + (s > 0)
+
+
+def test_jobs_ask_for_resources_that_grow_with_the_scene(tmp_path):
+    """Every job asks for runtime and memory; LS asks for more at a lower growth rate and
+    CALiPPSO at a larger N, so a long job is not killed at a flat default; no rule
+    silences its command (--quiet emptied every log)."""
+    work = _workdir(tmp_path)
+    small = work / "config" / "config.yaml"
+    res = _snakemake(work, "-n", "-p", "--configfile", str(small))
+    assert res.returncode == 0, res.stderr
+    commands = [line for line in res.stdout.splitlines() if line.startswith("Shell command: jamflow")]
+    assert commands and not any("--quiet" in c for c in commands)
+    assert all("> results/" in c and " 2>" in c for c in commands)  # output goes to the log
+    base = _planned_resources(work, small)
+    assert all(runtime >= 10 and mem >= 1000 for jobs in base.values() for runtime, mem in jobs)
+
+    def plan(n, kappa):
+        scene = {"scene": f"big{n}", "system": {"d": 3, "n": n, "phi": 0.3, "seeds": [1]},
+                 "chain": ["ls", "calippso"], "ls": {"growth_rates": [kappa], "p_targets": [1e6, 1e7]},
+                 "analyses": ["check"], "figures": []}
+        path = work / f"scene{n}_{kappa:g}.yaml"
+        path.write_text(yaml.safe_dump(scene))
+        return _planned_resources(work, path)
+
+    fast, slow, large = plan(1024, 1e-3), plan(1024, 1e-5), plan(4096, 1e-5)
+    assert slow["ls"][0][0] > fast["ls"][0][0] and large["ls"][0][0] > slow["ls"][0][0]
+    assert max(r for r, _ in large["calippso"]) > max(r for r, _ in slow["calippso"])
+    assert max(m for _, m in large["calippso"]) > max(m for _, m in slow["calippso"])
+    assert max(m for _, m in large["calippso"]) > max(m for _, m in large["check"])

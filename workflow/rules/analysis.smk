@@ -10,6 +10,9 @@ rule check:
         f"{LOGS}/check/{{sample}}_{{stage}}.log",
     benchmark:
         f"{BENCH}/check/{{sample}}_{{stage}}.tsv"
+    threads: job_threads("check")
+    resources:
+        **job_resources("check"),
     wildcard_constraints:
         stage="[a-z]+(_k[0-9.e+-]+_p[0-9.e+-]+)?",
     conda:
@@ -29,6 +32,9 @@ rule gaps:
         f"{LOGS}/analysis/gaps{{variant}}.log",
     benchmark:
         f"{BENCH}/analysis/gaps{{variant}}.tsv"
+    threads: job_threads("gaps")
+    resources:
+        **job_resources("gaps"),
     params:
         read=read_flags(FINAL),
         fit_min=opt("gaps", "fit_min"),
@@ -37,7 +43,7 @@ rule gaps:
         "../envs/jamflow.yaml"
     shell:
         "jamflow gaps {input} {output} --fit-min {params.fit_min} --fit-max {params.fit_max}"
-        " {params.read} --quiet > {log} 2>&1"
+        " {params.read} > {log} 2>&1"
 
 
 rule forces:
@@ -49,6 +55,9 @@ rule forces:
         f"{LOGS}/analysis/forces{{variant}}.log",
     benchmark:
         f"{BENCH}/analysis/forces{{variant}}.tsv"
+    threads: job_threads("forces")
+    resources:
+        **job_resources("forces"),
     params:
         read=read_flags(FINAL),
     conda:
@@ -66,6 +75,9 @@ rule rdf:
         f"{LOGS}/analysis/rdf_{{sample}}{{variant}}.log",
     benchmark:
         f"{BENCH}/analysis/rdf_{{sample}}{{variant}}.tsv"
+    threads: job_threads("rdf")
+    resources:
+        **job_resources("rdf"),
     params:
         read=read_flags(FINAL),
     conda:
@@ -83,6 +95,9 @@ rule certify:
         f"{LOGS}/analysis/certify_{{sample}}{{variant}}.log",
     benchmark:
         f"{BENCH}/analysis/certify_{{sample}}{{variant}}.tsv"
+    threads: job_threads("certify")
+    resources:
+        **job_resources("certify"),
     params:
         preset=PRESET,
         strict="--strict" if opt("certify", "strict") else "",
@@ -92,7 +107,7 @@ rule certify:
         "../envs/jamflow.yaml"
     shell:
         "jamflow certify {input} {output} {params.strict} {params.loads} --preset {params.preset}"
-        " {params.read} --quiet > {log} 2>&1"
+        " {params.read} > {log} 2>&1"
 
 
 rule ls_gaps:
@@ -104,6 +119,9 @@ rule ls_gaps:
         f"{LOGS}/analysis/ls-gaps{{variant}}.log",
     benchmark:
         f"{BENCH}/analysis/ls-gaps{{variant}}.tsv"
+    threads: job_threads("gaps")
+    resources:
+        **job_resources("gaps"),
     params:
         fit_min=opt("gaps", "fit_min"),
         fit_max=opt("gaps", "fit_max"),
@@ -112,7 +130,7 @@ rule ls_gaps:
     shell:
         # an LS snapshot at finite pressure has no contacts (so no rattlers): every positive gap is binned
         "jamflow gaps {input} {output} --gap-tol 0 --include-rattlers --fit-min {params.fit_min} --fit-max {params.fit_max}"
-        " --quiet > {log} 2>&1"
+        " > {log} 2>&1"
 
 
 rule overlap_series:
@@ -124,6 +142,9 @@ rule overlap_series:
         f"{LOGS}/analysis/overlap_{{sample}}_k{{kappa}}.log",
     benchmark:
         f"{BENCH}/analysis/overlap_{{sample}}_k{{kappa}}.tsv"
+    threads: job_threads("overlap")
+    resources:
+        **job_resources("overlap"),
     params:
         targets=" ".join(f"{p:g}" for p in LS_TARGETS),
     conda:
@@ -143,6 +164,9 @@ rule jamming_table:
         f"{LOGS}/analysis/jamming-table.log",
     benchmark:
         f"{BENCH}/analysis/jamming-table.tsv"
+    threads: job_threads("jamming_table")
+    resources:
+        **job_resources("jamming_table"),
     params:
         p_min=opt("jamming_table", "fit_min"),
         p_max=opt("jamming_table", "fit_max"),

@@ -1,5 +1,9 @@
-# Helpers shared by the rules: sample names, stage chain, target list.
+# Helpers shared by the rules: sample names, stage chain, target list, options, resources.
 # Stage outputs live under results/<scene>/; rules only call the jamflow CLI.
+
+import functools
+import math
+import os
 
 RESULTS = f"results/{config['scene']}"
 LOGS = f"{RESULTS}/logs"
@@ -192,3 +196,175 @@ def optional_flag(flag, value):
 def read_flags(stage):
     """Reading options for a stage's packing: soft packings carry overlaps."""
     return "--soft" if stage == "soft" else ""
+
+
+def stage_options(section, **flags):
+    """The scene's options of a stage as command-line flags, as a params function.
+
+    ``flags`` maps a key of the scene's ``section`` to its flag. A null value leaves the
+    option to the command's default (or, given as ``(flag, value)``, passes ``value``);
+    a boolean gives the bare flag when true. Evaluated per job, so a section the scene
+    does not use is never read.
+    """
+
+    def _options(wildcards):
+        parts = []
+        for key, spec in flags.items():
+            flag, if_null = spec if isinstance(spec, tuple) else (spec, None)
+            value = opt(section, key)
+            value = if_null if value is None else value
+            if isinstance(value, bool):
+                parts.append(flag if value else "")
+            else:
+                parts.append(optional_flag(flag, value))
+        return " ".join(p for p in parts if p)
+
+    return _options
+
+
+# Requests per job: threads, mem_mb [MB] and runtime [min] from the scene (N, d), the
+# stage and its protocol options, so that a scheduler gets honest requests and a long
+# LS or CALiPPSO job is not killed at a flat default. Expected CPU times are fitted to
+# runs on the 2-core development machine (README "Resources per job" gives the runs and
+# numbers; CALiPPSO from docs/calippso-scaling.md); a job asks for RUNTIME_SAFETY times
+# its expectation, at least RUNTIME_FLOOR_MIN, and a retry (profile `retries`) asks for
+# `attempt` times both runtime and memory.
+RUNTIME_SAFETY = 5
+RUNTIME_FLOOR_MIN = 10
+#: every jamflow process holds ~0.25 GB (Python, numpy, xarray, numba, matplotlib)
+MEM_FLOOR_MB = 1000
+#: LS CPU seconds per sphere and per decade of pressure above the fast stage at
+#: kappa = 1e-3 (cost ~ N / kappa per decade): 2D N = 1024 to p = 1e11 in 8.6 s, 3D
+#: N = 1024 in 17 s; 5D bounded by the extremes suite's N = 1024 run, 4D in between
+LS_SECONDS_PER_SPHERE = {2: 1e-3, 3: 2e-3, 4: 8e-3, 5: 3e-2}
+#: overdamped flow of N = 100 2D discs: compression from phi = 0.5 to 0.83 took 75 CPU-s,
+#: shear at fixed volume 31 CPU-s for strain 0.05; scaled as N^2 (events per strain ~N,
+#: each event re-solves the contact network), an assumption, not a fit
+COMPRESS_SECONDS = 75
+SHEAR_SECONDS_PER_STRAIN = 600
+FLOW_EXPONENT = 2
+#: Threads per stage (default 1): the LS, FIRE and event-driven kernels are serial numba,
+#: and `jamflow calippso --threads 2` took the same 7.7 CPU-s as 1 on the authors' 3D
+#: N = 1024 LS packing (HiGHS's IPX and simplex are serial); the calippso rule passes its
+#: threads to HiGHS, so raising this entry reaches the solver
+STAGE_THREADS = {"calippso": 1}
+
+
+def _dat_header(path):
+    """(N, d) of a CALiPPSO .dat file: line 1 is d, line 2 is N."""
+    if not os.path.isfile(path):
+        raise ValueError(f"import: {path} not found")
+    with open(path) as fh:
+        d, n = int(fh.readline()), int(fh.readline())
+    return n, d
+
+
+@functools.cache
+def scene_size():
+    """(N, d) of the scene's packings: the system's, the largest import, or a small stand-in
+    for a tradeoff-only scene (its sweeps choose their own inputs)."""
+    if "system" in config:
+        return config["system"]["n"], config["system"]["d"]
+    if "import" in config:
+        sizes = [_dat_header(path) for path in config["import"].values()]
+        return max(n for n, _ in sizes), max(d for _, d in sizes)
+    return 64, 2
+
+
+def _lp_size(n, d):
+    """Size of a CALiPPSO/certificate LP in units of a 3D packing's: N times the growth of
+    the constraint count with d, fitted to 5D N = 1024 (218 s) against 3D (4.9 s), whose
+    cube root is 3.5; 4D interpolated geometrically, 2D taken as 3D."""
+    return n * {2: 1.0, 3: 1.0, 4: 1.9, 5: 3.5}.get(d, 3.5 ** ((d - 3) / 2))
+
+
+def expected_cpu_seconds(stage, wildcards):
+    """Expected CPU time [s] of one job of ``stage`` in this scene (see README)."""
+    n, d = scene_size()
+    if stage == "ls":
+        kappa = float(wildcards.kappa)
+        # the slow stage starts at the end of the fast one (p ~ 1 without a fast stage)
+        slow_from = opt("ls", "fast_until") if opt("ls", "fast_growth_rate") else 1.0
+        decades = math.log10(max(LS_TARGETS) / slow_from)
+        return LS_SECONDS_PER_SPHERE[d] * n * (1 + max(decades, 0.0)) * (1e-3 / kappa)
+    if stage == "calippso":
+        # near starts (LS snapshots, imports): 694 s at N = 4096, ~N^3; a random start
+        # (init) needs 44 times more LPs and time (216 s against 4.9 s at N = 1024)
+        start = 44 if CHAIN[CHAIN.index("calippso") - 1] == "init" else 1
+        return 694 * (_lp_size(n, d) / 4096) ** 3 * start
+    if stage == "certify":
+        # 3D N = 4096 from soft jamming: 1683 s, the collective LP by dual simplex
+        return 1683 * (_lp_size(n, d) / 4096) ** 3
+    if stage == "soft":
+        # FIRE to P0 = 1e-8: 2D N = 1024 in 30 s, 3D N = 4096 in 1325 s
+        return 1325 * (n / 4096) ** 2 * (d / 3) ** 2
+    if stage == "compress":
+        return COMPRESS_SECONDS * (n / 100) ** FLOW_EXPONENT
+    if stage == "shear":
+        return SHEAR_SECONDS_PER_STRAIN * opt("flow", "strain") * (n / 100) ** FLOW_EXPONENT
+    if stage == "sd_shear":
+        # lerner-fig6 (N = 100, 500 strain steps of 1e-4) takes about a minute: ~0.1 s
+        # per strain step, each a steepest-descent minimisation whose length grows ~N
+        return 0.1 * opt("flow", "strain") / opt("sd", "step") * (n / 100) ** 2
+    if stage == "tradeoff":
+        # all stages of a full sweep take about a quarter of an hour, quick ones a minute
+        return 60 if opt("tradeoff", "quick") else 900
+    # init, import, check, analyses and figures: seconds
+    return 10 + 1e-3 * n
+
+
+def extra_memory_mb(stage):
+    """Memory [MB] a job of ``stage`` needs beyond the interpreter's."""
+    n, d = scene_size()
+    if stage in ("calippso", "certify"):
+        # peak 0.27 GiB up to N = 1024, 0.59 GiB at 4096 and 3.4 GiB in the first LP at
+        # 16384 (3D near starts): ~0.35 GB (N / 4096)^1.6 above the interpreter, doubled
+        return 2 * 350 * (_lp_size(n, d) / 4096) ** 1.6
+    # neighbour lists, contact networks and time series: linear in N, ~1 kB per sphere
+    return 1e-3 * n * d
+
+
+def job_threads(stage):
+    """Threads of a job of ``stage``: one unless STAGE_THREADS says otherwise."""
+    return STAGE_THREADS.get(stage, 1)
+
+
+def job_resources(stage):
+    """``mem_mb`` and ``runtime`` of a stage's jobs, for a rule's ``resources:``."""
+
+    def mem_mb(wildcards, attempt):
+        # whole 100 MB, so that requests read as round numbers
+        return 100 * math.ceil((MEM_FLOOR_MB + extra_memory_mb(stage)) * attempt / 100)
+
+    def runtime(wildcards, attempt):
+        minutes = RUNTIME_SAFETY * expected_cpu_seconds(stage, wildcards) / 60
+        return math.ceil(max(RUNTIME_FLOOR_MIN, minutes) * attempt)
+
+    return {"mem_mb": mem_mb, "runtime": runtime}
+
+
+# Light jobs run on the submitting host, not as cluster jobs: figures and summaries that
+# read a few small analysis files.
+localrules:
+    all,
+    import_dat,
+    gaps,
+    forces,
+    ls_gaps,
+    overlap_series,
+    jamming_table,
+    flow_summary,
+    plot_packing,
+    plot_gaps,
+    plot_forces,
+    plot_gap_windows,
+    plot_force_windows,
+    plot_rdf,
+    plot_stress_strain,
+    plot_phi_kappa,
+    plot_ed_vs_sd,
+    plot_phi_j_series,
+    plot_gaps_ls_vs_calippso,
+    plot_jamming_table,
+    plot_eos,
+    plot_pareto,

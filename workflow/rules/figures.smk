@@ -16,6 +16,9 @@ rule plot_packing:
         f"{LOGS}/figures/packing_{{sample}}{{variant}}.log",
     benchmark:
         f"{BENCH}/figures/packing_{{sample}}{{variant}}.tsv"
+    threads: job_threads("plot")
+    resources:
+        **job_resources("plot"),
     conda:
         "../envs/jamflow.yaml"
     params:
@@ -38,6 +41,9 @@ rule plot_gaps:
         f"{LOGS}/figures/gaps.log",
     benchmark:
         f"{BENCH}/figures/gaps.tsv"
+    threads: job_threads("plot")
+    resources:
+        **job_resources("plot"),
     conda:
         "../envs/jamflow.yaml"
     params:
@@ -61,6 +67,9 @@ rule plot_forces:
         f"{LOGS}/figures/forces.log",
     benchmark:
         f"{BENCH}/figures/forces.tsv"
+    threads: job_threads("plot")
+    resources:
+        **job_resources("plot"),
     conda:
         "../envs/jamflow.yaml"
     shell:
@@ -82,6 +91,9 @@ rule plot_gap_windows:
         f"{LOGS}/figures/gaps-windows.log",
     benchmark:
         f"{BENCH}/figures/gaps-windows.tsv"
+    threads: job_threads("plot")
+    resources:
+        **job_resources("plot"),
     conda:
         "../envs/jamflow.yaml"
     shell:
@@ -102,6 +114,9 @@ rule plot_force_windows:
         f"{LOGS}/figures/forces-windows.log",
     benchmark:
         f"{BENCH}/figures/forces-windows.tsv"
+    threads: job_threads("plot")
+    resources:
+        **job_resources("plot"),
     conda:
         "../envs/jamflow.yaml"
     shell:
@@ -122,6 +137,9 @@ rule plot_rdf:
         f"{LOGS}/figures/rdf.log",
     benchmark:
         f"{BENCH}/figures/rdf.tsv"
+    threads: job_threads("plot")
+    resources:
+        **job_resources("plot"),
     conda:
         "../envs/jamflow.yaml"
     params:
@@ -145,6 +163,9 @@ rule plot_stress_strain:
         f"{LOGS}/figures/stress-strain.log",
     benchmark:
         f"{BENCH}/figures/stress-strain.tsv"
+    threads: job_threads("plot")
+    resources:
+        **job_resources("plot"),
     params:
         labels=shear_labels(),
     conda:
@@ -168,6 +189,9 @@ rule plot_phi_kappa:
         f"{LOGS}/figures/phi-kappa_{{sample}}_{{condition}}.log",
     benchmark:
         f"{BENCH}/figures/phi-kappa_{{sample}}_{{condition}}.tsv"
+    threads: job_threads("plot")
+    resources:
+        **job_resources("plot"),
     conda:
         "../envs/jamflow.yaml"
     shell:
@@ -190,6 +214,9 @@ rule plot_ed_vs_sd:
         f"{LOGS}/figures/ed-vs-sd_{{sample}}.log",
     benchmark:
         f"{BENCH}/figures/ed-vs-sd_{{sample}}.tsv"
+    threads: job_threads("plot")
+    resources:
+        **job_resources("plot"),
     conda:
         "../envs/jamflow.yaml"
     shell:
@@ -211,6 +238,9 @@ rule plot_phi_j_series:
         f"{LOGS}/figures/phi-j-series.log",
     benchmark:
         f"{BENCH}/figures/phi-j-series.tsv"
+    threads: job_threads("plot")
+    resources:
+        **job_resources("plot"),
     conda:
         "../envs/jamflow.yaml"
     shell:
@@ -232,6 +262,9 @@ rule plot_gaps_ls_vs_calippso:
         f"{LOGS}/figures/gaps-ls-vs-calippso.log",
     benchmark:
         f"{BENCH}/figures/gaps-ls-vs-calippso.tsv"
+    threads: job_threads("plot")
+    resources:
+        **job_resources("plot"),
     params:
         labels=" ".join([*(f"LS:{v}" for v in variant_labels()), *(f"CALiPPSO:{v}" for v in variant_labels())]),
     conda:
@@ -254,6 +287,9 @@ rule plot_jamming_table:
         f"{LOGS}/figures/jamming-table.log",
     benchmark:
         f"{BENCH}/figures/jamming-table.tsv"
+    threads: job_threads("plot")
+    resources:
+        **job_resources("plot"),
     conda:
         "../envs/jamflow.yaml"
     shell:
@@ -274,6 +310,9 @@ rule plot_eos:
         f"{LOGS}/figures/eos.log",
     benchmark:
         f"{BENCH}/figures/eos.tsv"
+    threads: job_threads("plot")
+    resources:
+        **job_resources("plot"),
     conda:
         "../envs/jamflow.yaml"
     params:

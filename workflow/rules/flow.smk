@@ -12,19 +12,20 @@ rule compress:
         f"{LOGS}/compress/{{sample}}.log",
     benchmark:
         f"{BENCH}/compress/{{sample}}.tsv"
+    threads: job_threads("compress")
+    resources:
+        **job_resources("compress"),
     params:
         preset=PRESET,
-        phi=lambda wildcards: opt("compress", "phi"),
-        dt=lambda wildcards: optional_flag("--dt", opt("compress", "dt")),
-        correct_every=lambda wildcards: optional_flag("--correct-every", opt("compress", "correct_every")),
-        record_every=lambda wildcards: opt("compress", "record_every"),
+        options=stage_options(
+            "compress", phi="--phi", dt="--dt", correct_every="--correct-every", record_every="--record-every"
+        ),
         read=lambda wildcards: read_flags(CHAIN[CHAIN.index("compress") - 1]),
     conda:
         "../envs/jamflow.yaml"
     shell:
-        "jamflow compress {input} {output.series} --final {output.packing} --phi {params.phi}"
-        " {params.dt} {params.correct_every} --preset {params.preset}"
-        " --record-every {params.record_every} {params.read} --quiet > {log} 2>&1"
+        "jamflow compress {input} {output.series} --final {output.packing} {params.options}"
+        " --preset {params.preset} {params.read} > {log} 2>&1"
 
 
 rule shear:
@@ -37,21 +38,21 @@ rule shear:
         f"{LOGS}/shear/{{sample}}_{{condition}}.log",
     benchmark:
         f"{BENCH}/shear/{{sample}}_{{condition}}.tsv"
+    threads: job_threads("shear")
+    resources:
+        **job_resources("shear"),
     params:
         preset=PRESET,
-        strain=lambda wildcards: opt("flow", "strain"),
+        options=stage_options(
+            "flow", strain="--strain", dt="--dt", correct_every="--correct-every", record_every="--record-every", unit="--unit"
+        ),
         pressure=lambda wildcards: pressure_option(wildcards.condition),
-        dt=lambda wildcards: optional_flag("--dt", opt("flow", "dt")),
-        correct_every=lambda wildcards: optional_flag("--correct-every", opt("flow", "correct_every")),
-        record_every=lambda wildcards: opt("flow", "record_every"),
-        unit=lambda wildcards: opt("flow", "unit"),
         read=read_flags(FINAL),
     conda:
         "../envs/jamflow.yaml"
     shell:
-        "jamflow shear {input} {output.series} --final {output.final} --strain {params.strain}"
-        " {params.pressure} {params.dt} {params.correct_every} --preset {params.preset}"
-        " --record-every {params.record_every} --unit {params.unit} {params.read} --quiet > {log} 2>&1"
+        "jamflow shear {input} {output.series} --final {output.final} {params.options}"
+        " {params.pressure} --preset {params.preset} {params.read} > {log} 2>&1"
 
 
 rule flow_summary:
@@ -63,6 +64,9 @@ rule flow_summary:
         f"{LOGS}/analysis/shear_summary_{{sample}}_{{condition}}.log",
     benchmark:
         f"{BENCH}/analysis/shear_summary_{{sample}}_{{condition}}.tsv"
+    threads: job_threads("flow_summary")
+    resources:
+        **job_resources("flow_summary"),
     conda:
         "../envs/jamflow.yaml"
     shell:
@@ -78,16 +82,13 @@ rule sd_shear:
         f"{LOGS}/sd_shear/{{sample}}.log",
     benchmark:
         f"{BENCH}/sd_shear/{{sample}}.tsv"
+    threads: job_threads("sd_shear")
+    resources:
+        **job_resources("sd_shear"),
     params:
-        strain=lambda wildcards: opt("flow", "strain"),
-        step=lambda wildcards: opt("sd", "step"),
-        dt=lambda wildcards: opt("sd", "dt"),
-        grad_tol=lambda wildcards: opt("sd", "grad_tol"),
-        delta_r=lambda wildcards: opt("sd", "delta_r"),
-        unit=lambda wildcards: opt("flow", "unit"),
+        flow=stage_options("flow", strain="--strain", unit="--unit"),
+        sd=stage_options("sd", step="--step", dt="--dt", grad_tol="--grad-tol", delta_r="--delta-r"),
     conda:
         "../envs/jamflow.yaml"
     shell:
-        "jamflow sd-shear {input} {output} --strain {params.strain} --step {params.step}"
-        " --dt {params.dt} --grad-tol {params.grad_tol} --delta-r {params.delta_r}"
-        " --unit {params.unit} --quiet > {log} 2>&1"
+        "jamflow sd-shear {input} {output} {params.flow} {params.sd} > {log} 2>&1"

@@ -8,6 +8,9 @@ rule init:
         f"{LOGS}/init/{{sample}}.log",
     benchmark:
         f"{BENCH}/init/{{sample}}.tsv"
+    threads: job_threads("init")
+    resources:
+        **job_resources("init"),
     params:
         seed=seed_of,
         system=config.get("system", {}),
@@ -18,7 +21,7 @@ rule init:
         " --phi {params.system[phi]} --dispersity {params.system[dispersity]}"
         " --ratio {params.system[ratio]} --fraction {params.system[fraction]}"
         " --width {params.system[width]} --species-spread {params.system[species_spread]}"
-        " --seed {params.seed} --quiet > {log} 2>&1"
+        " --seed {params.seed} > {log} 2>&1"
 
 
 rule import_dat:
@@ -30,10 +33,13 @@ rule import_dat:
         f"{LOGS}/import/{{sample}}.log",
     benchmark:
         f"{BENCH}/import/{{sample}}.tsv"
+    threads: job_threads("import")
+    resources:
+        **job_resources("import"),
     conda:
         "../envs/jamflow.yaml"
     shell:
-        "jamflow import-dat {input} {output} --quiet > {log} 2>&1"
+        "jamflow import-dat {input} {output} > {log} 2>&1"
 
 
 rule soft_jam:
@@ -45,15 +51,16 @@ rule soft_jam:
         f"{LOGS}/soft/{{sample}}.log",
     benchmark:
         f"{BENCH}/soft/{{sample}}.tsv"
+    threads: job_threads("soft")
+    resources:
+        **job_resources("soft"),
     params:
         preset=PRESET,
-        pressure=lambda wildcards: opt("soft", "pressure"),
-        force_tol=lambda wildcards: optional_flag("--force-tol", opt("soft", "force_tol")),
+        options=stage_options("soft", pressure="--pressure", force_tol="--force-tol"),
     conda:
         "../envs/jamflow.yaml"
     shell:
-        "jamflow soft-jam {input} {output} --pressure {params.pressure}"
-        " {params.force_tol} --preset {params.preset} --quiet > {log} 2>&1"
+        "jamflow soft-jam {input} {output} {params.options} --preset {params.preset} > {log} 2>&1"
 
 
 rule ls:
@@ -66,21 +73,26 @@ rule ls:
         f"{LOGS}/ls/{{sample}}_k{{kappa}}.log",
     benchmark:
         f"{BENCH}/ls/{{sample}}_k{{kappa}}.tsv"
+    threads: job_threads("ls")
+    resources:
+        **job_resources("ls"),
     params:
         seed=seed_of,
         preset=PRESET,
         targets=" ".join(f"{p:g}" for p in LS_TARGETS),
         # null in the scene skips the fast stage, which the command spells as rate 0
-        fast=lambda wildcards: opt("ls", "fast_growth_rate") or 0,
-        fast_until=lambda wildcards: opt("ls", "fast_until"),
-        beta=lambda wildcards: opt("ls", "beta"),
-        max_collisions=lambda wildcards: optional_flag("--max-collisions", opt("ls", "max_collisions")),
+        options=stage_options(
+            "ls",
+            fast_growth_rate=("--fast-growth-rate", 0),
+            fast_until="--fast-until",
+            beta="--beta",
+            max_collisions="--max-collisions",
+        ),
     conda:
         "../envs/jamflow.yaml"
     shell:
         "jamflow ls {input} {output.snapshots} --growth-rate {wildcards.kappa} --p-target {params.targets}"
-        " --fast-growth-rate {params.fast} --fast-until {params.fast_until} --beta {params.beta} {params.max_collisions}"
-        " --seed {params.seed} --eos {output.eos} --preset {params.preset} --quiet > {log} 2>&1"
+        " {params.options} --seed {params.seed} --eos {output.eos} --preset {params.preset} > {log} 2>&1"
 
 
 rule calippso:
@@ -92,16 +104,17 @@ rule calippso:
         f"{LOGS}/calippso/{{sample}}{{variant}}.log",
     benchmark:
         f"{BENCH}/calippso/{{sample}}{{variant}}.tsv"
+    threads: job_threads("calippso")
+    resources:
+        **job_resources("calippso"),
     params:
         preset=PRESET,
-        tol_s=lambda wildcards: optional_flag("--tol-s", opt("calippso", "tol_s")),
-        tol_gamma=lambda wildcards: optional_flag("--tol-gamma", opt("calippso", "tol_gamma")),
-        solver=lambda wildcards: optional_flag("--solver", opt("calippso", "solver")),
-        solver_tol=lambda wildcards: optional_flag("--solver-tol", opt("calippso", "solver_tol")),
-        walls="--walls" if opt("calippso", "walls") else "",
+        options=stage_options(
+            "calippso", tol_s="--tol-s", tol_gamma="--tol-gamma", solver="--solver", solver_tol="--solver-tol", walls="--walls"
+        ),
         read=read_flags(CHAIN[CHAIN.index("calippso") - 1]) if "calippso" in CHAIN else "",
     conda:
         "../envs/jamflow.yaml"
     shell:
-        "jamflow calippso {input} {output} {params.tol_s} {params.tol_gamma} {params.solver} {params.solver_tol}"
-        " {params.walls} {params.read} --preset {params.preset} --quiet > {log} 2>&1"
+        "jamflow calippso {input} {output} {params.options} {params.read} --threads {threads}"
+        " --preset {params.preset} > {log} 2>&1"

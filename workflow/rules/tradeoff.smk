@@ -8,15 +8,17 @@ rule tradeoff:
         f"{LOGS}/tradeoff/{{stage}}.log",
     benchmark:
         f"{BENCH}/tradeoff/{{stage}}.tsv"
+    threads: job_threads("tradeoff")
+    resources:
+        **job_resources("tradeoff"),
     wildcard_constraints:
         stage="[a-z]+",
     params:
-        quick=lambda wildcards: "--quick" if opt("tradeoff", "quick") else "",
-        seed=lambda wildcards: opt("tradeoff", "seed"),
+        options=stage_options("tradeoff", quick="--quick", seed="--seed"),
     conda:
         "../envs/jamflow.yaml"
     shell:
-        "jamflow tradeoff {wildcards.stage} {output} {params.quick} --seed {params.seed} > {log} 2>&1"
+        "jamflow tradeoff {wildcards.stage} {output} {params.options} > {log} 2>&1"
 
 
 rule plot_pareto:
@@ -34,6 +36,9 @@ rule plot_pareto:
         f"{LOGS}/figures/pareto_{{stage}}.log",
     benchmark:
         f"{BENCH}/figures/pareto_{{stage}}.tsv"
+    threads: job_threads("plot")
+    resources:
+        **job_resources("plot"),
     wildcard_constraints:
         stage="[a-z]+",
     conda:
