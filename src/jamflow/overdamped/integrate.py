@@ -33,6 +33,7 @@ from .collisions import NeighborList, build_neighbor_list, images_of, next_colli
 from .driving import Drive
 from .jamming import constrained_subset, self_stress
 from .network import (
+    FactorCache,
     SingularNetworkError,
     _factorize,
     Solution,
@@ -176,6 +177,7 @@ class Integrator:
         self._count_key = None
         self._count = None
         self._nl_version = 0
+        self.factor_cache = FactorCache()
         self.solution: Solution = self._solution_now()
         self.last_correction: tuple[float, float] = (np.nan, np.nan)
 
@@ -216,6 +218,7 @@ class Integrator:
         integ._count_key = None
         integ._count = None
         integ._nl_version = 0
+        integ.factor_cache = FactorCache()
         if contact.any():
             integ._rewire(contact.copy())
             # the initial network is the reference state, not a sequence of events
@@ -236,7 +239,7 @@ class Integrator:
             self.state.x, self.state.h, pairs, images, self.base_gradient,
             external=self.drive.external_forces(), xi0=self.drive.xi0,
             pressure=self.pressure_internal, rate=self.drive.rate, cond_limit=self.options.cond_limit,
-            check_pivots=check_pivots,
+            check_pivots=check_pivots, cache=self.factor_cache,
         )
 
     def count(self, mask: NDArray[np.bool_]):
@@ -268,8 +271,12 @@ class Integrator:
         if not singular:
             try:
                 # a self-stress needs an over-constrained subset: check pivots only when
-                # the constrained count is within d of potential jamming, or hyperstatic
-                sol = self._solve(mask, check_pivots=count.excess >= -self.d)
+                # the constrained count is within d of potential jamming, or hyperstatic.
+                # An empty constrained subset carries none: a particle with <= d
+                # contacts balances nonzero forces only in degenerate (collinear)
+                # geometry, which the unchecked solve still reports as singular
+                near = count.n_particles > 0 and count.excess >= -self.d
+                sol = self._solve(mask, check_pivots=near)
                 return Evaluation(sol.force, sol)
             except SingularNetworkError:
                 singular = True
@@ -540,7 +547,13 @@ class Integrator:
             st.permanent[st.nl.index_of(perm, self.n)] = True
 
     def synchronize(self) -> None:
-        """Synchronisation point: rebuild and recompute the solution from the state alone."""
+        """Synchronisation point: rebuild and recompute the solution from the state alone.
+
+        The factorisation cache is dropped, so the solves after this point depend on
+        the state only (a run resumed from a checkpoint written here repeats them
+        bit for bit).
+        """
         self.rebuild()
+        self.factor_cache.reset()
         self.solution = self._solution_now()
         self.state.kappa = self.solution.kappa

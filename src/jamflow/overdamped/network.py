@@ -20,8 +20,10 @@ and rate 1 unless given; lengths in units of lambda.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
@@ -33,6 +35,7 @@ __all__ = [
     "affine_rates",
     "Solution",
     "SingularNetworkError",
+    "FactorCache",
     "solve_network",
     "pair_velocities",
     "stress_tensor",
@@ -116,6 +119,112 @@ class Solution:
     kappa: float
 
 
+@numba.njit(cache=True)
+def _s_apply(pairs, unit, v):  # pragma: no cover - numba
+    """``S v`` for a flat velocity ``v`` (length N d), shape (Nc,)."""
+    nc, d = unit.shape
+    out = np.empty(nc)
+    for c in range(nc):
+        i = pairs[c, 0] * d
+        j = pairs[c, 1] * d
+        s = 0.0
+        for a in range(d):
+            s += unit[c, a] * (v[j + a] - v[i + a])
+        out[c] = s
+    return out
+
+
+@numba.njit(cache=True)
+def _st_apply(pairs, unit, f, n):  # pragma: no cover - numba
+    """``S^T f`` for contact forces ``f`` (Nc,), flat shape (N d,)."""
+    nc, d = unit.shape
+    out = np.zeros(n * d)
+    for c in range(nc):
+        i = pairs[c, 0] * d
+        j = pairs[c, 1] * d
+        for a in range(d):
+            out[i + a] -= unit[c, a] * f[c]
+            out[j + a] += unit[c, a] * f[c]
+    return out
+
+
+@dataclass
+class FactorCache:
+    """A factorisation of ``N = S S^T`` kept for later solves on the same contact network.
+
+    Between events the network is fixed and its geometry drifts slowly, so the LU of
+    N at an earlier geometry is an excellent preconditioner: conjugate gradients on
+    the current N (the paper solves Eq. 11 by CG), warm-started from the last
+    solution, converge in a few iterations. A cache only ever changes *how* a
+    solution is computed, not which network is solved; callers reset it at points
+    from which a run can be resumed, so a resumed run repeats the same solves.
+
+    Attributes
+    ----------
+    rtol : float
+        CG stops when the preconditioned residual ``|M^-1 r|_inf`` (≈ the error of
+        the solution when M ≈ N) is below ``rtol |f|_inf``.
+    max_iter : int
+        Iterations after which CG gives up and N is refactorised directly.
+    key : bytes or None
+        Identity of the factorised network (its pairs).
+    lu : SuperLU or None
+    guesses : list of ndarray
+        Last solutions per right-hand side (warm starts).
+    iterations : int
+        CG iterations of the last cached solve (diagnostic).
+    n_factor, n_cg : int
+        Counts of direct factorisations and of CG solves (diagnostic).
+    """
+
+    rtol: float = 1e-13
+    max_iter: int = 8
+    key: bytes | None = None
+    lu: Any = None
+    guesses: list = field(default_factory=list)
+    iterations: int = 0
+    n_factor: int = 0
+    n_cg: int = 0
+
+    def reset(self) -> None:
+        """Forget the factorisation (the next solve factorises from scratch)."""
+        self.key, self.lu, self.guesses = None, None, []
+
+
+def _network_key(pairs: NDArray[np.int64], n: int) -> bytes:
+    return np.int64(n).tobytes() + np.ascontiguousarray(pairs, dtype=np.int64).tobytes()
+
+
+def _pcg(pairs, unit, n, lu, b, x0, rtol, max_iter):
+    """Conjugate gradients on ``N x = b`` preconditioned by ``lu``; (x, iterations) or (None, max_iter).
+
+    Converged when ``|M^-1 r|_inf <= rtol |x|_inf``: with M close to N the
+    preconditioned residual estimates the error ``N^-1 r`` of x itself.
+    """
+    x = x0.copy()
+    r = b - _s_apply(pairs, unit, _st_apply(pairs, unit, x, n))
+    z = lu.solve(r)
+    p = z.copy()
+    rz = float(r @ z)
+    for it in range(max_iter + 1):
+        if np.max(np.abs(z), initial=0.0) <= rtol * np.max(np.abs(x), initial=0.0):
+            return x, it
+        if it == max_iter or not rz > 0.0:
+            break
+        q = _s_apply(pairs, unit, _st_apply(pairs, unit, p, n))
+        pq = float(p @ q)
+        if not pq > 0.0:
+            break
+        alpha = rz / pq
+        x += alpha * p
+        r -= alpha * q
+        z = lu.solve(r)
+        rz_new = float(r @ z)
+        p = z + (rz_new / rz) * p
+        rz = rz_new
+    return None, max_iter
+
+
 def _factorize(S: sp.csr_matrix, cond_limit: float, check_pivots: bool = True):
     """Sparse LU of N = S S^T with an explicit singularity check.
 
@@ -148,6 +257,7 @@ def solve_network(
     rate: float = 1.0,
     cond_limit: float = 1e13,
     check_pivots: bool = True,
+    cache: FactorCache | None = None,
 ) -> Solution:
     """Forces and velocities of a contact network (Eqs. 11–12, 18–19, 23–25).
 
@@ -171,6 +281,12 @@ def solve_network(
     check_pivots : bool
         Check the pivots (else only an exactly singular factor or a solution whose
         residual exceeds ``1e-8`` relative is reported singular).
+    cache : FactorCache, optional
+        Reuse of an earlier factorisation of the same network as a CG preconditioner
+        (only when ``check_pivots`` is False: near potential jamming every solve is a
+        fresh factorisation with its pivot check). CG that does not converge within
+        ``cache.max_iter`` iterations falls back to the direct solve, which refreshes
+        the cache.
 
     Raises
     ------
@@ -191,27 +307,49 @@ def solve_network(
     R = pair_vectors(x, h, pairs, images)
     r = np.linalg.norm(R, axis=1)
     unit = R / r[:, None]
-    S = s_matrix(pairs, unit, n)
-    lu = _factorize(S, cond_limit, check_pivots)
-    rhs = -(affine_rates(R, gradient) / xi0 + S @ ext.ravel())
-    if not check_pivots:
-        f = lu.solve(rhs)
-        res = np.linalg.norm(S @ (S.T @ f) - rhs)
-        if not np.all(np.isfinite(f)) or res > 1e-8 * max(np.linalg.norm(rhs), 1e-300):
-            raise SingularNetworkError(f"N = S S^T solve inaccurate (relative residual {res / max(np.linalg.norm(rhs), 1e-300):.3g})")
+    pairs = np.ascontiguousarray(pairs, dtype=np.int64)
+    rhs = -(affine_rates(R, gradient) / xi0 + _s_apply(pairs, unit, np.ascontiguousarray(ext, dtype=np.float64).ravel()))
+    rhs_list = [rhs] if pressure is None else [rhs, rate * r / xi0]
+    sols = None
+    key = _network_key(pairs, n) if cache is not None else None
+    if cache is not None and not check_pivots and cache.key == key:
+        sols = []
+        for k, b in enumerate(rhs_list):
+            x0 = cache.guesses[k] if k < len(cache.guesses) else np.zeros(nc)
+            xk, it = _pcg(pairs, unit, n, cache.lu, b, x0, cache.rtol, cache.max_iter)
+            if xk is None:
+                sols = None
+                break
+            cache.iterations = it
+            sols.append(xk)
+        if sols is not None:
+            cache.n_cg += 1
+    if sols is None:
+        S = s_matrix(pairs, unit, n)
+        lu = _factorize(S, cond_limit, check_pivots)
+        sols = [lu.solve(b) for b in rhs_list]
+        if not check_pivots:
+            f = sols[0]
+            res = np.linalg.norm(S @ (S.T @ f) - rhs)
+            if not np.all(np.isfinite(f)) or res > 1e-8 * max(np.linalg.norm(rhs), 1e-300):
+                raise SingularNetworkError(f"N = S S^T solve inaccurate (relative residual {res / max(np.linalg.norm(rhs), 1e-300):.3g})")
+        if cache is not None:
+            cache.key, cache.lu, cache.iterations = key, lu, 0
+            cache.n_factor += 1
+    if cache is not None:
+        cache.guesses = sols
     if pressure is None:
-        f = lu.solve(rhs)
+        f = sols[0]
         E = np.array(gradient, dtype=np.float64)
         kappa = np.nan
     else:
         # E = gradient - kappa * rate * I:  f = a + kappa * b with N b = rate r / xi0
-        a = lu.solve(rhs)
-        b = lu.solve(rate * r / xi0)
+        a, b = sols
         omega = abs(np.linalg.det(h))
         kappa = float((pressure * omega * d - a @ r) / (b @ r))
         f = a + kappa * b
         E = np.array(gradient, dtype=np.float64) - kappa * rate * np.eye(d)
-    U = xi0 * (ext.ravel() + S.T @ f)
+    U = xi0 * (ext.ravel() + _st_apply(pairs, unit, f, n))
     return Solution(f, U.reshape(n, d), E, kappa)
 
 
