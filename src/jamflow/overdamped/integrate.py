@@ -42,6 +42,7 @@ from .network import (
     pair_velocities,
     s_matrix,
     solve_network,
+    spectral_norm,
     stress_tensor,
 )
 from .rewiring import Evaluation, rewire
@@ -177,6 +178,7 @@ class Integrator:
         self._count_key = None
         self._count = None
         self._nl_version = 0
+        self._pairs_key = None
         self.factor_cache = FactorCache()
         self.solution: Solution = self._solution_now()
         self.last_correction: tuple[float, float] = (np.nan, np.nan)
@@ -218,6 +220,7 @@ class Integrator:
         integ._count_key = None
         integ._count = None
         integ._nl_version = 0
+        integ._pairs_key = None
         integ.factor_cache = FactorCache()
         if contact.any():
             integ._rewire(contact.copy())
@@ -231,7 +234,12 @@ class Integrator:
 
     # ------------------------------------------------------------- network algebra
     def _pairs(self, mask: NDArray[np.bool_]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-        return self.state.nl.pairs[mask], self.state.nl.images[mask]
+        """Pairs and images of the sub-network ``mask`` (memoised on the last mask; read-only)."""
+        key = (mask.tobytes(), self._nl_version, id(self.state.nl))
+        if self._pairs_key != key:
+            self._pairs_key = key
+            self._pairs_value = (self.state.nl.pairs[mask], self.state.nl.images[mask])
+        return self._pairs_value
 
     def _solve(self, mask: NDArray[np.bool_], check_pivots: bool = True) -> Solution:
         pairs, images = self._pairs(mask)
@@ -292,7 +300,7 @@ class Integrator:
     def velocity_scale(self, sol: Solution) -> float:
         """Scale against which pair rates are judged zero [lambda / time]."""
         u = float(np.max(np.abs(sol.velocity), initial=0.0))
-        return max(u, float(np.linalg.norm(sol.gradient, 2)) * self.state.nl.cutoff, 1e-300)
+        return max(u, spectral_norm(sol.gradient) * self.state.nl.cutoff, 1e-300)
 
     def _rewire(self, candidate: NDArray[np.bool_]) -> None:
         res = rewire(candidate, self.evaluate, self.rates, self.velocity_scale,
@@ -365,7 +373,7 @@ class Integrator:
         nl = self.state.nl
         a = float(np.sqrt(np.max(np.einsum("nk,nk->n", nl.displacement, nl.displacement), initial=0.0)))
         u = float(np.sqrt(np.max(np.einsum("nk,nk->n", sol.velocity, sol.velocity), initial=0.0)))
-        g = float(np.linalg.norm(sol.gradient, 2))
+        g = spectral_norm(sol.gradient)
         s0, c = nl.strain_norm, nl.cutoff
         # 2 (a + t u) + (s0 + t g) (1 + s0 + t g) c < skin, a quadratic A t^2 + B t + C < 0
         A = g * g * c

@@ -20,6 +20,7 @@ and rate 1 unless given; lengths in units of lambda.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -39,6 +40,7 @@ __all__ = [
     "solve_network",
     "pair_velocities",
     "stress_tensor",
+    "spectral_norm",
 ]
 
 
@@ -88,6 +90,21 @@ def s_matrix(pairs: NDArray[np.int64], unit: NDArray[np.float64], n: int) -> sp.
     vals = np.concatenate([-unit, unit], axis=1).ravel()
     indptr = np.arange(0, 2 * d * nc + 1, 2 * d)
     return sp.csr_matrix((vals, cols, indptr), shape=(nc, n * d))
+
+
+@functools.lru_cache(maxsize=64)
+def _spectral_norm(data: bytes, d: int) -> float:
+    return float(np.linalg.norm(np.frombuffer(data).reshape(d, d), 2))
+
+
+def spectral_norm(E: NDArray[np.float64]) -> float:
+    """Largest singular value ``|E|_2`` of a (d, d) velocity gradient [1/time].
+
+    Memoised on the matrix: the integrator asks several times per step for the same
+    (or one of a few) gradients, and an SVD costs more than the rest of the query.
+    """
+    E = np.ascontiguousarray(E, dtype=np.float64)
+    return _spectral_norm(E.tobytes(), E.shape[0])
 
 
 def affine_rates(R: NDArray[np.float64], gradient: NDArray[np.float64]) -> NDArray[np.float64]:
