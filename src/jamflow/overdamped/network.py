@@ -183,44 +183,143 @@ class FactorCache:
         the solution when M ≈ N) is below ``rtol |f|_inf``.
     max_iter : int
         Iterations after which CG gives up and N is refactorised directly.
+    max_changes : int
+        A network that differs from the factorised one by at most this many added plus
+        removed pairs (the candidates of the rewiring after a collision) is solved by CG
+        with a bordered preconditioner built from the cached LU (:func:`_bordered`).
     key : bytes or None
         Identity of the factorised network (its pairs).
+    codes : ndarray of int64 or None
+        Pair codes ``i N + j`` of the factorised network, in its order.
     lu : SuperLU or None
     guesses : list of ndarray
-        Last solutions per right-hand side (warm starts).
+        Last solutions per right-hand side (warm starts), on the pairs ``guess_codes``.
+    guess_codes : ndarray of int64 or None
     iterations : int
         CG iterations of the last cached solve (diagnostic).
-    n_factor, n_cg : int
-        Counts of direct factorisations and of CG solves (diagnostic).
+    n_factor, n_cg, n_bordered : int
+        Counts of direct factorisations, of CG solves, and of those CG solves on a
+        changed network (diagnostic).
     """
 
     rtol: float = 1e-13
     max_iter: int = 8
+    max_changes: int = 4
     key: bytes | None = None
+    codes: NDArray[np.int64] | None = None
     lu: Any = None
     guesses: list = field(default_factory=list)
+    guess_codes: NDArray[np.int64] | None = None
     iterations: int = 0
     n_factor: int = 0
     n_cg: int = 0
+    n_bordered: int = 0
 
     def reset(self) -> None:
         """Forget the factorisation (the next solve factorises from scratch)."""
-        self.key, self.lu, self.guesses = None, None, []
+        self.key, self.codes, self.lu, self.guesses, self.guess_codes = None, None, None, [], None
+
+    def warm_starts(self, codes: NDArray[np.int64], count: int) -> list[NDArray[np.float64]]:
+        """The last solutions carried over to the pairs ``codes`` (zero on new pairs)."""
+        m = len(codes)
+        if self.guess_codes is None or len(self.guesses) < count:
+            return [np.zeros(m) for _ in range(count)]
+        if np.array_equal(self.guess_codes, codes):
+            return self.guesses[:count]
+        pos = _locate(self.guess_codes, codes)
+        out = []
+        for g in self.guesses[:count]:
+            x0 = np.zeros(m)
+            x0[pos >= 0] = g[pos[pos >= 0]]
+            out.append(x0)
+        return out
 
 
 def _network_key(pairs: NDArray[np.int64], n: int) -> bytes:
     return np.int64(n).tobytes() + np.ascontiguousarray(pairs, dtype=np.int64).tobytes()
 
 
-def _pcg(pairs, unit, n, lu, b, x0, rtol, max_iter):
-    """Conjugate gradients on ``N x = b`` preconditioned by ``lu``; (x, iterations) or (None, max_iter).
+def _locate(codes_from: NDArray[np.int64], codes_to: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Position in ``codes_from`` of every entry of ``codes_to`` (-1 where absent)."""
+    if len(codes_from) == 0:
+        return np.full(len(codes_to), -1, dtype=np.int64)
+    order = np.argsort(codes_from, kind="stable")
+    srt = codes_from[order]
+    loc = np.minimum(np.searchsorted(srt, codes_to), len(srt) - 1)
+    return np.where(srt[loc] == codes_to, order[loc], -1)
 
-    Converged when ``|M^-1 r|_inf <= rtol |x|_inf``: with M close to N the
-    preconditioned residual estimates the error ``N^-1 r`` of x itself.
+
+def _bordered(lu, old_codes, codes, pairs, unit, n, cond_limit, max_changes):
+    """Preconditioner for N on a network a few pairs away from the factorised one, or None.
+
+    With C the kept pairs, Q the removed and P the added ones, it applies the exact
+    inverse of ``[[M_CC, N_CP], [N_PC, N_PP]]``: ``M_CC^-1`` from the cached LU of M by
+    the capacitance trick (solve with M, then cancel the Q components with
+    ``(M^-1)_QQ``, |Q| extra solves once), the added pairs by their Schur complement
+    ``T = N_PP - N_PC M_CC^-1 N_CP`` (current geometry, |P| solves once). A Schur
+    complement below ``diag(N_PP) / cond_limit`` means an added pair is (nearly)
+    dependent on the others — a possible self-stress — and returns None so that the
+    caller factorises directly with its singularity checks.
+    """
+    pos = _locate(old_codes, codes)
+    C = np.flatnonzero(pos >= 0)
+    P = np.flatnonzero(pos < 0)
+    kept = np.zeros(len(old_codes), dtype=bool)
+    kept[pos[C]] = True
+    Q = np.flatnonzero(~kept)
+    if len(P) + len(Q) > max_changes or len(C) == 0:
+        return None
+    pos_c = pos[C]
+    if len(Q):
+        E = np.zeros((len(old_codes), len(Q)))
+        E[Q, np.arange(len(Q))] = 1.0
+        W = lu.solve(E)
+        WQQ = W[Q]
+
+    def solve_cc(g):
+        G = np.zeros((len(old_codes),) + g.shape[1:])
+        G[pos_c] = g
+        y = lu.solve(G)
+        if len(Q):
+            y = y + W @ np.linalg.solve(WQQ, -y[Q])
+        return y[pos_c]
+
+    if len(P):
+        cols = np.empty((len(codes), len(P)))
+        for a, k in enumerate(P):
+            e = np.zeros(len(codes))
+            e[k] = 1.0
+            cols[:, a] = _s_apply(pairs, unit, _st_apply(pairs, unit, e, n))
+        NCP, NPP = cols[C], cols[P]
+        B = solve_cc(NCP)
+        T = NPP - NCP.T @ B
+        if np.any(np.diag(T) <= np.diag(NPP) / cond_limit):
+            return None
+
+    def apply(g):
+        out = np.empty(len(codes))
+        a = solve_cc(g[C])
+        if len(P):
+            xp = np.linalg.solve(T, g[P] - NCP.T @ a)
+            out[P] = xp
+            out[C] = a - B @ xp
+        else:
+            out[C] = a
+        return out
+
+    return apply
+
+
+def _pcg(pairs, unit, n, precond, b, x0, rtol, max_iter):
+    """Conjugate gradients on ``N x = b`` with preconditioner ``precond(r) ≈ N^-1 r``.
+
+    Returns (x, iterations), or (None, max_iter) without convergence. Converged when
+    ``|M^-1 r|_inf <= rtol |x|_inf``: with M close to N the preconditioned residual
+    estimates the error ``N^-1 r`` of x itself.
     """
     x = x0.copy()
     r = b - _s_apply(pairs, unit, _st_apply(pairs, unit, x, n))
-    z = lu.solve(r)
+    z = precond(r)
     p = z.copy()
     rz = float(r @ z)
     for it in range(max_iter + 1):
@@ -235,7 +334,7 @@ def _pcg(pairs, unit, n, lu, b, x0, rtol, max_iter):
         alpha = rz / pq
         x += alpha * p
         r -= alpha * q
-        z = lu.solve(r)
+        z = precond(r)
         rz_new = float(r @ z)
         p = z + (rz_new / rz) * p
         rz = rz_new
@@ -299,9 +398,10 @@ def solve_network(
         Check the pivots (else only an exactly singular factor or a solution whose
         residual exceeds ``1e-8`` relative is reported singular).
     cache : FactorCache, optional
-        Reuse of an earlier factorisation of the same network as a CG preconditioner
-        (only when ``check_pivots`` is False: near potential jamming every solve is a
-        fresh factorisation with its pivot check). CG that does not converge within
+        Reuse of an earlier factorisation as a CG preconditioner, on the same network
+        or on one at most ``cache.max_changes`` pairs away (bordered preconditioner);
+        only when ``check_pivots`` is False: near potential jamming every solve is a
+        fresh factorisation with its pivot check. CG that does not converge within
         ``cache.max_iter`` iterations falls back to the direct solve, which refreshes
         the cache.
 
@@ -329,18 +429,23 @@ def solve_network(
     rhs_list = [rhs] if pressure is None else [rhs, rate * r / xi0]
     sols = None
     key = _network_key(pairs, n) if cache is not None else None
-    if cache is not None and not check_pivots and cache.key == key:
-        sols = []
-        for k, b in enumerate(rhs_list):
-            x0 = cache.guesses[k] if k < len(cache.guesses) else np.zeros(nc)
-            xk, it = _pcg(pairs, unit, n, cache.lu, b, x0, cache.rtol, cache.max_iter)
-            if xk is None:
-                sols = None
-                break
-            cache.iterations = it
-            sols.append(xk)
-        if sols is not None:
-            cache.n_cg += 1
+    codes = pairs[:, 0] * n + pairs[:, 1]
+    if cache is not None and not check_pivots and cache.lu is not None:
+        same = cache.key == key
+        precond = cache.lu.solve if same else _bordered(
+            cache.lu, cache.codes, codes, pairs, unit, n, cond_limit, cache.max_changes)
+        if precond is not None:
+            sols = []
+            for b, x0 in zip(rhs_list, cache.warm_starts(codes, len(rhs_list))):
+                xk, it = _pcg(pairs, unit, n, precond, b, x0, cache.rtol, cache.max_iter)
+                if xk is None:
+                    sols = None
+                    break
+                cache.iterations = it
+                sols.append(xk)
+            if sols is not None:
+                cache.n_cg += 1
+                cache.n_bordered += not same
     if sols is None:
         S = s_matrix(pairs, unit, n)
         lu = _factorize(S, cond_limit, check_pivots)
@@ -351,10 +456,10 @@ def solve_network(
             if not np.all(np.isfinite(f)) or res > 1e-8 * max(np.linalg.norm(rhs), 1e-300):
                 raise SingularNetworkError(f"N = S S^T solve inaccurate (relative residual {res / max(np.linalg.norm(rhs), 1e-300):.3g})")
         if cache is not None:
-            cache.key, cache.lu, cache.iterations = key, lu, 0
+            cache.key, cache.codes, cache.lu, cache.iterations = key, codes, lu, 0
             cache.n_factor += 1
     if cache is not None:
-        cache.guesses = sols
+        cache.guesses, cache.guess_codes = sols, codes
     if pressure is None:
         f = sols[0]
         E = np.array(gradient, dtype=np.float64)
