@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 
 from ..box import Box
 from ..neighbors import pairs_within
+from .network import spectral_norm
 
 __all__ = ["next_collision", "NeighborList", "build_neighbor_list", "images_of"]
 
@@ -157,7 +158,7 @@ class NeighborList:
     def advance(self, velocity: NDArray[np.float64], gradient: NDArray[np.float64], dt: float) -> None:
         """Account for one straight-line step of length ``dt``."""
         self.displacement += dt * velocity
-        self.strain_norm += dt * float(np.linalg.norm(gradient, 2))
+        self.strain_norm += dt * spectral_norm(gradient)
 
     @property
     def valid(self) -> bool:

@@ -20,8 +20,11 @@ and rate 1 unless given; lengths in units of lambda.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import functools
+from dataclasses import dataclass, field
+from typing import Any
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
@@ -33,9 +36,11 @@ __all__ = [
     "affine_rates",
     "Solution",
     "SingularNetworkError",
+    "FactorCache",
     "solve_network",
     "pair_velocities",
     "stress_tensor",
+    "spectral_norm",
 ]
 
 
@@ -87,6 +92,21 @@ def s_matrix(pairs: NDArray[np.int64], unit: NDArray[np.float64], n: int) -> sp.
     return sp.csr_matrix((vals, cols, indptr), shape=(nc, n * d))
 
 
+@functools.lru_cache(maxsize=64)
+def _spectral_norm(data: bytes, d: int) -> float:
+    return float(np.linalg.norm(np.frombuffer(data).reshape(d, d), 2))
+
+
+def spectral_norm(E: NDArray[np.float64]) -> float:
+    """Largest singular value ``|E|_2`` of a (d, d) velocity gradient [1/time].
+
+    Memoised on the matrix: the integrator asks several times per step for the same
+    (or one of a few) gradients, and an SVD costs more than the rest of the query.
+    """
+    E = np.ascontiguousarray(E, dtype=np.float64)
+    return _spectral_norm(E.tobytes(), E.shape[0])
+
+
 def affine_rates(R: NDArray[np.float64], gradient: NDArray[np.float64]) -> NDArray[np.float64]:
     """``S V_aff`` for contacts with separations R: ``n . E R`` (Eq. 13), shape (Nc,)."""
     r = np.linalg.norm(R, axis=1)
@@ -114,6 +134,211 @@ class Solution:
     velocity: NDArray[np.float64]
     gradient: NDArray[np.float64]
     kappa: float
+
+
+@numba.njit(cache=True)
+def _s_apply(pairs, unit, v):  # pragma: no cover - numba
+    """``S v`` for a flat velocity ``v`` (length N d), shape (Nc,)."""
+    nc, d = unit.shape
+    out = np.empty(nc)
+    for c in range(nc):
+        i = pairs[c, 0] * d
+        j = pairs[c, 1] * d
+        s = 0.0
+        for a in range(d):
+            s += unit[c, a] * (v[j + a] - v[i + a])
+        out[c] = s
+    return out
+
+
+@numba.njit(cache=True)
+def _st_apply(pairs, unit, f, n):  # pragma: no cover - numba
+    """``S^T f`` for contact forces ``f`` (Nc,), flat shape (N d,)."""
+    nc, d = unit.shape
+    out = np.zeros(n * d)
+    for c in range(nc):
+        i = pairs[c, 0] * d
+        j = pairs[c, 1] * d
+        for a in range(d):
+            out[i + a] -= unit[c, a] * f[c]
+            out[j + a] += unit[c, a] * f[c]
+    return out
+
+
+@dataclass
+class FactorCache:
+    """A factorisation of ``N = S S^T`` kept for later solves on the same contact network.
+
+    Between events the network is fixed and its geometry drifts slowly, so the LU of
+    N at an earlier geometry is an excellent preconditioner: conjugate gradients on
+    the current N (the paper solves Eq. 11 by CG), warm-started from the last
+    solution, converge in a few iterations. A cache only ever changes *how* a
+    solution is computed, not which network is solved; callers reset it at points
+    from which a run can be resumed, so a resumed run repeats the same solves.
+
+    Attributes
+    ----------
+    rtol : float
+        CG stops when the preconditioned residual ``|M^-1 r|_inf`` (≈ the error of
+        the solution when M ≈ N) is below ``rtol |f|_inf``.
+    max_iter : int
+        Iterations after which CG gives up and N is refactorised directly.
+    max_changes : int
+        A network that differs from the factorised one by at most this many added plus
+        removed pairs (the candidates of the rewiring after a collision) is solved by CG
+        with a bordered preconditioner built from the cached LU (:func:`_bordered`).
+    key : bytes or None
+        Identity of the factorised network (its pairs).
+    codes : ndarray of int64 or None
+        Pair codes ``i N + j`` of the factorised network, in its order.
+    lu : SuperLU or None
+    guesses : list of ndarray
+        Last solutions per right-hand side (warm starts), on the pairs ``guess_codes``.
+    guess_codes : ndarray of int64 or None
+    iterations : int
+        CG iterations of the last cached solve (diagnostic).
+    n_factor, n_cg, n_bordered : int
+        Counts of direct factorisations, of CG solves, and of those CG solves on a
+        changed network (diagnostic).
+    """
+
+    rtol: float = 1e-13
+    max_iter: int = 8
+    max_changes: int = 4
+    key: bytes | None = None
+    codes: NDArray[np.int64] | None = None
+    lu: Any = None
+    guesses: list = field(default_factory=list)
+    guess_codes: NDArray[np.int64] | None = None
+    iterations: int = 0
+    n_factor: int = 0
+    n_cg: int = 0
+    n_bordered: int = 0
+
+    def reset(self) -> None:
+        """Forget the factorisation (the next solve factorises from scratch)."""
+        self.key, self.codes, self.lu, self.guesses, self.guess_codes = None, None, None, [], None
+
+    def warm_starts(self, codes: NDArray[np.int64], count: int) -> list[NDArray[np.float64]]:
+        """The last solutions carried over to the pairs ``codes`` (zero on new pairs)."""
+        m = len(codes)
+        if self.guess_codes is None or len(self.guesses) < count:
+            return [np.zeros(m) for _ in range(count)]
+        if np.array_equal(self.guess_codes, codes):
+            return self.guesses[:count]
+        pos = _locate(self.guess_codes, codes)
+        out = []
+        for g in self.guesses[:count]:
+            x0 = np.zeros(m)
+            x0[pos >= 0] = g[pos[pos >= 0]]
+            out.append(x0)
+        return out
+
+
+def _network_key(pairs: NDArray[np.int64], n: int) -> bytes:
+    return np.int64(n).tobytes() + np.ascontiguousarray(pairs, dtype=np.int64).tobytes()
+
+
+def _locate(codes_from: NDArray[np.int64], codes_to: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Position in ``codes_from`` of every entry of ``codes_to`` (-1 where absent)."""
+    if len(codes_from) == 0:
+        return np.full(len(codes_to), -1, dtype=np.int64)
+    order = np.argsort(codes_from, kind="stable")
+    srt = codes_from[order]
+    loc = np.minimum(np.searchsorted(srt, codes_to), len(srt) - 1)
+    return np.where(srt[loc] == codes_to, order[loc], -1)
+
+
+def _bordered(lu, old_codes, codes, pairs, unit, n, cond_limit, max_changes):
+    """Preconditioner for N on a network a few pairs away from the factorised one, or None.
+
+    With C the kept pairs, Q the removed and P the added ones, it applies the exact
+    inverse of ``[[M_CC, N_CP], [N_PC, N_PP]]``: ``M_CC^-1`` from the cached LU of M by
+    the capacitance trick (solve with M, then cancel the Q components with
+    ``(M^-1)_QQ``, |Q| extra solves once), the added pairs by their Schur complement
+    ``T = N_PP - N_PC M_CC^-1 N_CP`` (current geometry, |P| solves once). A Schur
+    complement below ``diag(N_PP) / cond_limit`` means an added pair is (nearly)
+    dependent on the others — a possible self-stress — and returns None so that the
+    caller factorises directly with its singularity checks.
+    """
+    pos = _locate(old_codes, codes)
+    C = np.flatnonzero(pos >= 0)
+    P = np.flatnonzero(pos < 0)
+    kept = np.zeros(len(old_codes), dtype=bool)
+    kept[pos[C]] = True
+    Q = np.flatnonzero(~kept)
+    if len(P) + len(Q) > max_changes or len(C) == 0:
+        return None
+    pos_c = pos[C]
+    if len(Q):
+        E = np.zeros((len(old_codes), len(Q)))
+        E[Q, np.arange(len(Q))] = 1.0
+        W = lu.solve(E)
+        WQQ = W[Q]
+
+    def solve_cc(g):
+        G = np.zeros((len(old_codes),) + g.shape[1:])
+        G[pos_c] = g
+        y = lu.solve(G)
+        if len(Q):
+            y = y + W @ np.linalg.solve(WQQ, -y[Q])
+        return y[pos_c]
+
+    if len(P):
+        cols = np.empty((len(codes), len(P)))
+        for a, k in enumerate(P):
+            e = np.zeros(len(codes))
+            e[k] = 1.0
+            cols[:, a] = _s_apply(pairs, unit, _st_apply(pairs, unit, e, n))
+        NCP, NPP = cols[C], cols[P]
+        B = solve_cc(NCP)
+        T = NPP - NCP.T @ B
+        if np.any(np.diag(T) <= np.diag(NPP) / cond_limit):
+            return None
+
+    def apply(g):
+        out = np.empty(len(codes))
+        a = solve_cc(g[C])
+        if len(P):
+            xp = np.linalg.solve(T, g[P] - NCP.T @ a)
+            out[P] = xp
+            out[C] = a - B @ xp
+        else:
+            out[C] = a
+        return out
+
+    return apply
+
+
+def _pcg(pairs, unit, n, precond, b, x0, rtol, max_iter):
+    """Conjugate gradients on ``N x = b`` with preconditioner ``precond(r) ≈ N^-1 r``.
+
+    Returns (x, iterations), or (None, max_iter) without convergence. Converged when
+    ``|M^-1 r|_inf <= rtol |x|_inf``: with M close to N the preconditioned residual
+    estimates the error ``N^-1 r`` of x itself.
+    """
+    x = x0.copy()
+    r = b - _s_apply(pairs, unit, _st_apply(pairs, unit, x, n))
+    z = precond(r)
+    p = z.copy()
+    rz = float(r @ z)
+    for it in range(max_iter + 1):
+        if np.max(np.abs(z), initial=0.0) <= rtol * np.max(np.abs(x), initial=0.0):
+            return x, it
+        if it == max_iter or not rz > 0.0:
+            break
+        q = _s_apply(pairs, unit, _st_apply(pairs, unit, p, n))
+        pq = float(p @ q)
+        if not pq > 0.0:
+            break
+        alpha = rz / pq
+        x += alpha * p
+        r -= alpha * q
+        z = precond(r)
+        rz_new = float(r @ z)
+        p = z + (rz_new / rz) * p
+        rz = rz_new
+    return None, max_iter
 
 
 def _factorize(S: sp.csr_matrix, cond_limit: float, check_pivots: bool = True):
@@ -148,6 +373,7 @@ def solve_network(
     rate: float = 1.0,
     cond_limit: float = 1e13,
     check_pivots: bool = True,
+    cache: FactorCache | None = None,
 ) -> Solution:
     """Forces and velocities of a contact network (Eqs. 11–12, 18–19, 23–25).
 
@@ -171,6 +397,13 @@ def solve_network(
     check_pivots : bool
         Check the pivots (else only an exactly singular factor or a solution whose
         residual exceeds ``1e-8`` relative is reported singular).
+    cache : FactorCache, optional
+        Reuse of an earlier factorisation as a CG preconditioner, on the same network
+        or on one at most ``cache.max_changes`` pairs away (bordered preconditioner);
+        only when ``check_pivots`` is False: near potential jamming every solve is a
+        fresh factorisation with its pivot check. CG that does not converge within
+        ``cache.max_iter`` iterations falls back to the direct solve, which refreshes
+        the cache.
 
     Raises
     ------
@@ -191,27 +424,54 @@ def solve_network(
     R = pair_vectors(x, h, pairs, images)
     r = np.linalg.norm(R, axis=1)
     unit = R / r[:, None]
-    S = s_matrix(pairs, unit, n)
-    lu = _factorize(S, cond_limit, check_pivots)
-    rhs = -(affine_rates(R, gradient) / xi0 + S @ ext.ravel())
-    if not check_pivots:
-        f = lu.solve(rhs)
-        res = np.linalg.norm(S @ (S.T @ f) - rhs)
-        if not np.all(np.isfinite(f)) or res > 1e-8 * max(np.linalg.norm(rhs), 1e-300):
-            raise SingularNetworkError(f"N = S S^T solve inaccurate (relative residual {res / max(np.linalg.norm(rhs), 1e-300):.3g})")
+    pairs = np.ascontiguousarray(pairs, dtype=np.int64)
+    rhs = -(affine_rates(R, gradient) / xi0 + _s_apply(pairs, unit, np.ascontiguousarray(ext, dtype=np.float64).ravel()))
+    rhs_list = [rhs] if pressure is None else [rhs, rate * r / xi0]
+    sols = None
+    key = _network_key(pairs, n) if cache is not None else None
+    codes = pairs[:, 0] * n + pairs[:, 1]
+    if cache is not None and not check_pivots and cache.lu is not None:
+        same = cache.key == key
+        precond = cache.lu.solve if same else _bordered(
+            cache.lu, cache.codes, codes, pairs, unit, n, cond_limit, cache.max_changes)
+        if precond is not None:
+            sols = []
+            for b, x0 in zip(rhs_list, cache.warm_starts(codes, len(rhs_list))):
+                xk, it = _pcg(pairs, unit, n, precond, b, x0, cache.rtol, cache.max_iter)
+                if xk is None:
+                    sols = None
+                    break
+                cache.iterations = it
+                sols.append(xk)
+            if sols is not None:
+                cache.n_cg += 1
+                cache.n_bordered += not same
+    if sols is None:
+        S = s_matrix(pairs, unit, n)
+        lu = _factorize(S, cond_limit, check_pivots)
+        sols = [lu.solve(b) for b in rhs_list]
+        if not check_pivots:
+            f = sols[0]
+            res = np.linalg.norm(S @ (S.T @ f) - rhs)
+            if not np.all(np.isfinite(f)) or res > 1e-8 * max(np.linalg.norm(rhs), 1e-300):
+                raise SingularNetworkError(f"N = S S^T solve inaccurate (relative residual {res / max(np.linalg.norm(rhs), 1e-300):.3g})")
+        if cache is not None:
+            cache.key, cache.codes, cache.lu, cache.iterations = key, codes, lu, 0
+            cache.n_factor += 1
+    if cache is not None:
+        cache.guesses, cache.guess_codes = sols, codes
     if pressure is None:
-        f = lu.solve(rhs)
+        f = sols[0]
         E = np.array(gradient, dtype=np.float64)
         kappa = np.nan
     else:
         # E = gradient - kappa * rate * I:  f = a + kappa * b with N b = rate r / xi0
-        a = lu.solve(rhs)
-        b = lu.solve(rate * r / xi0)
+        a, b = sols
         omega = abs(np.linalg.det(h))
         kappa = float((pressure * omega * d - a @ r) / (b @ r))
         f = a + kappa * b
         E = np.array(gradient, dtype=np.float64) - kappa * rate * np.eye(d)
-    U = xi0 * (ext.ravel() + S.T @ f)
+    U = xi0 * (ext.ravel() + _st_apply(pairs, unit, f, n))
     return Solution(f, U.reshape(n, d), E, kappa)
 
 

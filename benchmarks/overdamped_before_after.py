@@ -1,0 +1,95 @@
+"""Event-driven shear speed of this tree against another source tree, side by side in one run.
+
+The machine is shared, so absolute times drift: the two trees shear the same start for the
+same number of steps in alternation (``--repeats`` rounds, each a fresh interpreter), and the
+ratio of events per second is reported per round. Also prints the relative difference of the
+final shear stress (both runs must follow the same trajectory to round-off over a short run).
+
+``--options`` changes this tree's FlowOptions (e.g. a larger ``step_drift``): then the runs
+cover different strains in the same number of steps and the stress difference is not a check.
+
+Start packings: ``--start FILE.nc`` (any jamflow packing; contacts need not be set) or, by
+default, the trade-off harness's start (:func:`jamflow.tradeoff.flow_start`, event-driven
+compression of 2D 1:1.4 bidisperse 3 % polydisperse discs to ``--phi``).
+
+Usage::
+
+    git worktree add /tmp/base 68bf334
+    python benchmarks/overdamped_before_after.py --base-src /tmp/base/src --n 256 --phi 0.83 --steps 600
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+SRC = HERE.parent / "src"
+
+CHILD = r"""
+import json, sys, time
+from jamflow.io import read_packing
+from jamflow.overdamped.driving import Drive
+from jamflow.overdamped.integrate import FlowOptions
+from jamflow.overdamped.run import Stop, run_flow
+path, steps, opts = sys.argv[1], int(sys.argv[2]), FlowOptions(**json.loads(sys.argv[3]))
+p = read_packing(path)
+run_flow(p, Drive("shear"), Stop(strain=10.0, max_steps=5), FlowOptions(), unit="small_diameter")  # numba caches
+t0 = time.perf_counter()
+res = run_flow(p, Drive("shear"), Stop(strain=10.0, max_steps=steps), opts, unit="small_diameter")
+wall = time.perf_counter() - t0
+s = res.series
+print(json.dumps({"wall": wall, "events": int(s.sizes["event"]), "strain": float(s.strain.values[-1]),
+                  "stress": float(s.shear_stress.values[-1]), "steps": steps}))
+"""
+
+
+def run_child(src: Path, start: Path, steps: int, options: str = "{}") -> dict:
+    env = dict(os.environ, PYTHONPATH=str(src))
+    out = subprocess.run([sys.executable, "-c", CHILD, str(start), str(steps), options], env=env, check=True,
+                         capture_output=True, text=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--base-src", type=Path, required=True, help="src/ directory of the tree to compare against")
+    ap.add_argument("--start", type=Path, help="start packing (netCDF); default: flow_start(N, phi)")
+    ap.add_argument("--n", type=int, default=256)
+    ap.add_argument("--phi", type=float, default=0.83)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--steps", type=int, default=600)
+    ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--options", default="{}", help="FlowOptions of this tree's run as JSON, e.g. '{\"step_drift\": 1e-7}' "
+                    "(the base tree always runs the defaults)")
+    args = ap.parse_args()
+    if not (args.base_src / "jamflow").is_dir():
+        sys.exit(f"--base-src {args.base_src}: no jamflow package there")
+    with tempfile.TemporaryDirectory() as tmp:
+        start = args.start
+        if start is None:
+            sys.path.insert(0, str(SRC))
+            from jamflow.io import write_packing
+            from jamflow.tradeoff import flow_start
+
+            start = Path(tmp) / "start.nc"
+            write_packing(flow_start(args.n, args.phi, args.seed), start)
+        for r in range(args.repeats):
+            base = run_child(args.base_src, start, args.steps)
+            new = run_child(SRC, start, args.steps, args.options)
+            rates = [x["events"] / x["wall"] for x in (base, new)]
+            print(f"round {r}: base {rates[0]:.2f} events/s ({base['wall']:.2f} s), this tree {rates[1]:.2f} events/s "
+                  f"({new['wall']:.2f} s): ratio {rates[1] / rates[0]:.2f}; {new['events']} events over strain "
+                  f"{new['strain']:.4g} in {args.steps} steps ({args.steps / max(new['events'], 1):.1f} steps/event); "
+                  f"strain/min {60 * base['strain'] / base['wall']:.3g} -> {60 * new['strain'] / new['wall']:.3g}; "
+                  f"final stress rel. difference {abs(new['stress'] - base['stress']) / abs(base['stress']):.1e}",
+                  flush=True)
+
+
+if __name__ == "__main__":
+    main()
