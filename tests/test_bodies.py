@@ -7,6 +7,7 @@ clear error.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -243,3 +244,29 @@ def test_orientation_needs_shapes_and_shapes_are_2d() -> None:
     with pytest.raises(ValueError, match="shaped particles are 2D"):
         Packing(position=[[0.1, 0.1, 0.1], [0.5, 0.5, 0.5]], diameter=[0.062, 0.062], box=Box.cubic(3, 1.0),
                 shapes=table, shape_index=[0, 0], orientation=[0.0, 0.0])
+
+
+def test_the_schema_documents_examples_run_and_mean_what_they_say() -> None:
+    text = (Path(__file__).parents[1] / "docs" / "bodies.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, re.S)
+    assert len(blocks) == 2
+    trimer: dict = {}
+    exec(blocks[0], trimer)
+    np.testing.assert_array_equal(trimer["p"].clusters, [0, 0, 0, 1, 1])
+    x = trimer["p"].position
+    for i, j, length in zip(trimer["links"].i, trimer["links"].j, trimer["links"].length):
+        assert np.linalg.norm(x[j] - x[i]) == pytest.approx(length, rel=1e-12)
+    shapes = dict(trimer)  # the page reads top to bottom: imports of the first block carry over
+    exec(blocks[1], shapes)
+    assert list(shapes["table"].kind) == list(SHAPE_KINDS)
+
+
+@pytest.mark.parametrize("shape", SHAPES, ids=[s["kind"] for s in SHAPES])
+def test_outline_is_the_shapes_boundary(shape: dict) -> None:
+    table = ShapeTable.from_shapes([shape])
+    outline = table.outline(0, points_per_turn=4096)
+    ring = Polygon(outline)
+    assert ring.is_valid and ring.exterior.is_ccw
+    assert ring.area == pytest.approx(table.area[0], rel=1e-5)
+    assert ring.length == pytest.approx(table.perimeter[0], rel=1e-5)
+    assert ring.symmetric_difference(_shapely(shape)).area < 1e-5 * table.area[0]

@@ -219,6 +219,48 @@ class ShapeTable:
         """Body-frame vertices of shape ``k``, shape (n_k, 2) [length]."""
         return self.vertices[k, : self.n_vertices[k]]
 
+    def outline(self, k: int, points_per_turn: int = 256) -> NDArray[np.float64]:
+        """Body-frame boundary of shape ``k`` as a closed counter-clockwise polygon.
+
+        Curved parts are sampled with ``points_per_turn`` points per full turn (the
+        polygon's area converges to :attr:`area` as ``points_per_turn**-2``); for
+        drawing and export, not for contact geometry.
+
+        Returns
+        -------
+        ndarray, shape (M, 2) [length]
+            Boundary points, the first not repeated at the end.
+        """
+        kind = self.kind[k]
+        r = float(self.radius[k])
+        v = self.vertex_list(k)
+        if kind == "disk":
+            return _arc(np.zeros(2), r, 0.0, 2.0 * pi, points_per_turn, closed=False)
+        if kind == "ellipse":
+            a, b = self.semi_axes[k]
+            t = np.linspace(0.0, 2.0 * pi, points_per_turn, endpoint=False)
+            return np.stack([a * np.cos(t), b * np.sin(t)], axis=1)
+        if kind == "reuleaux":
+            return np.concatenate([
+                _arc(v[m], float(np.linalg.norm(v[(m + 1) % 3] - v[m])), _angle(v[(m + 1) % 3] - v[m]),
+                     pi / 3.0, points_per_turn, closed=False) for m in range(3)
+            ])
+        if kind == "dumbbell":
+            u = v[1] / np.linalg.norm(v[1])
+            alpha = asin(float(self.shaft_half_width[k]) / r)
+            start = _angle(u) - (pi - alpha)
+            return np.concatenate([_arc(v[1], r, start, 2.0 * (pi - alpha), points_per_turn),
+                                   _arc(v[0], r, start + pi, 2.0 * (pi - alpha), points_per_turn)])
+        # circulo-line and -polygon: at each vertex, an arc between the outward normals
+        # of its two edges (a half turn at each end of a circulo-line)
+        edge = np.roll(v, -1, axis=0) - v
+        normal = np.stack([edge[:, 1], -edge[:, 0]], axis=1)
+        out = []
+        for m in range(len(v)):
+            a0, a1 = _angle(normal[m - 1]), _angle(normal[m])
+            out.append(_arc(v[m], r, a0, (a1 - a0) % (2.0 * pi) or 2.0 * pi, points_per_turn))
+        return np.concatenate(out)
+
     @property
     def area(self) -> NDArray[np.float64]:
         """Exact area of each shape, shape (S,) [length^2]."""
@@ -249,6 +291,18 @@ class ShapeTable:
             else:
                 out[k] = far + self.radius[k]
         return out
+
+
+def _angle(vec: NDArray[np.float64]) -> float:
+    return float(np.arctan2(vec[1], vec[0]))
+
+
+def _arc(centre: NDArray[np.float64], radius: float, start: float, sweep: float, points_per_turn: int,
+         closed: bool = True) -> NDArray[np.float64]:
+    """Points on a counter-clockwise arc, both ends included when ``closed``."""
+    n = max(2, int(np.ceil(points_per_turn * sweep / (2.0 * pi))) + 1)
+    t = start + np.linspace(0.0, sweep, n, endpoint=closed)
+    return centre + radius * np.stack([np.cos(t), np.sin(t)], axis=1)
 
 
 def _float_array(values: ArrayLike, shape: tuple[int, ...], name: str) -> NDArray[np.float64]:
