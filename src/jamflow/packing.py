@@ -18,6 +18,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike, NDArray
 
+from .bodies import SHAPE_GEOMETRY_RTOL, SHAPE_KINDS, Links, ShapeTable
 from .box import Box
 from .neighbors import PairList, pairs_within
 from .provenance import provenance_attrs
@@ -93,6 +94,16 @@ class Packing:
         The producing stage's full parameters (stored as JSON).
     attrs : dict
         Further scalar attributes of the producing stage (stored verbatim).
+    links : Links or None
+        Fixed-length links between spheres (chains, rigid clusters); linked pairs
+        are constraints, not contacts, and are exempt from the overlap check.
+    orientation : ndarray, shape (N,) or None
+        Orientation of shaped particles in 2D [rad]; given exactly when ``shapes`` is.
+    shapes : ShapeTable or None
+        Shape table of anisotropic 2D particles (see :mod:`jamflow.bodies`).
+    shape_index : ndarray of int64, shape (N,) or None
+        Row of ``shapes`` of each particle. A shaped particle's ``diameter`` is the
+        diameter of its bounding circle.
     """
 
     position: NDArray[np.float64]
@@ -106,6 +117,10 @@ class Packing:
     seed: int | None = None
     parameters: dict[str, Any] = field(default_factory=dict)
     attrs: dict[str, Any] = field(default_factory=dict)
+    links: Links | None = None
+    orientation: NDArray[np.float64] | None = None
+    shapes: ShapeTable | None = None
+    shape_index: NDArray[np.int64] | None = None
 
     def __post_init__(self) -> None:
         x = np.array(self.position, dtype=np.float64)
@@ -153,6 +168,41 @@ class Packing:
             if r.shape != (n,):
                 raise ValueError(f"rattler must have shape ({n},), got {r.shape}")
             object.__setattr__(self, "rattler", r)
+        if self.links is not None:
+            self.links.check_indices(n)
+        self._check_shapes()
+
+    def _check_shapes(self) -> None:
+        n, d = self.position.shape
+        if (self.shapes is None) != (self.orientation is None) or (self.shapes is None) != (self.shape_index is None):
+            raise ValueError("shapes, shape_index and orientation must be given together")
+        if self.shapes is None:
+            return
+        if d != 2:
+            raise ValueError(f"shaped particles are 2D; this packing has d={d}")
+        theta = np.asarray(self.orientation, dtype=np.float64)
+        if theta.shape != (n,):
+            raise ValueError(f"orientation must have shape ({n},), got {theta.shape}")
+        if not np.all(np.isfinite(theta)):
+            k = int(np.flatnonzero(~np.isfinite(theta))[0])
+            raise ValueError(f"orientation of particle {k} is {theta[k]}: angles must be finite")
+        index = np.asarray(self.shape_index)
+        if index.shape != (n,) or not np.issubdtype(index.dtype, np.integer):
+            raise ValueError(f"shape_index must be {n} integers, got shape {index.shape} of {index.dtype}")
+        index = index.astype(np.int64)
+        if np.any(index < 0) or np.any(index >= len(self.shapes)):
+            k = int(np.flatnonzero((index < 0) | (index >= len(self.shapes)))[0])
+            raise ValueError(f"particle {k} has shape_index {index[k]} outside 0..{len(self.shapes) - 1}")
+        bound = 2.0 * self.shapes.bounding_radius[index]
+        wrong = np.abs(self.diameter - bound) > SHAPE_GEOMETRY_RTOL * bound
+        if np.any(wrong):
+            k = int(np.flatnonzero(wrong)[0])
+            raise ValueError(
+                f"particle {k}: diameter {float(self.diameter[k])!r} is not the bounding diameter "
+                f"{float(bound[k])!r} of its shape {index[k]} ({self.shapes.kind[index[k]]})"
+            )
+        object.__setattr__(self, "orientation", theta)
+        object.__setattr__(self, "shape_index", index)
 
     # derived quantities -------------------------------------------------------------
     @property
@@ -167,8 +217,21 @@ class Packing:
 
     @property
     def packing_fraction(self) -> float:
-        """Sum of particle volumes over box volume (dimensionless)."""
+        """Sum of particle volumes (shape areas for shaped particles) over box volume.
+
+        Linked spheres count whole: a link shorter than the contact distance makes
+        the members' volumes overlap and this sum an upper bound.
+        """
+        if self.shapes is not None:
+            return float(self.shapes.area[self.shape_index].sum() / self.box.volume)
         return float(sphere_volume(self.d, self.diameter).sum() / self.box.volume)
+
+    @property
+    def clusters(self) -> NDArray[np.int64]:
+        """Cluster label of each particle (connected components of the links), shape (N,)."""
+        if self.links is None:
+            return np.arange(self.n, dtype=np.int64)
+        return self.links.clusters(self.n)
 
     def sigma(self, i: ArrayLike, j: ArrayLike) -> NDArray[np.float64]:
         """Contact distances ``(D_i + D_j) / 2`` for index arrays [length]."""
@@ -188,8 +251,13 @@ class Packing:
         """
         if not (np.isfinite(unit) and unit > 0.0):
             raise ValueError(f"length unit must be positive and finite, got {unit}")
+        bodies: dict[str, Any] = {}
+        if self.links is not None:
+            bodies["links"] = self.links.scaled(1.0 / unit)
+        if self.shapes is not None:
+            bodies["shapes"] = self.shapes.scaled(1.0 / unit)
         return replace(self, position=self.position / unit, diameter=self.diameter / unit,
-                       box=self.box.scaled(1.0 / unit))
+                       box=self.box.scaled(1.0 / unit), **bodies)
 
     def wrapped(self) -> "Packing":
         """Same packing with centres mapped into the primary cell."""
@@ -222,10 +290,17 @@ class Packing:
             raise ValueError(f"{bad.size} particle(s) lie outside the box, e.g. index {bad[0]}")
         if overlap_tol is None:
             return
+        if self.shapes is not None and np.any(self.shapes.kind != "disk"):
+            raise ValueError(
+                "the hard-particle overlap check is defined for spheres; shaped particles "
+                "overlap by their shape model's contact distance (read with overlap_tol=None)"
+            )
         pairs, h = near_pairs(self, 0.0)
         bad = -h > overlap_tol
+        if self.links is not None:
+            bad &= ~_linked(pairs.i, pairs.j, self.links)
         if np.any(bad):
-            worst = np.argsort(h)[: min(3, int(bad.sum()))]
+            worst = np.flatnonzero(bad)[np.argsort(h[bad])][:3]
             named = ", ".join(f"({pairs.i[k]}, {pairs.j[k]}): {-h[k]:.3g}" for k in worst)
             raise OverlapError(
                 f"{int(bad.sum())} pair(s) overlap by more than {overlap_tol:g} (relative); "
@@ -314,6 +389,13 @@ def near_pairs(packing: Packing, max_gap: float) -> tuple[PairList, NDArray[np.f
     return pairs.select(keep), h[keep]
 
 
+def _linked(i: NDArray[np.int64], j: NDArray[np.int64], links: Links) -> NDArray[np.bool_]:
+    """Which pairs ``(i, j)``, ``i < j``, are links."""
+    key = i * (np.int64(1) << 32) + j
+    linked = links.i * (np.int64(1) << 32) + links.j
+    return np.isin(key, linked)
+
+
 def max_overlap(packing: Packing) -> tuple[float, float]:
     """Largest overlap ``sigma_ij - r`` [length] and its relative value (0 if none)."""
     pairs, h = near_pairs(packing, 0.0)
@@ -385,6 +467,7 @@ def packing_to_dataset(p: Packing, stage_parameters: dict[str, Any] | None = Non
                 "flag_meanings": "backbone rattler",
             },
         )
+    data_vars.update(_body_variables(p))
     attrs: dict[str, Any] = {
         "length_unit": "box side of the initial configuration",
         "force_unit": "stage-specific",
@@ -403,6 +486,71 @@ def packing_to_dataset(p: Packing, stage_parameters: dict[str, Any] | None = Non
     )
     attrs.update(provenance_attrs(title=f"jamflow packing ({p.protocol})"))
     return xr.Dataset(data_vars=data_vars, attrs=attrs)
+
+
+def _length(dims: tuple[str, ...], values: Any, long_name: str) -> tuple:
+    return (dims, values, {"units": "1", "long_name": long_name, "comment": _LENGTH_COMMENT})
+
+
+def _body_variables(p: Packing) -> dict[str, Any]:
+    """Dataset variables of links, orientations and shapes (none for plain spheres)."""
+    out: dict[str, Any] = {}
+    if p.links is not None:
+        out["link_i"] = (("link",), p.links.i,
+                         {"units": "1", "long_name": "index of the first particle of a link (i < j)"})
+        out["link_j"] = (("link",), p.links.j,
+                         {"units": "1", "long_name": "index of the second particle of a link (i < j)"})
+        out["link_length"] = _length(("link",), p.links.length, "link length (fixed centre-to-centre distance)")
+        out["cluster"] = (("particle",), p.clusters, {
+            "units": "1", "long_name": "cluster label (connected component of the links)",
+            "comment": "derived from link_i, link_j for convenience; recomputed on read",
+        })
+    if p.shapes is not None:
+        t = p.shapes
+        out["orientation"] = (("particle",), p.orientation,
+                              {"units": "rad", "long_name": "orientation of the body frame (counter-clockwise)"})
+        out["shape_index"] = (("particle",), p.shape_index,
+                              {"units": "1", "long_name": "row of the shape table of each particle"})
+        out["shape_kind"] = (("shape",), t.kind.astype(object),
+                             {"long_name": "shape kind", "flag_meanings": " ".join(SHAPE_KINDS)})
+        out["shape_radius"] = _length(("shape",), t.radius,
+                                      "disk, rounding or lobe radius (NaN where not applicable)")
+        out["semi_axes"] = _length(("shape", "axis"), t.semi_axes, "ellipse semi-axes a >= b (NaN for other kinds)")
+        out["shape_vertex"] = _length(("shape", "vertex", "plane"), t.vertices,
+                                      "body-frame vertex relative to the centroid (NaN padding beyond n_vertices)")
+        out["n_vertices"] = (("shape",), t.n_vertices, {"units": "1", "long_name": "number of vertices of the shape"})
+        out["shaft_half_width"] = _length(("shape",), t.shaft_half_width,
+                                          "dumbbell shaft half-width (NaN for other kinds)")
+    return out
+
+
+def _body_fields(ds: xr.Dataset) -> dict[str, Any]:
+    """Inverse of :func:`_body_variables`; ``cluster`` is not read (links are the truth)."""
+    fields: dict[str, Any] = {}
+    link_vars = ("link_i", "link_j", "link_length")
+    present = [v for v in link_vars if v in ds]
+    if present and len(present) != len(link_vars):
+        raise ValueError(f"dataset has {', '.join(present)} but not all of {', '.join(link_vars)}")
+    if present:
+        fields["links"] = Links(ds["link_i"].values, ds["link_j"].values, ds["link_length"].values)
+    shape_vars = ("orientation", "shape_index", "shape_kind", "shape_radius", "semi_axes",
+                  "shape_vertex", "n_vertices", "shaft_half_width")
+    present = [v for v in shape_vars if v in ds]
+    if present and len(present) != len(shape_vars):
+        missing = [v for v in shape_vars if v not in ds]
+        raise ValueError(f"dataset has shape variables but lacks {', '.join(missing)}")
+    if present:
+        fields["shapes"] = ShapeTable(
+            kind=ds["shape_kind"].values.astype(str),
+            radius=ds["shape_radius"].values,
+            semi_axes=ds["semi_axes"].values,
+            vertices=ds["shape_vertex"].values,
+            n_vertices=ds["n_vertices"].values,
+            shaft_half_width=ds["shaft_half_width"].values,
+        )
+        fields["orientation"] = ds["orientation"].values
+        fields["shape_index"] = ds["shape_index"].values
+    return fields
 
 
 def _json_default(obj: Any) -> Any:
@@ -448,4 +596,5 @@ def packing_from_dataset(ds: xr.Dataset) -> Packing:
         seed=None if seed < 0 else seed,
         parameters=json.loads(ds.attrs.get("parameters", "{}")),
         attrs=extra,
+        **_body_fields(ds),
     )
