@@ -64,3 +64,18 @@ MINIMIZE_FORCE_TOL: float = 1e-12
 #: same particles (the contact overlap Q): jamming one sample from different target
 #: pressures rescales every diameter by one common factor.
 DIAMETER_RATIO_RTOL: float = 1e-8
+
+#: Linked spheres (holonomic links, soft-chains paper Sec. II C): largest relative
+#: link-length error ``|r_ij - l_ij| / l_ij`` that Newton re-affixing (Eq. 7) leaves
+#: after every position update of a minimiser. Newton converges quadratically, so a
+#: sweep ends one or two iterations above the float64 floor of pair vectors
+#: (~L 2^-53, i.e. ~1e-14 for box sides L ~ 30 link lengths); 1e-13 sits above that
+#: floor and far below any physical tolerance.
+LINK_LENGTH_RTOL: float = 1e-13
+
+#: A cluster's link Jacobian counts as degenerate (redundant links, e.g. both
+#: diagonals of a rigid square in 2D, or a straight rigid chain) when its smallest
+#: QR diagonal ``|R_kk|`` falls below this fraction of the largest: the constraint
+#: basis would then carry a direction set by round-off. Unit link directions give
+#: ``|R_kk| ~ 1``; 1e-8 keeps projections accurate to ~1e-8 relative at worst.
+LINK_RANK_RTOL: float = 1e-8
