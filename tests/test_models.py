@@ -271,3 +271,56 @@ def test_sd_on_spheres_is_the_compiled_descent():
     res = minimize_sd(SphereModel(box, D, HARMONIC), x, dt=0.05, force_tol=1e-9)
     assert res.converged and res.max_force <= 1e-9
     assert res.energy == pytest.approx(evaluate(res.position, box, D).energy, rel=1e-14)
+
+
+# --- jamflow minimize ----------------------------------------------------------------
+
+@pytest.mark.parametrize("method, bodies", [("fire", "both"), ("cg", "both"), ("sd", "spheres")])
+def test_cli_minimize_spheres_and_linked_spheres(tmp_path, capsys, method, bodies):
+    from jamflow.cli import main
+    from jamflow.io import read_dataset, read_packing, write_packing
+    from jamflow.packing import Packing
+
+    x, box, D, links = _chains()
+    # steepest descent of the linked packing crawls (test_rigid_trimer_keeps_its_shape covers it)
+    cases = (("spheres", None), ("linked", links)) if bodies == "both" else (("spheres", None),)
+    for name, lk in cases:
+        src = tmp_path / f"{name}.nc"
+        write_packing(Packing(position=box.wrap(x), diameter=D, box=box, links=lk, protocol="test"), src)
+        out = tmp_path / f"{name}_{method}.nc"
+        tol = 1e-7 if method == "sd" else 1e-11
+        assert main(["minimize", str(src), str(out), "--method", method, "--force-tol", str(tol),
+                     "--max-steps", "2000000"]) == 0
+        printed = capsys.readouterr().out
+        ds = read_dataset(out)
+        p = read_packing(out, None)
+        for key in ("n_force_evaluations", "max_force", "energy"):
+            assert key in ds.attrs and f"{key} = " in printed
+        assert ds.attrs["max_force"] <= tol and ds.attrs["n_force_evaluations"] > 1
+        # the stored numbers are those of the stored configuration
+        if lk is None:
+            model = SphereModel(box, D)
+        else:
+            model = LinkedSpheresModel(box, D, p.links, p.position)
+            assert np.max(np.abs(model.link_errors(model.dofs(p.position)))) <= 1e-12
+            linked = set(zip(p.links.i.tolist(), p.links.j.tolist()))
+            assert not linked & set(map(tuple, p.contacts.tolist()))
+        q = model.dofs(p.position)
+        ev = model.evaluate(q)
+        assert ev.energy == pytest.approx(ds.attrs["energy"], rel=1e-10)
+        assert model.max_force(model.project(ev.gradient, q)) <= 2 * tol
+
+
+def test_cli_minimize_refuses_bad_options(tmp_path, capsys):
+    from jamflow.cli import main
+    from jamflow.io import write_packing
+    from jamflow.packing import Packing
+
+    x, box, D = _compressed(16, 2, 0.85, seed=1)
+    src = tmp_path / "s.nc"
+    write_packing(Packing(position=box.wrap(x), diameter=D, box=box), src)
+    assert main(["minimize", str(src), str(tmp_path / "o.nc"), "--force-tol", "-1"]) == 1
+    assert "--force-tol" in capsys.readouterr().err
+    assert main(["minimize", str(src), str(tmp_path / "o.nc"), "--max-steps", "3"]) == 1
+    assert "did not reach" in capsys.readouterr().err
+    assert not (tmp_path / "o.nc").exists()

@@ -17,7 +17,8 @@ from ..presets import preset_options
 from ..provenance import jamflow_version
 
 #: Topic modules of this package that contribute subcommands.
-COMMAND_MODULES: tuple[str, ...] = ("packings", "analysis", "soft", "flow", "certify", "tradeoff", "ls", "calippso")
+COMMAND_MODULES: tuple[str, ...] = ("packings", "analysis", "soft", "flow", "certify", "tradeoff", "ls", "calippso",
+                                   "minimize")
 
 
 class _Parser(argparse.ArgumentParser):

@@ -28,6 +28,7 @@ from .potential import HARMONIC, NeighborList, PowerLawPotential
 __all__ = [
     "DEFAULT_FIRE",
     "METHODS",
+    "SD_STEP",
     "DescentResult",
     "FireParameters",
     "MinimizeResult",
@@ -575,6 +576,11 @@ def minimize_cg(
 #: Minimisers of :func:`minimize` by name.
 METHODS = ("fire", "cg", "sd")
 
+#: Steepest-descent step of :func:`minimize` in units of ``<D>^2 / (xi_0 epsilon)``
+#: (the time unit squared at unit mass): below ``2 / lambda_max ~ 1 / (2 d)`` of the
+#: harmonic Hessian with unit mean diameter, as :func:`steepest_descent`'s default.
+SD_STEP: float = 0.1
+
 
 def minimize(
     model: EnergyModel,
@@ -586,12 +592,13 @@ def minimize(
     """Minimise a model's energy at fixed box with ``method`` in :data:`METHODS`.
 
     ``"fire"``: :func:`minimize_fire` (default parameters); ``"cg"``:
-    :func:`minimize_cg`; ``"sd"``: :func:`minimize_sd` with its default step.
+    :func:`minimize_cg`; ``"sd"``: :func:`minimize_sd` with the step
+    :data:`SD_STEP` ``model.time_unit^2`` (``0.1 <D>^2 / (xi_0 epsilon)``).
     """
     if method == "fire":
         return minimize_fire(model, position, force_tol, max_steps)
     if method == "cg":
         return minimize_cg(model, position, force_tol, max_steps)
     if method == "sd":
-        return minimize_sd(model, position, force_tol=force_tol, max_steps=max_steps)
+        return minimize_sd(model, position, SD_STEP * model.time_unit**2, force_tol, max_steps)
     raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
