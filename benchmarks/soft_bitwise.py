@@ -37,7 +37,7 @@ def run(path: str) -> None:
         out[f"{name}.scalars"] = np.array([res.energy, res.pressure, res.max_force, res.n_contacts,
                                            res.steps, res.converged, res.rebuilds], dtype=np.float64)
 
-    for d, n, phi in ((2, 128, 0.9), (3, 96, 0.7)):
+    for d, n, phi in ((2, 48, 0.9), (3, 32, 0.7)):
         start = random_packing(n, d, 0.5 if d == 2 else 0.3, "bi", seed=11)
         factor = (start.packing_fraction / phi) ** (1.0 / d)  # compress affinely to phi
         x, box, D = start.position * factor, start.box.scaled(factor), start.diameter
@@ -46,7 +46,7 @@ def run(path: str) -> None:
         keep(f"{tag}.enthalpy_iso", minimize_enthalpy(x, box, D, 1e-2, force_tol=1e-12))
         keep(f"{tag}.enthalpy_full", minimize_enthalpy(x, box, D, 1e-2, force_tol=1e-12, box_dof="full"))
         keep(f"{tag}.cg", conjugate_gradient(x, box, D, force_tol=1e-10))
-        sd = steepest_descent(x, box, D, dt=0.05, force_tol=1e-8, record=50)
+        sd = steepest_descent(x, box, D, dt=0.05, force_tol=1e-6, record=50)
         keep(f"{tag}.sd", sd.result)
         out[f"{tag}.sd.energies"] = sd.energies
         loose = random_packing(n, d, 0.5 if d == 2 else 0.3, "bi", seed=5)

@@ -324,3 +324,25 @@ def test_cli_minimize_refuses_bad_options(tmp_path, capsys):
     assert main(["minimize", str(src), str(tmp_path / "o.nc"), "--max-steps", "3"]) == 1
     assert "did not reach" in capsys.readouterr().err
     assert not (tmp_path / "o.nc").exists()
+
+
+def test_jamming_bisection_of_linked_spheres_reaches_the_target_pressure():
+    """The compress/decompress bisection takes any model: linked spheres end at P0 with links intact."""
+    from jamflow.soft.jamming import jam_model_to_pressure
+
+    x, box, D, links = _chains(seed=4)
+    start = LinkedSpheresModel(box, D, links, x)
+    factor = 1.06  # decompress so the bisection must compress
+    model, start_x = start.rescaled(factor, x)
+    phi = float(np.sum(np.pi * D**2 / 4) / model.box.volume)
+    p0 = 1e-3
+    model, res, history, steps = jam_model_to_pressure(model, start_x, phi, p0, force_tol=1e-11,
+                                                       pressure_rtol=1e-3, delta_phi=5e-3)
+    assert res.converged and res.max_force <= 1e-11
+    assert abs(res.pressure - p0) <= 1e-3 * p0
+    q = res.position.ravel()
+    assert np.max(np.abs(model.link_errors(q))) <= 1e-12
+    # the reported pressure is the virial pressure (pairs + link tensions) of the final state
+    ev = model.evaluate(q)
+    assert np.trace(ev.virial) / (2 * model.box.volume) == pytest.approx(res.pressure, rel=1e-12)
+    assert len(history["phi"]) > 2 and steps == sum(history["steps"])

@@ -14,7 +14,9 @@ only through this protocol (jax-md's energy + shift, pele's ``BasePotential``):
   manifold (:meth:`EnergyModel.project`) and a re-projection of ``q`` onto it
   (:meth:`EnergyModel.reproject`); both are the identity for an unconstrained model;
 - the convergence measure ``max_force`` (largest per-body force norm), pressure and
-  stress from the evaluation, and a Hessian on request.
+  stress from the evaluation, and a Hessian on request;
+- the same model in a box scaled isotropically (``rescaled``), for the jamming-onset
+  bisection of :mod:`jamflow.soft.jamming`.
 
 The model owns its box, neighbour list and kernels: a minimiser never reaches into them.
 """
@@ -121,4 +123,8 @@ class EnergyModel(Protocol):
 
     def hessian(self, q: NDArray[np.float64]) -> sp.csr_matrix:
         """Second derivatives ``d^2 U / dq dq``, shape ``(n_dof, n_dof)``."""
+        ...
+
+    def rescaled(self, factor: float, position: NDArray[np.float64]) -> tuple["EnergyModel", NDArray[np.float64]]:
+        """The model in its box scaled by ``factor`` and the matching start (jamming bisection)."""
         ...

@@ -42,6 +42,7 @@ from ..soft import _kernels
 from ..soft.potential import HARMONIC, NeighborList, PowerLawPotential
 from ..tolerances import LINK_LENGTH_RTOL, LINK_RANK_RTOL
 from .base import ModelEvaluation
+from .spheres import SphereBodies
 
 __all__ = ["LINK_NEWTON_MAX_ITERATIONS", "LinkedSpheresModel"]
 
@@ -82,7 +83,7 @@ class _ClusterGroup:
         return q, r
 
 
-class LinkedSpheresModel:
+class LinkedSpheresModel(SphereBodies):
     """Soft spheres joined by fixed-length links (see the module doc).
 
     Parameters
@@ -115,16 +116,8 @@ class LinkedSpheresModel:
         nlist: NeighborList | None = None,
         length_rtol: float = LINK_LENGTH_RTOL,
     ) -> None:
-        self.box = box
-        self.diameter = np.asarray(diameter, dtype=np.float64)
-        self.potential = potential
+        super().__init__(box, diameter, potential, nlist)
         self.links = links
-        self.d = box.d
-        self.n = len(self.diameter)
-        self.n_dof = self.n * self.d
-        self.inverse_mass = np.ones(self.n_dof)
-        self.time_unit = float(self.diameter.mean()) / np.sqrt(potential.epsilon)
-        self.nlist = NeighborList(self.diameter) if nlist is None else nlist
         if not length_rtol > 0.0:
             raise ValueError(f"length_rtol must be positive, got {length_rtol}")
         self.length_rtol = float(length_rtol)
@@ -168,19 +161,6 @@ class LinkedSpheresModel:
             glinks = order_l[start_l[cl][:, None] + np.arange(lc)]
             groups.append(_ClusterGroup(particles, glinks, local[links.i[glinks]], local[links.j[glinks]], self.d))
         return groups
-
-    @property
-    def neighbor_builds(self) -> int:
-        return self.nlist.builds
-
-    def dofs(self, position: ArrayLike) -> NDArray[np.float64]:
-        x = np.array(position, dtype=np.float64)
-        if x.shape != (self.n, self.d):
-            raise ValueError(f"position must have shape ({self.n}, {self.d}), got {x.shape}")
-        return x.ravel()
-
-    def positions(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
-        return q.reshape(self.n, self.d)
 
     def link_vectors(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         """``x_ij`` of every link, shape (L, d) [length]."""
@@ -272,8 +252,16 @@ class LinkedSpheresModel:
             virial = virial + np.einsum("k,ka,kb->ab", mu / r, rvec, rvec)
         return ModelEvaluation(float(energy), gradient, virial, int(n_contacts))
 
-    def max_force(self, g: NDArray[np.float64]) -> float:
-        return float(np.sqrt(np.max(np.sum(g.reshape(self.n, self.d) ** 2, axis=1))))
+    def rescaled(self, factor: float, position: NDArray[np.float64]) -> tuple["LinkedSpheresModel", NDArray[np.float64]]:
+        """The model in the box scaled by ``factor`` and the centres moved affinely.
+
+        The affine move changes link lengths by ``factor - 1``; minimisers re-affix
+        them (:meth:`reproject`) before their first step.
+        """
+        x = position * factor
+        model = LinkedSpheresModel(self.box.scaled(factor), self.diameter, self.links, x, self.potential,
+                                   self.nlist, self.length_rtol)
+        return model, x
 
     def hessian(self, q: NDArray[np.float64]) -> sp.csr_matrix:
         raise NotImplementedError("the constrained Hessian of linked spheres is not implemented yet")

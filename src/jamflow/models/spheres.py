@@ -18,11 +18,14 @@ from ..soft.hessian import hessian
 from ..soft.potential import HARMONIC, NeighborList, PowerLawPotential, evaluate
 from .base import ModelEvaluation
 
-__all__ = ["SphereModel"]
+__all__ = ["SphereBodies", "SphereModel"]
 
 
-class SphereModel:
-    """Soft spheres with a power-law contact potential (see :mod:`jamflow.soft.potential`).
+class SphereBodies:
+    """Spheres with centres as their only degrees of freedom (unit masses), in a fixed box.
+
+    The part of a sphere model that does not depend on how the spheres interact;
+    :class:`SphereModel` and :class:`~jamflow.models.links.LinkedSpheresModel` share it.
 
     Parameters
     ----------
@@ -31,11 +34,10 @@ class SphereModel:
     diameter : array_like, shape (N,)
         Diameters [length].
     potential : PowerLawPotential
+        Contact potential [energy scale epsilon].
     nlist : NeighborList, optional
         Verlet list to (re)use; a new one by default.
     """
-
-    constrained = False
 
     def __init__(
         self,
@@ -67,6 +69,18 @@ class SphereModel:
     def positions(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         return q.reshape(self.n, self.d)
 
+    def max_force(self, g: NDArray[np.float64]) -> float:
+        return float(np.sqrt(np.max(np.sum(g.reshape(self.n, self.d) ** 2, axis=1))))
+
+
+class SphereModel(SphereBodies):
+    """Soft spheres with a power-law contact potential (see :mod:`jamflow.soft.potential`).
+
+    Parameters as :class:`SphereBodies`.
+    """
+
+    constrained = False
+
     def evaluate(self, q: NDArray[np.float64]) -> ModelEvaluation:
         ev = evaluate(self.positions(q), self.box, self.diameter, self.potential, self.nlist)
         return ModelEvaluation(ev.energy, -ev.force.ravel(), ev.virial, ev.n_contacts)
@@ -77,8 +91,9 @@ class SphereModel:
     def reproject(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         return q
 
-    def max_force(self, g: NDArray[np.float64]) -> float:
-        return float(np.sqrt(np.max(np.sum(g.reshape(self.n, self.d) ** 2, axis=1))))
-
     def hessian(self, q: NDArray[np.float64]) -> sp.csr_matrix:
         return hessian(self.positions(q), self.box, self.diameter, self.potential)
+
+    def rescaled(self, factor: float, position: NDArray[np.float64]) -> tuple["SphereModel", NDArray[np.float64]]:
+        """The model in the box scaled by ``factor`` (same neighbour list) and the centres moved affinely."""
+        return SphereModel(self.box.scaled(factor), self.diameter, self.potential, self.nlist), position * factor
