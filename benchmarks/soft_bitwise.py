@@ -39,14 +39,15 @@ def run(path: str) -> None:
 
     for d, n, phi in ((2, 48, 0.9), (3, 32, 0.7)):
         start = random_packing(n, d, 0.5 if d == 2 else 0.3, "bi", seed=11)
-        factor = (start.packing_fraction / phi) ** (1.0 / d)  # compress affinely to phi
-        x, box, D = start.position * factor, start.box.scaled(factor), start.diameter
+        # compress affinely to phi, lengths in units of the mean diameter
+        factor = (start.packing_fraction / phi) ** (1.0 / d) / start.diameter.mean()
+        x, box, D = start.position * factor, start.box.scaled(factor), start.diameter / start.diameter.mean()
         tag = f"{d}d"
         keep(f"{tag}.fire", fire(x, box, D, force_tol=1e-12))
         keep(f"{tag}.enthalpy_iso", minimize_enthalpy(x, box, D, 1e-2, force_tol=1e-12))
         keep(f"{tag}.enthalpy_full", minimize_enthalpy(x, box, D, 1e-2, force_tol=1e-12, box_dof="full"))
         keep(f"{tag}.cg", conjugate_gradient(x, box, D, force_tol=1e-10))
-        sd = steepest_descent(x, box, D, dt=0.05, force_tol=1e-6, record=50)
+        sd = steepest_descent(x, box, D, dt=0.05, force_tol=1e-8, max_steps=200_000, record=50)
         keep(f"{tag}.sd", sd.result)
         out[f"{tag}.sd.energies"] = sd.energies
         loose = random_packing(n, d, 0.5 if d == 2 else 0.3, "bi", seed=5)
