@@ -262,8 +262,7 @@ def _fire_generic(
         vnorm = float(np.sqrt(np.sum(mass * v * v)))
         fnorm = float(np.sqrt(force @ accel))
         keep, mix = _kernels._fire_mixing(alpha, vnorm, fnorm)
-        _kernels._mix_velocity(_as_column(v), _as_column(accel), keep, mix)
-        _kernels._axpy(dt, _as_column(v), _as_column(q))
+        _kernels._mix_and_move(_as_column(v), _as_column(accel), keep, mix, _as_column(q), dt)
         q = model.reproject(q)
         ev = model.evaluate(q)
         evaluations += 1
@@ -289,7 +288,7 @@ def minimize_fire(
 
     Soft spheres run the compiled loop of :mod:`jamflow.soft._kernels`; any other
     model the same algorithm on its flat degree-of-freedom vector (same control
-    kernels: ``_fire_adapt``, ``_fire_step_back``, ``_fire_mixing``), with masses and
+    kernels: ``_fire_adapt``, ``_fire_step_back``, ``_fire_mixing``, ``_mix_and_move``), with masses and
     constraint projections (see :func:`_fire_generic`).
 
     Parameters
