@@ -328,7 +328,7 @@ def test_cli_minimize_refuses_bad_options(tmp_path, capsys):
 
 def test_jamming_bisection_of_linked_spheres_reaches_the_target_pressure():
     """The compress/decompress bisection takes any model: linked spheres end at P0 with links intact."""
-    from jamflow.soft.jamming import jam_model_to_pressure
+    from jamflow.soft.jamming import JammingSettings, jam_model_to_pressure
 
     x, box, D, links = _chains(seed=4)
     start = LinkedSpheresModel(box, D, links, x)
@@ -336,8 +336,8 @@ def test_jamming_bisection_of_linked_spheres_reaches_the_target_pressure():
     model, start_x = start.rescaled(factor, x)
     phi = float(np.sum(np.pi * D**2 / 4) / model.box.volume)
     p0 = 1e-3
-    model, res, history, steps = jam_model_to_pressure(model, start_x, phi, p0, force_tol=1e-10,
-                                                       pressure_rtol=1e-2, delta_phi=5e-3)
+    settings = JammingSettings(force_tol=1e-10, pressure_rtol=1e-2, delta_phi=5e-3)
+    model, res, history, steps = jam_model_to_pressure(model, start_x, phi, p0, settings)
     assert res.converged and res.max_force <= 1e-10
     assert abs(res.pressure - p0) <= 1e-2 * p0
     q = res.position.ravel()

@@ -241,7 +241,7 @@ def fire(
         vnorm = np.sqrt(_dot(v, v) + vq * vq)
         fnorm = np.sqrt(s * s * _dot(force, force) + fq * fq)
         keep, mix = _fire_mixing(alpha, vnorm, fnorm)
-        vq = keep * vq + mix * fq
+        vq = _mixed(keep, vq, mix, fq)
         _mix_and_move(v, force, keep, mix * s, y, dt)
         if barostat:
             q += dt * vq

@@ -44,6 +44,7 @@ from .potential import HARMONIC, NeighborList, PowerLawPotential, overlapping_pa
 __all__ = [
     "FORCE_TOL_VANDERWERF",
     "JammingResult",
+    "JammingSettings",
     "bisect_to_pressure",
     "jam_model_to_pressure",
     "jam_to_pressure",
@@ -78,6 +79,20 @@ class JammingResult:
     steps: int = 0
 
 
+@dataclass(frozen=True)
+class JammingSettings:
+    """Tolerances and budget of the jamming protocol (see :func:`jam_to_pressure`)."""
+
+    force_tol: float = FORCE_TOL_VANDERWERF
+    pressure_rtol: float = 1e-6
+    delta_phi: float = 1e-3
+    bisection_rtol: float = 0.1
+    bisection_force_factor: float = 1e-2
+    max_steps: int = 20_000_000
+    fire_params: FireParameters = DEFAULT_FIRE
+    box_dof: str = "isotropic"
+
+
 def soft_packing(
     x: np.ndarray,
     box: Box,
@@ -109,15 +124,15 @@ def jam_to_pressure(
     packing: Packing,
     pressure: float = 1e-7,
     potential: PowerLawPotential = HARMONIC,
-    force_tol: float = FORCE_TOL_VANDERWERF,
-    pressure_rtol: float = 1e-6,
-    delta_phi: float = 1e-3,
-    bisection_rtol: float = 0.1,
-    bisection_force_factor: float = 1e-2,
-    max_steps: int = 20_000_000,
-    fire_params: FireParameters = DEFAULT_FIRE,
+    force_tol: float = JammingSettings.force_tol,
+    pressure_rtol: float = JammingSettings.pressure_rtol,
+    delta_phi: float = JammingSettings.delta_phi,
+    bisection_rtol: float = JammingSettings.bisection_rtol,
+    bisection_force_factor: float = JammingSettings.bisection_force_factor,
+    max_steps: int = JammingSettings.max_steps,
+    fire_params: FireParameters = JammingSettings.fire_params,
     progress: Callable[[dict], None] | None = None,
-    box_dof: str = "isotropic",
+    box_dof: str = JammingSettings.box_dof,
 ) -> JammingResult:
     """Bring a packing to the jamming onset at pressure ``P0`` (see module doc).
 
@@ -167,10 +182,9 @@ def jam_to_pressure(
     particle_volume = float(sphere_volume(d, D).sum())
     phi = particle_volume / box.volume
     model = SphereModel(box, D, potential, NeighborList(D))
-    model, final, history, steps = jam_model_to_pressure(
-        model, x, phi, pressure, force_tol, pressure_rtol, delta_phi, bisection_rtol, bisection_force_factor,
-        max_steps, fire_params, progress, box_dof,
-    )
+    settings = JammingSettings(force_tol, pressure_rtol, delta_phi, bisection_rtol, bisection_force_factor,
+                               max_steps, fire_params, box_dof)
+    model, final, history, steps = jam_model_to_pressure(model, x, phi, pressure, settings, progress)
     box = final.box
     fmax2 = final.max_force**2
     attrs = {
@@ -266,15 +280,8 @@ def jam_model_to_pressure(
     position: np.ndarray,
     phi: float,
     pressure: float,
-    force_tol: float = FORCE_TOL_VANDERWERF,
-    pressure_rtol: float = 1e-6,
-    delta_phi: float = 1e-3,
-    bisection_rtol: float = 0.1,
-    bisection_force_factor: float = 1e-2,
-    max_steps: int = 20_000_000,
-    fire_params: FireParameters = DEFAULT_FIRE,
+    settings: JammingSettings = JammingSettings(),
     progress: Callable[[dict], None] | None = None,
-    box_dof: str = "isotropic",
 ) -> tuple[EnergyModel, MinimizeResult, dict[str, list], int]:
     """Jamming onset of any model at pressure ``P0`` (the protocol of :func:`jam_to_pressure`).
 
@@ -288,17 +295,18 @@ def jam_model_to_pressure(
         The model in the final box, the final minimisation, the per-step history
         (``phi``, ``pressure``, ``steps``) and the total FIRE steps.
     """
+    c = settings
     history: dict[str, list] = {"phi": [], "pressure": [], "steps": []}
     model, res, phi, delta_phi, direction, steps = bisect_to_pressure(
-        model, position, phi, pressure, bisection_force_factor * pressure, bisection_rtol, delta_phi,
-        max_steps, fire_params, progress, history,
+        model, position, phi, pressure, c.bisection_force_factor * pressure, c.bisection_rtol, c.delta_phi,
+        c.max_steps, c.fire_params, progress, history,
     )
     if isinstance(model, SphereModel):
-        final = minimize_enthalpy_model(model, res.position, pressure, force_tol, pressure_rtol,
-                                        max_steps - steps, fire_params, box_dof)
+        final = minimize_enthalpy_model(model, res.position, pressure, c.force_tol, c.pressure_rtol,
+                                        c.max_steps - steps, c.fire_params, c.box_dof)
         return model, final, history, steps + final.steps
     model, final, _, _, _, more = bisect_to_pressure(
-        model, res.position, phi, pressure, force_tol, pressure_rtol, delta_phi, max_steps - steps,
-        fire_params, progress, history, direction,
+        model, res.position, phi, pressure, c.force_tol, c.pressure_rtol, delta_phi, c.max_steps - steps,
+        c.fire_params, progress, history, direction,
     )
     return model, final, history, steps + more
