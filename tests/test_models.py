@@ -9,8 +9,16 @@ from jamflow.bodies import Links
 from jamflow.box import Box
 from jamflow.initial import random_packing
 from jamflow.models import EnergyModel, LinkedSpheresModel, ModelEvaluation, SphereModel
-from jamflow.soft import evaluate, fire, minimize, minimize_cg, minimize_fire, minimize_sd
-from jamflow.soft.minimize import _fire_generic, DEFAULT_FIRE
+from jamflow.soft import (
+    evaluate,
+    fire,
+    minimize,
+    minimize_cg,
+    minimize_enthalpy_model,
+    minimize_fire,
+    minimize_sd,
+)
+from jamflow.soft.minimize import DEFAULT_FIRE, _fire_generic
 from jamflow.soft.potential import HARMONIC
 from jamflow.tolerances import LINK_LENGTH_RTOL
 
@@ -346,3 +354,20 @@ def test_jamming_bisection_of_linked_spheres_reaches_the_target_pressure():
     ev = model.evaluate(q)
     assert np.trace(ev.virial) / (2 * model.box.volume) == pytest.approx(res.pressure, rel=1e-12)
     assert len(history["phi"]) > 2 and steps == sum(history["steps"])
+
+
+def test_rigid_tetrahedron_in_3d_keeps_its_shape():
+    x, box, D = _compressed(32, 3, 0.6, seed=8)
+    side = 0.5 * (D[0] + D[1])
+    # a regular tetrahedron of edge `side` on particles 0..3, all six edges linked
+    corners = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], float) * side / (2 * np.sqrt(2))
+    x[:4] = x[0] + corners
+    pairs = [(a, b) for a in range(4) for b in range(a + 1, 4)]
+    i, j = np.array(pairs).T
+    links = Links(i, j, np.full(len(pairs), side))
+    model = LinkedSpheresModel(box, D, links, x)
+    res = minimize_fire(model, x, force_tol=1e-11)
+    assert res.converged
+    assert np.max(np.abs(model.link_errors(res.position.ravel()))) <= 1e-12
+    with pytest.raises(NotImplementedError, match="box degrees of freedom"):
+        minimize_enthalpy_model(model, res.position, 1e-3)
