@@ -36,6 +36,7 @@ def _linked_packing(packing: Packing, model: LinkedSpheresModel, res: MinimizeRe
     x = packing.box.wrap(res.position)
     pairs, _, f = overlapping_pairs(x, packing.box, packing.diameter, model.potential)
     linked = np.isin(pairs.i * packing.n + pairs.j, packing.links.i * packing.n + packing.links.j)
+    attrs = {**attrs, "pressure_comment": "virial pressure of the contact forces and the link tensions"}
     return packing.evolve(
         position=x, contacts=np.stack([pairs.i, pairs.j], axis=1)[~linked], force=f[~linked], rattler=None,
         pressure=res.pressure, protocol=packing.protocol + ">minimize", parameters=parameters,
