@@ -78,3 +78,18 @@ SIZE_CLASS_RTOL: float = 1e-8
 #: boxes and points in float32, so lengths exchanged with freud agree to this relative
 #: accuracy (per coordinate; a distance between two points to a few times it).
 FLOAT32_RTOL: float = 2.0**-23
+
+#: Linked spheres (holonomic links, soft-chains paper Sec. II C): largest relative
+#: link-length error ``|r_ij - l_ij| / l_ij`` that Newton re-affixing (Eq. 7) leaves
+#: after every position update of a minimiser. Newton converges quadratically, so a
+#: sweep ends one or two iterations above the float64 floor of pair vectors
+#: (~L 2^-53, i.e. ~1e-14 for box sides L ~ 30 link lengths); 1e-13 sits above that
+#: floor and far below any physical tolerance.
+LINK_LENGTH_RTOL: float = 1e-13
+
+#: A cluster's link Jacobian counts as degenerate (redundant links, e.g. both
+#: diagonals of a rigid square in 2D, or a straight rigid chain) when its smallest
+#: QR diagonal ``|R_kk|`` falls below this fraction of the largest: the constraint
+#: basis would then carry a direction set by round-off. Unit link directions give
+#: ``|R_kk| ~ 1``; 1e-8 keeps projections accurate to ~1e-8 relative at worst.
+LINK_RANK_RTOL: float = 1e-8

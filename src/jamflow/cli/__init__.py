@@ -18,7 +18,7 @@ from ..provenance import jamflow_version
 
 #: Topic modules of this package that contribute subcommands.
 COMMAND_MODULES: tuple[str, ...] = ("packings", "analysis", "soft", "flow", "certify", "tradeoff", "ls", "calippso",
-                                     "summary")
+                                     "summary", "minimize")
 
 
 class _Parser(argparse.ArgumentParser):

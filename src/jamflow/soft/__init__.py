@@ -1,7 +1,8 @@
 """Soft repulsive spheres: potentials, minimisers, jamming onset, quasistatic shear, Hessian.
 
 Modules: :mod:`~jamflow.soft.potential` (pair potential, forces, stress, Verlet list),
-:mod:`~jamflow.soft.minimize` (FIRE, steepest descent, CG, enthalpy minimisation),
+:mod:`~jamflow.soft.minimize` (FIRE, steepest descent, CG, enthalpy minimisation; for any
+energy model of :mod:`jamflow.models`),
 :mod:`~jamflow.soft.jamming` (compress/decompress bisection to a target pressure),
 :mod:`~jamflow.soft.shear` (athermal quasistatic shear; Lerner et al.'s steepest-descent
 protocol), :mod:`~jamflow.soft.hessian` (dynamical matrix, modes, elastic moduli).
@@ -13,7 +14,12 @@ from .minimize import (
     MinimizeResult,
     conjugate_gradient,
     fire,
+    minimize,
+    minimize_cg,
     minimize_enthalpy,
+    minimize_enthalpy_model,
+    minimize_fire,
+    minimize_sd,
     steepest_descent,
 )
 from .potential import NeighborList, PowerLawPotential, evaluate, overlapping_pairs
@@ -27,7 +33,12 @@ __all__ = [
     "conjugate_gradient",
     "evaluate",
     "fire",
+    "minimize",
+    "minimize_cg",
     "minimize_enthalpy",
+    "minimize_enthalpy_model",
+    "minimize_fire",
+    "minimize_sd",
     "overlapping_pairs",
     "steepest_descent",
 ]

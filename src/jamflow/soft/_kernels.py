@@ -115,6 +115,49 @@ def _fire_adapt(power, step, npos, dt, alpha, n_delay, f_inc, f_dec, f_alpha, al
     return npos, dt, alpha
 
 
+@njit(cache=True, inline="always")
+def _fire_mixing(alpha, vnorm, fnorm):
+    """FIRE velocity mixing ``v <- keep v + mix F``; returns ``(keep, mix)``.
+
+    ``vnorm`` and ``fnorm`` are the norms of the velocity and force over every degree
+    of freedom (in the metric of the masses); with no force the velocity is kept.
+    """
+    mix = alpha * vnorm / fnorm if fnorm > 0.0 else 0.0
+    keep = 1.0 - alpha if fnorm > 0.0 else 1.0
+    return keep, mix
+
+
+@njit(cache=True, inline="always")
+def _mixed(keep, v, c, f):
+    """One mixed velocity component ``keep v + c f`` (``c`` = mixing coefficient x force scale)."""
+    return keep * v + c * f
+
+
+@njit(cache=True, inline="always")
+def _mix_velocity(v, f, keep, c):
+    """``v <- keep v + c f`` in place."""
+    for i in range(v.shape[0]):
+        for k in range(v.shape[1]):
+            v[i, k] = _mixed(keep, v[i, k], c, f[i, k])
+
+
+@njit(cache=True, inline="always")
+def _mix_and_move(v, f, keep, c, x, dt):
+    """``v <- keep v + c f`` and then ``x += dt v``, fused in one pass (no second sweep)."""
+    for i in range(v.shape[0]):
+        for k in range(v.shape[1]):
+            vi = _mixed(keep, v[i, k], c, f[i, k])
+            v[i, k] = vi
+            x[i, k] += dt * vi
+
+
+@njit(cache=True, inline="always")
+def _fire_step_back(x, v, dt):
+    """FIRE 2.0 correction after an uphill step: move back half a step and stop."""
+    _axpy(-0.5 * dt, v, x)
+    v[:, :] = 0.0
+
+
 @njit(cache=True)
 def _needs_rebuild(y, y_build, s, s_build, reach, skin, slack):
     """Verlet criterion: twice the largest non-affine displacement plus box deformation.
@@ -186,26 +229,20 @@ def fire(
             power, step, npos, dt, alpha, n_delay, f_inc, f_dec, f_alpha, alpha0, dt_max, dt_min, initial_delay
         )
         if not power > 0.0:
-            # step back half a step and stop: FIRE 2.0 correction of overshoot
-            _axpy(-0.5 * dt, v, y)
-            v[:, :] = 0.0
+            _fire_step_back(y, v, dt)
             if barostat:
                 q -= 0.5 * dt * vq
                 vq = 0.0
-        # semi-implicit Euler with FIRE velocity mixing (fused loops: no temporaries)
+        # semi-implicit Euler with FIRE velocity mixing; the generalised force s F is
+        # never formed (mix * s * F keeps the rounding of the fused original)
         _axpy(dt * s, force, v)
         if barostat:
             vq += dt * fq
         vnorm = np.sqrt(_dot(v, v) + vq * vq)
         fnorm = np.sqrt(s * s * _dot(force, force) + fq * fq)
-        mix = alpha * vnorm / fnorm if fnorm > 0.0 else 0.0
-        keep = 1.0 - alpha if fnorm > 0.0 else 1.0
-        vq = keep * vq + mix * fq
-        for i in range(y.shape[0]):
-            for a in range(d):
-                vi = keep * v[i, a] + mix * s * force[i, a]
-                v[i, a] = vi
-                y[i, a] += dt * vi
+        keep, mix = _fire_mixing(alpha, vnorm, fnorm)
+        vq = _mixed(keep, vq, mix, fq)
+        _mix_and_move(v, force, keep, mix * s, y, dt)
         if barostat:
             q += dt * vq
             s = np.exp(q / q_scale)
@@ -379,26 +416,20 @@ def fire_stress(
             power, step, npos, dt, alpha, n_delay, f_inc, f_dec, f_alpha, alpha0, dt_max, dt_min, initial_delay
         )
         if not power > 0.0:
-            _axpy(-0.5 * dt, v, y)
             _axpy(-0.5 * dt / q_scale, vA, A)
-            v[:, :] = 0.0
+            _fire_step_back(y, v, dt)
             vA[:, :] = 0.0
         _axpy(dt, fy, v)
         _axpy(dt, fA, vA)
         vnorm = np.sqrt(_dot(v, v) + _dot(vA, vA))
         fnorm = np.sqrt(_dot(fy, fy) + _dot(fA, fA))
-        mix = alpha * vnorm / fnorm if fnorm > 0.0 else 0.0
-        keep = 1.0 - alpha if fnorm > 0.0 else 1.0
-        for i in range(y.shape[0]):
-            for a in range(d):
-                vi = keep * v[i, a] + mix * fy[i, a]
-                v[i, a] = vi
-                y[i, a] += dt * vi
+        keep, mix = _fire_mixing(alpha, vnorm, fnorm)
+        _mix_and_move(v, fy, keep, mix, y, dt)
+        # the box lower triangle has zero force and velocity, so mixing leaves it zero
+        _mix_velocity(vA, fA, keep, mix)
         for a in range(d):
             for b in range(a, d):
-                vab = keep * vA[a, b] + mix * fA[a, b]
-                vA[a, b] = vab
-                A[a, b] += dt * vab / q_scale
+                A[a, b] += dt * vA[a, b] / q_scale
         energy, n_contact = pair_forces_affine(y, A, offset, pi, pj, sigma, eps, w, force, virial)
         step += 1
     fire_state[0], fire_state[1], fire_state[2] = dt, alpha, npos

@@ -36,10 +36,20 @@ from ..analysis.contacts import find_rattlers
 from ..box import Box
 from ..packing import Packing, sphere_volume
 from ..tolerances import SOFT_FORCE_TOL
-from .minimize import DEFAULT_FIRE, FireParameters, fire, minimize_enthalpy
+from ..models.base import EnergyModel
+from ..models.spheres import SphereModel
+from .minimize import DEFAULT_FIRE, FireParameters, MinimizeResult, minimize_enthalpy_model, minimize_fire
 from .potential import HARMONIC, NeighborList, PowerLawPotential, overlapping_pairs
 
-__all__ = ["FORCE_TOL_VANDERWERF", "JammingResult", "jam_to_pressure", "soft_packing"]
+__all__ = [
+    "FORCE_TOL_VANDERWERF",
+    "JammingResult",
+    "JammingSettings",
+    "bisect_to_pressure",
+    "jam_model_to_pressure",
+    "jam_to_pressure",
+    "soft_packing",
+]
 
 #: Default final ``max_i |F_i|`` [epsilon / <D>]: VanderWerf et al.'s ``F_i^2 < 1e-25``
 #: with a factor ten to spare (see :data:`jamflow.tolerances.SOFT_FORCE_TOL`).
@@ -67,6 +77,20 @@ class JammingResult:
     converged: bool
     history: dict[str, list] = field(default_factory=dict)
     steps: int = 0
+
+
+@dataclass(frozen=True)
+class JammingSettings:
+    """Tolerances and budget of the jamming protocol (see :func:`jam_to_pressure`)."""
+
+    force_tol: float = FORCE_TOL_VANDERWERF
+    pressure_rtol: float = 1e-6
+    delta_phi: float = 1e-3
+    bisection_rtol: float = 0.1
+    bisection_force_factor: float = 1e-2
+    max_steps: int = 20_000_000
+    fire_params: FireParameters = DEFAULT_FIRE
+    box_dof: str = "isotropic"
 
 
 def soft_packing(
@@ -100,15 +124,15 @@ def jam_to_pressure(
     packing: Packing,
     pressure: float = 1e-7,
     potential: PowerLawPotential = HARMONIC,
-    force_tol: float = FORCE_TOL_VANDERWERF,
-    pressure_rtol: float = 1e-6,
-    delta_phi: float = 1e-3,
-    bisection_rtol: float = 0.1,
-    bisection_force_factor: float = 1e-2,
-    max_steps: int = 20_000_000,
-    fire_params: FireParameters = DEFAULT_FIRE,
+    force_tol: float = JammingSettings.force_tol,
+    pressure_rtol: float = JammingSettings.pressure_rtol,
+    delta_phi: float = JammingSettings.delta_phi,
+    bisection_rtol: float = JammingSettings.bisection_rtol,
+    bisection_force_factor: float = JammingSettings.bisection_force_factor,
+    max_steps: int = JammingSettings.max_steps,
+    fire_params: FireParameters = JammingSettings.fire_params,
     progress: Callable[[dict], None] | None = None,
-    box_dof: str = "isotropic",
+    box_dof: str = JammingSettings.box_dof,
 ) -> JammingResult:
     """Bring a packing to the jamming onset at pressure ``P0`` (see module doc).
 
@@ -157,36 +181,10 @@ def jam_to_pressure(
     x = packing.position / unit
     particle_volume = float(sphere_volume(d, D).sum())
     phi = particle_volume / box.volume
-    nlist = NeighborList(D)
-    history: dict[str, list] = {"phi": [], "pressure": [], "steps": []}
-    steps = 0
-    direction = 0
-    bisect_tol = bisection_force_factor * pressure
-    while True:
-        res = fire(x, box, D, potential, bisect_tol, max_steps - steps, fire_params, nlist)
-        steps += res.steps
-        x = res.position
-        history["phi"].append(phi)
-        history["pressure"].append(res.pressure)
-        history["steps"].append(res.steps)
-        if progress is not None:
-            progress({"phi": phi, "pressure": res.pressure, "delta_phi": delta_phi, "steps": steps})
-        if not res.converged:
-            raise RuntimeError(f"FIRE step budget ({max_steps}) exhausted at phi = {phi:.10f}")
-        if abs(res.pressure - pressure) <= bisection_rtol * pressure:
-            break
-        new_direction = 1 if res.pressure < pressure else -1
-        if direction and new_direction != direction:
-            delta_phi *= 0.5
-        direction = new_direction
-        if delta_phi < 4.0 * np.finfo(float).eps * phi:
-            break
-        new_phi = phi + direction * delta_phi
-        factor = (phi / new_phi) ** (1.0 / d)
-        box, x, phi = box.scaled(factor), x * factor, new_phi
-    final = minimize_enthalpy(x, box, D, pressure, potential, force_tol, pressure_rtol,
-                              max_steps - steps, fire_params, nlist, box_dof)
-    steps += final.steps
+    model = SphereModel(box, D, potential, NeighborList(D))
+    settings = JammingSettings(force_tol, pressure_rtol, delta_phi, bisection_rtol, bisection_force_factor,
+                               max_steps, fire_params, box_dof)
+    model, final, history, steps = jam_model_to_pressure(model, x, phi, pressure, settings, progress)
     box = final.box
     fmax2 = final.max_force**2
     attrs = {
@@ -208,3 +206,107 @@ def jam_to_pressure(
     }
     out = soft_packing(final.position, box, D, potential, packing, ">soft", params, attrs)
     return JammingResult(out, bool(final.converged), history, steps)
+
+
+def bisect_to_pressure(
+    model: EnergyModel,
+    position: np.ndarray,
+    phi: float,
+    pressure: float,
+    force_tol: float,
+    rtol: float,
+    delta_phi: float,
+    max_steps: int,
+    fire_params: FireParameters = DEFAULT_FIRE,
+    progress: Callable[[dict], None] | None = None,
+    history: dict[str, list] | None = None,
+    direction: int = 0,
+) -> tuple[EnergyModel, MinimizeResult, float, float, int, int]:
+    """Compress/decompress bisection of any model to ``|P - P0| <= rtol P0`` (module doc, step 2).
+
+    After each fixed-box FIRE minimisation to ``force_tol`` the box is scaled by
+    ``model.rescaled`` to the next packing fraction ``phi +- delta_phi``; ``delta_phi``
+    halves when the direction reverses. Stops also when ``delta_phi`` underflows.
+
+    Parameters
+    ----------
+    model : EnergyModel
+        Needs ``rescaled(factor, position) -> (model, position)``.
+    position : ndarray, shape (N, d)
+    phi : float
+        Packing fraction of the start (the bisection variable; ``phi ~ 1 / V``).
+    history : dict of lists, optional
+        ``phi``, ``pressure``, ``steps`` are appended per bisection step.
+    direction : int
+        Direction of the previous step (0: none), to resume a bisection.
+
+    Returns
+    -------
+    model, result, phi, delta_phi, direction, steps
+        The model in the last box, its FIRE result, and the state to resume from.
+    """
+    d = model.box.d
+    steps = 0
+    x = position
+    while True:
+        res = minimize_fire(model, x, force_tol, max_steps - steps, fire_params)
+        steps += res.steps
+        x = res.position
+        if history is not None:
+            history["phi"].append(phi)
+            history["pressure"].append(res.pressure)
+            history["steps"].append(res.steps)
+        if progress is not None:
+            progress({"phi": phi, "pressure": res.pressure, "delta_phi": delta_phi, "steps": steps})
+        if not res.converged:
+            raise RuntimeError(f"FIRE step budget ({max_steps}) exhausted at phi = {phi:.10f}")
+        if abs(res.pressure - pressure) <= rtol * pressure:
+            break
+        new_direction = 1 if res.pressure < pressure else -1
+        if direction and new_direction != direction:
+            delta_phi *= 0.5
+        direction = new_direction
+        if delta_phi < 4.0 * np.finfo(float).eps * phi:
+            break
+        new_phi = phi + direction * delta_phi
+        factor = (phi / new_phi) ** (1.0 / d)
+        model, x = model.rescaled(factor, x)
+        phi = new_phi
+    return model, res, phi, delta_phi, direction, steps
+
+
+def jam_model_to_pressure(
+    model: EnergyModel,
+    position: np.ndarray,
+    phi: float,
+    pressure: float,
+    settings: JammingSettings = JammingSettings(),
+    progress: Callable[[dict], None] | None = None,
+) -> tuple[EnergyModel, MinimizeResult, dict[str, list], int]:
+    """Jamming onset of any model at pressure ``P0`` (the protocol of :func:`jam_to_pressure`).
+
+    Models with box degrees of freedom (soft spheres) end with the enthalpy
+    minimisation of step 3; any other model continues the bisection with fixed-box
+    FIRE to ``force_tol`` until ``|P - P0| <= pressure_rtol P0``.
+
+    Returns
+    -------
+    model, result, history, steps
+        The model in the final box, the final minimisation, the per-step history
+        (``phi``, ``pressure``, ``steps``) and the total FIRE steps.
+    """
+    c = settings
+    history: dict[str, list] = {"phi": [], "pressure": [], "steps": []}
+    model, res, phi, delta_phi, direction, steps = bisect_to_pressure(
+        model, position, phi, pressure, c.bisection_force_factor * pressure, c.bisection_rtol, c.delta_phi,
+        c.max_steps, c.fire_params, progress, history,
+    )
+    if isinstance(model, SphereModel):
+        final = minimize_enthalpy_model(model, res.position, pressure, c.force_tol, c.pressure_rtol,
+                                        c.max_steps - steps, c.fire_params, c.box_dof)
+        return model, final, history, steps + final.steps
+    model, final, _, _, _, more = bisect_to_pressure(
+        model, res.position, phi, pressure, c.force_tol, c.pressure_rtol, delta_phi, c.max_steps - steps,
+        c.fire_params, progress, history, direction,
+    )
+    return model, final, history, steps + more

@@ -19,18 +19,27 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import minimize as _scipy_minimize
 
 from ..box import Box
+from ..models.base import EnergyModel, pressure_of
+from ..models.spheres import SphereModel
 from ..tolerances import MINIMIZE_FORCE_TOL
 from . import _kernels
-from .potential import HARMONIC, NeighborList, PowerLawPotential, evaluate
+from .potential import HARMONIC, NeighborList, PowerLawPotential
 
 __all__ = [
     "DEFAULT_FIRE",
+    "METHODS",
+    "SD_STEP",
     "DescentResult",
     "FireParameters",
     "MinimizeResult",
     "conjugate_gradient",
     "fire",
+    "minimize",
+    "minimize_cg",
     "minimize_enthalpy",
+    "minimize_enthalpy_model",
+    "minimize_fire",
+    "minimize_sd",
     "steepest_descent",
 ]
 
@@ -87,6 +96,8 @@ class MinimizeResult:
     converged : bool
     rebuilds : int
         Neighbour-list builds during the run.
+    evaluations : int
+        Energy/force evaluations during the run.
     """
 
     position: NDArray[np.float64]
@@ -98,6 +109,7 @@ class MinimizeResult:
     steps: int
     converged: bool
     rebuilds: int
+    evaluations: int
 
 
 def _fire_params(params: FireParameters, unit: float) -> NDArray[np.float64]:
@@ -106,16 +118,14 @@ def _fire_params(params: FireParameters, unit: float) -> NDArray[np.float64]:
 
 
 def _run_fire(
-    x: NDArray[np.float64], box: Box, diameter: NDArray[np.float64], potential: PowerLawPotential,
-    force_tol: float, max_steps: int, params: FireParameters, nlist: NeighborList | None,
+    model: SphereModel, x: NDArray[np.float64], force_tol: float, max_steps: int, params: FireParameters,
     pressure0: float | None, pressure_rtol: float,
 ) -> MinimizeResult:
+    """The compiled FIRE loop of soft spheres (fixed box, or an isotropic barostat)."""
+    box, diameter, potential, nlist = model.box, model.diameter, model.potential, model.nlist
     d = box.d
-    diameter = np.asarray(diameter, dtype=np.float64)
-    if nlist is None:
-        nlist = NeighborList(diameter)
     builds0 = nlist.builds
-    unit = float(diameter.mean()) / np.sqrt(potential.epsilon)
+    unit = model.time_unit
     barostat = pressure0 is not None
     h_ref = box
     y = np.array(x, dtype=np.float64)
@@ -127,6 +137,7 @@ def _run_fire(
     force = np.zeros_like(y)
     virial = np.zeros((d, d))
     steps = 0
+    calls = 0
     status = _kernels.MAX_STEPS
     while True:
         s = box_state[2]
@@ -145,6 +156,7 @@ def _run_fire(
             float(force_tol), float(pressure_rtol), int(max_steps - steps), force, virial,
         )
         steps += n
+        calls += 1
         if status != _kernels.REBUILD or steps >= max_steps:
             break
     s = box_state[2]
@@ -152,19 +164,19 @@ def _run_fire(
         position=s * y, box=h_ref.scaled(s) if barostat else box, energy=float(energy),
         pressure=float(pressure), max_force=float(np.sqrt(fmax2)), n_contacts=int(n_contacts),
         steps=steps, converged=status == _kernels.CONVERGED, rebuilds=nlist.builds - builds0,
+        evaluations=steps + calls,
     )
 
 
 def _run_fire_full(
-    x: NDArray[np.float64], box: Box, diameter: NDArray[np.float64], potential: PowerLawPotential,
-    force_tol: float, max_steps: int, params: FireParameters, nlist: NeighborList | None,
+    model: SphereModel, x: NDArray[np.float64], force_tol: float, max_steps: int, params: FireParameters,
     pressure0: float, stress_rtol: float,
 ) -> MinimizeResult:
+    """The compiled FIRE loop of soft spheres with the whole upper-triangular box free."""
+    box, diameter, potential, nlist = model.box, model.diameter, model.potential, model.nlist
     d = box.d
-    if nlist is None:
-        nlist = NeighborList(diameter)
     builds0 = nlist.builds
-    unit = float(diameter.mean()) / np.sqrt(potential.epsilon)
+    unit = model.time_unit
     h_ref = box
     y = np.array(x, dtype=np.float64)
     v = np.zeros_like(y)
@@ -176,6 +188,7 @@ def _run_fire_full(
     force = np.zeros_like(y)
     virial = np.zeros((d, d))
     steps = 0
+    calls = 0
     status = _kernels.MAX_STEPS
     while True:
         current = Box(A @ h_ref.matrix)
@@ -193,6 +206,7 @@ def _run_fire_full(
             int(max_steps - steps), force, virial,
         )
         steps += n
+        calls += 1
         if status != _kernels.REBUILD or steps >= max_steps:
             break
     final = Box(np.triu(A) @ h_ref.matrix)
@@ -200,8 +214,100 @@ def _run_fire_full(
         position=y @ A.T, box=final, energy=float(energy),
         pressure=float(np.trace(virial) / (d * final.volume)), max_force=float(np.sqrt(fmax2)),
         n_contacts=int(n_contacts), steps=steps, converged=status == _kernels.CONVERGED,
-        rebuilds=nlist.builds - builds0,
+        rebuilds=nlist.builds - builds0, evaluations=steps + calls,
     )
+
+
+def _as_column(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    """A (n, 1) view of a flat vector, the array shape of the FIRE control kernels."""
+    return a.reshape(-1, 1)
+
+
+def _fire_generic(
+    model: EnergyModel, q0: NDArray[np.float64], force_tol: float, max_steps: int, params: FireParameters,
+) -> MinimizeResult:
+    """FIRE 2.0 on any model: the control kernels of the compiled sphere loop, on flat vectors.
+
+    Mass metric: with ``M`` the diagonal masses, the run is the unit-mass FIRE of the
+    coordinates ``M^(1/2) q`` (so a time step means the same for every degree of
+    freedom): power ``F . v``, Euler step ``v += dt M^-1 F``, mixing
+    ``v <- (1 - alpha) v + alpha |v|_M / |F|_M^-1 M^-1 F``. With constraints the force
+    and, after every move, the velocity are projected onto the tangent space, and
+    positions are re-affixed onto the constraint manifold after every move.
+    """
+    unit = model.time_unit
+    dt_max, dt_min = params.dt_max * unit, params.dt_min * unit
+    inv_mass = model.inverse_mass
+    mass = 1.0 / inv_mass
+    builds0 = model.neighbor_builds
+    q = np.array(model.reproject(np.array(q0, dtype=np.float64)), dtype=np.float64)
+    v = np.zeros_like(q)
+    dt, alpha, npos = params.dt * unit, params.alpha0, 0
+    ev = model.evaluate(q)
+    force = -model.project(ev.gradient, q)
+    evaluations = 1
+    fmax = model.max_force(force)
+    step = 0
+    while step < max_steps and fmax > force_tol:
+        power = float(force @ v)
+        npos, dt, alpha = _kernels._fire_adapt(
+            power, step, npos, dt, alpha, params.n_delay, params.f_inc, params.f_dec, params.f_alpha,
+            params.alpha0, dt_max, dt_min, params.initial_delay,
+        )
+        if not power > 0.0:
+            _kernels._fire_step_back(_as_column(q), _as_column(v), dt)
+            q = model.reproject(q)
+        accel = inv_mass * force
+        _kernels._axpy(dt, _as_column(accel), _as_column(v))
+        vnorm = float(np.sqrt(np.sum(mass * v * v)))
+        fnorm = float(np.sqrt(force @ accel))
+        keep, mix = _kernels._fire_mixing(alpha, vnorm, fnorm)
+        _kernels._mix_and_move(_as_column(v), _as_column(accel), keep, mix, _as_column(q), dt)
+        q = model.reproject(q)
+        ev = model.evaluate(q)
+        evaluations += 1
+        force = -model.project(ev.gradient, q)
+        v = model.project(v, q)
+        fmax = model.max_force(force)
+        step += 1
+    return MinimizeResult(
+        position=np.array(model.positions(q)), box=model.box, energy=ev.energy,
+        pressure=pressure_of(ev, model.box), max_force=fmax, n_contacts=ev.n_contacts, steps=step,
+        converged=fmax <= force_tol, rebuilds=model.neighbor_builds - builds0, evaluations=evaluations,
+    )
+
+
+def minimize_fire(
+    model: EnergyModel,
+    position: ArrayLike,
+    force_tol: float = MINIMIZE_FORCE_TOL,
+    max_steps: int = 1_000_000,
+    params: FireParameters = DEFAULT_FIRE,
+) -> MinimizeResult:
+    """Minimise a model's energy at fixed box with FIRE 2.0.
+
+    Soft spheres run the compiled loop of :mod:`jamflow.soft._kernels`; any other
+    model the same algorithm on its flat degree-of-freedom vector (same control
+    kernels: ``_fire_adapt``, ``_fire_step_back``, ``_fire_mixing``, ``_mix_and_move``), with masses and
+    constraint projections (see :func:`_fire_generic`).
+
+    Parameters
+    ----------
+    model : EnergyModel
+    position : array_like, shape (N, d)
+        Initial centres [length].
+    force_tol : float
+        Stop when the largest per-body (projected) force norm is at most this
+        [epsilon / length].
+    max_steps : int
+        Step budget; ``converged`` is False when it runs out.
+    params : FireParameters
+        Time steps in units of ``model.time_unit``.
+    """
+    q = model.dofs(position)
+    if isinstance(model, SphereModel):
+        return _run_fire(model, model.positions(q), force_tol, max_steps, params, None, 0.0)
+    return _fire_generic(model, q, force_tol, max_steps, params)
 
 
 def fire(
@@ -214,7 +320,7 @@ def fire(
     params: FireParameters = DEFAULT_FIRE,
     nlist: NeighborList | None = None,
 ) -> MinimizeResult:
-    """Minimise the energy at fixed box with FIRE 2.0.
+    """Minimise the energy of soft spheres at fixed box with FIRE 2.0.
 
     Parameters
     ----------
@@ -232,8 +338,7 @@ def fire(
     nlist : NeighborList, optional
         Reused between calls (rebuilt only when stale).
     """
-    return _run_fire(np.asarray(x, dtype=np.float64), box, np.asarray(diameter, dtype=np.float64),
-                     potential, force_tol, max_steps, params, nlist, None, 0.0)
+    return minimize_fire(SphereModel(box, diameter, potential, nlist), x, force_tol, max_steps, params)
 
 
 def minimize_enthalpy(
@@ -275,15 +380,37 @@ def minimize_enthalpy(
     box_dof : {"isotropic", "full"}
     Other parameters as in :func:`fire`.
     """
+    return minimize_enthalpy_model(SphereModel(box, diameter, potential, nlist), x, pressure, force_tol,
+                                   pressure_rtol, max_steps, params, box_dof)
+
+
+def minimize_enthalpy_model(
+    model: EnergyModel,
+    position: ArrayLike,
+    pressure: float,
+    force_tol: float = MINIMIZE_FORCE_TOL,
+    pressure_rtol: float = 1e-6,
+    max_steps: int = 1_000_000,
+    params: FireParameters = DEFAULT_FIRE,
+    box_dof: str = "isotropic",
+) -> MinimizeResult:
+    """:func:`minimize_enthalpy` for a model (box degrees of freedom as documented there).
+
+    Only soft spheres have box degrees of freedom so far: any other model raises
+    ``NotImplementedError``, since scaling a box with links or shapes needs the
+    model's strain degrees of freedom (shear stabilisation, chains paper Sec. II D).
+    """
     if not pressure > 0.0:
         raise ValueError(f"target pressure must be positive, got {pressure}")
-    if box_dof == "full":
-        return _run_fire_full(np.asarray(x, dtype=np.float64), box, np.asarray(diameter, dtype=np.float64),
-                              potential, force_tol, max_steps, params, nlist, float(pressure), pressure_rtol)
-    if box_dof != "isotropic":
+    if box_dof not in ("isotropic", "full"):
         raise ValueError(f"box_dof must be 'isotropic' or 'full', got {box_dof!r}")
-    return _run_fire(np.asarray(x, dtype=np.float64), box, np.asarray(diameter, dtype=np.float64),
-                     potential, force_tol, max_steps, params, nlist, float(pressure), pressure_rtol)
+    if not isinstance(model, SphereModel):
+        raise NotImplementedError(f"enthalpy minimisation needs box degrees of freedom, which "
+                                  f"{type(model).__name__} does not have yet")
+    x = model.positions(model.dofs(position))
+    if box_dof == "full":
+        return _run_fire_full(model, x, force_tol, max_steps, params, float(pressure), pressure_rtol)
+    return _run_fire(model, x, force_tol, max_steps, params, float(pressure), pressure_rtol)
 
 
 @dataclass(frozen=True)
@@ -330,6 +457,7 @@ def steepest_descent(
     energies = np.full(max(record, 1), np.nan)
     traces = []
     steps = 0
+    calls = 0
     status = _kernels.MAX_STEPS
     while True:
         if status == _kernels.REBUILD:
@@ -346,14 +474,50 @@ def steepest_descent(
         if record > steps:
             traces.append(buf[: min(n + 1, record - steps)] if status != _kernels.REBUILD else buf[:n])
         steps += n
+        calls += 1
         if status != _kernels.REBUILD or steps >= max_steps:
             break
     if traces:
         energies = np.concatenate(traces)
     pressure = float(np.trace(virial) / (box.d * box.volume))
     res = MinimizeResult(y, box, float(energy), pressure, float(np.sqrt(fmax2)), int(n_contacts),
-                         steps, status == _kernels.CONVERGED, nlist.builds - builds0)
+                         steps, status == _kernels.CONVERGED, nlist.builds - builds0, steps + calls)
     return DescentResult(res, energies if record else np.empty(0))
+
+
+def minimize_sd(
+    model: EnergyModel,
+    position: ArrayLike,
+    dt: float = 0.1,
+    force_tol: float = 1e-9,
+    max_steps: int = 10_000_000,
+) -> MinimizeResult:
+    """Overdamped relaxation ``dq/dt = -M^-1 P grad U`` of any model with a fixed Euler step.
+
+    Soft spheres run the compiled loop of :func:`steepest_descent`; other models take
+    the step on their flat degrees of freedom, with the gradient projected onto the
+    constraints (``P``) and the positions re-affixed after every step. ``dt`` as in
+    :func:`steepest_descent` (used as given); stops when the largest per-body
+    projected gradient norm is at most ``force_tol``.
+    """
+    q = model.dofs(position)
+    if isinstance(model, SphereModel):
+        return steepest_descent(model.positions(q), model.box, model.diameter, model.potential, dt,
+                                force_tol, max_steps, model.nlist).result
+    builds0 = model.neighbor_builds
+    q = model.reproject(q)
+    ev = model.evaluate(q)
+    force = -model.project(ev.gradient, q)
+    fmax = model.max_force(force)
+    step = 0
+    while step < max_steps and fmax > force_tol:
+        q = model.reproject(q + dt * model.inverse_mass * force)
+        ev = model.evaluate(q)
+        force = -model.project(ev.gradient, q)
+        fmax = model.max_force(force)
+        step += 1
+    return MinimizeResult(np.array(model.positions(q)), model.box, ev.energy, pressure_of(ev, model.box), fmax,
+                          ev.n_contacts, step, fmax <= force_tol, model.neighbor_builds - builds0, step + 1)
 
 
 def conjugate_gradient(
@@ -365,33 +529,75 @@ def conjugate_gradient(
     max_steps: int = 100_000,
     nlist: NeighborList | None = None,
 ) -> MinimizeResult:
+    """:func:`minimize_cg` of soft spheres."""
+    return minimize_cg(SphereModel(box, diameter, potential, nlist), x, force_tol, max_steps)
+
+
+def minimize_cg(
+    model: EnergyModel,
+    position: ArrayLike,
+    force_tol: float = MINIMIZE_FORCE_TOL,
+    max_steps: int = 100_000,
+) -> MinimizeResult:
     """Polak–Ribière conjugate gradient (``scipy.optimize.minimize(method="CG")``).
 
     scipy stops on the largest gradient *component*; the run is continued with FIRE
-    if the per-particle norm criterion ``max_i |F_i| <= force_tol`` is not yet met.
-    CG's line searches make it an independent check of FIRE's minimum.
+    if the per-body norm criterion (largest force norm <= ``force_tol``) is not yet
+    met. CG's line searches make it an independent check of FIRE's minimum. With
+    constraints CG minimises ``U(R(q))``, ``R`` the re-affixing onto the constraint
+    manifold, whose gradient on the manifold is the projected gradient ``P grad U``.
     """
-    x0 = np.array(x, dtype=np.float64)
-    diameter = np.asarray(diameter, dtype=np.float64)
-    if nlist is None:
-        nlist = NeighborList(diameter)
-    builds0 = nlist.builds
-    shape = x0.shape
+    x0 = model.reproject(model.dofs(position))
+    builds0 = model.neighbor_builds
     count = [0]
 
     def fun(flat: NDArray[np.float64]) -> tuple[float, NDArray[np.float64]]:
         count[0] += 1
-        ev = evaluate(flat.reshape(shape), box, diameter, potential, nlist)
-        return ev.energy, -ev.force.ravel()
+        q = model.reproject(flat)
+        ev = model.evaluate(q)
+        return ev.energy, model.project(ev.gradient, q)
 
-    out = _scipy_minimize(fun, x0.ravel(), jac=True, method="CG",
-                          options={"gtol": force_tol / np.sqrt(box.d), "maxiter": max_steps})
-    xf = out.x.reshape(shape)
-    ev = evaluate(xf, box, diameter, potential, nlist)
-    if ev.max_force > force_tol:
-        polished = fire(xf, box, diameter, potential, force_tol, max_steps, nlist=nlist)
-        return MinimizeResult(polished.position, box, polished.energy, polished.pressure,
+    out = _scipy_minimize(fun, x0, jac=True, method="CG",
+                          options={"gtol": force_tol / np.sqrt(model.box.d), "maxiter": max_steps})
+    qf = model.reproject(out.x)
+    ev = model.evaluate(qf)
+    fmax = model.max_force(model.project(ev.gradient, qf))
+    if fmax > force_tol:
+        polished = minimize_fire(model, model.positions(qf), force_tol, max_steps)
+        return MinimizeResult(polished.position, model.box, polished.energy, polished.pressure,
                               polished.max_force, polished.n_contacts, count[0] + polished.steps,
-                              polished.converged, nlist.builds - builds0)
-    return MinimizeResult(xf, box, ev.energy, ev.pressure, ev.max_force, ev.n_contacts, count[0],
-                          True, nlist.builds - builds0)
+                              polished.converged, model.neighbor_builds - builds0,
+                              count[0] + 1 + polished.evaluations)
+    return MinimizeResult(model.positions(qf), model.box, ev.energy, pressure_of(ev, model.box), fmax,
+                          ev.n_contacts, count[0], True, model.neighbor_builds - builds0, count[0] + 1)
+
+
+#: Minimisers of :func:`minimize` by name.
+METHODS = ("fire", "cg", "sd")
+
+#: Steepest-descent step of :func:`minimize` in units of ``<D>^2 / (xi_0 epsilon)``
+#: (the time unit squared at unit mass): below ``2 / lambda_max ~ 1 / (2 d)`` of the
+#: harmonic Hessian with unit mean diameter, as :func:`steepest_descent`'s default.
+SD_STEP: float = 0.1
+
+
+def minimize(
+    model: EnergyModel,
+    position: ArrayLike,
+    method: str = "fire",
+    force_tol: float = MINIMIZE_FORCE_TOL,
+    max_steps: int = 1_000_000,
+) -> MinimizeResult:
+    """Minimise a model's energy at fixed box with ``method`` in :data:`METHODS`.
+
+    ``"fire"``: :func:`minimize_fire` (default parameters); ``"cg"``:
+    :func:`minimize_cg`; ``"sd"``: :func:`minimize_sd` with the step
+    :data:`SD_STEP` ``model.time_unit^2`` (``0.1 <D>^2 / (xi_0 epsilon)``).
+    """
+    if method == "fire":
+        return minimize_fire(model, position, force_tol, max_steps)
+    if method == "cg":
+        return minimize_cg(model, position, force_tol, max_steps)
+    if method == "sd":
+        return minimize_sd(model, position, SD_STEP * model.time_unit**2, force_tol, max_steps)
+    raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")

@@ -183,6 +183,8 @@ class Evaluation:
         Number of overlapping pairs.
     volume : float
         Box volume [length^d].
+    virial : ndarray, shape (d, d)
+        ``sum f r_a r_b / r`` [energy] (``stress = -virial / volume``).
     """
 
     energy: float
@@ -191,6 +193,7 @@ class Evaluation:
     pressure: float
     n_contacts: int
     volume: float
+    virial: NDArray[np.float64]
 
     @property
     def shear_stress(self) -> float:
@@ -236,7 +239,7 @@ def evaluate(
     volume = box.volume
     stress = -virial / volume
     return Evaluation(float(energy), force, stress, float(np.trace(virial) / (box.d * volume)),
-                      int(n_contacts), volume)
+                      int(n_contacts), volume, virial)
 
 
 def overlapping_pairs(

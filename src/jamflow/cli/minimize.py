@@ -1,0 +1,79 @@
+"""``jamflow minimize``: plain energy minimisation at a fixed box, for any body model (LAMMPS ``minimize``)."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from ..io import read_packing, write_packing
+from ..models import LinkedSpheresModel, SphereModel
+from ..packing import Packing
+from ..soft.jamming import soft_packing
+from ..soft.minimize import METHODS, MinimizeResult, minimize
+from ..soft.potential import PowerLawPotential, overlapping_pairs
+from ..tolerances import MINIMIZE_FORCE_TOL
+from .common import add_command, stage_parameters
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = add_command(sub, "minimize", _minimize,
+                    "minimise the energy at a fixed box (soft spheres, linked spheres) with FIRE, CG or "
+                    "steepest descent")
+    p.add_argument("input", help="input netCDF packing (overlaps allowed; links make it a linked-spheres model)")
+    p.add_argument("out", help="output netCDF packing (contacts = overlapping unlinked pairs with their forces)")
+    p.add_argument("--force-tol", type=float, default=MINIMIZE_FORCE_TOL,
+                   help=f"stop when the largest per-particle (projected) force norm is at most this "
+                        f"[epsilon / length] (default {MINIMIZE_FORCE_TOL:g})")
+    p.add_argument("--max-steps", type=int, default=1_000_000, help="step budget (default 1000000)")
+    p.add_argument("--method", choices=METHODS, default="fire", help="minimiser (default fire)")
+    p.add_argument("--exponent", type=float, default=2.0, help="contact potential exponent w (2 harmonic, 2.5 Hertz)")
+
+
+def _linked_packing(packing: Packing, model: LinkedSpheresModel, res: MinimizeResult, attrs: dict,
+                    parameters: dict) -> Packing:
+    """The minimised linked packing: contacts are overlapping pairs that are not linked."""
+    x = packing.box.wrap(res.position)
+    pairs, _, f = overlapping_pairs(x, packing.box, packing.diameter, model.potential)
+    linked = np.isin(pairs.i * packing.n + pairs.j, packing.links.i * packing.n + packing.links.j)
+    attrs = {**attrs, "pressure_comment": "virial pressure of the contact forces and the link tensions"}
+    return packing.evolve(
+        position=x, contacts=np.stack([pairs.i, pairs.j], axis=1)[~linked], force=f[~linked], rattler=None,
+        pressure=res.pressure, protocol=packing.protocol + ">minimize", parameters=parameters,
+        attrs={**packing.attrs, **attrs},
+    )
+
+
+def _minimize(args: argparse.Namespace) -> int:
+    if not args.force_tol > 0.0:
+        raise ValueError(f"--force-tol must be positive, got {args.force_tol}")
+    if args.max_steps < 1:
+        raise ValueError(f"--max-steps must be at least 1, got {args.max_steps}")
+    packing = read_packing(args.input, None)
+    if packing.shapes is not None:
+        raise ValueError(f"{args.input}: shaped particles have no energy model yet; minimize handles "
+                         "spheres and linked spheres")
+    potential = PowerLawPotential(exponent=args.exponent)
+    if packing.links is not None and len(packing.links):
+        model = LinkedSpheresModel(packing.box, packing.diameter, packing.links, packing.position, potential)
+    else:
+        model = SphereModel(packing.box, packing.diameter, potential)
+    res = minimize(model, packing.position, args.method, args.force_tol, args.max_steps)
+    print(f"{args.input}: {args.method} {'converged' if res.converged else 'did NOT converge'} after "
+          f"{res.steps} steps: n_force_evaluations = {res.evaluations}, energy = {res.energy:.15g} epsilon, "
+          f"max_force = {res.max_force:.3g} epsilon/length, pressure = {res.pressure:.10g} epsilon/length^d, "
+          f"n_contacts = {res.n_contacts}")
+    if not res.converged:
+        raise RuntimeError(f"{args.method} did not reach --force-tol {args.force_tol:g} within "
+                           f"--max-steps {args.max_steps} (max_force {res.max_force:.3g}); nothing written")
+    attrs = {"energy": res.energy, "energy_unit": "epsilon", "max_force": res.max_force,
+             "n_force_evaluations": res.evaluations, "minimize_steps": res.steps, "converged": 1,
+             "potential_exponent": potential.exponent}
+    parameters = stage_parameters(args, "input", "out")
+    if isinstance(model, LinkedSpheresModel):
+        out = _linked_packing(packing, model, res, attrs, parameters)
+    else:
+        out = soft_packing(res.position, packing.box, packing.diameter, potential, packing, ">minimize",
+                           parameters, {**packing.attrs, **attrs})
+    write_packing(out, args.out, parameters)
+    return 0
