@@ -171,9 +171,12 @@ _KILLED_WRITER = textwrap.dedent(
     import numpy as np
     import xarray as xr
     from jamflow.io import write_dataset
-    # random numbers compress slowly: the write takes seconds
-    v = np.random.default_rng(0).random(5_000_000)
-    ds = xr.Dataset({"v": ("x", v, {"units": "1", "long_name": "noise"})})
+    # random numbers compress slowly: the write takes seconds; shaped as a packing, since
+    # write_dataset refuses to replace a packing by another kind of dataset
+    v = np.random.default_rng(0).random((2_500_000, 2))
+    ds = xr.Dataset({"position": (("particle", "spatial"), v, {"units": "1", "long_name": "noise"}),
+                     "diameter": (("particle",), np.full(len(v), 1e-4)),
+                     "box": (("spatial", "lattice_vector"), np.eye(2))})
     print("ready", flush=True)
     write_dataset(ds, sys.argv[1])
     """

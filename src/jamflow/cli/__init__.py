@@ -13,8 +13,10 @@ import sys
 import typing
 from collections.abc import Sequence
 
+from ..io import check_output_paths
 from ..presets import preset_options
 from ..provenance import jamflow_version
+from .common import path_arguments
 
 #: Topic modules of this package that contribute subcommands.
 COMMAND_MODULES: tuple[str, ...] = ("packings", "analysis", "soft", "flow", "certify", "tradeoff", "ls", "calippso")
@@ -54,6 +56,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             # a preset changes the defaults; options given explicitly still win
             parser.subcommands[args.command].set_defaults(**preset_options(args.command, preset))
             args = parser.parse_args(argv)
+        reads, writes, packings = args.path_roles
+        check_output_paths(path_arguments(args, reads), path_arguments(args, writes),
+                           getattr(args, "in_place", False), path_arguments(args, packings))
         return int(args.handler(args) or 0)
     except (ValueError, FileNotFoundError, RuntimeError, OSError) as exc:
         print(f"jamflow {args.command}: error: {exc}", file=sys.stderr)

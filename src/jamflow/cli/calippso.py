@@ -30,6 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "spheres and move them by successive LPs until sqrt(Gamma)-1 < tol-gamma and "
                     "max|s| < tol-s; contacts and forces from the LP duals. Writes the jammed packing "
                     "with the per-LP history.",
+        reads=("packing",), writes=("out",), packings=("out",),
     )
     p.add_argument("packing", help="input netCDF packing (no overlaps)")
     p.add_argument("out", help="output netCDF jammed packing")

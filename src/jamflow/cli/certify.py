@@ -26,6 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "rattlers are removed, then random loads of both signs probe for unjamming "
                     "motions at fixed box (collective) and, with --strict, with a volume-preserving "
                     "box strain. Writes a dataset with attribute 'classification'.",
+        reads=("packing",), writes=("out",),
     )
     p.add_argument("packing", help="input netCDF packing")
     p.add_argument("out", help="output netCDF certificate")

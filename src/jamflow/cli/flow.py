@@ -16,9 +16,15 @@ from .common import add_command, add_preset, add_quiet, stage_parameters
 from .packings import add_overlap_option, overlap_tol
 
 
+#: path arguments of the flow runs (the checkpoint is written, and must not be an input)
+FLOW_READS = ("input", "composite")
+FLOW_WRITES = ("out", "final", "snapshot_file", "checkpoint")
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "shear", _shear, "event-driven overdamped simple shear (fixed volume or fixed pressure)",
-                    "Lerner-During-Wyart event-driven overdamped hard-sphere shear with Lees-Edwards boundaries.")
+                    "Lerner-During-Wyart event-driven overdamped hard-sphere shear with Lees-Edwards boundaries.",
+                    reads=FLOW_READS, writes=FLOW_WRITES, packings=("final",))
     _io_options(p)
     p.add_argument("--strain", type=float, required=True, help="total shear strain gamma")
     p.add_argument("--pressure", type=float, default=None,
@@ -27,7 +33,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     _common_options(p)
 
     p = add_command(sub, "compress", _compress, "event-driven overdamped compression (to a packing fraction or jamming)",
-                    "Isotropic compression V_aff = -rate R until the target packing fraction or a jammed packing.")
+                    "Isotropic compression V_aff = -rate R until the target packing fraction or a jammed packing.",
+                    reads=FLOW_READS, writes=FLOW_WRITES, packings=("final",))
     _io_options(p)
     p.add_argument("--phi", type=float, default=None, help="stop at this packing fraction (default: run to jamming)")
     p.add_argument("--strain", type=float, default=10.0, help="give up after this compressive strain rate*t (default 10)")
@@ -35,7 +42,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rate", type=float, default=1.0, help="compression rate (default 1)")
     _common_options(p)
 
-    p = add_command(sub, "drive", _drive, "event-driven overdamped dynamics under external or self-propelling forces")
+    p = add_command(sub, "drive", _drive, "event-driven overdamped dynamics under external or self-propelling forces",
+                    reads=(*FLOW_READS, "forces"), writes=FLOW_WRITES, packings=("final",))
     _io_options(p)
     p.add_argument("--time", type=float, required=True, help="duration in units of tau = lambda/(f_ext xi0)")
     g = p.add_mutually_exclusive_group(required=True)

@@ -22,6 +22,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "file per pressure target, in the order of the targets (OUT1 for P1, OUT2 for "
                     "P2, ...); with --phi-target and no pressure target give one output for the "
                     "state at that packing fraction.",
+        reads=("packing",), writes=("out", "eos"), packings=("out",),
     )
     p.add_argument("packing", help="input netCDF packing (orthogonal periodic box, no overlaps)")
     p.add_argument("out", nargs="+",

@@ -16,7 +16,7 @@ from .common import add_command, add_quiet, stage_parameters
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = add_command(sub, "init", _init, "random non-overlapping packing at a packing fraction")
+    p = add_command(sub, "init", _init, "random non-overlapping packing at a packing fraction", writes=("out",), packings=("out",))
     p.add_argument("out", help="output netCDF")
     p.add_argument("--d", type=int, required=True, help="dimension (>= 2)")
     p.add_argument("--n", type=int, required=True, help="number of particles")
@@ -30,17 +30,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, required=True, help="random seed")
     add_quiet(p)
 
-    p = add_command(sub, "import-dat", _import_dat, "read a CALiPPSO .dat configuration")
+    p = add_command(sub, "import-dat", _import_dat, "read a CALiPPSO .dat configuration",
+                    reads=("dat",), writes=("out",), packings=("out",))
     p.add_argument("dat", help="input .dat file (d, N, diameter, positions)")
     p.add_argument("out", help="output netCDF")
     add_quiet(p)
 
-    p = add_command(sub, "export-xyz", _export_xyz, "write extended XYZ (OVITO) with a radius column")
+    p = add_command(sub, "export-xyz", _export_xyz, "write extended XYZ (OVITO) with a radius column",
+                    reads=("packing",), writes=("out",))
     p.add_argument("packing", help="input netCDF packing")
     p.add_argument("out", help="output .xyz")
     add_overlap_option(p)
 
-    p = add_command(sub, "check", _check, "contacts, rattlers, isostaticity, overlaps, force balance")
+    p = add_command(sub, "check", _check, "contacts, rattlers, isostaticity, overlaps, force balance",
+                    reads=("packing",))
     p.add_argument("packing", help="input netCDF packing")
     p.add_argument("--gap-tol", type=float, default=None,
                    help="relative gap counted as contact; default: the packing's own contacts, "

@@ -20,7 +20,8 @@ from .common import add_command, add_preset, add_quiet, stage_parameters
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "soft-jam", _soft_jam,
-                    "soft-sphere jamming onset: compress/decompress bisection + enthalpy minimisation to P0")
+                    "soft-sphere jamming onset: compress/decompress bisection + enthalpy minimisation to P0",
+                    reads=("input",), writes=("out",), packings=("out",))
     p.add_argument("input", help="input netCDF packing (overlaps allowed)")
     p.add_argument("out", help="output netCDF packing (lengths in units of the mean diameter)")
     p.add_argument("--pressure", type=float, required=True,
@@ -40,7 +41,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_quiet(p)
     add_preset(p)
 
-    p = add_command(sub, "aqs", _aqs, "athermal quasistatic shear of a soft packing (stress-strain time series)")
+    p = add_command(sub, "aqs", _aqs, "athermal quasistatic shear of a soft packing (stress-strain time series)",
+                    reads=("input",), writes=("out", "final"), packings=("final",))
     p.add_argument("input", help="input netCDF soft packing")
     p.add_argument("out", help="output netCDF time series (dim step, coordinate strain)")
     p.add_argument("--strain", type=float, required=True, help="total strain")
@@ -57,7 +59,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_preset(p)
 
     p = add_command(sub, "sd-shear", _sd_shear,
-                    "Lerner et al. steepest-descent shear with tentative-network hard-sphere stress (flow schema)")
+                    "Lerner et al. steepest-descent shear with tentative-network hard-sphere stress (flow schema)",
+                    reads=("input",), writes=("out",))
     p.add_argument("input", help="input netCDF packing")
     p.add_argument("out", help="output netCDF flow time series")
     p.add_argument("--strain", type=float, required=True, help="total strain")
@@ -71,7 +74,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_quiet(p)
 
     p = add_command(sub, "moduli", _moduli,
-                    "bulk and shear moduli (affine and relaxed) and lowest Hessian eigenvalues of a soft packing")
+                    "bulk and shear moduli (affine and relaxed) and lowest Hessian eigenvalues of a soft packing",
+                    reads=("input",), writes=("out",))
     p.add_argument("input", help="input netCDF soft packing at force balance")
     p.add_argument("out", help="output netCDF dataset")
     p.add_argument("--modes", type=int, default=10, help="number of lowest non-translational eigenvalues")

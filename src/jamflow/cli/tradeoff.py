@@ -20,6 +20,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "reference per setting (dim 'setting', coordinate 'label'), the Pareto front and the "
                     "recommended fast/default/publication settings (attributes). Stages: "
                     + "; ".join(f"{k}: {v.description}" for k, v in STAGES.items()),
+        writes=("out",),
     )
     p.add_argument("stage", choices=sorted(STAGES), help="stage to sweep")
     p.add_argument("out", help="output netCDF")

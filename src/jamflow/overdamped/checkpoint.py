@@ -77,7 +77,7 @@ def save_checkpoint(path: str | os.PathLike, integ: Integrator, rec: Recorder) -
 
 def load_checkpoint(path: str | os.PathLike, drive: Drive, options: FlowOptions) -> tuple[Integrator, Recorder]:
     """Rebuild the integrator and recorder from a checkpoint (``drive`` is updated in place)."""
-    ds = read_dataset(path)
+    ds = read_dataset(path, "checkpoint")
     a = ds.attrs
     if a["drive_mode"] != drive.mode:
         raise ValueError(f"checkpoint {path} is for mode {a['drive_mode']!r}, not {drive.mode!r}")

@@ -1,0 +1,158 @@
+"""Issue 17: trustworthy outputs. Inputs are never destroyed, every command checks the kind
+of dataset it reads, impossible targets stop with one line, checkpoints are bound to
+their run. Each test reproduces a reported case and fails on the code before its fix.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import pytest
+
+from jamflow.cli import build_parser, main
+from jamflow.io import DATASET_KINDS, dataset_kind, file_kind, read_dataset, write_packing
+from jamflow.initial import random_packing
+
+
+def _run(capsys: pytest.CaptureFixture[str], *argv: object) -> tuple[int, str, str]:
+    """Run the CLI in-process; usage errors (SystemExit) count as exit codes."""
+    try:
+        code = main([str(a) for a in argv])
+    except SystemExit as exc:
+        code = exc.code if isinstance(exc.code, int) else 1
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _one_line_error(err: str, *names: object) -> None:
+    assert err.count("\n") == 1 and err.endswith("\n") and "Traceback" not in err, repr(err)
+    for name in names:
+        assert str(name) in err, (name, err)
+
+
+def _sha(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+@pytest.fixture
+def two_packings(tmp_path: Path) -> tuple[Path, Path]:
+    paths = []
+    for seed in (1, 2):
+        path = tmp_path / f"s{seed}.nc"
+        write_packing(random_packing(16, 2, 0.4, "bi", seed), path)
+        paths.append(path)
+    return paths[0], paths[1]
+
+
+# --- item 3: an input packing is never destroyed ------------------------------------------
+
+
+@pytest.mark.parametrize("command", ["gaps", "forces", "export-xyz"])
+def test_a_forgotten_output_does_not_overwrite_the_second_packing(capsys, two_packings, command):
+    s1, s2 = two_packings
+    before = _sha(s2)
+    code, _, err = _run(capsys, command, s1, s2)
+    assert code == 1
+    _one_line_error(err, s2, "packing")
+    assert _sha(s2) == before and file_kind(s2) == "packing"
+    assert [p.name for p in s2.parent.iterdir() if p.name.startswith(".")] == []  # no temporary left
+
+
+@pytest.mark.parametrize("argv", [
+    ["calippso", "{s1}", "{s1}", "--quiet"],
+    ["gaps", "{s1}", "{s2}", "{s2}", "--quiet"],
+    ["ls", "{s1}", "{s1}", "--growth-rate", "1e-3", "--p-target", "1e3"],
+    ["soft-jam", "{s1}", "{s1}", "--pressure", "1e-3"],
+    ["compress", "{s1}", "{out}", "--final", "{s1}"],
+    ["shear", "{s1}", "{out}", "--strain", "0.1", "--checkpoint", "{s1}"],
+])
+def test_an_output_that_is_an_input_is_refused_before_any_work(capsys, tmp_path, two_packings, argv):
+    s1, s2 = two_packings
+    sums = (_sha(s1), _sha(s2))
+    code, _, err = _run(capsys, *[a.format(s1=s1, s2=s2, out=tmp_path / "out.nc") for a in argv])
+    assert code == 1
+    _one_line_error(err, "s1.nc" if "{s1}" in argv[2:] else "s2.nc")
+    assert (_sha(s1), _sha(s2)) == sums
+    assert not (tmp_path / "out.nc").exists()
+
+
+def test_in_place_replaces_an_input_only_when_asked(capsys, two_packings):
+    s1, _ = two_packings
+    phi = read_dataset(s1).attrs["packing_fraction"]
+    code, _, err = _run(capsys, "ls", s1, s1, "--growth-rate", "1e-2", "--p-target", "1e2", "--quiet", "--in-place")
+    assert code == 0, err
+    ds = read_dataset(s1, "packing")
+    assert ds.attrs["pressure"] >= 1e2 and ds.attrs["packing_fraction"] > phi
+
+
+def test_two_outputs_on_one_path_are_refused(capsys, tmp_path, two_packings):
+    s1, _ = two_packings
+    out = tmp_path / "same.nc"
+    code, _, err = _run(capsys, "ls", s1, out, out, "--growth-rate", "1e-3", "--p-target", "1e2", "1e3")
+    assert code == 1
+    _one_line_error(err, out, "twice")
+    assert not out.exists()
+
+
+def test_every_command_declares_its_path_arguments():
+    # the output/input guard only knows the paths a command declares: a positional path
+    # argument left out of reads/writes would escape it
+    not_paths = {"kind", "stage"}
+    for name, parser in build_parser().subcommands.items():
+        reads, writes, packings = parser.get_default("path_roles")
+        declared = {r.split("[")[0] for r in (*reads, *writes)}
+        dests = {a.dest for a in parser._actions}
+        positional = {a.dest for a in parser._actions if not a.option_strings and a.dest != "help"}
+        assert positional - not_paths <= declared <= dests, name
+        assert set(packings) <= set(writes), name
+        has_flag = any("--in-place" in a.option_strings for a in parser._actions)
+        assert has_flag == bool(reads and writes), name
+
+
+# --- item 5: every command checks the kind of dataset it reads ------------------------------
+
+
+@pytest.mark.parametrize("kind", ["gaps", "eos", "forces", "rdf", "overlap", "phi-kappa", "stress-strain",
+                                  "jamming-table", "pareto"])
+def test_plot_of_a_packing_as_another_kind_is_one_line(capsys, tmp_path, two_packings, kind):
+    s1, _ = two_packings
+    code, _, err = _run(capsys, "plot", kind, s1, tmp_path / "out.png")
+    assert code == 1
+    _one_line_error(err, s1, "holds a packing")
+    assert not (tmp_path / "out.png").exists()
+
+
+@pytest.mark.parametrize("argv, named", [
+    (["jamming-table", "{s1}", "{out}", "--eos", "{s1}"], "{s1}"),
+    (["flow-summary", "{s1}", "{out}"], "{s1}"),
+])
+def test_analyses_refuse_a_packing_in_place_of_their_dataset(capsys, tmp_path, two_packings, argv, named):
+    s1, _ = two_packings
+    out = tmp_path / "o.nc"
+    code, _, err = _run(capsys, *[a.format(s1=s1, out=out) for a in argv])
+    assert code == 1
+    _one_line_error(err, named.format(s1=s1), "packing")
+    assert not out.exists()
+
+
+def test_a_stage_refuses_an_analysis_output_as_its_packing(capsys, tmp_path, two_packings):
+    s1, s2 = two_packings
+    gaps = tmp_path / "gaps.nc"
+    assert _run(capsys, "gaps", s1, s2, gaps, "--gap-tol", "0.5", "--quiet")[0] == 0
+    assert file_kind(gaps) == "gaps"
+    for argv in (["calippso", gaps, tmp_path / "c.nc"], ["check", gaps], ["export-xyz", gaps, tmp_path / "g.xyz"]):
+        code, _, err = _run(capsys, *argv)
+        assert code == 1
+        _one_line_error(err, gaps, "gap distribution", "not a packing")
+
+
+def test_dataset_kinds_are_told_apart_by_their_own_names():
+    # each kind's required names identify it and no earlier kind (first match wins)
+    import xarray as xr
+
+    for k, (names, _) in DATASET_KINDS.items():
+        ds = xr.Dataset({n: ((), 0.0) for n in names})
+        assert dataset_kind(ds) == k, (k, dataset_kind(ds))
+    # a dataset of none of the kinds is named as such
+    assert dataset_kind(xr.Dataset({"foo": ((), 1.0)})) is None
