@@ -10,6 +10,8 @@ from pathlib import Path
 
 import pytest
 
+import numpy as np
+
 from jamflow.cli import build_parser, main
 from jamflow.io import DATASET_KINDS, dataset_kind, file_kind, read_dataset, write_packing
 from jamflow.initial import random_packing
@@ -156,3 +158,54 @@ def test_dataset_kinds_are_told_apart_by_their_own_names():
         assert dataset_kind(ds) == k, (k, dataset_kind(ds))
     # a dataset of none of the kinds is named as such
     assert dataset_kind(xr.Dataset({"foo": ((), 1.0)})) is None
+
+
+# --- items 4 and 5: impossible LS targets stop with one line and the reached state ------------
+
+
+def test_ls_of_one_sphere_is_one_line(capsys, tmp_path):
+    start = tmp_path / "one.nc"
+    assert _run(capsys, "init", start, "--d", "2", "--n", "1", "--phi", "0.1", "--seed", "1")[0] == 0
+    code, _, err = _run(capsys, "ls", start, tmp_path / "o.nc", "--growth-rate", "1e-3", "--p-target", "1e3")
+    assert code == 1
+    _one_line_error(err, "N = 1")
+    assert not (tmp_path / "o.nc").exists()
+
+
+@pytest.mark.parametrize("n", [2, 3, 4])
+def test_ls_with_too_few_discs_to_jam_stops_at_half_the_box(capsys, tmp_path, n):
+    # N <= 4 monodisperse discs in the unit box cannot form cages before a diameter reaches
+    # half the box width (phi = N pi / 16); the run used to spin forever at 100 % CPU
+    start, out = tmp_path / "s.nc", tmp_path / "o.nc"
+    assert _run(capsys, "init", start, "--d", "2", "--n", n, "--phi", "0.1", "--seed", "1")[0] == 0
+    code, _, err = _run(capsys, "ls", start, out, "--growth-rate", "1e-3", "--p-target", "1e3", "--quiet")
+    assert code == 1
+    _one_line_error(err, f"N = {n}", "too few", "o.reached.nc")
+    assert not out.exists()
+    reached = read_dataset(tmp_path / "o.reached.nc", "packing")
+    assert reached.attrs["packing_fraction"] == pytest.approx(n * np.pi / 16, rel=1e-8)
+    assert reached.attrs["pressure"] < 1e3
+
+
+def test_ls_phi_target_beyond_jamming_stops_as_jammed(capsys, tmp_path):
+    from jamflow.io import read_packing
+    from jamflow.packing import max_overlap
+
+    start, out = tmp_path / "s.nc", tmp_path / "o.nc"
+    assert _run(capsys, "init", start, "--d", "3", "--n", "32", "--phi", "0.2", "--seed", "1")[0] == 0
+    code, _, err = _run(capsys, "ls", start, out, "--growth-rate", "1e-2", "--phi-target", "0.8",
+                        "--max-pressure", "1e8", "--quiet")
+    assert code == 1
+    _one_line_error(err, "jammed before the target", "o.reached.nc")
+    reached = read_packing(tmp_path / "o.reached.nc")
+    # jammed: p past the limit, phi within ~d/p of a 3D random packing's phi_J, far below 0.8
+    assert reached.pressure >= 1e8
+    assert 0.6 < reached.packing_fraction < 0.7
+    assert max_overlap(reached)[1] < 1e-8
+
+
+def test_ls_target_beyond_the_largest_pressure_is_refused(capsys, two_packings, tmp_path):
+    s1, _ = two_packings
+    code, _, err = _run(capsys, "ls", s1, tmp_path / "o.nc", "--growth-rate", "1e-3", "--p-target", "1e15")
+    assert code == 1
+    _one_line_error(err, "1e+15")
