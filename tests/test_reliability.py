@@ -209,3 +209,59 @@ def test_ls_target_beyond_the_largest_pressure_is_refused(capsys, two_packings, 
     code, _, err = _run(capsys, "ls", s1, tmp_path / "o.nc", "--growth-rate", "1e-3", "--p-target", "1e15")
     assert code == 1
     _one_line_error(err, "1e+15")
+
+
+# --- item 2: a checkpoint is bound to its input and trajectory parameters --------------------
+
+
+@pytest.fixture
+def starts(tmp_path: Path) -> tuple[Path, Path]:
+    """Two different 2D bidisperse random starts at phi = 0.5 (shear makes contacts)."""
+    paths = []
+    for seed in (4, 5):
+        path = tmp_path / f"start{seed}.nc"
+        write_packing(random_packing(24, 2, 0.5, "bi", seed), path)
+        paths.append(path)
+    return paths[0], paths[1]
+
+
+SHEAR = {"--strain": "0.02", "--rate": "1", "--sync-every": "10"}
+
+
+def _shear(start: Path, out: Path, *extra: object, changes: dict[str, str] | None = None) -> list[object]:
+    options = {**SHEAR, **(changes or {})}
+    return ["shear", start, out, *[x for kv in options.items() for x in kv], "--quiet", *extra]
+
+
+@pytest.mark.parametrize("change, differs", [
+    ({}, "input packing"),
+    ({"--strain": "0.03"}, "stop.strain"),
+    ({"--rate": "2"}, "drive.rate"),
+    ({"--step-drift": "1e-6"}, "options.step_drift"),
+])
+def test_a_checkpoint_of_another_run_is_refused(capsys, tmp_path, starts, change, differs):
+    ck = tmp_path / "ck.nc"
+    code, _, err = _run(capsys, *_shear(starts[0], tmp_path / "part.nc", "--checkpoint", ck, "--max-steps", "25"))
+    assert code == 0 and ck.exists(), err
+    before = _sha(ck)
+    other = starts[1] if not change else starts[0]
+    code, _, err = _run(capsys, *_shear(other, tmp_path / "x.nc", "--checkpoint", ck, changes=change))
+    assert code == 1
+    _one_line_error(err, ck, differs)
+    assert not (tmp_path / "x.nc").exists() and _sha(ck) == before
+
+
+def test_a_resumed_run_equals_the_uninterrupted_one_and_removes_its_checkpoint(capsys, tmp_path, starts):
+    ck = tmp_path / "ck.nc"
+    full, part, resumed = tmp_path / "full.nc", tmp_path / "part.nc", tmp_path / "resumed.nc"
+    assert _run(capsys, *_shear(starts[0], full))[0] == 0
+    assert _run(capsys, *_shear(starts[0], part, "--checkpoint", ck, "--max-steps", "25"))[0] == 0
+    assert ck.exists() and read_dataset(part).attrs["complete"] == 0
+    code, _, err = _run(capsys, *_shear(starts[0], resumed, "--checkpoint", ck))
+    assert code == 0, err
+    assert not ck.exists()
+    a, b = read_dataset(full, "flow"), read_dataset(resumed, "flow")
+    assert a.attrs["complete"] == b.attrs["complete"] == 1
+    assert a.sizes["step"] > 25 and a.sizes["event"] > 0
+    for name in ("strain", "shear_stress", "pressure", "n_contacts", "event_i", "event_j"):
+        assert np.array_equal(a[name].values, b[name].values), name

@@ -62,7 +62,9 @@ def _io_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--final", default=None, help="write the last (or jammed) packing with contacts and forces here")
     p.add_argument("--snapshots", type=int, default=0, metavar="N", help="number of evenly spaced packing snapshots")
     p.add_argument("--snapshot-file", default=None, help="snapshot netCDF (default OUT with suffix .snapshots.nc)")
-    p.add_argument("--checkpoint", default=None, help="checkpoint netCDF: written periodically, resumed from if present")
+    p.add_argument("--checkpoint", default=None,
+                   help="checkpoint netCDF: written periodically, resumed from if present (only by the same input "
+                        "and trajectory parameters), removed after a complete run")
     p.add_argument("--seed", type=int, default=0, help="seed of random choices (self-propulsion, random forces)")
     add_overlap_option(p)
     add_quiet(p)
@@ -130,6 +132,9 @@ def _run(args: argparse.Namespace, drive: Drive, stop: Stop, packing) -> int:
     if res.snapshots is not None:
         path = args.snapshot_file or str(Path(args.out).with_suffix(".snapshots.nc"))
         write_dataset(res.snapshots, path)
+    if res.complete and args.checkpoint and Path(args.checkpoint).exists():
+        # the outputs are written: a finished run's checkpoint could only be resumed by mistake
+        Path(args.checkpoint).unlink()
     if not args.quiet:
         s = res.series
         print(f"{args.command}: {s.sizes['step']} records, {s.sizes['event']} events, strain {float(s.strain[-1]):.6g}, "
