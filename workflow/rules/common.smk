@@ -1,5 +1,44 @@
-# Helpers shared by the rules: sample names, stage chain, target list.
+# Helpers shared by the rules: scene validation, sample names, stage chain, target list.
 # Stage outputs live under results/<scene>/; rules only call the jamflow CLI.
+
+# Scene validation comes first: the schema, reporting the most relevant error in one line
+# that names the key (not the whole schema), then the orderings a JSON schema cannot
+# state. snakemake's validate fills in the schema's defaults.
+from pathlib import Path
+
+import jsonschema
+import yaml
+from snakemake.exceptions import WorkflowError
+from snakemake.utils import validate
+
+SCENE_SCHEMA = Path(workflow.basedir) / "workflow" / "schemas" / "config.schema.yaml"
+
+
+def check_scene_schema():
+    """Raise one line naming the key of the schema's most relevant error."""
+    schema = yaml.safe_load(SCENE_SCHEMA.read_text())
+    error = jsonschema.exceptions.best_match(jsonschema.Draft202012Validator(schema).iter_errors(config))
+    if error is not None:
+        where = ".".join(str(p) for p in error.absolute_path) or "top level"
+        raise WorkflowError(f"Error validating config: {where}: {error.message}")
+
+
+def check_scene_order():
+    """Orderings the schema cannot state: increasing LS targets, non-empty fit windows."""
+    targets = config.get("ls", {}).get("p_targets", [])
+    if any(b <= a for a, b in zip(targets, targets[1:])):
+        raise WorkflowError(f"Error validating config: ls.p_targets must be strictly increasing, got {targets}")
+    for section in ("jamming_table", "gaps"):
+        window = config.get(section, {})
+        if {"fit_min", "fit_max"} <= set(window) and not window["fit_min"] < window["fit_max"]:
+            raise WorkflowError(f"Error validating config: {section}.fit_min ({window['fit_min']:g}) must be below "
+                                f"{section}.fit_max ({window['fit_max']:g})")
+
+
+check_scene_schema()
+validate(config, str(SCENE_SCHEMA))
+check_scene_order()
+
 
 RESULTS = f"results/{config['scene']}"
 LOGS = f"{RESULTS}/logs"
