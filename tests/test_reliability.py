@@ -265,3 +265,21 @@ def test_a_resumed_run_equals_the_uninterrupted_one_and_removes_its_checkpoint(c
     assert a.sizes["step"] > 25 and a.sizes["event"] > 0
     for name in ("strain", "shear_stress", "pressure", "n_contacts", "event_i", "event_j"):
         assert np.array_equal(a[name].values, b[name].values), name
+
+
+def test_overdamped_compress_past_jamming_stops_jammed_with_one_line(capsys, tmp_path):
+    from jamflow.analysis.contacts import summarize
+    from jamflow.io import read_packing
+
+    start, out, final = tmp_path / "s.nc", tmp_path / "o.nc", tmp_path / "f.nc"
+    write_packing(random_packing(8, 2, 0.5, "bi", 4), start)
+    code, _, err = _run(capsys, "compress", start, out, "--phi", "0.95", "--final", final, "--preset", "fast",
+                        "--quiet")
+    assert code == 1
+    _one_line_error(err, "jammed at phi", "o.reached.nc", "f.reached.nc")
+    assert not out.exists() and not final.exists()
+    reached = read_packing(tmp_path / "f.reached.nc")
+    assert reached.attrs["jammed"] == 1 and reached.packing_fraction < 0.9
+    s = summarize(reached)
+    assert s.isostatic and s.n_contacts == s.isostatic_count, (s.n_contacts, s.isostatic_count)
+    assert read_dataset(tmp_path / "o.reached.nc", "flow").attrs["jammed"] == 1

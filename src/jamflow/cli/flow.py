@@ -126,6 +126,19 @@ def _run(args: argparse.Namespace, drive: Drive, stop: Stop, packing) -> int:
     finally:
         if bar is not None:
             bar.close()
+    target = stop.packing_fraction
+    if target is not None and res.jammed and res.final.packing_fraction < target * (1 - 1e-12):
+        # jammed before the target: the outputs hold a state the target never describes
+        out = str(Path(args.out).with_suffix(".reached.nc"))
+        write_dataset(res.series, out)
+        written = [out]
+        if args.final:
+            written.append(str(Path(args.final).with_suffix(".reached.nc")))
+            write_packing(res.final, written[-1], params)
+        if args.checkpoint and Path(args.checkpoint).exists():
+            Path(args.checkpoint).unlink()
+        raise RuntimeError(f"jammed at phi = {res.final.packing_fraction:.8f} before the target phi {target:g}; "
+                           f"reached state written to {', '.join(written)}")
     write_dataset(res.series, args.out)
     if args.final:
         write_packing(res.final, args.final, params)
