@@ -283,3 +283,41 @@ def test_overdamped_compress_past_jamming_stops_jammed_with_one_line(capsys, tmp
     s = summarize(reached)
     assert s.isostatic and s.n_contacts == s.isostatic_count, (s.n_contacts, s.isostatic_count)
     assert read_dataset(tmp_path / "o.reached.nc", "flow").attrs["jammed"] == 1
+
+
+# --- item 7: smaller ones -------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("argv, named", [
+    (["shear", "{s1}", "{out}", "--strain", "-0.1"], "--strain"),
+    (["aqs", "{s1}", "{out}", "--strain", "-0.1", "--step", "1e-3"], "--strain"),
+    (["init", "{out}", "--d", "2", "--n", "4", "--phi", "0.1", "--seed", "-1"], "--seed"),
+    (["ls", "{s1}", "{out}", "--growth-rate", "1e-3", "--p-target", "-1e3"], "pressure targets must be positive"),
+])
+def test_negative_values_are_named(capsys, tmp_path, two_packings, argv, named):
+    s1, _ = two_packings
+    out = tmp_path / "o.nc"
+    code, _, err = _run(capsys, *[a.format(s1=s1, out=out) for a in argv])
+    assert code in (1, 2)
+    _one_line_error(err, named)
+    assert not out.exists()
+
+
+def test_import_dat_names_a_binary_file(capsys, tmp_path):
+    dat = tmp_path / "binary.dat"
+    dat.write_bytes(bytes(range(256)) * 4)
+    code, _, err = _run(capsys, "import-dat", dat, tmp_path / "o.nc")
+    assert code == 1
+    _one_line_error(err, dat, "not text")
+
+
+def test_import_dat_refuses_overlapping_spheres_unless_soft(capsys, tmp_path):
+    dat, out = tmp_path / "ov.dat", tmp_path / "o.nc"
+    # two discs of diameter 0.3 at distance 0.1: relative overlap 2/3
+    dat.write_text("2\n2\n0.3\n0.1 0.1\n0.2 0.1\n")
+    code, _, err = _run(capsys, "import-dat", dat, out)
+    assert code == 1
+    _one_line_error(err, dat, "overlap", "--soft")
+    assert not out.exists()
+    assert _run(capsys, "import-dat", dat, out, "--soft")[0] == 0
+    assert read_dataset(out, "packing")["position"].shape == (2, 2)

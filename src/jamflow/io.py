@@ -244,7 +244,11 @@ def read_dat(path: str | os.PathLike) -> Packing:
     Format: line 1 d, line 2 N, line 3 diameter, then N lines of d coordinates.
     """
     path = Path(path)
-    lines = [ln.split() for ln in path.read_text().splitlines() if ln.strip()]
+    try:
+        text = path.read_text()
+    except UnicodeDecodeError:
+        raise ValueError(f"{path}: not a CALiPPSO .dat file (not text)") from None
+    lines = [ln.split() for ln in text.splitlines() if ln.strip()]
     try:
         d, n, diameter = int(lines[0][0]), int(lines[1][0]), float(lines[2][0])
         x = np.array([[float(v) for v in ln] for ln in lines[3:]], dtype=np.float64)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import sys
 import typing
 from collections.abc import Sequence
@@ -23,7 +24,15 @@ COMMAND_MODULES: tuple[str, ...] = ("packings", "analysis", "soft", "flow", "cer
 
 
 class _Parser(argparse.ArgumentParser):
-    """Reports usage errors as one line (``prog: error: message``) with exit code 2."""
+    """Reports usage errors as one line (``prog: error: message``) with exit code 2.
+
+    Negative numbers in scientific notation (``--p-target -1e3``) are read as values,
+    not as options, so that the command's own check names the bad value.
+    """
+
+    def __init__(self, *args: typing.Any, **kwargs: typing.Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 
     def error(self, message: str) -> typing.NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")

@@ -14,7 +14,7 @@ from ..strict_jamming import (
     certificate_to_dataset,
     certify,
 )
-from .common import add_command, add_preset, add_quiet, stage_parameters
+from .common import add_command, add_preset, add_quiet, seed, stage_parameters
 from .packings import add_overlap_option, overlap_tol
 
 
@@ -38,7 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with --gap-tol: treat the pairs as exact contacts (zero right-hand side)")
     p.add_argument("--loads", type=int, default=DEFAULT_LOADS,
                    help=f"random loads per LP kind, each with both signs (default {DEFAULT_LOADS})")
-    p.add_argument("--seed", type=int, default=0, help="seed of the random loads (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the random loads (default 0)")
     p.add_argument("--max-cluster-fraction", type=float, default=DEFAULT_MAX_CLUSTER_FRACTION,
                    help="largest non-wrapping moving group removed as a rattling cluster, as a fraction "
                         f"of the backbone (default {DEFAULT_MAX_CLUSTER_FRACTION})")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-__all__ = ["add_command", "add_quiet", "add_preset", "stage_parameters", "path_arguments"]
+__all__ = ["add_command", "add_quiet", "add_preset", "stage_parameters", "path_arguments", "seed", "positive"]
 
 
 def add_command(sub: Any, name: str, handler: Any, help: str, description: str | None = None,
@@ -62,3 +62,25 @@ def stage_parameters(args: argparse.Namespace, *exclude: str) -> dict[str, Any]:
     """The parsed options of a stage as a JSON-able dict (for dataset provenance)."""
     skip = {"handler", "command", "quiet", "path_roles", "in_place", *exclude}
     return {k: v for k, v in vars(args).items() if k not in skip}
+
+
+def seed(text: str) -> int:
+    """Argument type of random seeds: a non-negative integer (numpy's generators need one)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a non-negative integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a non-negative integer, got {value}")
+    return value
+
+
+def positive(text: str) -> float:
+    """Argument type of a strictly positive finite number (strains, durations)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}") from None
+    if not (value > 0.0 and value < float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value

@@ -12,7 +12,7 @@ from ..overdamped.driving import Drive, SelfPropulsion
 from ..overdamped.integrate import FlowOptions
 from ..overdamped.run import Stop, run_flow
 from ..packing import LENGTH_UNITS
-from .common import add_command, add_preset, add_quiet, stage_parameters
+from .common import add_command, add_preset, add_quiet, positive, seed, stage_parameters
 from .packings import add_overlap_option, overlap_tol
 
 
@@ -26,7 +26,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "Lerner-During-Wyart event-driven overdamped hard-sphere shear with Lees-Edwards boundaries.",
                     reads=FLOW_READS, writes=FLOW_WRITES, packings=("final",))
     _io_options(p)
-    p.add_argument("--strain", type=float, required=True, help="total shear strain gamma")
+    p.add_argument("--strain", type=positive, required=True,
+                   help="total shear strain gamma (> 0)")
     p.add_argument("--pressure", type=float, default=None,
                    help="shear at this fixed pressure (units gamma_dot xi0^-1 lambda^(2-d)); default fixed volume")
     p.add_argument("--rate", type=float, default=1.0, help="shear rate gamma_dot (default 1)")
@@ -37,7 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     reads=FLOW_READS, writes=FLOW_WRITES, packings=("final",))
     _io_options(p)
     p.add_argument("--phi", type=float, default=None, help="stop at this packing fraction (default: run to jamming)")
-    p.add_argument("--strain", type=float, default=10.0, help="give up after this compressive strain rate*t (default 10)")
+    p.add_argument("--strain", type=positive, default=10.0, help="give up after this compressive strain rate*t (default 10)")
     p.add_argument("--shear", action="store_true", help="shear while compressing (Sec. IV D: jamming under both)")
     p.add_argument("--rate", type=float, default=1.0, help="compression rate (default 1)")
     _common_options(p)
@@ -45,7 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "drive", _drive, "event-driven overdamped dynamics under external or self-propelling forces",
                     reads=(*FLOW_READS, "forces"), writes=FLOW_WRITES, packings=("final",))
     _io_options(p)
-    p.add_argument("--time", type=float, required=True, help="duration in units of tau = lambda/(f_ext xi0)")
+    p.add_argument("--time", type=positive, required=True, help="duration in units of tau = lambda/(f_ext xi0)")
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--forces", default=None, help="external forces: .npy file of shape (N, d) [input force units]")
     g.add_argument("--random-forces", type=float, default=None, metavar="F_EXT",
@@ -65,7 +66,7 @@ def _io_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--checkpoint", default=None,
                    help="checkpoint netCDF: written periodically, resumed from if present (only by the same input "
                         "and trajectory parameters), removed after a complete run")
-    p.add_argument("--seed", type=int, default=0, help="seed of random choices (self-propulsion, random forces)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of random choices (self-propulsion, random forces)")
     add_overlap_option(p)
     add_quiet(p)
     add_preset(p)

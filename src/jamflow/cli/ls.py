@@ -9,7 +9,7 @@ from tqdm import tqdm
 
 from ..io import read_packing, write_dataset, write_packing
 from ..ls import DEFAULT_BETA, DEFAULT_FAST_GROWTH_RATE, DEFAULT_FAST_UNTIL, MAX_PRESSURE, compress
-from .common import add_command, add_preset, add_quiet, stage_parameters
+from .common import add_command, add_preset, add_quiet, seed, stage_parameters
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -45,7 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help=f"reduced pressure ending the fast stage (default {DEFAULT_FAST_UNTIL:g})")
     p.add_argument("--beta", type=float, default=DEFAULT_BETA,
                    help=f"inverse temperature set at every velocity rescaling (default {DEFAULT_BETA:g})")
-    p.add_argument("--seed", type=int, default=0, help="seed of the initial velocities (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the initial velocities (default 0)")
     p.add_argument("--eos", default=None, help="also write the equation of state (p vs phi) as netCDF")
     p.add_argument("--max-pressure", type=float, default=MAX_PRESSURE,
                    help=f"stop as jammed at this reduced pressure (default {MAX_PRESSURE:g}, where the cages reach "

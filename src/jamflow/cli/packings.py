@@ -12,7 +12,7 @@ from ..analysis.contacts import summarize
 from ..initial import random_packing
 from ..io import read_dat, read_packing, write_packing, write_xyz
 from ..tolerances import OVERLAP_TOL
-from .common import add_command, add_quiet, stage_parameters
+from .common import add_command, add_quiet, seed, stage_parameters
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -27,13 +27,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--width", type=float, default=0.1, help="polydisperse relative width (default 0.1)")
     p.add_argument("--species-spread", type=float, default=0.0,
                    help="bidisperse: relative standard deviation within each species (default 0)")
-    p.add_argument("--seed", type=int, required=True, help="random seed")
+    p.add_argument("--seed", type=seed, required=True, help="random seed")
     add_quiet(p)
 
     p = add_command(sub, "import-dat", _import_dat, "read a CALiPPSO .dat configuration",
                     reads=("dat",), writes=("out",), packings=("out",))
     p.add_argument("dat", help="input .dat file (d, N, diameter, positions)")
     p.add_argument("out", help="output netCDF")
+    add_overlap_option(p)
     add_quiet(p)
 
     p = add_command(sub, "export-xyz", _export_xyz, "write extended XYZ (OVITO) with a radius column",
@@ -75,7 +76,13 @@ def _init(args: argparse.Namespace) -> int:
 
 
 def _import_dat(args: argparse.Namespace) -> int:
-    write_packing(read_dat(args.dat), args.out)
+    packing = read_dat(args.dat)
+    try:
+        # a hard-sphere file with overlaps is refused here, not by the first stage that reads it
+        packing.validate(overlap_tol(args))
+    except ValueError as exc:
+        raise ValueError(f"{args.dat}: {exc} (--soft or --overlap-tol to accept)") from exc
+    write_packing(packing, args.out)
     return 0
 
 

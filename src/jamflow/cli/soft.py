@@ -15,7 +15,7 @@ from ..soft.jamming import FORCE_TOL_VANDERWERF, jam_to_pressure
 from ..soft.potential import PowerLawPotential
 from ..soft.shear import LERNER_DELTA_R, aqs_shear, lerner_sd_shear
 from ..tolerances import MINIMIZE_FORCE_TOL
-from .common import add_command, add_preset, add_quiet, stage_parameters
+from .common import add_command, add_preset, add_quiet, positive, seed, stage_parameters
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -26,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("out", help="output netCDF packing (lengths in units of the mean diameter)")
     p.add_argument("--pressure", type=float, required=True,
                    help="target pressure P0 [epsilon / mean diameter^d], e.g. 1e-7")
-    p.add_argument("--seed", type=int, default=None,
+    p.add_argument("--seed", type=seed, default=None,
                    help="start from uniformly random centres drawn with this seed (O'Hern's "
                         "infinite-temperature quench); default: start from the input centres")
     p.add_argument("--force-tol", type=float, default=FORCE_TOL_VANDERWERF,
@@ -45,8 +45,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     reads=("input",), writes=("out", "final"), packings=("final",))
     p.add_argument("input", help="input netCDF soft packing")
     p.add_argument("out", help="output netCDF time series (dim step, coordinate strain)")
-    p.add_argument("--strain", type=float, required=True, help="total strain")
-    p.add_argument("--step", type=float, required=True, help="strain step delta gamma")
+    p.add_argument("--strain", type=positive, required=True, help="total strain (> 0)")
+    p.add_argument("--step", type=positive, required=True, help="strain step delta gamma")
     p.add_argument("--fixed-pressure", action="store_true",
                    help="minimise the enthalpy at the input's pressure (or --pressure) after every step")
     p.add_argument("--pressure", type=float, default=None, help="fixed pressure P0 (implies --fixed-pressure)")
@@ -63,7 +63,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     reads=("input",), writes=("out",))
     p.add_argument("input", help="input netCDF packing")
     p.add_argument("out", help="output netCDF flow time series")
-    p.add_argument("--strain", type=float, required=True, help="total strain")
+    p.add_argument("--strain", type=positive, required=True, help="total strain (> 0)")
     p.add_argument("--step", type=float, default=1e-6, help="strain step (paper: 1e-6)")
     p.add_argument("--dt", type=float, default=0.1, help="steepest-descent step (paper: 0.1)")
     p.add_argument("--grad-tol", type=float, default=1e-9, help="max |grad U| stop (paper: 1e-9)")

@@ -8,7 +8,7 @@ from tqdm import tqdm
 
 from ..io import write_dataset
 from ..tradeoff import STAGES, recommend, sweep
-from .common import add_command, add_quiet
+from .common import add_command, add_quiet, seed
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -25,7 +25,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("stage", choices=sorted(STAGES), help="stage to sweep")
     p.add_argument("out", help="output netCDF")
     p.add_argument("--quick", action="store_true", help="smaller inputs and grid (seconds to a minute per stage)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the fixed inputs (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the fixed inputs (default 0)")
     add_quiet(p)
 
 
