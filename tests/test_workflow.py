@@ -150,6 +150,9 @@ def test_ls_calippso_scene_plans_one_ls_run_per_sample_and_rate(tmp_path):
         ({"chain": ["soft"], "analyses": ["overlap"]}, "need(s) the chain [ls, calippso]"),
         ({"chain": ["ls", "calippso"], "ls": {"growth_rates": [1e-3], "p_targets": [1e3]}, "analyses": ["overlap"]},
          "at least two LS p_targets"),
+        ({"chain": ["soft", "calippso"], "calippso": {"walls": True}, "analyses": []},
+         "calippso.walls needs the chain [calippso]"),
+        ({"chain": ["calippso"], "calippso": {"walls": True}}, "analyses and figures other than packing"),
     ],
 )
 def test_impossible_stage_orders_fail_at_start(tmp_path, patch, message):
@@ -224,3 +227,31 @@ def test_scene_schema_offers_exactly_the_tradeoff_stages():
 
     schema = yaml.safe_load((REPO / "workflow" / "schemas" / "config.schema.yaml").read_text())
     assert schema["properties"]["tradeoff"]["properties"]["stages"]["items"]["enum"] == list(STAGES)
+
+
+def test_walls_scene_runs_end_to_end(tmp_path):
+    # issue 17: a scene with calippso.walls failed on its own random start (spheres across
+    # the faces); init --walls now places them inside, and CALiPPSO jams them between walls
+    work = _workdir(tmp_path)
+    scene_file = work / "config" / "scenes" / "walls.yaml"
+    scene = yaml.safe_load(scene_file.read_text())
+    res = _snakemake(work, "-c1", "--workflow-profile", "workflow/profiles/default", "--configfile", str(scene_file))
+    assert res.returncode == 0, res.stderr[-4000:]
+    out = work / "results" / scene["scene"]
+    d = scene["system"]["d"]
+    for s in scene["system"]["seeds"]:
+        start = xr.load_dataset(out / "packings" / f"seed{s}" / "init.nc")
+        ds = xr.load_dataset(out / "packings" / f"seed{s}" / "calippso.nc")
+        for data in (start, ds):
+            # every sphere inside the walls, up to the overlap tolerance
+            rad = 0.5 * data["diameter"].values[:, None]
+            x = data["position"].values
+            assert np.all(x >= rad * (1 - 1e-8)) and np.all(x <= 1 - rad * (1 - 1e-8))
+        assert ds.attrs["boundary"] == "walls" and ds.attrs["converged"] == 1
+        # isostatic between walls (no translations): N_c = d N_s + 1, wall contacts included
+        n_wall = ds.sizes["wall_contact"]
+        pair_force_bearing = int(np.count_nonzero(ds["force"].values > 0))
+        assert n_wall > 0
+        assert ds.attrs["n_contacts"] == d * ds.attrs["n_stable"] + 1 == pair_force_bearing + n_wall
+        assert ds.attrs["max_overlap"] < 1e-8
+        assert (out / "figures" / f"packing_seed{s}.png").stat().st_size > 1000

@@ -49,6 +49,7 @@ FINAL = CHAIN[-1]
 PRESET = config["preset"]
 LS_TARGETS = config.get("ls", {}).get("p_targets", [])
 LS_RATES = config.get("ls", {}).get("growth_rates", [])
+WALLS = config.get("calippso", {}).get("walls", False)
 
 
 def check_chain():
@@ -61,6 +62,12 @@ def check_chain():
         raise ValueError("the eos figure needs ls in the chain")
     if wanted & {"overlap", "phi-j-series"} and len(LS_TARGETS) < 2:
         raise ValueError("overlap and phi-j-series compare packings from at least two LS p_targets")
+    if WALLS and (SOURCE_STAGE != "init" or CHAIN[1:] != ["calippso"]):
+        raise ValueError("calippso.walls needs the chain [calippso] from a random system (init --walls); "
+                         "the other stages are periodic")
+    if WALLS and (config.get("analyses") or set(config.get("figures", [])) - {"packing"}):
+        raise ValueError("calippso.walls: the analyses and figures other than packing assume periodic "
+                         "boundaries; set analyses: [] and figures: [packing]")
     if "ls" not in CHAIN:
         return
     if SOURCE_STAGE != "init" or CHAIN[1] != "ls":

@@ -28,6 +28,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--species-spread", type=float, default=0.0,
                    help="bidisperse: relative standard deviation within each species (default 0)")
     p.add_argument("--seed", type=seed, required=True, help="random seed")
+    p.add_argument("--walls", action="store_true",
+                   help="every sphere inside the box (a start for calippso --walls, hard walls on the faces)")
     add_quiet(p)
 
     p = add_command(sub, "import-dat", _import_dat, "read a CALiPPSO .dat configuration",
@@ -70,7 +72,7 @@ def _init(args: argparse.Namespace) -> int:
     with tqdm(total=args.n, desc="init (RSA)", unit="sphere", disable=args.quiet, delay=1.0) as bar:
         p = random_packing(args.n, args.d, args.phi, args.dispersity, args.seed,
                            args.ratio, args.fraction, args.width, args.species_spread,
-                           progress=bar.update)
+                           progress=bar.update, walls=args.walls)
     write_packing(p, args.out, stage_parameters(args, "out"))
     return 0
 
