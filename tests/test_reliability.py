@@ -12,19 +12,10 @@ import pytest
 
 import numpy as np
 
-from jamflow.cli import build_parser, main
+from jamflow.cli import build_parser
 from jamflow.io import DATASET_KINDS, dataset_kind, file_kind, read_dataset, write_packing
 from jamflow.initial import random_packing
-
-
-def _run(capsys: pytest.CaptureFixture[str], *argv: object) -> tuple[int, str, str]:
-    """Run the CLI in-process; usage errors (SystemExit) count as exit codes."""
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as exc:
-        code = exc.code if isinstance(exc.code, int) else 1
-    out, err = capsys.readouterr()
-    return code, out, err
+from test_cli_packings import _run
 
 
 def _one_line_error(err: str, *names: object) -> None:
@@ -37,14 +28,17 @@ def _sha(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
+def _random_starts(folder: Path, n: int, phi: float, seeds: tuple[int, int], prefix: str) -> tuple[Path, Path]:
+    """Two 2D bidisperse random packings written to ``folder/<prefix><seed>.nc``."""
+    paths = [folder / f"{prefix}{seed}.nc" for seed in seeds]
+    for seed, path in zip(seeds, paths):
+        write_packing(random_packing(n, 2, phi, "bi", seed), path)
+    return paths[0], paths[1]
+
+
 @pytest.fixture
 def two_packings(tmp_path: Path) -> tuple[Path, Path]:
-    paths = []
-    for seed in (1, 2):
-        path = tmp_path / f"s{seed}.nc"
-        write_packing(random_packing(16, 2, 0.4, "bi", seed), path)
-        paths.append(path)
-    return paths[0], paths[1]
+    return _random_starts(tmp_path, 16, 0.4, (1, 2), "s")
 
 
 # --- item 3: an input packing is never destroyed ------------------------------------------
@@ -217,12 +211,7 @@ def test_ls_target_beyond_the_largest_pressure_is_refused(capsys, two_packings, 
 @pytest.fixture
 def starts(tmp_path: Path) -> tuple[Path, Path]:
     """Two different 2D bidisperse random starts at phi = 0.5 (shear makes contacts)."""
-    paths = []
-    for seed in (4, 5):
-        path = tmp_path / f"start{seed}.nc"
-        write_packing(random_packing(24, 2, 0.5, "bi", seed), path)
-        paths.append(path)
-    return paths[0], paths[1]
+    return _random_starts(tmp_path, 24, 0.5, (4, 5), "start")
 
 
 SHEAR = {"--strain": "0.02", "--rate": "1", "--sync-every": "10"}
