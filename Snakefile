@@ -1,6 +1,6 @@
 # jamflow workflow: a scene (config/*.yaml) names a system, a protocol chain, analyses and
-# figures; this file only validates the scene and includes the stages.
-from snakemake.utils import min_version, validate
+# figures; this file includes the scene validation (rules/common.smk) and the stages.
+from snakemake.utils import min_version
 
 min_version("9.0")
 
@@ -11,9 +11,6 @@ if not config:
 
     configfile: "config/config.yaml"
 
-
-
-validate(config, "workflow/schemas/config.schema.yaml")
 
 
 include: "workflow/rules/common.smk"

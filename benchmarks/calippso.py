@@ -72,9 +72,8 @@ from jamflow.packing import Packing, max_overlap
 from jamflow.rigidity import rigidity_matrix
 
 OUT = Path(__file__).resolve().parent / "output"
-LS = Path(__file__).resolve().parents[2] / "shared" / "data" / "calippso-ls"
-if not LS.is_dir():
-    LS = Path("/work/shared/data/calippso-ls")
+#: the CALiPPSO authors' LS examples, vendored with the tests (MIT, licence in its README.md)
+LS = Path(__file__).resolve().parents[1] / "tests" / "data" / "calippso-ls"
 
 PARTS = ("scaling", "ls", "solvers", "lp", "relax", "tolerances", "large", "factor")
 #: LS pressure of the near-jamming starts: the paper's Sec. IV value. (At 1e6 the

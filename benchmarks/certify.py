@@ -53,7 +53,7 @@ from jamflow.packing import Packing
 from jamflow.strict_jamming import certify
 
 OUT = Path(__file__).resolve().parent / "output"
-LS = Path(__file__).resolve().parents[2] / "shared" / "data" / "calippso-ls" / "Centers-after-LS--N-1024--d-3.dat"
+LS = Path(__file__).resolve().parents[1] / "tests" / "data" / "calippso-ls" / "Centers-after-LS--N-1024--d-3.dat"
 LS_GAP_TOL = 3e-3
 
 

@@ -36,7 +36,8 @@ SYSTEMS = {"2D bi N=64": (2, 64, "bi"), "3D mono N=128": (3, 128, "mono")}
 def run(name: str, budget: int) -> dict[str, np.ndarray]:
     d, n, dispersity = SYSTEMS[name]
     start = random_packing(n, d, 0.2, dispersity=dispersity, seed=5)
-    res = compress(start, 1e-3, TARGETS, fast_growth_rate=5e-3, seed=5, max_collisions=budget)
+    res = compress(start, 1e-3, TARGETS, fast_growth_rate=5e-3, seed=5, max_collisions=budget,
+                   max_pressure=None)
     rows = {k: np.full(len(TARGETS), np.nan) for k in ("p", "n_lp", "isostatic", "max_overlap", "dphi", "time")}
     for k, snap in enumerate(res.snapshots):
         t0 = time.perf_counter()

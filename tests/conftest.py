@@ -7,15 +7,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-#: Real LS-compressed configurations (N = 1024, d = 3, 4, 5) beside the repository.
-CALIPPSO_LS_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "calippso-ls"
-CALIPPSO_LS_FILES = sorted(CALIPPSO_LS_DIR.glob("Centers-after-LS--N-*--d-*.dat"))
+from ls_data import LS_DIMENSIONS, ls_dat
 
 
-@pytest.fixture(params=CALIPPSO_LS_FILES, ids=lambda p: p.stem)
+@pytest.fixture(params=LS_DIMENSIONS, ids=lambda d: f"Centers-after-LS--N-1024--d-{d}")
 def calippso_ls_file(request: pytest.FixtureRequest) -> Path:
-    """Each CALiPPSO LS ``.dat`` file in turn."""
-    return request.param
+    """Each vendored CALiPPSO LS ``.dat`` file in turn (a missing one is an error)."""
+    return ls_dat(request.param)
 
 
 @pytest.fixture

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,6 +16,7 @@ from jamflow.analysis.gaps import (
 from jamflow.box import Box
 from jamflow.io import read_dat, read_dataset
 from jamflow.packing import Packing, near_pairs
+from ls_data import ls_dat
 
 
 def power_law_gaps(rng: np.random.Generator, gamma: float, lo: float, hi: float, size: int) -> np.ndarray:
@@ -98,13 +98,12 @@ def test_explicit_contacts_are_excluded_and_other_gaps_kept():
     assert len(non_contact_gaps(full, 1e-3, gap_tol=1e-3)[0]) == 0
 
 
-LS_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "calippso-ls"
 
 
 @pytest.mark.parametrize("d", [4, 5])
 def test_ls_snapshot_shows_plateau_and_mean_field_regime(d):
     # d = 3 is at lower pressure: its plateau reaches 1e-6 and the power law is hidden
-    packing = read_dat(LS_DIR / f"Centers-after-LS--N-1024--d-{d}.dat")
+    packing = read_dat(ls_dat(d))
     # an LS snapshot has no contacts: count every positive gap (gap_tol = 0)
     ds = gap_distribution([packing], max_gap=0.1, min_gap=1e-13, bins_per_decade=2,
                           fit_min=1e-4, fit_max=3e-2, gap_tol=0.0, include_rattlers=True)

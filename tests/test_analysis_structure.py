@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,8 +16,8 @@ from jamflow.analysis.structure import (
 from jamflow.box import Box
 from jamflow.io import read_dat, read_dataset
 from jamflow.packing import Packing
+from ls_data import ls_dat
 
-LS_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "calippso-ls"
 
 
 def triangular(nx: int, ny: int, spacing: float = 1.0, shift: float = 0.1) -> Packing:
@@ -103,7 +102,7 @@ def test_q6_random_is_small_and_not_crystal(rng):
 
 
 def test_ls_packing_is_amorphous():
-    p = read_dat(LS_DIR / "Centers-after-LS--N-1024--d-3.dat")
+    p = read_dat(ls_dat(3))
     ds = structure_dataset(p, r_max=2.5, bins=250)
     print(f"LS d=3: Q6 = {ds.attrs['Q6_global']:.4f}, crystal fraction {ds.attrs['crystal_fraction']:.4f}")
     assert ds.attrs["Q6_global"] < 0.1
@@ -122,7 +121,7 @@ def test_rdf_cli_in_four_dimensions_reports_g_only(tmp_path):
     from jamflow.cli import main
 
     out = tmp_path / "rdf.nc"
-    assert main(["rdf", str(LS_DIR / "Centers-after-LS--N-1024--d-4.dat"), str(out), "--r-max", "1.3"]) == 0
+    assert main(["rdf", str(ls_dat(4)), str(out), "--r-max", "1.3"]) == 0
     ds = read_dataset(out)
     assert "not computed" in ds.attrs["crystallinity"]
     assert set(ds.data_vars) == {"g", "r_lower"}

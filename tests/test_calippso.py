@@ -8,7 +8,6 @@ from gaps, and the duality identity sum_c f_c sigma_c = 1 (paper Eq. 9).
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import highspy
 import numpy as np
@@ -30,10 +29,8 @@ from jamflow.initial import random_packing
 from jamflow.io import read_dat, read_dataset, read_packing, write_packing
 from jamflow.packing import Packing, max_overlap, near_pairs
 from jamflow.tolerances import FORCE_BALANCE_TOL, OVERLAP_TOL
+from ls_data import ls_dat
 
-LS = Path(__file__).resolve().parents[2] / "shared" / "data" / "calippso-ls"
-if not LS.is_dir():
-    LS = Path("/work/shared/data/calippso-ls")
 
 #: two independent contact definitions agree: pairs closer than this relative gap
 GEOMETRIC_GAP = 1e-9
@@ -84,7 +81,7 @@ def _check_jammed(res, start: Packing, walls: bool = False) -> None:
 
 
 def test_ls_d3_jams():
-    start = read_dat(LS / "Centers-after-LS--N-1024--d-3.dat")
+    start = read_dat(ls_dat(3))
     res = calippso(start)
     _check_jammed(res, start)
     assert res.iterations <= 8
@@ -106,7 +103,7 @@ def test_ls_d3_jams():
 @pytest.mark.slow
 @pytest.mark.parametrize("d", [4, 5])
 def test_ls_high_d_jams(d):
-    start = read_dat(LS / f"Centers-after-LS--N-1024--d-{d}.dat")
+    start = read_dat(ls_dat(d))
     res = calippso(start)
     _check_jammed(res, start)
 

@@ -219,5 +219,11 @@ def test_summary_keys_and_values_of_a_real_ls_packing(calippso_ls_file) -> None:
     # an LS packing near jamming: mean backbone coordination close to 2d, few rattlers
     assert 2 * p.d - 0.5 < out["z"] < 2 * p.d + 1.0
     assert out["n_rattlers"] < 0.05 * 1024
-    assert out["max_overlap"] >= 0.0 and out["max_overlap_rel"] < 1e-12
+    # the largest overlap against an all-pairs minimum-image search (unit cubic box)
+    i, j = np.triu_indices(p.n, 1)
+    dx = p.position[i] - p.position[j]
+    dx -= np.round(dx)
+    h = np.sqrt(np.einsum("ij,ij->i", dx, dx)) / p.diameter[0] - 1.0
+    assert out["max_overlap"] == pytest.approx(max(0.0, -h.min()) * p.diameter[0], rel=1e-12, abs=1e-300)
+    assert out["max_overlap_rel"] < 1e-12
     assert out["contact_source"] == "gap <= 0.001"

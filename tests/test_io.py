@@ -171,9 +171,12 @@ _KILLED_WRITER = textwrap.dedent(
     import numpy as np
     import xarray as xr
     from jamflow.io import write_dataset
-    # random numbers compress slowly: the write takes seconds
-    v = np.random.default_rng(0).random(5_000_000)
-    ds = xr.Dataset({"v": ("x", v, {"units": "1", "long_name": "noise"})})
+    # random numbers compress slowly: the write takes seconds; shaped as a packing, since
+    # write_dataset refuses to replace a packing by another kind of dataset
+    v = np.random.default_rng(0).random((2_500_000, 2))
+    ds = xr.Dataset({"position": (("particle", "spatial"), v, {"units": "1", "long_name": "noise"}),
+                     "diameter": (("particle",), np.full(len(v), 1e-4)),
+                     "box": (("spatial", "lattice_vector"), np.eye(2))})
     print("ready", flush=True)
     write_dataset(ds, sys.argv[1])
     """
@@ -359,3 +362,12 @@ def test_xyz_read_by_ase(tmp_path: Path) -> None:
     np.testing.assert_allclose(atoms.get_positions(), p.position, rtol=0, atol=1e-15)
     np.testing.assert_allclose(atoms.arrays["radius"], p.diameter / 2, rtol=0, atol=1e-15)
     assert list(atoms.pbc) == [True, True, True]
+
+
+def test_vendored_ls_data_is_present_and_a_missing_file_is_an_error() -> None:
+    from ls_data import LS_DIMENSIONS, LS_DIR, ls_dat
+
+    assert [ls_dat(d).name for d in LS_DIMENSIONS] == [f"Centers-after-LS--N-1024--d-{d}.dat" for d in (3, 4, 5)]
+    assert "MIT" in (LS_DIR / "README.md").read_text()
+    with pytest.raises(FileNotFoundError, match="d-6.dat"):
+        ls_dat(6)

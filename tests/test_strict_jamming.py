@@ -9,7 +9,6 @@ the certificate itself uses randomized interior-point / simplex LPs.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -28,8 +27,8 @@ from jamflow.rigidity import (
 )
 from jamflow.soft.jamming import jam_to_pressure
 from jamflow.strict_jamming import CLASSIFICATIONS, _MotionLP, certify
+from ls_data import ls_dat
 
-DATA = Path("/work/shared/data/calippso-ls")
 
 
 def _independent(packing, contacts, backbone, strain, method="nnls"):
@@ -243,9 +242,8 @@ def test_random_low_density_packing_is_not_jammed():
     assert cert.rattler.all()
 
 
-@pytest.mark.skipif(not DATA.exists(), reason="LS data not available")
 def test_ls_snapshot_with_too_small_gap_tolerance_is_not_jammed():
-    p = read_dat(DATA / "Centers-after-LS--N-1024--d-3.dat")
+    p = read_dat(ls_dat(3))
     for tol in (1e-6, 1e-4):
         cert = certify(p, gap_tol=tol)
         assert cert.classification == "not_jammed"
@@ -254,9 +252,8 @@ def test_ls_snapshot_with_too_small_gap_tolerance_is_not_jammed():
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not DATA.exists(), reason="LS data not available")
 def test_ls_snapshot_near_contact_network_is_jammed():
-    p = read_dat(DATA / "Centers-after-LS--N-1024--d-3.dat")
+    p = read_dat(ls_dat(3))
     cert = certify(p, gap_tol=3e-3, strict=True)
     assert cert.classification in ("collectively_jammed", "strictly_jammed")
     full_rank, positive = _independent(p, cert.contacts, ~cert.rattler, strain=False, method="lp")

@@ -94,6 +94,7 @@ def random_packing(
     species_spread: float = 0.0,
     max_trials_per_particle: int = 2000,
     progress: Callable[[int], None] | None = None,
+    walls: bool = False,
 ) -> Packing:
     """Random non-overlapping packing at packing fraction ``phi`` in a cubic box.
 
@@ -113,6 +114,10 @@ def random_packing(
         RSA trial budget; exceeding it raises :class:`UnreachableError`.
     progress : callable, optional
         Called with the number of spheres placed by each batch of trials.
+    walls : bool
+        Place every sphere inside the box, ``D_i / 2 <= x_i <= 1 - D_i / 2`` in every
+        direction, as a start between hard walls on the faces (``jamflow calippso
+        --walls``); attribute ``boundary = "walls"``.
     """
     if d < 2:
         raise ValueError(f"d must be >= 2, got {d}")
@@ -126,7 +131,7 @@ def random_packing(
         raise UnreachableError(
             f"N={n} spheres at phi={phi} in d={d} would have diameter {D.max():.3g} >= half the box; use more particles"
         )
-    x = _rsa(D, d, rng, max_trials_per_particle, phi, progress)
+    x = _rsa(D, d, rng, max_trials_per_particle, phi, progress, walls)
     return Packing(
         position=x,
         diameter=D,
@@ -137,20 +142,23 @@ def random_packing(
             "n": n, "d": d, "phi": phi, "dispersity": dispersity, "seed": seed,
             "ratio": ratio, "fraction": fraction, "width": width,
             "species_spread": species_spread, "method": "rsa",
-            "max_trials_per_particle": max_trials_per_particle,
+            "max_trials_per_particle": max_trials_per_particle, "walls": walls,
         },
-        attrs={"length_unit": "side of the periodic box"},
+        attrs={"length_unit": "side of the box", "boundary": "walls"} if walls
+        else {"length_unit": "side of the periodic box"},
     )
 
 
 def _rsa(
     D: NDArray[np.float64], d: int, rng: np.random.Generator, max_trials: int, phi: float,
-    progress: Callable[[int], None] | None = None,
+    progress: Callable[[int], None] | None = None, walls: bool = False,
 ) -> NDArray[np.float64]:
     """Place spheres (largest first) by batched random sequential addition.
 
     Each batch of trial points is tested against a periodic k-d tree of the spheres
-    placed before the batch and, directly, against those accepted within it.
+    placed before the batch and, directly, against those accepted within it. With
+    ``walls`` a trial point closer than its radius to a face is rejected too (the
+    periodic distances then only reject more than the direct ones).
     """
     n = len(D)
     order = np.argsort(-D, kind="stable")
@@ -179,6 +187,8 @@ def _rsa(
         near_lists = tree.query_ball_point(cand, reach) if tree is not None else [[]] * len(cand)
         for c, near in zip(cand, near_lists):
             Dk = Ds[placed]
+            if walls and (np.any(c < 0.5 * Dk) or np.any(c > 1.0 - 0.5 * Dk)):
+                continue
             idx = np.concatenate([np.asarray(near, dtype=np.int64), np.arange(start, placed)])
             if idx.size:
                 dx = xs[idx] - c

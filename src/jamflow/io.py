@@ -23,6 +23,10 @@ from .provenance import provenance_attrs
 from .tolerances import OVERLAP_TOL, SIZE_CLASS_RTOL
 
 __all__ = [
+    "DATASET_KINDS",
+    "dataset_kind",
+    "file_kind",
+    "check_output_paths",
     "write_dataset",
     "read_dataset",
     "write_packing",
@@ -34,6 +38,99 @@ __all__ = [
     "size_classes",
     "write_table",
 ]
+
+
+#: Every kind of dataset jamflow writes: the variable or coordinate names its readers need
+#: and what writes it. A dataset is of the first kind whose names it all holds, so the
+#: more specific kinds come first (a jamming table also holds p_target and phi_J, a flow
+#: series also holds packing_fraction and pressure). Commands name the kinds they read;
+#: one check serves them all.
+DATASET_KINDS: dict[str, tuple[frozenset[str], str]] = {
+    "packing": (frozenset({"position", "diameter", "box"}),
+                "a packing (jamflow init, import-dat, ls, calippso, soft-jam, --final)"),
+    "gaps": (frozenset({"gap_density", "h"}), "a gap distribution (jamflow gaps)"),
+    "forces": (frozenset({"P_linear", "f"}), "a force distribution (jamflow forces)"),
+    "rdf": (frozenset({"g", "r"}), "a g(r) dataset (jamflow rdf)"),
+    "jamming-table": (frozenset({"phi_J_LS", "kappa", "p_target"}), "a jamming table (jamflow jamming-table)"),
+    "overlap-series": (frozenset({"p_target", "phi_J"}), "an overlap series (jamflow overlap-series)"),
+    "overlap": (frozenset({"Q", "n_common"}), "a contact overlap (jamflow overlap)"),
+    "flow-summary": (frozenset({"steady_mean", "strain", "shear_stress", "pressure"}),
+                     "a flow summary (jamflow flow-summary)"),
+    "flow": (frozenset({"strain", "time", "shear_stress", "pressure", "packing_fraction", "n_contacts"}),
+             "a flow time series (jamflow compress, shear, drive, sd-shear)"),
+    "aqs": (frozenset({"strain", "shear_stress", "pressure", "packing_fraction", "fire_steps"}),
+            "an AQS stress-strain series (jamflow aqs)"),
+    "eos": (frozenset({"packing_fraction", "pressure"}), "an LS equation of state (jamflow ls --eos)"),
+    "certificate": (frozenset({"lp_objective", "unjamming_motion"}), "a jamming certificate (jamflow certify)"),
+    "moduli": (frozenset({"bulk", "shear", "eigenvalue"}), "elastic moduli (jamflow moduli)"),
+    "tradeoff": (frozenset({"time", "on_front", "is_reference"}), "a speed/accuracy sweep (jamflow tradeoff)"),
+    "checkpoint": (frozenset({"x", "h", "radius", "nl_pairs"}), "a flow checkpoint (--checkpoint)"),
+    "snapshots": (frozenset({"snapshot_position", "snapshot_box"}), "flow snapshots (--snapshots)"),
+}
+
+
+def dataset_kind(ds: xr.Dataset) -> str | None:
+    """The kind of a jamflow dataset (a key of :data:`DATASET_KINDS`), ``None`` if none fits."""
+    names = set(ds.variables)
+    for kind, (required, _) in DATASET_KINDS.items():
+        if required <= names:
+            return kind
+    return None
+
+
+def file_kind(path: str | os.PathLike) -> str | None:
+    """The kind of dataset an existing file holds, without loading its data.
+
+    A CALiPPSO ``.dat`` file is a packing; a file that is not netCDF (or is unreadable)
+    is of no kind (``None``).
+    """
+    path = Path(path)
+    if path.suffix == ".dat":
+        return "packing"
+    try:
+        with xr.open_dataset(path, engine="netcdf4") as ds:
+            return dataset_kind(ds)
+    except (OSError, ValueError):
+        return None
+
+
+def check_output_paths(inputs: Sequence[str | os.PathLike], outputs: Sequence[str | os.PathLike],
+                       allow_input: bool = False,
+                       packing_outputs: Sequence[str | os.PathLike] = ()) -> None:
+    """Check output paths before any work is done.
+
+    Refuses outputs that repeat each other, an output that is an input (unless
+    ``allow_input``), and an output not among ``packing_outputs`` where a packing is
+    (the writers refuse that too, but only after the work).
+
+    Raises
+    ------
+    ValueError
+        One line naming the file.
+    """
+    for out in outputs:
+        if out not in packing_outputs:
+            _refuse_clobbering_a_packing(Path(out), "this output is not a packing")
+    seen: dict[Path, str] = {}
+    for out in outputs:
+        key = Path(out).resolve()
+        if key in seen:
+            raise ValueError(f"{out} is given twice as an output")
+        seen[key] = str(out)
+    if allow_input:
+        return
+    for inp in inputs:
+        for out in outputs:
+            if Path(inp).resolve() == Path(out).resolve() or (
+                    Path(inp).exists() and Path(out).exists() and os.path.samefile(inp, out)):
+                raise ValueError(f"output {out} is also an input: give another output path "
+                                 "(or --in-place to replace the input)")
+
+
+def _refuse_clobbering_a_packing(path: Path, writing: str) -> None:
+    """Never replace a file that holds a packing by another kind of file."""
+    if path.is_file() and file_kind(path) == "packing":
+        raise ValueError(f"refusing to overwrite {path}: it holds a packing, and {writing}")
 
 
 def new_dataset_attrs(title: str, parameters: dict[str, Any], **extra: Any) -> dict[str, Any]:
@@ -62,8 +159,12 @@ def write_dataset(ds: xr.Dataset, path: str | os.PathLike) -> Path:
 
     Variables are zlib-compressed. A process killed during the write leaves only a
     hidden ``.*.tmp`` file, never a partial file under ``path``.
+    Raises ``ValueError`` rather than replace a packing by another kind of dataset.
     """
     path = Path(path)
+    kind = dataset_kind(ds)
+    if kind != "packing":
+        _refuse_clobbering_a_packing(path, f"this writes {DATASET_KINDS[kind][1] if kind else 'a non-packing dataset'}")
     path.parent.mkdir(parents=True, exist_ok=True)
     ds = ds.copy()
     ds.attrs = {k: _netcdf_attr(v) for k, v in ds.attrs.items()}
@@ -82,15 +183,32 @@ def write_dataset(ds: xr.Dataset, path: str | os.PathLike) -> Path:
     return path
 
 
-def read_dataset(path: str | os.PathLike) -> xr.Dataset:
-    """Load a netCDF file fully into memory and close it."""
+def read_dataset(path: str | os.PathLike, kind: str | Sequence[str] | None = None) -> xr.Dataset:
+    """Load a netCDF file fully into memory and close it.
+
+    Parameters
+    ----------
+    path : path-like
+    kind : str or sequence of str, optional
+        Accepted kinds (keys of :data:`DATASET_KINDS`); any other dataset raises a
+        ``ValueError`` naming the file, what it holds and what was expected.
+    """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no such file: {path}")
     try:
-        return xr.load_dataset(path, engine="netcdf4")
-    except OSError as exc:
+        ds = xr.load_dataset(path, engine="netcdf4")
+    except (OSError, ValueError) as exc:
         raise ValueError(f"{path} is not a readable netCDF file: {exc}") from exc
+    if kind is not None:
+        kinds = (kind,) if isinstance(kind, str) else tuple(kind)
+        found = dataset_kind(ds)
+        if found not in kinds:
+            holds = DATASET_KINDS[found][1] if found else f"no jamflow dataset ({ds.attrs.get('title', 'no title')})"
+            wanted = " or ".join(DATASET_KINDS[k][1] for k in kinds)
+            missing = ", ".join(sorted(DATASET_KINDS[kinds[0]][0] - set(ds.variables)))
+            raise ValueError(f"{path} holds {holds}, not {wanted} (missing variable(s) {missing})")
+    return ds
 
 
 def write_packing(
@@ -115,7 +233,7 @@ def read_packing(path: str | os.PathLike, overlap_tol: float | None = OVERLAP_TO
         Malformed file, bad shapes, non-finite values, centres outside the box,
         or overlaps beyond ``overlap_tol``.
     """
-    packing = Packing.from_dataset(read_dataset(path))
+    packing = Packing.from_dataset(read_dataset(path, "packing"))
     packing.validate(overlap_tol)
     return packing
 
@@ -129,7 +247,11 @@ def read_dat(path: str | os.PathLike) -> Packing:
     Format: line 1 d, line 2 N, line 3 diameter, then N lines of d coordinates.
     """
     path = Path(path)
-    lines = [ln.split() for ln in path.read_text().splitlines() if ln.strip()]
+    try:
+        text = path.read_text()
+    except UnicodeDecodeError:
+        raise ValueError(f"{path}: not a CALiPPSO .dat file (not text)") from None
+    lines = [ln.split() for ln in text.splitlines() if ln.strip()]
     try:
         d, n, diameter = int(lines[0][0]), int(lines[1][0]), float(lines[2][0])
         x = np.array([[float(v) for v in ln] for ln in lines[3:]], dtype=np.float64)
@@ -253,7 +375,9 @@ def write_xyz(frames: Packing | Sequence[Packing], path: str | os.PathLike, pos_
         lines += [str(n), " ".join(info)]
         lines += [" ".join([names[t], *(str(int(v)) if kind == "i" else repr(float(v)) for v, kind in zip(row, kinds))])
                   for t, row in zip(index.tolist(), table.tolist())]
-    return _atomic_text(Path(path), "\n".join(lines) + "\n")
+    path = Path(path)
+    _refuse_clobbering_a_packing(path, "this writes an extended XYZ file")
+    return _atomic_text(path, "\n".join(lines) + "\n")
 
 
 def write_table(table: pd.DataFrame, path: str | os.PathLike) -> Path:

@@ -84,6 +84,7 @@ __all__ = [
     "NL_MIN_GAIN",
     "NL_SKIN",
     "WINDOW_COLLISIONS_PER_PARTICLE",
+    "MAX_PRESSURE",
     "LSResult",
     "compress",
 ]
@@ -111,6 +112,11 @@ NL_SKIN: float = 0.2
 #: already 1.8 times faster; ratio 4.5 (3D) 2.6 times, 10 (4D) 4.8 times, 30-40 (5D)
 #: 15 times.
 NL_MIN_GAIN: float = 2.0
+#: Reduced pressure at which a run stops as jammed (stop reason ``"max_pressure"``)
+#: when its targets lie beyond: the relative gaps of the cages, ~d/p, are then ~1e-14,
+#: a hundred times the float64 resolution of the centres (~1e-16 of the box), and the
+#: pressure no longer rises (docs/extremes.md: 2D and 3D reach ~1e14, never 1e15).
+MAX_PRESSURE: float = 1e14
 
 
 @dataclass
@@ -133,7 +139,11 @@ class LSResult:
     final : Packing
         State at the end of the run.
     stop_reason : str
-        ``"p_targets"``, ``"phi_target"``, ``"max_collisions"`` or ``"max_time"``.
+        ``"p_targets"``, ``"phi_target"``, ``"max_collisions"``, ``"max_time"``, or a
+        target found impossible: ``"max_pressure"`` (jammed first: ``p`` reached
+        ``max_pressure``) or ``"box_width"`` (a contact distance reached half the
+        smallest box width, where a sphere would touch two images of a neighbour: too
+        few spheres to jam in this box).
     collisions : int
     cpu_time : float
         Process CPU time of the run [s].
@@ -316,9 +326,12 @@ class _State:
 
 def _check_inputs(packing: Packing, growth_rate: float, p_targets: Sequence[float],
                   phi_target: float | None, max_collisions: int | None, max_time: float | None,
-                  beta: float, fast_growth_rate: float | None, fast_until: float) -> list[float]:
+                  beta: float, fast_growth_rate: float | None, fast_until: float,
+                  max_pressure: float | None) -> list[float]:
     if packing.d < 2:
         raise ValueError(f"LS needs d >= 2, got d={packing.d}")
+    if packing.n < 2:
+        raise ValueError(f"LS needs at least 2 spheres (one alone never collides), got N = {packing.n}")
     if not packing.box.is_orthogonal:
         raise ValueError("LS runs in orthogonal periodic boxes only; the input box is sheared "
                          f"(strain {packing.box.shear_strain:g})")
@@ -335,6 +348,9 @@ def _check_inputs(packing: Packing, growth_rate: float, p_targets: Sequence[floa
         raise ValueError(f"pressure targets must be positive and finite, got {targets}")
     if any(b <= a for a, b in pairwise(targets)):
         raise ValueError(f"pressure targets must be strictly increasing, got {targets}")
+    if max_pressure is not None and targets and targets[-1] >= max_pressure:
+        raise ValueError(f"pressure target {targets[-1]:g} is not below the largest LS pressure "
+                         f"{max_pressure:g} (float64 resolution of the cages)")
     if phi_target is not None:
         if not 0.0 < phi_target < 1.0:
             raise ValueError(f"phi_target must lie in (0, 1), got {phi_target}")
@@ -371,6 +387,7 @@ def compress(
     progress: Callable[[dict[str, float]], None] | None = None,
     window: int | None = None,
     neighbor_list: bool | None = None,
+    max_pressure: float | None = MAX_PRESSURE,
 ) -> LSResult:
     """Compress a hard-sphere packing by LS event-driven dynamics with growing spheres.
 
@@ -409,13 +426,18 @@ def compress(
         Force Verlet neighbour lists (True) or the cell scan (False); by default lists
         are used when the neighbour cells hold ``NL_MIN_GAIN`` times more particles.
         Same dynamics either way (up to round-off).
+    max_pressure : float or None
+        Stop as jammed when a window's pressure reaches this (stop reason
+        ``"max_pressure"``); pressure targets must lie below it. ``None``: no limit.
+        A contact distance reaching half the smallest box width always stops the run
+        (stop reason ``"box_width"``).
 
     Returns
     -------
     LSResult
     """
     targets = _check_inputs(packing, growth_rate, p_targets, phi_target, max_collisions, max_time,
-                            beta, fast_growth_rate, fast_until)
+                            beta, fast_growth_rate, fast_until, max_pressure)
     n, d = packing.n, packing.d
     window = WINDOW_COLLISIONS_PER_PARTICLE * n if window is None else int(window)
     if window < 1:
@@ -426,8 +448,13 @@ def compress(
         "fast_growth_rate": fast_growth_rate, "fast_until": fast_until, "seed": seed,
         "window": window, "growth_law": "proportional: sigma_i = a_i s(t), ds/dt = kappa (mean diameter)",
         "neighbor_list": "auto" if neighbor_list is None else bool(neighbor_list),
+        "max_pressure": max_pressure,
     }
     state = _State(packing, beta, np.random.default_rng(seed), neighbor_list)
+    # a packing's diameters stay below half the smallest box width (Packing); stop a
+    # relative 1e-9 short of it, far above the round-off of s(t)
+    half_width = 0.5 * float(packing.box.widths.min()) * (1.0 - 1e-9)
+    a_max = float(state.a.max())
     fast = fast_growth_rate is not None and fast_growth_rate > 0.0
     rate = fast_growth_rate if fast else growth_rate
     state.sc[2] = rate
@@ -463,6 +490,11 @@ def compress(
             t_phi = ((phi_target / state.phi_unit) ** (1.0 / d) - state.sc[1]) / state.sc[2]
             if t_phi < t_limit:
                 t_limit, limit_kind = t_phi, "phi_target"
+        if state.sc[2] > 0.0:
+            # the largest contact distance a_max s reaches half the smallest box width
+            t_box = (half_width / a_max - state.sc[1]) / state.sc[2]
+            if t_box < t_limit:
+                t_limit, limit_kind = t_box, "box_width"
         todo = window - state.window_coll
         if max_collisions is not None:
             todo = min(todo, max_collisions - collisions)
@@ -500,6 +532,10 @@ def compress(
             stop_reason = "max_time"
         elif max_collisions is not None and collisions >= max_collisions:
             stop_reason = "max_collisions"
+        elif status == _k.TIME_LIMIT and limit_kind == "box_width":
+            stop_reason = "box_width"
+        elif max_pressure is not None and p >= max_pressure:
+            stop_reason = "max_pressure"
         if stop_reason:
             break
         switch = fast and state.sc[2] == fast_growth_rate and p >= fast_until

@@ -1,9 +1,48 @@
-# Helpers shared by the rules: sample names, stage chain, target list, options, resources.
+# Helpers shared by the rules: scene validation, sample names, stage chain, target list,
+# options, resources.
 # Stage outputs live under results/<scene>/; rules only call the jamflow CLI.
 
+# Scene validation comes first: the schema, reporting the most relevant error in one line
+# that names the key (not the whole schema), then the orderings a JSON schema cannot
+# state. snakemake's validate fills in the schema's defaults.
 import functools
 import math
 import os
+from pathlib import Path
+
+import jsonschema
+import yaml
+from snakemake.exceptions import WorkflowError
+from snakemake.utils import validate
+
+SCENE_SCHEMA = Path(workflow.basedir) / "workflow" / "schemas" / "config.schema.yaml"
+
+
+def check_scene_schema():
+    """Raise one line naming the key of the schema's most relevant error."""
+    schema = yaml.safe_load(SCENE_SCHEMA.read_text())
+    error = jsonschema.exceptions.best_match(jsonschema.Draft202012Validator(schema).iter_errors(config))
+    if error is not None:
+        where = ".".join(str(p) for p in error.absolute_path) or "top level"
+        raise WorkflowError(f"Error validating config: {where}: {error.message}")
+
+
+def check_scene_order():
+    """Orderings the schema cannot state: increasing LS targets, non-empty fit windows."""
+    targets = config.get("ls", {}).get("p_targets", [])
+    if any(b <= a for a, b in zip(targets, targets[1:])):
+        raise WorkflowError(f"Error validating config: ls.p_targets must be strictly increasing, got {targets}")
+    for section in ("jamming_table", "gaps"):
+        window = config.get(section, {})
+        if {"fit_min", "fit_max"} <= set(window) and not window["fit_min"] < window["fit_max"]:
+            raise WorkflowError(f"Error validating config: {section}.fit_min ({window['fit_min']:g}) must be below "
+                                f"{section}.fit_max ({window['fit_max']:g})")
+
+
+check_scene_schema()
+validate(config, str(SCENE_SCHEMA))
+check_scene_order()
+
 
 RESULTS = f"results/{config['scene']}"
 LOGS = f"{RESULTS}/logs"
@@ -14,6 +53,7 @@ FINAL = CHAIN[-1]
 PRESET = config["preset"]
 LS_TARGETS = config.get("ls", {}).get("p_targets", [])
 LS_RATES = config.get("ls", {}).get("growth_rates", [])
+WALLS = config.get("calippso", {}).get("walls", False)
 
 
 def check_chain():
@@ -26,6 +66,12 @@ def check_chain():
         raise ValueError("the eos figure needs ls in the chain")
     if wanted & {"overlap", "phi-j-series"} and len(LS_TARGETS) < 2:
         raise ValueError("overlap and phi-j-series compare packings from at least two LS p_targets")
+    if WALLS and (SOURCE_STAGE != "init" or CHAIN[1:] != ["calippso"]):
+        raise ValueError("calippso.walls needs the chain [calippso] from a random system (init --walls); "
+                         "the other stages are periodic")
+    if WALLS and (config.get("analyses") or set(config.get("figures", [])) - {"packing"}):
+        raise ValueError("calippso.walls: the analyses and figures other than packing assume periodic "
+                         "boundaries; set analyses: [] and figures: [packing]")
     if "ls" not in CHAIN:
         return
     if SOURCE_STAGE != "init" or CHAIN[1] != "ls":

@@ -14,6 +14,7 @@ rule init:
     params:
         seed=seed_of,
         system=config.get("system", {}),
+        walls="--walls" if WALLS else "",
     conda:
         "../envs/jamflow.yaml"
     shell:
@@ -21,7 +22,7 @@ rule init:
         " --phi {params.system[phi]} --dispersity {params.system[dispersity]}"
         " --ratio {params.system[ratio]} --fraction {params.system[fraction]}"
         " --width {params.system[width]} --species-spread {params.system[species_spread]}"
-        " --seed {params.seed} > {log} 2>&1"
+        " --seed {params.seed} {params.walls} > {log} 2>&1"
 
 
 rule import_dat:

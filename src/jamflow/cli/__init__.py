@@ -9,12 +9,15 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import sys
 import typing
 from collections.abc import Sequence
 
+from ..io import check_output_paths
 from ..presets import preset_options
 from ..provenance import jamflow_version
+from .common import path_arguments
 
 #: Topic modules of this package that contribute subcommands.
 COMMAND_MODULES: tuple[str, ...] = ("packings", "analysis", "soft", "flow", "certify", "tradeoff", "ls", "calippso",
@@ -22,7 +25,15 @@ COMMAND_MODULES: tuple[str, ...] = ("packings", "analysis", "soft", "flow", "cer
 
 
 class _Parser(argparse.ArgumentParser):
-    """Reports usage errors as one line (``prog: error: message``) with exit code 2."""
+    """Reports usage errors as one line (``prog: error: message``) with exit code 2.
+
+    Negative numbers in scientific notation (``--p-target -1e3``) are read as values,
+    not as options, so that the command's own check names the bad value.
+    """
+
+    def __init__(self, *args: typing.Any, **kwargs: typing.Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 
     def error(self, message: str) -> typing.NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
@@ -55,6 +66,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             # a preset changes the defaults; options given explicitly still win
             parser.subcommands[args.command].set_defaults(**preset_options(args.command, preset))
             args = parser.parse_args(argv)
+        reads, writes, packings = args.path_roles
+        check_output_paths(path_arguments(args, reads), path_arguments(args, writes),
+                           getattr(args, "in_place", False), path_arguments(args, packings))
         return int(args.handler(args) or 0)
     except (ValueError, FileNotFoundError, RuntimeError, OSError) as exc:
         print(f"jamflow {args.command}: error: {exc}", file=sys.stderr)

@@ -36,6 +36,19 @@ PLOT_KINDS: dict[str, str] = {
     "jamming-table": "one `jamflow jamming-table` output",
     "eos": "one or more LS equation-of-state datasets (`jamflow ls --eos`)",
 }
+#: the dataset kinds (jamflow.io.DATASET_KINDS) each figure kind reads
+PLOT_INPUT_KINDS: dict[str, tuple[str, ...]] = {
+    "packing": ("packing",),
+    "gaps": ("gaps",),
+    "forces": ("forces",),
+    "rdf": ("rdf",),
+    "stress-strain": ("flow", "flow-summary", "aqs"),
+    "phi-kappa": ("flow", "flow-summary", "aqs"),
+    "overlap": ("overlap-series",),
+    "pareto": ("tradeoff",),
+    "jamming-table": ("jamming-table",),
+    "eos": ("eos",),
+}
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -45,7 +58,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "averaged over samples (one file = one sample). gamma of p(h) ~ h^-gamma by maximum "
                     "likelihood on the pooled gaps in a window chosen inside [fit-min, fit-max] (raised to 1/p "
                     "for LS snapshots, lowered to a power-law break), with a bootstrap statistical error and a "
-                    "systematic error from a scan of windows spanning >= 1.5 decades.")
+                    "systematic error from a scan of windows spanning >= 1.5 decades.",
+                    reads=("paths[:-1]",), writes=("paths[-1]",))
     p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc", help="input packings (.nc or .dat), then the output")
     p.add_argument("--max-gap", type=float, default=0.1, help="largest gap binned (default 0.1)")
     p.add_argument("--min-gap", type=float, default=1e-13, help="smallest gap binned (default 1e-13)")
@@ -61,7 +75,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_overlap_option(p)
     add_quiet(p)
 
-    p = add_command(sub, "forces", _forces, "contact-force distribution P(f/<f>), tail exponent, bucklers")
+    p = add_command(sub, "forces", _forces, "contact-force distribution P(f/<f>), tail exponent, bucklers",
+                    reads=("paths[:-1]",), writes=("paths[-1]",))
     p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc", help="packings with forces, then the output")
     p.add_argument("--f-max", type=float, default=6.0, help="upper end of the bins, in mean forces (default 6)")
     p.add_argument("--linear-bins", type=int, default=60, help="linear bins on [0, f_max] (default 60)")
@@ -75,7 +90,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_overlap_option(p)
     add_quiet(p)
 
-    p = add_command(sub, "overlap", _overlap, "contact-network overlap Q(A, B) = |C_A ∩ C_B| / N_c(B)")
+    p = add_command(sub, "overlap", _overlap, "contact-network overlap Q(A, B) = |C_A ∩ C_B| / N_c(B)",
+                    reads=("a", "b"), writes=("out",))
     p.add_argument("a", help="packing A")
     p.add_argument("b", help="reference packing B")
     p.add_argument("out", help="output netCDF")
@@ -84,7 +100,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_quiet(p)
 
     p = add_command(sub, "overlap-series", _overlap_series,
-                    "Q(p_tar) and |Delta phi_J| of one sample against its largest p_tar")
+                    "Q(p_tar) and |Delta phi_J| of one sample against its largest p_tar",
+                    reads=("paths[:-1]",), writes=("paths[-1]",))
     p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc", help="jammed packings of one sample, then the output")
     p.add_argument("--p-target", type=float, nargs="+", required=True, help="target pressure of each input, same order")
     p.add_argument("--gap-tol", type=float, default=None, help="contacts from h <= GAP_TOL instead of the stored ones")
@@ -97,7 +114,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "phi_J^(LS) from the LS equation of state against LS+CALiPPSO phi_J, per kappa (Table I)",
                     "Fits Eq. 15, phi = phi_J (1 - d/p), to each LS run's equation of state on a pressure window and "
                     "compares the extrapolated phi_J^(LS) with the phi_J of the packings CALiPPSO jams from its "
-                    "snapshots; sample means and standard errors per growth rate. Prints the table as markdown.")
+                    "snapshots; sample means and standard errors per growth rate. Prints the table as markdown.",
+                    reads=("paths[:-1]", "eos"), writes=("paths[-1]",))
     p.add_argument("paths", nargs="+", metavar="SERIES.nc ... OUT.nc",
                    help="overlap-series outputs (one per sample and kappa, with --growth-rate), then the output")
     p.add_argument("--eos", nargs="+", required=True, help="equation of state of each LS run, same order as the series")
@@ -105,7 +123,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--fit-max", type=float, default=1e11, help="highest reduced pressure of the fit (default 1e11)")
     add_quiet(p)
 
-    p = add_command(sub, "rdf", _rdf, "radial distribution g(r) and crystallinity (2D psi6, 3D Q6)")
+    p = add_command(sub, "rdf", _rdf, "radial distribution g(r) and crystallinity (2D psi6, 3D Q6)",
+                    reads=("packing",), writes=("out",))
     p.add_argument("packing", help="input packing (.nc or .dat)")
     p.add_argument("out", help="output netCDF")
     p.add_argument("--r-max", type=float, default=3.0, help="largest r in mean diameters (default 3)")
@@ -114,7 +133,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_quiet(p)
 
     p = add_command(sub, "flow-summary", _flow_summary,
-                    "stress-strain, friction, steady-state averages, contact lifetimes, event rates of a flow run")
+                    "stress-strain, friction, steady-state averages, contact lifetimes, event rates of a flow run",
+                    reads=("run",), writes=("out",))
     p.add_argument("run", help="flow time series netCDF")
     p.add_argument("out", help="output netCDF")
     p.add_argument("--strain-min", type=float, default=None, help="start of the steady-state window (default: mid run)")
@@ -123,7 +143,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_quiet(p)
 
     p = add_command(sub, "plot", _plot, "draw a figure (writes OUT.png and OUT.pdf)",
-                    "Kinds: " + "; ".join(f"{k}: {v}" for k, v in PLOT_KINDS.items()))
+                    "Kinds: " + "; ".join(f"{k}: {v}" for k, v in PLOT_KINDS.items()), reads=("paths[:-1]",), writes=("paths[-1]",))
     p.add_argument("kind", choices=sorted(PLOT_KINDS), help="figure kind")
     p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.png", help="inputs, then the output figure")
     p.add_argument("--labels", nargs="+", default=None, help="legend label per input")
@@ -244,7 +264,8 @@ def _overlap_series(args: argparse.Namespace) -> int:
 
 def _jamming_table(args: argparse.Namespace) -> int:
     inputs, out = _split(args.paths, "overlap series")
-    ds = jamming_table([read_dataset(p) for p in inputs], [read_dataset(p) for p in args.eos], args.fit_min,
+    series = [read_dataset(p, "overlap-series") for p in inputs]
+    ds = jamming_table(series, [read_dataset(p, "eos") for p in args.eos], args.fit_min,
                        args.fit_max, stage_parameters(args, "paths") | {"inputs": inputs})
     write_dataset(ds, out)
     print_summary(args, out)
@@ -265,7 +286,7 @@ def _rdf(args: argparse.Namespace) -> int:
 
 
 def _flow_summary(args: argparse.Namespace) -> int:
-    ds = flow_summary(read_dataset(args.run), args.strain_min, args.strain_max, args.blocks,
+    ds = flow_summary(read_dataset(args.run, "flow"), args.strain_min, args.strain_max, args.blocks,
                       stage_parameters(args, "out"))
     write_dataset(ds, args.out)
     a = ds.attrs
@@ -297,7 +318,7 @@ def _plot(args: argparse.Namespace) -> int:
     if args.kind == "packing":
         fig = plots.plot_packing(_load_packing(inputs[0], overlap_tol(args)), args.slab_axis)
     else:
-        data = [read_dataset(p) for p in inputs]
+        data = [read_dataset(p, PLOT_INPUT_KINDS[args.kind]) for p in inputs]
         if args.kind in single:
             fig = single[args.kind](data[0])
         elif args.kind in labelled:

@@ -31,6 +31,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "max|s| < tol-s; contacts and forces from the LP duals; a degenerate (hyperstatic, "
                     "crystalline) packing stores its geometric contacts with minimum-norm balanced forces "
                     "(attribute force_assignment). Writes the jammed packing with the per-LP history.",
+        reads=("packing",), writes=("out",), packings=("out",),
     )
     p.add_argument("packing", help="input netCDF packing (no overlaps)")
     p.add_argument("out", help="output netCDF jammed packing")

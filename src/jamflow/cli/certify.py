@@ -14,7 +14,7 @@ from ..strict_jamming import (
     certificate_to_dataset,
     certify,
 )
-from .common import add_command, add_preset, add_quiet, print_summary, stage_parameters
+from .common import add_command, add_preset, add_quiet, print_summary, seed, stage_parameters
 from .packings import add_overlap_option, overlap_tol
 
 
@@ -26,6 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "rattlers are removed, then random loads of both signs probe for unjamming "
                     "motions at fixed box (collective) and, with --strict, with a volume-preserving "
                     "box strain. Writes a dataset with attribute 'classification'.",
+        reads=("packing",), writes=("out",),
     )
     p.add_argument("packing", help="input netCDF packing")
     p.add_argument("out", help="output netCDF certificate")
@@ -37,7 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with --gap-tol: treat the pairs as exact contacts (zero right-hand side)")
     p.add_argument("--loads", type=int, default=DEFAULT_LOADS,
                    help=f"random loads per LP kind, each with both signs (default {DEFAULT_LOADS})")
-    p.add_argument("--seed", type=int, default=0, help="seed of the random loads (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the random loads (default 0)")
     p.add_argument("--max-cluster-fraction", type=float, default=DEFAULT_MAX_CLUSTER_FRACTION,
                    help="largest non-wrapping moving group removed as a rattling cluster, as a fraction "
                         f"of the backbone (default {DEFAULT_MAX_CLUSTER_FRACTION})")

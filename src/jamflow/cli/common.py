@@ -6,15 +6,43 @@ import argparse
 from collections.abc import Iterable
 from typing import Any
 
-__all__ = ["add_command", "add_quiet", "add_preset", "stage_parameters", "format_rows", "print_summary",
-           "packing_rows"]
+__all__ = ["add_command", "add_quiet", "add_preset", "stage_parameters", "path_arguments", "seed", "positive",
+           "format_rows", "print_summary", "packing_rows"]
 
 
-def add_command(sub: Any, name: str, handler: Any, help: str, description: str | None = None) -> argparse.ArgumentParser:
-    """Add a subcommand whose handler is ``handler(args) -> int``."""
+def add_command(sub: Any, name: str, handler: Any, help: str, description: str | None = None,
+                reads: tuple[str, ...] = (), writes: tuple[str, ...] = (),
+                packings: tuple[str, ...] = ()) -> argparse.ArgumentParser:
+    """Add a subcommand whose handler is ``handler(args) -> int``.
+
+    ``reads`` and ``writes`` name the arguments (``dest``) holding input and output
+    paths; ``"paths[:-1]"`` and ``"paths[-1]"`` split an ``IN ... OUT`` list; ``packings``
+    are the outputs (among ``writes``) that are packings. Before the handler runs, an
+    output that is also an input is refused unless ``--in-place`` (added here to commands
+    that both read and write) is given, and so is a non-packing output where a packing is.
+    """
     parser = sub.add_parser(name, help=help, description=description or help)
-    parser.set_defaults(handler=handler)
+    parser.set_defaults(handler=handler, path_roles=(reads, writes, packings))
+    if reads and writes:
+        parser.add_argument("--in-place", action="store_true",
+                            help="allow an output to be one of the inputs (the input file is replaced)")
     return parser
+
+
+def path_arguments(args: argparse.Namespace, roles: tuple[str, ...]) -> list[str]:
+    """The paths held by the arguments named in ``roles`` (see :func:`add_command`)."""
+    out: list[str] = []
+    for role in roles:
+        if role == "paths[:-1]":
+            value = args.paths[:-1]
+        elif role == "paths[-1]":
+            value = args.paths[-1:]
+        else:
+            value = getattr(args, role)
+        if value is None:
+            continue
+        out.extend([value] if isinstance(value, str) else value)
+    return out
 
 
 def add_quiet(parser: argparse.ArgumentParser) -> None:
@@ -35,7 +63,7 @@ def add_preset(parser: argparse.ArgumentParser) -> None:
 
 def stage_parameters(args: argparse.Namespace, *exclude: str) -> dict[str, Any]:
     """The parsed options of a stage as a JSON-able dict (for dataset provenance)."""
-    skip = {"handler", "command", "quiet", *exclude}
+    skip = {"handler", "command", "quiet", "path_roles", "in_place", *exclude}
     return {k: v for k, v in vars(args).items() if k not in skip}
 
 
@@ -74,3 +102,25 @@ def packing_rows(packing: Any) -> list[tuple[str, Any]]:
     if packing.rattler is not None:
         rows.append(("rattlers", int(packing.rattler.sum())))
     return rows
+
+
+def seed(text: str) -> int:
+    """Argument type of random seeds: a non-negative integer (numpy's generators need one)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a non-negative integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a non-negative integer, got {value}")
+    return value
+
+
+def positive(text: str) -> float:
+    """Argument type of a strictly positive finite number (strains, durations)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}") from None
+    if not (value > 0.0 and value < float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value

@@ -13,8 +13,13 @@ from ..overdamped.driving import Drive, SelfPropulsion
 from ..overdamped.integrate import FlowOptions
 from ..overdamped.run import Stop, dilute_start, run_flow
 from ..packing import LENGTH_UNITS
-from .common import add_command, add_preset, add_quiet, print_summary, stage_parameters
+from .common import add_command, add_preset, add_quiet, positive, print_summary, seed, stage_parameters
 from .packings import add_overlap_option, overlap_tol
+
+
+#: path arguments of the flow runs (the checkpoint is written, and must not be an input)
+FLOW_READS = ("input", "composite")
+FLOW_WRITES = ("out", "final", "snapshot_file", "checkpoint")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -22,26 +27,30 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "Lerner-During-Wyart event-driven overdamped hard-sphere shear with Lees-Edwards boundaries. "
                     "Physical starts are dense or jammed packings (e.g. from jamflow compress, or with a contact "
                     "network): a start without contacts below 0.9 phi_J (reference phi_J 0.84 in 2D, 0.64 in 3D) "
-                    "shears a dilute gas and a warning is printed.")
+                    "shears a dilute gas and a warning is printed.",
+                    reads=FLOW_READS, writes=FLOW_WRITES, packings=("final",))
     _io_options(p)
-    p.add_argument("--strain", type=float, required=True, help="total shear strain gamma")
+    p.add_argument("--strain", type=positive, required=True,
+                   help="total shear strain gamma (> 0)")
     p.add_argument("--pressure", type=float, default=None,
                    help="shear at this fixed pressure (units gamma_dot xi0^-1 lambda^(2-d)); default fixed volume")
     p.add_argument("--rate", type=float, default=1.0, help="shear rate gamma_dot (default 1)")
     _common_options(p)
 
     p = add_command(sub, "compress", _compress, "event-driven overdamped compression (to a packing fraction or jamming)",
-                    "Isotropic compression V_aff = -rate R until the target packing fraction or a jammed packing.")
+                    "Isotropic compression V_aff = -rate R until the target packing fraction or a jammed packing.",
+                    reads=FLOW_READS, writes=FLOW_WRITES, packings=("final",))
     _io_options(p)
     p.add_argument("--phi", type=float, default=None, help="stop at this packing fraction (default: run to jamming)")
-    p.add_argument("--strain", type=float, default=10.0, help="give up after this compressive strain rate*t (default 10)")
+    p.add_argument("--strain", type=positive, default=10.0, help="give up after this compressive strain rate*t (default 10)")
     p.add_argument("--shear", action="store_true", help="shear while compressing (Sec. IV D: jamming under both)")
     p.add_argument("--rate", type=float, default=1.0, help="compression rate (default 1)")
     _common_options(p)
 
-    p = add_command(sub, "drive", _drive, "event-driven overdamped dynamics under external or self-propelling forces")
+    p = add_command(sub, "drive", _drive, "event-driven overdamped dynamics under external or self-propelling forces",
+                    reads=(*FLOW_READS, "forces"), writes=FLOW_WRITES, packings=("final",))
     _io_options(p)
-    p.add_argument("--time", type=float, required=True, help="duration in units of tau = lambda/(f_ext xi0)")
+    p.add_argument("--time", type=positive, required=True, help="duration in units of tau = lambda/(f_ext xi0)")
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--forces", default=None, help="external forces: .npy file of shape (N, d) [input force units]")
     g.add_argument("--random-forces", type=float, default=None, metavar="F_EXT",
@@ -58,8 +67,10 @@ def _io_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--final", default=None, help="write the last (or jammed) packing with contacts and forces here")
     p.add_argument("--snapshots", type=int, default=0, metavar="N", help="number of evenly spaced packing snapshots")
     p.add_argument("--snapshot-file", default=None, help="snapshot netCDF (default OUT with suffix .snapshots.nc)")
-    p.add_argument("--checkpoint", default=None, help="checkpoint netCDF: written periodically, resumed from if present")
-    p.add_argument("--seed", type=int, default=0, help="seed of random choices (self-propulsion, random forces)")
+    p.add_argument("--checkpoint", default=None,
+                   help="checkpoint netCDF: written periodically, resumed from if present (only by the same input "
+                        "and trajectory parameters), removed after a complete run")
+    p.add_argument("--seed", type=seed, default=0, help="seed of random choices (self-propulsion, random forces)")
     add_overlap_option(p)
     add_quiet(p)
     add_preset(p)
@@ -120,12 +131,28 @@ def _run(args: argparse.Namespace, drive: Drive, stop: Stop, packing) -> int:
     finally:
         if bar is not None:
             bar.close()
+    target = stop.packing_fraction
+    if target is not None and res.jammed and res.final.packing_fraction < target * (1 - 1e-12):
+        # jammed before the target: the outputs hold a state the target never describes
+        out = str(Path(args.out).with_suffix(".reached.nc"))
+        write_dataset(res.series, out)
+        written = [out]
+        if args.final:
+            written.append(str(Path(args.final).with_suffix(".reached.nc")))
+            write_packing(res.final, written[-1], params)
+        if args.checkpoint and Path(args.checkpoint).exists():
+            Path(args.checkpoint).unlink()
+        raise RuntimeError(f"jammed at phi = {res.final.packing_fraction:.8f} before the target phi {target:g}; "
+                           f"reached state written to {', '.join(written)}")
     write_dataset(res.series, args.out)
     if args.final:
         write_packing(res.final, args.final, params)
     if res.snapshots is not None:
         path = args.snapshot_file or str(Path(args.out).with_suffix(".snapshots.nc"))
         write_dataset(res.snapshots, path)
+    if res.complete and args.checkpoint and Path(args.checkpoint).exists():
+        # the outputs are written: a finished run's checkpoint could only be resumed by mistake
+        Path(args.checkpoint).unlink()
     s = res.series
     rows = [("records, events", f"{s.sizes['step']}, {s.sizes['event']}"),
             ("strain", f"{float(s.strain[-1]):.6g}"), ("time", f"{float(s.time[-1]):.6g}"),

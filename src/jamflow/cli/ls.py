@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from tqdm import tqdm
 
 from ..io import read_packing, write_dataset, write_packing
-from ..ls import DEFAULT_BETA, DEFAULT_FAST_GROWTH_RATE, DEFAULT_FAST_UNTIL, compress
-from .common import add_command, add_preset, add_quiet, print_summary, stage_parameters
+from ..ls import DEFAULT_BETA, DEFAULT_FAST_GROWTH_RATE, DEFAULT_FAST_UNTIL, MAX_PRESSURE, compress
+from .common import add_command, add_preset, add_quiet, print_summary, seed, stage_parameters
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -22,6 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "file per pressure target, in the order of the targets (OUT1 for P1, OUT2 for "
                     "P2, ...); with --phi-target and no pressure target give one output for the "
                     "state at that packing fraction.",
+        reads=("packing",), writes=("out", "eos"), packings=("out",),
     )
     p.add_argument("packing", help="input netCDF packing (orthogonal periodic box, no overlaps)")
     p.add_argument("out", nargs="+",
@@ -43,10 +45,21 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help=f"reduced pressure ending the fast stage (default {DEFAULT_FAST_UNTIL:g})")
     p.add_argument("--beta", type=float, default=DEFAULT_BETA,
                    help=f"inverse temperature set at every velocity rescaling (default {DEFAULT_BETA:g})")
-    p.add_argument("--seed", type=int, default=0, help="seed of the initial velocities (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the initial velocities (default 0)")
     p.add_argument("--eos", default=None, help="also write the equation of state (p vs phi) as netCDF")
+    p.add_argument("--max-pressure", type=float, default=MAX_PRESSURE,
+                   help=f"stop as jammed at this reduced pressure (default {MAX_PRESSURE:g}, where the cages reach "
+                        "the float64 resolution); a target beyond it is impossible"),
     add_quiet(p)
     add_preset(p)
+
+
+#: stop reasons of :func:`jamflow.ls.compress` that make the remaining targets impossible
+IMPOSSIBLE = {
+    "max_pressure": "jammed before the target (p reached --max-pressure {max_pressure:g})",
+    "box_width": "a contact distance reached half the box width: N = {n} is too few spheres to jam "
+                 "in this periodic box (d = {d})",
+}
 
 
 def _ls(args: argparse.Namespace) -> int:
@@ -58,7 +71,8 @@ def _ls(args: argparse.Namespace) -> int:
                          "--p-target, in the order of the targets")
     packing = read_packing(args.packing)
     params = stage_parameters(args, "packing", "out", "eos")
-    with tqdm(desc="LS", unit="coll", unit_scale=True, disable=args.quiet) as bar:
+    # delay: no bar before a one-line error on bad input
+    with tqdm(desc="LS", unit="coll", unit_scale=True, disable=args.quiet, delay=1.0) as bar:
         def progress(info: dict[str, float]) -> None:
             bar.update(int(info["collisions"]) - bar.n)
             bar.set_postfix(p=f"{info['p']:.3g}", phi=f"{info['phi']:.6f}", refresh=False)
@@ -67,7 +81,7 @@ def _ls(args: argparse.Namespace) -> int:
             packing, args.growth_rate, args.p_target,
             phi_target=args.phi_target, max_collisions=args.max_collisions, max_time=args.max_time,
             beta=args.beta, fast_growth_rate=args.fast_growth_rate or None,
-            fast_until=args.fast_until, seed=args.seed, progress=progress,
+            fast_until=args.fast_until, seed=args.seed, progress=progress, max_pressure=args.max_pressure,
         )
     kind = "p" if args.p_target else "phi"
     snapshots = [s for s in result.snapshots if s.attrs["target_kind"] == kind]
@@ -77,7 +91,15 @@ def _ls(args: argparse.Namespace) -> int:
         write_dataset(result.eos, args.eos)
     if len(snapshots) < expected:
         missing = args.out[len(snapshots):]
-        raise RuntimeError(f"stopped by {result.stop_reason} before reaching every target; "
+        why = IMPOSSIBLE.get(result.stop_reason)
+        if why is None:
+            raise RuntimeError(f"stopped by {result.stop_reason} before reaching every target; "
+                               f"not written: {', '.join(missing)}")
+        reached = str(Path(missing[0]).with_suffix(".reached.nc"))
+        write_packing(result.final, reached, params)
+        f = result.final
+        raise RuntimeError(f"{why.format(n=f.n, d=f.d, max_pressure=args.max_pressure)}: stopped at "
+                           f"phi = {f.packing_fraction:.8f}, p = {f.pressure:.4g}; reached state written to {reached}; "
                            f"not written: {', '.join(missing)}")
     print_summary(args, f"{len(snapshots)} snapshot(s) of {args.packing}", [
         *((path, f"p = {snap.pressure:.6g}, phi = {snap.packing_fraction:.10f}, "

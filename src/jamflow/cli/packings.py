@@ -13,11 +13,11 @@ from ..initial import random_packing
 from ..io import read_dat, read_dataset, read_packing, size_classes, write_packing, write_xyz
 from ..overdamped.run import snapshot_packings
 from ..tolerances import OVERLAP_TOL
-from .common import add_command, add_quiet, format_rows, packing_rows, print_summary, stage_parameters
+from .common import add_command, add_quiet, format_rows, packing_rows, print_summary, seed, stage_parameters
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = add_command(sub, "init", _init, "random non-overlapping packing at a packing fraction")
+    p = add_command(sub, "init", _init, "random non-overlapping packing at a packing fraction", writes=("out",), packings=("out",))
     p.add_argument("out", help="output netCDF")
     p.add_argument("--d", type=int, required=True, help="dimension (>= 2)")
     p.add_argument("--n", type=int, required=True, help="number of particles")
@@ -28,12 +28,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--width", type=float, default=0.1, help="polydisperse relative width (default 0.1)")
     p.add_argument("--species-spread", type=float, default=0.0,
                    help="bidisperse: relative standard deviation within each species (default 0)")
-    p.add_argument("--seed", type=int, required=True, help="random seed")
+    p.add_argument("--seed", type=seed, required=True, help="random seed")
+    p.add_argument("--walls", action="store_true",
+                   help="every sphere inside the box (a start for calippso --walls, hard walls on the faces)")
     add_quiet(p)
 
-    p = add_command(sub, "import-dat", _import_dat, "read a CALiPPSO .dat configuration")
+    p = add_command(sub, "import-dat", _import_dat, "read a CALiPPSO .dat configuration",
+                    reads=("dat",), writes=("out",), packings=("out",))
     p.add_argument("dat", help="input .dat file (d, N, diameter, positions)")
     p.add_argument("out", help="output netCDF")
+    add_overlap_option(p)
     add_quiet(p)
 
     p = add_command(sub, "export-xyz", _export_xyz,
@@ -41,7 +45,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "One frame for a packing; one frame per snapshot for a flow snapshot file (OUT.snapshots.nc "
                     "of compress, shear or drive --snapshots N). Columns: type (size class: sphere, small/large, "
                     "size1..sizeK, or poly), pos, radius, rattler (0/1, when known), force_sum (sum of contact-force "
-                    "magnitudes) and force_residual (|net contact force| / mean force), when the input has forces.")
+                    "magnitudes) and force_residual (|net contact force| / mean force), when the input has forces.",
+                    reads=("packing",), writes=("out",))
     p.add_argument("packing", help="input netCDF packing or flow snapshot file")
     p.add_argument("out", help="output .xyz")
     p.add_argument("--pos-2d", action="store_true",
@@ -49,7 +54,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_overlap_option(p)
     add_quiet(p)
 
-    p = add_command(sub, "check", _check, "contacts, rattlers, isostaticity, overlaps, force balance")
+    p = add_command(sub, "check", _check, "contacts, rattlers, isostaticity, overlaps, force balance",
+                    reads=("packing",))
     p.add_argument("packing", help="input netCDF packing")
     p.add_argument("--gap-tol", type=float, default=None,
                    help="relative gap counted as contact; default: the packing's own contacts, "
@@ -78,7 +84,7 @@ def _init(args: argparse.Namespace) -> int:
     with tqdm(total=args.n, desc="init (RSA)", unit="sphere", disable=args.quiet, delay=1.0) as bar:
         p = random_packing(args.n, args.d, args.phi, args.dispersity, args.seed,
                            args.ratio, args.fraction, args.width, args.species_spread,
-                           progress=bar.update)
+                           progress=bar.update, walls=args.walls)
     write_packing(p, args.out, stage_parameters(args, "out"))
     print_summary(args, args.out, packing_rows(p))
     return 0
@@ -86,6 +92,11 @@ def _init(args: argparse.Namespace) -> int:
 
 def _import_dat(args: argparse.Namespace) -> int:
     packing = read_dat(args.dat)
+    try:
+        # a hard-sphere file with overlaps is refused here, not by the first stage that reads it
+        packing.validate(overlap_tol(args))
+    except ValueError as exc:
+        raise ValueError(f"{args.dat}: {exc} (--soft or --overlap-tol to accept)") from exc
     write_packing(packing, args.out)
     print_summary(args, args.out, packing_rows(packing))
     return 0

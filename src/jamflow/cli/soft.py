@@ -16,17 +16,18 @@ from ..soft.potential import PowerLawPotential
 from ..soft.shear import LERNER_DELTA_R, aqs_shear, lerner_sd_shear
 from ..tolerances import MINIMIZE_FORCE_TOL
 from ..analysis.contacts import summarize
-from .common import add_command, add_preset, add_quiet, print_summary, stage_parameters
+from .common import add_command, add_preset, add_quiet, positive, print_summary, seed, stage_parameters
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "soft-jam", _soft_jam,
-                    "soft-sphere jamming onset: compress/decompress bisection + enthalpy minimisation to P0")
+                    "soft-sphere jamming onset: compress/decompress bisection + enthalpy minimisation to P0",
+                    reads=("input",), writes=("out",), packings=("out",))
     p.add_argument("input", help="input netCDF packing (overlaps allowed)")
     p.add_argument("out", help="output netCDF packing (lengths in units of the mean diameter)")
     p.add_argument("--pressure", type=float, required=True,
                    help="target pressure P0 [epsilon / mean diameter^d], e.g. 1e-7")
-    p.add_argument("--seed", type=int, default=None,
+    p.add_argument("--seed", type=seed, default=None,
                    help="start from uniformly random centres drawn with this seed (O'Hern's "
                         "infinite-temperature quench); default: start from the input centres")
     p.add_argument("--force-tol", type=float, default=FORCE_TOL_VANDERWERF,
@@ -41,11 +42,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_quiet(p)
     add_preset(p)
 
-    p = add_command(sub, "aqs", _aqs, "athermal quasistatic shear of a soft packing (stress-strain time series)")
+    p = add_command(sub, "aqs", _aqs, "athermal quasistatic shear of a soft packing (stress-strain time series)",
+                    reads=("input",), writes=("out", "final"), packings=("final",))
     p.add_argument("input", help="input netCDF soft packing")
     p.add_argument("out", help="output netCDF time series (dim step, coordinate strain)")
-    p.add_argument("--strain", type=float, required=True, help="total strain")
-    p.add_argument("--step", type=float, required=True, help="strain step delta gamma")
+    p.add_argument("--strain", type=positive, required=True, help="total strain (> 0)")
+    p.add_argument("--step", type=positive, required=True, help="strain step delta gamma")
     p.add_argument("--fixed-pressure", action="store_true",
                    help="minimise the enthalpy at the input's pressure (or --pressure) after every step")
     p.add_argument("--pressure", type=float, default=None, help="fixed pressure P0 (implies --fixed-pressure)")
@@ -58,10 +60,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_preset(p)
 
     p = add_command(sub, "sd-shear", _sd_shear,
-                    "Lerner et al. steepest-descent shear with tentative-network hard-sphere stress (flow schema)")
+                    "Lerner et al. steepest-descent shear with tentative-network hard-sphere stress (flow schema)",
+                    reads=("input",), writes=("out",))
     p.add_argument("input", help="input netCDF packing")
     p.add_argument("out", help="output netCDF flow time series")
-    p.add_argument("--strain", type=float, required=True, help="total strain")
+    p.add_argument("--strain", type=positive, required=True, help="total strain (> 0)")
     p.add_argument("--step", type=float, default=1e-6, help="strain step (paper: 1e-6)")
     p.add_argument("--dt", type=float, default=0.1, help="steepest-descent step (paper: 0.1)")
     p.add_argument("--grad-tol", type=float, default=1e-9, help="max |grad U| stop (paper: 1e-9)")
@@ -72,7 +75,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_quiet(p)
 
     p = add_command(sub, "moduli", _moduli,
-                    "bulk and shear moduli (affine and relaxed) and lowest Hessian eigenvalues of a soft packing")
+                    "bulk and shear moduli (affine and relaxed) and lowest Hessian eigenvalues of a soft packing",
+                    reads=("input",), writes=("out",))
     p.add_argument("input", help="input netCDF soft packing at force balance")
     p.add_argument("out", help="output netCDF dataset")
     p.add_argument("--modes", type=int, default=10, help="number of lowest non-translational eigenvalues")

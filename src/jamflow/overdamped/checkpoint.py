@@ -11,6 +11,7 @@ repeats the uninterrupted one bit for bit.
 
 from __future__ import annotations
 
+import json
 import os
 
 import numpy as np
@@ -22,15 +23,20 @@ from .driving import Drive
 from .integrate import FlowOptions, FlowState, Integrator
 from .run import SERIES, Recorder
 
-__all__ = ["save_checkpoint", "load_checkpoint"]
+__all__ = ["save_checkpoint", "load_checkpoint", "check_binding"]
 
 
 def _v(dims: tuple[str, ...], data, long_name: str) -> tuple:
     return (dims, np.asarray(data), {"units": "1", "long_name": long_name})
 
 
-def save_checkpoint(path: str | os.PathLike, integ: Integrator, rec: Recorder) -> None:
-    """Write the full state of ``integ`` and the records so far to ``path`` (atomic)."""
+def save_checkpoint(path: str | os.PathLike, integ: Integrator, rec: Recorder,
+                    binding: dict[str, str]) -> None:
+    """Write the full state of ``integ`` and the records so far to ``path`` (atomic).
+
+    ``binding`` (:func:`jamflow.overdamped.run.run_binding`) is stored as attributes, so
+    that only the same run can resume from the file.
+    """
     st = integ.state
     nl = st.nl
     ev = np.array(st.events, dtype=np.float64).reshape(-1, 5)
@@ -65,6 +71,7 @@ def save_checkpoint(path: str | os.PathLike, integ: Integrator, rec: Recorder) -
         "time": st.time, "strain": st.strain, "step": st.step, "event_interval": st.event_interval,
         "last_event_time": st.last_event_time, "jammed": int(st.jammed), "kappa": st.kappa,
         "next_snapshot": rec.next_snapshot, "d": d, "drive_mode": integ.drive.mode,
+        **binding,
     }
     sp = integ.drive.propulsion
     if sp is not None:
@@ -75,12 +82,43 @@ def save_checkpoint(path: str | os.PathLike, integ: Integrator, rec: Recorder) -
     write_dataset(ds, path)
 
 
-def load_checkpoint(path: str | os.PathLike, drive: Drive, options: FlowOptions) -> tuple[Integrator, Recorder]:
-    """Rebuild the integrator and recorder from a checkpoint (``drive`` is updated in place)."""
-    ds = read_dataset(path)
+def _flat(value: object, prefix: str = "") -> dict[str, object]:
+    if isinstance(value, dict):
+        return {k: v for key, sub in value.items() for k, v in _flat(sub, f"{prefix}{key}.").items()}
+    return {prefix.rstrip("."): value}
+
+
+def check_binding(path: str | os.PathLike, attrs: dict, binding: dict[str, str]) -> None:
+    """Refuse a checkpoint whose start or run parameters differ from ``binding``.
+
+    Raises
+    ------
+    ValueError
+        One line naming the checkpoint and what differs.
+    """
+    if "bound_run" not in attrs:
+        raise ValueError(f"checkpoint {path} records no start or parameters (older jamflow): "
+                         "remove it or choose another --checkpoint")
+    differ = []
+    if attrs["bound_input_sha256"] != binding["bound_input_sha256"]:
+        differ.append("input packing")
+    old, new = _flat(json.loads(attrs["bound_run"])), _flat(json.loads(binding["bound_run"]))
+    differ += [f"{k} ({old.get(k)} -> {new.get(k)})" for k in sorted(old.keys() | new.keys()) if old.get(k) != new.get(k)]
+    if differ:
+        raise ValueError(f"checkpoint {path} belongs to another run (different {', '.join(differ)}): "
+                         "remove it or choose another --checkpoint")
+
+
+def load_checkpoint(path: str | os.PathLike, drive: Drive, options: FlowOptions,
+                    binding: dict[str, str]) -> tuple[Integrator, Recorder]:
+    """Rebuild the integrator and recorder from a checkpoint (``drive`` is updated in place).
+
+    The checkpoint must have been written by the same run (``binding``, see
+    :func:`check_binding`).
+    """
+    ds = read_dataset(path, "checkpoint")
     a = ds.attrs
-    if a["drive_mode"] != drive.mode:
-        raise ValueError(f"checkpoint {path} is for mode {a['drive_mode']!r}, not {drive.mode!r}")
+    check_binding(path, a, binding)
     nl = NeighborList(
         ds["nl_pairs"].values.astype(np.int64), ds["nl_images"].values.astype(np.int64),
         ds["nl_sigma"].values, float(a["nl_cutoff"]), float(a["nl_skin"]),

@@ -11,8 +11,10 @@ coordinates ``strain`` and ``time``; ``shear_stress`` (Eq. 30), ``pressure``
 
 from __future__ import annotations
 
+import hashlib
+import json
 import os
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -182,6 +184,30 @@ def _done(integ: Integrator, stop: Stop) -> bool:
     return False
 
 
+def run_binding(packing: Packing, drive: Drive, stop: Stop, options: FlowOptions, unit: str,
+                record_every: int, n_snapshots: int) -> dict[str, str]:
+    """What a checkpoint must match to be resumed: the start and every trajectory parameter.
+
+    Returns
+    -------
+    dict
+        ``bound_input_sha256``: SHA-256 of the start's arrays (positions, diameters, box,
+        contacts) and of the drive's arrays (external forces, permanent pairs, initial
+        self-propulsion forces, which carry the seed); ``bound_run``: JSON of the drive,
+        the targets of ``stop`` (not its step budget, which a resumed run may change),
+        the options, the length unit and the recording choices.
+    """
+    digest = hashlib.sha256()
+    arrays = [packing.position, packing.diameter, packing.box.matrix, packing.contacts, drive.external,
+              drive.permanent, None if drive.propulsion is None else drive.propulsion.force]
+    for a in arrays:
+        digest.update(b"-" if a is None else np.ascontiguousarray(a).tobytes())
+    run = {"drive": drive.describe(), "stop": {"strain": stop.strain, "packing_fraction": stop.packing_fraction,
+                                               "time": stop.time},
+           "options": asdict(options), "unit": unit, "record_every": record_every, "n_snapshots": n_snapshots}
+    return {"bound_input_sha256": digest.hexdigest(), "bound_run": json.dumps(run, sort_keys=True, default=str)}
+
+
 def run_flow(
     packing: Packing,
     drive: Drive,
@@ -212,6 +238,8 @@ def run_flow(
     checkpoint : path, optional
         Checkpoint file, written at every synchronisation point; if it exists the
         run resumes from it and produces the same numbers as an uninterrupted run.
+        A checkpoint written from another start or with other parameters
+        (:func:`run_binding`) is refused with a ``ValueError``.
     parameters : dict, optional
         Stage parameters for provenance.
     progress : callable, optional
@@ -223,8 +251,9 @@ def run_flow(
     params = dict(parameters or {})
     params.update({"drive": drive.describe(), "lambda": lam, "unit": unit})
     recorder = Recorder()
+    binding = run_binding(packing, drive, stop, options, unit, record_every, n_snapshots)
     if checkpoint is not None and Path(checkpoint).exists():
-        integ, recorder = load_checkpoint(checkpoint, drive, options)
+        integ, recorder = load_checkpoint(checkpoint, drive, options, binding)
     else:
         check_overlaps(packing, options)
         integ = Integrator.start(packing.position / lam, packing.box.matrix / lam,
@@ -253,7 +282,7 @@ def run_flow(
                 recorder.next_snapshot += 1
                 recorder.snapshot(integ, lam)
         if checkpoint is not None and st.step % options.sync_every == 0:
-            save_checkpoint(checkpoint, integ, recorder)
+            save_checkpoint(checkpoint, integ, recorder, binding)
     complete = _done(integ, stop)
     if complete and integ.state.contact.any():
         # the written packing satisfies its contact constraints to round-off (Sec. IV C)
