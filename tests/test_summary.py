@@ -14,6 +14,8 @@ import jamflow
 from jamflow.cli import main
 from jamflow.io import write_dataset
 
+#: discs per sample: enough that the gap and force fits have their minimum number of samples
+N = 128
 KAPPA, P_TARGETS = 1e-2, (1e3, 1e6)
 VARIANTS = [f"_k{KAPPA:g}_p{p:g}" for p in P_TARGETS]
 
@@ -29,7 +31,7 @@ def scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
     for seed in (1, 2):
         pk = root / "packings" / f"seed{seed}"
         pk.mkdir(parents=True)
-        _cli("init", pk / "init.nc", "--d", "2", "--n", "16", "--phi", "0.5", "--dispersity", "bi",
+        _cli("init", pk / "init.nc", "--d", "2", "--n", str(N), "--phi", "0.5", "--dispersity", "bi",
              "--seed", seed, "--quiet")
         _cli("ls", pk / "init.nc", *(pk / f"ls{v}.nc" for v in VARIANTS), "--growth-rate", KAPPA,
              "--p-target", *P_TARGETS, "--seed", seed, "--quiet")
@@ -39,12 +41,12 @@ def scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
     _cli("certify", root / "packings" / "seed1" / f"calippso{v}.nc", root / "analysis" / "seed1" / f"certify{v}.nc",
          "--quiet")
     finals = [root / "packings" / f"seed{s}" / f"calippso{v}.nc" for s in (1, 2)]
-    # 16 discs give few gaps: a wide window on coarse bins so the fit has populated bins
+    # a wide window, so the fits have the minimum number of gaps and forces
     _cli("gaps", *finals, root / "analysis" / f"gaps{v}.nc", "--fit-min", "1e-10", "--fit-max", "1e-1",
          "--bins-per-decade", "1", "--quiet")
     _cli("forces", *finals, root / "analysis" / f"forces{v}.nc", "--quiet")
     lss = [root / "packings" / f"seed{s}" / f"ls{v}.nc" for s in (1, 2)]
-    _cli("gaps", *lss, root / "analysis" / f"ls-gaps{v}.nc", "--gap-tol", "1e-4", "--fit-min", "1e-4",
+    _cli("gaps", *lss, root / "analysis" / f"ls-gaps{v}.nc", "--gap-tol", "1e-4", "--include-rattlers", "--fit-min", "1e-4",
          "--fit-max", "1e-1", "--bins-per-decade", "2", "--quiet")
     # a flow time series in the flow schema's variables (its values are what the table must report)
     steps = np.arange(5.0)
@@ -53,7 +55,7 @@ def scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
             "packing_fraction": 0.8 + 1e-3 * steps, "pressure": 3.0 + steps, "shear_stress": 0.1 * steps,
             "n_contacts": 20 + steps}.items()},
         coords={"strain": ("step", 0.01 * steps), "time": ("step", 0.02 * steps)},
-        attrs={"N": 16, "d": 2, "mode": "shear"},
+        attrs={"N": N, "d": 2, "mode": "shear"},
     )
     write_dataset(series, root / "flow" / "seed1" / "shear_fixed-volume.nc")
     return root
@@ -75,7 +77,7 @@ def test_one_row_per_packing_and_run_with_the_datasets_numbers(scene):
             assert row.phi_J == a["phi_J"] and row.n_lp == a["iterations"]
             assert row.n_contacts == a["n_contacts"] and row.n_rattlers == a["n_rattlers"]
             # LS + CALiPPSO: isostatic backbone, N_c = d (N_s - 1) + 1
-            assert row.isostatic == 1 and row.n_contacts == row.isostatic_count == 2 * (16 - row.n_rattlers - 1) + 1
+            assert row.isostatic == 1 and row.n_contacts == row.isostatic_count == 2 * (N - row.n_rattlers - 1) + 1
             assert row.max_overlap == a["max_overlap"]
         if row.stage in ("ls", "calippso"):
             assert row.kappa == KAPPA and row.p_target == a["target"] and row.p_target in P_TARGETS

@@ -41,6 +41,7 @@ PLOT_INPUT_KINDS: dict[str, tuple[str, ...]] = {
     "packing": ("packing",),
     "gaps": ("gaps",),
     "forces": ("forces",),
+    "fit-windows": ("gaps", "forces"),
     "rdf": ("rdf",),
     "stress-strain": ("flow", "flow-summary", "aqs"),
     "phi-kappa": ("flow", "flow-summary", "aqs"),

@@ -13,13 +13,13 @@ from ..soft.jamming import soft_packing
 from ..soft.minimize import METHODS, MinimizeResult, minimize
 from ..soft.potential import PowerLawPotential, overlapping_pairs
 from ..tolerances import MINIMIZE_FORCE_TOL
-from .common import add_command, stage_parameters
+from .common import add_command, add_quiet, print_summary, stage_parameters
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "minimize", _minimize,
                     "minimise the energy at a fixed box (soft spheres, linked spheres) with FIRE, CG or "
-                    "steepest descent")
+                    "steepest descent", reads=("input",), writes=("out",), packings=("out",))
     p.add_argument("input", help="input netCDF packing (overlaps allowed; links make it a linked-spheres model)")
     p.add_argument("out", help="output netCDF packing (contacts = overlapping unlinked pairs with their forces)")
     p.add_argument("--force-tol", type=float, default=MINIMIZE_FORCE_TOL,
@@ -28,6 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-steps", type=int, default=1_000_000, help="step budget (default 1000000)")
     p.add_argument("--method", choices=METHODS, default="fire", help="minimiser (default fire)")
     p.add_argument("--exponent", type=float, default=2.0, help="contact potential exponent w (2 harmonic, 2.5 Hertz)")
+    add_quiet(p)
 
 
 def _linked_packing(packing: Packing, model: LinkedSpheresModel, res: MinimizeResult, attrs: dict,
@@ -59,10 +60,6 @@ def _minimize(args: argparse.Namespace) -> int:
     else:
         model = SphereModel(packing.box, packing.diameter, potential)
     res = minimize(model, packing.position, args.method, args.force_tol, args.max_steps)
-    print(f"{args.input}: {args.method} {'converged' if res.converged else 'did NOT converge'} after "
-          f"{res.steps} steps: n_force_evaluations = {res.evaluations}, energy = {res.energy:.15g} epsilon, "
-          f"max_force = {res.max_force:.3g} epsilon/length, pressure = {res.pressure:.10g} epsilon/length^d, "
-          f"n_contacts = {res.n_contacts}")
     if not res.converged:
         raise RuntimeError(f"{args.method} did not reach --force-tol {args.force_tol:g} within "
                            f"--max-steps {args.max_steps} (max_force {res.max_force:.3g}); nothing written")
@@ -76,4 +73,12 @@ def _minimize(args: argparse.Namespace) -> int:
         out = soft_packing(res.position, packing.box, packing.diameter, potential, packing, ">minimize",
                            parameters, {**packing.attrs, **attrs})
     write_packing(out, args.out, parameters)
+    print_summary(args, args.out, [
+        ("method", f"{args.method}, converged after {res.steps} steps"),
+        ("n_force_evaluations", res.evaluations),
+        ("energy", f"{res.energy:.15g} epsilon"),
+        ("max_force", f"{res.max_force:.3g} epsilon/length"),
+        ("pressure", f"{res.pressure:.10g} epsilon/length^d"),
+        ("contacts", res.n_contacts),
+    ])
     return 0

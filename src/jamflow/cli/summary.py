@@ -27,6 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "numbers (phi, phi_J, pressure, backbone contacts, isostatic count, rattlers, LPs, certificate, "
                     "the scene's gap exponent gamma and force exponent theta with their errors). The same table "
                     "from Python: jamflow.load_scene(PATH).",
+        reads=("path",), writes=("json", "csv"),
     )
     p.add_argument("path", help="a scene's results folder (results/<scene>) or its scene YAML")
     p.add_argument("--json", default=None, metavar="OUT.json", help="also write every column as JSON records")
