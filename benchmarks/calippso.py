@@ -65,6 +65,7 @@ from numpy.typing import NDArray
 
 from jamflow.analysis.contacts import force_balance_residual, summarize
 from jamflow.calippso import CONTACT_DUAL_REL_TOL, SOLVER_TOL, JammingLP, jamming_lp
+from jamflow.highs import new_highs
 from jamflow.initial import random_packing
 from jamflow.io import new_dataset_attrs, read_dat, read_dataset, read_packing, write_dataset, write_packing
 from jamflow.ls import compress
@@ -211,8 +212,8 @@ def part_lp(quick: bool) -> xr.Dataset:
     lp = jamming_lp(read_packing(start))
     rows = []
     for name, options in LP_METHODS.items():
-        h = highspy.Highs()
-        for key, value in {"output_flag": False, "threads": 1, "time_limit": 600.0,
+        h = new_highs(1)
+        for key, value in {"time_limit": 600.0,
                            "primal_feasibility_tolerance": SOLVER_TOL, "dual_feasibility_tolerance": SOLVER_TOL,
                            **options}.items():
             h.setOptionValue(key, value)
@@ -314,8 +315,8 @@ def highs_factor_time(K: sp.csc_matrix) -> float:
     stopped by a zero pivot limit: setup plus the first factorisation of the basis."""
     free = np.full(K.shape[1], highspy.kHighsInf)
     lp = JammingLP(K, np.zeros(K.shape[0]), -free, free, np.empty((0, 2), np.int64)).to_highs()
-    h = highspy.Highs()
-    for option, value in (("output_flag", False), ("threads", 1), ("solver", "simplex"),
+    h = new_highs(1)
+    for option, value in (("solver", "simplex"),
                           ("simplex_strategy", 4), ("simplex_iteration_limit", 0)):
         h.setOptionValue(option, value)
     h.passModel(lp)

@@ -312,3 +312,20 @@ def test_import_dat_refuses_overlapping_spheres_unless_soft(capsys, tmp_path):
     assert not out.exists()
     assert _run(capsys, "import-dat", dat, out, "--soft")[0] == 0
     assert read_dataset(out, "packing")["position"].shape == (2, 2)
+
+
+# --- item 8: a walled packing is never counted as a periodic one ------------------------
+
+
+def test_check_and_certify_refuse_a_walled_packing_instead_of_printing_rattlers(capsys, tmp_path):
+    # calippso --walls keeps its wall contacts outside the Packing: periodic counting
+    # called every sphere a rattler and printed it with exit 0
+    start, jammed = tmp_path / "w.nc", tmp_path / "wj.nc"
+    assert _run(capsys, "init", start, "--d", "2", "--n", "24", "--phi", "0.3", "--seed", "3", "--walls",
+                "--quiet")[0] == 0
+    assert _run(capsys, "calippso", start, jammed, "--walls", "--quiet")[0] == 0
+    for argv in (["check", jammed], ["certify", jammed, tmp_path / "c.nc", "--quiet"]):
+        code, out, err = _run(capsys, *argv)
+        assert code == 1 and out == ""
+        _one_line_error(err, "walls")
+    assert not (tmp_path / "c.nc").exists()

@@ -131,6 +131,7 @@ from numpy.typing import NDArray
 
 from .analysis.contacts import find_rattlers, isostatic_count
 from .force_network import MIN_NORM, balance_matrix, min_norm_forces
+from .highs import new_highs
 from .neighbors import pairs_within
 from .packing import Packing, max_overlap, near_pairs
 from .rigidity import contact_geometry
@@ -541,9 +542,7 @@ class _Solver:
     """
 
     def __init__(self, threads: int = 1, tol: float = SOLVER_TOL) -> None:
-        self.h = highspy.Highs()
-        self.h.setOptionValue("output_flag", False)
-        self.h.setOptionValue("threads", threads)
+        self.h = new_highs(threads)
         for option in ("primal_feasibility_tolerance", "dual_feasibility_tolerance", "ipm_optimality_tolerance"):
             if self.h.setOptionValue(option, tol) != highspy.HighsStatus.kOk:
                 raise ValueError(f"HiGHS refused {option} = {tol:g}")

@@ -31,6 +31,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.sparse.linalg import lsqr, splu
 
+from .highs import new_highs
 from .tolerances import FORCE_BALANCE_TOL
 
 __all__ = ["MIN_NORM", "balance_matrix", "min_norm_forces"]
@@ -223,8 +224,7 @@ def _highs_qp(A: sp.csc_matrix, rhs: NDArray[np.float64]) -> NDArray[np.float64]
     hess.start_ = np.arange(nc + 1, dtype=np.int32)
     hess.index_ = np.arange(nc, dtype=np.int32)
     hess.value_ = np.ones(nc)
-    h = highspy.Highs()
-    h.setOptionValue("output_flag", False)
+    h = new_highs()
     for option in ("primal_feasibility_tolerance", "dual_feasibility_tolerance"):
         h.setOptionValue(option, _QP_TOL)
     h.passModel(lp)

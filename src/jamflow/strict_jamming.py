@@ -47,7 +47,8 @@ import xarray as xr
 from numpy.typing import NDArray
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
-from .analysis.contacts import find_rattlers, isostatic_count
+from .analysis.contacts import find_rattlers, isostatic_count, require_periodic
+from .highs import new_highs
 from .io import new_dataset_attrs
 from .packing import Packing, near_pairs
 from .rigidity import contact_geometry, rigidity_matrix, strain_basis
@@ -191,8 +192,7 @@ class _MotionLP:
         lp.a_matrix_.start_ = csc.indptr.astype(np.int32)
         lp.a_matrix_.index_ = csc.indices.astype(np.int32)
         lp.a_matrix_.value_ = csc.data.astype(np.float64)
-        self.h = highspy.Highs()
-        self.h.setOptionValue("output_flag", False)
+        self.h = new_highs()
         # displacements are O(1) and motions are thresholded at CERTIFY_MOTION_TOL
         self.h.setOptionValue("primal_feasibility_tolerance", 1e-9)
         self.h.setOptionValue("dual_feasibility_tolerance", 1e-9)
@@ -415,6 +415,7 @@ def certify(
     -------
     JammingCertificate
     """
+    require_periodic(packing, "the jamming certificate")
     if loads < 1:
         raise ValueError(f"loads must be >= 1, got {loads}")
     if not 0.0 <= max_cluster_fraction < 1.0:

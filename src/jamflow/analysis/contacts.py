@@ -30,6 +30,7 @@ __all__ = [
     "rigidity_counting",
     "force_balance_residual",
     "summarize",
+    "require_periodic",
 ]
 
 
@@ -161,6 +162,18 @@ class ContactSummary:
         return dict(self.__dict__)
 
 
+def require_periodic(packing: Packing, what: str) -> None:
+    """Refuse a packing jammed between hard walls (attribute ``boundary = "walls"``).
+
+    Its wall contacts are not part of the :class:`Packing` (CALiPPSO stores them as
+    separate ``wall_contact`` variables), so periodic contact counting would call every
+    sphere touching a wall under-coordinated and print wrong rattlers and counts.
+    """
+    if packing.attrs.get("boundary") == "walls":
+        raise ValueError(f"{what} counts contacts of periodic packings; this packing is jammed between hard "
+                         "walls (its wall contacts are the calippso output's wall_contact variables)")
+
+
 def summarize(packing: Packing, gap_tol: float | None = None) -> ContactSummary:
     """Contacts, rattlers, isostaticity, overlap and force balance of a packing.
 
@@ -170,6 +183,7 @@ def summarize(packing: Packing, gap_tol: float | None = None) -> ContactSummary:
     :func:`isostatic_count` and ``counting`` says on which side it lies (a
     crystal's backbone is hyperstatic).
     """
+    require_periodic(packing, "check")
     explicit = gap_tol is None and packing.contacts is not None
     contacts = contact_network(packing, gap_tol)
     rattler = find_rattlers(packing.n, packing.d, contacts)
