@@ -270,3 +270,59 @@ def test_outline_is_the_shapes_boundary(shape: dict) -> None:
     assert ring.area == pytest.approx(table.area[0], rel=1e-5)
     assert ring.length == pytest.approx(table.perimeter[0], rel=1e-5)
     assert ring.symmetric_difference(_shapely(shape)).area < 1e-5 * table.area[0]
+
+
+# --- drawing --------------------------------------------------------------------------
+
+
+def _polygon_area_centroid(v: np.ndarray) -> tuple[float, np.ndarray]:
+    w = np.roll(v, -1, axis=0)
+    cross = v[:, 0] * w[:, 1] - w[:, 0] * v[:, 1]
+    area = 0.5 * cross.sum()
+    return area, ((v + w) * cross[:, None]).sum(axis=0) / (6.0 * area)
+
+
+def test_plot_packing_draws_each_shape_at_its_centre_and_orientation(tmp_path: Path) -> None:
+    from matplotlib.collections import LineCollection, PolyCollection
+
+    from jamflow.plots import plot_packing, save_figure
+
+    p = _shaped_packing()
+    fig = plot_packing(p)
+    ax = fig.axes[0]
+    polys = [c for c in ax.collections if isinstance(c, PolyCollection)]
+    assert len(polys) == 9  # the primary cell and its eight periodic neighbours
+    x = p.box.wrap(p.position)
+    drawn = polys[4].get_paths()  # shift (0, 0) is the fifth of itertools.product((-1, 0, 1), repeat=2)
+    assert len(drawn) == p.n
+    for k, path in enumerate(drawn):
+        area, centroid = _polygon_area_centroid(path.vertices[:-1])
+        shape = p.shape_index[k]
+        assert area == pytest.approx(p.shapes.area[shape], rel=5e-3)  # 64 points per turn
+        np.testing.assert_allclose(centroid, x[k], atol=1e-9)
+        if p.shapes.kind[shape] == "ellipse":
+            # the long axis lies along the orientation (mod pi)
+            far = path.vertices[np.argmax(np.linalg.norm(path.vertices - x[k], axis=1))] - x[k]
+            assert abs(np.sin(np.arctan2(far[1], far[0]) - p.orientation[k])) < 0.05
+    assert not [c for c in ax.collections if isinstance(c, LineCollection)]  # no contacts guessed from diameters
+    save_figure(fig, tmp_path / "shapes.png")
+
+
+def test_plot_packing_draws_links_at_their_length(tmp_path: Path) -> None:
+    from matplotlib.collections import LineCollection
+
+    from jamflow.plots import plot_packing, save_figure
+
+    D = 0.05
+    x = np.array([[0.3, 0.3], [0.35, 0.3], [0.325, 0.3 + D * np.sqrt(3) / 2], [0.925, 0.3 + D * np.sqrt(3) / 2]])
+    p = Packing(position=x, diameter=np.full(4, D), box=Box.cubic(2, 1.0),
+                links=Links([0, 1, 0, 2], [1, 2, 2, 3], [D, D, D, 0.4]))
+    fig = plot_packing(p)
+    lines = [c for c in fig.axes[0].collections if isinstance(c, LineCollection)]
+    assert len(lines) == 9
+    segments = np.asarray(lines[4].get_segments())  # shift (0, 0)
+    lengths = np.linalg.norm(segments[:, 1] - segments[:, 0], axis=1)
+    # the link 2-3 crosses the periodic boundary: drawn as its minimum image, at its length
+    np.testing.assert_allclose(np.sort(lengths), np.sort(p.links.length), rtol=1e-12)
+    assert "links (fixed length)" in fig.axes[0].get_legend_handles_labels()[1]
+    save_figure(fig, tmp_path / "links.png")

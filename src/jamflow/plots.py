@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import xarray as xr
-from matplotlib.collections import EllipseCollection, LineCollection
+from matplotlib.collections import EllipseCollection, LineCollection, PolyCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Polygon
 from matplotlib.ticker import NullFormatter
@@ -103,21 +103,28 @@ def plot_packing(packing: Packing, slab_axis: int = 2, title: str | None = None)
     ``slab_axis``, drawn as their cross-sections with that plane, projected on the
     first two axes. Contacts are lines between centres, their width proportional
     to the force when the packing has forces; rattlers are drawn in orange.
+    Shaped particles are drawn as their outlines at their orientations and links as
+    green lines between centres; a packing with shapes or links shows only its stored
+    contacts and rattlers (contacts between bodies are not guessed from diameters).
     """
     fig = Figure(layout="constrained", figsize=(6.4, 6.4 * min(2.0, packing.box.lengths[1] / packing.box.lengths[0]) + 0.6))
     ax = fig.add_subplot()
     h = packing.box.matrix
     x = packing.box.wrap(packing.position)
     radius = 0.5 * packing.diameter
-    contacts = contact_network(packing)
+    bodies = packing.shapes is not None or packing.links is not None
+    if bodies:
+        contacts = packing.contacts if packing.contacts is not None else np.empty((0, 2), np.int64)
+    else:
+        contacts = contact_network(packing)
     # without stored contacts (e.g. an LS snapshot) near contacts are only geometric: flag no rattlers
     if packing.rattler is not None:
         rattler = packing.rattler
-    elif packing.contacts is not None:
+    elif packing.contacts is not None and not bodies:
         rattler = find_rattlers(packing.n, packing.d, contacts)
     else:
         rattler = np.zeros(packing.n, dtype=bool)
-    source = "" if packing.contacts is not None else f" with h <= {CONTACT_GAP_TOL:g}"
+    source = "" if packing.contacts is not None or bodies else f" with h <= {CONTACT_GAP_TOL:g}"
     shown = np.ones(packing.n, dtype=bool)
     if packing.d >= 3:
         mid = 0.5 * h[slab_axis, slab_axis]
@@ -132,12 +139,25 @@ def plot_packing(packing: Packing, slab_axis: int = 2, title: str | None = None)
     colours = np.where(rattler, "tab:orange", np.where(big, "#9ecae1", "#c6dbef"))
     shifts = [i * a1 + j * a2 for i, j in itertools.product((-1, 0, 1), repeat=2)]
     idx = np.flatnonzero(shown)
+    outlines = _body_outlines(packing, x) if packing.shapes is not None else None
     for s in shifts:
-        col = EllipseCollection(2 * radius[idx], 2 * radius[idx], 0.0, units="xy", offsets=x[idx, :2] + s,
-                                offset_transform=ax.transData, facecolors=colours[idx], edgecolors="#3b5b7a",
-                                linewidths=0.4)
+        if outlines is None:
+            col = EllipseCollection(2 * radius[idx], 2 * radius[idx], 0.0, units="xy", offsets=x[idx, :2] + s,
+                                    offset_transform=ax.transData, facecolors=colours[idx], edgecolors="#3b5b7a",
+                                    linewidths=0.4)
+        else:
+            col = PolyCollection([o + s for o in outlines], facecolors=colours, edgecolors="#3b5b7a", linewidths=0.4)
         col.set_clip_path(clip)
         ax.add_collection(col)
+    if packing.links is not None and len(packing.links):
+        li, lj = packing.links.i, packing.links.j
+        link_seg = np.stack([x[li, :2], x[li, :2] + packing.box.minimum_image(x[lj] - x[li])[:, :2]], axis=1)
+        link_seg = link_seg[shown[li] & shown[lj]]
+        for s in shifts:
+            lc = LineCollection(link_seg + s, linewidths=2.0, colors="#1b7837")
+            lc.set_clip_path(clip)
+            ax.add_collection(lc)
+        ax.plot([], [], color="#1b7837", lw=2.0, label="links (fixed length)")
     drawn_contacts = 0
     if len(contacts):
         ci, cj = contacts[:, 0], contacts[:, 1]
@@ -174,6 +194,17 @@ def plot_packing(packing: Packing, slab_axis: int = 2, title: str | None = None)
     if ax.get_legend_handles_labels()[0]:
         ax.legend(loc="upper right", fontsize=8, framealpha=0.8)
     return fig
+
+
+def _body_outlines(packing: Packing, x: np.ndarray) -> list[np.ndarray]:
+    """Outline polygon of every shaped particle at its centre ``x`` and orientation [length]."""
+    table = packing.shapes
+    shapes = [table.outline(k, points_per_turn=64) for k in range(len(table))]
+    out = []
+    for centre, k, theta in zip(x[:, :2], packing.shape_index, packing.orientation, strict=True):
+        c, s = np.cos(theta), np.sin(theta)
+        out.append(shapes[k] @ np.array([[c, s], [-s, c]]) + centre)
+    return out
 
 
 # --- distributions ----------------------------------------------------------------------
