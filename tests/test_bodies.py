@@ -326,3 +326,33 @@ def test_plot_packing_draws_links_at_their_length(tmp_path: Path) -> None:
     np.testing.assert_allclose(np.sort(lengths), np.sort(p.links.length), rtol=1e-12)
     assert "links (fixed length)" in fig.axes[0].get_legend_handles_labels()[1]
     save_figure(fig, tmp_path / "links.png")
+
+
+# --- check --------------------------------------------------------------------------
+
+
+def test_check_reports_how_well_links_hold_and_refuses_to_count_body_contacts(tmp_path: Path, capsys) -> None:
+    import json
+
+    from jamflow.analysis.contacts import summarize
+    from jamflow.cli import main
+    from jamflow.strict_jamming import certify
+
+    p = _linked_packing()
+    stretched = p.position.copy()
+    stretched[2, 0] += 0.05 * 1e-6  # link (1, 2) of length 0.05 stretched by 1e-6 relative
+    p = p.evolve(position=stretched)
+    write_packing(p, tmp_path / "l.nc")
+    assert main(["check", str(tmp_path / "l.nc"), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["n_links"] == 3 and report["n_clusters"] == 3
+    assert report["max_link_error_rel"] == pytest.approx(1e-6, rel=1e-6)
+    for count in (summarize, lambda q: certify(q)):
+        with pytest.raises(ValueError, match="links"):
+            count(p)
+    with pytest.raises(ValueError, match="shaped particles"):
+        summarize(_shaped_packing())
+    write_packing(_shaped_packing(), tmp_path / "s.nc")
+    assert main(["check", str(tmp_path / "s.nc")]) == 0
+    out = capsys.readouterr().out
+    assert "2 circulo_line" in out and "not counted" in out

@@ -36,9 +36,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from math import asin, pi, sqrt
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+if TYPE_CHECKING:
+    from .box import Box
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.special import ellipe
@@ -114,6 +118,11 @@ class Links:
         if np.any(bad):
             k = int(np.flatnonzero(bad)[0])
             raise ValueError(f"link ({self.i[k]}, {self.j[k]}) names a particle outside 0..{n - 1}")
+
+    def length_errors(self, position: NDArray[np.float64], box: "Box") -> NDArray[np.float64]:
+        """Relative link-length errors ``|x_j - x_i| / l - 1`` (minimum image), shape (L,)."""
+        r = np.linalg.norm(box.minimum_image(position[self.j] - position[self.i]), axis=1)
+        return r / self.length - 1.0
 
     def clusters(self, n: int) -> NDArray[np.int64]:
         """Cluster label per particle: connected components of the link graph.

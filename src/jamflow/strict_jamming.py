@@ -47,7 +47,7 @@ import xarray as xr
 from numpy.typing import NDArray
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
-from .analysis.contacts import find_rattlers, isostatic_count, require_periodic
+from .analysis.contacts import find_rattlers, isostatic_count, require_plain_spheres
 from .highs import new_highs
 from .io import new_dataset_attrs
 from .packing import Packing, near_pairs
@@ -415,7 +415,7 @@ def certify(
     -------
     JammingCertificate
     """
-    require_periodic(packing, "the jamming certificate")
+    require_plain_spheres(packing, "the jamming certificate")
     if loads < 1:
         raise ValueError(f"loads must be >= 1, got {loads}")
     if not 0.0 <= max_cluster_fraction < 1.0:

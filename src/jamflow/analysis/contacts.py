@@ -30,7 +30,7 @@ __all__ = [
     "rigidity_counting",
     "force_balance_residual",
     "summarize",
-    "require_periodic",
+    "require_plain_spheres",
 ]
 
 
@@ -162,16 +162,24 @@ class ContactSummary:
         return dict(self.__dict__)
 
 
-def require_periodic(packing: Packing, what: str) -> None:
-    """Refuse a packing jammed between hard walls (attribute ``boundary = "walls"``).
+def require_plain_spheres(packing: Packing, what: str) -> None:
+    """Refuse what periodic sphere contact counting would get wrong.
 
-    Its wall contacts are not part of the :class:`Packing` (CALiPPSO stores them as
-    separate ``wall_contact`` variables), so periodic contact counting would call every
-    sphere touching a wall under-coordinated and print wrong rattlers and counts.
+    A packing jammed between hard walls (attribute ``boundary = "walls"``) keeps its
+    wall contacts outside the :class:`Packing` (CALiPPSO's ``wall_contact``
+    variables), so every sphere touching a wall would look under-coordinated. Linked
+    spheres and shaped particles have constraints and contact distances that the
+    sphere network does not know (their counting comes with their energy models).
     """
     if packing.attrs.get("boundary") == "walls":
         raise ValueError(f"{what} counts contacts of periodic packings; this packing is jammed between hard "
                          "walls (its wall contacts are the calippso output's wall_contact variables)")
+    if packing.links is not None and len(packing.links):
+        raise ValueError(f"{what} counts contacts of unlinked spheres; this packing has {len(packing.links)} "
+                         "links (linked pairs are constraints, not contacts)")
+    if packing.shapes is not None and np.any(packing.shapes.kind != "disk"):
+        raise ValueError(f"{what} counts contacts of spheres; this packing has shaped particles, whose contact "
+                         "distances are not their bounding diameters")
 
 
 def summarize(packing: Packing, gap_tol: float | None = None) -> ContactSummary:
@@ -183,7 +191,7 @@ def summarize(packing: Packing, gap_tol: float | None = None) -> ContactSummary:
     :func:`isostatic_count` and ``counting`` says on which side it lies (a
     crystal's backbone is hyperstatic).
     """
-    require_periodic(packing, "check")
+    require_plain_spheres(packing, "check")
     explicit = gap_tol is None and packing.contacts is not None
     contacts = contact_network(packing, gap_tol)
     rattler = find_rattlers(packing.n, packing.d, contacts)
