@@ -119,6 +119,11 @@ class Links:
             k = int(np.flatnonzero(bad)[0])
             raise ValueError(f"link ({self.i[k]}, {self.j[k]}) names a particle outside 0..{n - 1}")
 
+    def contains(self, i: ArrayLike, j: ArrayLike) -> NDArray[np.bool_]:
+        """Which pairs ``(i[k], j[k])``, ``i < j``, are links, shape (P,)."""
+        i, j = np.asarray(i, dtype=np.int64), np.asarray(j, dtype=np.int64)
+        return np.isin((i << 32) | j, (self.i << 32) | self.j)
+
     def length_errors(self, position: NDArray[np.float64], box: "Box") -> NDArray[np.float64]:
         """Relative link-length errors ``|x_j - x_i| / l - 1`` (minimum image), shape (L,)."""
         r = np.linalg.norm(box.minimum_image(position[self.j] - position[self.i]), axis=1)

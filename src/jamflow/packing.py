@@ -298,7 +298,7 @@ class Packing:
         pairs, h = near_pairs(self, 0.0)
         bad = -h > overlap_tol
         if self.links is not None:
-            bad &= ~_linked(pairs.i, pairs.j, self.links)
+            bad &= ~self.links.contains(pairs.i, pairs.j)
         if np.any(bad):
             worst = np.flatnonzero(bad)[np.argsort(h[bad])][:3]
             named = ", ".join(f"({pairs.i[k]}, {pairs.j[k]}): {-h[k]:.3g}" for k in worst)
@@ -387,13 +387,6 @@ def near_pairs(packing: Packing, max_gap: float) -> tuple[PairList, NDArray[np.f
     h = pairs.distance / packing.sigma(pairs.i, pairs.j) - 1.0
     keep = h <= max_gap
     return pairs.select(keep), h[keep]
-
-
-def _linked(i: NDArray[np.int64], j: NDArray[np.int64], links: Links) -> NDArray[np.bool_]:
-    """Which pairs ``(i, j)``, ``i < j``, are links."""
-    key = i * (np.int64(1) << 32) + j
-    linked = links.i * (np.int64(1) << 32) + links.j
-    return np.isin(key, linked)
 
 
 def max_overlap(packing: Packing) -> tuple[float, float]:

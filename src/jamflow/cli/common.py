@@ -104,23 +104,22 @@ def packing_rows(packing: Any) -> list[tuple[str, Any]]:
     return rows
 
 
+def _checked(text: str, cast: type, ok: Any, need: str) -> Any:
+    """``cast(text)`` if it parses and satisfies ``ok``, else an argparse error saying ``need``."""
+    try:
+        value = cast(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be {need}, got {text!r}") from None
+    if not ok(value):
+        raise argparse.ArgumentTypeError(f"must be {need}, got {text}")
+    return value
+
+
 def seed(text: str) -> int:
     """Argument type of random seeds: a non-negative integer (numpy's generators need one)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a non-negative integer, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be a non-negative integer, got {value}")
-    return value
+    return _checked(text, int, lambda v: v >= 0, "a non-negative integer")
 
 
 def positive(text: str) -> float:
     """Argument type of a strictly positive finite number (strains, durations)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}") from None
-    if not (value > 0.0 and value < float("inf")):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
-    return value
+    return _checked(text, float, lambda v: 0.0 < v < float("inf"), "a positive number")

@@ -36,7 +36,7 @@ def _linked_packing(packing: Packing, model: LinkedSpheresModel, res: MinimizeRe
     """The minimised linked packing: contacts are overlapping pairs that are not linked."""
     x = packing.box.wrap(res.position)
     pairs, _, f = overlapping_pairs(x, packing.box, packing.diameter, model.potential)
-    linked = np.isin(pairs.i * packing.n + pairs.j, packing.links.i * packing.n + packing.links.j)
+    linked = packing.links.contains(pairs.i, pairs.j)
     attrs = {**attrs, "pressure_comment": "virial pressure of the contact forces and the link tensions"}
     return packing.evolve(
         position=x, contacts=np.stack([pairs.i, pairs.j], axis=1)[~linked], force=f[~linked], rattler=None,

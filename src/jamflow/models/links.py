@@ -129,7 +129,6 @@ class LinkedSpheresModel(SphereBodies):
         raw = x[links.j] - x[links.i]
         image = np.round((box.minimum_image(raw) - raw) @ box.inverse.T)
         self.link_offset = image @ box.matrix.T
-        self._link_keys = links.i * self.n + links.j
         self._groups = self._cluster_groups()
         self._pair_build = -1
         self._geometry_q: NDArray[np.float64] | None = None
@@ -221,7 +220,7 @@ class LinkedSpheresModel(SphereBodies):
         nl = self.nlist
         if self._pair_build == nl.builds:
             return
-        keep = ~np.isin(nl.i * self.n + nl.j, self._link_keys)
+        keep = ~self.links.contains(nl.i, nl.j)
         self._pi, self._pj, self._sigma = nl.i[keep], nl.j[keep], nl.sigma[keep]
         self._offset = nl.image[keep] @ self.box.matrix.T
         self._pair_build = nl.builds
