@@ -60,3 +60,31 @@ def test_decompression_target_outside_range_is_refused(jammed16, offset):
     phi = 0.0 if offset is None else jammed16.packing_fraction + offset
     with pytest.raises(ValueError, match="decompression target"):
         decompressed(jammed16, phi)
+
+
+def test_decompress_cli_writes_the_start_and_prints_its_numbers(jammed16, tmp_path, capsys):
+    from jamflow.cli import main
+    from jamflow.io import read_packing, write_packing
+
+    write_packing(jammed16, tmp_path / "jammed.nc")
+    phi = jammed16.packing_fraction - 0.02
+    assert main(["decompress", str(tmp_path / "jammed.nc"), str(tmp_path / "start.nc"), "--phi", str(phi)]) == 0
+    start = read_packing(tmp_path / "start.nc")
+    assert start.packing_fraction == pytest.approx(phi, rel=1e-14)
+    assert start.position == pytest.approx(jammed16.position, abs=0)
+    s = (phi / jammed16.packing_fraction) ** 0.5
+    printed = capsys.readouterr().out
+    assert f"{s:.10f}" in printed and f"{phi:.10f}" in printed
+    assert "smallest relative gap" in printed
+
+
+def test_decompress_cli_refuses_a_denser_target_and_writes_nothing(jammed16, tmp_path, capsys):
+    from jamflow.cli import main
+    from jamflow.io import write_packing
+
+    write_packing(jammed16, tmp_path / "jammed.nc")
+    code = main(["decompress", str(tmp_path / "jammed.nc"), str(tmp_path / "start.nc"),
+                 "--phi", str(jammed16.packing_fraction + 0.01)])
+    assert code != 0
+    assert "decompression target" in capsys.readouterr().err
+    assert not (tmp_path / "start.nc").exists()

@@ -72,16 +72,19 @@ def check_chain():
     if WALLS and (config.get("analyses") or set(config.get("figures", [])) - {"packing"}):
         raise ValueError("calippso.walls: the analyses and figures other than packing assume periodic "
                          "boundaries; set analyses: [] and figures: [packing]")
+    if "decompress" in CHAIN and CHAIN[CHAIN.index("decompress") - 1] not in ("calippso", "soft"):
+        raise ValueError("chain: decompress shrinks a jammed packing and must follow calippso or soft")
     if "ls" not in CHAIN:
         return
     if SOURCE_STAGE != "init" or CHAIN[1] != "ls":
         raise ValueError("chain: ls must come first and needs a random system (an LS snapshot is not a start)")
-    if any(stage != "calippso" for stage in CHAIN[2:]):
-        raise ValueError("chain: only calippso may follow ls")
+    if CHAIN[2:] not in ([], ["calippso"], ["calippso", "decompress"]):
+        raise ValueError("chain: only calippso (then decompress) may follow ls")
     if "ls" not in config:
         raise ValueError("chain has ls but the scene has no 'ls' section with p_targets")
-    if "flow" in config:
-        raise ValueError("flow needs one final packing per sample; a chain with ls gives one per (kappa, p_target)")
+    if "flow" in config and len(LS_RATES) * len(LS_TARGETS) != 1:
+        raise ValueError("flow needs one final packing per sample; a chain with ls gives one per (kappa, p_target): "
+                         "give one growth rate and one p_target")
 
 
 check_chain()
@@ -150,6 +153,11 @@ def overlap_series_files():
 
 def eos_files():
     return [f"{RESULTS}/packings/{s}/ls_k{k:g}.eos.nc" for k in LS_RATES for s in samples()]
+
+
+def flow_start(wildcards):
+    """The packing every shear run of a sample starts from: its one final packing."""
+    return packing(wildcards.sample, f"{FINAL}{variants()[0]}")
 
 
 def shear_conditions():
@@ -400,6 +408,8 @@ localrules:
     overlap_series,
     jamming_table,
     flow_summary,
+    flow_curve,
+    decompress,
     plot_packing,
     plot_gaps,
     plot_forces,
@@ -408,6 +418,7 @@ localrules:
     plot_rdf,
     plot_stress_strain,
     plot_phi_kappa,
+    plot_flow_curve,
     plot_ed_vs_sd,
     plot_phi_j_series,
     plot_gaps_ls_vs_calippso,

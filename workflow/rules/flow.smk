@@ -30,7 +30,7 @@ rule compress:
 
 rule shear:
     input:
-        packing("{sample}", FINAL),
+        flow_start,
     output:
         series=f"{RESULTS}/flow/{{sample}}/shear_{{condition}}.nc",
         final=f"{RESULTS}/flow/{{sample}}/shear_{{condition}}_final.nc",
@@ -73,9 +73,29 @@ rule flow_summary:
         "jamflow flow-summary {input} {output} > {log} 2>&1"
 
 
+rule flow_curve:
+    input:
+        shear_summaries(),
+    output:
+        f"{RESULTS}/analysis/flow-curve.nc",
+    log:
+        f"{LOGS}/analysis/flow-curve.log",
+    benchmark:
+        f"{BENCH}/analysis/flow-curve.tsv"
+    threads: job_threads("flow_curve")
+    resources:
+        **job_resources("flow_curve"),
+    params:
+        labels=shear_labels(),
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow flow-curve {input} {output} --labels {params.labels} > {log} 2>&1"
+
+
 rule sd_shear:
     input:
-        packing("{sample}", FINAL),
+        flow_start,
     output:
         f"{RESULTS}/flow/{{sample}}/sd_fixed-volume.nc",
     log:

@@ -64,6 +64,27 @@ rule soft_jam:
         "jamflow soft-jam {input} {output} {params.options} --preset {params.preset} > {log} 2>&1"
 
 
+rule decompress:
+    input:
+        previous_stage("decompress"),
+    output:
+        packing("{sample}", "decompress{variant}"),
+    log:
+        f"{LOGS}/decompress/{{sample}}{{variant}}.log",
+    benchmark:
+        f"{BENCH}/decompress/{{sample}}{{variant}}.tsv"
+    threads: job_threads("decompress")
+    resources:
+        **job_resources("decompress"),
+    params:
+        phi=lambda wildcards: opt("decompress", "phi"),
+        read=read_flags(CHAIN[CHAIN.index("decompress") - 1]) if "decompress" in CHAIN else "",
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow decompress {input} {output} --phi {params.phi} {params.read} > {log} 2>&1"
+
+
 rule ls:
     input:
         packing("{sample}", "init"),

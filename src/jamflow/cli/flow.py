@@ -1,4 +1,4 @@
-"""Subcommands of the event-driven overdamped dynamics: shear, compress, drive."""
+"""Subcommands of the event-driven overdamped dynamics: shear, compress, drive, and the decompress start."""
 
 from __future__ import annotations
 
@@ -12,8 +12,10 @@ from ..io import read_packing, write_dataset, write_packing
 from ..overdamped.driving import Drive, SelfPropulsion
 from ..overdamped.integrate import FlowOptions
 from ..overdamped.run import Stop, dilute_start, run_flow
-from ..packing import LENGTH_UNITS
-from .common import add_command, add_preset, add_quiet, positive, print_summary, seed, stage_parameters
+from ..overdamped.starts import decompressed
+from ..packing import LENGTH_UNITS, near_pairs
+from ..tolerances import OVERLAP_TOL
+from .common import add_command, add_preset, add_quiet, packing_rows, positive, print_summary, seed, stage_parameters
 from .packings import add_overlap_option, overlap_tol
 
 
@@ -46,6 +48,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--shear", action="store_true", help="shear while compressing (Sec. IV D: jamming under both)")
     p.add_argument("--rate", type=float, default=1.0, help="compression rate (default 1)")
     _common_options(p)
+
+    p = add_command(sub, "decompress", _decompress, "dense flow start: a jammed packing decompressed to a packing fraction",
+                    "Shrinks every diameter by (phi / phi_J)^(1/d) about fixed centres (jamflow.overdamped.starts): "
+                    "an LS + CALiPPSO (or soft-jammed) packing becomes a start at any phi below its own in one "
+                    "step, instead of minutes of event-driven compression. It is a marginally stable state with "
+                    "every gap opened by the same relative amount, not a liquid at that phi: discard the initial "
+                    "transient of a flow run from it.",
+                    reads=("input",), writes=("out",), packings=("out",))
+    p.add_argument("input", help="input packing netCDF (jammed: LS + CALiPPSO, or soft-jam with --soft)")
+    p.add_argument("out", help="output packing netCDF")
+    p.add_argument("--phi", type=positive, required=True, help="target packing fraction, below the input's")
+    add_overlap_option(p)
+    add_quiet(p)
 
     p = add_command(sub, "drive", _drive, "event-driven overdamped dynamics under external or self-propelling forces",
                     reads=(*FLOW_READS, "forces"), writes=FLOW_WRITES, packings=("final",))
@@ -200,3 +215,26 @@ def _drive(args: argparse.Namespace) -> int:
             F = rng.uniform(-1, 1, size=(n, d)) * args.random_forces * np.sqrt(3.0 / d)
         drive = Drive("forces", xi0=args.xi0, external=np.asarray(F, dtype=np.float64), permanent=perm)
     return _run(args, drive, Stop(time=args.time, max_steps=args.max_steps), packing)
+
+
+#: decompress reports the smallest relative gap r / sigma - 1 if it is below this
+_GAP_REPORTED = 0.1
+
+
+def _decompress(args: argparse.Namespace) -> int:
+    packing = read_packing(args.input, overlap_tol(args))
+    if packing.attrs.get("boundary") == "walls" or (packing.links is not None and len(packing.links)) \
+            or packing.shapes is not None:
+        raise ValueError(f"decompress shrinks periodic plain spheres; {args.input} has walls, links or shapes")
+    start = decompressed(packing, args.phi)
+    # a soft input's overlaps must have been opened by the shrink: the flow stages are hard-sphere
+    start.validate(OVERLAP_TOL)
+    _, h = near_pairs(start, _GAP_REPORTED)
+    write_packing(start, args.out, stage_parameters(args, "out"))
+    print_summary(args, args.out, [
+        ("decompressed from phi", f"{packing.packing_fraction:.10f}"),
+        ("diameter scale", f"{(args.phi / packing.packing_fraction) ** (1.0 / packing.d):.10f}"),
+        *packing_rows(start),
+        ("smallest relative gap", f"{h.min():.4g}" if h.size else f"above {_GAP_REPORTED}"),
+    ])
+    return 0
