@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from jamflow.analysis.flow import block_average, contact_lifetimes, flow_summary, strain_average
+from jamflow.analysis.flow import block_average, contact_lifetimes, flow_curve, flow_summary, strain_average
 from jamflow.io import new_dataset_attrs, read_dataset, write_dataset
 
 
@@ -142,3 +142,56 @@ def test_summary_of_a_real_overdamped_shear_run():
     # once contacts carry the load the imposed pressure holds (before the first collision p = 0)
     loaded = out["n_contacts"].values > 0
     assert loaded.any() and np.all(out["pressure"].values[loaded] == pytest.approx(10.0, rel=1e-9))
+
+
+def _summary(pressure: float, stress: float, rng, mode: str = "shear_fixed_pressure", d: int = 2) -> xr.Dataset:
+    strain = np.linspace(0, 1, 2001)
+    noise = 0.01 * rng.standard_normal(2001)
+    return flow_summary(flow_dataset(strain, stress * (1 + noise), pressure * (1 + noise), [(0.2, 0, 1, 1)],
+                                     kappa=np.zeros(2001), mode=mode, d=d))
+
+
+def test_flow_curve_viscous_number_is_inverse_mean_pressure_and_sorted(rng):
+    """I = 1 / <p> in the runs' reduced units, mu = <sigma / p>, runs ordered by I."""
+    runs = [_summary(p, mu * p, rng) for p, mu in ((100.0, 0.30), (10.0, 0.45), (30.0, 0.38))]
+    curve = flow_curve(runs, ["p100", "p10", "p30"])
+    assert curve["label"].values.tolist() == ["p100", "p30", "p10"]
+    p_mean = np.array([runs[k].attrs["mean_pressure"] for k in (0, 2, 1)])
+    assert curve["viscous_number"].values == pytest.approx(1.0 / p_mean, rel=1e-15)
+    assert curve["friction"].values == pytest.approx([0.30, 0.38, 0.45], rel=1e-12)
+    dp = np.array([runs[k].attrs["err_pressure"] for k in (0, 2, 1)])
+    assert curve["viscous_number_err"].values == pytest.approx(dp / p_mean**2, rel=1e-15)
+    assert np.all(curve["friction_err"].values > 0)
+    assert all("units" in v.attrs and "long_name" in v.attrs for v in curve.data_vars.values())
+
+
+@pytest.mark.parametrize("bad", ["compress", "dimension", "labels"])
+def test_flow_curve_refuses_runs_without_a_viscous_number(rng, bad):
+    runs = [_summary(10.0, 4.0, rng), _summary(30.0, 10.0, rng)]
+    labels = None
+    if bad == "compress":
+        runs[1] = _summary(30.0, 10.0, rng, mode="compress")
+    elif bad == "dimension":
+        runs[1] = _summary(30.0, 10.0, rng, d=3)
+    else:
+        labels = ["one"]
+    with pytest.raises(ValueError, match="flow curve"):
+        flow_curve(runs, labels)
+
+
+def test_flow_curve_cli_prints_and_plots(tmp_path, rng, capsys):
+    from jamflow.cli import main
+
+    paths = []
+    for p, mu in ((10.0, 0.45), (100.0, 0.30)):
+        path = tmp_path / f"sum{p:g}.nc"
+        write_dataset(_summary(p, mu * p, rng), path)
+        paths.append(str(path))
+    out = tmp_path / "curve.nc"
+    assert main(["flow-curve", *paths, str(out), "--labels", "p10", "p100"]) == 0
+    printed = capsys.readouterr().out
+    curve = read_dataset(out, "flow-curve")
+    for label, i, mu in zip(curve.label.values, curve.viscous_number.values, curve.friction.values, strict=True):
+        assert f"{label}: I" in printed and f"{i:.4g}" in printed and f"{mu:.4f}" in printed
+    assert main(["plot", "flow-curve", str(out), str(tmp_path / "curve.png")]) == 0
+    assert (tmp_path / "curve.png").stat().st_size > 0

@@ -54,6 +54,8 @@ DATASET_KINDS: dict[str, tuple[frozenset[str], str]] = {
     "jamming-table": (frozenset({"phi_J_LS", "kappa", "p_target"}), "a jamming table (jamflow jamming-table)"),
     "overlap-series": (frozenset({"p_target", "phi_J"}), "an overlap series (jamflow overlap-series)"),
     "overlap": (frozenset({"Q", "n_common"}), "a contact overlap (jamflow overlap)"),
+    "flow-curve": (frozenset({"viscous_number", "friction", "packing_fraction"}),
+                   "a flow curve mu(I), phi(I) (jamflow flow-curve)"),
     "flow-summary": (frozenset({"steady_mean", "strain", "shear_stress", "pressure"}),
                      "a flow summary (jamflow flow-summary)"),
     "flow": (frozenset({"strain", "time", "shear_stress", "pressure", "packing_fraction", "n_contacts"}),

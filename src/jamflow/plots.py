@@ -436,6 +436,28 @@ def plot_stress_strain(datasets: Sequence[xr.Dataset], labels: Sequence[str] | N
     return fig
 
 
+def plot_flow_curve(ds: xr.Dataset) -> Figure:
+    """Friction mu and packing fraction phi against the viscous number I (flow curve, block errors)."""
+    fig = Figure(layout="constrained", figsize=(6.0, 6.0))
+    ax1, ax2 = fig.subplots(2, 1, sharex=True)
+    i, di = ds["viscous_number"].values, ds["viscous_number_err"].values
+    ax1.errorbar(i, ds["friction"].values, xerr=di, yerr=ds["friction_err"].values, fmt="o-", ms=4, capsize=3)
+    ax2.errorbar(i, ds["packing_fraction"].values, xerr=di, yerr=ds["packing_fraction_err"].values,
+                 fmt="s-", ms=4, capsize=3)
+    for x, y, label in zip(i, ds["friction"].values, ds["label"].values, strict=True):
+        ax1.annotate(str(label), (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7)
+    ax1.set_ylabel(f"friction mu = <sigma / p>\n{_DL}")
+    ax2.set_ylabel(f"packing fraction phi\n{_DL}")
+    ax2.set_xlabel(f"viscous number I = gamma_dot / (xi0 lambda^(d-2) p) {_DL}")
+    ax2.set_xscale("log")
+    for ax in (ax1, ax2):
+        ax.ticklabel_format(axis="y", useOffset=False)
+    fig.align_ylabels((ax1, ax2))
+    fig.suptitle(f"flow curve, d = {ds.attrs.get('d', '?')}, N = {', '.join(str(n) for n in np.unique(ds['n_particles'].values))}",
+                 fontsize=9)
+    return fig
+
+
 def _widen_flat_axis(ax) -> None:
     """Show a signal held constant (a fixed pressure, to 1e-12) as a flat line at its value.
 

@@ -174,6 +174,29 @@ rule plot_stress_strain:
         "jamflow plot stress-strain {input} {output.png} --labels {params.labels} > {log} 2>&1"
 
 
+rule plot_flow_curve:
+    input:
+        f"{RESULTS}/analysis/flow-curve.nc",
+    output:
+        png=report(
+            f"{RESULTS}/figures/flow-curve.png",
+            caption="../report/flow-curve.rst",
+            category="Flow",
+        ),
+        pdf=f"{RESULTS}/figures/flow-curve.pdf",
+    log:
+        f"{LOGS}/figures/flow-curve.log",
+    benchmark:
+        f"{BENCH}/figures/flow-curve.tsv"
+    threads: job_threads("plot")
+    resources:
+        **job_resources("plot"),
+    conda:
+        "../envs/jamflow.yaml"
+    shell:
+        "jamflow plot flow-curve {input} {output.png} > {log} 2>&1"
+
+
 rule plot_phi_kappa:
     input:
         f"{RESULTS}/analysis/{{sample}}/shear_{{condition}}_summary.nc",

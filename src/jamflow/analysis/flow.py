@@ -28,7 +28,10 @@ from numpy.typing import NDArray
 
 from ..io import new_dataset_attrs
 
-__all__ = ["SIGNALS", "strain_average", "block_average", "contact_lifetimes", "flow_summary"]
+__all__ = ["SIGNALS", "SHEAR_MODES", "strain_average", "block_average", "contact_lifetimes", "flow_summary", "flow_curve"]
+
+#: Flow modes whose stresses are in units of ``gamma_dot / (xi0 lambda^(d-2))`` under shear.
+SHEAR_MODES: tuple[str, ...] = ("shear", "shear_fixed_pressure")
 
 #: Step variables summarised by :func:`flow_summary` (``friction`` is derived).
 SIGNALS: tuple[str, ...] = ("shear_stress", "pressure", "friction", "packing_fraction", "kappa", "z_bar", "n_contacts")
@@ -261,4 +264,84 @@ def flow_summary(
             **attrs_avg,
             **rates,
         ),
+    )
+
+
+def flow_curve(summaries: list[xr.Dataset], labels: list[str] | None = None,
+               parameters: dict | None = None) -> xr.Dataset:
+    """Friction and packing fraction against the viscous number over shear runs (Lerner et al. Sec. V A).
+
+    In the reduced units of the shear runs stresses are measured in
+    ``gamma_dot / (xi0 lambda^(d-2))`` (``xi0`` the mobility of Eq. 31), so the viscous
+    number of a run, ``I = gamma_dot / (xi0 lambda^(d-2) p)``, is ``1 / <p>`` with
+    ``<p>`` its steady-state mean pressure in those units, whatever ``gamma_dot``.
+    Its error follows from the block error of ``<p>``: ``dI = d<p> / <p>^2``.
+
+    Parameters
+    ----------
+    summaries : list of xarray.Dataset
+        ``jamflow flow-summary`` outputs of shear runs (fixed volume or fixed pressure),
+        all with the same ``d``.
+    labels : list of str or None
+        One label per run (default ``run<k>``).
+    parameters : dict or None
+        Stage parameters recorded in the provenance attributes.
+
+    Returns
+    -------
+    xarray.Dataset
+        dim ``run`` sorted by increasing ``I``: ``viscous_number`` and its error,
+        ``pressure``, ``friction`` (mu = <sigma / p>), ``friction_ratio_of_means``
+        (<sigma> / <p>), ``packing_fraction``, ``z_bar`` with block errors, the
+        steady-state window and ``N`` per run; ``label(run)`` names the runs.
+
+    Raises
+    ------
+    ValueError
+        If a run is not a shear run, has a non-positive mean pressure, or the runs
+        differ in dimension.
+    """
+    if not summaries:
+        raise ValueError("flow curve needs at least one flow summary")
+    labels = list(labels) if labels is not None else [f"run{k}" for k in range(len(summaries))]
+    if len(labels) != len(summaries):
+        raise ValueError(f"flow curve: {len(labels)} labels for {len(summaries)} runs")
+    dims = {int(s.attrs.get("d", 0)) for s in summaries}
+    if len(dims) != 1:
+        raise ValueError(f"flow curve: runs of different dimensions {sorted(dims)}")
+    for label, s in zip(labels, summaries, strict=True):
+        if s.attrs.get("mode") not in SHEAR_MODES:
+            raise ValueError(f"flow curve: run {label} is not a shear run (mode {s.attrs.get('mode')!r})")
+        if not s.attrs["mean_pressure"] > 0:
+            raise ValueError(f"flow curve: run {label} has mean pressure {s.attrs['mean_pressure']:g} <= 0 "
+                             "(no viscous number)")
+
+    def column(name: str) -> NDArray[np.float64]:
+        return np.array([float(s.attrs.get(name, np.nan)) for s in summaries])
+
+    p, dp = column("mean_pressure"), column("err_pressure")
+    order = np.argsort(1.0 / p, kind="stable")
+    one = {"units": "1"}
+    stress_unit = summaries[0]["pressure"].attrs.get("units", "1")
+    variables = {
+        "viscous_number": (1.0 / p, {**one, "long_name": "viscous number I = gamma_dot / (xi0 lambda^(d-2) <p>)"}),
+        "viscous_number_err": (dp / p**2, {**one, "long_name": "block error of I (from the error of <p>)"}),
+        "pressure": (p, {"units": stress_unit, "long_name": "steady-state mean pressure <p>"}),
+        "pressure_err": (dp, {"units": stress_unit, "long_name": "block error of <p>"}),
+        "friction": (column("mean_friction"), {**one, "long_name": "steady-state mean friction mu = <sigma / p>"}),
+        "friction_err": (column("err_friction"), {**one, "long_name": "block error of mu"}),
+        "friction_ratio_of_means": (column("friction_ratio_of_means"), {**one, "long_name": "<sigma> / <p>"}),
+        "packing_fraction": (column("mean_packing_fraction"), {**one, "long_name": "steady-state mean packing fraction"}),
+        "packing_fraction_err": (column("err_packing_fraction"), {**one, "long_name": "block error of phi"}),
+        "z_bar": (column("mean_z_bar"), {**one, "long_name": "steady-state mean coordination (Eq. 29)"}),
+        "z_bar_err": (column("err_z_bar"), {**one, "long_name": "block error of z_bar"}),
+        "window_strain_min": (column("window_strain_min"), {**one, "long_name": "start of the steady-state window"}),
+        "window_strain_max": (column("window_strain_max"), {**one, "long_name": "end of the steady-state window"}),
+        "n_particles": (column("N").astype(np.int64), {**one, "long_name": "number of particles N"}),
+    }
+    return xr.Dataset(
+        data_vars={name: ("run", values[order], attrs) for name, (values, attrs) in variables.items()},
+        coords={"label": ("run", np.array(labels, dtype=object)[order], {"long_name": "run label"})},
+        attrs=new_dataset_attrs("jamflow flow curve", parameters or {}, d=dims.pop(), n_runs=len(summaries),
+                                stress_unit=stress_unit),
     )

@@ -1,4 +1,4 @@
-"""Analysis subcommands: gaps, forces, overlap, overlap-series, jamming-table, rdf, flow-summary, plot."""
+"""Analysis subcommands: gaps, forces, overlap, overlap-series, jamming-table, rdf, flow-summary, flow-curve, plot."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from tqdm import tqdm
 
 from ..analysis.eos import jamming_table, table_markdown
 from ..analysis.fitting import check_window
-from ..analysis.flow import flow_summary
+from ..analysis.flow import flow_curve, flow_summary
 from ..analysis.forces import THETA_EXTENDED, THETA_LOCALISED, force_distribution
 from ..analysis.gaps import MEAN_FIELD_GAP_EXPONENT, gap_distribution
 from ..analysis.overlap import overlap_dataset, overlap_series
@@ -31,6 +31,7 @@ PLOT_KINDS: dict[str, str] = {
     "rdf": "one or more `jamflow rdf` outputs",
     "stress-strain": "one or more flow time series or `jamflow flow-summary` outputs",
     "phi-kappa": "one flow time series or `jamflow flow-summary` output",
+    "flow-curve": "one `jamflow flow-curve` output (friction and phi against the viscous number)",
     "overlap": "one or more `jamflow overlap-series` outputs (one per sample)",
     "pareto": "one `jamflow tradeoff` output",
     "jamming-table": "one `jamflow jamming-table` output",
@@ -45,6 +46,7 @@ PLOT_INPUT_KINDS: dict[str, tuple[str, ...]] = {
     "rdf": ("rdf",),
     "stress-strain": ("flow", "flow-summary", "aqs"),
     "phi-kappa": ("flow", "flow-summary", "aqs"),
+    "flow-curve": ("flow-curve",),
     "overlap": ("overlap-series",),
     "pareto": ("tradeoff",),
     "jamming-table": ("jamming-table",),
@@ -141,6 +143,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--strain-min", type=float, default=None, help="start of the steady-state window (default: mid run)")
     p.add_argument("--strain-max", type=float, default=None, help="end of the steady-state window (default: end)")
     p.add_argument("--blocks", type=int, default=10, help="blocks of the error estimate (default 10)")
+    add_quiet(p)
+
+    p = add_command(sub, "flow-curve", _flow_curve,
+                    "friction mu and packing fraction phi against the viscous number I over shear runs",
+                    "Collects `jamflow flow-summary` outputs of shear runs (one per pressure or density) into "
+                    "mu(I), phi(I) with block errors; I = 1 / <p> in the runs' reduced stress unit "
+                    "gamma_dot / (xi0 lambda^(d-2)).",
+                    reads=("paths[:-1]",), writes=("paths[-1]",))
+    p.add_argument("paths", nargs="+", metavar="SUMMARY.nc ... OUT.nc", help="flow summaries, then the output")
+    p.add_argument("--labels", nargs="+", default=None, help="one label per summary (default run0, run1, ...)")
     add_quiet(p)
 
     p = add_command(sub, "plot", _plot, "draw a figure (writes OUT.png and OUT.pdf)",
@@ -301,6 +313,19 @@ def _flow_summary(args: argparse.Namespace) -> int:
     return 0
 
 
+def _flow_curve(args: argparse.Namespace) -> int:
+    inputs, out = _split(args.paths, "flow summary")
+    ds = flow_curve([read_dataset(p, "flow-summary") for p in inputs], args.labels, stage_parameters(args, "paths"))
+    write_dataset(ds, out)
+    print_summary(args, out, [
+        (f"{label}: I", f"{i:.4g} +- {di:.2g}   mu {mu:.4f} +- {dmu:.2g}   phi {phi:.5f} +- {dphi:.2g}")
+        for label, i, di, mu, dmu, phi, dphi in zip(
+            ds.label.values, ds.viscous_number.values, ds.viscous_number_err.values, ds.friction.values,
+            ds.friction_err.values, ds.packing_fraction.values, ds.packing_fraction_err.values, strict=True)
+    ])
+    return 0
+
+
 def _plot(args: argparse.Namespace) -> int:
     from .. import plots
 
@@ -310,7 +335,7 @@ def _plot(args: argparse.Namespace) -> int:
     if args.labels is not None and len(args.labels) != len(inputs):
         raise ValueError(f"--labels needs one label per input ({len(inputs)}), got {len(args.labels)}")
     single = {"packing": None, "forces": plots.plot_forces, "fit-windows": plots.plot_fit_windows,
-              "phi-kappa": plots.plot_phi_kappa,
+              "phi-kappa": plots.plot_phi_kappa, "flow-curve": plots.plot_flow_curve,
               "pareto": plots.pareto, "jamming-table": plots.plot_jamming_table}
     labelled = {"gaps": plots.plot_gaps, "rdf": plots.plot_rdf, "stress-strain": plots.plot_stress_strain,
                 "eos": plots.plot_eos}
