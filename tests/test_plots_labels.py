@@ -13,7 +13,7 @@ from matplotlib.figure import Figure
 
 from jamflow import plots
 from jamflow.analysis.eos import jamming_table
-from jamflow.analysis.flow import flow_summary
+from jamflow.analysis.flow import flow_curve, flow_summary
 from jamflow.analysis.forces import force_distribution
 from jamflow.analysis.gaps import gap_histogram
 from jamflow.analysis.overlap import overlap_series
@@ -42,6 +42,8 @@ def _figures(rng) -> dict[str, Figure]:
     run = flow_dataset(s, 1 + 0.1 * rng.standard_normal(201), 5 + 0.1 * rng.standard_normal(201), [],
                        kappa=0.01 * rng.standard_normal(201), mode="shear_fixed_pressure")
     run["shear_stress"].attrs["units"] = "gamma_dot / xi0"
+    slower = flow_dataset(s, 15 + rng.standard_normal(201), 50 + rng.standard_normal(201), [],
+                          kappa=0.01 * rng.standard_normal(201), mode="shear_fixed_pressure")
     p = lattice()
     overlaps = [overlap_series([p.evolve(contacts=p.contacts[3:], force=None, attrs={"iterations": 4}), p],
                                [1e4, 1e8], growth_rate=1e-4)]
@@ -61,6 +63,7 @@ def _figures(rng) -> dict[str, Figure]:
         "rdf": plots.plot_rdf([structure_dataset(lattice(12, 12), 2.5, 100)]),
         "stress-strain": plots.plot_stress_strain([run, flow_summary(run)]),
         "phi-kappa": plots.plot_phi_kappa(flow_summary(run)),
+        "flow-curve": plots.plot_flow_curve(flow_curve([flow_summary(run), flow_summary(slower)], ["p5", "p50"])),
         "overlap": plots.plot_overlap_series(overlaps),
         "pareto": plots.pareto(tradeoff),
         "jamming-table": plots.plot_jamming_table(table),

@@ -160,6 +160,11 @@ def test_ls_calippso_scene_plans_one_ls_run_per_sample_and_rate(tmp_path):
         ({"chain": ["soft", "calippso"], "calippso": {"walls": True}, "analyses": []},
          "calippso.walls needs the chain [calippso]"),
         ({"chain": ["calippso"], "calippso": {"walls": True}}, "analyses and figures other than packing"),
+        ({"chain": ["compress", "decompress"], "compress": {"phi": 0.8}, "decompress": {"phi": 0.7}},
+         "decompress shrinks a jammed packing and must follow calippso or soft"),
+        ({"chain": ["ls", "calippso", "decompress"], "ls": {"growth_rates": [1e-3], "p_targets": [1e3, 1e5]},
+          "decompress": {"phi": 0.8}, "flow": {"strain": 0.1}, "analyses": []},
+         "give one growth rate and one p_target"),
     ],
 )
 def test_impossible_stage_orders_fail_at_start(tmp_path, patch, message):

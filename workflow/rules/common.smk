@@ -79,7 +79,7 @@ def check_chain():
     if SOURCE_STAGE != "init" or CHAIN[1] != "ls":
         raise ValueError("chain: ls must come first and needs a random system (an LS snapshot is not a start)")
     if CHAIN[2:] not in ([], ["calippso"], ["calippso", "decompress"]):
-        raise ValueError("chain: only calippso (then decompress) may follow ls")
+        raise ValueError("chain: only calippso may follow ls (and decompress after it)")
     if "ls" not in config:
         raise ValueError("chain has ls but the scene has no 'ls' section with p_targets")
     if "flow" in config and len(LS_RATES) * len(LS_TARGETS) != 1:
