@@ -27,9 +27,9 @@ from pathlib import Path
 import numpy as np
 
 from jamflow.analysis.contacts import summarize
+from jamflow.initial import random_packing
 from jamflow.io import read_dat, read_packing
 from jamflow.lattices import lattice_packing
-from jamflow.initial import random_packing
 from jamflow.overdamped.driving import Drive
 from jamflow.overdamped.integrate import FlowOptions
 from jamflow.overdamped.jamming import constrained_subset, self_stress
@@ -64,12 +64,18 @@ def _cert(p, **kw) -> str:
               np.array([r.iterations for r in c.lp]))
 
 
-def _guarded(fn) -> str:
-    """Hash of ``fn()``, or of the exception it raised (a failure is a fingerprint too)."""
+def _guarded(fn, *args, **kwargs) -> str:
+    """Hash of the outputs of ``fn(*args)``, or of the error it raised (a failure is a fingerprint too)."""
     try:
-        return fn()
-    except Exception as exc:
+        out = fn(*args, **kwargs)
+    except (ValueError, RuntimeError) as exc:
         return _h(type(exc).__name__, str(exc))
+    return _h(*(out if isinstance(out, tuple) else (out,)))
+
+
+def _forces_velocities(*args):
+    sol = solve_network(*args)
+    return sol.force, sol.velocity
 
 
 def fingerprints() -> dict[str, str]:
@@ -90,8 +96,7 @@ def fingerprints() -> dict[str, str]:
         out[f"{name}/rigidity_sub"] = _sparse(rigidity_matrix(p, bc, strain=True, particles=idx))
         if name == "tri":  # scipy's nnls aborted (double free) on the LS 2D network
             out[f"{name}/self_stress"] = _h(positive_self_stress(rigidity_matrix(p, bc)))
-        out[f"{name}/self_stress_lp"] = _guarded(
-            lambda: _h(positive_self_stress(rigidity_matrix(p, bc), method="lp")))
+        out[f"{name}/self_stress_lp"] = _guarded(positive_self_stress, rigidity_matrix(p, bc), method="lp")
         # event-driven network: fixed images from the minimum image at this geometry
         dx = p.box.minimum_image(p.position[bc[:, 1]] - p.position[bc[:, 0]])
         images = np.rint((p.position[bc[:, 0]] + dx - p.position[bc[:, 1]]) @ p.box.inverse.T).astype(np.int64)
@@ -105,10 +110,10 @@ def fingerprints() -> dict[str, str]:
         E = np.zeros((p.d, p.d))
         E[0, 1] = 1.0
         out[f"{name}/solve_network"] = _guarded(
-            lambda: _h(*(lambda s: (s.force, s.velocity))(solve_network(p.position, p.box.matrix, sub, images[::2], E))))
+            _forces_velocities, p.position, p.box.matrix, sub, images[::2], E)
         if p.n <= 100:
             out[f"{name}/overdamped_self_stress"] = _guarded(
-                lambda: _h(*self_stress(p.position, p.box.matrix, bc, images, np.ones(len(bc)))))
+                self_stress, p.position, p.box.matrix, bc, images, np.ones(len(bc)))
     start = random_packing(16, 2, 0.5, "bi", seed=2)
     rng = np.random.default_rng(2)
     start = start.evolve(diameter=start.diameter * (1 - 0.03 * rng.uniform(size=start.n)))

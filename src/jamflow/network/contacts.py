@@ -89,7 +89,7 @@ class ContactSet:
         """Body pairs as one array, shape (n_c, 2)."""
         return np.stack([self.i, self.j], axis=1)
 
-    def select(self, keep: ArrayLike) -> "ContactSet":
+    def select(self, keep: ArrayLike) -> ContactSet:
         """The contacts selected by a boolean mask or index array."""
         keep = np.asarray(keep)
         arm = (None, None) if self.central else (self.arm_i[keep], self.arm_j[keep])

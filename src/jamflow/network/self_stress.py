@@ -50,7 +50,7 @@ def self_stresses(J: sp.spmatrix, *, k: int | None = None, rtol: float | None = 
         Singular values ``s <= rtol s_max`` count as zero; default numpy's rank
         threshold ``max(shape) eps``.
     """
-    nc, ndof = J.shape
+    nc = J.shape[0]
     if nc == 0:
         return np.zeros((0, 0))
     tol = max(J.shape) * np.finfo(float).eps if rtol is None else rtol
