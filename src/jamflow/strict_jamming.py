@@ -54,8 +54,10 @@ from .network import (
     ContactSet,
     contact_jacobian,
     prune_rattlers,
+    rigid_network,
     sphere_contacts,
     strain_basis,
+    strain_motion,
 )
 from .packing import Packing, near_pairs
 from .tolerances import CERTIFY_BOUND_TOL, CERTIFY_MOTION_TOL, CONTACT_GAP_TOL
@@ -88,7 +90,10 @@ DEFAULT_LOADS: int = 2
 #: (``benchmarks/certify.py``): 6.9 s against 15.1 s at N = 1024, and the simplex's
 #: cold first solve at N = 4096 was stopped after 14 min (interior point: 552 s for
 #: the whole certificate). When interior point fails
-#: (status not optimal) the LP falls back to the simplex and stays there.
+#: (status not optimal) the LP falls back to the simplex and stays there. On a
+#: jammed network the cone LP's feasible set is the point y = 0 (no interior), which
+#: is what makes every LP method slow; exact-contact backbones that pass the
+#: Roth-Whiteley test skip these LPs (``self_stress_test``, ``benchmarks/certify_speed.py``).
 DEFAULT_SOLVER: str = "ipm"
 
 _DUAL, _PRIMAL = 1, 4  # HiGHS simplex_strategy values
@@ -146,6 +151,8 @@ class JammingCertificate:
         cone is trivial (the cage is then at least one mean diameter).
     lp : list of LPRecord
     parameters : dict
+    self_stress_decisions : int
+        Backbones decided without LPs by the Roth-Whiteley test (see :func:`certify`).
     """
 
     classification: str
@@ -161,6 +168,7 @@ class JammingCertificate:
     cage_at_bound: int
     lp: list[LPRecord] = field(default_factory=list)
     parameters: dict[str, Any] = field(default_factory=dict)
+    self_stress_decisions: int = 0
 
     @property
     def rattler(self) -> NDArray[np.bool_]:
@@ -375,6 +383,7 @@ def certify(
     max_cluster_fraction: float = DEFAULT_MAX_CLUSTER_FRACTION,
     solver: str = DEFAULT_SOLVER,
     both_signs: bool = True,
+    self_stress_test: bool = True,
     progress: Any = None,
 ) -> JammingCertificate:
     """Classify a packing in the jamming hierarchy (see module docstring).
@@ -408,6 +417,15 @@ def certify(
         Solve every load with both signs (Donev et al.). ``False`` is an ablation
         for benchmarks only: a motion confined to a pointed cone is then missed
         whenever the load points into its polar cone.
+    self_stress_test : bool
+        With exact contacts (``rhs="zero"``), decide a backbone without the large
+        motion LPs when the Roth-Whiteley test is clear
+        (:func:`jamflow.network.rigid_network`: full rank after pinning one
+        particle and a strictly positive self stress, so every cone LP would return
+        no motion): collectively jammed; with ``strict``, the strain columns are
+        decided by :func:`jamflow.network.strain_motion` (a kernel of ``[R E]``, or
+        an LP with one row per self stress), which also gives the unjamming motion.
+        Unclear cases and ``False`` run the motion LPs.
     progress : tqdm-like, optional
         Object with ``update(n)``; advanced once per LP.
 
@@ -443,7 +461,8 @@ def certify(
     motion = motion_strain = None
     motion_stage = ""
     params = {"strict": strict, "gap_tol": gap_tol, "rhs": rhs, "loads": loads, "seed": seed,
-                  "max_cluster_fraction": max_cluster_fraction, "solver": solver, "both_signs": both_signs}
+                  "max_cluster_fraction": max_cluster_fraction, "solver": solver, "both_signs": both_signs,
+              "self_stress_test": self_stress_test}
 
     def record(kind: str, rhs_kind: str, k: int, s: int, status: str, obj: float, t: float, it: int,
                size: float) -> None:
@@ -464,6 +483,7 @@ def certify(
 
     collective_jammed = strictly_jammed = False
     strict_motion = None
+    decisions = 0
     basis = strain_basis(d, volume_preserving=True)
     while True:
         new = prune_rattlers(contacts, n, dofs_per_body=d, active=active)
@@ -488,6 +508,27 @@ def certify(
         # the best-connected particle is pinned (removes the translations)
         p = _pin(contacts[sel], idx, n)
         found = strict_motion = None
+        free = np.ones(n_disp, dtype=bool)
+        free[d * p:d * p + d] = False
+        rigid = None
+        if self_stress_test and rhs == "zero":
+            # a soft packing's contact forces are (to its force tolerance) a positive self stress
+            guess = packing.force[sel] if packing.force is not None and gap_tol is None else None
+            rigid = rigid_network(R_fixed_box[:, free], seed, guess)
+        if rigid is not None:
+            verdict = "rigid"
+            if strict:
+                strain_cols = contact_jacobian(cs.select(sel), n, d, strain="traceless", bodies=idx)[:, n_disp:] / unit
+                verdict, z = strain_motion(rigid, R_fixed_box[:, free], strain_cols)
+                if verdict == "motion":
+                    strict_motion = _full_motion(z, free, d)
+                    if np.abs(strict_motion[1]).max() <= CERTIFY_MOTION_TOL:
+                        verdict, strict_motion = "unclear", None
+            if verdict != "unclear":
+                decisions += 1
+                collective_jammed = True
+                strictly_jammed = strict and verdict == "rigid"
+                break
         if strict:
             # strain LP first: without a motion there, none exists at fixed box either
             R = contact_jacobian(cs.select(sel), n, d, strain="traceless", bodies=idx)
@@ -554,6 +595,7 @@ def certify(
         cage_at_bound=sum(srch.cage_at_bound for srch in searches),
         lp=records,
         parameters=params,
+        self_stress_decisions=decisions,
     )
 
 
@@ -570,6 +612,15 @@ def _local_rows(R: sp.csr_matrix, first: NDArray[np.int64], idx: NDArray[np.int6
     nc = R.shape[0]
     rows = np.where(coo.col // d == col_of[first][coo.row], coo.row, coo.row + nc)
     return sp.csr_matrix((coo.data, (rows, coo.col)), shape=(2 * nc, R.shape[1]))
+
+
+def _full_motion(z: NDArray[np.float64], free: NDArray[np.bool_],
+                 d: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(y_free, e)`` to (relative displacements (Ns, d), strain coordinates), as :class:`_Search` returns them."""
+    y = np.zeros(len(free))
+    y[free] = z[:free.sum()]
+    y = y.reshape(-1, d)
+    return y - np.median(y, axis=0), z[free.sum():]
 
 
 def _pin(contacts: NDArray[np.int64], idx: NDArray[np.int64], n: int) -> int:
@@ -646,6 +697,7 @@ def certificate_to_dataset(cert: JammingCertificate, packing: Packing, parameter
         lp_time_total=float(sum(r.time for r in recs)),
         cage=cert.cage,
         cage_at_bound=cert.cage_at_bound,
+        n_self_stress_decisions=cert.self_stress_decisions,
         packing_protocol=packing.protocol,
     )
     return xr.Dataset(data_vars=data_vars, attrs=attrs)

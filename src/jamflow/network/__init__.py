@@ -10,16 +10,24 @@ this package (``docs/network.md``):
 - :mod:`.counting`: :func:`prune_rattlers`, :func:`find_sliders`,
   :func:`isostatic_count`, :func:`rigidity_counting`;
 - :mod:`.self_stress`: :func:`self_stresses`, :func:`positive_self_stress`,
-  :func:`jacobian_rank`.
+  :func:`jacobian_rank`, :func:`rigid_network` and :func:`strain_motion` (Roth-Whiteley).
 """
 
 from .contacts import ContactSet, sphere_contacts
 from .counting import find_sliders, isostatic_count, prune_rattlers, rigidity_counting
 from .jacobian import contact_jacobian, link_jacobian, n_strain, strain_basis
-from .self_stress import jacobian_rank, positive_self_stress, self_stresses
+from .self_stress import (
+    RigidNetwork,
+    jacobian_rank,
+    positive_self_stress,
+    rigid_network,
+    self_stresses,
+    strain_motion,
+)
 
 __all__ = [
     "ContactSet",
+    "RigidNetwork",
     "contact_jacobian",
     "find_sliders",
     "isostatic_count",
@@ -28,8 +36,10 @@ __all__ = [
     "n_strain",
     "positive_self_stress",
     "prune_rattlers",
+    "rigid_network",
     "rigidity_counting",
     "self_stresses",
     "sphere_contacts",
     "strain_basis",
+    "strain_motion",
 ]
