@@ -14,6 +14,8 @@ Inputs (all in ``tests/data`` or built from seeds): the 2D LS packing N = 64, th
 a 12 x 8 triangular lattice, and 16 bidisperse discs compressed to jamming.
 
 Run: ``python benchmarks/network_bitwise.py --write before.json`` (about a minute).
+Since the certificate decides exact-contact backbones by the Roth-Whiteley test
+(fewer LP records, a constructed motion), compare its LP path with ``--lp-only``.
 """
 
 from __future__ import annotations
@@ -57,8 +59,12 @@ def _sparse(R) -> str:
     return _h(R.data, R.indices, R.indptr, R.shape[0], R.shape[1])
 
 
+#: extra keyword arguments of every certify call (``--lp-only``: the LP path alone)
+CERTIFY_OPTIONS: dict = {}
+
+
 def _cert(p, **kw) -> str:
-    c = certify(p, **kw)
+    c = certify(p, **kw, **CERTIFY_OPTIONS)
     return _h(c.classification, c.contacts, c.gap, c.rattler_stage, c.motion, c.motion_strain, c.cage,
               np.array([r.objective for r in c.lp]), np.array([r.max_displacement for r in c.lp]),
               np.array([r.iterations for r in c.lp]))
@@ -88,7 +94,7 @@ def fingerprints() -> dict[str, str]:
         out[f"{name}/certify_strict"] = _cert(p, strict=True, gap_tol=gap_tol, rhs="zero", loads=1, seed=0)
         if gap_tol is not None:
             out[f"{name}/certify_gaps"] = _cert(p, strict=True, gap_tol=gap_tol, rhs="gaps", loads=1, seed=1)
-        cert = certify(p, gap_tol=gap_tol, loads=1, seed=0)
+        cert = certify(p, gap_tol=gap_tol, loads=1, seed=0, **CERTIFY_OPTIONS)
         bc = cert.backbone_contacts
         out[f"{name}/rigidity"] = _sparse(rigidity_matrix(p, bc))
         out[f"{name}/rigidity_strain"] = _sparse(rigidity_matrix(p, bc, strain=True, volume_preserving=False))
@@ -131,7 +137,11 @@ def main() -> int:
     g = ap.add_mutually_exclusive_group(required=True)
     g.add_argument("--write", type=Path, help="write the fingerprints to this JSON file")
     g.add_argument("--compare", type=Path, help="compare with fingerprints written earlier")
+    ap.add_argument("--lp-only", action="store_true",
+                    help="certify with self_stress_test=False (the LP path of the code before the Roth-Whiteley test)")
     args = ap.parse_args()
+    if args.lp_only:
+        CERTIFY_OPTIONS["self_stress_test"] = False
     fp = fingerprints()
     for k, v in fp.items():
         print(f"{k:32s} {v}")
