@@ -47,11 +47,19 @@ import xarray as xr
 from numpy.typing import NDArray
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
-from .analysis.contacts import find_rattlers, isostatic_count, require_plain_spheres
+from .analysis.contacts import isostatic_count, require_plain_spheres
 from .highs import new_highs
 from .io import new_dataset_attrs
+from .network import (
+    ContactSet,
+    contact_jacobian,
+    prune_rattlers,
+    rigid_network,
+    sphere_contacts,
+    strain_basis,
+    strain_motion,
+)
 from .packing import Packing, near_pairs
-from .rigidity import contact_geometry, rigidity_matrix, strain_basis
 from .tolerances import CERTIFY_BOUND_TOL, CERTIFY_MOTION_TOL, CONTACT_GAP_TOL
 
 __all__ = [
@@ -82,7 +90,10 @@ DEFAULT_LOADS: int = 2
 #: (``benchmarks/certify.py``): 6.9 s against 15.1 s at N = 1024, and the simplex's
 #: cold first solve at N = 4096 was stopped after 14 min (interior point: 552 s for
 #: the whole certificate). When interior point fails
-#: (status not optimal) the LP falls back to the simplex and stays there.
+#: (status not optimal) the LP falls back to the simplex and stays there. On a
+#: jammed network the cone LP's feasible set is the point y = 0 (no interior), which
+#: is what makes every LP method slow; exact-contact backbones that pass the
+#: Roth-Whiteley test skip these LPs (``self_stress_test``, ``benchmarks/certify_speed.py``).
 DEFAULT_SOLVER: str = "ipm"
 
 _DUAL, _PRIMAL = 1, 4  # HiGHS simplex_strategy values
@@ -140,6 +151,8 @@ class JammingCertificate:
         cone is trivial (the cage is then at least one mean diameter).
     lp : list of LPRecord
     parameters : dict
+    self_stress_decisions : int
+        Backbones decided without LPs by the Roth-Whiteley test (see :func:`certify`).
     """
 
     classification: str
@@ -155,6 +168,7 @@ class JammingCertificate:
     cage_at_bound: int
     lp: list[LPRecord] = field(default_factory=list)
     parameters: dict[str, Any] = field(default_factory=dict)
+    self_stress_decisions: int = 0
 
     @property
     def rattler(self) -> NDArray[np.bool_]:
@@ -254,19 +268,13 @@ def _network(packing: Packing, gap_tol: float | None) -> tuple[NDArray[np.int64]
     """Contacts (explicit, else gap <= gap_tol) and their relative gaps."""
     if gap_tol is None and packing.contacts is not None:
         c = packing.contacts
-        _, r = contact_geometry(packing, c)
+        r = np.linalg.norm(sphere_contacts(packing.position, packing.box, c).separation, axis=1)
         return c, r / packing.sigma(c[:, 0], c[:, 1]) - 1.0
     tol = CONTACT_GAP_TOL if gap_tol is None else float(gap_tol)
     if not np.isfinite(tol):
         raise ValueError(f"gap tolerance must be finite, got {gap_tol}")
     pairs, h = near_pairs(packing, tol)
     return np.stack([pairs.i, pairs.j], axis=1), h
-
-
-def _prune_coordination(d: int, active: NDArray[np.bool_], contacts: NDArray[np.int64]) -> NDArray[np.bool_]:
-    """Active particles with fewer than ``d + 1`` contacts among active particles (iterated)."""
-    keep = active[contacts[:, 0]] & active[contacts[:, 1]]
-    return find_rattlers(len(active), d, contacts[keep]) & active
 
 
 def _moving_clusters(
@@ -375,6 +383,7 @@ def certify(
     max_cluster_fraction: float = DEFAULT_MAX_CLUSTER_FRACTION,
     solver: str = DEFAULT_SOLVER,
     both_signs: bool = True,
+    self_stress_test: bool = True,
     progress: Any = None,
 ) -> JammingCertificate:
     """Classify a packing in the jamming hierarchy (see module docstring).
@@ -408,6 +417,15 @@ def certify(
         Solve every load with both signs (Donev et al.). ``False`` is an ablation
         for benchmarks only: a motion confined to a pointed cone is then missed
         whenever the load points into its polar cone.
+    self_stress_test : bool
+        With exact contacts (``rhs="zero"``), decide a backbone without the large
+        motion LPs when the Roth-Whiteley test is clear
+        (:func:`jamflow.network.rigid_network`: full rank after pinning one
+        particle and a strictly positive self stress, so every cone LP would return
+        no motion): collectively jammed; with ``strict``, the strain columns are
+        decided by :func:`jamflow.network.strain_motion` (a kernel of ``[R E]``, or
+        an LP with one row per self stress), which also gives the unjamming motion.
+        Unclear cases and ``False`` run the motion LPs.
     progress : tqdm-like, optional
         Object with ``update(n)``; advanced once per LP.
 
@@ -427,10 +445,12 @@ def certify(
     unit = float(np.mean(packing.diameter))
     contacts, gap = _network(packing, gap_tol)
     if len(contacts):
-        unit_vec, dist = contact_geometry(packing, contacts)
+        cs = sphere_contacts(packing.position, packing.box, contacts)
+        unit_vec, dist = cs.normal, np.linalg.norm(cs.separation, axis=1)
         g_abs = np.maximum(gap, 0.0) * packing.sigma(contacts[:, 0], contacts[:, 1])
     else:
-        unit_vec, dist, g_abs = np.zeros((0, d)), np.zeros(0), np.zeros(0)
+        cs = ContactSet(contacts[:, 0], contacts[:, 1], np.zeros((0, d)), np.zeros((0, d)))
+        unit_vec, dist, g_abs = cs.normal, np.zeros(0), np.zeros(0)
     dx = unit_vec * dist[:, None]
     g = g_abs / unit
     rng = np.random.default_rng(seed)
@@ -441,7 +461,8 @@ def certify(
     motion = motion_strain = None
     motion_stage = ""
     params = {"strict": strict, "gap_tol": gap_tol, "rhs": rhs, "loads": loads, "seed": seed,
-                  "max_cluster_fraction": max_cluster_fraction, "solver": solver, "both_signs": both_signs}
+                  "max_cluster_fraction": max_cluster_fraction, "solver": solver, "both_signs": both_signs,
+              "self_stress_test": self_stress_test}
 
     def record(kind: str, rhs_kind: str, k: int, s: int, status: str, obj: float, t: float, it: int,
                size: float) -> None:
@@ -462,9 +483,10 @@ def certify(
 
     collective_jammed = strictly_jammed = False
     strict_motion = None
+    decisions = 0
     basis = strain_basis(d, volume_preserving=True)
     while True:
-        new = _prune_coordination(d, active, contacts)
+        new = prune_rattlers(contacts, n, dofs_per_body=d, active=active)
         stage[new] = RATTLER_STAGES.index("coordination")
         active &= ~new
         if not active.any():
@@ -474,7 +496,8 @@ def certify(
         n_disp = d * len(idx)
 
         # local jamming: every contact end constrains one particle, the other held fixed
-        A_local = _local_matrix(packing, contacts[sel], unit_vec[sel], idx)
+        R_fixed_box = contact_jacobian(cs.select(sel), n, d, bodies=idx)
+        A_local = _local_rows(R_fixed_box, contacts[sel, 0], idx, n, d)
         found = search("local", A_local, np.concatenate([g[sel], g[sel]]), np.ones(n_disp), n_disp, "simplex")
         if found is not None:
             moved = np.linalg.norm(found[0], axis=1) > CERTIFY_MOTION_TOL
@@ -485,9 +508,30 @@ def certify(
         # the best-connected particle is pinned (removes the translations)
         p = _pin(contacts[sel], idx, n)
         found = strict_motion = None
+        free = np.ones(n_disp, dtype=bool)
+        free[d * p:d * p + d] = False
+        rigid = None
+        if self_stress_test and rhs == "zero":
+            # a soft packing's contact forces are (to its force tolerance) a positive self stress
+            guess = packing.force[sel] if packing.force is not None and gap_tol is None else None
+            rigid = rigid_network(R_fixed_box[:, free], seed, guess)
+        if rigid is not None:
+            verdict = "rigid"
+            if strict:
+                strain_cols = contact_jacobian(cs.select(sel), n, d, strain="traceless", bodies=idx)[:, n_disp:] / unit
+                verdict, z = strain_motion(rigid, R_fixed_box[:, free], strain_cols)
+                if verdict == "motion":
+                    strict_motion = _full_motion(z, free, d)
+                    if np.abs(strict_motion[1]).max() <= CERTIFY_MOTION_TOL:
+                        verdict, strict_motion = "unclear", None
+            if verdict != "unclear":
+                decisions += 1
+                collective_jammed = True
+                strictly_jammed = strict and verdict == "rigid"
+                break
         if strict:
             # strain LP first: without a motion there, none exists at fixed box either
-            R = rigidity_matrix(packing, contacts[sel], strain=True, volume_preserving=True, particles=idx)
+            R = contact_jacobian(cs.select(sel), n, d, strain="traceless", bodies=idx)
             # strain columns carry |r| [length]; per mean diameter like the displacements
             scale = np.ones(R.shape[1])
             scale[n_disp:] = 1.0 / unit
@@ -502,7 +546,7 @@ def certify(
                 # the motion needs the strain: the fixed-box test decides the rest
                 strict_motion, found = found, None
         if found is None:
-            R = rigidity_matrix(packing, contacts[sel], particles=idx)
+            R = R_fixed_box
             upper = np.ones(n_disp)
             upper[d * p:d * p + d] = 0.0
             found = search("collective", R, g[sel], upper, n_disp, solver)
@@ -551,22 +595,32 @@ def certify(
         cage_at_bound=sum(srch.cage_at_bound for srch in searches),
         lp=records,
         parameters=params,
+        self_stress_decisions=decisions,
     )
 
 
-def _local_matrix(packing: Packing, contacts: NDArray[np.int64], unit_vec: NDArray[np.float64],
-                  idx: NDArray[np.int64]) -> sp.csr_matrix:
-    """Rows ``-n . y_i`` then ``+n . y_j``: each contact seen from one particle, the other fixed."""
-    d = packing.d
-    col_of = np.full(packing.n, -1, dtype=np.int64)
+def _local_rows(R: sp.csr_matrix, first: NDArray[np.int64], idx: NDArray[np.int64], n: int,
+                d: int) -> sp.csr_matrix:
+    """Rows of the rigidity matrix split per end, shape (2 Nc, d Ns): ``-n . y_i`` then ``+n . y_j``.
+
+    Each contact seen from one particle, the other held fixed (the local LP);
+    ``first`` is the particle ``i`` of every row, ``idx`` the column particles.
+    """
+    col_of = np.full(n, -1, dtype=np.int64)
     col_of[idx] = np.arange(len(idx))
-    nc = len(contacts)
-    axis = np.arange(d)
-    rows = np.repeat(np.arange(2 * nc), d)
-    cols = np.concatenate([d * col_of[contacts[:, 0]][:, None] + axis,
-                           d * col_of[contacts[:, 1]][:, None] + axis]).ravel()
-    vals = np.concatenate([-unit_vec, unit_vec]).ravel()
-    return sp.csr_matrix((vals, (rows, cols)), shape=(2 * nc, d * len(idx)))
+    coo = R.tocoo()
+    nc = R.shape[0]
+    rows = np.where(coo.col // d == col_of[first][coo.row], coo.row, coo.row + nc)
+    return sp.csr_matrix((coo.data, (rows, coo.col)), shape=(2 * nc, R.shape[1]))
+
+
+def _full_motion(z: NDArray[np.float64], free: NDArray[np.bool_],
+                 d: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(y_free, e)`` to (relative displacements (Ns, d), strain coordinates), as :class:`_Search` returns them."""
+    y = np.zeros(len(free))
+    y[free] = z[:free.sum()]
+    y = y.reshape(-1, d)
+    return y - np.median(y, axis=0), z[free.sum():]
 
 
 def _pin(contacts: NDArray[np.int64], idx: NDArray[np.int64], n: int) -> int:
@@ -643,6 +697,7 @@ def certificate_to_dataset(cert: JammingCertificate, packing: Packing, parameter
         lp_time_total=float(sum(r.time for r in recs)),
         cage=cert.cage,
         cage_at_bound=cert.cage_at_bound,
+        n_self_stress_decisions=cert.self_stress_decisions,
         packing_protocol=packing.protocol,
     )
     return xr.Dataset(data_vars=data_vars, attrs=attrs)

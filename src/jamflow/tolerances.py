@@ -45,6 +45,18 @@ CONTACT_DRIFT_TOL: float = 1e-7
 #: tolerance of 1e-9, so genuine unjamming motions are O(1) and noise is <~1e-8.
 CERTIFY_MOTION_TOL: float = 1e-6
 
+#: Roth-Whiteley decision of the certificate (:func:`jamflow.network.rigid_network`):
+#: the Jacobian of an isostatic network counts as having full column rank when the
+#: smallest pivot of the sparse LU of ``J^T J`` exceeds this fraction of the largest.
+#: A floppy mode leaves a pivot at round-off (~1e-16 relative); a rigid but
+#: ill-conditioned network (condition number of J above ~1e6) falls back to the LPs.
+RIGID_PIVOT_RTOL: float = 1e-12
+
+#: Roth-Whiteley decision: the self stress counts as strictly positive when its
+#: smallest entry exceeds this fraction of its largest (and its residual
+#: ``|J^T lambda| / (|J|_1 |lambda|)`` is below the same number); closer calls go to the LPs.
+SELF_STRESS_POSITIVE_RTOL: float = 1e-8
+
 #: Gap-aware jamming certificate: an LP solution whose largest coordinate is within
 #: this (relative) distance of the displacement bound of one mean diameter counts as
 #: reaching the bound, i.e. as a possible unjamming motion to be checked exactly.

@@ -44,6 +44,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         f"of the backbone (default {DEFAULT_MAX_CLUSTER_FRACTION})")
     p.add_argument("--solver", choices=["ipm", "simplex", "choose"], default=DEFAULT_SOLVER,
                    help=f"HiGHS algorithm for the collective and strict LPs (default {DEFAULT_SOLVER})")
+    p.add_argument("--lp-only", action="store_true",
+                   help="decide every backbone by the motion LPs (default: a clear Roth-Whiteley test, "
+                        "full rank and a positive self stress, decides exact-contact backbones without them)")
     add_overlap_option(p)
     add_quiet(p)
     add_preset(p)
@@ -63,9 +66,11 @@ def _certify(args: argparse.Namespace) -> int:
             seed=args.seed,
             max_cluster_fraction=args.max_cluster_fraction,
             solver=args.solver,
+            self_stress_test=not args.lp_only,
             progress=bar,
         )
     write_dataset(certificate_to_dataset(cert, packing, stage_parameters(args, "packing", "out")), args.out)
     print_summary(args, args.out, [("classification", cert.classification),
-                                   ("rattlers", int(cert.rattler.sum())), ("LPs", len(cert.lp))])
+                                   ("rattlers", int(cert.rattler.sum())), ("LPs", len(cert.lp)),
+                                   ("self-stress decisions", cert.self_stress_decisions)])
     return 0
