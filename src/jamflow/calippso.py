@@ -94,6 +94,22 @@ The cutoff is ``cutoff`` (1.7 largest diameters) far from jamming and
 ``cutoff_near`` (1.4) in the last phase; rows are kept from LP to LP (which lets the
 dual simplex start from the previous basis) while the particles moved little.
 
+Newton finish
+-------------
+In the tail the chain fine-tunes positions of a network that no longer changes. With
+``finish="newton"`` (default), after every accepted LP with ``sqrt(Gamma*) - 1 <=``
+:data:`NEWTON_FROM` whose network is isostatic, the square system "every backbone
+contact touches, one inflation factor" (the network rows of the LP as equalities over
+the stable particles' coordinates and ``g``; the LP's basis matrix) is solved by
+Newton's method with a sparse LU (:func:`_newton_finish`). The result is kept only
+under a certificate that it is the LP chain's limit: the forces of the transposed
+system are all positive, no pair overlaps beyond :data:`~jamflow.tolerances.OVERLAP_TOL`
+and the geometric network has the same backbone; then ``s = 0, Gamma = 1`` solves the
+next LP. Otherwise the chain goes on with LPs. The finish is one history entry with
+solver ``newton``; attributes ``finish``, ``n_lps``, ``newton_attempts``,
+``newton_rejections``, ``newton_last_rejection`` and ``newton_time`` [s, all
+attempts] say what happened.
+
 Robustness
 ----------
 After each LP: a status other than optimal (e.g. an LP without bounds that HiGHS
@@ -126,6 +142,7 @@ from typing import Any
 import highspy
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg as sla
 import xarray as xr
 from numpy.typing import NDArray
 
@@ -258,6 +275,25 @@ STALL_WINDOW: int = 100
 STALL_PROGRESS: float = 0.5
 MAX_STALL_RECOVERIES: int = 3
 
+#: How a chain ends. ``newton``: once an LP in the tail (``sqrt(Gamma*) - 1 <=
+#: NEWTON_FROM``) gives an isostatic network (see :func:`_newton_ready`), the square system of that network is solved by Newton's method and certified
+#: (:func:`_newton_finish`); a rejected finish leaves the chain to the LPs. ``lp``: the
+#: pure LP chain of the paper.
+FINISHES: tuple[str, ...] = ("newton", "lp")
+DEFAULT_FINISH: str = "newton"
+
+#: Newton finish: tried from this ``sqrt(Gamma*) - 1`` down (the hybrid solver's tail).
+NEWTON_FROM: float = 1e-5
+
+#: Newton finish: largest number of steps (it converges quadratically: from
+#: ``sqrt(Gamma*) - 1 ~ 1e-7`` three steps reach round-off).
+NEWTON_MAX_STEPS: int = 8
+
+#: Newton finish: a step moving a stable particle by more than this [mean diameters]
+#: (the tightest default bound) means the network is not the one of a nearby jammed
+#: packing: rejected.
+NEWTON_MAX_MOVE: float = 5e-3
+
 #: Default largest number of LPs.
 DEFAULT_MAX_ITERATIONS: int = 1000
 
@@ -307,6 +343,7 @@ class IterationRecord:
     warm_start: bool = False  # simplex started from the previous LP's basis
     simplex_iterations: int = 0  # simplex pivots, crossover pivots included
     ipm_iterations: int = 0
+    newton_steps: int = 0  # Newton steps of a certified finish (its own record, solver "newton")
 
 
 @dataclass(frozen=True)
@@ -755,6 +792,7 @@ class _Options:
     bound: tuple[tuple[float, float], ...]
     relax: float | None
     require_isostatic: bool
+    finish: str
 
 
 @dataclass
@@ -778,6 +816,9 @@ class _Chain:
     unbounded_next: bool = False
     stalls: int = 0
     stall_from: int = 0  # records before this index are not compared by the stall test
+    backbone_key: bytes | None = None  # backbone rows of the last accepted LP
+    newton_tried: bytes | None = None  # backbone of the last rejected Newton finish
+    newton: list[NewtonFinish] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -973,6 +1014,167 @@ def _final_recovery(chain: _Chain) -> None:
     chain.rows = None
 
 
+# --- the Newton finish ----------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class NewtonFinish:
+    """Outcome of one Newton finish attempt (:func:`_newton_finish`).
+
+    Attributes
+    ----------
+    certified : bool
+        The square system converged and its certificate holds: every network force
+        positive, no overlap beyond ``OVERLAP_TOL``, and the geometric network (gaps
+        at most ``CONTACT_GAP_TOL``) has the same backbone and rattlers.
+    reason : str
+        Why it was rejected ("ok" when certified).
+    steps : int
+        Newton steps taken.
+    seconds : float
+        Wall time [s].
+    min_dual : float
+        Smallest network dual over the largest (NaN when not reached).
+    """
+
+    certified: bool
+    reason: str
+    steps: int
+    seconds: float
+    min_dual: float = np.nan
+
+
+def _network_rows(step: _Step, lp: _LPSetup) -> _Rows:
+    """The backbone rows of an LP's active set (pairs of stable particles, stable wall rows)."""
+    rows = lp.rows
+    P = rows.n_pairs
+    stable = ~step.rattler
+    pa = step.active[:P] & stable[rows.i] & stable[rows.j]
+    wa = step.active[P:] & stable[rows.wall_particle]
+    return _Rows(rows.i[pa], rows.j[pa], rows.wall_particle[wa], rows.wall_face[wa], rows.x_build, rows.cutoff)
+
+
+def _square_columns(stable: NDArray[np.bool_], anchor: int, d: int) -> NDArray[np.int64]:
+    """Columns of the square system: the stable particles' coordinates (without the
+    anchor's in a periodic box) and ``g`` (column ``d N``)."""
+    keep = stable.copy()
+    if anchor >= 0:
+        keep[anchor] = False
+    cols = (np.flatnonzero(keep)[:, None] * d + np.arange(d)).ravel()
+    return np.append(cols, d * len(stable))
+
+
+def _newton_finish(chain: _Chain, step: _Step, lp: _LPSetup, opt: _Options, container: _Container,
+                   packing: Packing) -> tuple[NewtonFinish, NDArray[np.float64], NDArray[np.float64], _Network | None]:
+    """Solve the isostatic network's square system by Newton's method and certify it.
+
+    The unknowns are the stable particles' displacements (the anchor fixed in a
+    periodic box) and ``g = Gamma - 1``; the equations say that every backbone contact
+    of the LP's network touches after the update ``r <- r + s``, ``sigma <- sqrt(Gamma)
+    sigma``. Linearised, they are the network rows of the jamming LP as equalities, so
+    each Newton step solves ``B z = rhs`` with ``B`` the LP's basis matrix (sparse LU,
+    COLAMD ordering) and updates like an LP of the chain. Steps stop when one satisfies
+    the chain's convergence test (``sqrt(Gamma) - 1 < tol_gamma``, ``max |s| <
+    tol_s``), within :data:`NEWTON_MAX_STEPS` steps each moving no particle by more
+    than :data:`NEWTON_MAX_MOVE`.
+
+    Certificate that the result is the LP chain's limit: the forces
+    ``mu = B^-T e_g`` (paper Eqs. 9, 11: the dual basic solution of the LP at ``s = 0``)
+    are all above ``CONTACT_DUAL_REL_TOL`` of the largest, and no pair overlaps by more
+    than ``OVERLAP_TOL``; then ``s = 0, Gamma = 1`` is optimal for the next LP (primal
+    feasible, dual feasible, complementary). The geometric network must also have the
+    network's backbone and rattlers (else the final checks would switch to it).
+
+    Returns the attempt, the finished positions and diameters, and the network (None
+    when not certified; then positions and diameters are the chain's, unchanged).
+    """
+    t0 = time.perf_counter()
+    d, n = packing.d, packing.n
+    rows = _network_rows(step, lp)
+    stable = ~step.rattler
+    cols = _square_columns(stable, chain.anchor if container.has_translation else -1, d)
+    x, D = chain.x, chain.D
+
+    def reject(reason: str, steps: int):
+        return NewtonFinish(False, reason, steps, time.perf_counter() - t0), chain.x, chain.D, None
+
+    if len(rows) != len(cols):
+        return reject(f"network has {len(rows)} backbone rows for {len(cols)} unknowns", 0)
+    for k in range(1, NEWTON_MAX_STEPS + 1):
+        unit = float(D.mean())
+        geo = _row_geometry(rows, x, D, container.box)
+        try:
+            lu = sla.splu(_matrix(rows, geo, n, d, unit)[:, cols].tocsc(), permc_spec="COLAMD")
+        except RuntimeError as exc:  # exactly singular basis
+            return reject(f"singular network matrix ({exc})", k)
+        z = lu.solve(geo.rhs)
+        u = np.zeros(n * d)
+        u[cols[:-1]] = z[:-1]
+        u = u.reshape(n, d)
+        g = float(z[-1])
+        ref = u[stable].mean(axis=0) if container.has_translation else np.zeros(d)
+        move = float(np.linalg.norm(u[stable] - ref, axis=1).max())
+        if not (np.isfinite(move) and move <= NEWTON_MAX_MOVE and g > -1.0):
+            return reject(f"Newton step {k} moves a particle by {move:.3g} mean diameters", k)
+        x = container.wrap(x + u * unit)
+        D = D * np.sqrt(1.0 + g)
+        if g / (1.0 + np.sqrt(1.0 + g)) < opt.tol_gamma and move < opt.tol_s:
+            break
+    else:
+        return reject(f"Newton did not converge in {NEWTON_MAX_STEPS} steps", NEWTON_MAX_STEPS)
+    # certificate: forces from the transposed system at the finished configuration
+    geo = _row_geometry(rows, x, D, container.box)
+    B = _matrix(rows, geo, n, d, float(D.mean()))[:, cols].tocsc()
+    e_g = np.zeros(len(cols))
+    e_g[-1] = 1.0
+    mu = sla.splu(B, permc_spec="COLAMD").solve(e_g, trans="T")
+    if not mu.min() > CONTACT_DUAL_REL_TOL * mu.max():
+        return reject(f"{int(np.sum(mu <= CONTACT_DUAL_REL_TOL * mu.max()))} network force(s) not positive", k)
+    p = container.packing(packing, x, D)
+    ov = container.max_overlap(p)
+    if ov > OVERLAP_TOL:
+        return reject(f"overlap {ov:.3g} (relative) > {OVERLAP_TOL:g}", k)
+    P = rows.n_pairs
+    contacts = np.stack([rows.i, rows.j], axis=1)
+    f_pair, f_wall = mu[:P] / geo.sig, mu[P:] / geo.rad
+    resid = _balance_residual(x, container, contacts, f_pair, rows.wall_particle, rows.wall_face, f_wall, d, n)
+    net = _Network(contacts, rows.wall_particle, rows.wall_face, f_pair, f_wall, step.rattler, len(rows),
+                   step.n_s, True, force_balance_residual=float(resid.max(initial=0.0)),
+                   residual_stable=float(resid[stable].max(initial=0.0)))
+    geo_c, geo_wp, geo_wf = container.touching(p)
+    if not _same_backbone(net, geo_c, geo_wp, geo_wf, find_rattlers(n, d, geo_c, geo_wp)):
+        return reject("the geometric network has another backbone", k)
+    return NewtonFinish(True, "ok", k, time.perf_counter() - t0, float(mu.min() / mu.max())), x, D, net
+
+
+def _newton_ready(chain: _Chain, step: _Step, lp: _LPSetup, n: int) -> bool:
+    """Whether to try the Newton finish after this (accepted) LP: in the tail, an
+    isostatic network without force-bearing rattlers, not the backbone of the last
+    rejected finish unless the LP before had it too (a rejection by an overlap, e.g.
+    of a rattler, may not recur closer to jamming)."""
+    stable = ~step.rattler
+    rows = lp.rows
+    on_stable = np.concatenate([stable[rows.i] & stable[rows.j], stable[rows.wall_particle]])
+    key = np.sort(rows.keys(n)[step.active & on_stable]).tobytes()
+    same, chain.backbone_key = key == chain.backbone_key, key
+    return (step.iso and step.sg <= NEWTON_FROM and (same or key != chain.newton_tried)
+            and not np.any(step.active & ~on_stable))
+
+
+def _newton_record(chain: _Chain, container: _Container, net: _Network, attempt: NewtonFinish,
+                   x: NDArray[np.float64], D: NDArray[np.float64], lp: _LPSetup) -> IterationRecord:
+    """The history entry of a certified Newton finish: its total growth and moves."""
+    unit = float(chain.D.mean())
+    s = container.displacement(x - chain.x) / unit
+    stable = ~net.rattler
+    ref = s[stable].mean(axis=0) if container.has_translation else np.zeros(s.shape[1])
+    rel = np.linalg.norm(s - ref, axis=1)
+    return IterationRecord(
+        len(chain.records) + 1, float(D[0] / chain.D[0] - 1.0), float(rel.max()), float(rel[stable].max()),
+        net.n_c, net.n_c, net.n_s, True, "Certified", attempt.seconds, "newton", lp.ell / lp.sig_max, np.inf,
+        attempt.min_dual, np.nan, True, newton_steps=attempt.steps)
+
+
 def _record(chain: _Chain, progress, rec: IterationRecord) -> None:
     chain.records.append(rec)
     if progress:
@@ -994,6 +1196,7 @@ def calippso(
     max_iterations: int = DEFAULT_MAX_ITERATIONS,
     require_isostatic: bool = True,
     threads: int = 1,
+    finish: str = DEFAULT_FINISH,
     progress: Callable[[IterationRecord], None] | None = None,
 ) -> CalippsoResult:
     """Jam ``packing`` by CALiPPSO (Algorithm 1), see the module docstring.
@@ -1034,6 +1237,8 @@ def calippso(
         hyperstatic case; False returns it with ``converged`` and the flags set.
     threads : int
         HiGHS threads.
+    finish : {"newton", "lp"}
+        How the chain ends, see :data:`FINISHES`.
     progress : callable, optional
         Called with each :class:`IterationRecord`.
 
@@ -1055,7 +1260,9 @@ def calippso(
     t_start = time.perf_counter()
     d, n = packing.d, packing.n
     container = _Container(packing.box, walls)
-    opt = _Options(tol_s, tol_gamma, solver, cutoff, cutoff_near, bound, relax, require_isostatic)
+    if finish not in FINISHES:
+        raise ValueError(f"unknown finish {finish!r}; choose one of {', '.join(FINISHES)}")
+    opt = _Options(tol_s, tol_gamma, solver, cutoff, cutoff_near, bound, relax, require_isostatic, finish)
     chain = _Chain(x=packing.position.copy() if walls else packing.box.wrap(packing.position),
                    D=packing.diameter.copy())
     solver_obj = _Solver(threads, solver_tol)
@@ -1086,6 +1293,18 @@ def calippso(
             _recover(chain, f"update overlaps by {ov:.3g} (relative)")
             continue
         _update(chain, step, lp, opt, container, n)
+        if opt.finish == "newton" and _newton_ready(chain, step, lp, n):
+            attempt, x, D, net = _newton_finish(chain, step, lp, opt, container, packing)
+            if attempt.certified:
+                ok, why = _final_checks(packing, x, D, container, net)
+                if ok:
+                    chain.newton.append(attempt)
+                    _record(chain, progress, _newton_record(chain, container, net, attempt, x, D, lp))
+                    chain.x, chain.D, network, converged = x, D, net, True
+                    break
+                attempt = replace(attempt, certified=False, reason=f"final checks: {why}")
+            chain.newton.append(attempt)
+            chain.newton_tried = chain.backbone_key
         if _small(step, opt) and np.isinf(lp.bound):
             network = _dual_network(step, lp, chain.x, container, d, n)
             converged, network.why = _final_checks(packing, chain.x, chain.D, container, network)
@@ -1100,8 +1319,8 @@ def calippso(
         raise RuntimeError(_diagnose(f"not converged in {max_iterations} LPs", chain.records))
     if not converged and require_isostatic:
         raise RuntimeError(_diagnose(f"converged LP failed the final checks: {network.why}", chain.records))
-    return _result(packing, chain.x, chain.D, container, network, chain.records, history, converged, total, dict(
-        tol_s=tol_s, tol_gamma=tol_gamma, solver=solver, solver_tol=solver_tol, cutoff=cutoff, cutoff_near=cutoff_near, bound=[list(b) for b in bound],
+    return _result(packing, chain.x, chain.D, container, network, chain, history, converged, total, dict(
+        finish=finish, tol_s=tol_s, tol_gamma=tol_gamma, solver=solver, solver_tol=solver_tol, cutoff=cutoff, cutoff_near=cutoff_near, bound=[list(b) for b in bound],
         relax=relax, walls=walls, max_iterations=max_iterations, threads=threads))
 
 
@@ -1326,7 +1545,7 @@ def _dual_on(net: _Network, geo_c, geo_wp, geo_wf) -> NDArray[np.float64]:
     return np.array(fp + fw, dtype=np.float64)
 
 
-_COUNTS = ("n_constraints", "n_contacts", "n_stable", "simplex_iterations", "ipm_iterations")
+_COUNTS = ("n_constraints", "n_contacts", "n_stable", "simplex_iterations", "ipm_iterations", "newton_steps")
 
 
 def _history(records: list[IterationRecord]) -> xr.Dataset:
@@ -1342,7 +1561,8 @@ def _history(records: list[IterationRecord]) -> xr.Dataset:
         "n_stable": ("1", "stable (non-rattler) particles"),
         "simplex_iterations": ("1", "simplex pivots of the LP (crossover pivots included)"),
         "ipm_iterations": ("1", "interior point iterations of the LP"),
-        "lp_time": ("s", "LP wall time"),
+        "newton_steps": ("1", "Newton steps of the certified finish (0 for an LP)"),
+        "lp_time": ("s", "LP (or Newton finish) wall time"),
         "cutoff": ("1", "neighbour cutoff [largest diameters]"),
         "bound": ("1", "displacement bound per coordinate [mean diameters]; inf = none"),
         "min_active_dual": ("1", "smallest active dual / largest dual"),
@@ -1368,8 +1588,10 @@ def _diagnose(message: str, records: list[IterationRecord]) -> str:
     return f"CALiPPSO failed: {message} [{info}]"
 
 
-def _result(packing, x, D, container: _Container, net: _Network, records, history, converged, total,
+def _result(packing, x, D, container: _Container, net: _Network, chain: _Chain, history, converged, total,
             settings) -> CalippsoResult:
+    records = chain.records
+    newton = chain.newton
     p = container.packing(packing, x, D)
     ov_rel = container.max_overlap(p)
     n_rattlers = int(net.rattler.sum())
@@ -1402,6 +1624,12 @@ def _result(packing, x, D, container: _Container, net: _Network, records, histor
         + net.force_assignment_note,
         n_zero_force_contacts=int(np.sum(net.f_pair <= 0.0) + np.sum(net.f_wall <= 0.0)),
         boundary="walls" if container.walls else "periodic",
+        finish="newton" if any(a.certified for a in newton) else "lp",
+        n_lps=sum(r.solver != "newton" for r in records),
+        newton_attempts=len(newton),
+        newton_rejections=sum(not a.certified for a in newton),
+        newton_last_rejection=next((a.reason for a in reversed(newton) if not a.certified), "none"),
+        newton_time=float(sum(a.seconds for a in newton)),
         force_unit="CALiPPSO dual scaling (paper Eq. 11): f = lambda sigma_ij [1/length], sum_c f_c sigma_c = 1",
         total_time=total,
         peak_memory=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024.0,
