@@ -37,6 +37,12 @@ Parts (d = 3 monodisperse unless stated):
     --tol-gamma 1e-9``) against the defaults (the paper's tolerances, the
     ``publication`` setting), run alternately side by side on the d = 3 LS example and a
     3D N = 256 random start; the issue asked for at least 1.5x on both, or no preset.
+``finish``
+    The Newton finish against the pure LP chain (``--finish newton`` vs ``--finish lp``)
+    on the whole command, side by side: the d = 3 LS example (N = 1024) and that
+    example tiled 2x1x1 (N = 2048) and 2x2x1 (N = 4096; a near-jamming start without an
+    LS run); LPs, time, the Newton attempts and whether both give the same contacts
+    (Q) and forces (largest difference over the largest force).
 ``relax``
     LP counts with and without the Sec. IV relaxation c = 0.5 (random starts).
 ``tolerances``
@@ -69,6 +75,8 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from jamflow.analysis.contacts import force_balance_residual, summarize
+from jamflow.analysis.overlap import contact_overlap
+from jamflow.box import Box
 from jamflow.calippso import CONTACT_DUAL_REL_TOL, SOLVER_TOL, JammingLP, jamming_lp
 from jamflow.highs import new_highs
 from jamflow.initial import random_packing
@@ -81,7 +89,7 @@ OUT = Path(__file__).resolve().parent / "output"
 #: the CALiPPSO authors' LS examples, vendored with the tests (MIT, licence in its README.md)
 LS = Path(__file__).resolve().parents[1] / "tests" / "data" / "calippso-ls"
 
-PARTS = ("scaling", "ls", "preset", "solvers", "lp", "relax", "tolerances", "large", "factor")
+PARTS = ("scaling", "ls", "preset", "finish", "solvers", "lp", "relax", "tolerances", "large", "factor")
 #: the former ``fast`` preset of ``jamflow calippso`` (dropped: not faster, part ``preset``)
 FORMER_FAST = ("--tol-s", "1e-6", "--tol-gamma", "1e-9")
 #: LS pressure of the near-jamming starts: the paper's Sec. IV value. (At 1e6 the
@@ -143,6 +151,19 @@ def ls_example(d: int) -> Path:
     return path
 
 
+def tiled_ls_example(reps: tuple[int, int, int]) -> Path:
+    """The d = 3 LS example repeated ``reps`` times along the axes of its unit box."""
+    path = OUT / f"calippso_start_authors_d3_tiled{'x'.join(map(str, reps))}.nc"
+    if not path.exists():
+        p = read_packing(ls_example(3))
+        shifts = np.stack(np.meshgrid(*[np.arange(r) for r in reps], indexing="ij"), -1).reshape(-1, 3)
+        x = (p.position[None, :, :] + shifts[:, None, :].astype(float)).reshape(-1, 3)
+        write_packing(Packing(position=x, diameter=np.tile(p.diameter, len(shifts)),
+                              box=Box.orthogonal(np.array(reps, dtype=float)), protocol="import-dat>tile",
+                              parameters={"tiles": list(reps)}), path)
+    return path
+
+
 def table(rows: list[dict[str, float]], dim: str, coords, attrs: dict) -> xr.Dataset:
     units = {"time": "s", "peak_memory": "B", "t_lp": "s"}
     data = {m: ((dim,), np.array([r[m] for r in rows], float), {"units": units.get(m, "1")}) for m in METRICS}
@@ -200,6 +221,37 @@ def part_preset(quick: bool) -> xr.Dataset:
         parts.append(ds.expand_dims(start=[name]).assign(speedup=(("start",), [speedup], {"units": "1"})))
     return xr.concat(parts, "start").assign_attrs(new_dataset_attrs(
         "CALiPPSO: former fast preset against the paper's tolerances", {"quick": quick}))
+
+
+def part_finish(quick: bool, max_n: int) -> xr.Dataset:
+    starts = {1024: ls_example(3), 2048: tiled_ls_example((2, 1, 1)), 4096: tiled_ls_example((2, 2, 1))}
+    sizes = [n for n in starts if n <= (1024 if quick else max_n)]
+    parts = []
+    for n in sizes:
+        rows = []
+        for finish in ("lp", "newton"):
+            print(f"N = {n}: --finish {finish}", flush=True)
+            row = command(starts[n], f"finish_N{n}_{finish}", "--finish", finish)
+            ds = read_dataset(OUT / f"calippso_out_finish_N{n}_{finish}.nc")
+            row.update(newton_attempts=float(ds.attrs["newton_attempts"]), newton_time=float(ds.attrs["newton_time"]),
+                       lps=float(ds.attrs["n_lps"]))
+            rows.append(row)
+        lp, nw = (read_packing(OUT / f"calippso_out_finish_N{n}_{f}.nc") for f in ("lp", "newton"))
+        f_lp = dict(zip(map(tuple, np.sort(lp.contacts, axis=1).tolist()), lp.force))
+        f_nw = dict(zip(map(tuple, np.sort(nw.contacts, axis=1).tolist()), nw.force))
+        q = contact_overlap(nw, lp)[0]
+        df = max(abs(f_nw.get(k, 0.0) - v) for k, v in f_lp.items()) / max(f_lp.values())
+        print(f"   N = {n}: Q = {q:.6f}, max |df| / max f = {df:.2e}, LPs {rows[0]['lps']:.0f} -> {rows[1]['lps']:.0f}, "
+              f"time {rows[0]['time']:.1f} -> {rows[1]['time']:.1f} s (x{rows[0]['time'] / rows[1]['time']:.2f})",
+              flush=True)
+        ds = table(rows, "finish", ["lp", "newton"], {})
+        ds = ds.assign(newton_attempts=(("finish",), [r["newton_attempts"] for r in rows], {"units": "1"}),
+                       newton_time=(("finish",), [r["newton_time"] for r in rows], {"units": "s"}),
+                       contact_overlap=((), q, {"units": "1", "long_name": "Q of the Newton finish against the LP chain"}),
+                       force_difference=((), df, {"units": "1", "long_name": "max |f_newton - f_lp| / max f_lp"}))
+        parts.append(ds.expand_dims(N=[n]))
+    return xr.concat(parts, "N").assign_attrs(new_dataset_attrs(
+        "CALiPPSO: Newton finish against the pure LP chain (d = 3 LS example and tilings)", {"quick": quick}))
 
 
 def part_large(n: int) -> xr.Dataset:
@@ -434,10 +486,12 @@ def main() -> None:
     ap.add_argument("--large-n", type=int, default=16384, help="N of the 'large' part (default 16384)")
     ap.add_argument("--max-random", type=int, default=4096,
                     help="largest N of the random starts in 'scaling' (3D N = 1024 takes ~200 LPs, ~6 min)")
+    ap.add_argument("--max-finish", type=int, default=4096, help="largest N of the 'finish' part (1024, 2048, 4096)")
     args = ap.parse_args()
     OUT.mkdir(exist_ok=True)
     runners = {"scaling": lambda: part_scaling(args.quick, args.max_random), "ls": lambda: part_ls(args.quick),
                "preset": lambda: part_preset(args.quick),
+               "finish": lambda: part_finish(args.quick, args.max_finish),
                "solvers": lambda: part_solvers(args.quick), "lp": lambda: part_lp(args.quick),
                "relax": lambda: part_relax(args.quick),
                "tolerances": lambda: part_tolerances(args.quick),

@@ -239,6 +239,17 @@ HYBRID_SWITCH: float = 1e-5
 #: (89 s), a limit of 1 per row none and 305 LPs (47 s).
 WARM_PIVOTS_PER_ROW: float = 1.0
 
+#: HiGHS interior point methods for the interior point LPs: ``ipx`` (HiGHS's default,
+#: in every highspy wheel) and ``hipo`` (nested-dissection factorisation; needs the
+#: ``hipo`` extra, ``highspy[extras]``, which exists only for highspy <= 1.15.1).
+#: Measured on the first LP of the d = 3 LS example (N = 1024, one thread, side by
+#: side, loaded machine): IPX + crossover 36.7 s, HiPO + crossover 32.0 s, the same
+#: vertex (3004 active duals); the issue's N = 4096 measurement 51.1 s against 49.9 s.
+#: HiPO wins only at N = 16384 (the first LP in ~593 s where IPX did not finish in 58 min),
+#: which is not worth pinning highspy to 1.15.1 for everyone: opt-in.
+INTERIOR_POINTS: tuple[str, ...] = ("ipx", "hipo")
+DEFAULT_INTERIOR: str = "ipx"
+
 #: Methods of the cold re-solves after a converged LP failed its final checks:
 #: interior point with crossover, then the dual simplex.
 FINAL_RECOVERY_METHODS: tuple[str, ...] = ("ipm", "dual")
@@ -668,8 +679,14 @@ class _Solver:
     pay costs about one interior point solve more.
     """
 
-    def __init__(self, threads: int = 1, tol: float = SOLVER_TOL) -> None:
+    def __init__(self, threads: int = 1, tol: float = SOLVER_TOL, interior: str = DEFAULT_INTERIOR) -> None:
         self.h = new_highs(threads)
+        if interior not in INTERIOR_POINTS:
+            raise ValueError(f"unknown interior point {interior!r}; choose one of {', '.join(INTERIOR_POINTS)}")
+        if self.h.setOptionValue("solver", interior) != highspy.HighsStatus.kOk:
+            raise ValueError(f"interior point {interior!r} is not in this highspy build: HiPO needs "
+                             "`pip install 'jamflow[hipo]'` (highspy[extras]==1.15.1, which must match highspy)")
+        self.interior = interior
         for option in ("primal_feasibility_tolerance", "dual_feasibility_tolerance", "ipm_optimality_tolerance"):
             if self.h.setOptionValue(option, tol) != highspy.HighsStatus.kOk:
                 raise ValueError(f"HiGHS refused {option} = {tol:g}")
@@ -750,7 +767,7 @@ class _Solver:
         h = self.h
         h.clearSolver()
         if method in ("ipm", "ipm-nox"):
-            h.setOptionValue("solver", "ipm")
+            h.setOptionValue("solver", self.interior)
             h.setOptionValue("run_crossover", "on" if method == "ipm" else "off")
         else:
             # from a carried basis the primal simplex needs a few pivots where the
@@ -1197,6 +1214,7 @@ def calippso(
     require_isostatic: bool = True,
     threads: int = 1,
     finish: str = DEFAULT_FINISH,
+    interior: str = DEFAULT_INTERIOR,
     progress: Callable[[IterationRecord], None] | None = None,
 ) -> CalippsoResult:
     """Jam ``packing`` by CALiPPSO (Algorithm 1), see the module docstring.
@@ -1239,6 +1257,8 @@ def calippso(
         HiGHS threads.
     finish : {"newton", "lp"}
         How the chain ends, see :data:`FINISHES`.
+    interior : {"ipx", "hipo"}
+        HiGHS interior point method of the interior point LPs, see :data:`INTERIOR_POINTS`.
     progress : callable, optional
         Called with each :class:`IterationRecord`.
 
@@ -1265,7 +1285,7 @@ def calippso(
     opt = _Options(tol_s, tol_gamma, solver, cutoff, cutoff_near, bound, relax, require_isostatic, finish)
     chain = _Chain(x=packing.position.copy() if walls else packing.box.wrap(packing.position),
                    D=packing.diameter.copy())
-    solver_obj = _Solver(threads, solver_tol)
+    solver_obj = _Solver(threads, solver_tol, interior)
     solver_obj.cold_simplex_as_ipm = solver == "hybrid"  # a cold simplex is slower than ipm
     network: _Network | None = None
     converged = False
@@ -1320,7 +1340,7 @@ def calippso(
     if not converged and require_isostatic:
         raise RuntimeError(_diagnose(f"converged LP failed the final checks: {network.why}", chain.records))
     return _result(packing, chain.x, chain.D, container, network, chain, history, converged, total, dict(
-        finish=finish, tol_s=tol_s, tol_gamma=tol_gamma, solver=solver, solver_tol=solver_tol, cutoff=cutoff, cutoff_near=cutoff_near, bound=[list(b) for b in bound],
+        finish=finish, interior=interior, tol_s=tol_s, tol_gamma=tol_gamma, solver=solver, solver_tol=solver_tol, cutoff=cutoff, cutoff_near=cutoff_near, bound=[list(b) for b in bound],
         relax=relax, walls=walls, max_iterations=max_iterations, threads=threads))
 
 

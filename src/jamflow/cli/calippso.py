@@ -10,12 +10,14 @@ from ..calippso import (
     DEFAULT_CUTOFF,
     DEFAULT_CUTOFF_NEAR,
     DEFAULT_FINISH,
+    DEFAULT_INTERIOR,
     DEFAULT_MAX_ITERATIONS,
     DEFAULT_SOLVER,
     DEFAULT_TOL_GAMMA,
     DEFAULT_TOL_S,
     SOLVER_TOL,
     FINISHES,
+    INTERIOR_POINTS,
     SOLVERS,
     calippso,
     result_to_dataset,
@@ -58,6 +60,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-iterations", type=int, default=DEFAULT_MAX_ITERATIONS,
                    help=f"largest number of LPs (default {DEFAULT_MAX_ITERATIONS})")
     p.add_argument("--threads", type=int, default=1, help="HiGHS threads (default 1)")
+    p.add_argument("--interior", choices=INTERIOR_POINTS, default=DEFAULT_INTERIOR,
+                   help="HiGHS interior point method of the interior point LPs; hipo needs "
+                        f"pip install 'jamflow[hipo]' (default {DEFAULT_INTERIOR})")
     p.add_argument("--finish", choices=FINISHES, default=DEFAULT_FINISH,
                    help="newton: once the network is isostatic in the chain's tail, solve its square system by "
                         "Newton and keep it only if certified (positive forces, no overlap, same geometric "
@@ -80,7 +85,7 @@ def _calippso(args: argparse.Namespace) -> int:
         result = calippso(
             packing, tol_s=args.tol_s, tol_gamma=args.tol_gamma, solver=args.solver, solver_tol=args.solver_tol, cutoff=args.cutoff,
             cutoff_near=args.cutoff_near, relax=args.relax, walls=args.walls,
-            max_iterations=args.max_iterations, threads=args.threads, finish=args.finish, progress=progress, **kwargs,
+            max_iterations=args.max_iterations, threads=args.threads, finish=args.finish, interior=args.interior, progress=progress, **kwargs,
         )
     write_dataset(result_to_dataset(result, stage_parameters(args, "packing", "out")), args.out)
     a = result.packing.attrs
