@@ -1,7 +1,7 @@
 """HiGHS interior point choice of CALiPPSO (issue 19): HiPO is opt-in (the ``hipo`` extra).
 
 Without HiPO in the installed highspy, asking for it is a clear error naming the extra;
-with it, the chain must give the same jammed packing as IPX, and every interior point
+with it, the chain must jam (isostatic, balanced, no overlap) and every interior point
 LP (with crossover) must end at a vertex: inactive duals exactly zero, the gap the
 contact detection needs.
 """
@@ -12,12 +12,14 @@ import highspy
 import numpy as np
 import pytest
 
-from jamflow.analysis.overlap import contact_overlap
+from jamflow.analysis.contacts import force_balance_residual, summarize
 from jamflow.calippso import calippso
 from jamflow.cli import main
 from jamflow.highs import new_highs
 from jamflow.initial import random_packing
 from jamflow.io import write_packing
+from jamflow.packing import max_overlap
+from jamflow.tolerances import FORCE_BALANCE_TOL, OVERLAP_TOL
 
 
 def _hipo_available() -> bool:
@@ -29,15 +31,18 @@ def start():
     return random_packing(48, 3, 0.3, "mono", seed=5)
 
 
-def test_hipo_gives_the_ipx_packing_with_vertex_duals_or_a_clear_error(start):
+def test_hipo_jams_with_vertex_duals_or_is_a_clear_error(start):
     if not _hipo_available():
         with pytest.raises(ValueError, match=r"pip install 'jamflow\[hipo\]'"):
             calippso(start, interior="hipo")
         return
-    ref = calippso(start, solver="ipm", finish="lp")
+    # from a random start another optimal vertex of a degenerate early LP leads to another
+    # jammed packing, so the packing is checked, not compared with IPX's
     res = calippso(start, solver="ipm", finish="lp", interior="hipo")
-    assert contact_overlap(res.packing, ref.packing)[0] == 1.0
-    np.testing.assert_allclose(res.packing.packing_fraction, ref.packing.packing_fraction, rtol=1e-12)
+    p = res.packing
+    assert res.converged and summarize(p).isostatic
+    assert force_balance_residual(p)[~p.rattler].max() < FORCE_BALANCE_TOL
+    assert max_overlap(p)[1] < OVERLAP_TOL
     # crossover kept: every LP's inactive duals are exactly zero (a vertex)
     assert np.all(res.history["max_inactive_dual"].values == 0.0)
 
