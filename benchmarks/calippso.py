@@ -439,7 +439,7 @@ def part_factor(quick: bool) -> xr.Dataset:
 
 def plot() -> None:
     found = {p: xr.open_dataset(OUT / f"calippso_{p}.nc") for p in PARTS if (OUT / f"calippso_{p}.nc").exists()}
-    fig, ax = plt.subplots(1, 5, figsize=(22, 4))
+    fig, ax = plt.subplots(1, 6, figsize=(26, 4))
     if "scaling" in found:
         ds = found["scaling"]
         for s, m in (("random", "o"), ("near", "s")):
@@ -473,6 +473,16 @@ def plot() -> None:
         ax[4].loglog(ds["N"], ds["superlu_nd"], "D-", label="SuperLU METIS ND [s]")
         ax[4].loglog(ds["N"], ds["fill"] / ds["nnz"], "^--", label="SuperLU fill nnz(L+U)/nnz")
         ax[4].set_xlabel("N"); ax[4].legend(fontsize=7); ax[4].set_title("warm LP: basis factorisation")
+    if "finish" in found:
+        ds = found["finish"]
+        pos = np.arange(ds.sizes["N"])
+        for k, finish in enumerate(("lp", "newton")):
+            ax[5].bar(pos + (k - 0.5) * 0.4, ds["time"].sel(finish=finish), 0.4, label=f"--finish {finish}")
+            for x, (t, lps) in enumerate(zip(ds["time"].sel(finish=finish).values, ds["lps"].sel(finish=finish).values)):
+                ax[5].annotate(f"{lps:.0f} LPs", (x + (k - 0.5) * 0.4, t), ha="center", fontsize=6)
+        ax[5].set_xticks(pos, [str(int(n)) for n in ds["N"].values])
+        ax[5].set_xlabel("N (d = 3 LS example and tilings)"); ax[5].set_ylabel("time to jam [s]")
+        ax[5].legend(fontsize=7); ax[5].set_title("Newton finish vs LP chain")
     fig.tight_layout()
     fig.savefig(OUT / "calippso.png", dpi=120)
     print(f"wrote {OUT / 'calippso.png'} from parts {', '.join(found)}")
