@@ -39,9 +39,9 @@ Parts (d = 3 monodisperse unless stated):
     3D N = 256 random start; the issue asked for at least 1.5x on both, or no preset.
 ``finish``
     The Newton finish against the pure LP chain (``--finish newton`` vs ``--finish lp``)
-    on the whole command, side by side: the d = 3 LS example (N = 1024) and that
-    example tiled 2x1x1 (N = 2048) and 2x2x1 (N = 4096; a near-jamming start without an
-    LS run); LPs, time, the Newton attempts and whether both give the same contacts
+    on the whole command, side by side: the authors' LS examples (N = 1024, d = 3, 4, 5)
+    and the d = 3 one tiled 2x1x1 (N = 2048) and 2x2x1 (N = 4096; near-jamming starts
+    without an LS run, but the tiling's symmetry can make the packing degenerate); LPs, time, the Newton attempts and whether both give the same contacts
     (Q) and forces (largest difference over the largest force).
 ``relax``
     LP counts with and without the Sec. IV relaxation c = 0.5 (random starts).
@@ -224,39 +224,43 @@ def part_preset(quick: bool) -> xr.Dataset:
 
 
 def part_finish(quick: bool, max_n: int) -> xr.Dataset:
-    starts = {1024: ls_example(3), 2048: tiled_ls_example((2, 1, 1)), 4096: tiled_ls_example((2, 2, 1))}
-    sizes = [n for n in starts if n <= (1024 if quick else max_n)]
+    starts = {"ls_d3": (1024, ls_example(3)), "ls_d4": (1024, ls_example(4)), "ls_d5": (1024, ls_example(5)),
+              "ls_d3_tiled2x1x1": (2048, tiled_ls_example((2, 1, 1))),
+              "ls_d3_tiled2x2x1": (4096, tiled_ls_example((2, 2, 1)))}
+    cases = ["ls_d3"] if quick else [c for c, (n, _) in starts.items() if n <= max_n]
     parts = []
-    for n in sizes:
+    for case in cases:
+        start = starts[case][1]
         rows = []
         for finish in ("lp", "newton"):
-            print(f"N = {n}: --finish {finish}", flush=True)
-            row = command(starts[n], f"finish_N{n}_{finish}", "--finish", finish)
-            ds = read_dataset(OUT / f"calippso_out_finish_N{n}_{finish}.nc")
+            print(f"{case}: --finish {finish}", flush=True)
+            row = command(start, f"finish_{case}_{finish}", "--finish", finish)
+            ds = read_dataset(OUT / f"calippso_out_finish_{case}_{finish}.nc")
             row.update(newton_attempts=float(ds.attrs["newton_attempts"]), newton_time=float(ds.attrs["newton_time"]),
                        lps=float(ds.attrs["n_lps"]))
             rows.append(row)
-        lp, nw = (read_packing(OUT / f"calippso_out_finish_N{n}_{f}.nc") for f in ("lp", "newton"))
+        lp, nw = (read_packing(OUT / f"calippso_out_finish_{case}_{f}.nc") for f in ("lp", "newton"))
         f_lp = dict(zip(map(tuple, np.sort(lp.contacts, axis=1).tolist()), lp.force))
         f_nw = dict(zip(map(tuple, np.sort(nw.contacts, axis=1).tolist()), nw.force))
         q = contact_overlap(nw, lp)[0]
         df = max(abs(f_nw.get(k, 0.0) - v) for k, v in f_lp.items()) / max(f_lp.values())
-        print(f"   N = {n}: Q = {q:.6f}, max |df| / max f = {df:.2e}, LPs {rows[0]['lps']:.0f} -> {rows[1]['lps']:.0f}, "
+        print(f"   {case}: Q = {q:.6f}, max |df| / max f = {df:.2e}, LPs {rows[0]['lps']:.0f} -> {rows[1]['lps']:.0f}, "
               f"time {rows[0]['time']:.1f} -> {rows[1]['time']:.1f} s (x{rows[0]['time'] / rows[1]['time']:.2f})",
               flush=True)
         ds = table(rows, "finish", ["lp", "newton"], {})
         ds = ds.assign(newton_attempts=(("finish",), [r["newton_attempts"] for r in rows], {"units": "1"}),
                        newton_time=(("finish",), [r["newton_time"] for r in rows], {"units": "s"}),
                        contact_overlap=((), q, {"units": "1", "long_name": "Q of the Newton finish against the LP chain"}),
-                       force_difference=((), df, {"units": "1", "long_name": "max |f_newton - f_lp| / max f_lp"}))
-        parts.append(ds.expand_dims(N=[n]))
-    return xr.concat(parts, "N").assign_attrs(new_dataset_attrs(
-        "CALiPPSO: Newton finish against the pure LP chain (d = 3 LS example and tilings)", {"quick": quick}))
+                       force_difference=((), df, {"units": "1", "long_name": "max |f_newton - f_lp| / max f_lp"}),
+                       n=((), lp.n, {"units": "1", "long_name": "number of spheres"}))
+        parts.append(ds.expand_dims(case=[case]))
+    return xr.concat(parts, "case").assign_attrs(new_dataset_attrs(
+        "CALiPPSO: Newton finish against the pure LP chain (the authors' LS examples and tilings)", {"quick": quick}))
 
 
-def part_large(n: int) -> xr.Dataset:
-    print(f"N = {n}, near-jamming start (target 1800 s, 8 GiB)", flush=True)
-    row = command(near_start(n), f"near_N{n}")
+def part_large(n: int, options: tuple[str, ...] = ()) -> xr.Dataset:
+    print(f"N = {n}, near-jamming start (target 1800 s, 8 GiB), options {' '.join(options) or 'none'}", flush=True)
+    row = command(near_start(n), f"near_N{n}", *options)
     return table([row], "N", [n], new_dataset_attrs("CALiPPSO at large N", {"near_pressure": NEAR_PRESSURE}))
 
 
@@ -475,13 +479,13 @@ def plot() -> None:
         ax[4].set_xlabel("N"); ax[4].legend(fontsize=7); ax[4].set_title("warm LP: basis factorisation")
     if "finish" in found:
         ds = found["finish"]
-        pos = np.arange(ds.sizes["N"])
+        pos = np.arange(ds.sizes["case"])
         for k, finish in enumerate(("lp", "newton")):
             ax[5].bar(pos + (k - 0.5) * 0.4, ds["time"].sel(finish=finish), 0.4, label=f"--finish {finish}")
             for x, (t, lps) in enumerate(zip(ds["time"].sel(finish=finish).values, ds["lps"].sel(finish=finish).values)):
                 ax[5].annotate(f"{lps:.0f} LPs", (x + (k - 0.5) * 0.4, t), ha="center", fontsize=6)
-        ax[5].set_xticks(pos, [str(int(n)) for n in ds["N"].values])
-        ax[5].set_xlabel("N (d = 3 LS example and tilings)"); ax[5].set_ylabel("time to jam [s]")
+        ax[5].set_xticks(pos, [str(c).replace("ls_", "") for c in ds["case"].values], fontsize=6)
+        ax[5].set_xlabel("start (authors' LS examples, N = 1024, and tilings)"); ax[5].set_ylabel("time to jam [s]")
         ax[5].legend(fontsize=7); ax[5].set_title("Newton finish vs LP chain")
     fig.tight_layout()
     fig.savefig(OUT / "calippso.png", dpi=120)
@@ -496,7 +500,9 @@ def main() -> None:
     ap.add_argument("--large-n", type=int, default=16384, help="N of the 'large' part (default 16384)")
     ap.add_argument("--max-random", type=int, default=4096,
                     help="largest N of the random starts in 'scaling' (3D N = 1024 takes ~200 LPs, ~6 min)")
-    ap.add_argument("--max-finish", type=int, default=4096, help="largest N of the 'finish' part (1024, 2048, 4096)")
+    ap.add_argument("--large-options", default="",
+                    help="extra jamflow calippso options of the 'large' part, e.g. \"--interior hipo --threads 2\"")
+    ap.add_argument("--max-finish", type=int, default=4096, help="largest N of the 'finish' part (1024: the LS examples; 2048, 4096: tilings)")
     args = ap.parse_args()
     OUT.mkdir(exist_ok=True)
     runners = {"scaling": lambda: part_scaling(args.quick, args.max_random), "ls": lambda: part_ls(args.quick),
@@ -505,7 +511,7 @@ def main() -> None:
                "solvers": lambda: part_solvers(args.quick), "lp": lambda: part_lp(args.quick),
                "relax": lambda: part_relax(args.quick),
                "tolerances": lambda: part_tolerances(args.quick),
-               "large": lambda: part_large(1024 if args.quick else args.large_n),
+               "large": lambda: part_large(1024 if args.quick else args.large_n, tuple(args.large_options.split())),
                "factor": lambda: part_factor(args.quick)}
     for part in args.parts:
         write_dataset(runners[part](), OUT / f"calippso_{part}.nc")
