@@ -835,7 +835,7 @@ class _Chain:
     stall_from: int = 0  # records before this index are not compared by the stall test
     backbone_key: bytes | None = None  # backbone rows of the last accepted LP
     newton_tried: bytes | None = None  # backbone of the last rejected Newton finish
-    newton: list[NewtonFinish] = field(default_factory=list)
+    newton: list[_NewtonAttempt] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -1035,7 +1035,7 @@ def _final_recovery(chain: _Chain) -> None:
 
 
 @dataclass(frozen=True)
-class NewtonFinish:
+class _NewtonAttempt:
     """Outcome of one Newton finish attempt (:func:`_newton_finish`).
 
     Attributes
@@ -1082,7 +1082,7 @@ def _square_columns(stable: NDArray[np.bool_], anchor: int, d: int) -> NDArray[n
 
 
 def _newton_finish(chain: _Chain, step: _Step, lp: _LPSetup, opt: _Options, container: _Container,
-                   packing: Packing) -> tuple[NewtonFinish, NDArray[np.float64], NDArray[np.float64], _Network | None]:
+                   packing: Packing) -> tuple[_NewtonAttempt, NDArray[np.float64], NDArray[np.float64], _Network | None]:
     """Solve the isostatic network's square system by Newton's method and certify it.
 
     The unknowns are the stable particles' displacements (the anchor fixed in a
@@ -1113,7 +1113,7 @@ def _newton_finish(chain: _Chain, step: _Step, lp: _LPSetup, opt: _Options, cont
     x, D = chain.x, chain.D
 
     def reject(reason: str, steps: int):
-        return NewtonFinish(False, reason, steps, time.perf_counter() - t0), chain.x, chain.D, None
+        return _NewtonAttempt(False, reason, steps, time.perf_counter() - t0), chain.x, chain.D, None
 
     if len(rows) != len(cols):
         return reject(f"network has {len(rows)} backbone rows for {len(cols)} unknowns", 0)
@@ -1161,7 +1161,7 @@ def _newton_finish(chain: _Chain, step: _Step, lp: _LPSetup, opt: _Options, cont
     geo_c, geo_wp, geo_wf = container.touching(p)
     if not _same_backbone(net, geo_c, geo_wp, geo_wf, find_rattlers(n, d, geo_c, geo_wp)):
         return reject("the geometric network has another backbone", k)
-    return NewtonFinish(True, "ok", k, time.perf_counter() - t0, float(mu.min() / mu.max())), x, D, net
+    return _NewtonAttempt(True, "ok", k, time.perf_counter() - t0, float(mu.min() / mu.max())), x, D, net
 
 
 def _newton_ready(chain: _Chain, step: _Step, lp: _LPSetup, n: int) -> bool:
@@ -1178,7 +1178,7 @@ def _newton_ready(chain: _Chain, step: _Step, lp: _LPSetup, n: int) -> bool:
             and not np.any(step.active & ~on_stable))
 
 
-def _newton_record(chain: _Chain, container: _Container, net: _Network, attempt: NewtonFinish,
+def _newton_record(chain: _Chain, container: _Container, net: _Network, attempt: _NewtonAttempt,
                    x: NDArray[np.float64], D: NDArray[np.float64], lp: _LPSetup) -> IterationRecord:
     """The history entry of a certified Newton finish: its total growth and moves."""
     unit = float(chain.D.mean())
