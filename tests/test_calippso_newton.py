@@ -24,15 +24,20 @@ from jamflow.tolerances import FORCE_BALANCE_TOL, OVERLAP_TOL
 FORCE_RTOL = 1e-8
 
 
-@pytest.fixture(scope="module", params=[(2, "bi", 3), (3, "mono", 2)], ids=["2d-bi-64", "3d-mono-64"])
+@pytest.fixture(scope="module", params=[(2, "bi", 3, False), (3, "mono", 2, False), (2, "bi", 3, True)],
+                ids=["2d-bi-64", "3d-mono-64", "2d-bi-64-walls"])
 def start(request):
-    d, dispersity, seed = request.param
-    return random_packing(64, d, 0.5 if d == 2 else 0.3, dispersity, seed=seed)
+    d, dispersity, seed, walls = request.param
+    return random_packing(64, d, 0.5 if d == 2 else 0.3, dispersity, seed=seed, walls=walls)
+
+
+def _walls(p) -> bool:
+    return p.attrs.get("boundary") == "walls"
 
 
 @pytest.fixture(scope="module")
 def lp_chain(start):
-    return calippso(start, finish="lp")
+    return calippso(start, finish="lp", walls=_walls(start))
 
 
 def _forces_by_pair(p) -> dict[tuple[int, int], float]:
@@ -46,17 +51,25 @@ def _assert_same_packing(res, ref) -> None:
     np.testing.assert_array_equal(p.rattler, q.rattler)
     fp, fq = _forces_by_pair(p), _forces_by_pair(q)
     assert max(abs(fp[k] - fq[k]) for k in fq) <= FORCE_RTOL * max(fq.values())
-    s = summarize(p)
-    assert s.isostatic and res.converged
-    assert force_balance_residual(p)[~p.rattler].max() < FORCE_BALANCE_TOL
-    assert max_overlap(p)[1] < OVERLAP_TOL
-    assert np.all(p.force > 0)
+    assert res.converged and np.all(p.force > 0)
+    total = float(np.sum(p.force * p.sigma(p.contacts[:, 0], p.contacts[:, 1])))
+    if p.attrs["boundary"] == "walls":
+        # wall contacts: same (particle, face) and forces; N_c = d N_s + 1
+        np.testing.assert_array_equal(res.wall_contacts, ref.wall_contacts)
+        assert np.max(np.abs(res.wall_force - ref.wall_force)) <= FORCE_RTOL * max(fq.values())
+        assert p.attrs["isostatic"] == 1 and p.attrs["n_contacts"] == p.d * int((~p.rattler).sum()) + 1
+        assert p.attrs["max_overlap"] < OVERLAP_TOL and p.attrs["force_balance_residual"] < FORCE_BALANCE_TOL
+        total += float(np.sum(res.wall_force * 0.5 * p.diameter[res.wall_contacts[:, 0]]))
+    else:
+        assert summarize(p).isostatic
+        assert force_balance_residual(p)[~p.rattler].max() < FORCE_BALANCE_TOL
+        assert max_overlap(p)[1] < OVERLAP_TOL
     # duality (paper Eq. 9): sum_c f_c sigma_c = 1
-    assert float(np.sum(p.force * p.sigma(p.contacts[:, 0], p.contacts[:, 1]))) == pytest.approx(1.0, rel=1e-9)
+    assert total == pytest.approx(1.0, rel=1e-9)
 
 
 def test_newton_finish_gives_the_lp_chains_network_and_forces(start, lp_chain):
-    res = calippso(start, finish="newton")
+    res = calippso(start, finish="newton", walls=_walls(start))
     a = res.packing.attrs
     assert a["finish"] == "newton" and lp_chain.packing.attrs["finish"] == "lp"
     _assert_same_packing(res, lp_chain)
@@ -86,7 +99,7 @@ def test_network_with_a_contact_removed_is_rejected_and_the_chain_continues(star
         return cal._Rows(rows.i[1:], rows.j[1:], rows.wall_particle, rows.wall_face, rows.x_build, rows.cutoff)
 
     planted = _plant(monkeypatch, drop_first)
-    res = calippso(start, finish="newton")
+    res = calippso(start, finish="newton", walls=_walls(start))
     assert planted, "no Newton finish was tried"
     a = res.packing.attrs
     assert a["finish"] == "lp" and a["newton_attempts"] == len(planted)
@@ -112,7 +125,7 @@ def test_network_with_a_contact_swapped_for_a_gap_is_rejected(start, lp_chain, m
                          rows.x_build, rows.cutoff)
 
     planted = _plant(monkeypatch, swap_first)
-    res = calippso(start, finish="newton")
+    res = calippso(start, finish="newton", walls=_walls(start))
     assert planted
     a = res.packing.attrs
     assert a["finish"] == "lp" and a["newton_attempts"] == len(planted)

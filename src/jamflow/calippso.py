@@ -305,6 +305,10 @@ NEWTON_MAX_STEPS: int = 8
 #: packing: rejected.
 NEWTON_MAX_MOVE: float = 5e-3
 
+#: Newton finish: sweeps pushing rattlers off the neighbours the finish grew into
+#: (:func:`_free_rattlers`).
+RATTLER_PUSHES: int = 5
+
 #: Default largest number of LPs.
 DEFAULT_MAX_ITERATIONS: int = 1000
 
@@ -1139,6 +1143,7 @@ def _newton_finish(chain: _Chain, step: _Step, lp: _LPSetup, opt: _Options, cont
             break
     else:
         return reject(f"Newton did not converge in {NEWTON_MAX_STEPS} steps", NEWTON_MAX_STEPS)
+    x = _free_rattlers(x, D, step.rattler, container, packing)
     # certificate: forces from the transposed system at the finished configuration
     geo = _row_geometry(rows, x, D, container.box)
     B = _matrix(rows, geo, n, d, float(D.mean()))[:, cols].tocsc()
@@ -1162,6 +1167,36 @@ def _newton_finish(chain: _Chain, step: _Step, lp: _LPSetup, opt: _Options, cont
     if not _same_backbone(net, geo_c, geo_wp, geo_wf, find_rattlers(n, d, geo_c, geo_wp)):
         return reject("the geometric network has another backbone", k)
     return _NewtonAttempt(True, "ok", k, time.perf_counter() - t0, float(mu.min() / mu.max())), x, D, net
+
+
+def _free_rattlers(x: NDArray[np.float64], D: NDArray[np.float64], rattler: NDArray[np.bool_],
+                   container: _Container, packing: Packing) -> NDArray[np.float64]:
+    """Push rattlers off the neighbours the Newton finish grew into.
+
+    The finish moves only the stable particles; a rattler that rested on a neighbour
+    at the last LP (gap ~0, zero dual) overlaps it by about the growth, ~1e-9, where the
+    LP chain's next LP would have moved it. Each overlapping rattler moves away along
+    the pair direction by twice the overlap (a pair of rattlers shares the move), for
+    up to :data:`RATTLER_PUSHES` sweeps; what remains is caught by the certificate's
+    overlap check.
+    """
+    for _ in range(RATTLER_PUSHES):
+        p = container.packing(packing, x, D)
+        pairs, h = near_pairs(p, 0.0)
+        loose = (h < 0.0) & (rattler[pairs.i] | rattler[pairs.j])
+        if container.walls and len(h):  # no periodic images through a wall
+            loose &= _direct(p.position[pairs.j] - p.position[pairs.i], pairs.dx, p.box)
+        if not np.any(loose):
+            break
+        i, j, dx, h = pairs.i[loose], pairs.j[loose], pairs.dx[loose], h[loose]
+        sig = p.sigma(i, j)
+        push = (-2.0 * h * sig / np.linalg.norm(dx, axis=1))[:, None] * dx  # along r_j - r_i
+        share = np.where(rattler[i] & rattler[j], 0.5, 1.0)[:, None]
+        move = np.zeros_like(x)
+        np.add.at(move, i, -push * share * rattler[i][:, None])
+        np.add.at(move, j, push * share * rattler[j][:, None])
+        x = container.wrap(p.position + move)
+    return x
 
 
 def _newton_ready(chain: _Chain, step: _Step, lp: _LPSetup, n: int) -> bool:
