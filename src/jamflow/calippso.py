@@ -105,7 +105,9 @@ Newton's method with a sparse LU (:func:`_newton_finish`). The result is kept on
 under a certificate that it is the LP chain's limit: the forces of the transposed
 system are all positive, no pair overlaps beyond :data:`~jamflow.tolerances.OVERLAP_TOL`
 and the geometric network has the same backbone; then ``s = 0, Gamma = 1`` solves the
-next LP. Otherwise the chain goes on with LPs. The finish is one history entry with
+next LP. Otherwise the chain goes on with LPs. Rattlers are not part of the system;
+those the finish's growth pressed into a neighbour are pushed off it first
+(:func:`_free_rattlers`). The finish is one history entry with
 solver ``newton``; attributes ``finish``, ``n_lps``, ``newton_attempts``,
 ``newton_rejections``, ``newton_last_rejection`` and ``newton_time`` [s, all
 attempts] say what happened.
