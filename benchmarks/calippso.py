@@ -32,6 +32,17 @@ Parts (d = 3 monodisperse unless stated):
     Time, status, g and how the row duals split into active and inactive (counts
     above 1e-10, 1e-6 and 1e-3 of the largest): only a vertex solution has inactive
     duals exactly zero, which the contact detection needs.
+``preset``
+    Whether a ``fast`` preset is worth having: the former fast setting (``--tol-s 1e-6
+    --tol-gamma 1e-9``) against the defaults (the paper's tolerances, the
+    ``publication`` setting), run alternately side by side on the d = 3 LS example and a
+    3D N = 256 random start; the issue asked for at least 1.5x on both, or no preset.
+``finish``
+    The Newton finish against the pure LP chain (``--finish newton`` vs ``--finish lp``)
+    on the whole command, side by side: the authors' LS examples (N = 1024, d = 3, 4, 5)
+    and the d = 3 one tiled 2x1x1 (N = 2048) and 2x2x1 (N = 4096; near-jamming starts
+    without an LS run, but the tiling's symmetry can make the packing degenerate); LPs, time, the Newton attempts and whether both give the same contacts
+    (Q) and forces (largest difference over the largest force).
 ``relax``
     LP counts with and without the Sec. IV relaxation c = 0.5 (random starts).
 ``tolerances``
@@ -64,6 +75,8 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from jamflow.analysis.contacts import force_balance_residual, summarize
+from jamflow.analysis.overlap import contact_overlap
+from jamflow.box import Box
 from jamflow.calippso import CONTACT_DUAL_REL_TOL, SOLVER_TOL, JammingLP, jamming_lp
 from jamflow.highs import new_highs
 from jamflow.initial import random_packing
@@ -76,7 +89,9 @@ OUT = Path(__file__).resolve().parent / "output"
 #: the CALiPPSO authors' LS examples, vendored with the tests (MIT, licence in its README.md)
 LS = Path(__file__).resolve().parents[1] / "tests" / "data" / "calippso-ls"
 
-PARTS = ("scaling", "ls", "solvers", "lp", "relax", "tolerances", "large", "factor")
+PARTS = ("scaling", "ls", "preset", "finish", "solvers", "lp", "relax", "tolerances", "large", "factor")
+#: the former ``fast`` preset of ``jamflow calippso`` (dropped: not faster, part ``preset``)
+FORMER_FAST = ("--tol-s", "1e-6", "--tol-gamma", "1e-9")
 #: LS pressure of the near-jamming starts: the paper's Sec. IV value. (At 1e6 the
 #: chain is longer: 3D N = 2048 needed 220 LPs from p = 1e6 and 86 from 1e7 of the
 #: same compression.) The growth rate is kappa = 1e-3, not the paper's 1e-5: LS at
@@ -136,6 +151,19 @@ def ls_example(d: int) -> Path:
     return path
 
 
+def tiled_ls_example(reps: tuple[int, int, int]) -> Path:
+    """The d = 3 LS example repeated ``reps`` times along the axes of its unit box."""
+    path = OUT / f"calippso_start_authors_d3_tiled{'x'.join(map(str, reps))}.nc"
+    if not path.exists():
+        p = read_packing(ls_example(3))
+        shifts = np.stack(np.meshgrid(*[np.arange(r) for r in reps], indexing="ij"), -1).reshape(-1, 3)
+        x = (p.position[None, :, :] + shifts[:, None, :].astype(float)).reshape(-1, 3)
+        write_packing(Packing(position=x, diameter=np.tile(p.diameter, len(shifts)),
+                              box=Box.orthogonal(np.array(reps, dtype=float)), protocol="import-dat>tile",
+                              parameters={"tiles": list(reps)}), path)
+    return path
+
+
 def table(rows: list[dict[str, float]], dim: str, coords, attrs: dict) -> xr.Dataset:
     units = {"time": "s", "peak_memory": "B", "t_lp": "s"}
     data = {m: ((dim,), np.array([r[m] for r in rows], float), {"units": units.get(m, "1")}) for m in METRICS}
@@ -179,9 +207,60 @@ def part_ls(quick: bool) -> xr.Dataset:
     return ds
 
 
-def part_large(n: int) -> xr.Dataset:
-    print(f"N = {n}, near-jamming start (target 1800 s, 8 GiB)", flush=True)
-    row = command(near_start(n), f"near_N{n}")
+def part_preset(quick: bool) -> xr.Dataset:
+    starts = {"ls_d3": ls_example(3), "random_N256": random_start(128 if quick else 256)}
+    parts = []
+    for name, start in starts.items():
+        rows = []
+        for setting, options in (("publication", ()), ("former_fast", FORMER_FAST)):
+            print(f"{name}: {setting}", flush=True)
+            rows.append(command(start, f"preset_{name}_{setting}", *options))
+        ds = table(rows, "setting", ["publication", "former_fast"], {})
+        speedup = float(ds["time"][0] / ds["time"][1])
+        print(f"   {name}: speed-up of the former fast setting {speedup:.2f}x (target >= 1.5x)", flush=True)
+        parts.append(ds.expand_dims(start=[name]).assign(speedup=(("start",), [speedup], {"units": "1"})))
+    return xr.concat(parts, "start").assign_attrs(new_dataset_attrs(
+        "CALiPPSO: former fast preset against the paper's tolerances", {"quick": quick}))
+
+
+def part_finish(quick: bool, max_n: int) -> xr.Dataset:
+    starts = {"ls_d3": (1024, ls_example(3)), "ls_d4": (1024, ls_example(4)), "ls_d5": (1024, ls_example(5)),
+              "ls_d3_tiled2x1x1": (2048, tiled_ls_example((2, 1, 1))),
+              "ls_d3_tiled2x2x1": (4096, tiled_ls_example((2, 2, 1)))}
+    cases = ["ls_d3"] if quick else [c for c, (n, _) in starts.items() if n <= max_n]
+    parts = []
+    for case in cases:
+        start = starts[case][1]
+        rows = []
+        for finish in ("lp", "newton"):
+            print(f"{case}: --finish {finish}", flush=True)
+            row = command(start, f"finish_{case}_{finish}", "--finish", finish)
+            ds = read_dataset(OUT / f"calippso_out_finish_{case}_{finish}.nc")
+            row.update(newton_attempts=float(ds.attrs["newton_attempts"]), newton_time=float(ds.attrs["newton_time"]),
+                       lps=float(ds.attrs["n_lps"]))
+            rows.append(row)
+        lp, nw = (read_packing(OUT / f"calippso_out_finish_{case}_{f}.nc") for f in ("lp", "newton"))
+        f_lp = dict(zip(map(tuple, np.sort(lp.contacts, axis=1).tolist()), lp.force))
+        f_nw = dict(zip(map(tuple, np.sort(nw.contacts, axis=1).tolist()), nw.force))
+        q = contact_overlap(nw, lp)[0]
+        df = max(abs(f_nw.get(k, 0.0) - v) for k, v in f_lp.items()) / max(f_lp.values())
+        print(f"   {case}: Q = {q:.6f}, max |df| / max f = {df:.2e}, LPs {rows[0]['lps']:.0f} -> {rows[1]['lps']:.0f}, "
+              f"time {rows[0]['time']:.1f} -> {rows[1]['time']:.1f} s (x{rows[0]['time'] / rows[1]['time']:.2f})",
+              flush=True)
+        ds = table(rows, "finish", ["lp", "newton"], {})
+        ds = ds.assign(newton_attempts=(("finish",), [r["newton_attempts"] for r in rows], {"units": "1"}),
+                       newton_time=(("finish",), [r["newton_time"] for r in rows], {"units": "s"}),
+                       contact_overlap=((), q, {"units": "1", "long_name": "Q of the Newton finish against the LP chain"}),
+                       force_difference=((), df, {"units": "1", "long_name": "max |f_newton - f_lp| / max f_lp"}),
+                       n=((), lp.n, {"units": "1", "long_name": "number of spheres"}))
+        parts.append(ds.expand_dims(case=[case]))
+    return xr.concat(parts, "case").assign_attrs(new_dataset_attrs(
+        "CALiPPSO: Newton finish against the pure LP chain (the authors' LS examples and tilings)", {"quick": quick}))
+
+
+def part_large(n: int, options: tuple[str, ...] = ()) -> xr.Dataset:
+    print(f"N = {n}, near-jamming start (target 1800 s, 8 GiB), options {' '.join(options) or 'none'}", flush=True)
+    row = command(near_start(n), f"near_N{n}", *options)
     return table([row], "N", [n], new_dataset_attrs("CALiPPSO at large N", {"near_pressure": NEAR_PRESSURE}))
 
 
@@ -364,7 +443,7 @@ def part_factor(quick: bool) -> xr.Dataset:
 
 def plot() -> None:
     found = {p: xr.open_dataset(OUT / f"calippso_{p}.nc") for p in PARTS if (OUT / f"calippso_{p}.nc").exists()}
-    fig, ax = plt.subplots(1, 5, figsize=(22, 4))
+    fig, ax = plt.subplots(1, 6, figsize=(26, 4))
     if "scaling" in found:
         ds = found["scaling"]
         for s, m in (("random", "o"), ("near", "s")):
@@ -398,6 +477,16 @@ def plot() -> None:
         ax[4].loglog(ds["N"], ds["superlu_nd"], "D-", label="SuperLU METIS ND [s]")
         ax[4].loglog(ds["N"], ds["fill"] / ds["nnz"], "^--", label="SuperLU fill nnz(L+U)/nnz")
         ax[4].set_xlabel("N"); ax[4].legend(fontsize=7); ax[4].set_title("warm LP: basis factorisation")
+    if "finish" in found:
+        ds = found["finish"]
+        pos = np.arange(ds.sizes["case"])
+        for k, finish in enumerate(("lp", "newton")):
+            ax[5].bar(pos + (k - 0.5) * 0.4, ds["time"].sel(finish=finish), 0.4, label=f"--finish {finish}")
+            for x, (t, lps) in enumerate(zip(ds["time"].sel(finish=finish).values, ds["lps"].sel(finish=finish).values)):
+                ax[5].annotate(f"{lps:.0f} LPs", (x + (k - 0.5) * 0.4, t), ha="center", fontsize=6)
+        ax[5].set_xticks(pos, [str(c).replace("ls_", "") for c in ds["case"].values], fontsize=6)
+        ax[5].set_xlabel("start (authors' LS examples, N = 1024, and tilings)"); ax[5].set_ylabel("time to jam [s]")
+        ax[5].legend(fontsize=7); ax[5].set_title("Newton finish vs LP chain")
     fig.tight_layout()
     fig.savefig(OUT / "calippso.png", dpi=120)
     print(f"wrote {OUT / 'calippso.png'} from parts {', '.join(found)}")
@@ -411,13 +500,18 @@ def main() -> None:
     ap.add_argument("--large-n", type=int, default=16384, help="N of the 'large' part (default 16384)")
     ap.add_argument("--max-random", type=int, default=4096,
                     help="largest N of the random starts in 'scaling' (3D N = 1024 takes ~200 LPs, ~6 min)")
+    ap.add_argument("--large-options", default="",
+                    help="extra jamflow calippso options of the 'large' part, e.g. \"--interior hipo --threads 2\"")
+    ap.add_argument("--max-finish", type=int, default=4096, help="largest N of the 'finish' part (1024: the LS examples; 2048, 4096: tilings)")
     args = ap.parse_args()
     OUT.mkdir(exist_ok=True)
     runners = {"scaling": lambda: part_scaling(args.quick, args.max_random), "ls": lambda: part_ls(args.quick),
+               "preset": lambda: part_preset(args.quick),
+               "finish": lambda: part_finish(args.quick, args.max_finish),
                "solvers": lambda: part_solvers(args.quick), "lp": lambda: part_lp(args.quick),
                "relax": lambda: part_relax(args.quick),
                "tolerances": lambda: part_tolerances(args.quick),
-               "large": lambda: part_large(1024 if args.quick else args.large_n),
+               "large": lambda: part_large(1024 if args.quick else args.large_n, tuple(args.large_options.split())),
                "factor": lambda: part_factor(args.quick)}
     for part in args.parts:
         write_dataset(runners[part](), OUT / f"calippso_{part}.nc")

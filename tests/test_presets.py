@@ -42,3 +42,9 @@ def test_every_stage_command_takes_a_preset(command):
 
 def test_ls_presets_leave_the_dynamics_alone():
     assert all(preset_options("ls", name) == {} for name in PRESET_NAMES)
+
+
+def test_calippso_presets_all_run_the_papers_tolerances():
+    # issue 19: the former fast preset (tol_s 1e-6, tol_gamma 1e-9) was not faster on the
+    # whole command, so no preset may change CALiPPSO's convergence tolerances
+    assert all(preset_options("calippso", name) == {} for name in PRESET_NAMES)

@@ -74,7 +74,9 @@ def test_one_row_per_packing_and_run_with_the_datasets_numbers(scene):
         a = _attrs(scene, row.file)
         assert row.phi == a["packing_fraction"] and row.N == a["N"] and row.d == a["d"]
         if row.stage == "calippso":
-            assert row.phi_J == a["phi_J"] and row.n_lp == a["iterations"]
+            # n_lp counts LPs; a Newton finish is one more history entry (iterations)
+            assert row.phi_J == a["phi_J"] and row.n_lp == a["n_lps"]
+            assert a["iterations"] == a["n_lps"] + (a["finish"] == "newton")
             assert row.n_contacts == a["n_contacts"] and row.n_rattlers == a["n_rattlers"]
             # LS + CALiPPSO: isostatic backbone, N_c = d (N_s - 1) + 1
             assert row.isostatic == 1 and row.n_contacts == row.isostatic_count == 2 * (N - row.n_rattlers - 1) + 1

@@ -94,6 +94,24 @@ The cutoff is ``cutoff`` (1.7 largest diameters) far from jamming and
 ``cutoff_near`` (1.4) in the last phase; rows are kept from LP to LP (which lets the
 dual simplex start from the previous basis) while the particles moved little.
 
+Newton finish
+-------------
+In the tail the chain fine-tunes positions of a network that no longer changes. With
+``finish="newton"`` (default), after every accepted LP with ``sqrt(Gamma*) - 1 <=``
+:data:`NEWTON_FROM` whose network is isostatic, the square system "every backbone
+contact touches, one inflation factor" (the network rows of the LP as equalities over
+the stable particles' coordinates and ``g``; the LP's basis matrix) is solved by
+Newton's method with a sparse LU (:func:`_newton_finish`). The result is kept only
+under a certificate that it is the LP chain's limit: the forces of the transposed
+system are all positive, no pair overlaps beyond :data:`~jamflow.tolerances.OVERLAP_TOL`
+and the geometric network has the same backbone; then ``s = 0, Gamma = 1`` solves the
+next LP. Otherwise the chain goes on with LPs. Rattlers are not part of the system;
+those the finish's growth pressed into a neighbour are pushed off it first
+(:func:`_free_rattlers`). The finish is one history entry with
+solver ``newton``; attributes ``finish``, ``n_lps``, ``newton_attempts``,
+``newton_rejections``, ``newton_last_rejection`` and ``newton_time`` [s, all
+attempts] say what happened.
+
 Robustness
 ----------
 After each LP: a status other than optimal (e.g. an LP without bounds that HiGHS
@@ -126,10 +144,12 @@ from typing import Any
 import highspy
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg as sla
 import xarray as xr
 from numpy.typing import NDArray
 
 from .analysis.contacts import find_rattlers, isostatic_count
+from .box import Box
 from .force_network import MIN_NORM, balance_matrix, min_norm_forces
 from .highs import new_highs
 from .neighbors import pairs_within
@@ -221,6 +241,17 @@ HYBRID_SWITCH: float = 1e-5
 #: (89 s), a limit of 1 per row none and 305 LPs (47 s).
 WARM_PIVOTS_PER_ROW: float = 1.0
 
+#: HiGHS interior point methods for the interior point LPs: ``ipx`` (HiGHS's default,
+#: in every highspy wheel) and ``hipo`` (nested-dissection factorisation; needs the
+#: ``hipo`` extra, ``highspy[extras]``, which exists only for highspy <= 1.15.1).
+#: Measured on the first LP of the d = 3 LS example (N = 1024, one thread, side by
+#: side, loaded machine): IPX + crossover 36.7 s, HiPO + crossover 32.0 s, the same
+#: vertex (3004 active duals); the issue's N = 4096 measurement 51.1 s against 49.9 s.
+#: HiPO wins only at N = 16384 (the first LP in ~593 s where IPX did not finish in 58 min),
+#: which is not worth pinning highspy to 1.15.1 for everyone: opt-in.
+INTERIOR_POINTS: tuple[str, ...] = ("ipx", "hipo")
+DEFAULT_INTERIOR: str = "ipx"
+
 #: Methods of the cold re-solves after a converged LP failed its final checks:
 #: interior point with crossover, then the dual simplex.
 FINAL_RECOVERY_METHODS: tuple[str, ...] = ("ipm", "dual")
@@ -256,6 +287,31 @@ BOUND_ACTIVE_FRACTION: float = 0.5
 STALL_WINDOW: int = 100
 STALL_PROGRESS: float = 0.5
 MAX_STALL_RECOVERIES: int = 3
+
+#: How a chain ends. ``newton``: once an LP in the tail (``sqrt(Gamma*) - 1 <=
+#: NEWTON_FROM``) gives an isostatic network (see :func:`_newton_ready`), the square system of that network is solved by Newton's method and certified
+#: (:func:`_newton_finish`); a rejected finish leaves the chain to the LPs. ``lp``: the
+#: pure LP chain of the paper.
+FINISHES: tuple[str, ...] = ("newton", "lp")
+DEFAULT_FINISH: str = "newton"
+
+#: Newton finish: tried from this ``sqrt(Gamma*) - 1`` down (the hybrid solver's tail).
+NEWTON_FROM: float = 1e-5
+
+#: Newton finish: largest number of steps (it converges quadratically: from
+#: ``sqrt(Gamma*) - 1 ~ 1e-7`` three steps reach round-off).
+NEWTON_MAX_STEPS: int = 8
+
+#: Newton finish: a step moving a stable particle by more than this [mean diameters]
+#: (the tightest default bound) means the network is not the one of a nearby jammed
+#: packing: rejected.
+NEWTON_MAX_MOVE: float = 5e-3
+
+#: Newton finish: largest number of sweeps pushing rattlers off the neighbours the finish
+#: grew into (a rattler between two neighbours may need several; the d = 5 LS example kept
+#: an overlap of 2e-10 after 5 sweeps, which one more sweep removed)
+#: (:func:`_free_rattlers`).
+RATTLER_PUSHES: int = 50
 
 #: Default largest number of LPs.
 DEFAULT_MAX_ITERATIONS: int = 1000
@@ -306,6 +362,7 @@ class IterationRecord:
     warm_start: bool = False  # simplex started from the previous LP's basis
     simplex_iterations: int = 0  # simplex pivots, crossover pivots included
     ipm_iterations: int = 0
+    newton_steps: int = 0  # Newton steps of a certified finish (its own record, solver "newton")
 
 
 @dataclass(frozen=True)
@@ -341,12 +398,102 @@ class CalippsoResult:
     diagnostics: dict[str, Any] = field(default_factory=dict)
 
 
-# --- rows ------------------------------------------------------------------------------
+# --- the container: periodic box or hard walls --------------------------------------------
+
+
+def _direct(dx_direct: NDArray[np.float64], dx_image: NDArray[np.float64], box: Box) -> NDArray[np.bool_]:
+    """Pairs whose direct separation is their minimum image (no periodic image through a wall)."""
+    return np.all(np.abs(dx_direct - dx_image) < 1e-12 * box.lengths.max(), axis=1)
+
+
+@dataclass(frozen=True)
+class _Container:
+    """Where the spheres live: a periodic box, or an orthogonal box whose faces are hard
+    walls. Everything that differs between the two is here. A wall is a body like a
+    sphere: the row finder lists sphere-wall rows after the pair rows, the matrix, the
+    duals and the force balance treat both kinds of row alike, and a wall contact
+    counts like a pair contact.
+    """
+
+    box: Box
+    walls: bool
+
+    @property
+    def has_translation(self) -> bool:
+        """Periodic: the global translation is a zero mode, removed by fixing one anchor
+        particle; displacements are reported relative to the stable particles' mean."""
+        return not self.walls
+
+    def wrap(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Positions in the primary cell (between walls: unchanged)."""
+        return x if self.walls else self.box.wrap(x)
+
+    def displacement(self, dx: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Displacement vectors (minimum image in a periodic box)."""
+        return dx if self.walls else self.box.minimum_image(dx)
+
+    def pairs(self, x: NDArray[np.float64], cutoff: float) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """Sphere pairs closer than ``cutoff`` [length]; between walls only direct ones."""
+        pairs = pairs_within(x, self.box, cutoff)
+        if not self.walls:
+            return pairs.i, pairs.j
+        keep = _direct(x[pairs.j] - x[pairs.i], pairs.dx, self.box)
+        return pairs.i[keep], pairs.j[keep]
+
+    def wall_bodies(self, x: NDArray[np.float64], D: NDArray[np.float64],
+                    cutoff: float) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """Sphere-wall rows within ``cutoff`` (centre-to-surface minus radius): particles
+        and faces ``2 * axis + (0 lower, 1 upper)``; none in a periodic box."""
+        if not self.walls:
+            return np.empty(0, np.int64), np.empty(0, np.int64)
+        L = self.box.lengths
+        pl, al = np.nonzero(x <= cutoff - 0.5 * D[:, None])
+        pu, au = np.nonzero((L - x) <= cutoff - 0.5 * D[:, None])
+        return (np.concatenate([pl, pu]).astype(np.int64),
+                np.concatenate([2 * al + _LOWER, 2 * au + _UPPER]).astype(np.int64))
+
+    def n_dof(self, d: int, n_stable: int) -> int:
+        """Isostatic contact count: ``d (N_s - 1) + 1`` periodic, ``d N_s + 1`` between walls."""
+        if self.walls:
+            return d * n_stable + 1 if n_stable > 0 else 0
+        return isostatic_count(d, n_stable)
+
+    def packing(self, packing: Packing, x: NDArray[np.float64], D: NDArray[np.float64]) -> Packing:
+        """``packing`` at positions ``x`` and diameters ``D``, without contacts."""
+        return replace(packing, position=self.wrap(x), diameter=D, contacts=None, force=None, rattler=None)
+
+    def max_overlap(self, p: Packing) -> float:
+        """Largest relative overlap over ALL pairs (and walls), 0 if none."""
+        if not self.walls:
+            return max_overlap(p)[1]
+        pairs, h = near_pairs(p, 0.0)
+        if len(h):
+            h = h[_direct(p.position[pairs.j] - p.position[pairs.i], pairs.dx, p.box)]
+        ov = max(0.0, -float(h.min())) if len(h) else 0.0
+        rad = 0.5 * p.diameter[:, None]
+        wall_gap = np.minimum(p.position, p.box.lengths - p.position) / rad - 1.0
+        return max(ov, -float(wall_gap.min()))
+
+    def touching(self, p: Packing) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+        """The geometric network: pairs (P, 2) and wall contacts (particles, faces) with
+        relative gap at most :data:`~jamflow.tolerances.CONTACT_GAP_TOL`."""
+        pairs, h = near_pairs(p, CONTACT_GAP_TOL)
+        if not self.walls:
+            return np.stack([pairs.i, pairs.j], axis=1), np.empty(0, np.int64), np.empty(0, np.int64)
+        if len(h):
+            pairs = pairs.select(_direct(p.position[pairs.j] - p.position[pairs.i], pairs.dx, p.box))
+        rad = 0.5 * p.diameter[:, None]
+        gap = np.stack([p.position / rad - 1.0, (p.box.lengths - p.position) / rad - 1.0], axis=2)  # (N, d, 2)
+        wp, axis, side = np.nonzero(gap <= CONTACT_GAP_TOL)
+        return np.stack([pairs.i, pairs.j], axis=1), wp.astype(np.int64), (2 * axis + side).astype(np.int64)
+
+
+# --- rows: the LP row builder ------------------------------------------------------------
 
 
 @dataclass
 class _Rows:
-    """Constraint rows: particle pairs then wall rows."""
+    """Constraint rows: particle pairs then sphere-wall rows."""
 
     i: NDArray[np.int64]
     j: NDArray[np.int64]
@@ -367,46 +514,45 @@ class _Rows:
         return np.concatenate([self.i * n + self.j, n * n + 64 * self.wall_particle + self.wall_face])
 
 
-def _find_rows(x: NDArray[np.float64], D: NDArray[np.float64], packing: Packing, cutoff: float, walls: bool) -> _Rows:
-    pairs = pairs_within(x, packing.box, cutoff)
-    i, j = pairs.i, pairs.j
-    if walls:
-        # no periodic images through the walls: keep only pairs whose direct
-        # separation is the minimum-image one
-        direct = x[j] - x[i]
-        keep = np.all(np.abs(direct - pairs.dx) < 1e-12 * packing.box.lengths.max(), axis=1)
-        i, j = i[keep], j[keep]
-        L = packing.box.lengths
-        near_low = x <= cutoff - 0.5 * D[:, None]
-        near_up = (L - x) <= cutoff - 0.5 * D[:, None]
-        pl, al = np.nonzero(near_low)
-        pu, au = np.nonzero(near_up)
-        wp = np.concatenate([pl, pu]).astype(np.int64)
-        wf = np.concatenate([2 * al + _LOWER, 2 * au + _UPPER]).astype(np.int64)
-    else:
-        wp = wf = np.empty(0, np.int64)
+def _find_rows(x: NDArray[np.float64], D: NDArray[np.float64], container: _Container, cutoff: float) -> _Rows:
+    """Algorithm 1, lines 4-6: every pair (and wall) within ``cutoff`` [length]."""
+    i, j = container.pairs(x, cutoff)
+    wp, wf = container.wall_bodies(x, D, cutoff)
     return _Rows(i, j, wp, wf, x.copy(), cutoff)
 
 
-def _row_geometry(rows: _Rows, x: NDArray[np.float64], D: NDArray[np.float64], packing: Packing):
+@dataclass(frozen=True)
+class _RowGeometry:
+    """Geometry of the rows at the current state: pair vectors ``dx`` (P, d) [length],
+    contact distances ``sig`` (P,), scaled right-hand sides ``rhs`` (M,), wall distances
+    ``a`` (W,) and radii ``rad`` (W,) of the sphere-wall rows."""
+
+    dx: NDArray[np.float64]
+    sig: NDArray[np.float64]
+    rhs: NDArray[np.float64]
+    a: NDArray[np.float64]
+    rad: NDArray[np.float64]
+
+
+def _row_geometry(rows: _Rows, x: NDArray[np.float64], D: NDArray[np.float64], box: Box) -> _RowGeometry:
     """Pair vectors, contact distances and right-hand sides for the current state."""
-    dx = packing.box.minimum_image(x[rows.j] - x[rows.i]) if rows.n_pairs else np.empty((0, x.shape[1]))
+    dx = box.minimum_image(x[rows.j] - x[rows.i]) if rows.n_pairs else np.empty((0, x.shape[1]))
     sig = 0.5 * (D[rows.i] + D[rows.j])
     r = np.linalg.norm(dx, axis=1)
     rhs = (r - sig) * (r + sig) / sig**2
     axis = rows.wall_face // 2
     upper = rows.wall_face % 2 == _UPPER
     xa = x[rows.wall_particle, axis]
-    a = np.where(upper, packing.box.lengths[axis] - xa, xa)
+    a = np.where(upper, box.lengths[axis] - xa, xa)
     rad = 0.5 * D[rows.wall_particle]
     wrhs = (a - rad) * (a + rad) / rad**2
-    return dx, sig, np.concatenate([rhs, wrhs]), a, rad
+    return _RowGeometry(dx, sig, np.concatenate([rhs, wrhs]), a, rad)
 
 
-def _matrix(rows: _Rows, dx, sig, a, rad, n: int, d: int, unit: float) -> sp.csc_matrix:
+def _matrix(rows: _Rows, geo: _RowGeometry, n: int, d: int, unit: float) -> sp.csc_matrix:
     """Scaled constraint matrix (rows x (d N + 1)), column ``d N`` is ``g``."""
     P = rows.n_pairs
-    coef = 2.0 * unit * dx / sig[:, None] ** 2  # (P, d)
+    coef = 2.0 * unit * geo.dx / geo.sig[:, None] ** 2  # (P, d)
     k = np.arange(d)
     r_pair = np.repeat(np.arange(P), d)
     ci = (rows.i[:, None] * d + k).ravel()
@@ -414,7 +560,7 @@ def _matrix(rows: _Rows, dx, sig, a, rad, n: int, d: int, unit: float) -> sp.csc
     W = len(rows.wall_particle)
     axis = rows.wall_face // 2
     sign = np.where(rows.wall_face % 2 == _UPPER, 1.0, -1.0)
-    wcoef = sign * 2.0 * unit * a / rad**2
+    wcoef = sign * 2.0 * unit * geo.a / geo.rad**2
     r_wall = P + np.arange(W)
     cw = rows.wall_particle * d + axis
     m = P + W
@@ -505,13 +651,13 @@ def jamming_lp(packing: Packing, cutoff: float = DEFAULT_CUTOFF, walls: bool = F
     D = packing.diameter
     unit, sig_max = float(D.mean()), float(D.max())
     ell = min(cutoff * sig_max, 0.499 * float(np.min(packing.box.widths)))
-    rows = _find_rows(x, D, packing, ell, walls)
-    dx, sig, rhs, a, rad = _row_geometry(rows, x, D, packing)
-    A = _matrix(rows, dx, sig, a, rad, n, d, unit)
+    rows = _find_rows(x, D, _Container(packing.box, walls), ell)
+    geo = _row_geometry(rows, x, D, packing.box)
+    A = _matrix(rows, geo, n, d, unit)
     b_part = np.full(n, _far_bound(ell / sig_max, d) * sig_max / unit)
     anchor = -1 if walls else _most_neighbours(rows, n)
     col_lower, col_upper = _column_bounds(b_part, d, anchor, ell, sig_max, unit)
-    return JammingLP(A, rhs, col_lower, col_upper, np.stack([rows.i, rows.j], axis=1))
+    return JammingLP(A, geo.rhs, col_lower, col_upper, np.stack([rows.i, rows.j], axis=1))
 
 
 # --- LP solve --------------------------------------------------------------------------
@@ -541,8 +687,14 @@ class _Solver:
     pay costs about one interior point solve more.
     """
 
-    def __init__(self, threads: int = 1, tol: float = SOLVER_TOL) -> None:
+    def __init__(self, threads: int = 1, tol: float = SOLVER_TOL, interior: str = DEFAULT_INTERIOR) -> None:
         self.h = new_highs(threads)
+        if interior not in INTERIOR_POINTS:
+            raise ValueError(f"unknown interior point {interior!r}; choose one of {', '.join(INTERIOR_POINTS)}")
+        if self.h.setOptionValue("solver", interior) != highspy.HighsStatus.kOk:
+            raise ValueError(f"interior point {interior!r} is not in this highspy build: HiPO needs "
+                             "`pip install 'jamflow[hipo]'` (highspy[extras]==1.15.1, which must match highspy)")
+        self.interior = interior
         for option in ("primal_feasibility_tolerance", "dual_feasibility_tolerance", "ipm_optimality_tolerance"):
             if self.h.setOptionValue(option, tol) != highspy.HighsStatus.kOk:
                 raise ValueError(f"HiGHS refused {option} = {tol:g}")
@@ -623,7 +775,7 @@ class _Solver:
         h = self.h
         h.clearSolver()
         if method in ("ipm", "ipm-nox"):
-            h.setOptionValue("solver", "ipm")
+            h.setOptionValue("solver", self.interior)
             h.setOptionValue("run_crossover", "on" if method == "ipm" else "off")
         else:
             # from a carried basis the primal simplex needs a few pivots where the
@@ -641,16 +793,6 @@ class _Solver:
         return h.getModelStatus(), time.perf_counter() - t0
 
 
-# --- rattlers and counts -----------------------------------------------------------------
-
-
-def _n_dof(d: int, n_stable: int, walls: bool) -> int:
-    """Isostatic contact count: ``d (N_s - 1) + 1`` periodic, ``d N_s + 1`` between walls."""
-    if walls:
-        return d * n_stable + 1 if n_stable > 0 else 0
-    return isostatic_count(d, n_stable)
-
-
 # --- schedules -----------------------------------------------------------------------------
 
 
@@ -660,10 +802,439 @@ def _far_bound(cutoff: float, d: int) -> float:
     return max((cutoff - FAR_GROWTH) / (2.0 * np.sqrt(d)), 0.0)
 
 
+# --- Algorithm 1: state and steps ------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Options:
+    """The user's options of one :func:`calippso` call."""
+
+    tol_s: float
+    tol_gamma: float
+    solver: str
+    cutoff: float
+    cutoff_near: float
+    bound: tuple[tuple[float, float], ...]
+    relax: float | None
+    require_isostatic: bool
+    finish: str
+
+
 @dataclass
-class _State:
-    x: NDArray[np.float64]
-    D: NDArray[np.float64]
+class _Chain:
+    """What Algorithm 1 carries from one LP to the next: the configuration, the rows
+    (kept while particles move little, for warm starts), the bound phase and the
+    recovery counters."""
+
+    x: NDArray[np.float64]  # (N, d) positions [length]
+    D: NDArray[np.float64]  # (N,) diameters [length]
+    records: list[IterationRecord] = field(default_factory=list)
+    rows: _Rows | None = None
+    phase: int = 0  # 0 far, 1.. schedule entries; only tightens (hysteresis)
+    cut_factor: float = 1.0
+    bound_factor: float = 1.0
+    recoveries: int = 0
+    anchor: int = -1  # fixed particle (periodic box); -1 = none
+    prev_rattler: NDArray[np.bool_] | None = None
+    final_attempts: int = 0
+    recovery_method: str | None = None  # cold solve forced by a failed final check
+    unbounded_next: bool = False
+    stalls: int = 0
+    stall_from: int = 0  # records before this index are not compared by the stall test
+    backbone_key: bytes | None = None  # backbone rows of the last accepted LP
+    newton_tried: bytes | None = None  # backbone of the last rejected Newton finish
+    newton: list[_NewtonAttempt] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class _LPSetup:
+    """One jamming LP as set up (Algorithm 1, lines 4-7): rows, their geometry, the
+    scaled matrix, column bounds, the cutoff ``ell`` [length], the displacement bound
+    ``bound`` [mean diameters; inf = none], the mean diameter ``unit`` and the HiGHS method."""
+
+    rows: _Rows
+    geo: _RowGeometry
+    A: sp.csc_matrix
+    col_lower: NDArray[np.float64]
+    col_upper: NDArray[np.float64]
+    ell: float
+    sig_max: float
+    unit: float
+    bound: float
+    method: str
+
+
+@dataclass(frozen=True)
+class _Step:
+    """What one solved LP says (Algorithm 1, lines 9-11): displacements ``u`` (N, d)
+    [mean diameters], ``g = Gamma* - 1``, the row duals ``mu`` and their active set, the
+    contacts and rattlers they give, and the convergence measures."""
+
+    u: NDArray[np.float64]
+    g: float
+    sg: float  # sqrt(Gamma*) - 1
+    mu: NDArray[np.float64]
+    active: NDArray[np.bool_]
+    contacts: NDArray[np.int64]
+    wall_particles: NDArray[np.int64]
+    rattler: NDArray[np.bool_]
+    n_c: int
+    n_s: int
+    iso: bool
+    max_s: float
+    max_s_stable: float
+    min_active_dual: float
+    max_inactive_dual: float
+
+    @property
+    def backbone(self) -> NDArray[np.bool_]:
+        """Contacts between two stable particles."""
+        stable = ~self.rattler
+        return stable[self.contacts[:, 0]] & stable[self.contacts[:, 1]]
+
+
+def _set_up_lp(chain: _Chain, container: _Container, opt: _Options, d: int, n: int) -> _LPSetup:
+    """Algorithm 1, lines 4-7: cutoff, bounds, rows within the cutoff and the LP matrix."""
+    x, D = chain.x, chain.D
+    unit = float(D.mean())
+    sig_max = float(D.max())
+    c_rel = opt.cutoff_near if (chain.phase == len(opt.bound) or chain.unbounded_next) else opt.cutoff
+    ell = min(c_rel * chain.cut_factor * sig_max, 0.499 * float(np.min(container.box.widths)))
+    if ell < MIN_CUTOFF * sig_max:
+        raise RuntimeError(
+            f"CALiPPSO failed: largest diameter {sig_max:.4g} is too close to half the box width "
+            f"({0.5 * float(np.min(container.box.widths)):.4g}) for a neighbour cutoff; use more particles"
+        )
+    # bound for this LP [mean diameters]
+    if chain.unbounded_next:
+        b = np.inf
+    elif chain.phase == 0:
+        b = _far_bound(ell / sig_max, d) * sig_max / unit * chain.bound_factor
+    else:
+        b = 0.5 * opt.bound[chain.phase - 1][1] * chain.bound_factor
+    # rows (and with them a simplex basis) are kept while the cutoff changed by less
+    # than REUSE_FRACTION relatively and every particle moved less than
+    # REUSE_FRACTION (ell - sigma_max) since they were built
+    rows = chain.rows
+    if rows is None or abs(rows.cutoff / ell - 1.0) > REUSE_FRACTION or _moved(
+        rows, x, container, chain.prev_rattler
+    ) > REUSE_FRACTION * (ell - sig_max):
+        rows = chain.rows = _find_rows(x, D, container, ell)
+    ell = rows.cutoff
+    geo = _row_geometry(rows, x, D, container.box)
+    A = _matrix(rows, geo, n, d, unit)
+    # per-particle bound: the previous LP's rattlers get the far bound, so that a
+    # rattler is not pinned on its bound (an active bound is an external force that
+    # it would pass on to the stable particle it touches)
+    b_far = _far_bound(ell / sig_max, d) * sig_max / unit
+    b_part = np.full(n, b)
+    if chain.prev_rattler is not None and np.isfinite(b):
+        b_part[chain.prev_rattler] = max(b, b_far)
+    if container.has_translation and chain.anchor < 0:
+        chain.anchor = _most_neighbours(rows, n)
+    col_lower, col_upper = _column_bounds(b_part, d, chain.anchor, ell, sig_max, unit)
+    method = chain.recovery_method or _method(opt.solver, chain.records, bool(np.isfinite(b)))
+    return _LPSetup(rows, geo, A, col_lower, col_upper, ell, sig_max, unit, b, method)
+
+
+def _read_solution(lp: _LPSetup, col: NDArray[np.float64], dual: NDArray[np.float64],
+                   container: _Container, d: int, n: int) -> _Step:
+    """Algorithm 1, lines 9-11: Gamma*, the contacts (active duals) and the displacements."""
+    u = col[:-1].reshape(n, d)
+    g = float(col[-1])
+    mu = np.maximum(dual, 0.0)
+    mu_max = float(mu.max()) if len(mu) else 0.0
+    active = mu > CONTACT_DUAL_REL_TOL * mu_max if mu_max > 0 else np.zeros(len(mu), bool)
+    min_act = float(mu[active].min() / mu_max) if np.any(active) else np.nan
+    max_inact = float(mu[~active].max() / mu_max) if (mu_max > 0 and np.any(~active)) else 0.0
+    rows = lp.rows
+    P = rows.n_pairs
+    pair_act = active[:P]
+    contacts = np.stack([rows.i[pair_act], rows.j[pair_act]], axis=1)
+    wall_particles = rows.wall_particle[active[P:]]
+    rattler = find_rattlers(n, d, contacts, wall_particles)
+    stable = ~rattler
+    n_s = int(stable.sum())
+    n_c = int((stable[contacts[:, 0]] & stable[contacts[:, 1]]).sum()) + int(stable[wall_particles].sum())
+    iso = n_s > 0 and n_c == container.n_dof(d, n_s)
+    ref = u[stable].mean(axis=0) if (n_s and container.has_translation) else np.zeros(d)
+    rel = np.linalg.norm(u - ref, axis=1)
+    max_s = float(rel.max())
+    max_s_stable = float(rel[stable].max()) if n_s else max_s
+    sg = g / (1.0 + np.sqrt(1.0 + g))
+    return _Step(u, g, sg, mu, active, contacts, wall_particles, rattler, n_c, n_s, iso, max_s, max_s_stable,
+                 min_act, max_inact)
+
+
+def _update(chain: _Chain, step: _Step, lp: _LPSetup, opt: _Options, container: _Container, n: int) -> None:
+    """Algorithm 1, lines 12-13 for an accepted LP: ``r <- r + s*``, ``sigma <- sqrt(Gamma*) sigma``
+    (or the Sec. IV relaxation), the next anchor and the bound phase."""
+    chain.recoveries = 0
+    chain.prev_rattler = step.rattler
+    chain.x = container.wrap(chain.x + step.u * lp.unit)
+    chain.D = chain.D * _growth(step.g, opt.relax)
+    if container.has_translation and len(step.contacts):
+        zc = np.bincount(step.contacts[step.backbone].ravel(), minlength=n)
+        chain.anchor = int(np.argmax(zc))
+    # phase schedule with hysteresis: a phase never loosens (measured: loosening
+    # again above 10x the threshold cost more LPs from random starts)
+    while chain.phase < len(opt.bound) and step.sg <= opt.bound[chain.phase][0]:
+        chain.phase += 1
+
+
+def _growth(g: float, relax: float | None) -> float:
+    """Diameter factor of one LP: ``sqrt(Gamma*)``, or ``sqrt(1 + c g*)`` with relaxation ``c``."""
+    return np.sqrt(1.0 + (relax if relax is not None else 1.0) * g)
+
+
+def _small(step: _Step, opt: _Options) -> bool:
+    """Algorithm 1, line 15: ``sqrt(Gamma*) - 1 < tol_gamma`` and ``max |s| < tol_s``."""
+    return step.sg < opt.tol_gamma and step.max_s_stable < opt.tol_s
+
+
+def _schedule_next(chain: _Chain, step: _Step, lp: _LPSetup, opt: _Options) -> None:
+    """Whether the next LP is bounded, and the stall recovery."""
+    # the converging LP must be unbounded: go unbounded once the network is
+    # isostatic or the tightest bound is far from active for the stable particles;
+    # stay unbounded only while isostatic with moves the bound would have allowed
+    # (a large unbounded move wanders along soft directions: bounded again after it)
+    tight = 0.5 * opt.bound[-1][1]
+    if np.isfinite(lp.bound):
+        leave_bound = (step.iso or step.max_s_stable < UNBOUND_FRACTION * tight
+                       or step.max_s_stable > BOUND_ACTIVE_FRACTION * tight)
+    else:
+        leave_bound = step.iso and step.max_s_stable <= BOUND_ACTIVE_FRACTION * tight
+    chain.unbounded_next = _small(step, opt) or (chain.phase == len(opt.bound) and leave_bound)
+    if _stalled(chain.records, chain.stall_from):
+        chain.stalls += 1
+        if chain.stalls > MAX_STALL_RECOVERIES:
+            raise RuntimeError(_diagnose(
+                f"stalled: sqrt(Gamma*)-1 did not halve in {STALL_WINDOW} LPs, {MAX_STALL_RECOVERIES} times",
+                chain.records))
+        # recovery: an unbounded LP (no bound pins floppy motions) with fresh rows
+        chain.stall_from = len(chain.records)
+        chain.unbounded_next = True
+        chain.rows = None
+
+
+def _recover(chain: _Chain, reason: str) -> None:
+    """After a failed LP or a rejected update: one more recovery, a larger cutoff and a
+    smaller bound with fresh rows, or the diagnostics when spent."""
+    if chain.recoveries + 1 > MAX_RECOVERIES:
+        raise RuntimeError(_diagnose(f"{reason} after {MAX_RECOVERIES} recoveries", chain.records))
+    chain.recoveries += 1
+    chain.cut_factor *= CUTOFF_GROWTH
+    chain.bound_factor *= BOUND_SHRINK
+    chain.unbounded_next = False
+    chain.rows = None
+
+
+def _final_recovery(chain: _Chain) -> None:
+    """A converged LP failed its final checks: re-solve with a larger cutoff, cold. A
+    degenerate (e.g. App. A hyperstatic) LP has many dual optima: by interior point with
+    crossover, then by the dual simplex."""
+    chain.final_attempts += 1
+    chain.cut_factor *= CUTOFF_GROWTH
+    chain.recovery_method = FINAL_RECOVERY_METHODS[chain.final_attempts - 1]
+    chain.rows = None
+
+
+# --- the Newton finish ----------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _NewtonAttempt:
+    """Outcome of one Newton finish attempt (:func:`_newton_finish`).
+
+    Attributes
+    ----------
+    certified : bool
+        The square system converged and its certificate holds: every network force
+        positive, no overlap beyond ``OVERLAP_TOL``, and the geometric network (gaps
+        at most ``CONTACT_GAP_TOL``) has the same backbone and rattlers.
+    reason : str
+        Why it was rejected ("ok" when certified).
+    steps : int
+        Newton steps taken.
+    seconds : float
+        Wall time [s].
+    min_dual : float
+        Smallest network dual over the largest (NaN when not reached).
+    """
+
+    certified: bool
+    reason: str
+    steps: int
+    seconds: float
+    min_dual: float = np.nan
+
+
+def _network_rows(step: _Step, lp: _LPSetup) -> _Rows:
+    """The backbone rows of an LP's active set (pairs of stable particles, stable wall rows)."""
+    rows = lp.rows
+    P = rows.n_pairs
+    stable = ~step.rattler
+    pa = step.active[:P] & stable[rows.i] & stable[rows.j]
+    wa = step.active[P:] & stable[rows.wall_particle]
+    return _Rows(rows.i[pa], rows.j[pa], rows.wall_particle[wa], rows.wall_face[wa], rows.x_build, rows.cutoff)
+
+
+def _square_columns(stable: NDArray[np.bool_], anchor: int, d: int) -> NDArray[np.int64]:
+    """Columns of the square system: the stable particles' coordinates (without the
+    anchor's in a periodic box) and ``g`` (column ``d N``)."""
+    keep = stable.copy()
+    if anchor >= 0:
+        keep[anchor] = False
+    cols = (np.flatnonzero(keep)[:, None] * d + np.arange(d)).ravel()
+    return np.append(cols, d * len(stable))
+
+
+def _newton_finish(chain: _Chain, step: _Step, lp: _LPSetup, opt: _Options, container: _Container,
+                   packing: Packing) -> tuple[_NewtonAttempt, NDArray[np.float64], NDArray[np.float64], _Network | None]:
+    """Solve the isostatic network's square system by Newton's method and certify it.
+
+    The unknowns are the stable particles' displacements (the anchor fixed in a
+    periodic box) and ``g = Gamma - 1``; the equations say that every backbone contact
+    of the LP's network touches after the update ``r <- r + s``, ``sigma <- sqrt(Gamma)
+    sigma``. Linearised, they are the network rows of the jamming LP as equalities, so
+    each Newton step solves ``B z = rhs`` with ``B`` the LP's basis matrix (sparse LU,
+    COLAMD ordering) and updates like an LP of the chain. Steps stop when one satisfies
+    the chain's convergence test (``sqrt(Gamma) - 1 < tol_gamma``, ``max |s| <
+    tol_s``), within :data:`NEWTON_MAX_STEPS` steps each moving no particle by more
+    than :data:`NEWTON_MAX_MOVE`.
+
+    Certificate that the result is the LP chain's limit: the forces
+    ``mu = B^-T e_g`` (paper Eqs. 9, 11: the dual basic solution of the LP at ``s = 0``)
+    are all above ``CONTACT_DUAL_REL_TOL`` of the largest, and no pair overlaps by more
+    than ``OVERLAP_TOL``; then ``s = 0, Gamma = 1`` is optimal for the next LP (primal
+    feasible, dual feasible, complementary). The geometric network must also have the
+    network's backbone and rattlers (else the final checks would switch to it).
+
+    Returns the attempt, the finished positions and diameters, and the network (None
+    when not certified; then positions and diameters are the chain's, unchanged).
+    """
+    t0 = time.perf_counter()
+    d, n = packing.d, packing.n
+    rows = _network_rows(step, lp)
+    stable = ~step.rattler
+    cols = _square_columns(stable, chain.anchor if container.has_translation else -1, d)
+    x, D = chain.x, chain.D
+
+    def reject(reason: str, steps: int):
+        return _NewtonAttempt(False, reason, steps, time.perf_counter() - t0), chain.x, chain.D, None
+
+    if len(rows) != len(cols):
+        return reject(f"network has {len(rows)} backbone rows for {len(cols)} unknowns", 0)
+    for k in range(1, NEWTON_MAX_STEPS + 1):
+        unit = float(D.mean())
+        geo = _row_geometry(rows, x, D, container.box)
+        try:
+            lu = sla.splu(_matrix(rows, geo, n, d, unit)[:, cols].tocsc(), permc_spec="COLAMD")
+        except RuntimeError as exc:  # exactly singular basis
+            return reject(f"singular network matrix ({exc})", k)
+        z = lu.solve(geo.rhs)
+        u = np.zeros(n * d)
+        u[cols[:-1]] = z[:-1]
+        u = u.reshape(n, d)
+        g = float(z[-1])
+        ref = u[stable].mean(axis=0) if container.has_translation else np.zeros(d)
+        move = float(np.linalg.norm(u[stable] - ref, axis=1).max())
+        if not (np.isfinite(move) and move <= NEWTON_MAX_MOVE and g > -1.0):
+            return reject(f"Newton step {k} moves a particle by {move:.3g} mean diameters", k)
+        x = container.wrap(x + u * unit)
+        D = D * np.sqrt(1.0 + g)
+        if g / (1.0 + np.sqrt(1.0 + g)) < opt.tol_gamma and move < opt.tol_s:
+            break
+    else:
+        return reject(f"Newton did not converge in {NEWTON_MAX_STEPS} steps", NEWTON_MAX_STEPS)
+    x = _free_rattlers(x, D, step.rattler, container, packing)
+    # certificate: forces from the transposed system at the finished configuration
+    geo = _row_geometry(rows, x, D, container.box)
+    B = _matrix(rows, geo, n, d, float(D.mean()))[:, cols].tocsc()
+    e_g = np.zeros(len(cols))
+    e_g[-1] = 1.0
+    mu = sla.splu(B, permc_spec="COLAMD").solve(e_g, trans="T")
+    if not mu.min() > CONTACT_DUAL_REL_TOL * mu.max():
+        return reject(f"{int(np.sum(mu <= CONTACT_DUAL_REL_TOL * mu.max()))} network force(s) not positive", k)
+    p = container.packing(packing, x, D)
+    ov = container.max_overlap(p)
+    if ov > OVERLAP_TOL:
+        return reject(f"overlap {ov:.3g} (relative) > {OVERLAP_TOL:g}", k)
+    P = rows.n_pairs
+    contacts = np.stack([rows.i, rows.j], axis=1)
+    f_pair, f_wall = mu[:P] / geo.sig, mu[P:] / geo.rad
+    resid = _balance_residual(x, container, contacts, f_pair, rows.wall_particle, rows.wall_face, f_wall, d, n)
+    net = _Network(contacts, rows.wall_particle, rows.wall_face, f_pair, f_wall, step.rattler, len(rows),
+                   step.n_s, True, force_balance_residual=float(resid.max(initial=0.0)),
+                   residual_stable=float(resid[stable].max(initial=0.0)))
+    geo_c, geo_wp, geo_wf = container.touching(p)
+    if not _same_backbone(net, geo_c, geo_wp, geo_wf, find_rattlers(n, d, geo_c, geo_wp)):
+        return reject("the geometric network has another backbone", k)
+    return _NewtonAttempt(True, "ok", k, time.perf_counter() - t0, float(mu.min() / mu.max())), x, D, net
+
+
+def _free_rattlers(x: NDArray[np.float64], D: NDArray[np.float64], rattler: NDArray[np.bool_],
+                   container: _Container, packing: Packing) -> NDArray[np.float64]:
+    """Push rattlers off the neighbours the Newton finish grew into.
+
+    The finish moves only the stable particles; a rattler that rested on a neighbour
+    at the last LP (gap ~0, zero dual) overlaps it by about the growth, ~1e-9, where the
+    LP chain's next LP would have moved it. Each overlapping rattler moves away along
+    the pair direction by twice the overlap (a pair of rattlers shares the move), for
+    up to :data:`RATTLER_PUSHES` sweeps; what remains is caught by the certificate's
+    overlap check.
+    """
+    for _ in range(RATTLER_PUSHES):
+        p = container.packing(packing, x, D)
+        pairs, h = near_pairs(p, 0.0)
+        loose = (h < 0.0) & (rattler[pairs.i] | rattler[pairs.j])
+        if container.walls and len(h):  # no periodic images through a wall
+            loose &= _direct(p.position[pairs.j] - p.position[pairs.i], pairs.dx, p.box)
+        if not np.any(loose):
+            break
+        i, j, dx, h = pairs.i[loose], pairs.j[loose], pairs.dx[loose], h[loose]
+        sig = p.sigma(i, j)
+        push = (-2.0 * h * sig / np.linalg.norm(dx, axis=1))[:, None] * dx  # along r_j - r_i
+        share = np.where(rattler[i] & rattler[j], 0.5, 1.0)[:, None]
+        move = np.zeros_like(x)
+        np.add.at(move, i, -push * share * rattler[i][:, None])
+        np.add.at(move, j, push * share * rattler[j][:, None])
+        x = container.wrap(p.position + move)
+    return x
+
+
+def _newton_ready(chain: _Chain, step: _Step, lp: _LPSetup, n: int) -> bool:
+    """Whether to try the Newton finish after this (accepted) LP: in the tail, an
+    isostatic network without force-bearing rattlers, not the backbone of the last
+    rejected finish unless the LP before had it too (a rejection by an overlap, e.g.
+    of a rattler, may not recur closer to jamming)."""
+    stable = ~step.rattler
+    rows = lp.rows
+    on_stable = np.concatenate([stable[rows.i] & stable[rows.j], stable[rows.wall_particle]])
+    key = np.sort(rows.keys(n)[step.active & on_stable]).tobytes()
+    same, chain.backbone_key = key == chain.backbone_key, key
+    return (step.iso and step.sg <= NEWTON_FROM and (same or key != chain.newton_tried)
+            and not np.any(step.active & ~on_stable))
+
+
+def _newton_record(chain: _Chain, container: _Container, net: _Network, attempt: _NewtonAttempt,
+                   x: NDArray[np.float64], D: NDArray[np.float64], lp: _LPSetup) -> IterationRecord:
+    """The history entry of a certified Newton finish: its total growth and moves."""
+    unit = float(chain.D.mean())
+    s = container.displacement(x - chain.x) / unit
+    stable = ~net.rattler
+    ref = s[stable].mean(axis=0) if container.has_translation else np.zeros(s.shape[1])
+    rel = np.linalg.norm(s - ref, axis=1)
+    return IterationRecord(
+        len(chain.records) + 1, float(D[0] / chain.D[0] - 1.0), float(rel.max()), float(rel[stable].max()),
+        net.n_c, net.n_c, net.n_s, True, "Certified", attempt.seconds, "newton", lp.ell / lp.sig_max, np.inf,
+        attempt.min_dual, np.nan, True, newton_steps=attempt.steps)
+
+
+def _record(chain: _Chain, progress, rec: IterationRecord) -> None:
+    chain.records.append(rec)
+    if progress:
+        progress(rec)
 
 
 def calippso(
@@ -681,6 +1252,8 @@ def calippso(
     max_iterations: int = DEFAULT_MAX_ITERATIONS,
     require_isostatic: bool = True,
     threads: int = 1,
+    finish: str = DEFAULT_FINISH,
+    interior: str = DEFAULT_INTERIOR,
     progress: Callable[[IterationRecord], None] | None = None,
 ) -> CalippsoResult:
     """Jam ``packing`` by CALiPPSO (Algorithm 1), see the module docstring.
@@ -721,6 +1294,10 @@ def calippso(
         hyperstatic case; False returns it with ``converged`` and the flags set.
     threads : int
         HiGHS threads.
+    finish : {"newton", "lp"}
+        How the chain ends, see :data:`FINISHES`.
+    interior : {"ipx", "hipo"}
+        HiGHS interior point method of the interior point LPs, see :data:`INTERIOR_POINTS`.
     progress : callable, optional
         Called with each :class:`IterationRecord`.
 
@@ -741,186 +1318,69 @@ def calippso(
         raise ValueError(f"solver_tol must lie in [{MIN_SOLVER_TOL:g}, {MAX_SOLVER_TOL:g}], got {solver_tol}")
     t_start = time.perf_counter()
     d, n = packing.d, packing.n
-    x = packing.position.copy() if walls else packing.box.wrap(packing.position)
-    D = packing.diameter.copy()
-    solver_obj = _Solver(threads, solver_tol)
+    container = _Container(packing.box, walls)
+    if finish not in FINISHES:
+        raise ValueError(f"unknown finish {finish!r}; choose one of {', '.join(FINISHES)}")
+    opt = _Options(tol_s, tol_gamma, solver, cutoff, cutoff_near, bound, relax, require_isostatic, finish)
+    chain = _Chain(x=packing.position.copy() if walls else packing.box.wrap(packing.position),
+                   D=packing.diameter.copy())
+    solver_obj = _Solver(threads, solver_tol, interior)
     solver_obj.cold_simplex_as_ipm = solver == "hybrid"  # a cold simplex is slower than ipm
-    records: list[IterationRecord] = []
-    rows: _Rows | None = None
-    phase = 0  # 0 far, 1.. schedule entries; only tightens (hysteresis)
-    cut_factor = 1.0
-    bound_factor = 1.0
-    recoveries = 0
-    anchor = -1
-    prev_rattler: NDArray[np.bool_] | None = None
-    final_attempts = 0
-    recovery_method: str | None = None  # cold solve forced by a failed final check
+    network: _Network | None = None
     converged = False
-    unbounded_next = False
-    last: dict[str, Any] = {}
-    it = 0
-    stalls = 0
-    stall_from = 0  # records before this index are not compared by the stall test
-    while it < max_iterations:
-        it += 1
-        unit = float(D.mean())
-        sig_max = float(D.max())
-        c_rel = cutoff_near if (phase == len(bound) or unbounded_next) else cutoff
-        ell = min(c_rel * cut_factor * sig_max, 0.499 * float(np.min(packing.box.widths)))
-        if ell < MIN_CUTOFF * sig_max:
-            raise RuntimeError(
-                f"CALiPPSO failed: largest diameter {sig_max:.4g} is too close to half the box width "
-                f"({0.5 * float(np.min(packing.box.widths)):.4g}) for a neighbour cutoff; use more particles"
-            )
-        # bound for this LP [mean diameters]
-        if unbounded_next:
-            b = np.inf
-        elif phase == 0:
-            b = _far_bound(ell / sig_max, d) * sig_max / unit * bound_factor  # [mean diameters]
-        else:
-            b = 0.5 * bound[phase - 1][1] * bound_factor
-        # rows: reuse while displacements since the build are small
-        # rows (and with them a simplex basis) are kept while the cutoff changed by less
-        # than REUSE_FRACTION relatively and every particle moved less than
-        # REUSE_FRACTION (ell - sigma_max) since they were built
-        if rows is None or abs(rows.cutoff / ell - 1.0) > REUSE_FRACTION or _moved(
-            rows, x, packing, walls, prev_rattler
-        ) > REUSE_FRACTION * (ell - sig_max):
-            rows = _find_rows(x, D, packing, ell, walls)
-        ell = rows.cutoff
-        dx, sig, rhs, a, rad = _row_geometry(rows, x, D, packing)
-        A = _matrix(rows, dx, sig, a, rad, n, d, unit)
-        # per-particle bound: the previous LP's rattlers get the far bound, so that a
-        # rattler is not pinned on its bound (an active bound is an external force that
-        # it would pass on to the stable particle it touches)
-        b_far = _far_bound(ell / sig_max, d) * sig_max / unit
-        b_part = np.full(n, b)
-        if prev_rattler is not None and np.isfinite(b):
-            b_part[prev_rattler] = max(b, b_far)
-        if not walls and anchor < 0:
-            anchor = _most_neighbours(rows, n)
-        col_lower, col_upper = _column_bounds(b_part, d, -1 if walls else anchor, ell, sig_max, unit)
-        method = recovery_method or _method(solver, records, bool(np.isfinite(b)))
-        lp_sol = solver_obj.solve(A, rhs, col_lower, col_upper, method, rows)
-        status, lp_time, col, dual, method = lp_sol.status, lp_sol.seconds, lp_sol.col, lp_sol.dual, lp_sol.method
-        counts = dict(warm_start=lp_sol.warm, simplex_iterations=lp_sol.simplex_iterations,
-                      ipm_iterations=lp_sol.ipm_iterations)
-        if col is None:
-            rec = IterationRecord(it, np.nan, np.nan, np.nan, len(rows), 0, 0, False, status, lp_time, method, ell / sig_max, b, np.nan, np.nan, False, **counts)
-            records.append(rec)
-            if progress:
-                progress(rec)
-            recoveries, cut_factor, bound_factor = _retry(recoveries, cut_factor, bound_factor,
-                                                          f"LP status {status!r}", records)
-            unbounded_next = False
-            rows = None
+    for it in range(1, max_iterations + 1):
+        lp = _set_up_lp(chain, container, opt, d, n)
+        sol = solver_obj.solve(lp.A, lp.geo.rhs, lp.col_lower, lp.col_upper, lp.method, lp.rows)  # line 8
+        counts = dict(warm_start=sol.warm, simplex_iterations=sol.simplex_iterations,
+                      ipm_iterations=sol.ipm_iterations)
+        if sol.col is None:
+            _record(chain, progress, IterationRecord(
+                it, np.nan, np.nan, np.nan, len(lp.rows), 0, 0, False, sol.status, sol.seconds, sol.method,
+                lp.ell / lp.sig_max, lp.bound, np.nan, np.nan, False, **counts))
+            _recover(chain, f"LP status {sol.status!r}")
             continue
-        u = col[:-1].reshape(n, d)
-        g = float(col[-1])
-        # contacts from duals
-        mu = np.maximum(dual, 0.0)
-        mu_max = float(mu.max()) if len(mu) else 0.0
-        active = mu > CONTACT_DUAL_REL_TOL * mu_max if mu_max > 0 else np.zeros(len(mu), bool)
-        min_act = float(mu[active].min() / mu_max) if np.any(active) else np.nan
-        max_inact = float(mu[~active].max() / mu_max) if (mu_max > 0 and np.any(~active)) else 0.0
-        P = rows.n_pairs
-        pair_act = active[:P]
-        wall_act = active[P:]
-        contacts = np.stack([rows.i[pair_act], rows.j[pair_act]], axis=1)
-        wall_particle = rows.wall_particle[wall_act]
-        rattler = find_rattlers(n, d, contacts, wall_particle)
-        stable = ~rattler
-        n_s = int(stable.sum())
-        backbone = stable[contacts[:, 0]] & stable[contacts[:, 1]]
-        n_c = int(backbone.sum()) + int(stable[wall_particle].sum())
-        iso = n_s > 0 and n_c == _n_dof(d, n_s, walls)
-        ref = u[stable].mean(axis=0) if (n_s and not walls) else np.zeros(d)
-        rel = np.linalg.norm(u - ref, axis=1)
-        max_s = float(rel.max())
-        max_s_stable = float(rel[stable].max()) if n_s else max_s
-        sg = g / (1.0 + np.sqrt(1.0 + g))
-        # update and all-pairs overlap check
-        growth = np.sqrt(1.0 + (relax if relax is not None else 1.0) * g)
-        x_new = x + u * unit
-        D_new = D * growth
-        trial = _as_packing(packing, x_new, D_new, walls)
-        ov = _max_overlap(trial, walls)
+        step = _read_solution(lp, sol.col, sol.dual, container, d, n)
+        # the update must not create an overlap among ALL pairs (and walls)
+        ov = container.max_overlap(container.packing(
+            packing, chain.x + step.u * lp.unit, chain.D * _growth(step.g, relax)))
         accepted = ov <= OVERLAP_TOL
-        rec = IterationRecord(it, sg, max_s, max_s_stable, len(rows), n_c, n_s, iso, status, lp_time, method, ell / sig_max, b, min_act, max_inact, accepted, **counts)
-        records.append(rec)
-        if progress:
-            progress(rec)
+        _record(chain, progress, IterationRecord(
+            it, step.sg, step.max_s, step.max_s_stable, len(lp.rows), step.n_c, step.n_s, step.iso, sol.status,
+            sol.seconds, sol.method, lp.ell / lp.sig_max, lp.bound, step.min_active_dual, step.max_inactive_dual,
+            accepted, **counts))
         if not accepted:
-            recoveries, cut_factor, bound_factor = _retry(recoveries, cut_factor, bound_factor,
-                                                          f"update overlaps by {ov:.3g} (relative)", records)
-            unbounded_next = False
-            rows = None
+            _recover(chain, f"update overlaps by {ov:.3g} (relative)")
             continue
-        recoveries = 0
-        prev_rattler = rattler
-        x = x_new if walls else packing.box.wrap(x_new)
-        D = D_new
-        if not walls and len(contacts):
-            zc = np.bincount(contacts[backbone].ravel(), minlength=n)
-            anchor = int(np.argmax(zc))
-        # phase schedule with hysteresis: a phase never loosens (measured: loosening
-        # again above 10x the threshold cost more LPs from random starts)
-        while phase < len(bound) and sg <= bound[phase][0]:
-            phase += 1
-        small = sg < tol_gamma and max_s_stable < tol_s
-        if small and np.isinf(b):
-            last = dict(contacts=contacts, mu=mu, active=active, rows=rows, dx=dx, sig=sig, a=a, rad=rad,
-                        rattler=rattler, iso=iso, n_c=n_c, n_s=n_s, u=u, wall_particle=wall_particle)
-            ok, why = _final_checks(packing, x, D, walls, last)
-            if ok or not require_isostatic or final_attempts >= 2:
-                converged = ok
-                last["why"] = why
+        _update(chain, step, lp, opt, container, n)
+        if opt.finish == "newton" and _newton_ready(chain, step, lp, n):
+            attempt, x, D, net = _newton_finish(chain, step, lp, opt, container, packing)
+            if attempt.certified:
+                ok, why = _final_checks(packing, x, D, container, net)
+                if ok:
+                    chain.newton.append(attempt)
+                    _record(chain, progress, _newton_record(chain, container, net, attempt, x, D, lp))
+                    chain.x, chain.D, network, converged = x, D, net, True
+                    break
+                attempt = replace(attempt, certified=False, reason=f"final checks: {why}")
+            chain.newton.append(attempt)
+            chain.newton_tried = chain.backbone_key
+        if _small(step, opt) and np.isinf(lp.bound):
+            network = _dual_network(step, lp, chain.x, container, d, n)
+            converged, network.why = _final_checks(packing, chain.x, chain.D, container, network)
+            if converged or not require_isostatic or chain.final_attempts >= 2:
                 break
-            # recovery for a converged but failing network: larger cutoff, dual simplex
-            final_attempts += 1
-            cut_factor *= CUTOFF_GROWTH
-            # a degenerate (e.g. App. A hyperstatic) LP has many dual optima: re-solve
-            # cold, by interior point with crossover, then by the dual simplex
-            recovery_method = FINAL_RECOVERY_METHODS[final_attempts - 1]
-            rows = None
-            last["why"] = why
+            _final_recovery(chain)
             continue
-        # the converging LP must be unbounded: go unbounded once the network is
-        # isostatic or the tightest bound is far from active for the stable particles;
-        # stay unbounded only while isostatic with moves the bound would have allowed
-        # (a large unbounded move wanders along soft directions: bounded again after it)
-        tight = 0.5 * bound[-1][1]
-        if np.isfinite(b):
-            leave_bound = iso or max_s_stable < UNBOUND_FRACTION * tight or max_s_stable > BOUND_ACTIVE_FRACTION * tight
-        else:
-            leave_bound = iso and max_s_stable <= BOUND_ACTIVE_FRACTION * tight
-        unbounded_next = small or (phase == len(bound) and leave_bound)
-        if _stalled(records, stall_from):
-            stalls += 1
-            if stalls > MAX_STALL_RECOVERIES:
-                raise RuntimeError(_diagnose(
-                    f"stalled: sqrt(Gamma*)-1 did not halve in {STALL_WINDOW} LPs, {MAX_STALL_RECOVERIES} times", records))
-            # recovery: an unbounded LP (no bound pins floppy motions) with fresh rows
-            stall_from = len(records)
-            unbounded_next = True
-            rows = None
+        _schedule_next(chain, step, lp, opt)
     total = time.perf_counter() - t_start
-    history = _history(records)
-    if not last:
-        raise RuntimeError(_diagnose(f"not converged in {max_iterations} LPs", records))
+    history = _history(chain.records)
+    if network is None:
+        raise RuntimeError(_diagnose(f"not converged in {max_iterations} LPs", chain.records))
     if not converged and require_isostatic:
-        raise RuntimeError(_diagnose(f"converged LP failed the final checks: {last['why']}", records))
-    return _result(packing, x, D, walls, last, records, history, converged, total, dict(
-        tol_s=tol_s, tol_gamma=tol_gamma, solver=solver, solver_tol=solver_tol, cutoff=cutoff, cutoff_near=cutoff_near, bound=[list(b) for b in bound],
+        raise RuntimeError(_diagnose(f"converged LP failed the final checks: {network.why}", chain.records))
+    return _result(packing, chain.x, chain.D, container, network, chain, history, converged, total, dict(
+        finish=finish, interior=interior, tol_s=tol_s, tol_gamma=tol_gamma, solver=solver, solver_tol=solver_tol, cutoff=cutoff, cutoff_near=cutoff_near, bound=[list(b) for b in bound],
         relax=relax, walls=walls, max_iterations=max_iterations, threads=threads))
-
-
-def _retry(recoveries: int, cut_factor: float, bound_factor: float, reason: str,
-           records: list[IterationRecord]) -> tuple[int, float, float]:
-    """One more recovery: a larger cutoff and a smaller bound, or the diagnostics when spent."""
-    if recoveries + 1 > MAX_RECOVERIES:
-        raise RuntimeError(_diagnose(f"{reason} after {MAX_RECOVERIES} recoveries", records))
-    return recoveries + 1, cut_factor * CUTOFF_GROWTH, bound_factor * BOUND_SHRINK
 
 
 def _stalled(records: list[IterationRecord], start: int) -> bool:
@@ -944,79 +1404,122 @@ def _method(solver: str, records: list[IterationRecord], bounded: bool) -> str:
     return solver
 
 
-def _moved(rows: _Rows, x: NDArray[np.float64], packing: Packing, walls: bool,
-           rattler: NDArray[np.bool_] | None) -> float:
+def _moved(rows: _Rows, x: NDArray[np.float64], container: _Container, rattler: NDArray[np.bool_] | None) -> float:
     """Largest displacement since the rows were built [length]; a rattler of the last
     LP counts with a tenth of its displacement (it roams its cage; an overlap it
     might cause with an unlisted pair is caught by the all-pairs check)."""
-    dxs = x - rows.x_build
-    if not walls:
-        dxs = packing.box.minimum_image(dxs)
+    dxs = container.displacement(x - rows.x_build)
     m = np.sqrt(np.einsum("ij,ij->i", dxs, dxs))
     if rattler is not None:
         m[rattler] *= 0.1
     return float(m.max())
 
 
-def _as_packing(packing: Packing, x, D, walls: bool) -> Packing:
-    return replace(packing, position=x if walls else packing.box.wrap(x), diameter=D,
-                   contacts=None, force=None, rattler=None)
+# --- the converged network and its checks -----------------------------------------------------
 
 
-def _max_overlap(p: Packing, walls: bool) -> float:
-    """Largest relative overlap over ALL pairs (and walls), 0 if none."""
-    if not walls:
-        return max_overlap(p)[1]
-    pairs, h = near_pairs(p, 0.0)
-    if len(h):
-        direct = p.position[pairs.j] - p.position[pairs.i]
-        keep = np.all(np.abs(direct - pairs.dx) < 1e-12 * p.box.lengths.max(), axis=1)
-        h = h[keep]
-    ov = max(0.0, -float(h.min())) if len(h) else 0.0
-    rad = 0.5 * p.diameter[:, None]
-    L = p.box.lengths
-    wall_gap = np.minimum(p.position, L - p.position) / rad - 1.0
-    return max(ov, -float(wall_gap.min()))
+@dataclass
+class _Network:
+    """The contact network of the converged LP and what the final checks found.
+
+    Contacts are sphere pairs ``contacts`` (P, 2) and wall contacts
+    (``wall_particles``, ``wall_faces``) with forces ``f_pair``, ``f_wall`` (paper
+    Eq. 11); the remaining fields are the counts and residuals stored as attributes.
+    """
+
+    contacts: NDArray[np.int64]
+    wall_particles: NDArray[np.int64]
+    wall_faces: NDArray[np.int64]
+    f_pair: NDArray[np.float64]
+    f_wall: NDArray[np.float64]
+    rattler: NDArray[np.bool_]
+    n_c: int
+    n_s: int
+    iso: bool
+    force_balance_residual: float
+    residual_stable: float
+    force_assignment: str = DUAL_VERTEX
+    force_assignment_note: str = ""
+    isostatic_count: int = 0
+    hyperstatic: bool = False
+    isostatic_appendix_a: bool = False
+    n_contacts_with_rattlers: int = 0
+    n_force_bearing_rattlers: int = 0
+    n_contacts_dual: int = 0
+    n_rattlers_dual: int = 0
+    dual_not_geometric: int = 0
+    geometric_not_dual: int = 0
+    n_contacts_geometric: int = 0
+    n_stable_geometric: int = 0
+    why: str = "ok"
 
 
-def _final_checks(packing: Packing, x, D, walls: bool, last: dict[str, Any]) -> tuple[bool, str]:
+def _dual_network(step: _Step, lp: _LPSetup, x: NDArray[np.float64], container: _Container,
+                  d: int, n: int) -> _Network:
+    """Contacts and forces of a converged LP: forces from the duals (paper Eq. 11),
+    ``f = mu / sigma_ij`` (a wall: ``mu / (sigma_i / 2)``), with the per-particle
+    force-balance residual on the updated configuration ``x``."""
+    rows = lp.rows
+    P = rows.n_pairs
+    pa, wa = step.active[:P], step.active[P:]
+    f_pair = step.mu[:P][pa] / lp.geo.sig[pa]
+    f_wall = step.mu[P:][wa] / lp.geo.rad[wa]
+    faces = rows.wall_face[wa]
+    resid = _balance_residual(x, container, step.contacts, f_pair, rows.wall_particle[wa], faces, f_wall, d, n)
+    stable = ~step.rattler
+    # rattlers may carry forces only in the App. A case; residual over all particles
+    return _Network(step.contacts, step.wall_particles, faces, f_pair, f_wall, step.rattler, step.n_c, step.n_s,
+                    step.iso, force_balance_residual=float(resid.max(initial=0.0)),
+                    residual_stable=float(resid[stable].max(initial=0.0)))
+
+
+def _balance_residual(x, container: _Container, c, f_pair, wp, faces, f_wall, d: int, n: int) -> NDArray[np.float64]:
+    """Per-particle net contact force over the mean force, (N,), directions on ``x``."""
+    dxc = container.box.minimum_image(x[c[:, 1]] - x[c[:, 0]]) if len(c) else np.empty((0, d))
+    nij = dxc / np.linalg.norm(dxc, axis=1)[:, None] if len(c) else dxc
+    net = np.zeros((n, d))
+    np.add.at(net, c[:, 0], -f_pair[:, None] * nij)
+    np.add.at(net, c[:, 1], f_pair[:, None] * nij)
+    push = np.where(faces % 2 == _LOWER, 1.0, -1.0) * f_wall
+    np.add.at(net, (wp, faces // 2), push)
+    scale = float(np.mean(np.concatenate([f_pair, f_wall]))) if len(f_pair) + len(f_wall) else 1.0
+    return np.linalg.norm(net, axis=1) / scale
+
+
+def _final_checks(packing: Packing, x, D, container: _Container, net: _Network) -> tuple[bool, str]:
     """Isostaticity (or App. A hyperstaticity), force balance and dual-vs-gap contacts.
 
     When the geometric network (gaps below :data:`~jamflow.tolerances.CONTACT_GAP_TOL`)
     has another backbone than the dual vertex (a degenerate, hyperstatic packing),
-    ``last`` is switched to the geometric network with a balanced force assignment
+    ``net`` is switched to the geometric network with a balanced force assignment
     (:func:`_store_geometric`); otherwise the dual contacts and forces stay as they are.
     """
     d, n = packing.d, packing.n
-    forces, net = _forces(packing, x, D, walls, last)
-    last.update(forces)
-    last["force_balance_residual"] = net
-    last["force_assignment"] = DUAL_VERTEX
-    rattler, stable = last["rattler"], ~last["rattler"]
-    c = last["contacts"]
-    iso_n = _n_dof(d, last["n_s"], walls)
+    rattler, stable = net.rattler, ~net.rattler
+    c = net.contacts
+    iso_n = container.n_dof(d, net.n_s)
     # App. A counting: contacts between stable particles and between a stable particle
     # and a force-bearing rattler, all rattlers out of the degrees of freedom
     touches_stable = stable[c[:, 0]] | stable[c[:, 1]]
-    n_c_a = int(touches_stable.sum()) + int(stable[last["wall_particle"]].sum())
+    n_c_a = int(touches_stable.sum()) + int(stable[net.wall_particles].sum())
     fb_rattler = np.zeros(n, bool)
     both_r = rattler[c[:, 0]] | rattler[c[:, 1]]
     fb_rattler[c[both_r].ravel()] = True
     fb_rattler &= rattler
-    last["n_contacts_with_rattlers"] = n_c_a
-    last["n_force_bearing_rattlers"] = int(fb_rattler.sum())
-    last["isostatic_count"] = iso_n
-    last["n_contacts_dual"] = len(c) + len(last["wall_particle"])  # the vertex's support
-    last["n_rattlers_dual"] = int(rattler.sum())
-    hyper = last["n_c"] > iso_n
-    last["isostatic_appendix_a"] = bool(n_c_a == iso_n)
+    net.n_contacts_with_rattlers = n_c_a
+    net.n_force_bearing_rattlers = int(fb_rattler.sum())
+    net.isostatic_count = iso_n
+    net.n_contacts_dual = len(c) + len(net.wall_particles)  # the vertex's support
+    net.n_rattlers_dual = int(rattler.sum())
+    hyper = net.n_c > iso_n
+    net.isostatic_appendix_a = bool(n_c_a == iso_n)
     # dual contacts vs geometric contacts (gap below CONTACT_GAP_TOL)
-    p = _as_packing(packing, x, D, walls)
-    geo_c, geo_wp, geo_wf = _geometric_network(p, walls)
+    p = container.packing(packing, x, D)
+    geo_c, geo_wp, geo_wf = container.touching(p)
     geo = set(zip(geo_c[:, 0].tolist(), geo_c[:, 1].tolist()))
     dual = set(map(tuple, c.tolist()))
-    last["dual_not_geometric"] = len(dual - geo)
-    last["geometric_not_dual"] = len(geo - dual)
+    net.dual_not_geometric = len(dual - geo)
+    net.geometric_not_dual = len(geo - dual)
     # the geometric network: a degenerate (crystalline) jammed packing has more
     # contacts than force-bearing duals at any vertex of its LP (App. A)
     geo_rattler = find_rattlers(n, d, geo_c, geo_wp)
@@ -1024,60 +1527,42 @@ def _final_checks(packing: Packing, x, D, walls: bool, last: dict[str, Any]) -> 
     n_s_geo = int(geo_stable.sum())
     n_c_geo = (int((geo_stable[geo_c[:, 0]] & geo_stable[geo_c[:, 1]]).sum())
                + int(geo_stable[geo_wp].sum()))
-    last["n_stable_geometric"] = n_s_geo
-    last["n_contacts_geometric"] = n_c_geo
-    geo_rigid_count = n_s_geo > 0 and n_c_geo >= _n_dof(d, n_s_geo, walls)
-    hyper = hyper or n_c_geo > _n_dof(d, n_s_geo, walls)
-    last["hyperstatic"] = bool(hyper)
+    net.n_stable_geometric = n_s_geo
+    net.n_contacts_geometric = n_c_geo
+    geo_rigid_count = n_s_geo > 0 and n_c_geo >= container.n_dof(d, n_s_geo)
+    net.hyperstatic = bool(hyper or n_c_geo > container.n_dof(d, n_s_geo))
     reasons = []
-    if last["dual_not_geometric"]:
-        reasons.append(f"{last['dual_not_geometric']} dual contact(s) with gap > {CONTACT_GAP_TOL:g}")
-    elif not _same_backbone(last, geo_c, geo_wp, geo_wf, geo_rattler):
-        _store_geometric(p, walls, last, geo_c, geo_wp, geo_wf, geo_rattler)
+    if net.dual_not_geometric:
+        reasons.append(f"{net.dual_not_geometric} dual contact(s) with gap > {CONTACT_GAP_TOL:g}")
+    elif not _same_backbone(net, geo_c, geo_wp, geo_wf, geo_rattler):
+        _store_geometric(p, container, net, geo_c, geo_wp, geo_wf, geo_rattler)
         if not geo_rigid_count:
             reasons.append(f"geometric network: N_c = {n_c_geo} but isostatic count "
-                           f"{_n_dof(d, n_s_geo, walls)} (N_s = {n_s_geo})")
+                           f"{container.n_dof(d, n_s_geo)} (N_s = {n_s_geo})")
         return not reasons, "; ".join(reasons) or "ok"
-    if not (last["iso"] or (hyper and last["isostatic_appendix_a"])):
-        reasons.append(f"N_c = {last['n_c']} but d(N_s-1)+1 = {iso_n} (N_s = {last['n_s']})")
+    if not (net.iso or (net.hyperstatic and net.isostatic_appendix_a)):
+        reasons.append(f"N_c = {net.n_c} but d(N_s-1)+1 = {iso_n} (N_s = {net.n_s})")
     return not reasons, "; ".join(reasons) or "ok"
 
 
-def _geometric_network(p: Packing, walls: bool) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
-    """Pairs (P, 2) and wall contacts (particles, faces) with relative gap at most
-    :data:`~jamflow.tolerances.CONTACT_GAP_TOL`; between walls only direct pairs."""
-    pairs, h = near_pairs(p, CONTACT_GAP_TOL)
-    if not walls:
-        return np.stack([pairs.i, pairs.j], axis=1), np.empty(0, np.int64), np.empty(0, np.int64)
-    if len(h):
-        direct = p.position[pairs.j] - p.position[pairs.i]
-        keep = np.all(np.abs(direct - pairs.dx) < 1e-12 * p.box.lengths.max(), axis=1)
-        pairs = pairs.select(keep)
-    rad = 0.5 * p.diameter[:, None]
-    gap = np.stack([p.position / rad - 1.0, (p.box.lengths - p.position) / rad - 1.0], axis=2)  # (N, d, 2)
-    wp, axis, side = np.nonzero(gap <= CONTACT_GAP_TOL)
-    return np.stack([pairs.i, pairs.j], axis=1), wp.astype(np.int64), (2 * axis + side).astype(np.int64)
-
-
-def _same_backbone(last: dict[str, Any], geo_c, geo_wp, geo_wf, geo_rattler) -> bool:
+def _same_backbone(net: _Network, geo_c, geo_wp, geo_wf, geo_rattler) -> bool:
     """Whether the dual vertex and the geometry give the same rattlers and backbone
     contacts (pairs and walls); a rattler resting on a neighbour with zero force
     makes no difference."""
-    rattler = last["rattler"]
-    if not np.array_equal(rattler, geo_rattler):
+    if not np.array_equal(net.rattler, geo_rattler):
         return False
-    stable = ~rattler
+    stable = ~net.rattler
 
     def backbone(c, wp, wf):
         pairs = {tuple(v) for v in c[stable[c[:, 0]] & stable[c[:, 1]]].tolist()}
         keep = stable[wp]
         return pairs, set(zip(wp[keep].tolist(), wf[keep].tolist()))
 
-    return backbone(last["contacts"], last["wall_particles"], last["wall_faces"]) == backbone(geo_c, geo_wp, geo_wf)
+    return backbone(net.contacts, net.wall_particles, net.wall_faces) == backbone(geo_c, geo_wp, geo_wf)
 
 
-def _store_geometric(p: Packing, walls: bool, last: dict[str, Any], geo_c, geo_wp, geo_wf, geo_rattler) -> None:
-    """Replace the dual network in ``last`` by the geometric one, with rattlers from
+def _store_geometric(p: Packing, container: _Container, net: _Network, geo_c, geo_wp, geo_wf, geo_rattler) -> None:
+    """Replace the dual network in ``net`` by the geometric one, with rattlers from
     the geometric coordination and the minimum-norm balanced forces
     (:func:`jamflow.force_network.min_norm_forces`, normalised like the duals,
     ``sum_c f_c sigma_c = 1``); when that QP fails, the dual vertex forces (zero on
@@ -1089,65 +1574,37 @@ def _store_geometric(p: Packing, walls: bool, last: dict[str, Any], geo_c, geo_w
     weight = np.concatenate([p.sigma(geo_c[:, 0], geo_c[:, 1]), 0.5 * p.diameter[geo_wp]])
     try:
         f, _ = min_norm_forces(B, weight, d)
-        last["force_assignment"] = MIN_NORM
+        net.force_assignment = MIN_NORM
     except RuntimeError as exc:
-        f = _dual_on(last, geo_c, geo_wp, geo_wf)
-        last["force_assignment"] = DUAL_VERTEX_ON_GEOMETRIC
-        last["force_assignment_note"] = f" ({exc})"
+        f = _dual_on(net, geo_c, geo_wp, geo_wf)
+        net.force_assignment = DUAL_VERTEX_ON_GEOMETRIC
+        net.force_assignment_note = f" ({exc})"
     n_pairs = len(geo_c)
     stable = ~geo_rattler
-    net = np.linalg.norm(np.asarray(B @ f).reshape(n, d), axis=1) / float(f.mean())
+    resid = np.linalg.norm(np.asarray(B @ f).reshape(n, d), axis=1) / float(f.mean())
     n_s = int(stable.sum())
-    n_c = int((stable[geo_c[:, 0]] & stable[geo_c[:, 1]]).sum()) + int(stable[geo_wp].sum())
-    iso_n = _n_dof(d, n_s, walls)
-    last.update(
-        contacts=geo_c, f_pair=f[:n_pairs], rattler=geo_rattler, wall_particle=geo_wp, wall_particles=geo_wp,
-        wall_faces=geo_wf, f_wall=f[n_pairs:], n_c=n_c, n_s=n_s, iso=n_s > 0 and n_c == iso_n,
-        isostatic_count=iso_n, hyperstatic=n_c > iso_n, force_balance_residual=float(net.max(initial=0.0)),
-        residual_stable=float(net[stable].max(initial=0.0)),
-    )
+    net.contacts, net.f_pair, net.rattler = geo_c, f[:n_pairs], geo_rattler
+    net.wall_particles, net.wall_faces, net.f_wall = geo_wp, geo_wf, f[n_pairs:]
+    net.n_c = int((stable[geo_c[:, 0]] & stable[geo_c[:, 1]]).sum()) + int(stable[geo_wp].sum())
+    net.n_s = n_s
+    net.isostatic_count = container.n_dof(d, n_s)
+    net.iso = n_s > 0 and net.n_c == net.isostatic_count
+    net.hyperstatic = net.n_c > net.isostatic_count
+    net.force_balance_residual = float(resid.max(initial=0.0))
+    net.residual_stable = float(resid[stable].max(initial=0.0))
 
 
-def _dual_on(last: dict[str, Any], geo_c, geo_wp, geo_wf) -> NDArray[np.float64]:
+def _dual_on(net: _Network, geo_c, geo_wp, geo_wf) -> NDArray[np.float64]:
     """The dual vertex forces on the geometric contacts (pairs then walls), zero off its support."""
-    n = len(last["rattler"])
-    key_pair = {k: v for k, v in zip((last["contacts"] @ [n, 1]).tolist(), last["f_pair"].tolist())}
-    key_wall = {k: v for k, v in zip((last["wall_particles"] * 64 + last["wall_faces"]).tolist(),
-                                     last["f_wall"].tolist())}
+    n = len(net.rattler)
+    key_pair = {k: v for k, v in zip((net.contacts @ [n, 1]).tolist(), net.f_pair.tolist())}
+    key_wall = {k: v for k, v in zip((net.wall_particles * 64 + net.wall_faces).tolist(), net.f_wall.tolist())}
     fp = [key_pair.get(k, 0.0) for k in (geo_c @ [n, 1]).tolist()]
     fw = [key_wall.get(k, 0.0) for k in (geo_wp * 64 + geo_wf).tolist()]
     return np.array(fp + fw, dtype=np.float64)
 
 
-def _forces(packing: Packing, x, D, walls: bool, last: dict[str, Any]):
-    """Forces from duals (paper Eq. 11) and the per-particle force-balance residual."""
-    d, n = packing.d, packing.n
-    rows, active, mu = last["rows"], last["active"], last["mu"]
-    P = rows.n_pairs
-    pa = active[:P]
-    wa = active[P:]
-    f_pair = mu[:P][pa] / last["sig"][pa]
-    f_wall = mu[P:][wa] / last["rad"][wa]
-    # directions on the updated configuration
-    c = last["contacts"]
-    dxc = packing.box.minimum_image(x[c[:, 1]] - x[c[:, 0]]) if len(c) else np.empty((0, d))
-    nij = dxc / np.linalg.norm(dxc, axis=1)[:, None] if len(c) else dxc
-    net = np.zeros((n, d))
-    np.add.at(net, c[:, 0], -f_pair[:, None] * nij)
-    np.add.at(net, c[:, 1], f_pair[:, None] * nij)
-    faces = rows.wall_face[wa]
-    wp = rows.wall_particle[wa]
-    push = np.where(faces % 2 == _LOWER, 1.0, -1.0) * f_wall
-    np.add.at(net, (wp, faces // 2), push)
-    scale = float(np.mean(np.concatenate([f_pair, f_wall]))) if len(f_pair) + len(f_wall) else 1.0
-    resid = np.linalg.norm(net, axis=1) / scale
-    stable = ~last["rattler"]
-    # rattlers may carry forces only in the App. A case; residual over all particles
-    return dict(f_pair=f_pair, f_wall=f_wall, wall_faces=faces, wall_particles=wp,
-                residual_stable=float(resid[stable].max(initial=0.0))), float(resid.max(initial=0.0))
-
-
-_COUNTS = ("n_constraints", "n_contacts", "n_stable", "simplex_iterations", "ipm_iterations")
+_COUNTS = ("n_constraints", "n_contacts", "n_stable", "simplex_iterations", "ipm_iterations", "newton_steps")
 
 
 def _history(records: list[IterationRecord]) -> xr.Dataset:
@@ -1163,7 +1620,8 @@ def _history(records: list[IterationRecord]) -> xr.Dataset:
         "n_stable": ("1", "stable (non-rattler) particles"),
         "simplex_iterations": ("1", "simplex pivots of the LP (crossover pivots included)"),
         "ipm_iterations": ("1", "interior point iterations of the LP"),
-        "lp_time": ("s", "LP wall time"),
+        "newton_steps": ("1", "Newton steps of the certified finish (0 for an LP)"),
+        "lp_time": ("s", "LP (or Newton finish) wall time"),
         "cutoff": ("1", "neighbour cutoff [largest diameters]"),
         "bound": ("1", "displacement bound per coordinate [mean diameters]; inf = none"),
         "min_active_dual": ("1", "smallest active dual / largest dual"),
@@ -1189,66 +1647,74 @@ def _diagnose(message: str, records: list[IterationRecord]) -> str:
     return f"CALiPPSO failed: {message} [{info}]"
 
 
-def _result(packing, x, D, walls, last, records, history, converged, total, settings) -> CalippsoResult:
-    contacts = last["contacts"]
-    p = _as_packing(packing, x, D, walls)
-    ov_rel = _max_overlap(p, walls)
-    n_rattlers = int(last["rattler"].sum())
+def _result(packing, x, D, container: _Container, net: _Network, chain: _Chain, history, converged, total,
+            settings) -> CalippsoResult:
+    records = chain.records
+    newton = chain.newton
+    p = container.packing(packing, x, D)
+    ov_rel = container.max_overlap(p)
+    n_rattlers = int(net.rattler.sum())
     attrs = dict(packing.attrs)
     attrs.update(
         phi_J=p.packing_fraction,
         phi_initial=packing.packing_fraction,
         iterations=len(records),
         converged=int(converged),
-        n_contacts=int(last["n_c"]),
-        n_stable=int(last["n_s"]),
+        n_contacts=int(net.n_c),
+        n_stable=int(net.n_s),
         n_rattlers=n_rattlers,
-        isostatic_count=int(last["isostatic_count"]),
-        isostatic=int(last["iso"]),
-        hyperstatic=int(last["hyperstatic"]),
-        isostatic_appendix_a=int(last["isostatic_appendix_a"]),
-        n_contacts_with_rattlers=int(last["n_contacts_with_rattlers"]),
-        n_force_bearing_rattlers=int(last["n_force_bearing_rattlers"]),
-        force_balance_residual=float(last["force_balance_residual"]),
+        isostatic_count=int(net.isostatic_count),
+        isostatic=int(net.iso),
+        hyperstatic=int(net.hyperstatic),
+        isostatic_appendix_a=int(net.isostatic_appendix_a),
+        n_contacts_with_rattlers=int(net.n_contacts_with_rattlers),
+        n_force_bearing_rattlers=int(net.n_force_bearing_rattlers),
+        force_balance_residual=float(net.force_balance_residual),
         max_overlap=float(ov_rel),
-        dual_not_geometric=int(last["dual_not_geometric"]),
-        geometric_not_dual=int(last["geometric_not_dual"]),
-        n_contacts_geometric=int(last["n_contacts_geometric"]),
-        n_stable_geometric=int(last["n_stable_geometric"]),
+        dual_not_geometric=int(net.dual_not_geometric),
+        geometric_not_dual=int(net.geometric_not_dual),
+        n_contacts_geometric=int(net.n_contacts_geometric),
+        n_stable_geometric=int(net.n_stable_geometric),
         contact_gap_tol=CONTACT_GAP_TOL,
-        n_contacts_dual=int(last["n_contacts_dual"]),
-        n_rattlers_dual=int(last["n_rattlers_dual"]),
-        force_assignment=last["force_assignment"],
-        force_assignment_comment=FORCE_ASSIGNMENTS[last["force_assignment"]]
-        + last.get("force_assignment_note", ""),
-        n_zero_force_contacts=int(np.sum(last["f_pair"] <= 0.0) + np.sum(last["f_wall"] <= 0.0)),
-        boundary="walls" if walls else "periodic",
+        n_contacts_dual=int(net.n_contacts_dual),
+        n_rattlers_dual=int(net.n_rattlers_dual),
+        force_assignment=net.force_assignment,
+        force_assignment_comment=FORCE_ASSIGNMENTS[net.force_assignment]
+        + net.force_assignment_note,
+        n_zero_force_contacts=int(np.sum(net.f_pair <= 0.0) + np.sum(net.f_wall <= 0.0)),
+        boundary="walls" if container.walls else "periodic",
+        finish="newton" if any(a.certified for a in newton) else "lp",
+        n_lps=sum(r.solver != "newton" for r in records),
+        newton_attempts=len(newton),
+        newton_rejections=sum(not a.certified for a in newton),
+        newton_last_rejection=next((a.reason for a in reversed(newton) if not a.certified), "none"),
+        newton_time=float(sum(a.seconds for a in newton)),
         force_unit="CALiPPSO dual scaling (paper Eq. 11): f = lambda sigma_ij [1/length], sum_c f_c sigma_c = 1",
         total_time=total,
         peak_memory=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024.0,
         lp_time_total=float(np.nansum(history["lp_time"].values)),
     )
-    if walls:
+    if container.walls:
         attrs["walls"] = "hard walls on every face of the orthogonal box [0, L_mu]; wall contacts in wall_contact_*"
     out = Packing(
         position=p.position,
         diameter=D,
         box=packing.box,
-        contacts=contacts,
-        force=last["f_pair"],
-        rattler=last["rattler"],
+        contacts=net.contacts,
+        force=net.f_pair,
+        rattler=net.rattler,
         pressure=None,
         protocol=f"{packing.protocol}>calippso",
         seed=packing.seed,
         parameters=settings,
         attrs=attrs,
     )
-    wc = np.stack([last["wall_particles"], last["wall_faces"]], axis=1).astype(np.int64)
+    wc = np.stack([net.wall_particles, net.wall_faces], axis=1).astype(np.int64)
     diag = {k: attrs[k] for k in ("phi_J", "n_contacts", "n_stable", "isostatic_count", "isostatic", "hyperstatic",
                                   "force_balance_residual", "max_overlap", "total_time", "peak_memory")}
-    diag["residual_stable"] = last["residual_stable"]
-    diag["why"] = last.get("why", "ok")
-    return CalippsoResult(out, history, converged, len(records), wc, last["f_wall"], diag)
+    diag["residual_stable"] = net.residual_stable
+    diag["why"] = net.why
+    return CalippsoResult(out, history, converged, len(records), wc, net.f_wall, diag)
 
 
 def _check_options(packing, tol_s, tol_gamma, solver, cutoff, bound, relax, walls, max_iterations) -> None:
@@ -1280,7 +1746,8 @@ def _check_options(packing, tol_s, tol_gamma, solver, cutoff, bound, relax, wall
         if np.any(out):
             bad = np.flatnonzero(out.any(axis=1))
             raise ValueError(f"{bad.size} sphere(s) cross a wall (e.g. index {bad[0]}); walls need every sphere inside the box")
-    ov = _max_overlap(_as_packing(packing, packing.position, packing.diameter, walls), walls)
+    container = _Container(packing.box, walls)
+    ov = container.max_overlap(container.packing(packing, packing.position, packing.diameter))
     if ov > OVERLAP_TOL:
         raise ValueError(f"input overlaps by {ov:.3g} (relative) > {OVERLAP_TOL:g}: CALiPPSO needs a hard-sphere start")
 

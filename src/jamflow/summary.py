@@ -161,7 +161,7 @@ def _packing_row(root: Path, path: Path) -> dict[str, Any]:
         "N": int(_attr(a, "N")), "d": int(_attr(a, "d")), "protocol": _attr(a, "protocol", ""),
         "seed": int(_attr(a, "seed", -1)), "phi": float(_attr(a, "packing_fraction")),
         "pressure": float(_attr(a, "pressure")), "phi_J": float(_attr(a, "phi_J")),
-        "n_lp": _attr(a, "iterations"), "max_overlap": _attr(a, "max_overlap"),
+        "n_lp": _attr(a, "n_lps", _attr(a, "iterations")), "max_overlap": _attr(a, "max_overlap"),
         "force_balance_residual": _attr(a, "force_balance_residual"),
         "file": path.relative_to(root).as_posix(), "_variant": variant,
     }

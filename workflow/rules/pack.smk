@@ -132,7 +132,8 @@ rule calippso:
     params:
         preset=PRESET,
         options=stage_options(
-            "calippso", tol_s="--tol-s", tol_gamma="--tol-gamma", solver="--solver", solver_tol="--solver-tol", walls="--walls"
+            "calippso", tol_s="--tol-s", tol_gamma="--tol-gamma", solver="--solver", solver_tol="--solver-tol", walls="--walls",
+            finish="--finish",
         ),
         read=read_flags(CHAIN[CHAIN.index("calippso") - 1]) if "calippso" in CHAIN else "",
     conda:

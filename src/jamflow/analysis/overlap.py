@@ -140,7 +140,9 @@ def overlap_series(
                      {**one, "long_name": "contacts shared with the reference"}),
     }
     if all("iterations" in packings[k].attrs for k in order):
-        data_vars["n_lp"] = ("p_target", np.array([int(packings[k].attrs["iterations"]) for k in order]),
+        # LPs solved: a Newton finish (jamflow calippso --finish newton) is a history entry, not an LP
+        data_vars["n_lp"] = ("p_target", np.array([int(packings[k].attrs.get("n_lps", packings[k].attrs["iterations"]))
+                                                   for k in order]),
                              {**one, "long_name": "number of linear optimisations of CALiPPSO"})
     extra = {} if growth_rate is None else {"kappa": float(growth_rate)}
     return xr.Dataset(

@@ -9,11 +9,15 @@ from tqdm import tqdm
 from ..calippso import (
     DEFAULT_CUTOFF,
     DEFAULT_CUTOFF_NEAR,
+    DEFAULT_FINISH,
+    DEFAULT_INTERIOR,
     DEFAULT_MAX_ITERATIONS,
     DEFAULT_SOLVER,
     DEFAULT_TOL_GAMMA,
     DEFAULT_TOL_S,
     SOLVER_TOL,
+    FINISHES,
+    INTERIOR_POINTS,
     SOLVERS,
     calippso,
     result_to_dataset,
@@ -56,6 +60,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-iterations", type=int, default=DEFAULT_MAX_ITERATIONS,
                    help=f"largest number of LPs (default {DEFAULT_MAX_ITERATIONS})")
     p.add_argument("--threads", type=int, default=1, help="HiGHS threads (default 1)")
+    p.add_argument("--interior", choices=INTERIOR_POINTS, default=DEFAULT_INTERIOR,
+                   help="HiGHS interior point method of the interior point LPs; hipo needs "
+                        f"pip install 'jamflow[hipo]' (default {DEFAULT_INTERIOR})")
+    p.add_argument("--finish", choices=FINISHES, default=DEFAULT_FINISH,
+                   help="newton: once the network is isostatic in the chain's tail, solve its square system by "
+                        "Newton and keep it only if certified (positive forces, no overlap, same geometric "
+                        f"network), else go on with LPs; lp: the pure LP chain (default {DEFAULT_FINISH})")
     add_quiet(p)
     add_preset(p)
 
@@ -74,14 +85,16 @@ def _calippso(args: argparse.Namespace) -> int:
         result = calippso(
             packing, tol_s=args.tol_s, tol_gamma=args.tol_gamma, solver=args.solver, solver_tol=args.solver_tol, cutoff=args.cutoff,
             cutoff_near=args.cutoff_near, relax=args.relax, walls=args.walls,
-            max_iterations=args.max_iterations, threads=args.threads, progress=progress, **kwargs,
+            max_iterations=args.max_iterations, threads=args.threads, finish=args.finish, interior=args.interior, progress=progress, **kwargs,
         )
     write_dataset(result_to_dataset(result, stage_parameters(args, "packing", "out")), args.out)
     a = result.packing.attrs
     counting = "hyperstatic" if a["hyperstatic"] else "isostatic" if a["isostatic"] else "not isostatic"
     print_summary(args, args.out, [
         ("phi_J", f"{a['phi_J']:.10f}"),
-        ("LPs", f"{result.iterations} (converged {bool(result.converged)})"),
+        ("LPs", f"{a['n_lps']} (converged {bool(result.converged)})"),
+        ("finish", f"{a['finish']} ({a['newton_attempts']} Newton attempt(s) in {a['newton_time']:.2f} s, "
+                   f"{a['newton_rejections']} rejected, last because: {a['newton_last_rejection']})"),
         ("contacts N_c", f"{a['n_contacts']} (isostatic count d(N_s-1)+1 = {a['isostatic_count']}: {counting})"),
         ("rattlers", a["n_rattlers"]),
         ("forces", f"{a['force_assignment']} ({a['n_contacts_dual']} contacts carry a dual at the LP vertex, "
