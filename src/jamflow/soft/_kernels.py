@@ -44,8 +44,14 @@ def _add_pair(i, j, dx, r2, sig, eps, w, harmonic, force, virial):
 
 
 @njit(cache=True)
-def _pair_forces_2d(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial):
-    """:func:`pair_forces` for d = 2, coordinates unrolled (the same terms in the same order)."""
+def _pair_forces_low(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial):
+    """:func:`pair_forces` for d = 2 or 3 with the coordinates unrolled.
+
+    The third coordinate is a loop-invariant branch (``three``); in 2D its pair
+    vector component is 0.0, and ``r2 + 0.0 == r2`` exactly, so both dimensions add
+    the same terms in the same order as the generic loop.
+    """
+    three = y.shape[1] == 3
     energy = 0.0
     n_contact = 0
     harmonic = w == 2.0
@@ -54,38 +60,7 @@ def _pair_forces_2d(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_vir
         j = pj[p]
         dx0 = s * (y[j, 0] - y[i, 0] + offset[p, 0])
         dx1 = s * (y[j, 1] - y[i, 1] + offset[p, 1])
-        r2 = dx0 * dx0 + dx1 * dx1
-        sig = sigma[p]
-        if r2 < sig * sig:
-            e, fmag, inv_r = _pair_magnitude(r2, sig, eps, w, harmonic)
-            energy += e
-            n_contact += 1
-            f0 = fmag * dx0 * inv_r
-            f1 = fmag * dx1 * inv_r
-            force[j, 0] += f0
-            force[i, 0] -= f0
-            force[j, 1] += f1
-            force[i, 1] -= f1
-            if with_virial:
-                virial[0, 0] += fmag * dx0 * dx0 * inv_r
-                virial[0, 1] += fmag * dx0 * dx1 * inv_r
-                virial[1, 0] += fmag * dx1 * dx0 * inv_r
-                virial[1, 1] += fmag * dx1 * dx1 * inv_r
-    return energy, n_contact
-
-
-@njit(cache=True)
-def _pair_forces_3d(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial):
-    """:func:`pair_forces` for d = 3, coordinates unrolled (the same terms in the same order)."""
-    energy = 0.0
-    n_contact = 0
-    harmonic = w == 2.0
-    for p in range(pi.shape[0]):
-        i = pi[p]
-        j = pj[p]
-        dx0 = s * (y[j, 0] - y[i, 0] + offset[p, 0])
-        dx1 = s * (y[j, 1] - y[i, 1] + offset[p, 1])
-        dx2 = s * (y[j, 2] - y[i, 2] + offset[p, 2])
+        dx2 = s * (y[j, 2] - y[i, 2] + offset[p, 2]) if three else 0.0
         r2 = dx0 * dx0 + dx1 * dx1 + dx2 * dx2
         sig = sigma[p]
         if r2 < sig * sig:
@@ -94,23 +69,25 @@ def _pair_forces_3d(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_vir
             n_contact += 1
             f0 = fmag * dx0 * inv_r
             f1 = fmag * dx1 * inv_r
-            f2 = fmag * dx2 * inv_r
             force[j, 0] += f0
             force[i, 0] -= f0
             force[j, 1] += f1
             force[i, 1] -= f1
-            force[j, 2] += f2
-            force[i, 2] -= f2
+            if three:
+                f2 = fmag * dx2 * inv_r
+                force[j, 2] += f2
+                force[i, 2] -= f2
             if with_virial:
                 virial[0, 0] += fmag * dx0 * dx0 * inv_r
                 virial[0, 1] += fmag * dx0 * dx1 * inv_r
-                virial[0, 2] += fmag * dx0 * dx2 * inv_r
                 virial[1, 0] += fmag * dx1 * dx0 * inv_r
                 virial[1, 1] += fmag * dx1 * dx1 * inv_r
-                virial[1, 2] += fmag * dx1 * dx2 * inv_r
-                virial[2, 0] += fmag * dx2 * dx0 * inv_r
-                virial[2, 1] += fmag * dx2 * dx1 * inv_r
-                virial[2, 2] += fmag * dx2 * dx2 * inv_r
+                if three:
+                    virial[0, 2] += fmag * dx0 * dx2 * inv_r
+                    virial[1, 2] += fmag * dx1 * dx2 * inv_r
+                    virial[2, 0] += fmag * dx2 * dx0 * inv_r
+                    virial[2, 1] += fmag * dx2 * dx1 * inv_r
+                    virial[2, 2] += fmag * dx2 * dx2 * inv_r
     return energy, n_contact
 
 
@@ -129,10 +106,8 @@ def pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial=
     d = y.shape[1]
     force[:, :] = 0.0
     virial[:, :] = 0.0
-    if d == 2:
-        return _pair_forces_2d(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial)
-    if d == 3:
-        return _pair_forces_3d(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial)
+    if d == 2 or d == 3:
+        return _pair_forces_low(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial)
     energy = 0.0
     n_contact = 0
     dx = np.empty(d)
