@@ -158,6 +158,7 @@ def main() -> None:
                     help=f"indices into {CASES}")
     ap.add_argument("--max-steps", type=int, default=2_000_000)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--out", type=Path, default=OUT, help=f"output folder (default {OUT})")
     args = ap.parse_args()
     import jamflow
 
@@ -210,7 +211,7 @@ def main() -> None:
                                 note="runs interleaved jamflow, LAMMPS, ...; medians over runs; "
                                      "one thread on a shared, loaded machine"),
     )
-    write_dataset(ds, OUT / "minimize_vs_lammps.nc")
+    write_dataset(ds, args.out / "minimize_vs_lammps.nc")
     fig, ax = plt.subplots(figsize=(6, 3.5))
     pos = np.arange(len(cases))
     for k, code in enumerate(codes):
@@ -220,8 +221,8 @@ def main() -> None:
     ax.set_ylabel("wall time per force evaluation [us]")
     ax.set_yscale("log")
     ax.legend()
-    plots.save_figure(fig, OUT / "minimize_vs_lammps.png")
-    print("wrote", OUT / "minimize_vs_lammps.nc", "and .png")
+    plots.save_figure(fig, args.out / "minimize_vs_lammps.png")
+    print("wrote", args.out / "minimize_vs_lammps.nc", "and .png")
 
 
 if __name__ == "__main__":
