@@ -154,7 +154,8 @@ def _cell_pairs(x, wrapped, L, cutoff, diameter, skin):
     ws = np.empty((n, d))
     Ds = np.empty(n if verlet else 0)
     for q in range(n):
-        ws[q] = wrapped[members[q]]
+        for k in range(d):
+            ws[q, k] = wrapped[members[q], k]
         if verlet:
             Ds[q] = diameter[members[q]]
     cut2 = cutoff * cutoff
@@ -212,10 +213,17 @@ def _cell_pairs(x, wrapped, L, cutoff, diameter, skin):
             capacity = 2 * capacity + n_found
             out_i = np.concatenate((out_i[:m], np.empty(capacity - m, dtype=np.int64)))
             out_j = np.concatenate((out_j[:m], np.empty(capacity - m, dtype=np.int64)))
-        partners = np.sort(found[:n_found])
+        # insertion sort of the few partners in place (no allocation per particle)
+        for q in range(1, n_found):
+            key = found[q]
+            r = q - 1
+            while r >= 0 and found[r] > key:
+                found[r + 1] = found[r]
+                r -= 1
+            found[r + 1] = key
         for q in range(n_found):
             out_i[m] = i
-            out_j[m] = partners[q]
+            out_j[m] = found[q]
             m += 1
     image = np.empty((m, d), dtype=np.int64)
     for p in range(m):
