@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from jamflow.box import Box
-from jamflow.neighbors import PairList, pairs_within, pairs_within_brute_force
+from jamflow.neighbors import PairList, pairs_within, pairs_within_brute_force, verlet_pairs
 
 
 def _box(d: int, strain: float, rng: np.random.Generator) -> Box:
@@ -113,3 +113,28 @@ def test_bad_cutoffs_and_shapes_raise(box: Box) -> None:
         pairs_within(x[:, :2], box, 0.1)
     with pytest.raises(ValueError, match="shape"):
         pairs_within(x[0], box, 0.1)
+
+
+@pytest.mark.parametrize("d", [2, 3, 4])
+@pytest.mark.parametrize("strain", [0.0, 0.3])
+@pytest.mark.parametrize("skin_fraction", [0.05, 0.4])
+def test_verlet_pairs_match_brute_force(d: int, strain: float, skin_fraction: float) -> None:
+    """Verlet pairs (r < (D_i + D_j) / 2 + skin) and their images against every pair by the box.
+
+    A skin of 0.4 makes some axes hold fewer than 3 cells (the cell list must not count
+    a pair twice); unwrapped positions several boxes away check the images.
+    """
+    rng = np.random.default_rng(d + 10 * int(10 * strain) + int(100 * skin_fraction))
+    box = _box(d, strain, rng)
+    n = 150
+    x = box.to_cartesian(rng.uniform(-2.0, 3.0, (n, d)))
+    half = 0.5 * float(np.min(box.widths))
+    D = rng.choice([0.35, 0.49], n) * half
+    skin = skin_fraction * half
+    i, j, image = verlet_pairs(x, box, D, skin)
+    a, b = np.triu_indices(n, k=1)
+    dx = box.minimum_image(x[b] - x[a])
+    keep = np.linalg.norm(dx, axis=1) < 0.5 * (D[a] + D[b]) + skin
+    np.testing.assert_array_equal(np.stack([i, j], 1), np.stack([a[keep], b[keep]], 1))
+    assert np.array_equal(image, np.round(image))
+    np.testing.assert_allclose(x[j] - x[i] + image @ box.matrix.T, dx[keep], rtol=0, atol=1e-12)

@@ -47,6 +47,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .neighbors import sort_by_cell
+
 #: Status codes of :func:`run_events`: collision budget used, time limit reached, a
 #: particle may leave the neighbour-list skin (rebuild the lists before continuing).
 WINDOW_DONE, TIME_LIMIT, LIST_EXPIRED = 0, 1, 2
@@ -284,7 +286,8 @@ def build_cells(x, L, ncell, cc, cell, stride, head, nxt, prv):
 def build_neighbor_lists(x, a, L, invL, s_t, skin, cell, ncell, stride, offs):
     """Symmetric CSR neighbour lists: all j with ``|r_ij| < sigma_ij + skin``.
 
-    The particles are counting-sorted by cell into contiguous copies of their positions
+    The particles are counting-sorted by cell (:func:`jamflow.neighbors.sort_by_cell`,
+    the binning the soft-sphere Verlet lists use too) into contiguous copies of their positions
     and diameters; every pair of neighbour cells ``c <= c'`` is then swept once over
     contiguous ranges (cells at least ``max sigma + skin`` wide, positions synced), and
     a counting sort of the pairs gives the CSR arrays. Cost ``O(N * stencil)``; the
@@ -316,16 +319,7 @@ def build_neighbor_lists(x, a, L, invL, s_t, skin, cell, ncell, stride, offs):
     ncells = 1
     for k in range(d):
         ncells *= ncell[k]
-    cstart = np.zeros(ncells + 1, dtype=np.int64)
-    for i in range(n):
-        cstart[cell[i] + 1] += 1
-    for c in range(ncells):
-        cstart[c + 1] += cstart[c]
-    order = np.empty(n, dtype=np.int64)
-    slot = cstart[:ncells].copy()
-    for i in range(n):
-        order[slot[cell[i]]] = i
-        slot[cell[i]] += 1
+    cstart, order = sort_by_cell(cell, ncells)
     xs = np.empty((n, d))
     as_ = np.empty(n)
     for p in range(n):

@@ -17,8 +17,8 @@ CONVERGED, REBUILD, MAX_STEPS, STALLED = 0, 1, 2, 3
 
 
 @njit(cache=True, inline="always")
-def _add_pair(i, j, dx, r2, sig, eps, w, harmonic, force, virial):
-    """Add one overlapping pair (``r < sig``) to forces and virial; return its energy."""
+def _pair_magnitude(r2, sig, eps, w, harmonic):
+    """Energy, force magnitude ``-dV/dr`` and ``1 / r`` of one overlapping pair (``r < sig``)."""
     r = np.sqrt(r2)
     xi = 1.0 - r / sig
     if harmonic:
@@ -27,7 +27,13 @@ def _add_pair(i, j, dx, r2, sig, eps, w, harmonic, force, virial):
     else:
         energy = eps / w * xi**w
         fmag = eps * xi ** (w - 1.0) / sig
-    inv_r = 1.0 / r
+    return energy, fmag, 1.0 / r
+
+
+@njit(cache=True, inline="always")
+def _add_pair(i, j, dx, r2, sig, eps, w, harmonic, force, virial):
+    """Add one overlapping pair (``r < sig``) to forces and virial; return its energy."""
+    energy, fmag, inv_r = _pair_magnitude(r2, sig, eps, w, harmonic)
     for a in range(dx.shape[0]):
         fa = fmag * dx[a] * inv_r
         force[j, a] += fa
@@ -38,19 +44,75 @@ def _add_pair(i, j, dx, r2, sig, eps, w, harmonic, force, virial):
 
 
 @njit(cache=True)
-def pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial):
+def _pair_forces_low(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial):
+    """:func:`pair_forces` for d = 2 or 3 with the coordinates unrolled.
+
+    The third coordinate is a loop-invariant branch (``three``); in 2D its pair
+    vector component is 0.0, and ``r2 + 0.0 == r2`` exactly, so both dimensions add
+    the same terms in the same order as the generic loop.
+    """
+    three = y.shape[1] == 3
+    energy = 0.0
+    n_contact = 0
+    harmonic = w == 2.0
+    for p in range(pi.shape[0]):
+        i = pi[p]
+        j = pj[p]
+        dx0 = s * (y[j, 0] - y[i, 0] + offset[p, 0])
+        dx1 = s * (y[j, 1] - y[i, 1] + offset[p, 1])
+        dx2 = s * (y[j, 2] - y[i, 2] + offset[p, 2]) if three else 0.0
+        r2 = dx0 * dx0 + dx1 * dx1 + dx2 * dx2
+        sig = sigma[p]
+        if r2 < sig * sig:
+            e, fmag, inv_r = _pair_magnitude(r2, sig, eps, w, harmonic)
+            energy += e
+            n_contact += 1
+            f0 = fmag * dx0 * inv_r
+            f1 = fmag * dx1 * inv_r
+            force[j, 0] += f0
+            force[i, 0] -= f0
+            force[j, 1] += f1
+            force[i, 1] -= f1
+            if three:
+                f2 = fmag * dx2 * inv_r
+                force[j, 2] += f2
+                force[i, 2] -= f2
+            if with_virial:
+                virial[0, 0] += fmag * dx0 * dx0 * inv_r
+                virial[0, 1] += fmag * dx0 * dx1 * inv_r
+                virial[1, 0] += fmag * dx1 * dx0 * inv_r
+                virial[1, 1] += fmag * dx1 * dx1 * inv_r
+                if three:
+                    virial[0, 2] += fmag * dx0 * dx2 * inv_r
+                    virial[1, 2] += fmag * dx1 * dx2 * inv_r
+                    virial[2, 0] += fmag * dx2 * dx0 * inv_r
+                    virial[2, 1] += fmag * dx2 * dx1 * inv_r
+                    virial[2, 2] += fmag * dx2 * dx2 * inv_r
+    return energy, n_contact
+
+
+@njit(cache=True)
+def pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial=True):
     """Energy, forces and virial of the power-law contact potential.
 
     ``U = (eps / w) sum_{r < sigma} (1 - r / sigma)^w``. Fills ``force`` (N, d) with
-    ``-dU/dx`` and ``virial`` (d, d) with ``sum f r_a r_b / r`` (f = repulsive pair
-    force magnitude). Returns ``(U, number of overlapping pairs)``.
+    ``-dU/dx`` and, when ``with_virial``, ``virial`` (d, d) with ``sum f r_a r_b / r``
+    (f = repulsive pair force magnitude); otherwise ``virial`` is left zero (a
+    fixed-box minimiser needs no stress on every step). Returns
+    ``(U, number of overlapping pairs)``. d = 2 and 3 run loops with the coordinates
+    unrolled (no per-pair temporary, no runtime dimension loop): the same terms in the
+    same order, so the same bits.
     """
     d = y.shape[1]
     force[:, :] = 0.0
     virial[:, :] = 0.0
+    if d == 2 or d == 3:
+        return _pair_forces_low(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial)
     energy = 0.0
     n_contact = 0
     dx = np.empty(d)
+    # the virial of a run without stress goes to a scratch matrix
+    target = virial if with_virial else np.zeros((d, d))
     harmonic = w == 2.0
     for p in range(pi.shape[0]):
         i = pi[p]
@@ -60,7 +122,7 @@ def pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial):
             dx[a] = s * (y[j, a] - y[i, a] + offset[p, a])
             r2 += dx[a] * dx[a]
         if r2 < sigma[p] * sigma[p]:
-            energy += _add_pair(i, j, dx, r2, sigma[p], eps, w, harmonic, force, virial)
+            energy += _add_pair(i, j, dx, r2, sigma[p], eps, w, harmonic, force, target)
             n_contact += 1
     return energy, n_contact
 
@@ -207,7 +269,8 @@ def fire(
     alpha0, f_alpha, n_delay = fire_params[4], fire_params[5], int(fire_params[6])
     initial_delay = fire_params[7] > 0.0
     q, vq, s = box_state[0], box_state[1], box_state[2]
-    energy, n_contact = pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial)
+    # at a fixed box the virial is needed only once, at the end
+    energy, n_contact = pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial, barostat)
     volume = volume_ref * s**d
     pressure = (np.trace(virial)) / (d * volume)
     fmax2 = _max_force_sq(force)
@@ -247,10 +310,13 @@ def fire(
             q += dt * vq
             s = np.exp(q / q_scale)
             volume = volume_ref * s**d
-        energy, n_contact = pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial)
+        energy, n_contact = pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial, barostat)
         pressure = np.trace(virial) / (d * volume)
         fmax2 = _max_force_sq(force)
         step += 1
+    if not barostat:
+        energy, n_contact = pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial)
+        pressure = np.trace(virial) / (d * volume)
     fire_state[0], fire_state[1], fire_state[2] = dt, alpha, npos
     box_state[0], box_state[1], box_state[2] = q, vq, s
     return status, step, energy, n_contact, fmax2, pressure
@@ -270,7 +336,7 @@ def steepest_descent(
     -------
     status, steps, energy, n_contact, max_force_sq
     """
-    energy, n_contact = pair_forces(y, 1.0, offset, pi, pj, sigma, eps, w, force, virial)
+    energy, n_contact = pair_forces(y, 1.0, offset, pi, pj, sigma, eps, w, force, virial, False)
     fmax2 = _max_force_sq(force)
     status = MAX_STEPS
     step = 0
@@ -286,9 +352,11 @@ def steepest_descent(
             status = REBUILD
             break
         _axpy(dt, force, y)
-        energy, n_contact = pair_forces(y, 1.0, offset, pi, pj, sigma, eps, w, force, virial)
+        energy, n_contact = pair_forces(y, 1.0, offset, pi, pj, sigma, eps, w, force, virial, False)
         fmax2 = _max_force_sq(force)
         step += 1
+    # the virial (pressure) only of the final state
+    energy, n_contact = pair_forces(y, 1.0, offset, pi, pj, sigma, eps, w, force, virial)
     return status, step, energy, n_contact, fmax2
 
 

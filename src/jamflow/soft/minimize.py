@@ -117,105 +117,111 @@ def _fire_params(params: FireParameters, unit: float) -> NDArray[np.float64]:
                      params.alpha0, params.f_alpha, params.n_delay, float(params.initial_delay)])
 
 
-def _run_fire(
-    model: SphereModel, x: NDArray[np.float64], force_tol: float, max_steps: int, params: FireParameters,
-    pressure0: float | None, pressure_rtol: float,
-) -> MinimizeResult:
-    """The compiled FIRE loop of soft spheres (fixed box, or an isotropic barostat)."""
-    box, diameter, potential, nlist = model.box, model.diameter, model.potential, model.nlist
-    d = box.d
-    builds0 = nlist.builds
-    unit = model.time_unit
-    barostat = pressure0 is not None
-    h_ref = box
-    y = np.array(x, dtype=np.float64)
-    v = np.zeros_like(y)
-    q_scale = float(np.sqrt(len(y)) * diameter.mean())
-    box_state = np.array([0.0, 0.0, 1.0])
-    fire_state = np.array([params.dt * unit, params.alpha0, 0.0])
-    fparams = _fire_params(params, unit)
-    force = np.zeros_like(y)
-    virial = np.zeros((d, d))
-    steps = 0
-    calls = 0
-    status = _kernels.MAX_STEPS
-    while True:
-        s = box_state[2]
+class _SphereFire:
+    """FIRE steps of soft spheres in the compiled loop (:func:`jamflow.soft._kernels.fire`).
+
+    Fixed box, or an isotropic barostat (``pressure0``). Runs until convergence, the
+    step budget or a neighbour-list rebuild; the state persists across calls.
+    """
+
+    def __init__(self, model: SphereModel, x: NDArray[np.float64], params: FireParameters,
+                 pressure0: float | None, pressure_rtol: float) -> None:
+        self.model = model
+        self.builds0 = model.nlist.builds
+        unit = model.time_unit
+        self.barostat = pressure0 is not None
+        self.pressure0 = 0.0 if pressure0 is None else float(pressure0)
+        self.pressure_rtol = float(pressure_rtol)
+        self.y = np.array(x, dtype=np.float64)
+        self.v = np.zeros_like(self.y)
+        self.q_scale = float(np.sqrt(len(self.y)) * model.diameter.mean())
+        self.box_state = np.array([0.0, 0.0, 1.0])
+        self.fire_state = np.array([params.dt * unit, params.alpha0, 0.0])
+        self.fparams = _fire_params(params, unit)
+        self.force = np.zeros_like(self.y)
+        self.virial = np.zeros((model.box.d, model.box.d))
+
+    def advance(self, force_tol: float, budget: int, rebuild: bool) -> tuple[int, int]:
+        """At most ``budget`` steps; returns ``(status, steps)`` (status of :mod:`._kernels`)."""
+        nlist, potential, h_ref = self.model.nlist, self.model.potential, self.model.box
+        s = self.box_state[2]
         current = h_ref.scaled(s)
-        if status == _kernels.REBUILD:
-            nlist.build(s * y, current)
+        if rebuild:
+            nlist.build(s * self.y, current)
         else:
-            nlist.update(s * y, current)
+            nlist.update(s * self.y, current)
         affine, slack = nlist.affine_reference(current)
-        status, n, energy, n_contacts, fmax2, pressure = _kernels.fire(
-            y, v, box_state, fire_state, fparams,
+        status, n, *self.last = _kernels.fire(
+            self.y, self.v, self.box_state, self.fire_state, self.fparams,
             nlist.image @ h_ref.matrix.T, nlist.i, nlist.j, nlist.sigma,
             potential.epsilon, potential.exponent,
             affine / s, s, nlist.reach, nlist.skin, slack,
-            barostat, 0.0 if pressure0 is None else float(pressure0), h_ref.volume, q_scale,
-            float(force_tol), float(pressure_rtol), int(max_steps - steps), force, virial,
+            self.barostat, self.pressure0, h_ref.volume, self.q_scale,
+            float(force_tol), self.pressure_rtol, int(budget), self.force, self.virial,
         )
-        steps += n
-        calls += 1
-        if status != _kernels.REBUILD or steps >= max_steps:
-            break
-    s = box_state[2]
-    return MinimizeResult(
-        position=s * y, box=h_ref.scaled(s) if barostat else box, energy=float(energy),
-        pressure=float(pressure), max_force=float(np.sqrt(fmax2)), n_contacts=int(n_contacts),
-        steps=steps, converged=status == _kernels.CONVERGED, rebuilds=nlist.builds - builds0,
-        evaluations=steps + calls,
-    )
+        return status, n
+
+    def result(self, steps: int, calls: int, status: int) -> MinimizeResult:
+        energy, n_contacts, fmax2, pressure = self.last
+        s = self.box_state[2]
+        box = self.model.box
+        return MinimizeResult(
+            position=s * self.y, box=box.scaled(s) if self.barostat else box, energy=float(energy),
+            pressure=float(pressure), max_force=float(np.sqrt(fmax2)), n_contacts=int(n_contacts),
+            steps=steps, converged=status == _kernels.CONVERGED, rebuilds=self.model.nlist.builds - self.builds0,
+            evaluations=steps + calls,
+        )
 
 
-def _run_fire_full(
-    model: SphereModel, x: NDArray[np.float64], force_tol: float, max_steps: int, params: FireParameters,
-    pressure0: float, stress_rtol: float,
-) -> MinimizeResult:
-    """The compiled FIRE loop of soft spheres with the whole upper-triangular box free."""
-    box, diameter, potential, nlist = model.box, model.diameter, model.potential, model.nlist
-    d = box.d
-    builds0 = nlist.builds
-    unit = model.time_unit
-    h_ref = box
-    y = np.array(x, dtype=np.float64)
-    v = np.zeros_like(y)
-    A = np.eye(d)
-    vA = np.zeros((d, d))
-    q_scale = float(np.sqrt(len(y)) * diameter.mean())
-    fire_state = np.array([params.dt * unit, params.alpha0, 0.0])
-    fparams = _fire_params(params, unit)
-    force = np.zeros_like(y)
-    virial = np.zeros((d, d))
-    steps = 0
-    calls = 0
-    status = _kernels.MAX_STEPS
-    while True:
+class _SphereFireFullBox:
+    """FIRE steps of soft spheres with the whole upper-triangular box free (:func:`._kernels.fire_stress`)."""
+
+    def __init__(self, model: SphereModel, x: NDArray[np.float64], params: FireParameters,
+                 pressure0: float, stress_rtol: float) -> None:
+        d = model.box.d
+        self.model = model
+        self.builds0 = model.nlist.builds
+        unit = model.time_unit
+        self.pressure0, self.stress_rtol = float(pressure0), float(stress_rtol)
+        self.y = np.array(x, dtype=np.float64)
+        self.v = np.zeros_like(self.y)
+        self.A = np.eye(d)
+        self.vA = np.zeros((d, d))
+        self.q_scale = float(np.sqrt(len(self.y)) * model.diameter.mean())
+        self.fire_state = np.array([params.dt * unit, params.alpha0, 0.0])
+        self.fparams = _fire_params(params, unit)
+        self.force = np.zeros_like(self.y)
+        self.virial = np.zeros((d, d))
+
+    def advance(self, force_tol: float, budget: int, rebuild: bool) -> tuple[int, int]:
+        nlist, potential, h_ref = self.model.nlist, self.model.potential, self.model.box
+        A = self.A
         current = Box(A @ h_ref.matrix)
-        if status == _kernels.REBUILD:
-            nlist.build(y @ A.T, current)
+        if rebuild:
+            nlist.build(self.y @ A.T, current)
         else:
-            nlist.update(y @ A.T, current)
+            nlist.update(self.y @ A.T, current)
         offset = nlist.image @ h_ref.matrix.T
         affine, slack = nlist.affine_reference(current)
         A_inv = np.linalg.inv(A)
-        status, n, energy, n_contacts, fmax2, _ = _kernels.fire_stress(
-            y, v, A, vA, fire_state, fparams, offset, nlist.i, nlist.j, nlist.sigma,
+        status, n, *self.last = _kernels.fire_stress(
+            self.y, self.v, A, self.vA, self.fire_state, self.fparams, offset, nlist.i, nlist.j, nlist.sigma,
             potential.epsilon, potential.exponent, affine @ A_inv.T, A_inv, nlist.reach, nlist.skin,
-            slack, pressure0, h_ref.volume, q_scale, float(force_tol), float(stress_rtol),
-            int(max_steps - steps), force, virial,
+            slack, self.pressure0, h_ref.volume, self.q_scale, float(force_tol), self.stress_rtol,
+            int(budget), self.force, self.virial,
         )
-        steps += n
-        calls += 1
-        if status != _kernels.REBUILD or steps >= max_steps:
-            break
-    final = Box(np.triu(A) @ h_ref.matrix)
-    return MinimizeResult(
-        position=y @ A.T, box=final, energy=float(energy),
-        pressure=float(np.trace(virial) / (d * final.volume)), max_force=float(np.sqrt(fmax2)),
-        n_contacts=int(n_contacts), steps=steps, converged=status == _kernels.CONVERGED,
-        rebuilds=nlist.builds - builds0, evaluations=steps + calls,
-    )
+        return status, n
+
+    def result(self, steps: int, calls: int, status: int) -> MinimizeResult:
+        energy, n_contacts, fmax2, _ = self.last
+        d = self.model.box.d
+        final = Box(np.triu(self.A) @ self.model.box.matrix)
+        return MinimizeResult(
+            position=self.y @ self.A.T, box=final, energy=float(energy),
+            pressure=float(np.trace(self.virial) / (d * final.volume)), max_force=float(np.sqrt(fmax2)),
+            n_contacts=int(n_contacts), steps=steps, converged=status == _kernels.CONVERGED,
+            rebuilds=self.model.nlist.builds - self.builds0, evaluations=steps + calls,
+        )
 
 
 def _as_column(a: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -223,58 +229,111 @@ def _as_column(a: NDArray[np.float64]) -> NDArray[np.float64]:
     return a.reshape(-1, 1)
 
 
-def _fire_generic(
-    model: EnergyModel, q0: NDArray[np.float64], force_tol: float, max_steps: int, params: FireParameters,
-) -> MinimizeResult:
-    """FIRE 2.0 on any model: the control kernels of the compiled sphere loop, on flat vectors.
+class _ModelFire:
+    """FIRE steps of any model on its flat degree-of-freedom vector (the control kernels of the compiled loop).
 
     Mass metric: with ``M`` the diagonal masses, the run is the unit-mass FIRE of the
     coordinates ``M^(1/2) q`` (so a time step means the same for every degree of
     freedom): power ``F . v``, Euler step ``v += dt M^-1 F``, mixing
     ``v <- (1 - alpha) v + alpha |v|_M / |F|_M^-1 M^-1 F``. With constraints the force
     and, after every move, the velocity are projected onto the tangent space, and
-    positions are re-affixed onto the constraint manifold after every move.
+    positions are re-affixed onto the constraint manifold after every move. The
+    model owns its neighbour list, so a run never stops for a rebuild.
     """
-    unit = model.time_unit
-    dt_max, dt_min = params.dt_max * unit, params.dt_min * unit
-    inv_mass = model.inverse_mass
-    mass = 1.0 / inv_mass
-    builds0 = model.neighbor_builds
-    q = np.array(model.reproject(np.array(q0, dtype=np.float64)), dtype=np.float64)
-    v = np.zeros_like(q)
-    dt, alpha, npos = params.dt * unit, params.alpha0, 0
-    ev = model.evaluate(q)
-    force = -model.project(ev.gradient, q)
-    evaluations = 1
-    fmax = model.max_force(force)
-    step = 0
-    while step < max_steps and fmax > force_tol:
-        power = float(force @ v)
-        npos, dt, alpha = _kernels._fire_adapt(
-            power, step, npos, dt, alpha, params.n_delay, params.f_inc, params.f_dec, params.f_alpha,
-            params.alpha0, dt_max, dt_min, params.initial_delay,
-        )
-        if not power > 0.0:
-            _kernels._fire_step_back(_as_column(q), _as_column(v), dt)
+
+    def __init__(self, model: EnergyModel, q0: NDArray[np.float64], params: FireParameters) -> None:
+        self.model = model
+        self.params = params
+        unit = model.time_unit
+        self.dt_max, self.dt_min = params.dt_max * unit, params.dt_min * unit
+        self.inv_mass = model.inverse_mass
+        self.mass = 1.0 / self.inv_mass
+        self.builds0 = model.neighbor_builds
+        self.q = np.array(model.reproject(np.array(q0, dtype=np.float64)), dtype=np.float64)
+        self.v = np.zeros_like(self.q)
+        self.dt, self.alpha, self.npos = params.dt * unit, params.alpha0, 0
+        self.ev = model.evaluate(self.q)
+        self.force = -model.project(self.ev.gradient, self.q)
+        self.fmax = model.max_force(self.force)
+        self.step = 0
+
+    def advance(self, force_tol: float, budget: int, rebuild: bool) -> tuple[int, int]:
+        model, params = self.model, self.params
+        q, v, force, inv_mass, mass = self.q, self.v, self.force, self.inv_mass, self.mass
+        dt, alpha, npos, step, fmax = self.dt, self.alpha, self.npos, self.step, self.fmax
+        ev = self.ev
+        taken = 0
+        while taken < budget and fmax > force_tol:
+            power = float(force @ v)
+            npos, dt, alpha = _kernels._fire_adapt(
+                power, step, npos, dt, alpha, params.n_delay, params.f_inc, params.f_dec, params.f_alpha,
+                params.alpha0, self.dt_max, self.dt_min, params.initial_delay,
+            )
+            if not power > 0.0:
+                _kernels._fire_step_back(_as_column(q), _as_column(v), dt)
+                q = model.reproject(q)
+            accel = inv_mass * force
+            _kernels._axpy(dt, _as_column(accel), _as_column(v))
+            vnorm = float(np.sqrt(np.sum(mass * v * v)))
+            fnorm = float(np.sqrt(force @ accel))
+            keep, mix = _kernels._fire_mixing(alpha, vnorm, fnorm)
+            _kernels._mix_and_move(_as_column(v), _as_column(accel), keep, mix, _as_column(q), dt)
             q = model.reproject(q)
-        accel = inv_mass * force
-        _kernels._axpy(dt, _as_column(accel), _as_column(v))
-        vnorm = float(np.sqrt(np.sum(mass * v * v)))
-        fnorm = float(np.sqrt(force @ accel))
-        keep, mix = _kernels._fire_mixing(alpha, vnorm, fnorm)
-        _kernels._mix_and_move(_as_column(v), _as_column(accel), keep, mix, _as_column(q), dt)
-        q = model.reproject(q)
-        ev = model.evaluate(q)
-        evaluations += 1
-        force = -model.project(ev.gradient, q)
-        v = model.project(v, q)
-        fmax = model.max_force(force)
-        step += 1
-    return MinimizeResult(
-        position=np.array(model.positions(q)), box=model.box, energy=ev.energy,
-        pressure=pressure_of(ev, model.box), max_force=fmax, n_contacts=ev.n_contacts, steps=step,
-        converged=fmax <= force_tol, rebuilds=model.neighbor_builds - builds0, evaluations=evaluations,
-    )
+            ev = model.evaluate(q)
+            force = -model.project(ev.gradient, q)
+            v = model.project(v, q)
+            fmax = model.max_force(force)
+            step += 1
+            taken += 1
+        self.q, self.v, self.force, self.ev = q, v, force, ev
+        self.dt, self.alpha, self.npos, self.step, self.fmax = dt, alpha, npos, step, fmax
+        return (_kernels.CONVERGED if fmax <= force_tol else _kernels.MAX_STEPS), taken
+
+    def result(self, steps: int, calls: int, status: int) -> MinimizeResult:
+        model, ev = self.model, self.ev
+        return MinimizeResult(
+            position=np.array(model.positions(self.q)), box=model.box, energy=ev.energy,
+            pressure=pressure_of(ev, model.box), max_force=self.fmax, n_contacts=ev.n_contacts, steps=steps,
+            converged=status == _kernels.CONVERGED, rebuilds=model.neighbor_builds - self.builds0,
+            evaluations=steps + 1,
+        )
+
+
+def _fire(engine: _SphereFire | _SphereFireFullBox | _ModelFire, force_tol: float, max_steps: int) -> MinimizeResult:
+    """The one FIRE driver: advance ``engine`` until convergence or the budget, rebuilding lists on request.
+
+    An engine holds the whole FIRE state (positions, velocities, ``dt``, ``alpha``,
+    the count of downhill steps) across calls, so a run that stops for a neighbour
+    rebuild continues where it stopped.
+    """
+    steps = 0
+    calls = 0
+    status = _kernels.MAX_STEPS
+    while True:
+        status, n = engine.advance(force_tol, max_steps - steps, status == _kernels.REBUILD)
+        steps += n
+        calls += 1
+        if status != _kernels.REBUILD or steps >= max_steps:
+            break
+    return engine.result(steps, calls, status)
+
+
+def _fire_engine(model: EnergyModel, q: NDArray[np.float64], params: FireParameters,
+                 pressure0: float | None = None, pressure_rtol: float = 0.0, box_dof: str = "isotropic"):
+    """The FIRE engine of a model: the compiled loops for soft spheres, the flat-vector steps otherwise."""
+    if isinstance(model, SphereModel):
+        x = model.positions(q)
+        if box_dof == "full":
+            return _SphereFireFullBox(model, x, params, pressure0, pressure_rtol)
+        return _SphereFire(model, x, params, pressure0, pressure_rtol)
+    return _ModelFire(model, q, params)
+
+
+def _fire_generic(
+    model: EnergyModel, q0: NDArray[np.float64], force_tol: float, max_steps: int, params: FireParameters,
+) -> MinimizeResult:
+    """FIRE on the flat degree-of-freedom vector of any model, spheres included (see :class:`_ModelFire`)."""
+    return _fire(_ModelFire(model, q0, params), force_tol, max_steps)
 
 
 def minimize_fire(
@@ -286,10 +345,11 @@ def minimize_fire(
 ) -> MinimizeResult:
     """Minimise a model's energy at fixed box with FIRE 2.0.
 
-    Soft spheres run the compiled loop of :mod:`jamflow.soft._kernels`; any other
-    model the same algorithm on its flat degree-of-freedom vector (same control
-    kernels: ``_fire_adapt``, ``_fire_step_back``, ``_fire_mixing``, ``_mix_and_move``), with masses and
-    constraint projections (see :func:`_fire_generic`).
+    One driver (:func:`_fire`) for every model: soft spheres advance in the compiled
+    loop of :mod:`jamflow.soft._kernels`, any other model takes the same steps on its
+    flat degree-of-freedom vector (same control kernels: ``_fire_adapt``,
+    ``_fire_step_back``, ``_fire_mixing``, ``_mix_and_move``), with masses and
+    constraint projections (see :class:`_ModelFire`).
 
     Parameters
     ----------
@@ -304,10 +364,7 @@ def minimize_fire(
     params : FireParameters
         Time steps in units of ``model.time_unit``.
     """
-    q = model.dofs(position)
-    if isinstance(model, SphereModel):
-        return _run_fire(model, model.positions(q), force_tol, max_steps, params, None, 0.0)
-    return _fire_generic(model, q, force_tol, max_steps, params)
+    return _fire(_fire_engine(model, model.dofs(position), params), force_tol, max_steps)
 
 
 def fire(
@@ -407,10 +464,8 @@ def minimize_enthalpy_model(
     if not isinstance(model, SphereModel):
         raise NotImplementedError(f"enthalpy minimisation needs box degrees of freedom, which "
                                   f"{type(model).__name__} does not have yet")
-    x = model.positions(model.dofs(position))
-    if box_dof == "full":
-        return _run_fire_full(model, x, force_tol, max_steps, params, float(pressure), pressure_rtol)
-    return _run_fire(model, x, force_tol, max_steps, params, float(pressure), pressure_rtol)
+    engine = _fire_engine(model, model.dofs(position), params, float(pressure), pressure_rtol, box_dof)
+    return _fire(engine, force_tol, max_steps)
 
 
 @dataclass(frozen=True)

@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..box import Box
-from ..neighbors import PairList, pairs_within
+from ..neighbors import PairList, pairs_within, verlet_pairs
 from . import _kernels
 
 __all__ = [
@@ -95,7 +95,7 @@ HARMONIC = PowerLawPotential()
 
 
 class NeighborList:
-    """Verlet list with a skin, in periodic and sheared boxes, built with ``pairs_within``.
+    """Verlet list with a skin, in periodic and sheared boxes, built with ``verlet_pairs``.
 
     Stores each pair ``i < j`` with ``r < sigma_ij + skin`` at build time together with
     its periodic image as integer lattice coordinates ``n``, so the pair vector at any
@@ -127,13 +127,8 @@ class NeighborList:
 
     def build(self, x: NDArray[np.float64], box: Box) -> None:
         """(Re)build the list for positions ``x`` (N, d) in ``box``."""
-        pairs = pairs_within(x, box, self.reach)
-        sigma = 0.5 * (self.diameter[pairs.i] + self.diameter[pairs.j])
-        keep = pairs.distance < sigma + self.skin
-        pairs = pairs.select(keep)
-        raw = x[pairs.j] - x[pairs.i]
-        self.image = np.round((pairs.dx - raw) @ box.inverse.T)
-        self.i, self.j, self.sigma = pairs.i, pairs.j, sigma[keep]
+        self.i, self.j, self.image = verlet_pairs(x, box, self.diameter, self.skin)
+        self.sigma = 0.5 * (self.diameter[self.i] + self.diameter[self.j])
         self.x_build = np.array(x, dtype=np.float64)
         self.h_build = np.array(box.matrix)
         self.builds += 1
