@@ -11,7 +11,8 @@ from tqdm import tqdm
 from ..io import new_dataset_attrs, read_packing, write_dataset, write_packing
 from ..packing import LENGTH_UNITS, Packing, length_unit
 from ..soft.hessian import backbone_pairs, elastic_moduli, hessian, lowest_modes
-from ..soft.jamming import FORCE_TOL_VANDERWERF, jam_to_pressure
+from ..chains.jamming import jam_linked
+from ..soft.jamming import FORCE_TOL_VANDERWERF, JammingSettings, jam_to_pressure
 from ..soft.potential import PowerLawPotential
 from ..soft.shear import LERNER_DELTA_R, aqs_shear, lerner_sd_shear
 from ..tolerances import MINIMIZE_FORCE_TOL
@@ -21,7 +22,8 @@ from .common import add_command, add_preset, add_quiet, positive, print_summary,
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "soft-jam", _soft_jam,
-                    "soft-sphere jamming onset: compress/decompress bisection + enthalpy minimisation to P0",
+                    "soft-sphere jamming onset: compress/decompress bisection + enthalpy minimisation to P0 "
+                    "(linked packings: fixed-box bisection with constraint projection)",
                     reads=("input",), writes=("out",), packings=("out",))
     p.add_argument("input", help="input netCDF packing (overlaps allowed)")
     p.add_argument("out", help="output netCDF packing (lengths in units of the mean diameter)")
@@ -98,8 +100,45 @@ def _random_start(packing: Packing, seed: int) -> Packing:
     return packing.evolve(position=packing.box.to_cartesian(s), seed=seed)
 
 
+def _soft_jam_linked(args: argparse.Namespace, packing: Packing) -> int:
+    """soft-jam of a linked packing: fixed-box bisection with constraint projection (chains paper Sec. III)."""
+    if args.seed is not None:
+        raise ValueError("--seed draws random sphere centres, which would tear the links: start linked packings "
+                         "from jamflow init-chains with its own --seed")
+    if args.box_dof != "isotropic":
+        raise ValueError("--box-dof full is for spheres; linked packings are jammed in a fixed-shape box")
+    bar = tqdm(desc="soft-jam", unit=" bisection", disable=args.quiet)
+
+    def progress(info: dict) -> None:
+        bar.update(1)
+        bar.set_postfix(phi=f"{info['phi']:.8f}", P=f"{info['pressure']:.3e}")
+
+    settings = JammingSettings(args.force_tol, args.pressure_rtol, args.delta_phi, max_steps=args.max_steps)
+    result = jam_linked(packing, args.pressure, PowerLawPotential(exponent=args.exponent), settings, progress)
+    bar.close()
+    if not result.converged:
+        raise RuntimeError(f"the linked bisection did not reach force_tol {args.force_tol:g} and pressure_rtol "
+                           f"{args.pressure_rtol:g} within {args.max_steps} steps")
+    out = result.packing
+    write_packing(out, args.out, stage_parameters(args, "input", "out"))
+    a = out.attrs
+    print_summary(args, args.out, [
+        ("phi_J", f"{out.packing_fraction:.10f}"),
+        ("pressure", f"{out.pressure:.6g} (target {args.pressure:g}) epsilon / mean diameter^d"),
+        ("links", f"{len(out.links)} (max relative length error {a['max_link_error']:.3g})"),
+        ("contacts N_c (backbone)", f"{a['n_contacts']} (cluster isostatic count {a['isostatic_count']}, "
+                                    f"excess {a['n_contacts'] - a['isostatic_count']})"),
+        ("rattlers", f"{a['n_rattlers']} ({a['n_rattling_clusters']} rattling clusters, {a['n_danglers']} danglers)"),
+        ("max |P F|", f"{a['max_force_sq'] ** 0.5:.3g} epsilon / mean diameter"),
+        ("FIRE steps", result.steps),
+    ])
+    return 0
+
+
 def _soft_jam(args: argparse.Namespace) -> int:
     packing = read_packing(args.input, None)
+    if packing.links is not None and len(packing.links):
+        return _soft_jam_linked(args, packing)
     if args.seed is not None:
         packing = _random_start(packing, args.seed)
     bar = tqdm(desc="soft-jam", unit=" bisection", disable=args.quiet)
