@@ -20,9 +20,11 @@ pressure, and its fixed-box continuation needs no box degrees of freedom.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 
+from ..bodies import Links
 from ..box import Box
 from ..models.links import LinkedSpheresModel
 from ..packing import Packing, sphere_volume
@@ -31,6 +33,7 @@ from ..soft.minimize import MinimizeResult
 from ..soft.potential import HARMONIC, PowerLawPotential, overlapping_pairs
 from .builders import check_linked_start
 from .clusters import count_clusters
+from .shear import ShearStabilizedModel
 
 __all__ = ["jam_linked", "linked_soft_packing"]
 
@@ -40,8 +43,10 @@ def linked_soft_packing(packing: Packing, model: LinkedSpheresModel, res: Minimi
     """A minimised linked packing: contacts are the overlapping pairs that are not linked.
 
     Rattlers are the danglers and rattling clusters of
-    :func:`~jamflow.chains.clusters.count_clusters`; their counts and the clusters'
-    isostatic count go into the attributes.
+    :func:`~jamflow.chains.clusters.count_clusters`; their counts, the clusters'
+    isostatic count, the largest relative link-length error and the stress
+    anisotropy ``stress_deviation = max_ab |W_ab - P' delta_ab| / P'`` (``W`` the
+    total virial of pairs and link tensions, ``P' = tr W / d``) go into the attributes.
     """
     box = res.box
     x = box.wrap(res.position)
@@ -50,8 +55,12 @@ def linked_soft_packing(packing: Packing, model: LinkedSpheresModel, res: Minimi
     contacts = np.stack([pairs.i, pairs.j], axis=1)[~linked]
     count = count_clusters(len(x), box.d, model.links, contacts, shear_stabilized)
     err = np.abs(model.links.length_errors(x, box))
+    # total virial (pairs and link tensions) of the final configuration in its box
+    W = LinkedSpheresModel(box, model.diameter, model.links, x, model.potential).evaluate(x.ravel()).virial
+    p_virial = float(np.trace(W)) / box.d
     attrs = {**packing.attrs, **attrs, **count.as_dict(), "shear_stabilized": int(shear_stabilized),
              "max_link_error": float(err.max(initial=0.0)),
+             "stress_deviation": float(np.max(np.abs(W - p_virial * np.eye(box.d))) / p_virial) if p_virial else 0.0,
              "pressure_comment": "virial pressure of the contact forces and the link tensions"}
     return packing.evolve(position=x, box=box, diameter=model.diameter, links=model.links, contacts=contacts,
                           force=f[~linked], rattler=count.rattler, pressure=res.pressure,
@@ -64,13 +73,14 @@ def jam_linked(
     potential: PowerLawPotential = HARMONIC,
     settings: JammingSettings | None = None,
     progress: Callable[[dict], None] | None = None,
+    shear_stabilize: bool = False,
 ) -> JammingResult:
     """Bring a linked packing to the jamming onset at pressure ``P0`` in a fixed-shape box (module doc).
 
     Parameters
     ----------
     packing : Packing
-        Start with links (overlaps allowed); checked by
+        Start with links (overlaps allowed; without links, spheres); checked by
         :func:`~jamflow.chains.builders.check_linked_start`.
     pressure : float
         ``P0`` [epsilon / <D>^d], > 0.
@@ -83,15 +93,18 @@ def jam_linked(
         raise ValueError(f"target pressure must be positive and finite, got {pressure}")
     if settings.box_dof != "isotropic":
         raise ValueError("linked packings are jammed in a fixed-shape box or shear-stabilised, not with box_dof 'full'")
-    if packing.links is None or not len(packing.links):
-        raise ValueError("jam_linked needs a packing with links")
+    if packing.links is None:
+        packing = packing.evolve(links=Links(np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0)))
     check_linked_start(packing)
     unit = float(packing.diameter.mean())
     scaled = packing.in_units(unit)
     D, box, x = scaled.diameter, Box(scaled.box.matrix), scaled.position
     phi = float(sphere_volume(box.d, D).sum()) / box.volume
-    model = LinkedSpheresModel(box, D, scaled.links, x, potential)
+    kind = ShearStabilizedModel if shear_stabilize else LinkedSpheresModel
+    model = kind(box, D, scaled.links, x, potential)
     model, final, history, steps = jam_model_to_pressure(model, x, phi, pressure, settings, progress)
+    if shear_stabilize:
+        final = replace(final, box=model.last_box())
     attrs = {
         "length_unit": "mean particle diameter", "force_unit": "epsilon / mean diameter",
         "pressure_unit": "epsilon / mean diameter^d", "energy": final.energy, "energy_unit": "epsilon",
@@ -102,6 +115,7 @@ def jam_linked(
               "bisection_rtol": settings.bisection_rtol, "bisection_force_factor": settings.bisection_force_factor,
               "delta_phi": settings.delta_phi, "potential_exponent": potential.exponent,
               "fire": settings.fire_params.as_dict(), "length_rtol": model.length_rtol}
-    out = linked_soft_packing(scaled, model, final, ">soft", attrs, params)
+    suffix = ">soft-shear-stabilized" if shear_stabilize else ">soft"
+    out = linked_soft_packing(scaled, model, final, suffix, attrs, params, shear_stabilize)
     converged = final.converged and abs(final.pressure - pressure) <= settings.pressure_rtol * pressure
     return JammingResult(out, bool(converged), history, steps)

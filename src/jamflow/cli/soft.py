@@ -41,6 +41,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="final enthalpy minimisation over an isotropic box scale (default) or the whole box "
                         "(stress tensor -P0 1, the box may tilt)")
     p.add_argument("--max-steps", type=int, default=20_000_000, help="FIRE step budget of the whole protocol")
+    p.add_argument("--shear-stabilize", action="store_true",
+                   help="strain degrees of freedom at fixed volume in every minimisation (chains paper Sec. II D): "
+                        "the final stress is isotropic; spheres and linked packings")
     add_quiet(p)
     add_preset(p)
 
@@ -101,12 +104,13 @@ def _random_start(packing: Packing, seed: int) -> Packing:
 
 
 def _soft_jam_linked(args: argparse.Namespace, packing: Packing) -> int:
-    """soft-jam of a linked packing: fixed-box bisection with constraint projection (chains paper Sec. III)."""
+    """soft-jam of a linked packing (or a shear-stabilised one): bisection with constraint projection (chains paper Sec. III)."""
     if args.seed is not None:
         raise ValueError("--seed draws random sphere centres, which would tear the links: start linked packings "
                          "from jamflow init-chains with its own --seed")
     if args.box_dof != "isotropic":
-        raise ValueError("--box-dof full is for spheres; linked packings are jammed in a fixed-shape box")
+        raise ValueError("--box-dof full is for spheres without --shear-stabilize; linked packings are jammed in a "
+                         "fixed-shape box or with --shear-stabilize")
     bar = tqdm(desc="soft-jam", unit=" bisection", disable=args.quiet)
 
     def progress(info: dict) -> None:
@@ -114,7 +118,8 @@ def _soft_jam_linked(args: argparse.Namespace, packing: Packing) -> int:
         bar.set_postfix(phi=f"{info['phi']:.8f}", P=f"{info['pressure']:.3e}")
 
     settings = JammingSettings(args.force_tol, args.pressure_rtol, args.delta_phi, max_steps=args.max_steps)
-    result = jam_linked(packing, args.pressure, PowerLawPotential(exponent=args.exponent), settings, progress)
+    result = jam_linked(packing, args.pressure, PowerLawPotential(exponent=args.exponent), settings, progress,
+                        args.shear_stabilize)
     bar.close()
     if not result.converged:
         raise RuntimeError(f"the linked bisection did not reach force_tol {args.force_tol:g} and pressure_rtol "
@@ -122,9 +127,11 @@ def _soft_jam_linked(args: argparse.Namespace, packing: Packing) -> int:
     out = result.packing
     write_packing(out, args.out, stage_parameters(args, "input", "out"))
     a = out.attrs
+    stress = out.attrs["stress_deviation"]
     print_summary(args, args.out, [
         ("phi_J", f"{out.packing_fraction:.10f}"),
         ("pressure", f"{out.pressure:.6g} (target {args.pressure:g}) epsilon / mean diameter^d"),
+        ("shear-stabilised", f"{'yes' if args.shear_stabilize else 'no'} (max |sigma_ab - P delta_ab| / P = {stress:.3g})"),
         ("links", f"{len(out.links)} (max relative length error {a['max_link_error']:.3g})"),
         ("contacts N_c (backbone)", f"{a['n_contacts']} (cluster isostatic count {a['isostatic_count']}, "
                                     f"excess {a['n_contacts'] - a['isostatic_count']})"),
@@ -137,7 +144,7 @@ def _soft_jam_linked(args: argparse.Namespace, packing: Packing) -> int:
 
 def _soft_jam(args: argparse.Namespace) -> int:
     packing = read_packing(args.input, None)
-    if packing.links is not None and len(packing.links):
+    if (packing.links is not None and len(packing.links)) or args.shear_stabilize:
         return _soft_jam_linked(args, packing)
     if args.seed is not None:
         packing = _random_start(packing, args.seed)
