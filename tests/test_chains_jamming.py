@@ -9,7 +9,6 @@ import pytest
 
 from jamflow.analysis.contacts import find_rattlers, isostatic_count
 from jamflow.bodies import Links
-from jamflow.box import Box
 from jamflow.chains.builders import linked_packing
 from jamflow.chains.clusters import count_clusters
 from jamflow.chains.jamming import jam_linked

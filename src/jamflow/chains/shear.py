@@ -270,7 +270,7 @@ class ShearStabilizedModel(LinkedSpheresModel):
         gy, ge = self._split(g)
         return max(float(np.sqrt(np.max(np.sum(gy**2, axis=1)))), float(np.linalg.norm(ge)))
 
-    def rescaled(self, factor: float, position: NDArray[np.float64]) -> tuple["ShearStabilizedModel", NDArray[np.float64]]:
+    def rescaled(self, factor: float, position: NDArray[np.float64]) -> tuple[ShearStabilizedModel, NDArray[np.float64]]:
         """The model rebased on the last evaluated box (rotated frame), scaled by ``factor``, at zero strain.
 
         ``position`` are the centres a minimiser returned (:meth:`positions` of the
