@@ -138,23 +138,32 @@ def rigid_cluster_links(x: ArrayLike, offset: int = 0) -> tuple[list, list]:
     return [(offset + int(p), offset + int(q)) for p, q in zip(a[keep], b[keep])], list(r[keep])
 
 
-def _independent(i: NDArray[np.int64], j: NDArray[np.int64], vec: NDArray[np.float64], n: int) -> NDArray[np.bool_]:
-    """Greedy rank test of link gradients in the given order (one cluster, local indices).
+def _independent(i: NDArray[np.int64], j: NDArray[np.int64], vec: NDArray[np.float64], n: int,
+                 strain: bool = False) -> NDArray[np.bool_]:
+    """Greedy rank test of link gradients in the given order (local indices).
 
     The gradient of link ``(i, j)`` is ``-u`` on ``i`` and ``+u`` on ``j``,
-    ``u = vec / |vec|``; it is kept when its component orthogonal to the kept ones
-    (Gram–Schmidt, applied twice for stability) has a norm above
-    :data:`~jamflow.tolerances.LINK_RANK_RTOL` (gradients have norm sqrt(2)).
+    ``u = vec / |vec|`` (with ``strain``, also its strain column ``sym(u vec^T)`` of
+    :mod:`jamflow.chains.shear`, unscaled); it is kept when its component orthogonal
+    to the kept ones (Gram–Schmidt, applied twice for stability) has a norm above
+    :data:`~jamflow.tolerances.LINK_RANK_RTOL` times its own.
     """
     d = vec.shape[1]
     u = vec / np.linalg.norm(vec, axis=1)[:, None]
-    basis = np.zeros((0, n * d))
+    m = d * (d + 1) // 2 if strain else 0
+    if strain:
+        from .shear import strain_components
+
+        columns = strain_components(u[:, :, None] * vec[:, None, :], 1.0)
+    basis = np.zeros((0, n * d + m))
     keep = np.zeros(len(i), dtype=bool)
     for k in range(len(i)):
-        g = np.zeros(n * d)
+        g = np.zeros(n * d + m)
         g[i[k] * d:(i[k] + 1) * d] = -u[k]
         g[j[k] * d:(j[k] + 1) * d] = u[k]
-        g /= np.sqrt(2.0)
+        if strain:
+            g[n * d:] = columns[k]
+        g /= np.linalg.norm(g)
         for _ in range(2):
             g -= basis.T @ (basis @ g)
         norm = float(np.linalg.norm(g))
@@ -165,7 +174,7 @@ def _independent(i: NDArray[np.int64], j: NDArray[np.int64], vec: NDArray[np.flo
 
 
 def remove_degenerate_links(
-    pairs: ArrayLike, lengths: ArrayLike, position: ArrayLike, box: Box,
+    pairs: ArrayLike, lengths: ArrayLike, position: ArrayLike, box: Box, strain: bool = False,
 ) -> tuple[Links, list[str]]:
     """Links with redundant (degenerate) ones removed, and one message per removed link.
 
@@ -178,6 +187,10 @@ def remove_degenerate_links(
     position : array_like, shape (N, d)
         Centres [length]; link directions are their minimum-image differences.
     box : Box
+    strain : bool
+        Judge independence with the strain degrees of freedom (shear stabilisation,
+        compliance): links closing loops around the periodic box then fix the box shape
+        and are kept; the strain couples all clusters, so the test is global.
 
     Returns
     -------
@@ -194,11 +207,11 @@ def remove_degenerate_links(
     keep = np.ones(len(i), dtype=bool)
     vec = box.minimum_image(x[j] - x[i])
     link_label = labels[i]
-    for c in np.unique(link_label):
-        idx = np.flatnonzero(link_label == c)
+    for c in np.unique(link_label) if not strain else [None]:
+        idx = np.flatnonzero(link_label == c) if c is not None else np.arange(len(i))
         members = np.unique(np.concatenate([i[idx], j[idx]]))
         local = np.searchsorted(members, np.stack([i[idx], j[idx]]))
-        keep[idx] = _independent(local[0], local[1], vec[idx], len(members))
+        keep[idx] = _independent(local[0], local[1], vec[idx], len(members), strain)
     messages = [f"removed degenerate link ({a}, {b}) of length {r:.6g}: its gradient depends linearly on "
                 f"those of the other links of its cluster (rank-deficient constraint Jacobian, chains paper Sec. II B)" for a, b, r in zip(i[~keep], j[~keep], lengths[~keep])]
     return Links(i[keep], j[keep], lengths[keep]), messages
@@ -339,13 +352,14 @@ def read_link_file(path: str, position: ArrayLike, box: Box) -> tuple[NDArray[np
     return np.array(pairs, np.int64), np.array(lengths)
 
 
-def cement(packing: Packing, k: int, rng: np.random.Generator) -> tuple[Links, list[str]]:
+def cement(packing: Packing, k: int, rng: np.random.Generator, strain: bool = False) -> tuple[Links, list[str]]:
     """Turn ``k`` random contacts into links and freeze the bond angles they create (paper Fig. 5).
 
     New links take the current centre distance. For every sphere, each pair of its
     links of which at least one is new gets an angle link between the two other ends
     at their current distance. Redundant links are then removed
-    (:func:`remove_degenerate_links`; existing links and new contact links first).
+    (:func:`remove_degenerate_links`, with ``strain`` as there; existing links and
+    new contact links first).
 
     Returns
     -------
@@ -383,7 +397,7 @@ def cement(packing: Packing, k: int, rng: np.random.Generator) -> tuple[Links, l
                     angle_pairs.append(pair)
     pairs += angle_pairs
     lengths += list(_distances(np.array(angle_pairs, np.int64).reshape(-1, 2), x, box))
-    return remove_degenerate_links(pairs, lengths, x, box)
+    return remove_degenerate_links(pairs, lengths, x, box, strain)
 
 
 def _distances(pairs: NDArray[np.int64], x: NDArray[np.float64], box: Box) -> NDArray[np.float64]:

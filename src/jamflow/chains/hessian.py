@@ -45,9 +45,10 @@ import numpy as np
 import scipy.linalg as sla
 from numpy.typing import NDArray
 
+from ..bodies import Links
 from ..packing import Packing
 from ..soft.potential import HARMONIC, PowerLawPotential, overlapping_pairs
-from .shear import ShearStabilizedModel, _upper
+from .shear import _upper, strain_components
 
 __all__ = [
     "ZERO_MODE_RTOL",
@@ -145,42 +146,105 @@ class ConstrainedHessian:
     strain: bool
 
 
-def _model(packing: Packing, potential: PowerLawPotential) -> ShearStabilizedModel:
-    from ..bodies import Links
+@dataclass(frozen=True)
+class _Geometry:
+    """First-order geometry of a packing at zero strain: contacts (unlinked overlapping pairs) and links."""
 
+    n: int
+    d: int
+    strain_scale: float
+    pairs: object  # PairList of contacts
+    force: NDArray[np.float64]  # (P,) repulsive contact forces
+    k: NDArray[np.float64]  # (P,) contact stiffness phi''
+    links: Links
+    link_vector: NDArray[np.float64]  # (L, d) minimum image
+
+    @property
+    def m(self) -> int:
+        return self.d * (self.d + 1) // 2
+
+
+def _geometry(packing: Packing, potential: PowerLawPotential) -> _Geometry:
     links = packing.links if packing.links is not None else Links(np.empty(0, np.int64), np.empty(0, np.int64),
                                                                   np.empty(0))
-    return ShearStabilizedModel(packing.box, packing.diameter, links, packing.position, potential)
+    x, box, D = packing.position, packing.box, packing.diameter
+    pairs, _, f = overlapping_pairs(x, box, D, potential)
+    keep = ~links.contains(pairs.i, pairs.j)
+    pairs, f = pairs.select(keep), f[keep]
+    sigma = 0.5 * (D[pairs.i] + D[pairs.j])
+    k = potential.stiffness(1.0 - pairs.distance / sigma, sigma)
+    R = box.minimum_image(x[links.j] - x[links.i])
+    return _Geometry(packing.n, packing.d, float(np.sqrt(packing.n) * D.mean()), pairs, f, k, links, R)
 
 
-def _contact_pairs(model: ShearStabilizedModel, x: NDArray[np.float64]):
-    pairs, _, f = overlapping_pairs(x, model.box, model.diameter, model.potential)
-    keep = ~model.links.contains(pairs.i, pairs.j)
-    return pairs.select(keep), f[keep]
+def gamma_matrix(geo: _Geometry, strain: bool, volume: bool = True) -> NDArray[np.float64]:
+    """Dense ``Gamma`` (n_dof, L [+ 1]) at zero strain: link columns (and ``det F``), or ``Omega`` without strain.
 
-
-def gamma_matrix(model: ShearStabilizedModel, q: NDArray[np.float64], strain: bool, volume: bool = True
-                 ) -> NDArray[np.float64]:
-    """Dense ``Gamma`` (n_dof, L [+ 1]): link columns (and the volume column), or ``Omega`` without strain."""
-    c = model._solver(q)
-    n, d, L = model.n, model.d, len(model.links)
-    m = model.m if strain else 0
+    Built from geometry alone (no factorisation), so over-constrained position blocks
+    (links closing loops around the box, which only the strain makes independent) are fine.
+    """
+    n, d, L = geo.n, geo.d, len(geo.links)
+    m = geo.m if strain else 0
+    u = geo.link_vector / np.linalg.norm(geo.link_vector, axis=1)[:, None]
     G = np.zeros((n * d + m, L + (1 if strain and volume else 0)))
     k = np.arange(L)
     Gx = G[: n * d].reshape(n, d, -1)
-    Gx[model.links.j, :, k] += c["w"]
-    Gx[model.links.i, :, k] -= c["w"]
+    Gx[geo.links.j, :, k] += u
+    Gx[geo.links.i, :, k] -= u
     if strain:
-        G[n * d:, :L] = c["Be"].T
+        G[n * d:, :L] = strain_components(u[:, :, None] * geo.link_vector[:, None, :], geo.strain_scale).T
         if volume:
-            G[n * d:, L] = c["ce"]
+            G[n * d:, L] = strain_components(np.eye(d), geo.strain_scale)
     return G
 
 
+def energy_gradient(geo: _Geometry, strain: bool) -> NDArray[np.float64]:
+    """``dU/dq`` of the contact potential at zero strain, shape (n_dof,)."""
+    n, d = geo.n, geo.d
+    u = geo.pairs.dx / geo.pairs.distance[:, None]
+    g = np.zeros((n, d))
+    np.add.at(g, geo.pairs.i, geo.force[:, None] * u)
+    np.add.at(g, geo.pairs.j, -geo.force[:, None] * u)
+    if not strain:
+        return g.ravel()
+    W = np.einsum("p,pa,pb->ab", geo.force, u, geo.pairs.dx)
+    return np.r_[g.ravel(), strain_components(-W, geo.strain_scale)]
+
+
+def tension_hessian(geo: _Geometry, strain: bool, volume: bool) -> NDArray[np.float64]:
+    """``M = H0 - sum_k mu_k grad^2 c_k [- nu grad^2 det F]`` with least-squares multipliers of ``grad U``.
+
+    With strain the multipliers always include the volume column: the isotropic part
+    of the strain gradient (the pressure) is carried either by the constraint
+    ``det F = 1`` (``volume``; its curvature then enters) or by an external load
+    linear in the strain (the compliance of Sec. VI; no curvature).
+    """
+    scale = geo.strain_scale if strain else None
+    p = geo.pairs
+    M = pair_second_derivatives(geo.n, geo.d, p.i, p.j, p.dx, -geo.force, geo.k, scale)
+    G = gamma_matrix(geo, strain, volume=True)
+    if G.shape[1] == 0:
+        return M
+    mult = np.linalg.lstsq(G, energy_gradient(geo, strain), rcond=None)[0]
+    L = len(geo.links)
+    if L:
+        M -= pair_second_derivatives(geo.n, geo.d, geo.links.i, geo.links.j, geo.link_vector, mult[:L],
+                                     np.zeros(L), scale)
+    if strain and volume:
+        M[geo.n * geo.d:, geo.n * geo.d:] -= mult[L] * _volume_curvature(geo.d, geo.strain_scale)
+    return M
+
+
 def tangent_basis(gamma: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``B`` (n_dof - c, n_dof): orthonormal rows spanning ``Null(Gamma^T)`` (complete QR, Eqs. 29-30)."""
-    Q, _ = sla.qr(gamma, mode="full")
-    return Q[:, gamma.shape[1]:].T
+    """``B`` (n_dof - rank, n_dof): orthonormal rows spanning ``Null(Gamma^T)`` (complete QR, Eqs. 29-30).
+
+    The rank is that of ``Gamma`` (links may be linearly dependent in position space
+    when only the strain makes them independent, or be redundant outright).
+    """
+    Q, Rm, _ = sla.qr(gamma, mode="full", pivoting=True)
+    diag = np.abs(np.diag(Rm))
+    rank = int(np.sum(diag > ZERO_MODE_RTOL * diag.max())) if diag.size else 0
+    return Q[:, rank:].T
 
 
 def constrained_hessian(packing: Packing, potential: PowerLawPotential = HARMONIC, strain: bool = True,
@@ -198,31 +262,12 @@ def constrained_hessian(packing: Packing, potential: PowerLawPotential = HARMONI
     volume : bool
         Keep the volume constraint among the constraints (``False``: ``B_-1`` of Sec. VI).
     """
-    model = _model(packing, potential)
-    x = packing.position
-    q = model.dofs(x)
-    n, d = model.n, model.d
-    scale = model.strain_scale if strain else None
-    pairs, f = _contact_pairs(model, x)
-    k_pair = potential.stiffness(1.0 - pairs.distance / _sigma(model, pairs), _sigma(model, pairs))
-    H0 = pair_second_derivatives(n, d, pairs.i, pairs.j, pairs.dx, -f, k_pair, scale)
-    H = H0.copy()
-    if tension_term and len(model.links):
-        ev = model.evaluate(q)
-        g = ev.gradient if strain else np.r_[ev.gradient[: n * d], np.zeros(model.m)]
-        if strain and volume:
-            mu, nu = model.constraint_multipliers(g, q)
-        else:
-            G = gamma_matrix(model, q, strain, volume=False)
-            mu = np.linalg.lstsq(G, g[: G.shape[0]], rcond=None)[0]
-            nu = 0.0
-        R = model.link_vectors(q)
-        H -= pair_second_derivatives(n, d, model.links.i, model.links.j, R, mu, np.zeros(len(mu)), scale)
-    if tension_term and strain and volume:
-        if not len(model.links):
-            _, nu = model.constraint_multipliers(model.evaluate(q).gradient, q)
-        H[n * d:, n * d:] -= nu * _volume_curvature(d, model.strain_scale)
-    B = tangent_basis(gamma_matrix(model, q, strain, volume))
+    geo = _geometry(packing, potential)
+    scale = geo.strain_scale if strain else None
+    p = geo.pairs
+    H0 = pair_second_derivatives(geo.n, geo.d, p.i, p.j, p.dx, -geo.force, geo.k, scale)
+    H = tension_hessian(geo, strain, volume) if tension_term else H0
+    B = tangent_basis(gamma_matrix(geo, strain, volume))
     HE = B @ H @ B.T
     HE = 0.5 * (HE + HE.T)
     w, v = np.linalg.eigh(HE)
@@ -238,10 +283,6 @@ def _volume_curvature(d: int, scale: float) -> NDArray[np.float64]:
     return J.T @ det2 @ J
 
 
-def _sigma(model: ShearStabilizedModel, pairs) -> NDArray[np.float64]:
-    return 0.5 * (model.diameter[pairs.i] + model.diameter[pairs.j])
-
-
 def extended_rigidity(packing: Packing, strain: bool = True, potential: PowerLawPotential = HARMONIC
                       ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Constrained extended rigidity matrix ``R_E = R0 B^T`` (Eqs. 35-39) and the states of self stress.
@@ -255,20 +296,17 @@ def extended_rigidity(packing: Packing, strain: bool = True, potential: PowerLaw
         Orthonormal basis of the left null space of ``R_E`` (singular values below
         :data:`ZERO_MODE_RTOL` times the largest, and the ``n_c - n_t`` surplus rows).
     """
-    model = _model(packing, potential)
-    q = model.dofs(packing.position)
-    pairs, _ = _contact_pairs(model, packing.position)
-    n, d, P = model.n, model.d, len(pairs.i)
-    m = model.m if strain else 0
+    geo = _geometry(packing, potential)
+    pairs, n, d, P = geo.pairs, geo.n, geo.d, len(geo.pairs.i)
+    m = geo.m if strain else 0
     u = pairs.dx / pairs.distance[:, None]
     R0 = np.zeros((P, n * d + m))
     Rx = R0[:, : n * d].reshape(P, n, d)
     Rx[np.arange(P), pairs.j] = u
     Rx[np.arange(P), pairs.i] -= u
     if strain:
-        J = _strain_jacobian(d, model.strain_scale)
-        R0[:, n * d:] = (u[:, :, None] * pairs.dx[:, None, :]).reshape(P, d * d) @ J
-    B = tangent_basis(gamma_matrix(model, q, strain))
+        R0[:, n * d:] = strain_components(u[:, :, None] * pairs.dx[:, None, :], geo.strain_scale)
+    B = tangent_basis(gamma_matrix(geo, strain))
     RE = R0 @ B.T
     U, s, _ = np.linalg.svd(RE, full_matrices=True)
     rank = int(np.sum(s > ZERO_MODE_RTOL * s.max())) if s.size else 0

@@ -87,12 +87,16 @@ class ShearStabilizedModel(LinkedSpheresModel):
     diameter, links, position, potential, nlist, length_rtol
         As :class:`~jamflow.models.links.LinkedSpheresModel` (``links`` may be empty:
         shear-stabilised spheres).
+    fixed_volume : bool
+        Keep ``det F = 1`` (shear stabilisation); False frees the volume (the
+        compliance of Sec. VI and its stress-controlled check).
     """
 
     def __init__(self, box: Box, diameter: ArrayLike, links: Links, position: ArrayLike,
                  potential: PowerLawPotential = HARMONIC, nlist: NeighborList | None = None,
-                 length_rtol: float = LINK_LENGTH_RTOL) -> None:
+                 length_rtol: float = LINK_LENGTH_RTOL, fixed_volume: bool = True) -> None:
         super().__init__(box, diameter, links, position, potential, nlist, length_rtol)
+        self.fixed_volume = fixed_volume
         self.m = self.d * (self.d + 1) // 2
         self.strain_scale = float(np.sqrt(self.n) * self.diameter.mean())
         self.n_dof = self.n * self.d + self.m
@@ -144,8 +148,8 @@ class ShearStabilizedModel(LinkedSpheresModel):
         return y[self.links.j] - y[self.links.i] + self.link_offset
 
     def volume_error(self, q: NDArray[np.float64]) -> float:
-        """``det F - 1``."""
-        return float(np.linalg.det(self.deformation(q)) - 1.0)
+        """``det F - 1`` (0 when the volume is free)."""
+        return float(np.linalg.det(self.deformation(q)) - 1.0) if self.fixed_volume else 0.0
 
     # --- constraints ------------------------------------------------------------------
     def _solver(self, q: NDArray[np.float64]) -> dict:
@@ -195,6 +199,8 @@ class ShearStabilizedModel(LinkedSpheresModel):
         """``(lambda, nu)`` solving ``Gamma^T Gamma (lambda, nu) = (r_links, r_vol)`` (Schur on the volume row)."""
         c = self._solver(q)
         Kir = self._k_inverse(r_links)
+        if not self.fixed_volume:
+            return Kir, 0.0
         nu = (r_vol - c["b"] @ Kir) / c["schur"]
         return Kir - c["Kib"] * nu, float(nu)
 
@@ -278,7 +284,8 @@ class ShearStabilizedModel(LinkedSpheresModel):
         """
         box = self.last_box().scaled(factor)
         x = np.asarray(position) * factor
-        model = ShearStabilizedModel(box, self.diameter, self.links, x, self.potential, self.nlist, self.length_rtol)
+        model = ShearStabilizedModel(box, self.diameter, self.links, x, self.potential, self.nlist, self.length_rtol,
+                                     self.fixed_volume)
         return model, x
 
     def hessian(self, q: NDArray[np.float64]) -> sp.csr_matrix:

@@ -55,6 +55,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     group.add_argument("--file", default=None,
                        help="text file of links, one 'i j [length]' per line (length: current distance if omitted)")
     p.add_argument("--seed", type=seed, default=None, help="random seed of --cement")
+    p.add_argument("--with-strain", action="store_true",
+                   help="judge degenerate links with the strain degrees of freedom (keeps links that close loops "
+                        "around the box and fix its shape: for moduli; such packings cannot be minimised in a "
+                        "fixed box)")
     add_quiet(p)
 
 
@@ -89,14 +93,14 @@ def _link(args: argparse.Namespace) -> int:
     if args.cement is not None:
         if args.seed is None:
             raise ValueError("--cement needs --seed")
-        links, messages = cement(packing, args.cement, np.random.default_rng(args.seed))
+        links, messages = cement(packing, args.cement, np.random.default_rng(args.seed), args.with_strain)
         protocol = f">cement({args.cement})"
     else:
         pairs, lengths = read_link_file(args.file, packing.position, packing.box)
         if packing.links is not None:
             pairs = np.concatenate([np.stack([packing.links.i, packing.links.j], axis=1), pairs])
             lengths = np.concatenate([packing.links.length, lengths])
-        links, messages = remove_degenerate_links(pairs, lengths, packing.position, packing.box)
+        links, messages = remove_degenerate_links(pairs, lengths, packing.position, packing.box, args.with_strain)
         protocol = ">link-file"
     _messages(messages)
     keep = None

@@ -11,6 +11,8 @@ from tqdm import tqdm
 from ..io import new_dataset_attrs, read_packing, write_dataset, write_packing
 from ..packing import LENGTH_UNITS, Packing, length_unit
 from ..soft.hessian import backbone_pairs, elastic_moduli, hessian, lowest_modes
+from ..chains.compliance import compliance
+from ..chains.hessian import constrained_hessian
 from ..chains.jamming import jam_linked
 from ..soft.jamming import FORCE_TOL_VANDERWERF, JammingSettings, jam_to_pressure
 from ..soft.potential import PowerLawPotential
@@ -80,7 +82,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_quiet(p)
 
     p = add_command(sub, "moduli", _moduli,
-                    "bulk and shear moduli (affine and relaxed) and lowest Hessian eigenvalues of a soft packing",
+                    "bulk and shear moduli (affine and relaxed) and lowest Hessian eigenvalues of a soft packing; "
+                    "linked packings: compliance matrix, Voigt/Reuss/Hill moduli and constrained-Hessian modes",
                     reads=("input",), writes=("out",))
     p.add_argument("input", help="input netCDF soft packing at force balance")
     p.add_argument("out", help="output netCDF dataset")
@@ -213,8 +216,51 @@ def _sd_shear(args: argparse.Namespace) -> int:
     return 0
 
 
+def _moduli_linked(args: argparse.Namespace, packing: Packing) -> int:
+    """Compliance (Sec. VI) and the constrained Hessian's lowest modes (Sec. IV) of a linked packing."""
+    potential = PowerLawPotential(exponent=args.exponent)
+    c = compliance(packing, potential)
+    ch = constrained_hessian(packing, potential, strain=True)
+    eigenvalues = ch.eigenvalues[ch.n_zero:][: args.modes]
+    unit = "epsilon / length^d"
+    names = [f"{'xyz'[a]}{'xyz'[b]}" for a, b in zip(*np.triu_indices(packing.d))]
+    scalars = {name: ((), getattr(c, name), {"units": "1", "long_name": name.replace("_", " ") + " modulus",
+                                              "comment": unit + " (inf: infinite, links forbid the strain)"})
+               for name in ("bulk_voigt", "bulk_reuss", "bulk_hill", "shear_voigt", "shear_reuss", "shear_hill")}
+    ds = xr.Dataset(
+        data_vars={
+            **scalars,
+            "compliance": (("strain_component", "stress_component"), c.S,
+                           {"units": "1", "long_name": "compliance matrix S (Mandel basis eps_aa, sqrt2 eps_ab)",
+                            "comment": "length^d / epsilon"}),
+            "poisson_ratio": ((), c.poisson, {"units": "1", "long_name": "Poisson ratio (Hill moduli)"}),
+            "anisotropy": ((), c.anisotropy, {"units": "1", "long_name": "universal anisotropy index"}),
+            "eigenvalue": (("mode",), eigenvalues,
+                           {"units": "1", "long_name": "lowest non-zero eigenvalues of the constrained extended Hessian",
+                            "comment": "epsilon / length^2 (unit mass)"}),
+        },
+        coords={"strain_component": names, "stress_component": names},
+        attrs=new_dataset_attrs("jamflow linked-packing compliance and moduli", stage_parameters(args, "input", "out"),
+                                d=packing.d, N=packing.n, n_links=len(packing.links), n_rigid=c.n_rigid,
+                                n_zero_modes=ch.n_zero, protocol=packing.protocol,
+                                length_unit=packing.attrs.get("length_unit", "")),
+    )
+    write_dataset(ds, args.out)
+    print_summary(args, args.out, [
+        ("bulk modulus K (Voigt, Reuss, Hill)", f"{c.bulk_voigt:.6g}, {c.bulk_reuss:.6g}, {c.bulk_hill:.6g} {unit}"),
+        ("shear modulus G (Voigt, Reuss, Hill)", f"{c.shear_voigt:.6g}, {c.shear_reuss:.6g}, {c.shear_hill:.6g} {unit}"),
+        ("Poisson ratio, anisotropy", f"{c.poisson:.4g}, {c.anisotropy:.4g}"),
+        ("rigid stress directions (S = 0)", c.n_rigid),
+        ("zero modes (constrained Hessian)", ch.n_zero),
+        ("lowest eigenvalue", f"{eigenvalues[0]:.4g} epsilon / length^2" if len(eigenvalues) else "none"),
+    ])
+    return 0
+
+
 def _moduli(args: argparse.Namespace) -> int:
     packing = read_packing(args.input, None)
+    if packing.links is not None and len(packing.links):
+        return _moduli_linked(args, packing)
     potential = PowerLawPotential(exponent=args.exponent)
     m = elastic_moduli(packing.position, packing.box, packing.diameter, potential)
     pairs, rattler = backbone_pairs(packing.position, packing.box, packing.diameter, potential)
