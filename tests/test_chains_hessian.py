@@ -91,7 +91,7 @@ def test_zero_modes_are_the_global_translations_and_self_stress(jammed):
     assert np.all(ch.eigenvalues[ch.n_zero:] > 0.0)
     # rigidity matrix: n_c rows, n_t columns; rank n_t - d (translations), so the
     # states of self stress number n_c - (n_t - d)
-    RE, _, sss = extended_rigidity(p, strain=strain)
+    RE, _, sss, _ = extended_rigidity(p, strain=strain)
     n_t = ch.matrix.shape[0]
     assert RE.shape == (len(p.contacts), n_t)
     assert sss.shape[1] == len(p.contacts) - (n_t - 2)

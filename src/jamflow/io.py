@@ -63,6 +63,8 @@ DATASET_KINDS: dict[str, tuple[frozenset[str], str]] = {
     "eos": (frozenset({"packing_fraction", "pressure"}), "an LS equation of state (jamflow ls --eos)"),
     "certificate": (frozenset({"lp_objective", "unjamming_motion"}), "a jamming certificate (jamflow certify)"),
     "moduli": (frozenset({"bulk", "shear", "eigenvalue"}), "elastic moduli (jamflow moduli)"),
+    "chain-certificate": (frozenset({"chain_rattler", "chain_motion"}),
+                          "a jamming certificate of a linked packing (jamflow certify on links)"),
     "chain-moduli": (frozenset({"compliance", "bulk_hill", "shear_hill"}),
                      "compliance and moduli of a linked packing (jamflow moduli on links)"),
     "tradeoff": (frozenset({"time", "on_front", "is_reference"}), "a speed/accuracy sweep (jamflow tradeoff)"),

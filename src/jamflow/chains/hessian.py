@@ -283,9 +283,15 @@ def _volume_curvature(d: int, scale: float) -> NDArray[np.float64]:
     return J.T @ det2 @ J
 
 
-def extended_rigidity(packing: Packing, strain: bool = True, potential: PowerLawPotential = HARMONIC
-                      ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+def extended_rigidity(packing: Packing, strain: bool = True, potential: PowerLawPotential = HARMONIC,
+                      translations: bool = False
+                      ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Constrained extended rigidity matrix ``R_E = R0 B^T`` (Eqs. 35-39) and the states of self stress.
+
+    Parameters
+    ----------
+    translations : bool
+        Also remove the ``d`` uniform translations from the basis (the LP of Sec. V).
 
     Returns
     -------
@@ -295,6 +301,8 @@ def extended_rigidity(packing: Packing, strain: bool = True, potential: PowerLaw
     self_stress : ndarray, shape (n_c, s)
         Orthonormal basis of the left null space of ``R_E`` (singular values below
         :data:`ZERO_MODE_RTOL` times the largest, and the ``n_c - n_t`` surplus rows).
+    B : ndarray, shape (n_t, n_dof)
+        The basis of true degrees of freedom.
     """
     geo = _geometry(packing, potential)
     pairs, n, d, P = geo.pairs, geo.n, geo.d, len(geo.pairs.i)
@@ -306,8 +314,13 @@ def extended_rigidity(packing: Packing, strain: bool = True, potential: PowerLaw
     Rx[np.arange(P), pairs.i] -= u
     if strain:
         R0[:, n * d:] = strain_components(u[:, :, None] * pairs.dx[:, None, :], geo.strain_scale)
-    B = tangent_basis(gamma_matrix(geo, strain))
+    G = gamma_matrix(geo, strain)
+    if translations:
+        T = np.zeros((n * d + m, d))
+        T[: n * d] = np.tile(np.eye(d), (n, 1))
+        G = np.hstack([G, T])
+    B = tangent_basis(G)
     RE = R0 @ B.T
     U, s, _ = np.linalg.svd(RE, full_matrices=True)
     rank = int(np.sum(s > ZERO_MODE_RTOL * s.max())) if s.size else 0
-    return RE, R0, U[:, rank:]
+    return RE, R0, U[:, rank:], B

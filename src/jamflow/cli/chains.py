@@ -7,6 +7,7 @@ import sys
 from math import radians
 
 import numpy as np
+import xarray as xr
 
 from ..chains.builders import (
     CLUSTER_KINDS,
@@ -16,7 +17,8 @@ from ..chains.builders import (
     read_link_file,
     remove_degenerate_links,
 )
-from ..io import read_packing, write_packing
+from ..chains.certify import certify_linked
+from ..io import new_dataset_attrs, read_packing, write_dataset, write_packing
 from .common import (
     add_command,
     add_quiet,
@@ -116,4 +118,32 @@ def _link(args: argparse.Namespace) -> int:
         check_linked_start(out)
     write_packing(out, args.out, stage_parameters(args, "input", "out"))
     print_summary(args, args.out, [*_link_rows(out), ("degenerate links removed", len(messages))])
+    return 0
+
+
+def certify_linked_packing(args: argparse.Namespace, packing) -> int:
+    """``jamflow certify`` of a linked packing: the chain LP of Sec. V on ``R_E`` (collective, and strict
+    with ``--strict``); contacts are the overlapping unlinked pairs."""
+    if args.gap_tol is not None or args.exact:
+        raise ValueError("--gap-tol and --exact are for spheres; a linked packing is certified on its "
+                         "overlapping (soft) contacts")
+    cert = certify_linked(packing, strict=args.strict, loads=args.loads, seed=args.seed,
+                          max_cluster_fraction=args.max_cluster_fraction, solver=args.solver)
+    motion = np.zeros((packing.n, packing.d)) if cert.motion is None else cert.motion
+    ds = xr.Dataset(
+        data_vars={
+            "chain_rattler": (("particle",), cert.rattler.astype(np.int8),
+                              {"units": "1", "long_name": "outside the certified backbone (1) or in it (0)"}),
+            "chain_motion": (("particle", "spatial"), motion,
+                             {"units": "1", "long_name": "unjamming displacement (zero if none was found)",
+                              "comment": "mean diameters, tangent coordinates bounded by 1"}),
+        },
+        attrs=new_dataset_attrs("jamflow chain jamming certificate", stage_parameters(args, "packing", "out"),
+                                classification=cert.classification, motion_stage=cert.motion_stage,
+                                n_lp=cert.n_lp, strict_tested=int(args.strict), d=packing.d, N=packing.n,
+                                n_links=len(packing.links)),
+    )
+    write_dataset(ds, args.out)
+    print_summary(args, args.out, [("classification", cert.classification),
+                                   ("rattlers", int(cert.rattler.sum())), ("LPs", cert.n_lp)])
     return 0
