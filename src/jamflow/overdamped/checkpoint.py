@@ -21,9 +21,9 @@ from ..io import new_dataset_attrs, read_dataset, write_dataset
 from .collisions import NeighborList
 from .driving import Drive
 from .integrate import FlowOptions, FlowState, Integrator
-from .run import SERIES, Recorder
+from .recorder import SERIES, Recorder
 
-__all__ = ["save_checkpoint", "load_checkpoint", "check_binding"]
+__all__ = ["check_binding", "load_checkpoint", "save_checkpoint"]
 
 
 def _v(dims: tuple[str, ...], data, long_name: str) -> tuple:

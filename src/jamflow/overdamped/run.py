@@ -14,7 +14,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -26,10 +26,12 @@ from ..box import Box
 from ..io import new_dataset_attrs
 from ..packing import Packing, length_unit, near_pairs, sphere_volume
 from ..tolerances import OVERLAP_TOL
+from .checkpoint import load_checkpoint, save_checkpoint
 from .driving import Drive
 from .integrate import FlowOptions, Integrator
+from .recorder import SERIES, Recorder
 
-__all__ = ["Stop", "FlowResult", "length_unit", "run_flow", "snapshot_packings"]
+__all__ = ["FlowResult", "Stop", "length_unit", "run_flow", "snapshot_packings"]
 
 
 
@@ -77,47 +79,6 @@ class FlowResult:
     complete: bool
     jammed: bool
 
-
-@dataclass
-class Recorder:
-    """Accumulates the time series, events and snapshots of a run."""
-
-    columns: dict[str, list] = field(default_factory=lambda: {k: [] for k in SERIES})
-    snapshots: list[dict[str, Any]] = field(default_factory=list)
-    next_snapshot: int = 0
-
-    def record(self, integ: Integrator) -> None:
-        st = integ.state
-        drive = integ.drive
-        sig = integ.stress() / drive.force_unit
-        vol = abs(float(np.linalg.det(st.h)))
-        row = {
-            "strain": st.strain,
-            "time": st.time / drive.time_unit,
-            "shear_stress": -sig[0, 1],
-            "pressure": float(np.trace(sig)) / integ.d,
-            "packing_fraction": float(sphere_volume(integ.d, 2 * st.radius).sum() / vol),
-            "kappa": st.kappa,
-            "n_contacts": int(st.contact.sum()),
-            "z_bar": integ.z_bar(),
-            "volume": vol,
-            "constraint_error": integ.constraint_error(),
-        }
-        for k, v in row.items():
-            self.columns[k].append(v)
-
-    def snapshot(self, integ: Integrator, scale: float) -> None:
-        st = integ.state
-        pairs = st.nl.pairs[st.contact]
-        self.snapshots.append({
-            "position": st.x * scale, "box": st.h * scale, "strain": st.strain,
-            "time": st.time / integ.drive.time_unit, "pairs": pairs,
-            "force": integ.solution.force / integ.drive.force_unit,
-        })
-
-
-SERIES = ("strain", "time", "shear_stress", "pressure", "packing_fraction", "kappa",
-          "n_contacts", "z_bar", "volume", "constraint_error")
 
 _SERIES_META = {
     "strain": ("1", "accumulated imposed strain gamma (rate * time; shear strain for shear modes)"),
@@ -245,8 +206,6 @@ def run_flow(
     progress : callable, optional
         ``progress(fraction_done)`` after each recorded step (progress bars).
     """
-    from .checkpoint import load_checkpoint, save_checkpoint
-
     lam = length_unit(packing.diameter, unit)
     params = dict(parameters or {})
     params.update({"drive": drive.describe(), "lambda": lam, "unit": unit})
