@@ -99,3 +99,28 @@ def test_zero_modes_are_the_global_translations_and_self_stress(jammed):
     # contact forces are a state of self stress: f^T R_E = 0 at force balance (up to the force tolerance)
     f = p.force / np.linalg.norm(p.force)
     assert np.max(np.abs(f @ RE)) <= 1e-8
+
+
+def test_rigidity_and_link_columns_agree_with_the_network_core(jammed):
+    """R0 and Gamma's link columns equal jamflow.network's Jacobians (independent code) after the
+    change of strain coordinates: network s (E_aa, then E_ab + E_ba) -> ours e_aa = q_s s_aa,
+    e_ab = sqrt(2) q_s s_ab."""
+    from jamflow.chains.hessian import _geometry, gamma_matrix
+    from jamflow.network import contact_jacobian, link_jacobian, sphere_contacts
+
+    _, p = jammed
+    geo = _geometry(p, HARMONIC)
+    _, R0, _, _ = extended_rigidity(p, strain=True)
+    nd = 2 * p.n
+    # our strain columns in upper-triangle order (0,0), (0,1), (1,1); the network's (0,0), (1,1), (0,1)
+    order, factor = [0, 2, 1], geo.strain_scale * np.array([1.0, 1.0, np.sqrt(2.0)])
+
+    def to_network(A):
+        return np.hstack([A[:, :nd], A[:, nd:][:, order] * factor])
+
+    pairs = np.stack([geo.pairs.i, geo.pairs.j], axis=1)
+    J = contact_jacobian(sphere_contacts(p.position, p.box, pairs), p.n, 2, strain="symmetric").toarray()
+    np.testing.assert_allclose(to_network(R0), J, atol=1e-12)
+    G = gamma_matrix(geo, strain=True, volume=False)
+    L = link_jacobian(p.links, p.position, p.box, strain="symmetric").toarray()
+    np.testing.assert_allclose(to_network(G.T), L, atol=1e-12)
