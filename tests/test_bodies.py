@@ -331,7 +331,7 @@ def test_plot_packing_draws_links_at_their_length(tmp_path: Path) -> None:
 # --- check --------------------------------------------------------------------------
 
 
-def test_check_reports_how_well_links_hold_and_refuses_to_count_body_contacts(tmp_path: Path, capsys) -> None:
+def test_check_reports_how_well_links_hold_and_refuses_to_count_shape_contacts(tmp_path: Path, capsys) -> None:
     import json
 
     from jamflow.analysis.contacts import summarize
@@ -346,7 +346,7 @@ def test_check_reports_how_well_links_hold_and_refuses_to_count_body_contacts(tm
     assert main(["check", str(tmp_path / "l.nc"), "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["n_links"] == 3 and report["n_clusters"] == 3
-    assert report["max_link_error_rel"] == pytest.approx(1e-6, rel=1e-6)
+    assert report["max_link_error"] == pytest.approx(1e-6, rel=1e-6)
     for count in (summarize, lambda q: certify(q)):
         with pytest.raises(ValueError, match="links"):
             count(p)

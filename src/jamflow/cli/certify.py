@@ -56,6 +56,10 @@ def _certify(args: argparse.Namespace) -> int:
     if args.exact and args.gap_tol is None:
         raise ValueError("--exact needs --gap-tol (explicit contacts are always exact)")
     packing = read_packing(args.packing, overlap_tol(args))
+    if packing.links is not None and len(packing.links):
+        from .chains import certify_linked_packing
+
+        return certify_linked_packing(args, packing)
     with tqdm(desc="certify LPs", unit="LP", disable=args.quiet) as bar:
         cert = certify(
             packing,

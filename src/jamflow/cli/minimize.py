@@ -4,14 +4,12 @@ from __future__ import annotations
 
 import argparse
 
-import numpy as np
-
+from ..chains.jamming import linked_soft_packing
 from ..io import read_packing, write_packing
 from ..models import LinkedSpheresModel, SphereModel
-from ..packing import Packing
 from ..soft.jamming import soft_packing
-from ..soft.minimize import METHODS, MinimizeResult, minimize
-from ..soft.potential import PowerLawPotential, overlapping_pairs
+from ..soft.minimize import METHODS, minimize
+from ..soft.potential import PowerLawPotential
 from ..tolerances import MINIMIZE_FORCE_TOL
 from .common import add_command, add_quiet, print_summary, stage_parameters
 
@@ -29,20 +27,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--method", choices=METHODS, default="fire", help="minimiser (default fire)")
     p.add_argument("--exponent", type=float, default=2.0, help="contact potential exponent w (2 harmonic, 2.5 Hertz)")
     add_quiet(p)
-
-
-def _linked_packing(packing: Packing, model: LinkedSpheresModel, res: MinimizeResult, attrs: dict,
-                    parameters: dict) -> Packing:
-    """The minimised linked packing: contacts are overlapping pairs that are not linked."""
-    x = packing.box.wrap(res.position)
-    pairs, _, f = overlapping_pairs(x, packing.box, packing.diameter, model.potential)
-    linked = packing.links.contains(pairs.i, pairs.j)
-    attrs = {**attrs, "pressure_comment": "virial pressure of the contact forces and the link tensions"}
-    return packing.evolve(
-        position=x, contacts=np.stack([pairs.i, pairs.j], axis=1)[~linked], force=f[~linked], rattler=None,
-        pressure=res.pressure, protocol=packing.protocol + ">minimize", parameters=parameters,
-        attrs={**packing.attrs, **attrs},
-    )
 
 
 def _minimize(args: argparse.Namespace) -> int:
@@ -68,7 +52,7 @@ def _minimize(args: argparse.Namespace) -> int:
              "potential_exponent": potential.exponent}
     parameters = stage_parameters(args, "input", "out")
     if isinstance(model, LinkedSpheresModel):
-        out = _linked_packing(packing, model, res, attrs, parameters)
+        out = linked_soft_packing(packing, model, res, ">minimize", attrs, parameters)
     else:
         out = soft_packing(res.position, packing.box, packing.diameter, potential, packing, ">minimize",
                            parameters, {**packing.attrs, **attrs})

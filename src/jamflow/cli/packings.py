@@ -9,7 +9,8 @@ import math
 import numpy as np
 from tqdm import tqdm
 
-from ..analysis.contacts import summarize
+from ..analysis.contacts import contact_network, summarize
+from ..chains.clusters import count_clusters
 from ..initial import random_packing
 from ..io import read_dat, read_dataset, read_packing, size_classes, write_packing, write_xyz
 from ..overdamped.run import snapshot_packings
@@ -126,16 +127,27 @@ def _export_xyz(args: argparse.Namespace) -> int:
 
 
 def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
-    """What check can say of links and shapes today: how well links hold, clusters, shapes.
+    """Links: how well they hold and the cluster count (rattling clusters, danglers, isostaticity);
+    shapes: by kind (their contacts are not counted yet).
 
-    Contacts, rattlers and the isostatic count of bodies need their energy models'
-    contact networks and are not counted (``summarize`` refuses them).
+    Linked contacts are the packing's stored contacts (or, with ``--gap-tol`` or none
+    stored, pairs within the gap tolerance), never linked pairs; the count is
+    :func:`jamflow.chains.clusters.count_clusters` (stated in ``docs/chains.md``).
     """
     report: dict = {"N": packing.n, "d": packing.d, "phi": packing.packing_fraction}
+    counted = packing.links is not None and packing.shapes is None
     if packing.links is not None:
         err = packing.links.length_errors(packing.position, packing.box)
         report.update(n_links=len(packing.links), n_clusters=int(packing.clusters.max(initial=-1)) + 1,
-                      max_link_error_rel=float(np.max(np.abs(err), initial=0.0)))
+                      max_link_error=float(np.max(np.abs(err), initial=0.0)))
+    if counted:
+        source = "stored" if args.gap_tol is None and packing.contacts is not None else "gap"
+        contacts = contact_network(packing, args.gap_tol)
+        contacts = contacts[~packing.links.contains(contacts[:, 0], contacts[:, 1])]
+        stabilized = bool(packing.attrs.get("shear_stabilized", 0))
+        count = count_clusters(packing.n, packing.d, packing.links, contacts, stabilized)
+        report.update({**count.as_dict(), "isostatic": count.n_contacts == count.isostatic_count,
+                       "contact_source": source, "shear_stabilized": stabilized})
     if packing.shapes is not None:
         kinds, counts = np.unique(packing.shapes.kind[packing.shape_index], return_counts=True)
         report["shapes"] = {str(k): int(c) for k, c in zip(kinds, counts)}
@@ -145,11 +157,17 @@ def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
     rows = [("N", report["N"]), ("d", report["d"]), ("packing fraction", f"{report['phi']:.10f}")]
     if "n_links" in report:
         rows += [("links", f"{report['n_links']} in {report['n_clusters']} clusters"),
-                 ("max link-length error", f"{report['max_link_error_rel']:.3e} (relative)")]
+                 ("max link-length error", f"{report['max_link_error']:.3e} (relative)")]
+    if counted:
+        rows += [("contacts (backbone)", f"{report['n_contacts']}  [{report['contact_source']}]"),
+                 ("rattlers", f"{report['n_rattlers']} ({report['n_rattling_clusters']} rattling clusters, "
+                              f"{report['n_danglers']} danglers)"),
+                 ("isostatic", f"{str(report['isostatic']).lower()}  (N_c = {report['n_contacts']}, "
+                               f"sum f_c - d + 1{' + d(d+1)/2 - 1' if stabilized else ''} = "
+                               f"{report['isostatic_count']}: {report['rigidity_counting']})")]
     if "shapes" in report:
         rows.append(("shapes", ", ".join(f"{c} {k}" for k, c in report["shapes"].items())))
-    rows.append(("contacts, rattlers", "not counted for linked or shaped particles yet (their contact "
-                                       "networks come with the Bodies network core)"))
+        rows.append(("contacts, rattlers", "not counted for shaped particles yet"))
     print(format_rows(rows))
     return 0
 

@@ -11,7 +11,10 @@ from tqdm import tqdm
 from ..io import new_dataset_attrs, read_packing, write_dataset, write_packing
 from ..packing import LENGTH_UNITS, Packing, length_unit
 from ..soft.hessian import backbone_pairs, elastic_moduli, hessian, lowest_modes
-from ..soft.jamming import FORCE_TOL_VANDERWERF, jam_to_pressure
+from ..chains.compliance import compliance
+from ..chains.hessian import constrained_hessian
+from ..chains.jamming import jam_linked
+from ..soft.jamming import FORCE_TOL_VANDERWERF, JammingSettings, jam_to_pressure
 from ..soft.potential import PowerLawPotential
 from ..soft.shear import LERNER_DELTA_R, aqs_shear, lerner_sd_shear
 from ..tolerances import MINIMIZE_FORCE_TOL
@@ -21,7 +24,8 @@ from .common import add_command, add_preset, add_quiet, positive, print_summary,
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "soft-jam", _soft_jam,
-                    "soft-sphere jamming onset: compress/decompress bisection + enthalpy minimisation to P0",
+                    "soft-sphere jamming onset: compress/decompress bisection + enthalpy minimisation to P0 "
+                    "(linked packings: fixed-box bisection with constraint projection)",
                     reads=("input",), writes=("out",), packings=("out",))
     p.add_argument("input", help="input netCDF packing (overlaps allowed)")
     p.add_argument("out", help="output netCDF packing (lengths in units of the mean diameter)")
@@ -39,6 +43,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="final enthalpy minimisation over an isotropic box scale (default) or the whole box "
                         "(stress tensor -P0 1, the box may tilt)")
     p.add_argument("--max-steps", type=int, default=20_000_000, help="FIRE step budget of the whole protocol")
+    p.add_argument("--shear-stabilize", action="store_true",
+                   help="strain degrees of freedom at fixed volume in every minimisation (chains paper Sec. II D): "
+                        "the final stress is isotropic; spheres and linked packings")
     add_quiet(p)
     add_preset(p)
 
@@ -75,7 +82,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_quiet(p)
 
     p = add_command(sub, "moduli", _moduli,
-                    "bulk and shear moduli (affine and relaxed) and lowest Hessian eigenvalues of a soft packing",
+                    "bulk and shear moduli (affine and relaxed) and lowest Hessian eigenvalues of a soft packing; "
+                    "linked packings: compliance matrix, Voigt/Reuss/Hill moduli and constrained-Hessian modes",
                     reads=("input",), writes=("out",))
     p.add_argument("input", help="input netCDF soft packing at force balance")
     p.add_argument("out", help="output netCDF dataset")
@@ -98,8 +106,49 @@ def _random_start(packing: Packing, seed: int) -> Packing:
     return packing.evolve(position=packing.box.to_cartesian(s), seed=seed)
 
 
+def _soft_jam_linked(args: argparse.Namespace, packing: Packing) -> int:
+    """soft-jam of a linked packing (or a shear-stabilised one): bisection with constraint projection (chains paper Sec. III)."""
+    if args.seed is not None:
+        raise ValueError("--seed draws random sphere centres, which would tear the links: start linked packings "
+                         "from jamflow init-chains with its own --seed")
+    if args.box_dof != "isotropic":
+        raise ValueError("--box-dof full is for spheres without --shear-stabilize; linked packings are jammed in a "
+                         "fixed-shape box or with --shear-stabilize")
+    bar = tqdm(desc="soft-jam", unit=" bisection", disable=args.quiet)
+
+    def progress(info: dict) -> None:
+        bar.update(1)
+        bar.set_postfix(phi=f"{info['phi']:.8f}", P=f"{info['pressure']:.3e}")
+
+    settings = JammingSettings(args.force_tol, args.pressure_rtol, args.delta_phi, max_steps=args.max_steps)
+    result = jam_linked(packing, args.pressure, PowerLawPotential(exponent=args.exponent), settings, progress,
+                        args.shear_stabilize)
+    bar.close()
+    if not result.converged:
+        raise RuntimeError(f"the linked bisection did not reach force_tol {args.force_tol:g} and pressure_rtol "
+                           f"{args.pressure_rtol:g} within {args.max_steps} steps")
+    out = result.packing
+    write_packing(out, args.out, stage_parameters(args, "input", "out"))
+    a = out.attrs
+    stress = out.attrs["stress_deviation"]
+    print_summary(args, args.out, [
+        ("phi_J", f"{out.packing_fraction:.10f}"),
+        ("pressure", f"{out.pressure:.6g} (target {args.pressure:g}) epsilon / mean diameter^d"),
+        ("shear-stabilised", f"{'yes' if args.shear_stabilize else 'no'} (max |sigma_ab - P delta_ab| / P = {stress:.3g})"),
+        ("links", f"{len(out.links)} (max relative length error {a['max_link_error']:.3g})"),
+        ("contacts N_c (backbone)", f"{a['n_contacts']} (cluster isostatic count {a['isostatic_count']}, "
+                                    f"excess {a['n_contacts'] - a['isostatic_count']})"),
+        ("rattlers", f"{a['n_rattlers']} ({a['n_rattling_clusters']} rattling clusters, {a['n_danglers']} danglers)"),
+        ("max |P F|", f"{a['max_force_sq'] ** 0.5:.3g} epsilon / mean diameter"),
+        ("FIRE steps", result.steps),
+    ])
+    return 0
+
+
 def _soft_jam(args: argparse.Namespace) -> int:
     packing = read_packing(args.input, None)
+    if (packing.links is not None and len(packing.links)) or args.shear_stabilize:
+        return _soft_jam_linked(args, packing)
     if args.seed is not None:
         packing = _random_start(packing, args.seed)
     bar = tqdm(desc="soft-jam", unit=" bisection", disable=args.quiet)
@@ -167,8 +216,51 @@ def _sd_shear(args: argparse.Namespace) -> int:
     return 0
 
 
+def _moduli_linked(args: argparse.Namespace, packing: Packing) -> int:
+    """Compliance (Sec. VI) and the constrained Hessian's lowest modes (Sec. IV) of a linked packing."""
+    potential = PowerLawPotential(exponent=args.exponent)
+    c = compliance(packing, potential)
+    ch = constrained_hessian(packing, potential, strain=True)
+    eigenvalues = ch.eigenvalues[ch.n_zero:][: args.modes]
+    unit = "epsilon / length^d"
+    names = [f"{'xyz'[a]}{'xyz'[b]}" for a, b in zip(*np.triu_indices(packing.d))]
+    scalars = {name: ((), getattr(c, name), {"units": "1", "long_name": name.replace("_", " ") + " modulus",
+                                              "comment": unit + " (inf: infinite, links forbid the strain)"})
+               for name in ("bulk_voigt", "bulk_reuss", "bulk_hill", "shear_voigt", "shear_reuss", "shear_hill")}
+    ds = xr.Dataset(
+        data_vars={
+            **scalars,
+            "compliance": (("strain_component", "stress_component"), c.S,
+                           {"units": "1", "long_name": "compliance matrix S (Mandel basis eps_aa, sqrt2 eps_ab)",
+                            "comment": "length^d / epsilon"}),
+            "poisson_ratio": ((), c.poisson, {"units": "1", "long_name": "Poisson ratio (Hill moduli)"}),
+            "anisotropy": ((), c.anisotropy, {"units": "1", "long_name": "universal anisotropy index"}),
+            "eigenvalue": (("mode",), eigenvalues,
+                           {"units": "1", "long_name": "lowest non-zero eigenvalues of the constrained extended Hessian",
+                            "comment": "epsilon / length^2 (unit mass)"}),
+        },
+        coords={"strain_component": names, "stress_component": names},
+        attrs=new_dataset_attrs("jamflow linked-packing compliance and moduli", stage_parameters(args, "input", "out"),
+                                d=packing.d, N=packing.n, n_links=len(packing.links), n_rigid=c.n_rigid,
+                                n_zero_modes=ch.n_zero, protocol=packing.protocol,
+                                length_unit=packing.attrs.get("length_unit", "")),
+    )
+    write_dataset(ds, args.out)
+    print_summary(args, args.out, [
+        ("bulk modulus K (Voigt, Reuss, Hill)", f"{c.bulk_voigt:.6g}, {c.bulk_reuss:.6g}, {c.bulk_hill:.6g} {unit}"),
+        ("shear modulus G (Voigt, Reuss, Hill)", f"{c.shear_voigt:.6g}, {c.shear_reuss:.6g}, {c.shear_hill:.6g} {unit}"),
+        ("Poisson ratio, anisotropy", f"{c.poisson:.4g}, {c.anisotropy:.4g}"),
+        ("rigid stress directions (S = 0)", c.n_rigid),
+        ("zero modes (constrained Hessian)", ch.n_zero),
+        ("lowest eigenvalue", f"{eigenvalues[0]:.4g} epsilon / length^2" if len(eigenvalues) else "none"),
+    ])
+    return 0
+
+
 def _moduli(args: argparse.Namespace) -> int:
     packing = read_packing(args.input, None)
+    if packing.links is not None and len(packing.links):
+        return _moduli_linked(args, packing)
     potential = PowerLawPotential(exponent=args.exponent)
     m = elastic_moduli(packing.position, packing.box, packing.diameter, potential)
     pairs, rattler = backbone_pairs(packing.position, packing.box, packing.diameter, potential)

@@ -1,0 +1,326 @@
+"""Constrained Hessian and extended rigidity matrix of linked packings (chains paper Sec. IV).
+
+Coordinates are those of :class:`~jamflow.chains.shear.ShearStabilizedModel` at zero
+strain: centres ``x`` (N d) and the scaled strain components ``e`` (m =
+d (d + 1) / 2); the positions-only variant drops ``e``. For any pair function
+``phi(|r|)`` with ``r = F R`` (``F = 1 + eps``, ``R`` the pair vector at zero strain)
+the second derivatives at ``eps = 0`` are (Eqs. 24-26)
+
+- ``d2 phi / dx dx``: the block ``k = phi'' u u^T + (phi' / r) (1 - u u^T)`` (``+k`` on
+  ``ii, jj``, ``-k`` on ``ij``);
+- ``d2 phi / dx_j dF_cd = k_bc R_d + delta_bd phi' u_c`` (minus on ``i``);
+- ``d2 phi / dF_cd dF_ef = k_ce R_d R_f``;
+
+and the strain part is mapped to ``e`` by the linear chain rule of
+:func:`~jamflow.chains.shear.strain_components` (``F`` is linear in ``e``, so no
+further term). The extended Hessian ``H0`` (Eq. 27) sums the contact potential over
+overlapping pairs that are not linked.
+
+Change of basis (Eqs. 28-31): ``Gamma`` (n_dof x (L + 1), links and volume) is
+factorised by a complete Householder QR, whose last ``n_dof - L - 1`` columns are an
+orthonormal basis of ``Null(Gamma^T)``; their transpose is ``B`` (``y_t = B y``).
+
+Constrained Hessian: the paper's ``H_E = B H0 B^T`` (Eq. 33) is the second derivative
+on the constraint manifold only when the constraint forces vanish. At a force-balanced
+state with link tensions ``mu`` and volume multiplier ``nu`` (``grad U = Gamma (mu, nu)``)
+the second derivative of ``U`` along any curve on the manifold is
+``B (H0 - sum_k mu_k grad^2 c_k - nu grad^2 det F) B^T`` (the curvature of the
+constraints times their forces, a link being the pair function ``phi = |r|``, and
+``d2 det F / dF_ab dF_cd = delta_ab delta_cd - delta_ad delta_bc`` at ``F = 1``).
+:func:`constrained_hessian` includes that term by default (``tension_term=False``
+gives Eq. 33 as printed); its test is the finite-difference second derivative of the
+energy along ``B`` rows with Newton re-affixing onto the manifold.
+
+Extended rigidity matrix (Eqs. 35-39): one row per contact (links excluded), the
+gradient of its centre distance, ``R0 = (R_x, R_eps)`` with ``R_eps = n_a n_b r``
+(the paper's ``sigma_ij`` is the contact distance ``r``), and ``R_E = R0 B^T``. States of
+self stress are the left singular vectors of ``R_E`` with zero singular value.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg as sla
+from numpy.typing import NDArray
+
+from ..bodies import Links
+from ..packing import Packing
+from ..soft.potential import HARMONIC, PowerLawPotential, overlapping_pairs
+from .shear import _upper, strain_components
+
+__all__ = [
+    "ZERO_MODE_RTOL",
+    "ConstrainedHessian",
+    "constrained_hessian",
+    "extended_rigidity",
+    "pair_second_derivatives",
+]
+
+#: An eigenvalue of a constrained Hessian (or a singular value of a rigidity matrix)
+#: counts as zero below this fraction of the largest: dense float64 eigensolvers
+#: resolve eigenvalues to ~1e-16 of the largest, and a jammed packing's softest
+#: non-zero mode at P0 >= 1e-7 sits above ~1e-8 of it.
+ZERO_MODE_RTOL: float = 1e-10
+
+
+def _strain_jacobian(d: int, scale: float) -> NDArray[np.float64]:
+    """``dF / de``, shape (d * d, m): ``F`` is linear in ``e`` (:func:`~jamflow.chains.shear.strain_matrix`)."""
+    a, b, weight = _upper(d)
+    J = np.zeros((d * d, a.size))
+    J[a * d + b, np.arange(a.size)] = 1.0 / (scale * weight)
+    J[b * d + a, np.arange(a.size)] = 1.0 / (scale * weight)
+    return J
+
+
+def pair_second_derivatives(n: int, d: int, i: NDArray[np.int64], j: NDArray[np.int64], R: NDArray[np.float64],
+                            dphi: NDArray[np.float64], d2phi: NDArray[np.float64], strain_scale: float | None
+                            ) -> NDArray[np.float64]:
+    """Dense ``sum_p d2 phi_p(|F R_p|) / dq dq`` at zero strain (module doc), shape (n_dof, n_dof).
+
+    Parameters
+    ----------
+    i, j : ndarray of int, shape (P,)
+    R : ndarray, shape (P, d)
+        Pair vectors ``x_j - x_i`` (minimum image) [length].
+    dphi, d2phi : ndarray, shape (P,)
+        ``phi'(r)`` and ``phi''(r)``.
+    strain_scale : float or None
+        ``q_s`` of the strain components; None: positions only.
+    """
+    r = np.linalg.norm(R, axis=1)
+    u = R / r[:, None]
+    uu = u[:, :, None] * u[:, None, :]
+    k = d2phi[:, None, None] * uu + (dphi / r)[:, None, None] * (np.eye(d) - uu)
+    m = 0 if strain_scale is None else d * (d + 1) // 2
+    H = np.zeros((n * d + m, n * d + m))
+    Hx = H[: n * d, : n * d].reshape(n, d, n, d)
+    np.add.at(Hx, (i, slice(None), i, slice(None)), k)
+    np.add.at(Hx, (j, slice(None), j, slice(None)), k)
+    np.add.at(Hx, (i, slice(None), j, slice(None)), -k)
+    np.add.at(Hx, (j, slice(None), i, slice(None)), -k)
+    if strain_scale is None:
+        return H
+    J = _strain_jacobian(d, strain_scale)
+    # d2 phi / dx_j dF_cd = k_bc R_d + delta_bd phi' u_c  -> (P, d, d*d)
+    xF = np.einsum("pbc,pd->pbcd", k, R) + np.einsum("bd,pc->pbcd", np.eye(d), dphi[:, None] * u)
+    xe = xF.reshape(len(i), d, d * d) @ J  # (P, d, m)
+    He = np.zeros((n, d, m))
+    np.add.at(He, j, xe)
+    np.add.at(He, i, -xe)
+    H[: n * d, n * d:] = He.reshape(n * d, m)
+    H[n * d:, : n * d] = He.reshape(n * d, m).T
+    FF = np.einsum("pce,pd,pf->cdef", k, R, R).reshape(d * d, d * d)
+    H[n * d:, n * d:] = J.T @ FF @ J
+    return H
+
+
+@dataclass(frozen=True)
+class ConstrainedHessian:
+    """A constrained Hessian and its basis.
+
+    Attributes
+    ----------
+    matrix : ndarray, shape (n_t, n_t)
+        ``H_E`` in the basis of true degrees of freedom [epsilon / length^2].
+    basis : ndarray, shape (n_t, n_dof)
+        ``B`` (orthonormal rows spanning the tangent space).
+    H0 : ndarray, shape (n_dof, n_dof)
+        Extended (or positions-only) Hessian of the contact potential.
+    eigenvalues : ndarray, shape (n_t,)
+        Ascending.
+    modes : ndarray, shape (n_dof, n_t)
+        Normal modes mapped back to centres (and strain): ``B^T v``.
+    n_zero : int
+        Eigenvalues below :data:`ZERO_MODE_RTOL` times the largest.
+    strain : bool
+    """
+
+    matrix: NDArray[np.float64]
+    basis: NDArray[np.float64]
+    H0: NDArray[np.float64]
+    eigenvalues: NDArray[np.float64]
+    modes: NDArray[np.float64]
+    n_zero: int
+    strain: bool
+
+
+@dataclass(frozen=True)
+class _Geometry:
+    """First-order geometry of a packing at zero strain: contacts (unlinked overlapping pairs) and links."""
+
+    n: int
+    d: int
+    strain_scale: float
+    pairs: object  # PairList of contacts
+    force: NDArray[np.float64]  # (P,) repulsive contact forces
+    k: NDArray[np.float64]  # (P,) contact stiffness phi''
+    links: Links
+    link_vector: NDArray[np.float64]  # (L, d) minimum image
+
+    @property
+    def m(self) -> int:
+        return self.d * (self.d + 1) // 2
+
+
+def _geometry(packing: Packing, potential: PowerLawPotential) -> _Geometry:
+    links = packing.links if packing.links is not None else Links(np.empty(0, np.int64), np.empty(0, np.int64),
+                                                                  np.empty(0))
+    x, box, D = packing.position, packing.box, packing.diameter
+    pairs, _, f = overlapping_pairs(x, box, D, potential)
+    keep = ~links.contains(pairs.i, pairs.j)
+    pairs, f = pairs.select(keep), f[keep]
+    sigma = 0.5 * (D[pairs.i] + D[pairs.j])
+    k = potential.stiffness(1.0 - pairs.distance / sigma, sigma)
+    R = box.minimum_image(x[links.j] - x[links.i])
+    return _Geometry(packing.n, packing.d, float(np.sqrt(packing.n) * D.mean()), pairs, f, k, links, R)
+
+
+def gamma_matrix(geo: _Geometry, strain: bool, volume: bool = True) -> NDArray[np.float64]:
+    """Dense ``Gamma`` (n_dof, L [+ 1]) at zero strain: link columns (and ``det F``), or ``Omega`` without strain.
+
+    Built from geometry alone (no factorisation), so over-constrained position blocks
+    (links closing loops around the box, which only the strain makes independent) are fine.
+    """
+    n, d, L = geo.n, geo.d, len(geo.links)
+    m = geo.m if strain else 0
+    u = geo.link_vector / np.linalg.norm(geo.link_vector, axis=1)[:, None]
+    G = np.zeros((n * d + m, L + (1 if strain and volume else 0)))
+    k = np.arange(L)
+    Gx = G[: n * d].reshape(n, d, -1)
+    Gx[geo.links.j, :, k] += u
+    Gx[geo.links.i, :, k] -= u
+    if strain:
+        G[n * d:, :L] = strain_components(u[:, :, None] * geo.link_vector[:, None, :], geo.strain_scale).T
+        if volume:
+            G[n * d:, L] = strain_components(np.eye(d), geo.strain_scale)
+    return G
+
+
+def energy_gradient(geo: _Geometry, strain: bool) -> NDArray[np.float64]:
+    """``dU/dq`` of the contact potential at zero strain, shape (n_dof,)."""
+    n, d = geo.n, geo.d
+    u = geo.pairs.dx / geo.pairs.distance[:, None]
+    g = np.zeros((n, d))
+    np.add.at(g, geo.pairs.i, geo.force[:, None] * u)
+    np.add.at(g, geo.pairs.j, -geo.force[:, None] * u)
+    if not strain:
+        return g.ravel()
+    W = np.einsum("p,pa,pb->ab", geo.force, u, geo.pairs.dx)
+    return np.r_[g.ravel(), strain_components(-W, geo.strain_scale)]
+
+
+def tension_hessian(geo: _Geometry, strain: bool, volume: bool) -> NDArray[np.float64]:
+    """``M = H0 - sum_k mu_k grad^2 c_k [- nu grad^2 det F]`` with least-squares multipliers of ``grad U``.
+
+    With strain the multipliers always include the volume column: the isotropic part
+    of the strain gradient (the pressure) is carried either by the constraint
+    ``det F = 1`` (``volume``; its curvature then enters) or by an external load
+    linear in the strain (the compliance of Sec. VI; no curvature).
+    """
+    scale = geo.strain_scale if strain else None
+    p = geo.pairs
+    M = pair_second_derivatives(geo.n, geo.d, p.i, p.j, p.dx, -geo.force, geo.k, scale)
+    G = gamma_matrix(geo, strain, volume=True)
+    if G.shape[1] == 0:
+        return M
+    mult = np.linalg.lstsq(G, energy_gradient(geo, strain), rcond=None)[0]
+    L = len(geo.links)
+    if L:
+        M -= pair_second_derivatives(geo.n, geo.d, geo.links.i, geo.links.j, geo.link_vector, mult[:L],
+                                     np.zeros(L), scale)
+    if strain and volume:
+        M[geo.n * geo.d:, geo.n * geo.d:] -= mult[L] * _volume_curvature(geo.d, geo.strain_scale)
+    return M
+
+
+def tangent_basis(gamma: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``B`` (n_dof - rank, n_dof): orthonormal rows spanning ``Null(Gamma^T)`` (complete QR, Eqs. 29-30).
+
+    The rank is that of ``Gamma`` (links may be linearly dependent in position space
+    when only the strain makes them independent, or be redundant outright).
+    """
+    Q, Rm, _ = sla.qr(gamma, mode="full", pivoting=True)
+    diag = np.abs(np.diag(Rm))
+    rank = int(np.sum(diag > ZERO_MODE_RTOL * diag.max())) if diag.size else 0
+    return Q[:, rank:].T
+
+
+def constrained_hessian(packing: Packing, potential: PowerLawPotential = HARMONIC, strain: bool = True,
+                        tension_term: bool = True, volume: bool = True) -> ConstrainedHessian:
+    """The constrained (extended) Hessian of a force-balanced linked packing (module doc).
+
+    Parameters
+    ----------
+    packing : Packing
+        At force balance (projected forces ~0); links optional.
+    strain : bool
+        Include the strain degrees of freedom (and, with ``volume``, ``det F = 1``).
+    tension_term : bool
+        Include the constraint-curvature term ``- sum mu_k grad^2 c_k - nu grad^2 det F``.
+    volume : bool
+        Keep the volume constraint among the constraints (``False``: ``B_-1`` of Sec. VI).
+    """
+    geo = _geometry(packing, potential)
+    scale = geo.strain_scale if strain else None
+    p = geo.pairs
+    H0 = pair_second_derivatives(geo.n, geo.d, p.i, p.j, p.dx, -geo.force, geo.k, scale)
+    H = tension_hessian(geo, strain, volume) if tension_term else H0
+    B = tangent_basis(gamma_matrix(geo, strain, volume))
+    HE = B @ H @ B.T
+    HE = 0.5 * (HE + HE.T)
+    w, v = np.linalg.eigh(HE)
+    n_zero = int(np.sum(np.abs(w) <= ZERO_MODE_RTOL * np.abs(w).max()))
+    return ConstrainedHessian(HE, B, H0, w, B.T @ v, n_zero, strain)
+
+
+def _volume_curvature(d: int, scale: float) -> NDArray[np.float64]:
+    """``d2 det F / de de`` at ``F = 1``, shape (m, m) (module doc)."""
+    J = _strain_jacobian(d, scale)
+    eye = np.eye(d)
+    det2 = (np.einsum("ab,cd->abcd", eye, eye) - np.einsum("ad,bc->abcd", eye, eye)).reshape(d * d, d * d)
+    return J.T @ det2 @ J
+
+
+def extended_rigidity(packing: Packing, strain: bool = True, potential: PowerLawPotential = HARMONIC,
+                      translations: bool = False
+                      ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Constrained extended rigidity matrix ``R_E = R0 B^T`` (Eqs. 35-39) and the states of self stress.
+
+    Parameters
+    ----------
+    translations : bool
+        Also remove the ``d`` uniform translations from the basis (the LP of Sec. V).
+
+    Returns
+    -------
+    RE : ndarray, shape (n_c, n_t)
+        One row per contact (overlapping unlinked pair).
+    R0 : ndarray, shape (n_c, n_dof)
+    self_stress : ndarray, shape (n_c, s)
+        Orthonormal basis of the left null space of ``R_E`` (singular values below
+        :data:`ZERO_MODE_RTOL` times the largest, and the ``n_c - n_t`` surplus rows).
+    B : ndarray, shape (n_t, n_dof)
+        The basis of true degrees of freedom.
+    """
+    geo = _geometry(packing, potential)
+    pairs, n, d, P = geo.pairs, geo.n, geo.d, len(geo.pairs.i)
+    m = geo.m if strain else 0
+    u = pairs.dx / pairs.distance[:, None]
+    R0 = np.zeros((P, n * d + m))
+    Rx = R0[:, : n * d].reshape(P, n, d)
+    Rx[np.arange(P), pairs.j] = u
+    Rx[np.arange(P), pairs.i] -= u
+    if strain:
+        R0[:, n * d:] = strain_components(u[:, :, None] * pairs.dx[:, None, :], geo.strain_scale)
+    G = gamma_matrix(geo, strain)
+    if translations:
+        T = np.zeros((n * d + m, d))
+        T[: n * d] = np.tile(np.eye(d), (n, 1))
+        G = np.hstack([G, T])
+    B = tangent_basis(G)
+    RE = R0 @ B.T
+    U, s, _ = np.linalg.svd(RE, full_matrices=True)
+    rank = int(np.sum(s > ZERO_MODE_RTOL * s.max())) if s.size else 0
+    return RE, R0, U[:, rank:], B

@@ -1,0 +1,149 @@
+"""Linked-packing subcommands: init-chains (random chains and rigid clusters), link (cement, link files)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from math import radians
+
+import numpy as np
+import xarray as xr
+
+from ..chains.builders import (
+    CLUSTER_KINDS,
+    cement,
+    check_linked_start,
+    linked_packing,
+    read_link_file,
+    remove_degenerate_links,
+)
+from ..chains.certify import certify_linked
+from ..io import new_dataset_attrs, read_packing, write_dataset, write_packing
+from .common import (
+    add_command,
+    add_quiet,
+    packing_rows,
+    print_summary,
+    seed,
+    stage_parameters,
+)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = add_command(sub, "init-chains", _init_chains,
+                    "random start of chains or rigid trimers of unit spheres (links, overlaps allowed; "
+                    "no crossing links in 2D)", writes=("out",), packings=("out",))
+    p.add_argument("out", help="output netCDF packing with links")
+    p.add_argument("--d", type=int, required=True, help="dimension (2 or 3)")
+    p.add_argument("--clusters", type=int, required=True, help="number of clusters K (N = K M spheres)")
+    p.add_argument("--cluster", choices=CLUSTER_KINDS, required=True,
+                   help="trimer: three spheres with the bond angle frozen (rigid); chain: --chain-length spheres")
+    p.add_argument("--chain-length", type=int, default=3, help="spheres per chain M (default 3)")
+    p.add_argument("--free-angles", action="store_true",
+                   help="bonds only (flexible); default: every bond angle frozen by an angle link")
+    p.add_argument("--bond-angle", type=float, default=None,
+                   help="every bond angle [degrees]; default uniform in [60, 150] degrees")
+    p.add_argument("--phi", type=float, default=None, help="packing fraction (default 0.86 in 2D, 0.66 in 3D)")
+    p.add_argument("--seed", type=seed, required=True, help="random seed")
+    add_quiet(p)
+
+    p = add_command(sub, "link", _link,
+                    "add links to a packing: cement K random contacts (freezing the bond angles they create) "
+                    "or read a link file", reads=("input", "file"), writes=("out",), packings=("out",))
+    p.add_argument("input", help="input netCDF packing (with contacts for --cement)")
+    p.add_argument("out", help="output netCDF packing with links")
+    group = p.add_mutually_exclusive_group(required=True)
+    group.add_argument("--cement", type=int, default=None, help="number of random contacts turned into links")
+    group.add_argument("--file", default=None,
+                       help="text file of links, one 'i j [length]' per line (length: current distance if omitted)")
+    p.add_argument("--seed", type=seed, default=None, help="random seed of --cement")
+    p.add_argument("--with-strain", action="store_true",
+                   help="judge degenerate links with the strain degrees of freedom (keeps links that close loops "
+                        "around the box and fix its shape: for moduli; such packings cannot be minimised in a "
+                        "fixed box)")
+    add_quiet(p)
+
+
+def _messages(messages: list[str]) -> None:
+    for line in messages:
+        print(f"jamflow: {line}", file=sys.stderr)
+
+
+def _link_rows(packing) -> list[tuple[str, object]]:
+    links = packing.links
+    err = np.abs(links.length_errors(packing.position, packing.box))
+    clusters = packing.clusters
+    sizes = np.bincount(clusters)
+    return [*packing_rows(packing), ("links", len(links)),
+            ("clusters", f"{int((sizes > 1).sum())} linked (+ {int((sizes == 1).sum())} free spheres)"),
+            ("max link-length error", f"{float(err.max(initial=0.0)):.3e} (relative)")]
+
+
+def _init_chains(args: argparse.Namespace) -> int:
+    angle = None if args.bond_angle is None else radians(args.bond_angle)
+    packing, messages = linked_packing(args.d, args.clusters, args.cluster, np.random.default_rng(args.seed),
+                                       args.chain_length, args.free_angles, args.phi, angle)
+    _messages(messages)
+    packing = packing.evolve(seed=args.seed)
+    write_packing(packing, args.out, stage_parameters(args, "out"))
+    print_summary(args, args.out, [*_link_rows(packing), ("degenerate links removed", len(messages))])
+    return 0
+
+
+def _link(args: argparse.Namespace) -> int:
+    packing = read_packing(args.input, None)
+    if args.cement is not None:
+        if args.seed is None:
+            raise ValueError("--cement needs --seed")
+        links, messages = cement(packing, args.cement, np.random.default_rng(args.seed), args.with_strain)
+        protocol = f">cement({args.cement})"
+    else:
+        pairs, lengths = read_link_file(args.file, packing.position, packing.box)
+        if packing.links is not None:
+            pairs = np.concatenate([np.stack([packing.links.i, packing.links.j], axis=1), pairs])
+            lengths = np.concatenate([packing.links.length, lengths])
+        links, messages = remove_degenerate_links(pairs, lengths, packing.position, packing.box, args.with_strain)
+        protocol = ">link-file"
+    _messages(messages)
+    keep = None
+    if packing.contacts is not None:
+        keep = ~links.contains(packing.contacts[:, 0], packing.contacts[:, 1])
+    out = packing.evolve(
+        links=links, protocol=packing.protocol + protocol,
+        contacts=None if keep is None else packing.contacts[keep],
+        force=None if keep is None or packing.force is None else packing.force[keep], rattler=None,
+        seed=args.seed if args.cement is not None else packing.seed,
+    )
+    if args.file is not None:
+        check_linked_start(out)
+    write_packing(out, args.out, stage_parameters(args, "input", "out"))
+    print_summary(args, args.out, [*_link_rows(out), ("degenerate links removed", len(messages))])
+    return 0
+
+
+def certify_linked_packing(args: argparse.Namespace, packing) -> int:
+    """``jamflow certify`` of a linked packing: the chain LP of Sec. V on ``R_E`` (collective, and strict
+    with ``--strict``); contacts are the overlapping unlinked pairs."""
+    if args.gap_tol is not None or args.exact:
+        raise ValueError("--gap-tol and --exact are for spheres; a linked packing is certified on its "
+                         "overlapping (soft) contacts")
+    cert = certify_linked(packing, strict=args.strict, loads=args.loads, seed=args.seed,
+                          max_cluster_fraction=args.max_cluster_fraction, solver=args.solver)
+    motion = np.zeros((packing.n, packing.d)) if cert.motion is None else cert.motion
+    ds = xr.Dataset(
+        data_vars={
+            "chain_rattler": (("particle",), cert.rattler.astype(np.int8),
+                              {"units": "1", "long_name": "outside the certified backbone (1) or in it (0)"}),
+            "chain_motion": (("particle", "spatial"), motion,
+                             {"units": "1", "long_name": "unjamming displacement (zero if none was found)",
+                              "comment": "mean diameters, tangent coordinates bounded by 1"}),
+        },
+        attrs=new_dataset_attrs("jamflow chain jamming certificate", stage_parameters(args, "packing", "out"),
+                                classification=cert.classification, motion_stage=cert.motion_stage,
+                                n_lp=cert.n_lp, strict_tested=int(args.strict), d=packing.d, N=packing.n,
+                                n_links=len(packing.links)),
+    )
+    write_dataset(ds, args.out)
+    print_summary(args, args.out, [("classification", cert.classification),
+                                   ("rattlers", int(cert.rattler.sum())), ("LPs", cert.n_lp)])
+    return 0

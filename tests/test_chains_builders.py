@@ -1,0 +1,185 @@
+"""Builders of linked packings (chains paper Sec. II A, F): rigidity of clusters, no crossings, bad input."""
+
+from __future__ import annotations
+
+from math import pi
+
+import numpy as np
+import pytest
+
+from jamflow.bodies import Links
+from jamflow.box import Box
+from jamflow.chains.builders import (
+    BOND_ANGLE_RANGE,
+    cement,
+    check_linked_start,
+    cluster_extent,
+    crossing_links,
+    linked_packing,
+    read_link_file,
+    remove_degenerate_links,
+    rigid_cluster_links,
+)
+from jamflow.cli import main
+from jamflow.initial import random_packing
+from jamflow.io import read_packing, write_packing
+from jamflow.packing import Packing
+from jamflow.soft.jamming import jam_to_pressure
+
+
+def _floppy_modes(links: Links, x: np.ndarray, box: Box, members: np.ndarray) -> int:
+    """Null-space dimension of the link Jacobian of one cluster (its degrees of freedom)."""
+    d = box.d
+    rows = []
+    local = {int(p): k for k, p in enumerate(members)}
+    for a, b in zip(links.i, links.j):
+        if int(a) in local:
+            u = box.minimum_image(x[b] - x[a])
+            u /= np.linalg.norm(u)
+            g = np.zeros(len(members) * d)
+            g[local[int(a)] * d:(local[int(a)] + 1) * d] = -u
+            g[local[int(b)] * d:(local[int(b)] + 1) * d] = u
+            rows.append(g)
+    s = np.linalg.svd(np.array(rows), compute_uv=False)
+    rank = int(np.sum(s > 1e-8 * s.max()))
+    assert rank == len(rows), "degenerate links left in the cluster"
+    return len(members) * d - rank
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_trimers_are_rigid_clusters_with_bond_angles_in_range(d):
+    p, messages = linked_packing(d, 12, "trimer", np.random.default_rng(3))
+    assert messages == [] and p.n == 36 and len(p.links) == 36
+    labels = p.clusters
+    for c in range(12):
+        members = np.flatnonzero(labels == c)
+        assert len(members) == 3
+        # rigid: only the d (d + 1) / 2 rigid-body motions are free (a triangle spans a plane in 3D)
+        assert _floppy_modes(p.links, p.position, p.box, members) == d * (d + 1) // 2
+    # links hold exactly, bonds touch, angle links set angles in the documented range
+    err = p.links.length_errors(p.position, p.box)
+    assert np.max(np.abs(err)) <= 1e-14
+    bonds = p.links.j - p.links.i == 1
+    np.testing.assert_allclose(p.links.length[bonds], 1.0, rtol=1e-14)
+    theta = 2.0 * np.arcsin(p.links.length[~bonds] / 2.0)
+    assert np.all((theta >= BOND_ANGLE_RANGE[0]) & (theta <= BOND_ANGLE_RANGE[1]))
+    # the packing fraction asked for
+    assert p.packing_fraction == pytest.approx(0.86 if d == 2 else 0.66, rel=1e-12)
+
+
+@pytest.mark.parametrize("free", [True, False])
+def test_chains_have_the_degrees_of_freedom_of_their_links(free):
+    m = 6
+    p, _ = linked_packing(3, 10, "chain", np.random.default_rng(5), chain_length=m, free_angles=free, phi=0.3)
+    assert len(p.links) == 10 * ((m - 1) if free else (2 * m - 3))
+    members = np.flatnonzero(p.clusters == 4)
+    # free: 3 m - (m - 1); frozen angles in 3D leave the m - 3 torsions + 6 rigid motions
+    assert _floppy_modes(p.links, p.position, p.box, members) == (3 * m - (m - 1) if free else 6 + (m - 3))
+
+
+def test_2d_placement_has_no_crossing_links_and_crossings_are_found():
+    p, _ = linked_packing(2, 20, "chain", np.random.default_rng(7), chain_length=6, free_angles=True, phi=0.5)
+    assert len(crossing_links(p.links, p.position, p.box)) == 0
+    # two dimers crossing as an X (one of them across the periodic boundary) are found, touching ones are not
+    box = Box.cubic(2, 10.0)
+    x = np.array([[9.6, 5.0], [0.6, 5.0], [0.1, 4.5], [0.1, 5.5], [3.0, 3.0], [4.0, 3.0]])
+    links = Links(np.array([0, 2, 1]), np.array([1, 3, 4]), np.array([1.0, 1.0, 2.83]))
+    cross = crossing_links(links, x, box)
+    assert [tuple(links.i[c]) for c in cross] == [(0, 2)]
+
+
+def test_degenerate_links_are_removed_with_a_message():
+    p, messages = linked_packing(2, 4, "trimer", np.random.default_rng(1), bond_angle=pi, phi=0.3)
+    # a straight trimer's angle link depends linearly on its bonds
+    assert len(messages) == 4 and all("degenerate link" in m for m in messages)
+    assert len(p.links) == 8 and np.all(p.links.j - p.links.i == 1)
+    # a rigid square: all six pairs offered, five independent kept (2 * 4 - 3)
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    pairs, _ = rigid_cluster_links(square)
+    assert len(pairs) == 5
+    links, messages = remove_degenerate_links(
+        [(0, 1), (1, 2), (2, 3), (0, 3), (0, 2), (1, 3)], [1, 1, 1, 1, 2**0.5, 2**0.5], square + 3.0,
+        Box.cubic(2, 10.0))
+    assert len(links) == 5 and len(messages) == 1 and "(1, 3)" in messages[0]
+    # a regular tetrahedron is rigid with its six edges
+    tet = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], float)
+    assert len(rigid_cluster_links(tet)[0]) == 6
+
+
+@pytest.fixture(scope="module")
+def jammed() -> Packing:
+    start = random_packing(48, 2, 0.5, "bi", seed=11)
+    return jam_to_pressure(start, 1e-3, force_tol=1e-11, pressure_rtol=1e-3).packing
+
+
+def test_cementing_turns_contacts_into_links_and_freezes_their_angles(jammed):
+    links, _ = cement(jammed, 12, np.random.default_rng(2))
+    x, box = jammed.position, jammed.box
+    contact = {tuple(c) for c in jammed.contacts}
+    pairs = set(zip(links.i.tolist(), links.j.tolist()))
+    bonds = pairs & contact
+    assert len(bonds) == 12  # no contact link is ever redundant
+    # every link holds at the current configuration
+    assert np.max(np.abs(links.length_errors(x, box))) <= 1e-14
+    # every bond angle is frozen, so in 2D every cemented cluster is rigid: 3 rigid-body modes
+    labels = links.clusters(jammed.n)
+    sizes = np.bincount(labels)
+    assert sizes.max() >= 3  # some angle was created
+    for c in np.flatnonzero(sizes > 1):
+        assert _floppy_modes(links, x, box, np.flatnonzero(labels == c)) == 3
+
+
+def test_link_file_and_bad_input(tmp_path, capsys, jammed):
+    path = tmp_path / "j.nc"
+    write_packing(jammed.evolve(contacts=None, force=None, rattler=None), path)
+    good = tmp_path / "links.txt"
+    c = jammed.contacts[0]
+    good.write_text(f"# i j [length]\n{c[0]} {c[1]}\n")
+    assert main(["link", str(path), str(tmp_path / "l.nc"), "--file", str(good), "--quiet"]) == 0
+    out = read_packing(tmp_path / "l.nc", None)
+    r = np.linalg.norm(jammed.box.minimum_image(jammed.position[c[1]] - jammed.position[c[0]]))
+    assert len(out.links) == 1 and out.links.length[0] == pytest.approx(r, rel=1e-14)
+    assert read_link_file(good, jammed.position, jammed.box)[0].tolist() == [c.tolist()]
+    capsys.readouterr()
+    # inconsistent lengths: a triangle 1, 1, 2.5 cannot close
+    bad = tmp_path / "bad.txt"
+    k = next(int(b) for a, b in jammed.contacts if a == c[1] and b != c[0])  # a neighbour of c[1]
+    bad.write_text(f"{c[0]} {c[1]} 1.0\n{c[1]} {k} 1.0\n{c[0]} {k} 2.5\n")
+    assert main(["link", str(path), str(tmp_path / "b.nc"), "--file", str(bad)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "link lengths are inconsistent" in err
+    assert not (tmp_path / "b.nc").exists()
+    bad.write_text("0 1 2 3\n")
+    assert main(["link", str(path), str(tmp_path / "b.nc"), "--file", str(bad)]) == 1
+    assert "expected 'i j [length]'" in capsys.readouterr().err
+
+
+def test_crossing_links_and_huge_clusters_are_refused_at_the_start():
+    box = Box.cubic(2, 10.0)
+    x = np.array([[4.5, 5.0], [5.5, 5.0], [5.0, 4.5], [5.0, 5.5], [1.0, 1.0], [2.0, 1.0]])
+    crossed = Packing(x, np.full(6, 0.5), box, links=Links(np.array([0, 2]), np.array([1, 3]), np.ones(2)))
+    with pytest.raises(ValueError, match="links cross in 2D"):
+        check_linked_start(crossed)
+    # a chain of 9 bonds along x spans 9 > 10 / 2
+    x = np.stack([np.arange(10) * 1.0 + 0.5, np.full(10, 5.0)], axis=1)
+    chain = Links(np.arange(9), np.arange(1, 10), np.ones(9))
+    assert cluster_extent(chain, x, box)[0] == pytest.approx(9.0, rel=1e-14)
+    with pytest.raises(ValueError, match="more than half the smallest box width"):
+        check_linked_start(Packing(x, np.ones(10), box, links=chain))
+    # a ring winding around the box has infinite extent
+    ring = Links(np.r_[np.arange(9), 0], np.r_[np.arange(1, 10), 9], np.ones(10))
+    assert np.isinf(cluster_extent(ring, x, box)[0])
+
+
+def test_cli_init_chains(tmp_path, capsys):
+    out = tmp_path / "c.nc"
+    assert main(["init-chains", str(out), "--d", "2", "--clusters", "30", "--cluster", "trimer", "--seed", "4"]) == 0
+    text = capsys.readouterr().out
+    p = read_packing(out, None)
+    assert p.n == 90 and len(p.links) == 90 and p.seed == 4
+    rows = dict(line.split(None, 1) for line in text.splitlines()[1:] if line.startswith("  links "))
+    assert rows["links"].strip() == "90"
+    assert len(crossing_links(p.links, p.position, p.box)) == 0
+    assert main(["init-chains", str(tmp_path / "x.nc"), "--d", "4", "--clusters", "3", "--cluster", "trimer",
+                 "--seed", "1"]) == 1
+    assert "d = 2 or 3" in capsys.readouterr().err

@@ -1,0 +1,126 @@
+"""Constrained Hessian and extended rigidity matrix of linked packings (chains paper Sec. IV)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from jamflow.chains.builders import linked_packing
+from jamflow.chains.hessian import (
+    constrained_hessian,
+    extended_rigidity,
+    pair_second_derivatives,
+)
+from jamflow.chains.jamming import jam_linked
+from jamflow.chains.shear import ShearStabilizedModel
+from jamflow.models import LinkedSpheresModel
+from jamflow.soft.hessian import hessian
+from jamflow.soft.jamming import JammingSettings
+from jamflow.soft.potential import HARMONIC, overlapping_pairs
+
+
+@pytest.fixture(scope="module", params=[False, True], ids=["fixed-box", "shear-stabilized"])
+def jammed(request):
+    start, _ = linked_packing(2, 8, "trimer", np.random.default_rng(1))
+    settings = JammingSettings(force_tol=1e-12, pressure_rtol=1e-2, delta_phi=1e-2)
+    return request.param, jam_linked(start, 1e-3, settings=settings, shear_stabilize=request.param).packing
+
+
+def _manifold_energy(model, q0, b, t):
+    """U on the constraint manifold: q0 + t b re-affixed by three full Newton sweeps (to round-off)."""
+    q = q0 + t * b
+    for _ in range(3):
+        q = model.newton_step(q)
+    return model.evaluate(q).energy
+
+
+def test_constrained_hessian_is_the_second_derivative_on_the_manifold(jammed):
+    strain, p = jammed
+    ch = constrained_hessian(p, strain=strain)
+    plain = constrained_hessian(p, strain=strain, tension_term=False)
+    kind = ShearStabilizedModel if strain else LinkedSpheresModel
+    model = kind(p.box, p.diameter, p.links, p.position)
+    q0 = model.dofs(p.position)
+    # h: large enough that round-off of the raw (link-carried) forces times re-affixing errors
+    # stays below 1e-6 of H (measured: h = 1e-6 leaves errors of ~3e-4), small enough that
+    # the O(h^2) error is ~1e-6; a pair at the contact threshold would make the difference
+    # one-sided, none does here
+    h = 1e-5
+    rng = np.random.default_rng(0)
+    for k, l in rng.choice(ch.matrix.shape[0], size=(4, 2), replace=False):
+        for b, want in ((ch.basis[k], ch.matrix[k, k]),
+                        (ch.basis[k] + ch.basis[l], ch.matrix[k, k] + 2 * ch.matrix[k, l] + ch.matrix[l, l])):
+            num = (_manifold_energy(model, q0, b, h) - 2 * _manifold_energy(model, q0, b, 0.0)
+                   + _manifold_energy(model, q0, b, -h)) / h**2
+            assert num == pytest.approx(want, rel=1e-4)
+    # the link tensions' curvature matters at this pressure: Eq. 33 without it is off by more
+    assert np.max(np.abs(ch.matrix - plain.matrix)) > 1e-4 * np.abs(ch.matrix).max()
+
+
+def test_extended_hessian_against_finite_differences_of_the_gradient(jammed):
+    """H0 (positions and strain blocks, Eqs. 24-27) against central differences of the model's gradient."""
+    _, p = jammed
+    model = ShearStabilizedModel(p.box, p.diameter, p.links, p.position)
+    q0 = model.dofs(p.position)
+    pairs, _, f = overlapping_pairs(p.position, p.box, p.diameter)
+    keep = ~p.links.contains(pairs.i, pairs.j)
+    pairs, f = pairs.select(keep), f[keep]
+    sigma = 0.5 * (p.diameter[pairs.i] + p.diameter[pairs.j])
+    k = HARMONIC.stiffness(1.0 - pairs.distance / sigma, sigma)
+    H0 = pair_second_derivatives(p.n, 2, pairs.i, pairs.j, pairs.dx, -f, k, model.strain_scale)
+    # the positions block is the sphere Hessian of the same pairs
+    np.testing.assert_allclose(H0[: 2 * p.n, : 2 * p.n], hessian(p.position, p.box, p.diameter, pairs=pairs).toarray(),
+                               atol=1e-12)
+    h = 1e-7  # far below the contact overlaps that matter, the gradient is smooth elsewhere
+    for col in [0, 7, 2 * p.n, 2 * p.n + 1, 2 * p.n + 2]:  # two centre columns, the three strain columns
+        v = np.zeros(q0.size)
+        v[col] = 1.0
+        g = model.evaluate(q0 + h * v).gradient - model.evaluate(q0 - h * v).gradient
+        np.testing.assert_allclose(H0[:, col], g / (2 * h), atol=1e-6 * np.abs(H0).max())
+
+
+def test_zero_modes_are_the_global_translations_and_self_stress(jammed):
+    strain, p = jammed
+    ch = constrained_hessian(p, strain=strain)
+    assert p.attrs["n_rattlers"] == 0
+    assert ch.n_zero == 2
+    zero = ch.modes[: 2 * p.n, : ch.n_zero]
+    uniform = np.kron(np.ones((p.n, 1)), np.eye(2)) / np.sqrt(p.n)
+    # the zero modes span the uniform translations (and carry no strain)
+    np.testing.assert_allclose(uniform @ (uniform.T @ zero), zero, atol=1e-8)
+    assert np.all(ch.eigenvalues[ch.n_zero:] > 0.0)
+    # rigidity matrix: n_c rows, n_t columns; rank n_t - d (translations), so the
+    # states of self stress number n_c - (n_t - d)
+    RE, _, sss, _ = extended_rigidity(p, strain=strain)
+    n_t = ch.matrix.shape[0]
+    assert RE.shape == (len(p.contacts), n_t)
+    assert sss.shape[1] == len(p.contacts) - (n_t - 2)
+    np.testing.assert_allclose(sss.T @ RE, 0.0, atol=1e-10)
+    # contact forces are a state of self stress: f^T R_E = 0 at force balance (up to the force tolerance)
+    f = p.force / np.linalg.norm(p.force)
+    assert np.max(np.abs(f @ RE)) <= 1e-8
+
+
+def test_rigidity_and_link_columns_agree_with_the_network_core(jammed):
+    """R0 and Gamma's link columns equal jamflow.network's Jacobians (independent code) after the
+    change of strain coordinates: network s (E_aa, then E_ab + E_ba) -> ours e_aa = q_s s_aa,
+    e_ab = sqrt(2) q_s s_ab."""
+    from jamflow.chains.hessian import _geometry, gamma_matrix
+    from jamflow.network import contact_jacobian, link_jacobian, sphere_contacts
+
+    _, p = jammed
+    geo = _geometry(p, HARMONIC)
+    _, R0, _, _ = extended_rigidity(p, strain=True)
+    nd = 2 * p.n
+    # our strain columns in upper-triangle order (0,0), (0,1), (1,1); the network's (0,0), (1,1), (0,1)
+    order, factor = [0, 2, 1], geo.strain_scale * np.array([1.0, 1.0, np.sqrt(2.0)])
+
+    def to_network(A):
+        return np.hstack([A[:, :nd], A[:, nd:][:, order] * factor])
+
+    pairs = np.stack([geo.pairs.i, geo.pairs.j], axis=1)
+    J = contact_jacobian(sphere_contacts(p.position, p.box, pairs), p.n, 2, strain="symmetric").toarray()
+    np.testing.assert_allclose(to_network(R0), J, atol=1e-12)
+    G = gamma_matrix(geo, strain=True, volume=False)
+    L = link_jacobian(p.links, p.position, p.box, strain="symmetric").toarray()
+    np.testing.assert_allclose(to_network(G.T), L, atol=1e-12)

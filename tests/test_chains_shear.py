@@ -1,0 +1,111 @@
+"""Shear stabilisation of linked packings (chains paper Sec. II D-E): derivatives, projection, isotropic stress."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from jamflow.bodies import Links
+from jamflow.chains.builders import linked_packing
+from jamflow.chains.clusters import count_clusters
+from jamflow.chains.jamming import jam_linked
+from jamflow.chains.shear import ShearStabilizedModel
+from jamflow.models import SphereModel
+from jamflow.soft.jamming import JammingSettings
+from jamflow.tolerances import LINK_LENGTH_RTOL
+
+
+def _model(seed: int = 3, strain: float = 0.02):
+    p, _ = linked_packing(2, 8, "trimer", np.random.default_rng(seed))
+    model = ShearStabilizedModel(p.box, p.diameter, p.links, p.position)
+    q = model.dofs(p.position)
+    q[-model.m:] = np.random.default_rng(seed + 1).normal(scale=strain * model.strain_scale, size=model.m)
+    return model, q
+
+
+def _constraints(model: ShearStabilizedModel, q: np.ndarray) -> np.ndarray:
+    return np.r_[np.linalg.norm(model.link_vectors(q), axis=1) - model.links.length, model.volume_error(q)]
+
+
+def test_energy_gradient_and_constraint_gradients_match_finite_differences():
+    """At a finite strain, dU/dq (centres and strain, Eq. 22) and Gamma (Eqs. 15-17) against central differences."""
+    model, q = _model()
+    ev = model.evaluate(q)
+    assert ev.n_contacts > 10
+    rng = np.random.default_rng(7)
+    h = 1e-6
+    for _ in range(5):
+        v = rng.normal(size=q.size)
+        v /= np.linalg.norm(v)
+        num = (model.evaluate(q + h * v).energy - model.evaluate(q - h * v).energy) / (2 * h)
+        assert num == pytest.approx(ev.gradient @ v, rel=1e-6, abs=1e-10)
+        # Gamma^T v against the change of every constraint
+        dc = (_constraints(model, q + h * v) - _constraints(model, q - h * v)) / (2 * h)
+        links, vol = model._gamma_t(q, v)
+        np.testing.assert_allclose(np.r_[links, vol], dc, atol=1e-8)
+    # the strain block alone: a pure strain direction
+    v = np.zeros(q.size)
+    v[-model.m:] = rng.normal(size=model.m)
+    num = (model.evaluate(q + h * v).energy - model.evaluate(q - h * v).energy) / (2 * h)
+    assert num == pytest.approx(ev.gradient @ v, rel=1e-6)
+
+
+def test_projection_is_orthogonal_to_every_constraint_gradient_and_idempotent():
+    model, q = _model()
+    g = np.random.default_rng(2).normal(size=q.size)
+    pg = model.project(g, q)
+    links, vol = model._gamma_t(q, pg)
+    assert max(np.max(np.abs(links)), abs(vol)) <= 1e-12 * np.linalg.norm(g)
+    np.testing.assert_allclose(model.project(pg, q), pg, atol=1e-13 * np.linalg.norm(g))
+    # Newton re-affixing brings links and volume back from a perturbation
+    r = model.reproject(q + np.random.default_rng(3).normal(scale=1e-3, size=q.size))
+    assert np.max(np.abs(model.link_errors(r))) <= LINK_LENGTH_RTOL
+    assert abs(model.volume_error(r)) <= LINK_LENGTH_RTOL
+
+
+def test_without_links_at_zero_strain_the_positions_part_is_the_sphere_model():
+    p, _ = linked_packing(2, 8, "trimer", np.random.default_rng(4))
+    empty = Links(np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0))
+    model = ShearStabilizedModel(p.box, p.diameter, empty, p.position)
+    spheres = SphereModel(p.box, p.diameter)
+    a = model.evaluate(model.dofs(p.position))
+    b = spheres.evaluate(spheres.dofs(p.position))
+    assert a.energy == pytest.approx(b.energy, rel=1e-14)
+    np.testing.assert_allclose(a.gradient[: -model.m], b.gradient, atol=1e-14 * np.abs(b.gradient).max())
+    np.testing.assert_allclose(a.virial, b.virial, rtol=1e-13)
+
+
+@pytest.fixture(scope="module")
+def stabilized():
+    start, _ = linked_packing(2, 8, "trimer", np.random.default_rng(1))
+    settings = JammingSettings(force_tol=1e-11, pressure_rtol=1e-2, delta_phi=1e-2)
+    return start, jam_linked(start, 1e-4, settings=settings, shear_stabilize=True)
+
+
+def test_shear_stabilized_trimers_have_vanishing_strain_forces_and_isotropic_stress(stabilized):
+    start, result = stabilized
+    p = result.packing
+    assert result.converged and p.pressure == pytest.approx(1e-4, rel=1e-2)
+    # det F = 1 in every minimisation: the volume is the one the bisection set
+    assert p.packing_fraction == pytest.approx(result.history["phi"][-1], rel=1e-12)
+    assert np.max(np.abs(p.links.length_errors(p.position, p.box))) <= LINK_LENGTH_RTOL
+    # re-evaluated in its own box at zero strain: positions and strain forces balanced on the manifold
+    model = ShearStabilizedModel(p.box, p.diameter, p.links, p.position)
+    q = model.dofs(p.position)
+    ev = model.evaluate(q)
+    pg = model.project(ev.gradient, q)
+    assert model.max_force(pg) <= 1e-11
+    assert np.linalg.norm(pg[-model.m:]) <= 1e-11  # strain forces
+    assert np.linalg.norm(ev.gradient[-model.m:]) > 1e-6  # the raw strain gradient is the pressure's
+    # isotropic total stress: |W_dev| <= 2 q_s F_tol (strain force bound) relative to P V
+    W = ev.virial
+    P = np.trace(W) / 2
+    bound = 2 * model.strain_scale * 1e-11 / P
+    assert np.max(np.abs(W - P * np.eye(2))) / P <= bound
+    assert p.attrs["stress_deviation"] <= bound
+    # the box changed shape, not volume
+    assert not np.allclose(p.box.matrix / p.box.matrix[0, 0], start.box.matrix / start.box.matrix[0, 0])
+    # rigid: at least the shear-stabilised isostatic count sum f_c - d + 1 + d(d+1)/2 - 1
+    count = count_clusters(p.n, 2, p.links, p.contacts, shear_stabilized=True)
+    assert count.isostatic_count == 3 * (8 - count.rattling_cluster.sum()) - 2 + 1 + 2
+    assert count.n_contacts >= count.isostatic_count
