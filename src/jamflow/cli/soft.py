@@ -11,7 +11,7 @@ from tqdm import tqdm
 from ..io import new_dataset_attrs, read_packing, write_dataset, write_packing
 from ..packing import LENGTH_UNITS, Packing, length_unit
 from ..soft.hessian import backbone_pairs, elastic_moduli, hessian, lowest_modes
-from ..soft.jamming import FORCE_TOL_VANDERWERF, jam_to_pressure
+from ..soft.jamming import FORCE_TOL_VANDERWERF, JammingSettings, jam_to_pressure
 from ..soft.potential import PowerLawPotential
 from ..soft.shear import LERNER_DELTA_R, aqs_shear, lerner_sd_shear
 from ..tolerances import MINIMIZE_FORCE_TOL
@@ -100,6 +100,8 @@ def _random_start(packing: Packing, seed: int) -> Packing:
 
 def _soft_jam(args: argparse.Namespace) -> int:
     packing = read_packing(args.input, None)
+    if packing.shapes is not None:
+        return _soft_jam_shapes(args, packing)
     if args.seed is not None:
         packing = _random_start(packing, args.seed)
     bar = tqdm(desc="soft-jam", unit=" bisection", disable=args.quiet)
@@ -128,6 +130,41 @@ def _soft_jam(args: argparse.Namespace) -> int:
                                     f"excess {s.n_contacts - s.isostatic_count})"),
         ("rattlers", s.n_rattlers),
         ("max |F|", f"{result.packing.attrs['max_force_sq'] ** 0.5:.3g} epsilon / mean diameter"),
+        ("FIRE steps", result.steps),
+    ])
+    return 0
+
+
+def _soft_jam_shapes(args: argparse.Namespace, packing: Packing) -> int:
+    """soft-jam of shaped bodies: the linear spring of VanderWerf et al. Eq. 1, with rotations."""
+    from ..shapes.jamming import jam_shapes
+
+    if args.seed is not None:
+        raise ValueError("--seed: a shape packing starts from its input; draw a new start with init-shapes --seed")
+    if args.exponent != 2.0:
+        raise ValueError(f"--exponent {args.exponent}: shaped bodies use the linear spring of Eq. 1 (exponent 2)")
+    if args.box_dof != "isotropic":
+        raise ValueError("--box-dof full is not available for shaped bodies (the box stays square)")
+    bar = tqdm(desc="soft-jam", unit=" bisection", disable=args.quiet)
+
+    def progress(info: dict) -> None:
+        bar.update(1)
+        bar.set_postfix(phi=f"{info['phi']:.8f}", P=f"{info['pressure']:.3e}")
+
+    settings = JammingSettings(force_tol=args.force_tol, pressure_rtol=args.pressure_rtol,
+                               delta_phi=args.delta_phi, max_steps=args.max_steps)
+    result = jam_shapes(packing, args.pressure, settings, progress)
+    bar.close()
+    if not result.converged:
+        raise RuntimeError(f"FIRE did not reach force_tol {args.force_tol:g} within {args.max_steps} steps")
+    out = result.packing
+    write_packing(out, args.out, stage_parameters(args, "input", "out"))
+    print_summary(args, args.out, [
+        ("phi_J", f"{out.packing_fraction:.10f}"),
+        ("pressure", f"{out.pressure:.6g} (target {args.pressure:g}) k"),
+        ("interacting pairs", len(out.contacts)),
+        ("max |F|", f"{out.attrs['max_force_sq'] ** 0.5:.3g} k length"),
+        ("max |torque|", f"{out.attrs['max_torque_sq'] ** 0.5:.3g} k length^2"),
         ("FIRE steps", result.steps),
     ])
     return 0

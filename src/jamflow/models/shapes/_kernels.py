@@ -359,3 +359,84 @@ def circulo_terms(i, j, dx, theta, params, k):
     for r in range(len(rows)):
         out[r] = rows[r]
     return out
+
+
+@njit(cache=True)
+def _segments_cross(ax, ay, bx, by, cx, cy, dx, dy):
+    """Whether the closed segments ``ab`` and ``cd`` intersect (orientation tests)."""
+    d1 = (dx - cx) * (ay - cy) - (dy - cy) * (ax - cx)
+    d2 = (dx - cx) * (by - cy) - (dy - cy) * (bx - cx)
+    d3 = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+    d4 = (bx - ax) * (dy - ay) - (by - ay) * (dx - ax)
+    return d1 * d2 <= 0.0 and d3 * d4 <= 0.0
+
+
+@njit(cache=True)
+def _world_vertices(p, t, ox, oy):
+    n = int(p[1])
+    c = np.cos(t)
+    s = np.sin(t)
+    out = np.empty((n, 2))
+    for m in range(n):
+        out[m, 0] = ox + c * p[2 + 2 * m] - s * p[3 + 2 * m]
+        out[m, 1] = oy + s * p[2 + 2 * m] + c * p[3 + 2 * m]
+    return out
+
+
+@njit(cache=True)
+def _inside_convex(x, y, v):
+    """Whether ``(x, y)`` lies inside the counter-clockwise convex polygon ``v`` (n >= 3)."""
+    n = v.shape[0]
+    for m in range(n):
+        f = (m + 1) % n
+        if (v[f, 0] - v[m, 0]) * (y - v[m, 1]) - (v[f, 1] - v[m, 1]) * (x - v[m, 0]) < 0.0:
+            return False
+    return True
+
+
+@njit(cache=True)
+def circulo_cores_intersect(dx0, dx1, ti, tj, pi, pj):
+    """Whether the cores (segment or polygon) of two circulo bodies intersect.
+
+    The vertex–edge potential of App. A sees only vertices near edges, so crossed
+    shafts (an overlap deeper than the rounding radius) would cost no energy: such
+    configurations are outside the model and are refused by the callers.
+    """
+    vi = _world_vertices(pi, ti, 0.0, 0.0)
+    vj = _world_vertices(pj, tj, dx0, dx1)
+    ni = vi.shape[0]
+    nj = vj.shape[0]
+    ei = 1 if ni == 2 else ni
+    ej = 1 if nj == 2 else nj
+    for a in range(ei):
+        b = (a + 1) % ni
+        for c in range(ej):
+            d = (c + 1) % nj
+            if _segments_cross(vi[a, 0], vi[a, 1], vi[b, 0], vi[b, 1], vj[c, 0], vj[c, 1], vj[d, 0], vj[d, 1]):
+                return True
+    if nj >= 3 and _inside_convex(vi[0, 0], vi[0, 1], vj):
+        return True
+    if ni >= 3 and _inside_convex(vj[0, 0], vj[0, 1], vi):
+        return True
+    return False
+
+
+@njit(cache=True)
+def circulo_crossed_pairs(i, j, dx, theta, params):
+    """Mask of listed pairs whose cores intersect (see :func:`circulo_cores_intersect`)."""
+    out = np.zeros(i.size, dtype=np.bool_)
+    for p in range(i.size):
+        out[p] = circulo_cores_intersect(dx[p, 0], dx[p, 1], theta[i[p]], theta[j[p]], params[i[p]], params[j[p]])
+    return out
+
+
+@njit(cache=True)
+def pair_table(pair, i, j, dx, theta, params, k):
+    """Energy and gradient ``(x_i, y_i, theta_i, x_j, y_j, theta_j)`` of every listed pair, shape (P, 7)."""
+    out = np.zeros((i.size, 7))
+    g = np.zeros(6)
+    for p in range(i.size):
+        g[:] = 0.0
+        out[p, 0] = pair(dx[p, 0], dx[p, 1], theta[i[p]], theta[j[p]], params[i[p]], params[j[p]], k, g)
+        out[p, 1:] = g
+    return out

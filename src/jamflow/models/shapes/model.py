@@ -155,6 +155,36 @@ class ShapeModel:
         energy, n = _kernels.pair_sum(self._pair, i, j, dx, theta, self.params, self.k, grad, virial)
         return ModelEvaluation(float(energy), np.concatenate([grad[:, :2].ravel(), grad[:, 2]]), virial, int(n))
 
+    def pair_table(self, q: NDArray[np.float64]) -> dict[str, NDArray]:
+        """Interacting pairs (energy > 0) with their energies and gradients.
+
+        Returns
+        -------
+        dict of arrays
+            ``i, j`` (P,), ``i < j``; ``energy`` (P,) [energy]; ``gradient`` (P, 6),
+            ``dU / d(x_i, y_i, theta_i, x_j, y_j, theta_j)``; ``dx`` (P, 2) the
+            minimum-image ``x_j - x_i`` [length].
+        """
+        i, j, dx, theta = self._pairs(q)
+        table = _kernels.pair_table(self._pair, i, j, dx, theta, self.params, self.k)
+        keep = table[:, 0] > 0.0
+        order = np.lexsort((j[keep], i[keep]))
+        return {"i": i[keep][order], "j": j[keep][order], "energy": table[keep, 0][order],
+                "gradient": table[keep, 1:][order], "dx": dx[keep][order]}
+
+    def check_cores(self, q: NDArray[np.float64]) -> None:
+        """Raise ``ValueError`` if two circulo cores intersect (outside the App. A model)."""
+        if self.family != "circulo":
+            return
+        i, j, dx, theta = self._pairs(q)
+        crossed = _kernels.circulo_crossed_pairs(i, j, dx, theta, self.params)
+        if np.any(crossed):
+            k = int(np.flatnonzero(crossed)[0])
+            raise ValueError(
+                f"{int(crossed.sum())} pair(s) of circulo bodies have intersecting cores, e.g. "
+                f"({i[k]}, {j[k]}): an overlap deeper than the rounding radius, outside the contact model"
+            )
+
     def contact_terms(self, q: NDArray[np.float64]) -> dict[str, NDArray]:
         """Overlapping vertex–edge terms of a circulo packing (see :func:`._kernels.circulo_terms`).
 
