@@ -47,11 +47,17 @@ import xarray as xr
 from numpy.typing import NDArray
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
-from .analysis.contacts import find_rattlers, isostatic_count, require_plain_spheres
+from .analysis.contacts import isostatic_count, require_plain_spheres
 from .highs import new_highs
 from .io import new_dataset_attrs
+from .network import (
+    ContactSet,
+    contact_jacobian,
+    prune_rattlers,
+    sphere_contacts,
+    strain_basis,
+)
 from .packing import Packing, near_pairs
-from .rigidity import contact_geometry, rigidity_matrix, strain_basis
 from .tolerances import CERTIFY_BOUND_TOL, CERTIFY_MOTION_TOL, CONTACT_GAP_TOL
 
 __all__ = [
@@ -254,19 +260,13 @@ def _network(packing: Packing, gap_tol: float | None) -> tuple[NDArray[np.int64]
     """Contacts (explicit, else gap <= gap_tol) and their relative gaps."""
     if gap_tol is None and packing.contacts is not None:
         c = packing.contacts
-        _, r = contact_geometry(packing, c)
+        r = np.linalg.norm(sphere_contacts(packing.position, packing.box, c).separation, axis=1)
         return c, r / packing.sigma(c[:, 0], c[:, 1]) - 1.0
     tol = CONTACT_GAP_TOL if gap_tol is None else float(gap_tol)
     if not np.isfinite(tol):
         raise ValueError(f"gap tolerance must be finite, got {gap_tol}")
     pairs, h = near_pairs(packing, tol)
     return np.stack([pairs.i, pairs.j], axis=1), h
-
-
-def _prune_coordination(d: int, active: NDArray[np.bool_], contacts: NDArray[np.int64]) -> NDArray[np.bool_]:
-    """Active particles with fewer than ``d + 1`` contacts among active particles (iterated)."""
-    keep = active[contacts[:, 0]] & active[contacts[:, 1]]
-    return find_rattlers(len(active), d, contacts[keep]) & active
 
 
 def _moving_clusters(
@@ -427,10 +427,12 @@ def certify(
     unit = float(np.mean(packing.diameter))
     contacts, gap = _network(packing, gap_tol)
     if len(contacts):
-        unit_vec, dist = contact_geometry(packing, contacts)
+        cs = sphere_contacts(packing.position, packing.box, contacts)
+        unit_vec, dist = cs.normal, np.linalg.norm(cs.separation, axis=1)
         g_abs = np.maximum(gap, 0.0) * packing.sigma(contacts[:, 0], contacts[:, 1])
     else:
-        unit_vec, dist, g_abs = np.zeros((0, d)), np.zeros(0), np.zeros(0)
+        cs = ContactSet(contacts[:, 0], contacts[:, 1], np.zeros((0, d)), np.zeros((0, d)))
+        unit_vec, dist, g_abs = cs.normal, np.zeros(0), np.zeros(0)
     dx = unit_vec * dist[:, None]
     g = g_abs / unit
     rng = np.random.default_rng(seed)
@@ -464,7 +466,7 @@ def certify(
     strict_motion = None
     basis = strain_basis(d, volume_preserving=True)
     while True:
-        new = _prune_coordination(d, active, contacts)
+        new = prune_rattlers(contacts, n, dofs_per_body=d, active=active)
         stage[new] = RATTLER_STAGES.index("coordination")
         active &= ~new
         if not active.any():
@@ -474,7 +476,8 @@ def certify(
         n_disp = d * len(idx)
 
         # local jamming: every contact end constrains one particle, the other held fixed
-        A_local = _local_matrix(packing, contacts[sel], unit_vec[sel], idx)
+        R_fixed_box = contact_jacobian(cs.select(sel), n, d, bodies=idx)
+        A_local = _local_rows(R_fixed_box, contacts[sel, 0], idx, n, d)
         found = search("local", A_local, np.concatenate([g[sel], g[sel]]), np.ones(n_disp), n_disp, "simplex")
         if found is not None:
             moved = np.linalg.norm(found[0], axis=1) > CERTIFY_MOTION_TOL
@@ -487,7 +490,7 @@ def certify(
         found = strict_motion = None
         if strict:
             # strain LP first: without a motion there, none exists at fixed box either
-            R = rigidity_matrix(packing, contacts[sel], strain=True, volume_preserving=True, particles=idx)
+            R = contact_jacobian(cs.select(sel), n, d, strain="traceless", bodies=idx)
             # strain columns carry |r| [length]; per mean diameter like the displacements
             scale = np.ones(R.shape[1])
             scale[n_disp:] = 1.0 / unit
@@ -502,7 +505,7 @@ def certify(
                 # the motion needs the strain: the fixed-box test decides the rest
                 strict_motion, found = found, None
         if found is None:
-            R = rigidity_matrix(packing, contacts[sel], particles=idx)
+            R = R_fixed_box
             upper = np.ones(n_disp)
             upper[d * p:d * p + d] = 0.0
             found = search("collective", R, g[sel], upper, n_disp, solver)
@@ -554,19 +557,19 @@ def certify(
     )
 
 
-def _local_matrix(packing: Packing, contacts: NDArray[np.int64], unit_vec: NDArray[np.float64],
-                  idx: NDArray[np.int64]) -> sp.csr_matrix:
-    """Rows ``-n . y_i`` then ``+n . y_j``: each contact seen from one particle, the other fixed."""
-    d = packing.d
-    col_of = np.full(packing.n, -1, dtype=np.int64)
+def _local_rows(R: sp.csr_matrix, first: NDArray[np.int64], idx: NDArray[np.int64], n: int,
+                d: int) -> sp.csr_matrix:
+    """Rows of the rigidity matrix split per end, shape (2 Nc, d Ns): ``-n . y_i`` then ``+n . y_j``.
+
+    Each contact seen from one particle, the other held fixed (the local LP);
+    ``first`` is the particle ``i`` of every row, ``idx`` the column particles.
+    """
+    col_of = np.full(n, -1, dtype=np.int64)
     col_of[idx] = np.arange(len(idx))
-    nc = len(contacts)
-    axis = np.arange(d)
-    rows = np.repeat(np.arange(2 * nc), d)
-    cols = np.concatenate([d * col_of[contacts[:, 0]][:, None] + axis,
-                           d * col_of[contacts[:, 1]][:, None] + axis]).ravel()
-    vals = np.concatenate([-unit_vec, unit_vec]).ravel()
-    return sp.csr_matrix((vals, (rows, cols)), shape=(2 * nc, d * len(idx)))
+    coo = R.tocoo()
+    nc = R.shape[0]
+    rows = np.where(coo.col // d == col_of[first][coo.row], coo.row, coo.row + nc)
+    return sp.csr_matrix((coo.data, (rows, coo.col)), shape=(2 * nc, R.shape[1]))
 
 
 def _pin(contacts: NDArray[np.int64], idx: NDArray[np.int64], n: int) -> int:

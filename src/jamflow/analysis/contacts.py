@@ -7,7 +7,9 @@ backbone needs ``N_c = d (N_s - 1) + 1`` contacts: ``d N_s`` translational degre
 of freedom, minus ``d`` global translations, plus one. The ``+1`` is the inflation
 (or compression) degree of freedom of CALiPPSO, and equally the positive-pressure
 constraint of a soft packing at fixed box (2D: ``2 (N - N_r) - 1``); both give the
-same number. Contacts are counted once per pair (``i < j``).
+same number. Contacts are counted once per pair (``i < j``). The count and the
+rattler pruning are those of the contact-network core,
+:func:`jamflow.network.isostatic_count` and :func:`jamflow.network.prune_rattlers`.
 """
 
 from __future__ import annotations
@@ -17,20 +19,22 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..network import isostatic_count as network_isostatic_count
+from ..network import prune_rattlers, rigidity_counting
 from ..packing import Packing, max_overlap, near_pairs
 from ..tolerances import CONTACT_GAP_TOL
 
 __all__ = [
     "ContactSummary",
-    "contacts_from_gaps",
     "contact_network",
+    "contacts_from_gaps",
     "find_rattlers",
-    "rattler_mask",
-    "isostatic_count",
-    "rigidity_counting",
     "force_balance_residual",
-    "summarize",
+    "isostatic_count",
+    "rattler_mask",
     "require_plain_spheres",
+    "rigidity_counting",
+    "summarize",
 ]
 
 
@@ -54,40 +58,13 @@ def contact_network(packing: Packing, gap_tol: float | None = None) -> NDArray[n
 
 def find_rattlers(n: int, d: int, contacts: NDArray[np.int64],
                   wall_particles: NDArray[np.int64] | None = None) -> NDArray[np.bool_]:
-    """Iteratively flag particles with fewer than ``d + 1`` contacts.
+    """Rattlers of ``n`` spheres in ``d`` dimensions: :func:`jamflow.network.prune_rattlers`
+    with ``d`` degrees of freedom per particle (fewer than ``d + 1`` contacts, iterated).
 
-    A particle with at most ``d`` contacts cannot be held in place by frictionless
-    contacts; removing it may leave neighbours under-coordinated, so the removal
-    repeats until no particle changes. This is the one coordination pruning of the
-    package (CALiPPSO, the jamming certificate and ``jamflow check`` call it).
-
-    Parameters
-    ----------
-    n, d : int
-        Number of particles and dimension.
-    contacts : ndarray of int, shape (Nc, 2)
-        Particle pairs in contact.
-    wall_particles : ndarray of int, shape (Nw,), optional
-        The particle of each contact with a hard wall; a wall never rattles, so these
-        contacts always count.
-
-    Returns
-    -------
-    ndarray of bool, shape (n,)
-        True for rattlers.
+    ``wall_particles`` lists the particle of each hard-wall contact (always counts).
+    Returns a boolean mask of shape (n,), True for rattlers.
     """
-    contacts = np.asarray(contacts, dtype=np.int64).reshape(-1, 2)
-    z_wall = (np.zeros(n, dtype=np.int64) if wall_particles is None
-              else np.bincount(np.asarray(wall_particles, dtype=np.int64), minlength=n))
-    rattler = np.zeros(n, dtype=bool)
-    active = np.ones(len(contacts), dtype=bool)
-    while True:
-        z = np.bincount(contacts[active].ravel(), minlength=n) + z_wall
-        new = (~rattler) & (z < d + 1)
-        if not np.any(new):
-            return rattler
-        rattler |= new
-        active &= ~(rattler[contacts[:, 0]] | rattler[contacts[:, 1]])
+    return prune_rattlers(contacts, n, dofs_per_body=d, wall_contacts=wall_particles)
 
 
 def rattler_mask(packing: Packing, contacts: NDArray[np.int64] | None = None) -> NDArray[np.bool_]:
@@ -106,16 +83,9 @@ def rattler_mask(packing: Packing, contacts: NDArray[np.int64] | None = None) ->
 
 
 def isostatic_count(d: int, n_stable: int) -> int:
-    """Contacts of an isostatic backbone, ``d (N_s - 1) + 1`` (see module docstring)."""
-    return d * (n_stable - 1) + 1 if n_stable > 0 else 0
-
-
-def rigidity_counting(n_contacts: int, n_isostatic: int) -> str:
-    """``"hypostatic"``, ``"isostatic"`` or ``"hyperstatic"``: backbone contacts below,
-    at or above the isostatic count."""
-    if n_contacts < n_isostatic:
-        return "hypostatic"
-    return "isostatic" if n_contacts == n_isostatic else "hyperstatic"
+    """Contacts of an isostatic backbone of periodic spheres, ``d (N_s - 1) + 1``
+    (:func:`jamflow.network.isostatic_count` with ``d`` global translations)."""
+    return network_isostatic_count(n_stable, d, global_dofs=d)
 
 
 def force_balance_residual(packing: Packing) -> NDArray[np.float64]:

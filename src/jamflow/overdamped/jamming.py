@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..network import isostatic_count, prune_rattlers
 from .network import pair_vectors, s_matrix
 
 __all__ = ["ConstrainedCount", "constrained_subset", "self_stress"]
@@ -51,18 +52,19 @@ class ConstrainedCount:
     @property
     def potentially_jammed(self) -> bool:
         """``z_bar == 2 d`` in integer arithmetic (``N_c_bar = d N_bar - d + 1``)."""
-        return self.n_particles > 0 and self.n_contacts == self.d * self.n_particles - self.d + 1
+        return self.n_particles > 0 and self.n_contacts == isostatic_count(self.n_particles, self.d, global_dofs=self.d)
 
     @property
     def excess(self) -> int:
         """``N_c_bar - (d N_bar - d + 1)``: > 0 hyperstatic, 0 potentially jammed; -1 if empty."""
         if self.n_particles == 0:
             return -1
-        return self.n_contacts - (self.d * self.n_particles - self.d + 1)
+        return self.n_contacts - isostatic_count(self.n_particles, self.d, global_dofs=self.d)
 
 
 def constrained_subset(n: int, d: int, pairs: NDArray[np.int64]) -> ConstrainedCount:
-    """Constrained subset of a contact network (Sec. IV D), by iterative pruning.
+    """Constrained subset of a contact network (Sec. IV D): the non-rattlers of
+    :func:`jamflow.network.prune_rattlers` (fewer than ``d + 1`` contacts, iterated).
 
     Parameters
     ----------
@@ -71,15 +73,8 @@ def constrained_subset(n: int, d: int, pairs: NDArray[np.int64]) -> ConstrainedC
     pairs : ndarray of int64, shape (Nc, 2)
     """
     pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-    alive = np.ones(len(pairs), dtype=bool)
-    member = np.ones(n, dtype=bool)
-    while True:
-        z = np.bincount(pairs[alive].ravel(), minlength=n)
-        drop = member & (z < d + 1)
-        if not drop.any():
-            break
-        member &= ~drop
-        alive &= member[pairs[:, 0]] & member[pairs[:, 1]]
+    member = ~prune_rattlers(pairs, n, dofs_per_body=d)
+    alive = member[pairs[:, 0]] & member[pairs[:, 1]]
     return ConstrainedCount(member, int(member.sum()), int(alive.sum()), d)
 
 

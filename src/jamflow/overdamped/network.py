@@ -30,17 +30,19 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 
+from ..network import ContactSet, contact_jacobian
+
 __all__ = [
-    "pair_vectors",
-    "s_matrix",
-    "affine_rates",
-    "Solution",
-    "SingularNetworkError",
     "FactorCache",
-    "solve_network",
+    "SingularNetworkError",
+    "Solution",
+    "affine_rates",
+    "pair_vectors",
     "pair_velocities",
-    "stress_tensor",
+    "s_matrix",
+    "solve_network",
     "spectral_norm",
+    "stress_tensor",
 ]
 
 
@@ -82,14 +84,8 @@ def s_matrix(pairs: NDArray[np.int64], unit: NDArray[np.float64], n: int) -> sp.
     n : int
         Number of particles.
     """
-    nc, d = unit.shape
-    # 2d entries per row, columns ascending because i < j: build CSR directly
-    cols = np.concatenate(
-        [pairs[:, :1] * d + np.arange(d), pairs[:, 1:] * d + np.arange(d)], axis=1
-    ).ravel()
-    vals = np.concatenate([-unit, unit], axis=1).ravel()
-    indptr = np.arange(0, 2 * d * nc + 1, 2 * d)
-    return sp.csr_matrix((vals, cols, indptr), shape=(nc, n * d))
+    # the separations enter only strain columns, which S does not have
+    return contact_jacobian(ContactSet(pairs[:, 0], pairs[:, 1], unit, unit), n, unit.shape[1])
 
 
 @functools.lru_cache(maxsize=64)

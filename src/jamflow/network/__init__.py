@@ -1,0 +1,35 @@
+"""The one contact-network core: contacts, Jacobian, rattler/slider pruning, counts, self stress.
+
+Every stage that needs a rigidity matrix, a rattler set or an isostatic count asks
+this package (``docs/network.md``):
+
+- :mod:`.contacts`: :class:`ContactSet` (body pairs, normals, separations, contact
+  arms) and :func:`sphere_contacts`;
+- :mod:`.jacobian`: :func:`contact_jacobian` (``d gap / d q`` with optional
+  rotation and strain columns), :func:`link_jacobian`, :func:`strain_basis`;
+- :mod:`.counting`: :func:`prune_rattlers`, :func:`find_sliders`,
+  :func:`isostatic_count`, :func:`rigidity_counting`;
+- :mod:`.self_stress`: :func:`self_stresses`, :func:`positive_self_stress`,
+  :func:`jacobian_rank`.
+"""
+
+from .contacts import ContactSet, sphere_contacts
+from .counting import find_sliders, isostatic_count, prune_rattlers, rigidity_counting
+from .jacobian import contact_jacobian, link_jacobian, n_strain, strain_basis
+from .self_stress import jacobian_rank, positive_self_stress, self_stresses
+
+__all__ = [
+    "ContactSet",
+    "contact_jacobian",
+    "find_sliders",
+    "isostatic_count",
+    "jacobian_rank",
+    "link_jacobian",
+    "n_strain",
+    "positive_self_stress",
+    "prune_rattlers",
+    "rigidity_counting",
+    "self_stresses",
+    "sphere_contacts",
+    "strain_basis",
+]

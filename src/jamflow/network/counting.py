@@ -1,0 +1,166 @@
+"""Counting on a contact network: rattlers and sliders by pruning, the isostatic count.
+
+Isostatic count convention
+--------------------------
+A backbone of ``N_s`` bodies with ``f`` degrees of freedom each (``d`` for spheres,
+``d + 1`` for 2D bodies that rotate) is held by exactly
+
+    N_c^0 = f N_s - g + 1 - N_sliders
+
+contacts, where ``g`` counts the motions of the whole packing that change no gap
+(``d`` global translations in a periodic box, none between hard walls), the ``+1``
+is the inflation (CALiPPSO) or compression degree of freedom, equally the
+positive-pressure constraint of a soft packing at a fixed box, and every slider
+(see :func:`find_sliders`) has one degree of freedom no contact constrains.
+Spheres in a periodic box: ``d (N_s - 1) + 1`` (2D: ``2 N_s - 1``); spheres
+between walls: ``d N_s + 1``; rotating 2D bodies: ``3 N_s - 1`` (van der Werf et
+al., Fig. 3 and Eq. 3). Contacts are counted once per pair. An empty backbone has
+count 0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import ArrayLike, NDArray
+
+from .contacts import ContactSet
+
+__all__ = ["find_sliders", "isostatic_count", "prune_rattlers", "rigidity_counting"]
+
+
+def _pairs(contacts: ContactSet | ArrayLike) -> NDArray[np.int64]:
+    if isinstance(contacts, ContactSet):
+        return contacts.pairs
+    return np.asarray(contacts, dtype=np.int64).reshape(-1, 2)
+
+
+def prune_rattlers(
+    contacts: ContactSet | ArrayLike,
+    n_bodies: int,
+    *,
+    dofs_per_body: int,
+    wall_contacts: ArrayLike | None = None,
+    active: NDArray[np.bool_] | None = None,
+) -> NDArray[np.bool_]:
+    """Rattlers by iterative removal of bodies with fewer than ``dofs_per_body + 1`` contacts.
+
+    A body with at most ``f = dofs_per_body`` frictionless contacts cannot be held
+    in place (force balance of ``f`` components needs ``f + 1`` repulsive
+    contacts); removing it may leave neighbours under-coordinated, so the removal
+    repeats until no body changes. This is the one coordination pruning of the
+    package (``jamflow check``, CALiPPSO, the jamming certificate, the event-driven
+    network, Hessians and moduli call it).
+
+    Parameters
+    ----------
+    contacts : ContactSet or array_like of int, shape (n_c, 2)
+        Body pairs in contact.
+    n_bodies : int
+    dofs_per_body : int
+        ``d`` for spheres, ``d + 1`` for rotating 2D bodies.
+    wall_contacts : array_like of int, shape (n_w,), optional
+        The body of each contact with a hard wall; a wall never rattles, so these
+        contacts always count.
+    active : ndarray of bool, shape (n_bodies,), optional
+        Bodies still in the network; the others were removed earlier (their
+        contacts do not count) and are not reported again.
+
+    Returns
+    -------
+    ndarray of bool, shape (n_bodies,)
+        True for rattlers (among ``active`` bodies).
+    """
+    pairs = _pairs(contacts)
+    if active is not None:
+        pairs = pairs[active[pairs[:, 0]] & active[pairs[:, 1]]]
+    z_wall = (np.zeros(n_bodies, dtype=np.int64) if wall_contacts is None
+              else np.bincount(np.asarray(wall_contacts, dtype=np.int64), minlength=n_bodies))
+    rattler = np.zeros(n_bodies, dtype=bool)
+    alive = np.ones(len(pairs), dtype=bool)
+    while True:
+        z = np.bincount(pairs[alive].ravel(), minlength=n_bodies) + z_wall
+        new = (~rattler) & (z < dofs_per_body + 1)
+        if not np.any(new):
+            return rattler if active is None else rattler & active
+        rattler |= new
+        alive &= ~(rattler[pairs[:, 0]] | rattler[pairs[:, 1]])
+
+
+def find_sliders(jacobian: sp.spmatrix, contacts: ContactSet | ArrayLike, n_bodies: int, d: int, *,
+                 rattler: NDArray[np.bool_] | None = None, rtol: float = 1e-10) -> NDArray[np.bool_]:
+    """Sliders: backbone bodies with exactly one unconstrained translation.
+
+    A slider (van der Werf et al., Fig. 3: a circulo-line that can translate along
+    its long axis) keeps enough contacts to survive :func:`prune_rattlers`, but its
+    own block of the contact Jacobian (its contacts' rows restricted to its own
+    ``dofs_per_body`` columns, the other bodies held fixed) has a one-dimensional
+    kernel that is a translation: every contact normal is perpendicular to one
+    direction and the contacts exert no torque along it.
+
+    Parameters
+    ----------
+    jacobian : sparse matrix, shape (n_c, n_bodies * f)
+        :func:`~jamflow.network.jacobian.contact_jacobian` of ``contacts`` with all
+        bodies as columns and no strain columns; ``f = n_cols / n_bodies`` is ``d``
+        (translations only) or ``d + 1`` (with the rotation columns, which follow
+        all centre columns).
+    contacts : ContactSet or array_like of int, shape (n_c, 2)
+    n_bodies, d : int
+    rattler : ndarray of bool, shape (n_bodies,), optional
+        Bodies already removed (not tested; their contacts do not count).
+    rtol : float
+        Singular values below ``rtol`` times the largest of a block count as zero
+        (the blocks hold unit normals and arms of order one body size).
+
+    Returns
+    -------
+    ndarray of bool, shape (n_bodies,)
+    """
+    pairs = _pairs(contacts)
+    J = sp.csr_matrix(jacobian)
+    f = J.shape[1] // n_bodies if n_bodies else d
+    if J.shape[1] != f * n_bodies or f not in (d, d + 1):
+        raise ValueError(f"jacobian has {J.shape[1]} columns; expected {d} or {d + 1} per body for {n_bodies} bodies")
+    rattler = np.zeros(n_bodies, dtype=bool) if rattler is None else rattler
+    live = ~(rattler[pairs[:, 0]] | rattler[pairs[:, 1]])
+    slider = np.zeros(n_bodies, dtype=bool)
+    for b in np.flatnonzero(~rattler):
+        rows = np.flatnonzero(live & ((pairs[:, 0] == b) | (pairs[:, 1] == b)))
+        cols = np.arange(d * b, d * b + d)
+        if f == d + 1:
+            cols = np.append(cols, d * n_bodies + b)
+        if not len(rows):
+            continue
+        _, s, vt = np.linalg.svd(J[rows][:, cols].toarray(), full_matrices=True)
+        rank = int(np.sum(s > rtol * s.max()))
+        # one free direction, and it moves the centre without turning the body
+        slider[b] = rank == f - 1 and abs(vt[-1][d:]).max(initial=0.0) <= rtol
+    return slider
+
+
+def isostatic_count(n_bodies: int, dofs_per_body: int, *, global_dofs: int, n_sliders: int = 0) -> int:
+    """Contacts of an isostatic backbone, ``f N_s - g + 1 - N_sliders`` (module docstring).
+
+    Parameters
+    ----------
+    n_bodies : int
+        Backbone bodies ``N_s`` (non-rattlers; sliders included).
+    dofs_per_body : int
+        ``f``: ``d`` for spheres, ``d + 1`` for rotating 2D bodies.
+    global_dofs : int
+        ``g``: gap-preserving motions of the whole packing (``d`` periodic, 0 between walls).
+    n_sliders : int
+        Backbone bodies with one unconstrained degree of freedom.
+    """
+    if n_bodies <= 0:
+        return 0
+    return dofs_per_body * n_bodies - global_dofs + 1 - n_sliders
+
+
+def rigidity_counting(n_contacts: int, n_isostatic: int) -> str:
+    """``"hypostatic"``, ``"isostatic"`` or ``"hyperstatic"``: backbone contacts below,
+    at or above the isostatic count."""
+    if n_contacts < n_isostatic:
+        return "hypostatic"
+    return "isostatic" if n_contacts == n_isostatic else "hyperstatic"
