@@ -66,6 +66,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quiet", action="store_true",
                    help="accepted like every command's --quiet; check has no progress output and always "
                         "prints its report, which is its result")
+    p.add_argument("--parallel-contacts", choices=["once", "twice"], default="once",
+                   help="shape packings: count a parallel or nearly parallel circulo contact once (default) "
+                        "or twice (VanderWerf et al. Fig. 6)")
     add_overlap_option(p, default=None)
 
 
@@ -126,19 +129,27 @@ def _export_xyz(args: argparse.Namespace) -> int:
 
 
 def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
-    """What check can say of links and shapes today: how well links hold, clusters, shapes.
+    """What check can say of links and shapes: how well links hold, clusters, shapes.
 
-    Contacts, rattlers and the isostatic count of bodies need their energy models'
-    contact networks and are not counted (``summarize`` refuses them).
+    Shape packings of a family with an energy model also get the counting of
+    :mod:`jamflow.shapes.counting` (contacts, rattlers, sliders, ``<z>`` of Eq. 3,
+    isostatic count ``3N' - 1 - N_s``); linked packings are not counted.
     """
     report: dict = {"N": packing.n, "d": packing.d, "phi": packing.packing_fraction}
     if packing.links is not None:
         err = packing.links.length_errors(packing.position, packing.box)
         report.update(n_links=len(packing.links), n_clusters=int(packing.clusters.max(initial=-1)) + 1,
                       max_link_error_rel=float(np.max(np.abs(err), initial=0.0)))
+    counted = False
     if packing.shapes is not None:
         kinds, counts = np.unique(packing.shapes.kind[packing.shape_index], return_counts=True)
         report["shapes"] = {str(k): int(c) for k, c in zip(kinds, counts)}
+        if packing.links is None and _has_shape_model(kinds):
+            from ..shapes.counting import count_constraints
+
+            counting, *_ = count_constraints(packing, args.parallel_contacts)
+            report.update(counting.as_dict())
+            counted = True
     if args.json:
         print(json.dumps(report))
         return 0
@@ -148,10 +159,25 @@ def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
                  ("max link-length error", f"{report['max_link_error_rel']:.3e} (relative)")]
     if "shapes" in report:
         rows.append(("shapes", ", ".join(f"{c} {k}" for k, c in report["shapes"].items())))
-    rows.append(("contacts, rattlers", "not counted for linked or shaped particles yet (their contact "
-                                       "networks come with the Bodies network core)"))
+    if counted:
+        rows += [("contacts (non-rattlers)", f"{report['n_contacts']} (parallel contacts counted {report['parallel']})"),
+                 ("rattlers, sliders", f"{report['n_rattlers']}, {report['n_sliders']}"),
+                 ("coordination <z> (Eq. 3)", f"{report['z']:.6f}"),
+                 ("isostatic count 3N' - 1 - N_s", f"{report['isostatic_count']} ({report['counting']})")]
+    else:
+        rows.append(("contacts, rattlers", "not counted for linked particles or shapes without an energy model"))
     print(format_rows(rows))
     return 0
+
+
+def _has_shape_model(kinds: np.ndarray) -> bool:
+    from ..models.shapes import shape_family
+
+    try:
+        shape_family(kinds)
+    except ValueError:
+        return False
+    return True
 
 
 def _check(args: argparse.Namespace) -> int:

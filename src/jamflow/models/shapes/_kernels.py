@@ -440,3 +440,25 @@ def pair_table(pair, i, j, dx, theta, params, k):
         out[p, 0] = pair(dx[p, 0], dx[p, 1], theta[i[p]], theta[j[p]], params[i[p]], params[j[p]], k, g)
         out[p, 1:] = g
     return out
+
+
+@njit(cache=True)
+def ellipse_contact_geometry(i, j, dx, theta, params):
+    """Contact point and normal of ellipse pairs (Perram–Wertheim), shape (P, 4).
+
+    Columns: arm of ``i`` (contact point minus centre of ``i``) ``(1 - l) A s`` and
+    the unit normal from ``i`` to ``j`` along ``s = C(l)^-1 r``, the gradient of
+    ``i``'s shape function at the contact point of the two ellipses scaled to touch.
+    """
+    out = np.zeros((i.size, 4))
+    for p in range(i.size):
+        a = i[p]
+        b = j[p]
+        _, lam, s0, s1 = perram_wertheim(dx[p, 0], dx[p, 1], theta[a], theta[b], params[a], params[b])
+        axx, axy, ayy = _ellipse_matrix(params[a, 0], params[a, 1], theta[a])
+        out[p, 0] = (1.0 - lam) * (axx * s0 + axy * s1)
+        out[p, 1] = (1.0 - lam) * (axy * s0 + ayy * s1)
+        norm = np.sqrt(s0 * s0 + s1 * s1)
+        out[p, 2] = s0 / norm
+        out[p, 3] = s1 / norm
+    return out
