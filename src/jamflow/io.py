@@ -63,6 +63,8 @@ DATASET_KINDS: dict[str, tuple[frozenset[str], str]] = {
     "eos": (frozenset({"packing_fraction", "pressure"}), "an LS equation of state (jamflow ls --eos)"),
     "certificate": (frozenset({"lp_objective", "unjamming_motion"}), "a jamming certificate (jamflow certify)"),
     "moduli": (frozenset({"bulk", "shear", "eigenvalue"}), "elastic moduli (jamflow moduli)"),
+    "modes": (frozenset({"eigenvalue", "region", "rotational_weight"}),
+              "a dynamical-matrix spectrum of a shape packing (jamflow modes)"),
     "tradeoff": (frozenset({"time", "on_front", "is_reference"}), "a speed/accuracy sweep (jamflow tradeoff)"),
     "checkpoint": (frozenset({"x", "h", "radius", "nl_pairs"}), "a flow checkpoint (--checkpoint)"),
     "snapshots": (frozenset({"snapshot_position", "snapshot_box"}), "flow snapshots (--snapshots)"),
