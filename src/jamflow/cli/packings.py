@@ -117,7 +117,11 @@ def _export_xyz(args: argparse.Namespace) -> int:
         raise ValueError(f"{args.packing} is a flow time series without positions; export its snapshot file "
                          "(run with --snapshots N, written to OUT.snapshots.nc)")
     else:
-        frames = [read_packing(args.packing, overlap_tol(args))]
+        frame = read_packing(args.packing, None)
+        if frame.shapes is None:
+            # shaped bodies overlap by their energy model's contact distance, not the spheres' check
+            frame.validate(overlap_tol(args))
+        frames = [frame]
     if args.pos_2d and frames[0].d != 2:
         raise ValueError(f"--pos-2d is for 2D packings, got d = {frames[0].d}")
     write_xyz(frames, args.out, pos_2d=args.pos_2d)
