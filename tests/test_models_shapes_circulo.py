@@ -18,6 +18,7 @@ from shapely.geometry import LineString, Polygon
 from jamflow.bodies import ShapeTable
 from jamflow.box import Box
 from jamflow.models.shapes import ShapeModel
+from shape_numerics import numerical_gradient, numerical_hessian
 
 BOX = Box.cubic(2, 6.0)
 LINE = dict(kind="circulo_line", vertices=[(-0.5, 0.0), (0.5, 0.0)], radius=0.2)
@@ -34,15 +35,6 @@ TABLE = ShapeTable.from_shapes([LINE, SHORT, _regular(3, 0.4, 0.1), _regular(5, 
 
 def model(shapes: tuple[int, int]) -> ShapeModel:
     return ShapeModel(BOX, TABLE, list(shapes))
-
-
-def numerical_gradient(m: ShapeModel, q: np.ndarray, h: float) -> np.ndarray:
-    out = np.zeros_like(q)
-    for a in range(q.size):
-        e = np.zeros_like(q)
-        e[a] = h
-        out[a] = (m.evaluate(q + e).energy - m.evaluate(q - e).energy) / (2.0 * h)
-    return out
 
 
 # (shapes, configuration rows (x, y, theta), expected number of vertex-edge terms, label)
@@ -197,12 +189,7 @@ def test_hessian_is_derivative_of_gradient(shapes, conf, n_terms, label):
     m = model(shapes)
     q = m.dofs(conf)
     h_model = m.hessian(q).toarray()
-    h = 1e-6
-    h_num = np.zeros_like(h_model)
-    for a in range(q.size):
-        e = np.zeros_like(q)
-        e[a] = h
-        h_num[:, a] = (m.evaluate(q + e).gradient - m.evaluate(q - e).gradient) / (2.0 * h)
+    h_num = numerical_hessian(m, q, 1e-6)
     # finite differences of the gradient: truncation ~h^2 g''' plus round-off eps g / h
     np.testing.assert_allclose(h_model, h_num, atol=1e-7)
     # the complex step carries no truncation: symmetric to round-off

@@ -16,6 +16,7 @@ from jamflow.bodies import ShapeTable
 from jamflow.box import Box
 from jamflow.models.shapes import ShapeModel
 from jamflow.models.shapes._kernels import perram_wertheim
+from shape_numerics import numerical_gradient, numerical_hessian
 
 BOX = Box.cubic(2, 8.0)
 TABLE = ShapeTable.from_shapes([
@@ -88,32 +89,19 @@ CONFIGS = [
 ]
 
 
-def _numerical_gradient(m, q, h):
-    out = np.zeros_like(q)
-    for a in range(q.size):
-        e = np.zeros_like(q)
-        e[a] = h
-        out[a] = (m.evaluate(q + e).energy - m.evaluate(q - e).energy) / (2.0 * h)
-    return out
-
-
 @pytest.mark.parametrize("shapes, conf", CONFIGS)
 def test_ellipse_forces_torques_and_hessian(shapes, conf):
     m = ShapeModel(BOX, TABLE, list(shapes))
     q = m.dofs(conf)
     ev = m.evaluate(q)
     assert ev.energy > 0.0 and ev.n_contacts == 1
-    np.testing.assert_allclose(ev.gradient, _numerical_gradient(m, q, 1e-6), atol=1e-9)
+    np.testing.assert_allclose(ev.gradient, numerical_gradient(m, q, 1e-6), atol=1e-9)
     g = m.positions(ev.gradient)
     x = m.positions(q)
     np.testing.assert_allclose(g[:, :2].sum(axis=0), 0.0, atol=1e-14)
     assert abs(g[:, 2].sum() + np.sum(x[:, 0] * g[:, 1] - x[:, 1] * g[:, 0])) < 1e-13
     hess = m.hessian(q).toarray()
-    h_num = np.zeros_like(hess)
-    for a in range(q.size):
-        e = np.zeros_like(q)
-        e[a] = 1e-6
-        h_num[:, a] = (m.evaluate(q + e).gradient - m.evaluate(q - e).gradient) / 2e-6
+    h_num = numerical_hessian(m, q, 1e-6)
     np.testing.assert_allclose(hess, h_num, atol=1e-8)
     np.testing.assert_allclose(hess, hess.T, atol=1e-13)
 

@@ -134,8 +134,11 @@ _PW_NEWTON = 8
 
 
 @njit(cache=True)
-def _pw_slope(lam, dx0, dx1, axx, axy, ayy, dxx, dxy, dyy):
-    """``dF/dl`` of the Perram–Wertheim function at ``l`` (real arithmetic, for bracketing)."""
+def _pw_terms(lam, dx0, dx1, axx, axy, ayy, dxx, dxy, dyy):
+    """``s = C(l)^-1 r``, ``C`` (xx, xy, yy, det), and ``dF/dl`` of the Perram–Wertheim function at ``l``.
+
+    ``dF/dl = (1 - 2 l) r.s - l (1 - l) s.D.s`` with ``D = B - A``.
+    """
     cxx = axx + lam * dxx
     cxy = axy + lam * dxy
     cyy = ayy + lam * dyy
@@ -144,7 +147,7 @@ def _pw_slope(lam, dx0, dx1, axx, axy, ayy, dxx, dxy, dyy):
     s1 = (cxx * dx1 - cxy * dx0) / det
     rs = dx0 * s0 + dx1 * s1
     sds = s0 * (dxx * s0 + dxy * s1) + s1 * (dxy * s0 + dyy * s1)
-    return (1.0 - 2.0 * lam) * rs - lam * (1.0 - lam) * sds
+    return s0, s1, cxx, cxy, cyy, det, rs, sds, (1.0 - 2.0 * lam) * rs - lam * (1.0 - lam) * sds
 
 
 @njit(cache=True)
@@ -172,34 +175,21 @@ def perram_wertheim(dx0, dx1, ti, tj, pi, pj):
     hi = 1.0
     while hi - lo > 1e-3:
         mid = 0.5 * (lo + hi)
-        if _pw_slope(mid, dx0.real, dx1.real, axx.real, axy.real, ayy.real,
-                     dxx.real, dxy.real, dyy.real) > 0.0:
+        slope = _pw_terms(mid, dx0.real, dx1.real, axx.real, axy.real, ayy.real, dxx.real, dxy.real, dyy.real)[8]
+        if slope > 0.0:
             lo = mid
         else:
             hi = mid
     lam = 0.5 * (lo + hi) + 0.0 * dx0
     for _ in range(_PW_NEWTON):
-        cxx = axx + lam * dxx
-        cxy = axy + lam * dxy
-        cyy = ayy + lam * dyy
-        det = cxx * cyy - cxy * cxy
-        s0 = (cyy * dx0 - cxy * dx1) / det
-        s1 = (cxx * dx1 - cxy * dx0) / det
-        rs = dx0 * s0 + dx1 * s1
-        sds = s0 * (dxx * s0 + dxy * s1) + s1 * (dxy * s0 + dyy * s1)
-        d1 = (1.0 - 2.0 * lam) * rs - lam * (1.0 - lam) * sds
+        s0, s1, cxx, cxy, cyy, det, rs, sds, d1 = _pw_terms(lam, dx0, dx1, axx, axy, ayy, dxx, dxy, dyy)
         # u = D s; F'' = -2 r.s - 2 (1 - 2 l) s.D.s + 2 l (1 - l) u.C^-1.u
         ux = dxx * s0 + dxy * s1
         uy = dxy * s0 + dyy * s1
         ucu = (cyy * ux * ux - 2.0 * cxy * ux * uy + cxx * uy * uy) / det
         d2 = -2.0 * rs - 2.0 * (1.0 - 2.0 * lam) * sds + 2.0 * lam * (1.0 - lam) * ucu
         lam = lam - d1 / d2
-    cxx = axx + lam * dxx
-    cxy = axy + lam * dxy
-    cyy = ayy + lam * dyy
-    det = cxx * cyy - cxy * cxy
-    s0 = (cyy * dx0 - cxy * dx1) / det
-    s1 = (cxx * dx1 - cxy * dx0) / det
+    s0, s1 = _pw_terms(lam, dx0, dx1, axx, axy, ayy, dxx, dxy, dyy)[:2]
     f = lam * (1.0 - lam) * (dx0 * s0 + dx1 * s1)
     return f, lam, s0, s1
 
