@@ -128,3 +128,43 @@ def test_check_json_on_shapes(capsys):
     n_prime = report["N"] - report["n_rattlers"]
     assert report["isostatic_count"] == 3 * n_prime - 1 - report["n_sliders"]
     assert report["z"] == pytest.approx(2 * (report["n_contacts"] + 1) / (n_prime - report["n_sliders"] / 3))
+
+
+DISK_LIMIT = Path(__file__).parent / "data" / "shapes_ellipse_alpha1.001_n16_p1e-7.nc"
+
+
+def test_disk_limit_of_ellipses():
+    """Ellipses of aspect ratio 1.001 (A - 1 = 3.7e-7) at P0 = 1e-7 count as disks.
+
+    Data: ``jamflow init-shapes e0.nc --shape ellipse --aspect-ratio 1.001 --n 16
+    --phi 0.5 --seed 1`` then ``jamflow soft-jam e0.nc OUT --pressure 1e-7
+    --delta-phi 1e-2 --pressure-rtol 1e-2``. The non-rattlers form an isostatic disk
+    network, ``N_c = 2 N' - 1`` (``<z> = 4``, Fig. 8's small-A limit), hypostatic by
+    ``N'`` against ``3 N' - 1``; the missing constraints are exactly the ``N'`` quartic
+    (rotational) modes, and the zero modes are the two translations plus three per
+    rattler.
+    """
+    p = read_packing(DISK_LIMIT, None)
+    c, rattler, slider, _ = count_constraints(p)
+    n_prime = p.n - c.n_rattlers
+    assert c.n_contacts == 2 * n_prime - 1
+    assert c.z == pytest.approx(4.0, rel=1e-15)
+    assert c.counting == "hypostatic"
+    spec = spectrum(p, fourth=False)
+    assert spec.n_quartic == n_prime == c.isostatic_count - c.n_contacts
+    assert spec.n_zero == 2 + 3 * c.n_rattlers
+    model, q = shape_model(p)
+    lam, vec = np.linalg.eigh(model.hessian(q).toarray())
+    zero = vec[:, spec.region == 0]
+    expected = []
+    for axis in range(2):
+        t = np.zeros(q.size)
+        t[axis: 2 * model.n: 2] = ~rattler  # the backbone translates rigidly
+        expected.append(t / np.linalg.norm(t))
+    for b in np.flatnonzero(rattler):
+        for dof in (2 * b, 2 * b + 1, 2 * model.n + b):
+            t = np.zeros(q.size)
+            t[dof] = 1.0
+            expected.append(t)
+    for t in expected:
+        assert np.linalg.norm(zero.T @ t) == pytest.approx(1.0, abs=1e-9)
