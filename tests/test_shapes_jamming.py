@@ -108,3 +108,52 @@ def test_jammed_shapes_balance_forces_and_torques(kind):
         u.append((ms.evaluate(ms.dofs(cs)).energy, ms.box.volume))
     dudv = (u[1][0] - u[0][0]) / (u[1][1] - u[0][1])
     assert -dudv == pytest.approx(p.pressure, rel=1e-6)
+
+
+def _start(tmp_path) -> str:
+    # 16 bodies: with fewer, the box of the jammed packing is narrower than twice the
+    # neighbour-list reach (bounding diameter + skin) and the model refuses it
+    src = tmp_path / "start.nc"
+    assert main(["init-shapes", str(src), "--shape", "circulo-line", "--asphericity", "1.2", "--n", "16",
+                 "--seed", "3", "--quiet"]) == 0
+    return str(src)
+
+
+@pytest.mark.parametrize("extra, needle", [
+    (["--exponent", "2.5"], "linear spring"),
+    (["--seed", "4"], "init-shapes --seed"),
+    (["--box-dof", "full"], "box stays square"),
+])
+def test_soft_jam_refuses_options_shapes_do_not_have(tmp_path, capsys, extra, needle):
+    out = tmp_path / "j.nc"
+    assert main(["soft-jam", _start(tmp_path), str(out), "--pressure", "1e-3", "--quiet", *extra]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and needle in err[0]
+    assert not out.exists()
+
+
+def test_soft_jam_refuses_crossed_cores(tmp_path, capsys):
+    from jamflow.io import write_packing
+
+    src = _start(tmp_path)
+    p = read_packing(src, None)
+    x = p.position.copy()
+    x[1] = x[0]  # the second body's shaft now crosses the first's
+    theta = p.orientation.copy()
+    theta[1] = theta[0] + 1.0
+    bad = tmp_path / "crossed.nc"
+    write_packing(p.evolve(position=x, orientation=theta), bad)
+    assert main(["soft-jam", str(bad), str(tmp_path / "j.nc"), "--pressure", "1e-3", "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert "intersecting cores" in err and "(0, 1)" in err
+
+
+def test_soft_jam_cli_prints_its_numbers(tmp_path, capsys):
+    out = tmp_path / "j.nc"
+    assert main(["soft-jam", _start(tmp_path), str(out), "--pressure", "1e-2", "--delta-phi", "1e-2",
+                 "--pressure-rtol", "1e-3", "--force-tol", "1e-12"]) == 0
+    printed = capsys.readouterr().out
+    p = read_packing(out, None)
+    assert f"{p.packing_fraction:.10f}" in printed
+    assert abs(p.pressure - 1e-2) <= 1e-3 * 1e-2
+    assert "max |torque|" in printed
