@@ -92,10 +92,10 @@ def main() -> None:
         ax1.loglog(args.n, jam_time[a], "o-", label=family)
         if family != "disk":
             ax2.loglog(args.n, spec_time[a], "o-", label=family)
-    ax1.set_xlabel("number of bodies N")
+    ax1.set_xlabel("number of bodies N [1]")
     ax1.set_ylabel("time to a jammed packing [s]")
     ax1.set_title(f"P0 = {args.pressure:g}, A = {args.asphericity:g}")
-    ax2.set_xlabel("number of bodies N")
+    ax2.set_xlabel("number of bodies N [1]")
     ax2.set_ylabel("full-spectrum time [s]")
     ax1.legend()
     ax2.legend()

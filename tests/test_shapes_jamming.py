@@ -157,3 +157,16 @@ def test_soft_jam_cli_prints_its_numbers(tmp_path, capsys):
     assert f"{p.packing_fraction:.10f}" in printed
     assert abs(p.pressure - 1e-2) <= 1e-3 * 1e-2
     assert "max |torque|" in printed
+
+
+def test_reuleaux_triangles_jam_but_are_not_counted(capsys):
+    table = bidisperse_shapes(unit_shape("reuleaux"))
+    start = random_shape_packing(table, 16, 0.4, 2)
+    res = jam_shapes(start, 1e-3, JammingSettings(force_tol=1e-12, pressure_rtol=1e-3, delta_phi=1e-2))
+    p = res.packing
+    assert res.converged and abs(p.pressure - 1e-3) <= 1e-6
+    assert p.attrs["max_force_sq"] <= 1e-24
+    with pytest.raises(ValueError, match="not implemented"):
+        from jamflow.shapes.counting import count_constraints
+
+        count_constraints(p)

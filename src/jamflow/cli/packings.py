@@ -148,7 +148,7 @@ def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
     if packing.shapes is not None:
         kinds, counts = np.unique(packing.shapes.kind[packing.shape_index], return_counts=True)
         report["shapes"] = {str(k): int(c) for k, c in zip(kinds, counts)}
-        if packing.links is None and _has_shape_model(kinds):
+        if packing.links is None and _counted_family(kinds):
             from ..shapes.counting import count_constraints
 
             counting, *_ = count_constraints(packing, args.parallel_contacts)
@@ -169,19 +169,20 @@ def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
                  ("coordination <z> (Eq. 3)", f"{report['z']:.6f}"),
                  ("isostatic count 3N' - 1 - N_s", f"{report['isostatic_count']} ({report['counting']})")]
     else:
-        rows.append(("contacts, rattlers", "not counted for linked particles or shapes without an energy model"))
+        rows.append(("contacts, rattlers", "not counted for linked particles, dumbbells and Reuleaux triangles"))
     print(format_rows(rows))
     return 0
 
 
-def _has_shape_model(kinds: np.ndarray) -> bool:
+def _counted_family(kinds: np.ndarray) -> bool:
+    """Whether the shape counting covers these kinds (one family with contact points)."""
     from ..models.shapes import shape_family
+    from ..shapes.counting import COUNTED_FAMILIES
 
     try:
-        shape_family(kinds)
+        return shape_family(kinds) in COUNTED_FAMILIES
     except ValueError:
         return False
-    return True
 
 
 def _check(args: argparse.Namespace) -> int:

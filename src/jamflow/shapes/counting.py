@@ -32,10 +32,13 @@ from ..models.shapes import _kernels
 from ..network import ContactSet, contact_jacobian, find_sliders, isostatic_count, prune_rattlers, rigidity_counting
 from ..packing import Packing
 
-__all__ = ["PARALLEL_MODES", "ShapeCounting", "count_constraints", "shape_contacts", "shape_model"]
+__all__ = ["COUNTED_FAMILIES", "PARALLEL_MODES", "ShapeCounting", "count_constraints", "shape_contacts", "shape_model"]
 
 #: How a parallel or nearly parallel circulo contact is counted (Fig. 6).
 PARALLEL_MODES = ("once", "twice")
+
+#: Model families whose contacts (points, normals) are implemented.
+COUNTED_FAMILIES = ("circulo", "ellipse")
 
 
 def shape_model(packing: Packing) -> tuple[ShapeModel, NDArray[np.float64]]:
@@ -56,6 +59,9 @@ def shape_contacts(model: ShapeModel, q: NDArray[np.float64], parallel: str = "o
     """
     if parallel not in PARALLEL_MODES:
         raise ValueError(f"parallel contacts are counted {' or '.join(PARALLEL_MODES)}, got {parallel!r}")
+    if model.family not in COUNTED_FAMILIES:
+        raise ValueError(f"contact points and normals of {model.family} bodies are not implemented; "
+                         f"counting covers {', '.join(COUNTED_FAMILIES)}")
     if model.family == "ellipse":
         pairs = model.pair_table(q)
         geo = _kernels.ellipse_contact_geometry(pairs["i"], pairs["j"], pairs["dx"], q[2 * model.n:], model.params)

@@ -154,7 +154,7 @@ def random_shape_packing(shapes: ShapeTable, n: int, phi: float, seed: int,
     Raises
     ------
     ValueError
-        Bad ``n`` or ``phi``, a family without an energy model, or a body that finds
+        Bad ``n`` or ``phi``, a family without an energy model (dumbbells), or a body that finds
         no free place in ``max_attempts`` tries (``phi`` too high for addition).
     """
     if n < 2 or n % 2:

@@ -363,10 +363,11 @@ def _segments_cross(ax, ay, bx, by, cx, cy, dx, dy):
 
 @njit(cache=True)
 def _world_vertices(p, t, ox, oy):
-    n = int(p[1])
+    """Vertices ``(n, 2)`` of a body at angle ``t`` and centre ``(ox, oy)``, real or complex."""
+    n = int(p[1].real)
     c = np.cos(t)
     s = np.sin(t)
-    out = np.empty((n, 2))
+    out = np.zeros((n, 2)) + 0.0 * (c + ox)
     for m in range(n):
         out[m, 0] = ox + c * p[2 + 2 * m] - s * p[3 + 2 * m]
         out[m, 1] = oy + s * p[2 + 2 * m] + c * p[3 + 2 * m]
@@ -452,3 +453,89 @@ def ellipse_contact_geometry(i, j, dx, theta, params):
         out[p, 2] = s0 / norm
         out[p, 3] = s1 / norm
     return out
+
+
+@njit(cache=True)
+def _in_arc(ux, uy, ax, ay, bx, by):
+    """Whether direction ``u`` lies in the (< pi) angle spanned from ``a`` to ``b`` (either sense)."""
+    cab = ax * by - ay * bx
+    return (ax * uy - ay * ux) * cab >= 0.0 and (ux * by - uy * bx) * cab >= 0.0
+
+
+@njit(cache=True)
+def _point_term(pax, pay, pbx, pby, dx0, dx1, sigma, k, g, oa, ob):
+    """``(k/2)(sigma - r)^2`` of two body-fixed points ``P_a`` (rel. centre a) and ``P_b`` (rel. centre a); adds the gradient."""
+    qx = pax - pbx
+    qy = pay - pby
+    r = np.sqrt(qx * qx + qy * qy)
+    delta = sigma - r
+    nx = qx / r
+    ny = qy / r
+    fr = -k * delta
+    g[oa] += fr * nx
+    g[oa + 1] += fr * ny
+    g[oa + 2] += fr * (pax * ny - pay * nx)
+    g[ob] -= fr * nx
+    g[ob + 1] -= fr * ny
+    g[ob + 2] -= fr * ((pbx - dx0) * ny - (pby - dx1) * nx)
+    return 0.5 * k * delta * delta
+
+
+@njit(cache=True)
+def reuleaux_pair(dx0, dx1, ti, tj, pi, pj, k, g):
+    """Reuleaux-triangle pair (VanderWerf et al. Fig. 2); parameters ``[s, 3, vertices]`` (``s`` the side).
+
+    Arc ``m`` of a body is centred on its vertex ``m`` with radius ``s`` and joins the
+    other two vertices. Terms, each ``(k/2)(sigma - r)^2`` when positive and valid:
+
+    - arc-arc: ``r`` = distance of the two arc centres, ``sigma = s_i + s_j``, valid
+      when the contact point (on the line of centres, ``s`` from each centre) lies on
+      both arcs;
+    - vertex-arc: ``r`` = distance from the arc's centre to the other body's vertex,
+      ``sigma`` = the arc's radius, valid when the vertex lies in the arc's angle and
+      the contact normal lies in the vertex's normal cone (between the normals of the
+      two arcs meeting there), where no arc-arc term of those arcs is valid.
+
+    At a validity boundary the arc-arc contact point is the vertex of the vertex-arc
+    term, so the two ``delta`` agree and share a normal: ``U`` and its gradient are
+    continuous. All terms are distances between body-fixed points.
+    """
+    si = pi[0]
+    sj = pj[0]
+    vi = _world_vertices(pi, ti, 0.0 * dx0, 0.0 * dx1)
+    vj = _world_vertices(pj, tj, dx0, dx1)
+    energy = 0.0 * dx0
+    for m in range(3):
+        m1 = (m + 1) % 3
+        m2 = (m + 2) % 3
+        for n in range(3):
+            n1 = (n + 1) % 3
+            n2 = (n + 2) % 3
+            # arc m of i (centre vi[m]) against arc n of j (centre vj[n])
+            ux = vj[n, 0] - vi[m, 0]
+            uy = vj[n, 1] - vi[m, 1]
+            r = np.sqrt(ux * ux + uy * uy)
+            if r.real < (si + sj).real:
+                ok_i = _in_arc(ux.real, uy.real, (vi[m1, 0] - vi[m, 0]).real, (vi[m1, 1] - vi[m, 1]).real,
+                               (vi[m2, 0] - vi[m, 0]).real, (vi[m2, 1] - vi[m, 1]).real)
+                ok_j = _in_arc(-ux.real, -uy.real, (vj[n1, 0] - vj[n, 0]).real, (vj[n1, 1] - vj[n, 1]).real,
+                               (vj[n2, 0] - vj[n, 0]).real, (vj[n2, 1] - vj[n, 1]).real)
+                if ok_i and ok_j:
+                    energy += _point_term(vi[m, 0], vi[m, 1], vj[n, 0], vj[n, 1], dx0, dx1, si + sj, k, g, 0, 3)
+            # vertex n of j against arc m of i: u in the arc's angle and -u in the
+            # vertex's normal cone (between the normals of the two arcs ending there),
+            # exclusive with the arc-arc terms of the arcs meeting at the vertex
+            if r.real < si.real and _in_arc(ux.real, uy.real, (vi[m1, 0] - vi[m, 0]).real,
+                                            (vi[m1, 1] - vi[m, 1]).real, (vi[m2, 0] - vi[m, 0]).real,
+                                            (vi[m2, 1] - vi[m, 1]).real) \
+                    and _in_arc(-ux.real, -uy.real, (vj[n, 0] - vj[n1, 0]).real, (vj[n, 1] - vj[n1, 1]).real,
+                                (vj[n, 0] - vj[n2, 0]).real, (vj[n, 1] - vj[n2, 1]).real):
+                energy += _point_term(vi[m, 0], vi[m, 1], vj[n, 0], vj[n, 1], dx0, dx1, si, k, g, 0, 3)
+            # vertex m of i against arc n of j (the mirror image)
+            if r.real < sj.real and _in_arc(-ux.real, -uy.real, (vj[n1, 0] - vj[n, 0]).real,
+                                            (vj[n1, 1] - vj[n, 1]).real, (vj[n2, 0] - vj[n, 0]).real,
+                                            (vj[n2, 1] - vj[n, 1]).real) \
+                    and _in_arc(ux.real, uy.real, (vi[m, 0] - vi[m1, 0]).real, (vi[m, 1] - vi[m1, 1]).real,
+                                (vi[m, 0] - vi[m2, 0]).real, (vi[m, 1] - vi[m2, 1]).real):
+                energy += _point_term(vi[m, 0], vi[m, 1], vj[n, 0], vj[n, 1], dx0, dx1, sj, k, g, 0, 3)
+    return energy

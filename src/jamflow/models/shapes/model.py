@@ -13,7 +13,8 @@ per shape family:
 - ``circulo`` (circulo-lines and circulo-polygons, mixed freely): App. A, each
   vertex against each edge of the other body (:func:`._kernels.circulo_vertex_edge`);
 - ``ellipse``: centre distance and the Perram–Wertheim contact distance
-  (:func:`._kernels.perram_wertheim`).
+  (:func:`._kernels.perram_wertheim`);
+- ``reuleaux``: arc-arc and vertex-arc distances of Fig. 2 (:func:`._kernels.reuleaux_pair`).
 
 Masses are equal (``mass``, default 1); the moment of inertia of body ``i`` is
 ``mass * gyration_squared`` of its shape (uniform density), entering as the inverse
@@ -40,9 +41,10 @@ __all__ = ["SHAPE_FAMILIES", "ShapeModel", "shape_family"]
 SHAPE_FAMILIES: dict[str, tuple[str, ...]] = {
     "circulo": ("circulo_line", "circulo_polygon"),
     "ellipse": ("ellipse",),
+    "reuleaux": ("reuleaux",),
 }
 
-_PAIR = {"circulo": _kernels.circulo_pair, "ellipse": _kernels.ellipse_pair}
+_PAIR = {"circulo": _kernels.circulo_pair, "ellipse": _kernels.ellipse_pair, "reuleaux": _kernels.reuleaux_pair}
 
 
 def shape_family(kinds: ArrayLike) -> str:
@@ -71,7 +73,8 @@ def _shape_parameters(shapes: ShapeTable, family: str) -> NDArray[np.float64]:
     out = np.zeros((len(shapes), width))
     for k in range(len(shapes)):
         v = shapes.vertex_list(k)
-        out[k, 0] = shapes.radius[k]
+        # circulo: rounding radius; Reuleaux: arc radius = side
+        out[k, 0] = shapes.radius[k] if family == "circulo" else np.linalg.norm(v[1] - v[0])
         out[k, 1] = len(v)
         out[k, 2: 2 + 2 * len(v)] = v.ravel()
     return out
