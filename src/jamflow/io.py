@@ -69,6 +69,8 @@ DATASET_KINDS: dict[str, tuple[frozenset[str], str]] = {
                           "a jamming certificate of a linked packing (jamflow certify on links)"),
     "chain-moduli": (frozenset({"compliance", "bulk_hill", "shear_hill"}),
                      "compliance and moduli of a linked packing (jamflow moduli on links)"),
+    "modes": (frozenset({"eigenvalue", "region", "rotational_weight"}),
+              "a dynamical-matrix spectrum of a shape packing (jamflow modes)"),
     "tradeoff": (frozenset({"time", "on_front", "is_reference"}), "a speed/accuracy sweep (jamflow tradeoff)"),
     "checkpoint": (frozenset({"x", "h", "radius", "nl_pairs"}), "a flow checkpoint (--checkpoint)"),
     "snapshots": (frozenset({"snapshot_position", "snapshot_box"}), "flow snapshots (--snapshots)"),
@@ -335,6 +337,13 @@ def write_xyz(frames: Packing | Sequence[Packing], path: str | os.PathLike, pos_
     Each frame's header has ``Lattice`` (box vectors), ``pbc``, ``phi`` and, when
     known, ``strain``, ``time`` and ``pressure``.
 
+    Shaped bodies (2D) add ``shape_index:I:1``, ``angle:R:1`` (orientation [rad]) and
+    ``orientation:R:4``, the unit quaternion ``(X, Y, Z, W) = (0, 0, sin(theta/2),
+    cos(theta/2))`` of the rotation about z, which OVITO maps to its ``Orientation``
+    property; with ellipses also ``aspherical_shape:R:3`` (OVITO's ``Aspherical
+    Shape``: semi-axes ``(a, b, b)`` for an ellipse, zeros for other bodies, which
+    OVITO then draws with their ``radius``, the bounding radius).
+
     2D packings are written with ``pbc="T T F"``, ``z = 0`` and a third lattice vector
     ``(0, 0, max diameter)``: ASE reads them as periodic in x and y only, and OVITO
     needs every lattice vector non-zero to load the cell. OVITO marks a system 2D only
@@ -363,6 +372,17 @@ def write_xyz(frames: Packing | Sequence[Packing], path: str | os.PathLike, pos_
         if packing.rattler is not None:
             props.append("rattler:I:1")
             columns.append(packing.rattler.astype(np.int64)[:, None])
+        if packing.shapes is not None:
+            theta = np.asarray(packing.orientation, dtype=np.float64)
+            quat = np.zeros((n, 4))
+            quat[:, 2], quat[:, 3] = np.sin(0.5 * theta), np.cos(0.5 * theta)
+            props.append("shape_index:I:1:angle:R:1:orientation:R:4")
+            columns += [packing.shape_index.astype(np.int64)[:, None], theta[:, None], quat]
+            kind = packing.shapes.kind[packing.shape_index]
+            if np.any(kind == "ellipse"):
+                semi = np.where((kind == "ellipse")[:, None], packing.shapes.semi_axes[packing.shape_index], 0.0)
+                props.append("aspherical_shape:R:3")
+                columns.append(np.column_stack([semi, semi[:, 1]]))
         if packing.force is not None:
             load = np.zeros(n)
             np.add.at(load, packing.contacts[:, 0], np.abs(packing.force))

@@ -514,6 +514,10 @@ def _body_variables(p: Packing) -> dict[str, Any]:
         out["n_vertices"] = (("shape",), t.n_vertices, {"units": "1", "long_name": "number of vertices of the shape"})
         out["shaft_half_width"] = _length(("shape",), t.shaft_half_width,
                                           "dumbbell shaft half-width (NaN for other kinds)")
+        out["asphericity"] = (("shape",), t.asphericity, {
+            "units": "1", "long_name": "asphericity A = p^2 / (4 pi a) (exact; 1 for a disk)",
+            "comment": "derived from the shape parameters for convenience; recomputed on read",
+        })
     return out
 
 

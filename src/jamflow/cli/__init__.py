@@ -21,7 +21,7 @@ from .common import path_arguments
 
 #: Topic modules of this package that contribute subcommands.
 COMMAND_MODULES: tuple[str, ...] = ("packings", "analysis", "soft", "flow", "certify", "tradeoff", "ls", "calippso",
-                                     "summary", "minimize", "chains")
+                                     "summary", "minimize", "chains", "shapes")
 
 
 class _Parser(argparse.ArgumentParser):

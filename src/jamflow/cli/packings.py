@@ -67,6 +67,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quiet", action="store_true",
                    help="accepted like every command's --quiet; check has no progress output and always "
                         "prints its report, which is its result")
+    p.add_argument("--parallel-contacts", choices=["once", "twice"], default="once",
+                   help="shape packings: count a parallel or nearly parallel circulo contact once (default) "
+                        "or twice (VanderWerf et al. Fig. 6)")
     add_overlap_option(p, default=None)
 
 
@@ -115,7 +118,11 @@ def _export_xyz(args: argparse.Namespace) -> int:
         raise ValueError(f"{args.packing} is a flow time series without positions; export its snapshot file "
                          "(run with --snapshots N, written to OUT.snapshots.nc)")
     else:
-        frames = [read_packing(args.packing, overlap_tol(args))]
+        frame = read_packing(args.packing, None)
+        if frame.shapes is None:
+            # shaped bodies overlap by their energy model's contact distance, not the spheres' check
+            frame.validate(overlap_tol(args))
+        frames = [frame]
     if args.pos_2d and frames[0].d != 2:
         raise ValueError(f"--pos-2d is for 2D packings, got d = {frames[0].d}")
     write_xyz(frames, args.out, pos_2d=args.pos_2d)
@@ -127,20 +134,24 @@ def _export_xyz(args: argparse.Namespace) -> int:
 
 
 def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
-    """Links: how well they hold and the cluster count (rattling clusters, danglers, isostaticity);
-    shapes: by kind (their contacts are not counted yet).
+    """What check can say of links and shapes: how well links hold, and the counting of each body model.
 
-    Linked contacts are the packing's stored contacts (or, with ``--gap-tol`` or none
-    stored, pairs within the gap tolerance), never linked pairs; the count is
-    :func:`jamflow.chains.clusters.count_clusters` (stated in ``docs/chains.md``).
+    Linked spheres get the cluster count of :func:`jamflow.chains.clusters.count_clusters`
+    (stated in ``docs/chains.md``) over the packing's stored contacts (or, with
+    ``--gap-tol`` or none stored, pairs within the gap tolerance), never linked pairs.
+    Shape packings of a family with an energy model get the counting of
+    :mod:`jamflow.shapes.counting` (contacts, rattlers, sliders, ``<z>`` of Eq. 3,
+    isostatic count ``3N' - 1 - N_s``). Linked shapes, dumbbells and Reuleaux
+    triangles are not counted.
     """
     report: dict = {"N": packing.n, "d": packing.d, "phi": packing.packing_fraction}
-    counted = packing.links is not None and packing.shapes is None
+    links_counted = packing.links is not None and packing.shapes is None
+    shapes_counted = False
     if packing.links is not None:
         err = packing.links.length_errors(packing.position, packing.box)
         report.update(n_links=len(packing.links), n_clusters=int(packing.clusters.max(initial=-1)) + 1,
                       max_link_error=float(np.max(np.abs(err), initial=0.0)))
-    if counted:
+    if links_counted:
         source = "stored" if args.gap_tol is None and packing.contacts is not None else "gap"
         contacts = contact_network(packing, args.gap_tol)
         contacts = contacts[~packing.links.contains(contacts[:, 0], contacts[:, 1])]
@@ -151,6 +162,12 @@ def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
     if packing.shapes is not None:
         kinds, counts = np.unique(packing.shapes.kind[packing.shape_index], return_counts=True)
         report["shapes"] = {str(k): int(c) for k, c in zip(kinds, counts)}
+        if packing.links is None and _counted_family(kinds):
+            from ..shapes.counting import count_constraints
+
+            counting, *_ = count_constraints(packing, args.parallel_contacts)
+            report.update(counting.as_dict())
+            shapes_counted = True
     if args.json:
         print(json.dumps(report))
         return 0
@@ -158,7 +175,7 @@ def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
     if "n_links" in report:
         rows += [("links", f"{report['n_links']} in {report['n_clusters']} clusters"),
                  ("max link-length error", f"{report['max_link_error']:.3e} (relative)")]
-    if counted:
+    if links_counted:
         rows += [("contacts (backbone)", f"{report['n_contacts']}  [{report['contact_source']}]"),
                  ("rattlers", f"{report['n_rattlers']} ({report['n_rattling_clusters']} rattling clusters, "
                               f"{report['n_danglers']} danglers)"),
@@ -167,9 +184,26 @@ def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
                                f"{report['isostatic_count']}: {report['rigidity_counting']})")]
     if "shapes" in report:
         rows.append(("shapes", ", ".join(f"{c} {k}" for k, c in report["shapes"].items())))
-        rows.append(("contacts, rattlers", "not counted for shaped particles yet"))
+    if shapes_counted:
+        rows += [("contacts (non-rattlers)", f"{report['n_contacts']} (parallel contacts counted {report['parallel']})"),
+                 ("rattlers, sliders", f"{report['n_rattlers']}, {report['n_sliders']}"),
+                 ("coordination <z> (Eq. 3)", f"{report['z']:.6f}"),
+                 ("isostatic count 3N' - 1 - N_s", f"{report['isostatic_count']} ({report['counting']})")]
+    elif "shapes" in report:
+        rows.append(("contacts, rattlers", "not counted for linked shapes, dumbbells and Reuleaux triangles"))
     print(format_rows(rows))
     return 0
+
+
+def _counted_family(kinds: np.ndarray) -> bool:
+    """Whether the shape counting covers these kinds (one family with contact points)."""
+    from ..models.shapes import shape_family
+    from ..shapes.counting import COUNTED_FAMILIES
+
+    try:
+        return shape_family(kinds) in COUNTED_FAMILIES
+    except ValueError:
+        return False
 
 
 def _check(args: argparse.Namespace) -> int:

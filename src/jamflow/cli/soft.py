@@ -147,6 +147,8 @@ def _soft_jam_linked(args: argparse.Namespace, packing: Packing) -> int:
 
 def _soft_jam(args: argparse.Namespace) -> int:
     packing = read_packing(args.input, None)
+    if packing.shapes is not None:
+        return _soft_jam_shapes(args, packing)
     if (packing.links is not None and len(packing.links)) or args.shear_stabilize:
         return _soft_jam_linked(args, packing)
     if args.seed is not None:
@@ -177,6 +179,41 @@ def _soft_jam(args: argparse.Namespace) -> int:
                                     f"excess {s.n_contacts - s.isostatic_count})"),
         ("rattlers", s.n_rattlers),
         ("max |F|", f"{result.packing.attrs['max_force_sq'] ** 0.5:.3g} epsilon / mean diameter"),
+        ("FIRE steps", result.steps),
+    ])
+    return 0
+
+
+def _soft_jam_shapes(args: argparse.Namespace, packing: Packing) -> int:
+    """soft-jam of shaped bodies: the linear spring of VanderWerf et al. Eq. 1, with rotations."""
+    from ..shapes.jamming import jam_shapes
+
+    if args.seed is not None:
+        raise ValueError("--seed: a shape packing starts from its input; draw a new start with init-shapes --seed")
+    if args.exponent != 2.0:
+        raise ValueError(f"--exponent {args.exponent}: shaped bodies use the linear spring of Eq. 1 (exponent 2)")
+    if args.box_dof != "isotropic":
+        raise ValueError("--box-dof full is not available for shaped bodies (the box stays square)")
+    bar = tqdm(desc="soft-jam", unit=" bisection", disable=args.quiet)
+
+    def progress(info: dict) -> None:
+        bar.update(1)
+        bar.set_postfix(phi=f"{info['phi']:.8f}", P=f"{info['pressure']:.3e}")
+
+    settings = JammingSettings(force_tol=args.force_tol, pressure_rtol=args.pressure_rtol,
+                               delta_phi=args.delta_phi, max_steps=args.max_steps)
+    result = jam_shapes(packing, args.pressure, settings, progress)
+    bar.close()
+    if not result.converged:
+        raise RuntimeError(f"FIRE did not reach force_tol {args.force_tol:g} within {args.max_steps} steps")
+    out = result.packing
+    write_packing(out, args.out, stage_parameters(args, "input", "out"))
+    print_summary(args, args.out, [
+        ("phi_J", f"{out.packing_fraction:.10f}"),
+        ("pressure", f"{out.pressure:.6g} (target {args.pressure:g}) k"),
+        ("interacting pairs", len(out.contacts)),
+        ("max |F|", f"{out.attrs['max_force_sq'] ** 0.5:.3g} k length"),
+        ("max |torque|", f"{out.attrs['max_torque_sq'] ** 0.5:.3g} k length^2"),
         ("FIRE steps", result.steps),
     ])
     return 0

@@ -1,0 +1,103 @@
+"""Subcommands on packings of 2D shaped bodies: init-shapes, modes (soft-jam handles jamming)."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+import xarray as xr
+
+from ..io import new_dataset_attrs, read_packing, write_dataset, write_packing
+from ..shapes.generation import SHAPE_CHOICES, bidisperse_shapes, random_shape_packing, unit_shape
+from .common import add_command, add_quiet, packing_rows, print_summary, seed, stage_parameters
+
+#: Default packing fraction of the random start: random sequential addition of
+#: elongated bodies (up to aspect ratio ~5) still finds free places quickly.
+INIT_SHAPES_PHI: float = 0.3
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = add_command(sub, "init-shapes", _init_shapes,
+                    "random bidisperse packing of 2D shaped bodies (VanderWerf et al.): areas 1.4^2 apart, "
+                    "equal masses, mean area-equivalent diameter 1, no overlap",
+                    writes=("out",), packings=("out",))
+    p.add_argument("out", help="output netCDF packing")
+    p.add_argument("--shape", choices=SHAPE_CHOICES, required=True, help="shape family")
+    p.add_argument("--aspect-ratio", type=float, default=None,
+                   help="length over width (ellipse a/b; circulo-line (l + 2R)/2R; dumbbell (2|v| + 2R)/2R)")
+    p.add_argument("--asphericity", type=float, default=None,
+                   help="target asphericity A = p^2 / (4 pi a) > 1 (met exactly by bisection on the shape parameter)")
+    p.add_argument("--sides", type=int, default=None, help="circulo-polygon: number of sides n >= 3 (regular polygon)")
+    p.add_argument("--n", type=int, required=True, help="number of bodies (even: half small, half large)")
+    p.add_argument("--phi", type=float, default=INIT_SHAPES_PHI,
+                   help=f"packing fraction of the random start (default {INIT_SHAPES_PHI})")
+    p.add_argument("--seed", type=seed, required=True, help="random seed")
+    add_quiet(p)
+
+    p = add_command(sub, "modes", _modes,
+                    "dynamical-matrix spectrum of a shape packing: regions 0-3, quartic modes N_1 and their "
+                    "fourth derivatives, and the check N_c = N_c^0 - N_1 (VanderWerf et al. Sec. III B)",
+                    reads=("input",), writes=("out",))
+    p.add_argument("input", help="input netCDF shape packing at force balance (soft-jam)")
+    p.add_argument("out", help="output netCDF spectrum (dim mode)")
+    p.add_argument("--lambda-c", type=float, default=None,
+                   help="cutoff between regions 1 and 2 [k]; default: the widest gap of log(lambda) in the "
+                        "lower half of the nonzero spectrum")
+    add_quiet(p)
+
+
+def _modes(args: argparse.Namespace) -> int:
+    from ..shapes.spectrum import quartic_check, spectrum
+
+    packing = read_packing(args.input, None)
+    if packing.shapes is None:
+        raise ValueError(f"{args.input}: not a shape packing (modes needs shapes and orientations)")
+    spec = spectrum(packing, args.lambda_c)
+    check = quartic_check(packing, spec)
+    mode = ("mode",)
+    ds = xr.Dataset(
+        data_vars={
+            "eigenvalue": (mode, spec.eigenvalue, {"units": "1", "long_name": "dynamical-matrix eigenvalue (ascending)",
+                                                   "comment": "k (energy / length^2; orientations in rad)"}),
+            "region": (mode, spec.region, {"units": "1", "long_name": "spectral region",
+                                           "comment": "0 zero mode, 1 quartic, 2 rotational, 3 translational"}),
+            "rotational_weight": (mode, spec.rotational_weight,
+                                  {"units": "1", "long_name": "weight of the unit eigenvector on orientations"}),
+            "fourth_derivative": (mode, spec.fourth_derivative,
+                                  {"units": "1", "long_name": "d^4 U / ds^4 along region-1 modes (NaN elsewhere)",
+                                   "comment": "k, s the amplitude along the unit eigenvector"}),
+        },
+        attrs=new_dataset_attrs("jamflow shape-packing spectrum", stage_parameters(args, "input", "out"),
+                                N=packing.n, n_quartic=spec.n_quartic, n_zero=spec.n_zero, lambda_c=spec.lambda_c,
+                                lambda_0=spec.lambda_0, pressure=float(packing.pressure or np.nan), **check),
+    )
+    write_dataset(ds, args.out)
+    d4 = spec.fourth_derivative[spec.region == 1]
+    print_summary(args, args.out, [
+        ("N, modes", f"{packing.n}, {spec.eigenvalue.size}"),
+        ("zero modes (region 0)", f"{spec.n_zero} (|lambda| <= {spec.lambda_0:.3g})"),
+        ("quartic modes N_1 (region 1)", f"{spec.n_quartic} (lambda < lambda_c = {spec.lambda_c:.4g})"),
+        ("regions 2, 3", f"{int(np.sum(spec.region == 2))}, {int(np.sum(spec.region == 3))}"),
+        ("N_c once, twice", f"{check['n_contacts_once']}, {check['n_contacts_twice']}"),
+        ("N_c^0 - N_1", f"{check['isostatic_minus_quartic']} (N_c^0 = {check['isostatic_count']})"),
+        ("d^4U/ds^4 on region 1", "none" if not d4.size else f"{d4.min():.4g} .. {d4.max():.4g}"),
+    ])
+    return 0
+
+
+def _init_shapes(args: argparse.Namespace) -> int:
+    shape = unit_shape(args.shape, args.aspect_ratio, args.asphericity, args.sides)
+    table = bidisperse_shapes(shape)
+    packing = random_shape_packing(table, args.n, args.phi, args.seed)
+    params = stage_parameters(args, "out")
+    packing = packing.evolve(parameters=params)
+    write_packing(packing, args.out, params)
+    print_summary(args, args.out, packing_rows(packing) + [
+        ("shape", f"{args.shape} ({', '.join(sorted(set(table.kind)))})"),
+        ("asphericity A", f"{table.asphericity[0]:.12g} (A - 1 = {table.asphericity[0] - 1.0:.6g})"),
+        ("areas small, large", f"{table.area[0]:.10g}, {table.area[1]:.10g} (ratio {table.area[1] / table.area[0]:.6g})"),
+        ("bounding diameters", ", ".join(f"{2 * r:.6g}" for r in table.bounding_radius)),
+        ("mean area-equivalent diameter", f"{np.mean(2.0 * np.sqrt(table.area[packing.shape_index] / np.pi)):.12g}"),
+    ])
+    return 0

@@ -1,0 +1,251 @@
+"""Soft 2D shaped bodies (VanderWerf et al., Eq. 1) as an energy model with rotations.
+
+Degrees of freedom ``q`` (shape ``(3N,)``): centres ``(N, 2)`` row-major, then one
+orientation per body [rad] (the order of :mod:`jamflow.models.base`). A
+*configuration* is the ``(N, 3)`` array of rows ``(x, y, theta)``: it is what
+:meth:`ShapeModel.dofs` takes and :meth:`ShapeModel.positions` returns, so that
+the generic minimisers and the bisection to ``P0`` (which hand ``positions(q)`` back
+to ``rescaled``) carry the orientations along.
+
+Pair energy ``U = (k/2) (sigma_ij - r_ij)^2`` for ``sigma_ij > r_ij`` with ``r, sigma``
+per shape family:
+
+- ``circulo`` (circulo-lines and circulo-polygons, mixed freely): App. A, each
+  vertex against each edge of the other body (:func:`._kernels.circulo_vertex_edge`);
+- ``ellipse``: centre distance and the Perram–Wertheim contact distance
+  (:func:`._kernels.perram_wertheim`);
+- ``reuleaux``: arc-arc and vertex-arc distances of Fig. 2 (:func:`._kernels.reuleaux_pair`).
+
+Masses are equal (``mass``, default 1); the moment of inertia of body ``i`` is
+``mass * gyration_squared`` of its shape (uniform density), entering as the inverse
+mass of its orientation, so FIRE's time step means the same for rotations.
+The Hessian is the complex-step derivative of the analytic pair gradients
+(:func:`._kernels.pair_hessian_blocks`), exact to round-off.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import ArrayLike, NDArray
+
+from ...bodies import ShapeTable
+from ...box import Box
+from ...soft.potential import NeighborList
+from ..base import ModelEvaluation
+from . import _kernels
+
+__all__ = ["SHAPE_FAMILIES", "ShapeModel", "shape_family"]
+
+#: Shape kinds each model family handles (one family per packing).
+SHAPE_FAMILIES: dict[str, tuple[str, ...]] = {
+    "circulo": ("circulo_line", "circulo_polygon"),
+    "ellipse": ("ellipse",),
+    "reuleaux": ("reuleaux",),
+}
+
+_PAIR = {"circulo": _kernels.circulo_pair, "ellipse": _kernels.ellipse_pair, "reuleaux": _kernels.reuleaux_pair}
+
+
+def shape_family(kinds: ArrayLike) -> str:
+    """The one family of :data:`SHAPE_FAMILIES` holding every kind in ``kinds``.
+
+    Raises
+    ------
+    ValueError
+        If the kinds are not all of one implemented family.
+    """
+    present = set(np.asarray(kinds, dtype=str).tolist())
+    for family, members in SHAPE_FAMILIES.items():
+        if present <= set(members):
+            return family
+    raise ValueError(
+        f"shape kinds {sorted(present)} have no energy model; implemented families: "
+        + "; ".join(f"{f}: {', '.join(m)}" for f, m in SHAPE_FAMILIES.items())
+    )
+
+
+def _shape_parameters(shapes: ShapeTable, family: str) -> NDArray[np.float64]:
+    """Per-shape flat parameter rows of the pair kernels, shape (S, P)."""
+    if family == "ellipse":
+        return np.array(shapes.semi_axes, dtype=np.float64)
+    width = 2 + 2 * int(shapes.n_vertices.max())
+    out = np.zeros((len(shapes), width))
+    for k in range(len(shapes)):
+        v = shapes.vertex_list(k)
+        # circulo: rounding radius; Reuleaux: arc radius = side
+        out[k, 0] = shapes.radius[k] if family == "circulo" else np.linalg.norm(v[1] - v[0])
+        out[k, 1] = len(v)
+        out[k, 2: 2 + 2 * len(v)] = v.ravel()
+    return out
+
+
+class ShapeModel:
+    """Soft shaped bodies in 2D with translations and rotations (see the module doc).
+
+    Parameters
+    ----------
+    box : Box
+        Fixed periodic 2D box.
+    shapes : ShapeTable
+        Shapes, all of one family of :data:`SHAPE_FAMILIES`.
+    shape_index : array_like of int, shape (N,)
+        Row of ``shapes`` of each body.
+    k : float
+        Spring constant [energy / length^2].
+    mass : float
+        Mass of every body [mass].
+    nlist : NeighborList, optional
+        Verlet list on bounding diameters (reused by :meth:`rescaled`).
+    """
+
+    constrained = False
+
+    def __init__(self, box: Box, shapes: ShapeTable, shape_index: ArrayLike, k: float = 1.0,
+                 mass: float = 1.0, nlist: NeighborList | None = None) -> None:
+        if box.d != 2:
+            raise ValueError(f"shaped bodies are 2D; the box has d = {box.d}")
+        if not (np.isfinite(k) and k > 0.0 and np.isfinite(mass) and mass > 0.0):
+            raise ValueError(f"spring constant and mass must be finite and > 0, got k = {k}, mass = {mass}")
+        self.box = box
+        self.shapes = shapes
+        self.shape_index = np.asarray(shape_index, dtype=np.int64)
+        self.family = shape_family(shapes.kind[np.unique(self.shape_index)])
+        self.k = float(k)
+        self.mass = float(mass)
+        self.n = int(self.shape_index.size)
+        self.d = 2
+        self.n_dof = 3 * self.n
+        self.bounding_diameter = 2.0 * shapes.bounding_radius[self.shape_index]
+        self.nlist = NeighborList(self.bounding_diameter) if nlist is None else nlist
+        self.params = np.ascontiguousarray(_shape_parameters(shapes, self.family)[self.shape_index])
+        inertia = self.mass * shapes.gyration_squared[self.shape_index]
+        self.inverse_mass = np.concatenate([np.full(2 * self.n, 1.0 / self.mass), 1.0 / inertia])
+        #: length that turns a torque into a force in :meth:`max_force` [length]
+        self.torque_arm = float(self.bounding_diameter.mean())
+        self.time_unit = self.torque_arm * np.sqrt(self.mass / (self.k * self.torque_arm**2))
+        self._pair = _PAIR[self.family]
+
+    @property
+    def neighbor_builds(self) -> int:
+        return self.nlist.builds
+
+    def dofs(self, configuration: ArrayLike) -> NDArray[np.float64]:
+        """Flat ``q`` from a configuration ``(N, 3)`` of rows ``(x, y, theta)``."""
+        c = np.asarray(configuration, dtype=np.float64)
+        if c.shape != (self.n, 3):
+            raise ValueError(f"configuration must have shape ({self.n}, 3) (x, y, theta), got {c.shape}")
+        if not np.all(np.isfinite(c)):
+            raise ValueError("configuration has non-finite centres or orientations")
+        return np.concatenate([c[:, :2].ravel(), c[:, 2]])
+
+    def positions(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Configuration ``(N, 3)`` of rows ``(x, y, theta)`` of ``q``."""
+        return np.column_stack([q[: 2 * self.n].reshape(self.n, 2), q[2 * self.n:]])
+
+    def _pairs(self, q: NDArray[np.float64]) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+        x = np.ascontiguousarray(q[: 2 * self.n].reshape(self.n, 2))
+        self.nlist.update(x, self.box)
+        i, j = self.nlist.i, self.nlist.j
+        dx = np.ascontiguousarray(x[j] - x[i] + self.nlist.offsets(self.box))
+        return i, j, dx, np.ascontiguousarray(q[2 * self.n:])
+
+    def evaluate(self, q: NDArray[np.float64]) -> ModelEvaluation:
+        """Energy, gradient ``(3N,)`` and virial (``-sum dU/dx_j dx``, see :mod:`._kernels`)."""
+        i, j, dx, theta = self._pairs(q)
+        grad = np.zeros((self.n, 3))
+        virial = np.zeros((2, 2))
+        energy, n = _kernels.pair_sum(self._pair, i, j, dx, theta, self.params, self.k, grad, virial)
+        return ModelEvaluation(float(energy), np.concatenate([grad[:, :2].ravel(), grad[:, 2]]), virial, int(n))
+
+    def pair_table(self, q: NDArray[np.float64]) -> dict[str, NDArray]:
+        """Interacting pairs (energy > 0) with their energies and gradients.
+
+        Returns
+        -------
+        dict of arrays
+            ``i, j`` (P,), ``i < j``; ``energy`` (P,) [energy]; ``gradient`` (P, 6),
+            ``dU / d(x_i, y_i, theta_i, x_j, y_j, theta_j)``; ``dx`` (P, 2) the
+            minimum-image ``x_j - x_i`` [length].
+        """
+        i, j, dx, theta = self._pairs(q)
+        table = _kernels.pair_table(self._pair, i, j, dx, theta, self.params, self.k)
+        keep = table[:, 0] > 0.0
+        order = np.lexsort((j[keep], i[keep]))
+        return {"i": i[keep][order], "j": j[keep][order], "energy": table[keep, 0][order],
+                "gradient": table[keep, 1:][order], "dx": dx[keep][order]}
+
+    def check_cores(self, q: NDArray[np.float64]) -> None:
+        """Raise ``ValueError`` if two circulo cores intersect (outside the App. A model)."""
+        if self.family != "circulo":
+            return
+        i, j, dx, theta = self._pairs(q)
+        crossed = _kernels.circulo_crossed_pairs(i, j, dx, theta, self.params)
+        if np.any(crossed):
+            k = int(np.flatnonzero(crossed)[0])
+            raise ValueError(
+                f"{int(crossed.sum())} pair(s) of circulo bodies have intersecting cores, e.g. "
+                f"({i[k]}, {j[k]}): an overlap deeper than the rounding radius, outside the contact model"
+            )
+
+    def contact_terms(self, q: NDArray[np.float64]) -> dict[str, NDArray]:
+        """Overlapping vertex–edge terms of a circulo packing (see :func:`._kernels.circulo_terms`).
+
+        Returns
+        -------
+        dict of arrays, one entry per row
+            ``i, j`` (bodies of the pair, ``i < j``), ``vertex_body`` (``i`` or ``j``:
+            the body whose vertex overlaps), ``vertex``, ``edge``, ``r``, ``delta``
+            [length], ``weight``, ``point`` (N_t, 2) contact point relative to the
+            vertex body's centre [length], ``normal`` (N_t, 2) unit normal from the edge
+            body to the vertex body, ``t`` (foot parameter on the edge).
+        """
+        if self.family != "circulo":
+            raise ValueError(f"contact terms are defined for circulo packings, not {self.family}")
+        i, j, dx, theta = self._pairs(q)
+        rows = _kernels.circulo_terms(i, j, dx, theta, self.params, self.k)
+        pair = rows[:, 0].astype(np.int64)
+        side = rows[:, 1].astype(np.int64)
+        return {
+            "i": i[pair], "j": j[pair], "vertex_body": np.where(side == 0, i[pair], j[pair]),
+            "vertex": rows[:, 2].astype(np.int64), "edge": rows[:, 3].astype(np.int64),
+            "r": rows[:, 4], "delta": rows[:, 5], "weight": rows[:, 6], "point": rows[:, 7:9],
+            "normal": rows[:, 9:11], "t": rows[:, 11],
+        }
+
+    def project(self, g: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
+        return g
+
+    def reproject(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        return q
+
+    def max_force(self, g: NDArray[np.float64]) -> float:
+        """Largest per-body ``sqrt(|F_i|^2 + (tau_i / torque_arm)^2)`` [energy / length].
+
+        ``torque_arm`` is the mean bounding diameter, so force and torque balance are
+        asked to one relative accuracy.
+        """
+        f = g[: 2 * self.n].reshape(self.n, 2)
+        tau = g[2 * self.n:] / self.torque_arm
+        return float(np.sqrt(np.max(np.sum(f * f, axis=1) + tau * tau)))
+
+    def hessian(self, q: NDArray[np.float64]) -> sp.csr_matrix:
+        """``d^2 U / dq dq`` (complex-step of the analytic gradient), shape ``(3N, 3N)``."""
+        i, j, dx, theta = self._pairs(q)
+        blocks = _kernels.pair_hessian_blocks(self._pair, i, j, dx, theta, self.params, self.k,
+                                              _kernels.COMPLEX_STEP)
+        n = self.n
+        index = np.stack([2 * i, 2 * i + 1, 2 * n + i, 2 * j, 2 * j + 1, 2 * n + j], axis=1)
+        rows = np.repeat(index, 6, axis=1).ravel()
+        cols = np.tile(index, (1, 6)).ravel()
+        h = sp.coo_matrix((blocks.ravel(), (rows, cols)), shape=(self.n_dof, self.n_dof)).tocsr()
+        h.sum_duplicates()
+        h.eliminate_zeros()
+        return h
+
+    def rescaled(self, factor: float, configuration: NDArray[np.float64]) -> tuple["ShapeModel", NDArray[np.float64]]:
+        """The model in the box scaled by ``factor`` (shapes unchanged), centres moved affinely."""
+        c = np.array(configuration, dtype=np.float64)
+        c[:, :2] *= factor
+        model = ShapeModel(self.box.scaled(factor), self.shapes, self.shape_index, self.k, self.mass, self.nlist)
+        return model, c

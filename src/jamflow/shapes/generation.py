@@ -1,0 +1,193 @@
+"""Bidisperse shapes at a target aspect ratio or asphericity, and random initial packings.
+
+VanderWerf et al. Sec. II: half the particles small, half large, areas ``a_L = 1.4^2
+a_S``, equal masses; the large shape is the small one scaled by 1.4 (one asphericity).
+Lengths are set so that the mean area-equivalent diameter ``2 sqrt(a / pi)`` is 1 (a
+bidisperse disk packing in the units of the sphere code).
+
+Shape families and their aspect ratio ``alpha`` (length over width):
+
+- ``ellipse``: ``alpha = a / b``;
+- ``circulo-line``: segment of length ``l``, radius ``R``: ``alpha = (l + 2R) / (2R)``
+  (Table I: ``alpha - 1 = 1e-3`` gives ``A - 1 = 4.05e-7``);
+- ``circulo-polygon``: regular ``n``-gon of circumradius ``rho`` rounded by ``R``; only
+  the asphericity is a parameter (``R / rho`` is solved for it); App. B's random
+  polygons are not implemented;
+- ``dumbbell``: lobes of radius ``R`` at ``+-v``, shaft half-width ``R / 2`` (Fig. 4),
+  ``alpha = (2 |v| + 2R) / (2R) >= 2`` (lobes disjoint);
+- ``reuleaux``: no parameter (``A = pi / (2 (pi - sqrt 3)) = 1.1140``).
+
+The asphericity ``A = p^2 / (4 pi a)`` of each is exact (:attr:`ShapeTable.asphericity`)
+and a target ``A`` is met by bisection on the shape parameter to round-off.
+"""
+
+from __future__ import annotations
+
+from math import pi, sqrt
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..bodies import ShapeTable
+from ..box import Box
+from ..models.shapes import ShapeModel
+from ..models.shapes import _kernels
+from ..packing import Packing
+
+__all__ = ["AREA_RATIO", "SHAPE_CHOICES", "SIZE_RATIO", "bidisperse_shapes", "random_shape_packing", "unit_shape"]
+
+#: Shape families of ``jamflow init-shapes --shape`` (command-line spelling).
+SHAPE_CHOICES = ("ellipse", "circulo-line", "circulo-polygon", "dumbbell", "reuleaux")
+
+#: Linear size ratio large / small, so that ``a_L = 1.4^2 a_S`` (Sec. II).
+SIZE_RATIO: float = 1.4
+AREA_RATIO: float = SIZE_RATIO**2
+
+#: Dumbbell shaft half-width over lobe radius (VanderWerf et al. Fig. 4).
+DUMBBELL_WIDTH_RATIO: float = 0.5
+
+
+def _shape(kind: str, x: float, sides: int) -> dict:
+    """Shape of family ``kind`` with shape parameter ``x`` (aspect ratio, or ``R / rho``), unit width scale."""
+    if kind == "ellipse":
+        return dict(kind="ellipse", semi_axes=(x, 1.0))
+    if kind == "circulo-line":
+        return dict(kind="circulo_line", vertices=[(-(x - 1.0), 0.0), (x - 1.0, 0.0)], radius=1.0)
+    if kind == "circulo-polygon":
+        a = 2.0 * pi * np.arange(sides) / sides
+        return dict(kind="circulo_polygon", vertices=np.stack([np.cos(a), np.sin(a)], axis=1), radius=x)
+    if kind == "dumbbell":
+        return dict(kind="dumbbell", vertices=[(-(x - 1.0), 0.0), (x - 1.0, 0.0)], radius=1.0,
+                    shaft_half_width=DUMBBELL_WIDTH_RATIO)
+    a = 2.0 * pi * np.arange(3) / 3
+    return dict(kind="reuleaux", vertices=np.stack([np.cos(a), np.sin(a)], axis=1))
+
+
+def _asphericity(kind: str, x: float, sides: int) -> float:
+    return float(ShapeTable.from_shapes([_shape(kind, x, sides)]).asphericity[0])
+
+
+def unit_shape(kind: str, aspect_ratio: float | None = None, asphericity: float | None = None,
+               sides: int | None = None) -> dict:
+    """One shape of family ``kind`` (see the module doc) at the given parameter, any scale.
+
+    Raises
+    ------
+    ValueError
+        Unknown family, a parameter the family does not take or lacks, or a target
+        outside the family's range.
+    """
+    if kind not in SHAPE_CHOICES:
+        raise ValueError(f"--shape must be one of {', '.join(SHAPE_CHOICES)}, got {kind!r}")
+    if aspect_ratio is not None and asphericity is not None:
+        raise ValueError("give --aspect-ratio or --asphericity, not both")
+    if kind == "circulo-polygon":
+        if sides is None or sides < 3:
+            raise ValueError(f"circulo-polygon needs --sides n >= 3, got {sides}")
+    elif sides is not None:
+        raise ValueError(f"--sides applies to circulo-polygon only, not {kind}")
+    if kind == "reuleaux":
+        if aspect_ratio is not None or asphericity is not None:
+            raise ValueError("a Reuleaux triangle has no shape parameter (A = 1.1140): drop --aspect-ratio/--asphericity")
+        return _shape(kind, 0.0, 0)
+    low = 2.0 if kind == "dumbbell" else 1.0
+    if kind == "circulo-polygon":
+        if aspect_ratio is not None:
+            raise ValueError("a circulo-polygon is set by --asphericity (and --sides), not --aspect-ratio")
+        if asphericity is None:
+            raise ValueError("circulo-polygon needs --asphericity")
+        top = sides * np.tan(pi / sides) / pi  # the sharp polygon, R -> 0
+        if not 1.0 < asphericity < top:
+            raise ValueError(f"a rounded regular {sides}-gon has asphericity in (1, {top:.6g}), got {asphericity}")
+        # A decreases from the polygon's to 1 as R / rho grows: bisect log(R / rho)
+        lo, hi = -30.0, 30.0
+        for _ in range(200):
+            mid = 0.5 * (lo + hi)
+            if _asphericity(kind, np.exp(mid), sides) > asphericity:
+                lo = mid
+            else:
+                hi = mid
+        return _shape(kind, np.exp(0.5 * (lo + hi)), sides)
+    if aspect_ratio is None and asphericity is None:
+        raise ValueError(f"{kind} needs --aspect-ratio or --asphericity")
+    if aspect_ratio is not None:
+        ok = aspect_ratio >= 1.0 if kind == "ellipse" else aspect_ratio > low
+        if not (np.isfinite(aspect_ratio) and ok):
+            raise ValueError(f"{kind} needs --aspect-ratio {'>=' if kind == 'ellipse' else '>'} {low:g}, got {aspect_ratio}")
+        return _shape(kind, aspect_ratio, 0)
+    a_low = _asphericity(kind, low, 0) if kind == "dumbbell" else 1.0
+    if not (np.isfinite(asphericity) and asphericity > a_low):
+        raise ValueError(f"{kind} needs --asphericity > {a_low:.6g}, got {asphericity}")
+    # A grows monotonically with the aspect ratio: bisect log(alpha - low)
+    lo, hi = -60.0, 12.0
+    if _asphericity(kind, low + np.exp(hi), 0) < asphericity:
+        raise ValueError(f"--asphericity {asphericity} needs an aspect ratio beyond {low + np.exp(hi):.3g}")
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if _asphericity(kind, low + np.exp(mid), 0) < asphericity:
+            lo = mid
+        else:
+            hi = mid
+    return _shape(kind, low + np.exp(0.5 * (lo + hi)), 0)
+
+
+def bidisperse_shapes(shape: dict) -> ShapeTable:
+    """Small and large copies of ``shape`` (rows 0 and 1), areas in ratio 1.4^2, mean area-equivalent diameter 1."""
+    area = float(ShapeTable.from_shapes([shape]).area[0])
+    small = (1.0 / (0.5 * (1.0 + SIZE_RATIO))) * 0.5 * sqrt(pi) / sqrt(area)
+    rows = []
+    for scale in (small, small * SIZE_RATIO):
+        rows.append({key: (np.asarray(value, dtype=np.float64) * scale
+                           if key in ("semi_axes", "vertices", "radius", "shaft_half_width") else value)
+                     for key, value in shape.items()})
+    return ShapeTable.from_shapes(rows)
+
+
+def random_shape_packing(shapes: ShapeTable, n: int, phi: float, seed: int,
+                         max_attempts: int = 10_000) -> Packing:
+    """Random sequential addition of ``n`` bodies (half of row 0, half of row 1) at packing fraction ``phi``.
+
+    Each body gets a uniform centre in the square box and a uniform orientation and is
+    kept only if it overlaps no body placed before (exact shape test of the energy
+    model, plus intersecting cores for circulo-shapes), so the start has no overlap.
+
+    Raises
+    ------
+    ValueError
+        Bad ``n`` or ``phi``, a family without an energy model (dumbbells), or a body that finds
+        no free place in ``max_attempts`` tries (``phi`` too high for addition).
+    """
+    if n < 2 or n % 2:
+        raise ValueError(f"--n must be an even number >= 2 (half small, half large), got {n}")
+    if not 0.0 < phi < 0.6:
+        raise ValueError(f"--phi must lie in (0, 0.6) for random sequential addition, got {phi}")
+    index = np.repeat(np.arange(2, dtype=np.int64), n // 2)
+    side = float(np.sqrt(shapes.area[index].sum() / phi))
+    box = Box.cubic(2, side)
+    rng = np.random.default_rng(seed)
+    bound = shapes.bounding_radius[index]
+    model = ShapeModel(box, shapes, index)
+    pair, params = model._pair, model.params
+    circulo = model.family == "circulo"
+    conf = np.zeros((n, 3))
+    done = np.zeros(n, dtype=bool)
+    g = np.zeros(6)
+    for b in rng.permutation(n):
+        placed = np.flatnonzero(done)
+        for _ in range(max_attempts):
+            trial = np.array([*rng.uniform(0.0, side, 2), rng.uniform(0.0, 2.0 * pi)])
+            dx = box.minimum_image(conf[placed, :2] - trial[:2])
+            near = np.flatnonzero(np.hypot(dx[:, 0], dx[:, 1]) < bound[b] + bound[placed])
+            if not any(pair(dx[m, 0], dx[m, 1], trial[2], conf[placed[m], 2], params[b], params[placed[m]], 1.0, g) > 0.0
+                       or (circulo and _kernels.circulo_cores_intersect(dx[m, 0], dx[m, 1], trial[2],
+                                                                      conf[placed[m], 2], params[b],
+                                                                      params[placed[m]]))
+                       for m in near):
+                conf[b] = trial
+                done[b] = True
+                break
+        else:
+            raise ValueError(f"random sequential addition found no free place for body {b} in {max_attempts} "
+                             f"tries at phi = {phi}: lower --phi")
+    return Packing(position=conf[:, :2], diameter=2.0 * bound, box=box, protocol="random-shapes", seed=seed,
+                   orientation=conf[:, 2], shapes=shapes, shape_index=index)

@@ -1,0 +1,122 @@
+"""Dynamical-matrix spectrum of shape packings: regions 0-3 and quartic modes (Sec. III B).
+
+The dynamical matrix is ``M = d^2 U / d xi d xi`` over ``xi = (x_i, y_i, theta_i)``
+(Eq. 2; not mass-weighted, as in the paper), the complex-step Hessian of
+:meth:`~jamflow.models.shapes.ShapeModel.hessian` (round-off accurate: no truncation
+error, which finite differences could not avoid for eigenvalues of 1e-14 ... 1e-8).
+All ``3N`` eigenvalues come from a dense symmetric eigensolver (LAPACK ``syevd``).
+
+Regions (Fig. 7):
+
+- 0: ``|lambda| <= lambda_0``, zero modes (global translations, rattlers, sliders);
+  ``lambda_0 = ZERO_EIGENVALUE_RTOL * lambda_max`` is the floor of a backward-stable
+  eigensolver (a few ``eps * ||M||``) with a safety factor;
+- 1: ``lambda_0 < lambda < lambda_c``, quartic modes, ``N_1`` of them;
+- 2 and 3: ``lambda >= lambda_c``, predominantly rotational (2: more than half of the
+  eigenvector's weight on orientations) or translational (3).
+
+``lambda_c`` is given, or placed at the geometric middle of the widest gap of
+``log lambda`` among the nonzero eigenvalues in the lower half of the spectrum (the
+paper separates regions 1 and 2 by such a gap, ``lambda_c ~ 4e-8`` at ``P0 = 1e-9``;
+region 1 scales with ``P0``, region 2 does not). The fourth derivative of ``U`` along
+each region-1 mode ``v`` (Fig. 11) is the second difference of ``v^T M(q + h v) v``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..packing import Packing
+from .counting import count_constraints, shape_model
+
+__all__ = ["ZERO_EIGENVALUE_RTOL", "FOURTH_DERIVATIVE_STEP", "Spectrum", "spectrum"]
+
+#: Eigenvalues with ``|lambda| <= ZERO_EIGENVALUE_RTOL * lambda_max`` are zero modes:
+#: LAPACK's eigenvalues err by ``O(eps ||M||) ~ 1e-16 lambda_max``; 1e-13 leaves a
+#: factor of ~500 for the round-off of M itself (complex-step entries to ~eps).
+ZERO_EIGENVALUE_RTOL: float = 1e-13
+
+#: Step [length, or rad] of the second difference of ``v^T M v`` along a quartic mode:
+#: truncation ``h^2 U^(6) ~ 1e-6`` relative; round-off ``eps ||M|| / h^2 ~ 1e-9``.
+FOURTH_DERIVATIVE_STEP: float = 1e-3
+
+
+@dataclass(frozen=True)
+class Spectrum:
+    """Eigenvalues and regions of a shape packing's dynamical matrix.
+
+    Attributes
+    ----------
+    eigenvalue : ndarray, shape (3N,)
+        Ascending [k] (energy / length^2 for translations).
+    region : ndarray of int, shape (3N,)
+        0, 1, 2 or 3 (module doc).
+    rotational_weight : ndarray, shape (3N,)
+        Weight of each unit eigenvector on the orientations.
+    fourth_derivative : ndarray, shape (3N,)
+        ``d^4 U / d s^4`` along region-1 modes (NaN elsewhere) [k].
+    lambda_0, lambda_c : float
+        Zero-mode floor and the region-1/2 cutoff.
+    n_quartic : int
+        ``N_1``, the number of region-1 eigenvalues.
+    n_zero : int
+        Number of region-0 eigenvalues.
+    """
+
+    eigenvalue: NDArray[np.float64]
+    region: NDArray[np.int64]
+    rotational_weight: NDArray[np.float64]
+    fourth_derivative: NDArray[np.float64]
+    lambda_0: float
+    lambda_c: float
+    n_quartic: int
+    n_zero: int
+
+
+def _auto_cutoff(lam: NDArray[np.float64], lambda_0: float) -> float:
+    nonzero = lam[lam > lambda_0]
+    low = nonzero[: max(2, nonzero.size // 2)]
+    if low.size < 2:
+        return float(lambda_0)
+    gaps = np.diff(np.log(low))
+    k = int(np.argmax(gaps))
+    return float(np.sqrt(low[k] * low[k + 1]))
+
+
+def spectrum(packing: Packing, lambda_c: float | None = None, fourth: bool = True) -> Spectrum:
+    """Full spectrum of the dynamical matrix with regions and quartic modes (module doc)."""
+    model, q = shape_model(packing)
+    hess = model.hessian(q).toarray()
+    lam, vec = np.linalg.eigh(hess)
+    n = model.n
+    # dofs are centres first, then orientations
+    rot = np.sum(vec[2 * n:] ** 2, axis=0)
+    lambda_0 = ZERO_EIGENVALUE_RTOL * float(max(abs(lam[-1]), abs(lam[0])))
+    if lambda_c is None:
+        lambda_c = _auto_cutoff(lam, lambda_0)
+    if not (np.isfinite(lambda_c) and lambda_c > 0.0):
+        raise ValueError(f"--lambda-c must be positive and finite, got {lambda_c}")
+    region = np.where(np.abs(lam) <= lambda_0, 0, np.where(lam < lambda_c, 1, np.where(rot > 0.5, 2, 3)))
+    d4 = np.full(lam.size, np.nan)
+    if fourth:
+        h = FOURTH_DERIVATIVE_STEP
+        for k in np.flatnonzero(region == 1):
+            v = vec[:, k]
+            curv = [v @ (model.hessian(q + s * h * v) @ v) for s in (-1.0, 1.0)]
+            d4[k] = (curv[0] - 2.0 * lam[k] + curv[1]) / (h * h)
+    return Spectrum(lam, region.astype(np.int64), rot, d4, lambda_0, float(lambda_c),
+                    int(np.count_nonzero(region == 1)), int(np.count_nonzero(region == 0)))
+
+
+def quartic_check(packing: Packing, spec: Spectrum) -> dict:
+    """``N_c = N_c^0 - N_1`` with contacts counted once and twice (Sec. III B)."""
+    out = {}
+    for mode in ("once", "twice"):
+        c, *_ = count_constraints(packing, mode)
+        out[f"n_contacts_{mode}"] = c.n_contacts
+        out["isostatic_count"] = c.isostatic_count
+    out["isostatic_minus_quartic"] = out["isostatic_count"] - spec.n_quartic
+    return out

@@ -1,0 +1,172 @@
+"""Shape generation (init-shapes) and jamming with rotations (soft-jam on shapes).
+
+Physics checked: asphericities against Table I of VanderWerf et al. (independent
+numbers from the paper), the bidisperse area ratio 1.4^2 and unit mean
+area-equivalent diameter, an overlap-free random start, and a jammed packing at the
+target pressure with force and torque balance, whose virial pressure equals
+``-dU/dV`` measured by rescaling the box.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from jamflow.cli import main
+from jamflow.io import read_packing
+from jamflow.models.shapes import ShapeModel
+from jamflow.shapes import bidisperse_shapes, jam_shapes, random_shape_packing, unit_shape
+from jamflow.soft.jamming import JammingSettings
+from jamflow.bodies import ShapeTable
+
+
+@pytest.mark.parametrize("kind, alpha, a_minus_1, rel", [
+    ("circulo-line", 1.0 + 1e-3, 4.05e-7, 2e-3),   # Table I lower end (3 digits)
+    ("circulo-line", 5.0, 1.06, 5e-3),             # Table I upper end
+    ("ellipse", 1.9, 0.161, 5e-3),                 # Table I upper end
+    ("ellipse", 1.0001, 3.75e-9, 2e-3),            # Table I lower end
+])
+def test_asphericity_matches_table_one(kind, alpha, a_minus_1, rel):
+    shape = ShapeTable.from_shapes([unit_shape(kind, aspect_ratio=alpha)])
+    assert shape.asphericity[0] - 1.0 == pytest.approx(a_minus_1, rel=rel)
+
+
+@pytest.mark.parametrize("kind, sides", [("ellipse", None), ("circulo-line", None), ("circulo-polygon", 5),
+                                         ("dumbbell", None)])
+def test_target_asphericity_is_met_exactly(kind, sides):
+    target = 1.6 if kind == "dumbbell" else 1.03
+    table = bidisperse_shapes(unit_shape(kind, asphericity=target, sides=sides))
+    np.testing.assert_allclose(table.asphericity, target, rtol=1e-12)
+    assert table.area[1] / table.area[0] == pytest.approx(1.96, rel=1e-13)
+    assert np.mean(2.0 * np.sqrt(table.area / np.pi)) == pytest.approx(1.0, rel=1e-13)
+
+
+def test_reuleaux_asphericity():
+    table = bidisperse_shapes(unit_shape("reuleaux"))
+    np.testing.assert_allclose(table.asphericity, np.pi / (2.0 * (np.pi - np.sqrt(3.0))), rtol=1e-13)
+
+
+def test_init_shapes_writes_overlap_free_start(tmp_path, capsys):
+    out = tmp_path / "s.nc"
+    assert main(["init-shapes", str(out), "--shape", "circulo-line", "--asphericity", "1.2", "--n", "40",
+                 "--phi", "0.35", "--seed", "5"]) == 0
+    assert "asphericity A" in capsys.readouterr().out
+    p = read_packing(out, None)
+    assert p.packing_fraction == pytest.approx(0.35, rel=1e-12)
+    np.testing.assert_allclose(p.shapes.asphericity, 1.2, rtol=1e-12)
+    import xarray as xr
+    with xr.open_dataset(out) as ds:
+        np.testing.assert_allclose(ds["asphericity"].values, 1.2, rtol=1e-12)
+    m = ShapeModel(p.box, p.shapes, p.shape_index)
+    q = m.dofs(np.column_stack([p.position, p.orientation]))
+    assert m.evaluate(q).energy == 0.0
+    m.check_cores(q)
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--shape", "reuleaux", "--aspect-ratio", "2"], "no shape parameter"),
+    (["--shape", "circulo-polygon", "--asphericity", "1.1"], "--sides"),
+    (["--shape", "circulo-polygon", "--sides", "3", "--asphericity", "2.0"], "asphericity in"),
+    (["--shape", "ellipse", "--asphericity", "0.9"], "--asphericity >"),
+    (["--shape", "ellipse", "--aspect-ratio", "1.5", "--asphericity", "1.1"], "not both"),
+    (["--shape", "dumbbell", "--aspect-ratio", "3"], "no energy model"),
+])
+def test_init_shapes_bad_input(tmp_path, capsys, argv, needle):
+    out = tmp_path / "bad.nc"
+    assert main(["init-shapes", str(out), *argv, "--n", "10", "--seed", "1"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and needle in err[0]
+    assert not out.exists()
+
+
+def test_odd_n_is_refused():
+    with pytest.raises(ValueError, match="even"):
+        random_shape_packing(bidisperse_shapes(unit_shape("ellipse", aspect_ratio=1.5)), 7, 0.3, 1)
+
+
+@pytest.mark.parametrize("kind", ["circulo-line", "ellipse"])
+def test_jammed_shapes_balance_forces_and_torques(kind):
+    table = bidisperse_shapes(unit_shape(kind, asphericity=1.1))
+    start = random_shape_packing(table, 16, 0.4, 11)
+    p0 = 1e-3
+    settings = JammingSettings(force_tol=1e-12, pressure_rtol=1e-4, delta_phi=1e-2)
+    res = jam_shapes(start, p0, settings)
+    p = res.packing
+    assert res.converged
+    assert abs(p.pressure - p0) <= 1e-4 * p0
+    m = ShapeModel(p.box, p.shapes, p.shape_index)
+    # force_tol bounds sqrt(F^2 + (tau / l)^2) per body, l the mean bounding diameter
+    assert p.attrs["max_force_sq"] <= 1e-24
+    assert p.attrs["max_torque_sq"] <= (1e-12 * m.torque_arm) ** 2
+    assert 0.7 < p.packing_fraction < 0.95
+    # virial pressure = -dU/dV: rescale the box and centres, keep shapes and angles
+    conf = np.column_stack([p.position, p.orientation])
+    eps = 1e-6
+    u = []
+    for s in (1.0 - eps, 1.0 + eps):
+        ms, cs = m.rescaled(s, conf)
+        u.append((ms.evaluate(ms.dofs(cs)).energy, ms.box.volume))
+    dudv = (u[1][0] - u[0][0]) / (u[1][1] - u[0][1])
+    assert -dudv == pytest.approx(p.pressure, rel=1e-6)
+
+
+def _start(tmp_path) -> str:
+    # 16 bodies: with fewer, the box of the jammed packing is narrower than twice the
+    # neighbour-list reach (bounding diameter + skin) and the model refuses it
+    src = tmp_path / "start.nc"
+    assert main(["init-shapes", str(src), "--shape", "circulo-line", "--asphericity", "1.2", "--n", "16",
+                 "--seed", "3", "--quiet"]) == 0
+    return str(src)
+
+
+@pytest.mark.parametrize("extra, needle", [
+    (["--exponent", "2.5"], "linear spring"),
+    (["--seed", "4"], "init-shapes --seed"),
+    (["--box-dof", "full"], "box stays square"),
+])
+def test_soft_jam_refuses_options_shapes_do_not_have(tmp_path, capsys, extra, needle):
+    out = tmp_path / "j.nc"
+    assert main(["soft-jam", _start(tmp_path), str(out), "--pressure", "1e-3", "--quiet", *extra]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and needle in err[0]
+    assert not out.exists()
+
+
+def test_soft_jam_refuses_crossed_cores(tmp_path, capsys):
+    from jamflow.io import write_packing
+
+    src = _start(tmp_path)
+    p = read_packing(src, None)
+    x = p.position.copy()
+    x[1] = x[0]  # the second body's shaft now crosses the first's
+    theta = p.orientation.copy()
+    theta[1] = theta[0] + 1.0
+    bad = tmp_path / "crossed.nc"
+    write_packing(p.evolve(position=x, orientation=theta), bad)
+    assert main(["soft-jam", str(bad), str(tmp_path / "j.nc"), "--pressure", "1e-3", "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert "intersecting cores" in err and "(0, 1)" in err
+
+
+def test_soft_jam_cli_prints_its_numbers(tmp_path, capsys):
+    out = tmp_path / "j.nc"
+    assert main(["soft-jam", _start(tmp_path), str(out), "--pressure", "1e-2", "--delta-phi", "1e-2",
+                 "--pressure-rtol", "1e-3", "--force-tol", "1e-12"]) == 0
+    printed = capsys.readouterr().out
+    p = read_packing(out, None)
+    assert f"{p.packing_fraction:.10f}" in printed
+    assert abs(p.pressure - 1e-2) <= 1e-3 * 1e-2
+    assert "max |torque|" in printed
+
+
+def test_reuleaux_triangles_jam_but_are_not_counted(capsys):
+    table = bidisperse_shapes(unit_shape("reuleaux"))
+    start = random_shape_packing(table, 16, 0.4, 2)
+    res = jam_shapes(start, 1e-3, JammingSettings(force_tol=1e-12, pressure_rtol=1e-3, delta_phi=1e-2))
+    p = res.packing
+    assert res.converged and abs(p.pressure - 1e-3) <= 1e-6
+    assert p.attrs["max_force_sq"] <= 1e-24
+    with pytest.raises(ValueError, match="not implemented"):
+        from jamflow.shapes.counting import count_constraints
+
+        count_constraints(p)

@@ -1,0 +1,170 @@
+"""Dynamical matrix, spectral regions and quartic modes of shape packings (Sec. III B).
+
+Data: ``tests/data/shapes_circulo_line_a1.1_n16_p1e-6.nc``, made by
+``jamflow init-shapes c0.nc --shape circulo-line --asphericity 1.1 --n 16 --phi 0.4
+--seed 2`` and ``jamflow soft-jam c0.nc OUT --pressure 1e-6 --delta-phi 1e-2
+--pressure-rtol 1e-2``.
+
+Physics checked: the Hessian is the derivative of the gradient on the whole packing;
+the zero modes are exactly the two global translations (no rattlers or sliders
+here); ``N_c = N_c^0 - N_1`` with parallel contacts counted twice; region-1
+eigenvalues scale linearly with the pressure while their fourth derivatives do not
+change (Figs. 10-11); the modes CLI writes what it prints.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from jamflow.cli import main
+from jamflow.io import read_packing
+from jamflow.shapes.counting import count_constraints, shape_model
+from jamflow.shapes.jamming import shape_packing
+from jamflow.shapes.spectrum import spectrum
+from jamflow.soft.minimize import minimize_fire
+
+DATA = Path(__file__).parent / "data" / "shapes_circulo_line_a1.1_n16_p1e-6.nc"
+
+
+@pytest.fixture(scope="module")
+def packing():
+    return read_packing(DATA, None)
+
+
+@pytest.fixture(scope="module")
+def spec(packing):
+    return spectrum(packing)
+
+
+def test_hessian_is_derivative_of_gradient_on_a_packing(packing):
+    """Assembly of the pair Hessians (each checked to round-off in the model tests).
+
+    The step stays below a tenth of the smallest overlap (9.6e-9 here), so no
+    contact opens or closes inside the difference stencil (U'' jumps by k there);
+    round-off of the central difference is then eps |q| |H| / h ~ 1e-6.
+    """
+    model, q = shape_model(packing)
+    hess = model.hessian(q)
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=q.size)
+    v /= np.linalg.norm(v)
+    h = min(1e-7, 0.1 * float(model.contact_terms(q)["delta"].min()))
+    pairs = {(a, b) for a, b in zip(model.pair_table(q)["i"], model.pair_table(q)["j"])}
+    for s in (-h, h):
+        t = model.pair_table(q + s * v)
+        assert {(a, b) for a, b in zip(t["i"], t["j"])} == pairs
+    fd = (model.evaluate(q + h * v).gradient - model.evaluate(q - h * v).gradient) / (2.0 * h)
+    np.testing.assert_allclose(hess @ v, fd, atol=2e-5 * abs(hess).max())
+
+
+def test_zero_modes_are_the_translations(packing, spec):
+    c, rattler, slider, _ = count_constraints(packing, "twice")
+    assert c.n_rattlers == 0 and c.n_sliders == 0
+    assert spec.n_zero == 2
+    model, q = shape_model(packing)
+    lam, vec = np.linalg.eigh(model.hessian(q).toarray())
+    zero = vec[:, spec.region == 0]
+    for axis in range(2):
+        t = np.zeros(q.size)
+        t[axis: 2 * model.n: 2] = 1.0 / np.sqrt(model.n)
+        assert np.linalg.norm(zero.T @ t) == pytest.approx(1.0, abs=1e-10)
+
+
+def test_contacts_equal_isostatic_count_minus_quartic_modes(packing, spec):
+    twice, *_ = count_constraints(packing, "twice")
+    once, *_ = count_constraints(packing, "once")
+    assert spec.n_quartic >= 1
+    assert twice.n_contacts == twice.isostatic_count - spec.n_quartic
+    assert once.n_contacts < twice.n_contacts  # this packing has parallel contacts
+    # regions 1 and 2 are separated by a wide gap (orders of magnitude)
+    lam = spec.eigenvalue
+    assert lam[spec.region == 2].min() / lam[spec.region == 1].max() > 100.0
+    assert np.all(spec.fourth_derivative[spec.region == 1] > 0.0)
+
+
+def test_quartic_eigenvalues_scale_with_pressure_fourth_derivatives_do_not(packing, spec):
+    model, q = shape_model(packing)
+    conf = model.positions(q)
+    # compress slightly: the pressure grows by a factor ~3 (bulk modulus ~0.5 k)
+    squeezed, start = model.rescaled(1.0 - 2e-6, conf)
+    res = minimize_fire(squeezed, start, force_tol=1e-13, max_steps=200_000)
+    assert res.converged
+    denser = shape_packing(squeezed, res.position, packing, {}, {})
+    ratio = denser.pressure / packing.pressure
+    assert ratio > 2.0
+    spec2 = spectrum(denser, spec.lambda_c)
+    assert spec2.n_quartic == spec.n_quartic
+    lam1, lam2 = spec.eigenvalue[spec.region == 1], spec2.eigenvalue[spec2.region == 1]
+    # region 1: lambda proportional to P (Fig. 10), up to O(P) corrections
+    np.testing.assert_allclose(lam2 / lam1, ratio, rtol=0.1)
+    # region 2: independent of P
+    np.testing.assert_allclose(spec2.eigenvalue[spec2.region == 2][:5], spec.eigenvalue[spec.region == 2][:5], rtol=0.05)
+    np.testing.assert_allclose(spec2.fourth_derivative[spec2.region == 1],
+                               spec.fourth_derivative[spec.region == 1], rtol=0.1)
+
+
+def test_modes_cli(tmp_path, capsys, spec):
+    out = tmp_path / "modes.nc"
+    assert main(["modes", str(DATA), str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert f"quartic modes N_1 (region 1)  {spec.n_quartic}" in printed
+    with xr.open_dataset(out) as ds:
+        assert ds.attrs["n_quartic"] == spec.n_quartic
+        assert ds.attrs["lambda_c"] == pytest.approx(spec.lambda_c, rel=1e-15)
+        np.testing.assert_array_equal(ds["region"].values, spec.region)
+        assert ds.attrs["isostatic_minus_quartic"] == ds.attrs["n_contacts_twice"]
+
+
+def test_check_json_on_shapes(capsys):
+    import json
+
+    assert main(["check", str(DATA), "--json", "--parallel-contacts", "twice"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert {"z", "n_sliders", "isostatic_count", "n_contacts", "n_rattlers"} <= set(report)
+    n_prime = report["N"] - report["n_rattlers"]
+    assert report["isostatic_count"] == 3 * n_prime - 1 - report["n_sliders"]
+    assert report["z"] == pytest.approx(2 * (report["n_contacts"] + 1) / (n_prime - report["n_sliders"] / 3))
+
+
+DISK_LIMIT = Path(__file__).parent / "data" / "shapes_ellipse_alpha1.001_n16_p1e-7.nc"
+
+
+def test_disk_limit_of_ellipses():
+    """Ellipses of aspect ratio 1.001 (A - 1 = 3.7e-7) at P0 = 1e-7 count as disks.
+
+    Data: ``jamflow init-shapes e0.nc --shape ellipse --aspect-ratio 1.001 --n 16
+    --phi 0.5 --seed 1`` then ``jamflow soft-jam e0.nc OUT --pressure 1e-7
+    --delta-phi 1e-2 --pressure-rtol 1e-2``. The non-rattlers form an isostatic disk
+    network, ``N_c = 2 N' - 1`` (``<z> = 4``, Fig. 8's small-A limit), hypostatic by
+    ``N'`` against ``3 N' - 1``; the missing constraints are exactly the ``N'`` quartic
+    (rotational) modes, and the zero modes are the two translations plus three per
+    rattler.
+    """
+    p = read_packing(DISK_LIMIT, None)
+    c, rattler, slider, _ = count_constraints(p)
+    n_prime = p.n - c.n_rattlers
+    assert c.n_contacts == 2 * n_prime - 1
+    assert c.z == pytest.approx(4.0, rel=1e-15)
+    assert c.counting == "hypostatic"
+    spec = spectrum(p, fourth=False)
+    assert spec.n_quartic == n_prime == c.isostatic_count - c.n_contacts
+    assert spec.n_zero == 2 + 3 * c.n_rattlers
+    model, q = shape_model(p)
+    lam, vec = np.linalg.eigh(model.hessian(q).toarray())
+    zero = vec[:, spec.region == 0]
+    expected = []
+    for axis in range(2):
+        t = np.zeros(q.size)
+        t[axis: 2 * model.n: 2] = ~rattler  # the backbone translates rigidly
+        expected.append(t / np.linalg.norm(t))
+    for b in np.flatnonzero(rattler):
+        for dof in (2 * b, 2 * b + 1, 2 * model.n + b):
+            t = np.zeros(q.size)
+            t[dof] = 1.0
+            expected.append(t)
+    for t in expected:
+        assert np.linalg.norm(zero.T @ t) == pytest.approx(1.0, abs=1e-9)
