@@ -1147,8 +1147,9 @@ def _newton_finish(chain: _Chain, step: _Step, lp: _LPSetup, opt: _Options, cont
             break
     else:
         return reject(f"Newton did not converge in {NEWTON_MAX_STEPS} steps", NEWTON_MAX_STEPS)
-    x = _free_rattlers(x, D, step.rattler, container, packing)
     # certificate: forces from the transposed system at the finished configuration
+    # (rattlers are not in it: they are freed only once the forces pass, which spares
+    # the all-pairs sweeps to the many rejected attempts)
     geo = _row_geometry(rows, x, D, container.box)
     B = _matrix(rows, geo, n, d, float(D.mean()))[:, cols].tocsc()
     e_g = np.zeros(len(cols))
@@ -1156,6 +1157,7 @@ def _newton_finish(chain: _Chain, step: _Step, lp: _LPSetup, opt: _Options, cont
     mu = sla.splu(B, permc_spec="COLAMD").solve(e_g, trans="T")
     if not mu.min() > CONTACT_DUAL_REL_TOL * mu.max():
         return reject(f"{int(np.sum(mu <= CONTACT_DUAL_REL_TOL * mu.max()))} network force(s) not positive", k)
+    x = _free_rattlers(x, D, step.rattler, container, packing)
     p = container.packing(packing, x, D)
     ov = container.max_overlap(p)
     if ov > OVERLAP_TOL:
