@@ -77,22 +77,12 @@ def circulo_vertex_edge(dx0, dx1, ta, tb, pa, pb, k, g, oa, ob, record, out):
             cy = s0y + t * ey
             qx = px - cx
             qy = py - cy
-            r = np.sqrt(qx * qx + qy * qy)
-            if r.real >= sigma.real:
+            if (qx * qx + qy * qy).real >= (sigma * sigma).real:
                 continue
-            delta = sigma - r
-            energy += 0.5 * k * w * delta * delta
-            # envelope theorem: r is a minimum over t (or t is clamped), so
-            # dr/dq is the partial derivative at fixed t
-            nx = qx / r
-            ny = qy / r
-            fr = -k * w * delta
-            g[oa] += fr * nx
-            g[oa + 1] += fr * ny
-            g[oa + 2] += fr * (px * ny - py * nx)
-            g[ob] -= fr * nx
-            g[ob + 1] -= fr * ny
-            g[ob + 2] -= fr * ((cx - dx0) * ny - (cy - dx1) * nx)
+            # envelope theorem: r is a minimum over t (or t is clamped), so dr/dq is
+            # the derivative at fixed t: that of two body-fixed points P and C
+            u, r, delta, nx, ny = _point_term(px, py, cx, cy, dx0, dx1, sigma, k * w, g, oa, ob)
+            energy += u
             if record:
                 out[rows, 0] = m
                 out[rows, 1] = e
@@ -464,7 +454,12 @@ def _in_arc(ux, uy, ax, ay, bx, by):
 
 @njit(cache=True)
 def _point_term(pax, pay, pbx, pby, dx0, dx1, sigma, k, g, oa, ob):
-    """``(k/2)(sigma - r)^2`` of two body-fixed points ``P_a`` (rel. centre a) and ``P_b`` (rel. centre a); adds the gradient."""
+    """``(k/2)(sigma - r)^2`` of two body-fixed points, and its gradient added to ``g``.
+
+    ``P_a`` on body ``a`` and ``P_b`` on body ``b`` are given relative to ``a``'s
+    centre (``b``'s centre at ``dx``); ``r = |P_a - P_b|``. Returns the energy, ``r``,
+    ``delta = sigma - r`` and the unit normal from ``P_b`` to ``P_a``.
+    """
     qx = pax - pbx
     qy = pay - pby
     r = np.sqrt(qx * qx + qy * qy)
@@ -478,7 +473,7 @@ def _point_term(pax, pay, pbx, pby, dx0, dx1, sigma, k, g, oa, ob):
     g[ob] -= fr * nx
     g[ob + 1] -= fr * ny
     g[ob + 2] -= fr * ((pbx - dx0) * ny - (pby - dx1) * nx)
-    return 0.5 * k * delta * delta
+    return 0.5 * k * delta * delta, r, delta, nx, ny
 
 
 @njit(cache=True)
@@ -521,7 +516,7 @@ def reuleaux_pair(dx0, dx1, ti, tj, pi, pj, k, g):
                 ok_j = _in_arc(-ux.real, -uy.real, (vj[n1, 0] - vj[n, 0]).real, (vj[n1, 1] - vj[n, 1]).real,
                                (vj[n2, 0] - vj[n, 0]).real, (vj[n2, 1] - vj[n, 1]).real)
                 if ok_i and ok_j:
-                    energy += _point_term(vi[m, 0], vi[m, 1], vj[n, 0], vj[n, 1], dx0, dx1, si + sj, k, g, 0, 3)
+                    energy += _point_term(vi[m, 0], vi[m, 1], vj[n, 0], vj[n, 1], dx0, dx1, si + sj, k, g, 0, 3)[0]
             # vertex n of j against arc m of i: u in the arc's angle and -u in the
             # vertex's normal cone (between the normals of the two arcs ending there),
             # exclusive with the arc-arc terms of the arcs meeting at the vertex
@@ -530,12 +525,12 @@ def reuleaux_pair(dx0, dx1, ti, tj, pi, pj, k, g):
                                             (vi[m2, 1] - vi[m, 1]).real) \
                     and _in_arc(-ux.real, -uy.real, (vj[n, 0] - vj[n1, 0]).real, (vj[n, 1] - vj[n1, 1]).real,
                                 (vj[n, 0] - vj[n2, 0]).real, (vj[n, 1] - vj[n2, 1]).real):
-                energy += _point_term(vi[m, 0], vi[m, 1], vj[n, 0], vj[n, 1], dx0, dx1, si, k, g, 0, 3)
+                energy += _point_term(vi[m, 0], vi[m, 1], vj[n, 0], vj[n, 1], dx0, dx1, si, k, g, 0, 3)[0]
             # vertex m of i against arc n of j (the mirror image)
             if r.real < sj.real and _in_arc(-ux.real, -uy.real, (vj[n1, 0] - vj[n, 0]).real,
                                             (vj[n1, 1] - vj[n, 1]).real, (vj[n2, 0] - vj[n, 0]).real,
                                             (vj[n2, 1] - vj[n, 1]).real) \
                     and _in_arc(ux.real, uy.real, (vi[m, 0] - vi[m1, 0]).real, (vi[m, 1] - vi[m1, 1]).real,
                                 (vi[m, 0] - vi[m2, 0]).real, (vi[m, 1] - vi[m2, 1]).real):
-                energy += _point_term(vi[m, 0], vi[m, 1], vj[n, 0], vj[n, 1], dx0, dx1, sj, k, g, 0, 3)
+                energy += _point_term(vi[m, 0], vi[m, 1], vj[n, 0], vj[n, 1], dx0, dx1, sj, k, g, 0, 3)[0]
     return energy
