@@ -145,9 +145,18 @@ def _cell_pairs(x, wrapped, L, cutoff, diameter, skin):
     n_cells = 1
     for k in range(d):
         ncell[k] = max(int(L[k] // cutoff), 1)
+        n_cells *= ncell[k]
+    if n_cells > 2 * n + 8:
+        # sparse systems (small cutoff, high d): wider cells, about two particles per cell,
+        # so the cell tables stay O(N)
+        widen = (n_cells / (2.0 * n + 8.0)) ** (1.0 / d)
+        n_cells = 1
+        for k in range(d):
+            ncell[k] = max(int(ncell[k] / widen), 1)
+            n_cells *= ncell[k]
+    for k in range(d):
         span[k] = 3 if ncell[k] >= 3 else ncell[k]
         n_stencil *= span[k]
-        n_cells *= ncell[k]
     cell = cell_index(wrapped, L, ncell)
     start, members = sort_by_cell(cell, n_cells)
     # positions and diameters in cell order, so a cell's members are contiguous
@@ -163,18 +172,17 @@ def _cell_pairs(x, wrapped, L, cutoff, diameter, skin):
     out_i = np.empty(capacity, dtype=np.int64)
     out_j = np.empty(capacity, dtype=np.int64)
     found = np.empty(n, dtype=np.int64)
+    # stencil of every cell once (integer divisions per cell, not per particle): the
+    # neighbour cell ids and the image shift of their members (-+L across the boundary
+    # along axes with at least 3 cells; fewer cells along an axis round instead)
+    nb = np.empty((n_cells, n_stencil), dtype=np.int64)
+    nb_shift = np.zeros((n_cells, n_stencil, d))
     own = np.empty(d, dtype=np.int64)
-    shift = np.empty(d)
-    wi = np.empty(d)
-    m = 0
-    for i in range(n):
-        rest = cell[i]
+    for ci in range(n_cells):
+        rest = ci
         for k in range(d - 1, -1, -1):
             own[k] = rest % ncell[k]
             rest //= ncell[k]
-        for k in range(d):
-            wi[k] = wrapped[i, k]
-        n_found = 0
         for t in range(n_stencil):
             rest = t
             cid = 0
@@ -182,13 +190,23 @@ def _cell_pairs(x, wrapped, L, cutoff, diameter, skin):
                 step = rest % span[k]
                 rest //= span[k]
                 if span[k] == 3:
-                    # the neighbour cell across the boundary holds images shifted by -+L
                     c = own[k] + step - 1
-                    shift[k] = -L[k] if c < 0 else (L[k] if c >= ncell[k] else 0.0)
+                    nb_shift[ci, t, k] = -L[k] if c < 0 else (L[k] if c >= ncell[k] else 0.0)
                     c %= ncell[k]
                 else:
                     c = step
                 cid = cid * ncell[k] + c
+            nb[ci, t] = cid
+    wi = np.empty(d)
+    m = 0
+    for i in range(n):
+        ci = cell[i]
+        for k in range(d):
+            wi[k] = wrapped[i, k]
+        n_found = 0
+        for t in range(n_stencil):
+            cid = nb[ci, t]
+            shift = nb_shift[ci, t]
             for q in range(start[cid], start[cid + 1]):
                 j = members[q]
                 if j <= i:
