@@ -120,12 +120,11 @@ def sort_by_cell(cell, n_cells):
 
 
 @njit(cache=True)
-def _cell_pairs(x, wrapped, L, cutoff, diameter, skin):
+def _cell_pairs(x, L, cutoff, diameter, skin):
     """Pairs ``i < j`` closer than a cutoff in an orthogonal box, with their periodic images.
 
-    ``x`` (N, d) are the positions, ``wrapped`` the same wrapped into ``[0, L)``,
-    ``cutoff < min(L) / 2``. Kept are the pairs with minimum-image distance
-    ``r <= cutoff`` (``diameter`` empty) or ``r < (D_i + D_j) / 2 + skin`` (a Verlet
+    ``x`` (N, d) are the positions (wrapped into ``[0, L)`` here), ``cutoff < min(L) / 2``.
+    Kept are the pairs with minimum-image distance ``r <= cutoff`` (``diameter`` empty) or ``r < (D_i + D_j) / 2 + skin`` (a Verlet
     list; then ``cutoff`` must be at least ``max D + skin``). Cells are at least
     ``cutoff`` wide, so partners lie in the 3^d cells around a particle's (fewer
     distinct cells along an axis with fewer than 3); each particle collects its
@@ -157,6 +156,12 @@ def _cell_pairs(x, wrapped, L, cutoff, diameter, skin):
     for k in range(d):
         span[k] = 3 if ncell[k] >= 3 else ncell[k]
         n_stencil *= span[k]
+    wrapped = np.empty((n, d))
+    for i in range(n):
+        for k in range(d):
+            v = x[i, k] - L[k] * np.floor(x[i, k] / L[k])
+            # round-off can put x - L floor(x / L) at L
+            wrapped[i, k] = 0.0 if v >= L[k] else v
     cell = cell_index(wrapped, L, ncell)
     start, members = sort_by_cell(cell, n_cells)
     # positions and diameters in cell order, so a cell's members are contiguous
@@ -251,13 +256,6 @@ def _cell_pairs(x, wrapped, L, cutoff, diameter, skin):
     return out_i[:m].copy(), out_j[:m].copy(), image
 
 
-def _wrapped(x: NDArray[np.float64], L: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Positions wrapped into ``[0, L)`` of an orthogonal box."""
-    wrapped = x - L * np.floor(x / L)
-    wrapped[wrapped >= L] = 0.0
-    return wrapped
-
-
 def _checked_positions(positions: ArrayLike, box: Box) -> NDArray[np.float64]:
     x = np.asarray(positions, dtype=np.float64)
     if x.ndim != 2 or x.shape[1] != box.d:
@@ -288,7 +286,7 @@ def pairs_within(positions: ArrayLike, box: Box, cutoff: float) -> PairList:
         return _make(box, x, np.empty(0, np.int64), np.empty(0, np.int64))
     if box.is_orthogonal:
         L = box.lengths
-        i, j, _ = _cell_pairs(x, _wrapped(x, L), L, float(cutoff), np.empty(0), 0.0)
+        i, j, _ = _cell_pairs(x, L, float(cutoff), np.empty(0), 0.0)
         return PairList(i, j, box.minimum_image(x[j] - x[i]))
     return _pairs_sheared(x, box, cutoff)
 
@@ -348,7 +346,7 @@ def verlet_pairs(
     _check_cutoff(box, reach)
     if box.is_orthogonal and len(x) >= 2:
         L = box.lengths
-        i, j, image = _cell_pairs(x, _wrapped(x, L), L, reach, D, float(skin))
+        i, j, image = _cell_pairs(x, L, reach, D, float(skin))
         return i, j, image.astype(np.float64)
     pairs = pairs_within(x, box, reach)
     keep = pairs.distance < 0.5 * (D[pairs.i] + D[pairs.j]) + skin
