@@ -47,7 +47,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .neighbors import sort_by_cell
+from ._cell_kernels import sort_by_cell
 
 #: Status codes of :func:`run_events`: collision budget used, time limit reached, a
 #: particle may leave the neighbour-list skin (rebuild the lists before continuing).
@@ -286,7 +286,7 @@ def build_cells(x, L, ncell, cc, cell, stride, head, nxt, prv):
 def build_neighbor_lists(x, a, L, invL, s_t, skin, cell, ncell, stride, offs):
     """Symmetric CSR neighbour lists: all j with ``|r_ij| < sigma_ij + skin``.
 
-    The particles are counting-sorted by cell (:func:`jamflow.neighbors.sort_by_cell`,
+    The particles are counting-sorted by cell (:func:`jamflow._cell_kernels.sort_by_cell`,
     the binning the soft-sphere Verlet lists use too) into contiguous copies of their positions
     and diameters; every pair of neighbour cells ``c <= c'`` is then swept once over
     contiguous ranges (cells at least ``max sigma + skin`` wide, positions synced), and

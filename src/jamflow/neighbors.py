@@ -1,6 +1,7 @@
 """All pairs of particles closer than a cutoff in periodic and sheared boxes.
 
-Orthogonal boxes use a compiled cell list (cells at least ``cutoff`` wide, O(N),
+Orthogonal boxes use a compiled cell list (:mod:`jamflow._cell_kernels`, imported on
+first use so that ``import jamflow`` stays light; cells at least ``cutoff`` wide, O(N),
 pairs emitted already sorted). Sheared boxes are searched in their
 reduced basis with ghost images: every particle whose periodic image lies within
 the cutoff of the primary cell (a slab of ``cutoff / width_k`` in fractional
@@ -14,13 +15,12 @@ import itertools
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from .box import Box
 
-__all__ = ["PairList", "cell_index", "pairs_within", "pairs_within_brute_force", "sort_by_cell", "verlet_pairs"]
+__all__ = ["PairList", "pairs_within", "pairs_within_brute_force", "verlet_pairs"]
 
 
 @dataclass(frozen=True)
@@ -70,176 +70,6 @@ def _make(box: Box, positions: NDArray[np.float64], i: NDArray, j: NDArray) -> P
     return PairList(i, j, box.minimum_image(positions[j] - positions[i]))
 
 
-@njit(cache=True)
-def cell_index(x, L, ncell):
-    """Flat cell index of every position, cells ``L_k / ncell_k`` wide (row-major, last axis fastest).
-
-    ``x`` (N, d) must be wrapped into ``[0, L)``; round-off at the upper edge is
-    clamped into the last cell. Returns int64 (N,).
-    """
-    n, d = x.shape
-    out = np.empty(n, dtype=np.int64)
-    for i in range(n):
-        cid = 0
-        for k in range(d):
-            c = int(x[i, k] / L[k] * ncell[k])
-            c = min(max(c, 0), ncell[k] - 1)
-            cid = cid * ncell[k] + c
-        out[i] = cid
-    return out
-
-
-@njit(cache=True)
-def sort_by_cell(cell, n_cells):
-    """Counting sort of particles by cell index (stable: by particle index within a cell).
-
-    Parameters
-    ----------
-    cell : int64 (N,)
-        Flat cell index of every particle, ``0 <= cell < n_cells``.
-
-    Returns
-    -------
-    start : int64 (n_cells + 1,)
-        The members of cell ``c`` are ``members[start[c]:start[c + 1]]``.
-    members : int64 (N,)
-        Particle indices in cell order.
-    """
-    n = cell.shape[0]
-    start = np.zeros(n_cells + 1, dtype=np.int64)
-    for i in range(n):
-        start[cell[i] + 1] += 1
-    for c in range(n_cells):
-        start[c + 1] += start[c]
-    members = np.empty(n, dtype=np.int64)
-    slot = start[:n_cells].copy()
-    for i in range(n):
-        members[slot[cell[i]]] = i
-        slot[cell[i]] += 1
-    return start, members
-
-
-@njit(cache=True)
-def _cell_pairs(x, wrapped, L, cutoff, diameter, skin):
-    """Pairs ``i < j`` closer than a cutoff in an orthogonal box, with their periodic images.
-
-    ``x`` (N, d) are the positions, ``wrapped`` the same wrapped into ``[0, L)``,
-    ``cutoff < min(L) / 2``. Kept are the pairs with minimum-image distance
-    ``r <= cutoff`` (``diameter`` empty) or ``r < (D_i + D_j) / 2 + skin`` (a Verlet
-    list; then ``cutoff`` must be at least ``max D + skin``). Cells are at least
-    ``cutoff`` wide, so partners lie in the 3^d cells around a particle's (fewer
-    distinct cells along an axis with fewer than 3); each particle collects its
-    partners ``j > i`` and sorts them, so the pairs come out lexicographically sorted.
-
-    Returns
-    -------
-    i, j : int64 (P,)
-    image : int64 (P, d)
-        ``n`` with ``x_j - x_i + L n`` the minimum image.
-    """
-    n, d = x.shape
-    verlet = diameter.shape[0] > 0
-    ncell = np.empty(d, dtype=np.int64)
-    span = np.empty(d, dtype=np.int64)
-    n_stencil = 1
-    n_cells = 1
-    for k in range(d):
-        ncell[k] = max(int(L[k] // cutoff), 1)
-        span[k] = 3 if ncell[k] >= 3 else ncell[k]
-        n_stencil *= span[k]
-        n_cells *= ncell[k]
-    cell = cell_index(wrapped, L, ncell)
-    start, members = sort_by_cell(cell, n_cells)
-    # positions and diameters in cell order, so a cell's members are contiguous
-    ws = np.empty((n, d))
-    Ds = np.empty(n if verlet else 0)
-    for q in range(n):
-        for k in range(d):
-            ws[q, k] = wrapped[members[q], k]
-        if verlet:
-            Ds[q] = diameter[members[q]]
-    cut2 = cutoff * cutoff
-    capacity = 8 * n + 16
-    out_i = np.empty(capacity, dtype=np.int64)
-    out_j = np.empty(capacity, dtype=np.int64)
-    found = np.empty(n, dtype=np.int64)
-    own = np.empty(d, dtype=np.int64)
-    shift = np.empty(d)
-    wi = np.empty(d)
-    m = 0
-    for i in range(n):
-        rest = cell[i]
-        for k in range(d - 1, -1, -1):
-            own[k] = rest % ncell[k]
-            rest //= ncell[k]
-        for k in range(d):
-            wi[k] = wrapped[i, k]
-        n_found = 0
-        for t in range(n_stencil):
-            rest = t
-            cid = 0
-            for k in range(d):
-                step = rest % span[k]
-                rest //= span[k]
-                if span[k] == 3:
-                    # the neighbour cell across the boundary holds images shifted by -+L
-                    c = own[k] + step - 1
-                    shift[k] = -L[k] if c < 0 else (L[k] if c >= ncell[k] else 0.0)
-                    c %= ncell[k]
-                else:
-                    c = step
-                cid = cid * ncell[k] + c
-            for q in range(start[cid], start[cid + 1]):
-                j = members[q]
-                if j <= i:
-                    continue
-                r2 = 0.0
-                for k in range(d):
-                    if span[k] == 3:
-                        dx = ws[q, k] + shift[k] - wi[k]
-                    else:
-                        dx = ws[q, k] - wi[k]
-                        dx -= L[k] * np.round(dx / L[k])
-                    r2 += dx * dx
-                if verlet:
-                    reach = 0.5 * (diameter[i] + Ds[q]) + skin
-                    keep = r2 < reach * reach
-                else:
-                    keep = r2 <= cut2
-                if keep:
-                    found[n_found] = j
-                    n_found += 1
-        if m + n_found > capacity:
-            capacity = 2 * capacity + n_found
-            out_i = np.concatenate((out_i[:m], np.empty(capacity - m, dtype=np.int64)))
-            out_j = np.concatenate((out_j[:m], np.empty(capacity - m, dtype=np.int64)))
-        # insertion sort of the few partners in place (no allocation per particle)
-        for q in range(1, n_found):
-            key = found[q]
-            r = q - 1
-            while r >= 0 and found[r] > key:
-                found[r + 1] = found[r]
-                r -= 1
-            found[r + 1] = key
-        for q in range(n_found):
-            out_i[m] = i
-            out_j[m] = found[q]
-            m += 1
-    image = np.empty((m, d), dtype=np.int64)
-    for p in range(m):
-        for k in range(d):
-            raw = x[out_j[p], k] - x[out_i[p], k]
-            image[p, k] = -int(np.round(raw / L[k]))
-    return out_i[:m].copy(), out_j[:m].copy(), image
-
-
-def _wrapped(x: NDArray[np.float64], L: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Positions wrapped into ``[0, L)`` of an orthogonal box."""
-    wrapped = x - L * np.floor(x / L)
-    wrapped[wrapped >= L] = 0.0
-    return wrapped
-
-
 def _checked_positions(positions: ArrayLike, box: Box) -> NDArray[np.float64]:
     x = np.asarray(positions, dtype=np.float64)
     if x.ndim != 2 or x.shape[1] != box.d:
@@ -270,7 +100,9 @@ def pairs_within(positions: ArrayLike, box: Box, cutoff: float) -> PairList:
         return _make(box, x, np.empty(0, np.int64), np.empty(0, np.int64))
     if box.is_orthogonal:
         L = box.lengths
-        i, j, _ = _cell_pairs(x, _wrapped(x, L), L, float(cutoff), np.empty(0), 0.0)
+        from ._cell_kernels import cell_pairs
+
+        i, j, _ = cell_pairs(x, L, float(cutoff), np.empty(0), 0.0)
         return PairList(i, j, box.minimum_image(x[j] - x[i]))
     return _pairs_sheared(x, box, cutoff)
 
@@ -330,7 +162,9 @@ def verlet_pairs(
     _check_cutoff(box, reach)
     if box.is_orthogonal and len(x) >= 2:
         L = box.lengths
-        i, j, image = _cell_pairs(x, _wrapped(x, L), L, reach, D, float(skin))
+        from ._cell_kernels import cell_pairs
+
+        i, j, image = cell_pairs(x, L, reach, D, float(skin))
         return i, j, image.astype(np.float64)
     pairs = pairs_within(x, box, reach)
     keep = pairs.distance < 0.5 * (D[pairs.i] + D[pairs.j]) + skin

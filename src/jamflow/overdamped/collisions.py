@@ -7,10 +7,10 @@ follows ``dh/dt = E h``, so a pair's separation with fixed periodic image m move
 smallest root of ``|R0 + t W|^2 = sigma^2`` — the ballistic prediction of
 event-driven hard spheres (Allen & Tildesley), restricted to pairs not in contact.
 
-Pairs come from a Verlet list (``jamflow.neighbors.pairs_within``, cell/tree search,
-O(N log N)) with cutoff ``sigma_max + skin``; the list stays valid while the largest
-possible change of any listed separation stays below the skin (see
-:class:`NeighborList`).
+Pairs come from a Verlet list (``jamflow.neighbors.verlet_pairs``, the pair search of
+the soft-sphere lists: compiled cell list, O(N)) with cutoff ``sigma_max + skin``; the
+list stays valid while the largest possible change of any listed separation stays
+below the skin (see :class:`NeighborList`).
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..box import Box
-from ..neighbors import pairs_within
+from ..neighbors import verlet_pairs
 from .network import spectral_norm
 
 __all__ = ["next_collision", "NeighborList", "build_neighbor_list", "images_of"]
@@ -188,9 +188,9 @@ def build_neighbor_list(x: NDArray[np.float64], box: Box, radius: NDArray[np.flo
     cutoff = min(smax + skin, smax + 0.9 * (half - smax))
     if cutoff <= smax:
         raise ValueError("box too small for the largest particles (2 * diameter >= box width)")
-    pl = pairs_within(x, box, cutoff)
-    pairs = np.stack([pl.i, pl.j], axis=1).astype(np.int64)
-    h = box.matrix
-    images = images_of(x, h, pairs, pl.dx)
+    # every pair within the cutoff: the Verlet pairs of spheres all of diameter smax
+    i, j, image = verlet_pairs(x, box, np.full(len(x), smax), cutoff - smax)
+    pairs = np.stack([i, j], axis=1).astype(np.int64)
+    images = image.astype(np.int64)
     sigma = radius[pairs[:, 0]] + radius[pairs[:, 1]]
     return NeighborList(pairs, images, sigma, cutoff, cutoff - smax, np.zeros_like(x))

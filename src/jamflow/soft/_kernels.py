@@ -43,15 +43,15 @@ def _add_pair(i, j, dx, r2, sig, eps, w, harmonic, force, virial):
     return energy
 
 
-@njit(cache=True)
-def _pair_forces_low(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial):
-    """:func:`pair_forces` for d = 2 or 3 with the coordinates unrolled.
+@njit(cache=True, inline="always")
+def _pair_loop(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial, three):
+    """:func:`pair_forces` for d = 2 (``three`` False) or 3 with the coordinates unrolled.
 
-    The third coordinate is a loop-invariant branch (``three``); in 2D its pair
-    vector component is 0.0, and ``r2 + 0.0 == r2`` exactly, so both dimensions add
+    Inlined into :func:`_pair_forces_2d` and :func:`_pair_forces_3d` with ``three`` a
+    constant, so each compiles without the other's branches. In 2D the third pair
+    vector component is 0.0 and ``r2 + 0.0 == r2`` exactly, so both dimensions add
     the same terms in the same order as the generic loop.
     """
-    three = y.shape[1] == 3
     energy = 0.0
     n_contact = 0
     harmonic = w == 2.0
@@ -92,6 +92,16 @@ def _pair_forces_low(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_vi
 
 
 @njit(cache=True)
+def _pair_forces_2d(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial):
+    return _pair_loop(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial, False)
+
+
+@njit(cache=True)
+def _pair_forces_3d(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial):
+    return _pair_loop(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial, True)
+
+
+@njit(cache=True)
 def pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial=True):
     """Energy, forces and virial of the power-law contact potential.
 
@@ -106,8 +116,10 @@ def pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial=
     d = y.shape[1]
     force[:, :] = 0.0
     virial[:, :] = 0.0
-    if d == 2 or d == 3:
-        return _pair_forces_low(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial)
+    if d == 2:
+        return _pair_forces_2d(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial)
+    if d == 3:
+        return _pair_forces_3d(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial)
     energy = 0.0
     n_contact = 0
     dx = np.empty(d)
