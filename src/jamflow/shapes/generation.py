@@ -26,7 +26,6 @@ from __future__ import annotations
 from math import pi, sqrt
 
 import numpy as np
-from numpy.typing import NDArray
 
 from ..bodies import ShapeTable
 from ..box import Box
