@@ -26,7 +26,7 @@ from jamflow.rigidity import (
     strain_basis,
 )
 from jamflow.soft.jamming import jam_to_pressure
-from jamflow.strict_jamming import CLASSIFICATIONS, _MotionLP, certify
+from jamflow.strict_jamming import CLASSIFICATIONS, MotionLP, certify
 from ls_data import ls_dat
 
 
@@ -295,11 +295,11 @@ def test_warm_primal_cone_solves_match_cold_solves(soft_jammed):
     zero, upper = np.zeros(A.shape[0]), np.ones(A.shape[1])
     rng = np.random.default_rng(5)
     loads = [s * rng.standard_normal(A.shape[1]) for _ in range(3) for s in (1, -1)]
-    warm = _MotionLP(A, zero, upper, "simplex")
+    warm = MotionLP(A, zero, upper, "simplex")
     warm_its = cold_its = 0
     for k, load in enumerate(loads):
         _, obj_warm, y, _, it_warm = warm.solve(load)
-        _, obj_cold, _, _, it_cold = _MotionLP(A, zero, upper, "simplex").solve(load)
+        _, obj_cold, _, _, it_cold = MotionLP(A, zero, upper, "simplex").solve(load)
         # jammed: the only first-order motions are translations, which a load can
         # exploit only through its net component
         net = np.abs(load.reshape(-1, p.d).sum(axis=0)).sum()

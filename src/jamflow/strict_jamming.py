@@ -67,8 +67,11 @@ __all__ = [
     "RATTLER_STAGES",
     "JammingCertificate",
     "LPRecord",
+    "MotionLP",
     "certificate_to_dataset",
     "certify",
+    "moving_clusters",
+    "random_loads",
 ]
 
 #: Jamming categories, weakest first.
@@ -193,7 +196,7 @@ class JammingCertificate:
 # --- LP models ---------------------------------------------------------------------
 
 
-class _MotionLP:
+class MotionLP:
     """``max b . y`` subject to ``A y >= -g``, ``|y_k| <= 1``, built once per network.
 
     Columns are scaled so one unit of displacement is one mean diameter.
@@ -284,7 +287,7 @@ def _network(packing: Packing, gap_tol: float | None) -> tuple[NDArray[np.int64]
     return np.stack([pairs.i, pairs.j], axis=1), h
 
 
-def _moving_clusters(
+def moving_clusters(
     movers: NDArray[np.bool_], contacts: NDArray[np.int64], dx: NDArray[np.float64], tol: float
 ) -> list[tuple[NDArray[np.int64], bool]]:
     """Connected groups of moving particles (through contacts) and whether each wraps.
@@ -322,7 +325,8 @@ def _moving_clusters(
     return [(members, bool(lab in wrapping)) for lab, members in groups]
 
 
-def _loads(rng: np.random.Generator, n: int, loads: int) -> list[NDArray[np.float64]]:
+def random_loads(rng: np.random.Generator, n: int, loads: int) -> list[NDArray[np.float64]]:
+    """``loads`` random load vectors of length ``n`` (standard normal components) from ``rng``."""
     return [rng.standard_normal(n) for _ in range(loads)]
 
 
@@ -344,8 +348,8 @@ class _Search:
                  n_disp: int, d: int, rhs: str, solver: str, record: Any) -> None:
         self.kind, self.A, self.upper, self.n_disp, self.d = kind, A, upper, n_disp, d
         self.solver, self.record = solver, record
-        self.gap_lp = _MotionLP(A, g, upper, solver) if rhs == "gaps" else None
-        self.cone_lp: _MotionLP | None = None
+        self.gap_lp = MotionLP(A, g, upper, solver) if rhs == "gaps" else None
+        self.cone_lp: MotionLP | None = None
         self.cage = 0.0
         self.cage_at_bound = 0
 
@@ -365,7 +369,7 @@ class _Search:
                 self.cage = max(self.cage, size)
                 return None
         if self.cone_lp is None:
-            self.cone_lp = _MotionLP(self.A, np.zeros(self.A.shape[0]), self.upper, self.solver)
+            self.cone_lp = MotionLP(self.A, np.zeros(self.A.shape[0]), self.upper, self.solver)
         status, obj, z, t, it = self.cone_lp.solve(s * load)
         rel, e = self._motion(z)
         size = max(float(np.linalg.norm(rel, axis=1).max(initial=0.0)), float(np.abs(e).max(initial=0.0)))
@@ -481,7 +485,7 @@ def certify(
                n_disp: int, lp_solver: str):
         srch = _Search(kind, A, rows_g, upper, n_disp, d, rhs, lp_solver, record)
         searches.append(srch)
-        for k, b in enumerate(_loads(rng, A.shape[1], loads)):
+        for k, b in enumerate(random_loads(rng, A.shape[1], loads)):
             for s in ((1, -1) if both_signs else (1,)):
                 found = srch.run(k, s, b)
                 if found is not None:
@@ -564,7 +568,7 @@ def certify(
         y = found[0]
         movers = np.zeros(n, dtype=bool)
         movers[idx] = np.linalg.norm(y, axis=1) > CERTIFY_MOTION_TOL
-        clusters = _moving_clusters(movers, contacts[sel], dx[sel], 0.25 * float(packing.diameter.min()))
+        clusters = moving_clusters(movers, contacts[sel], dx[sel], 0.25 * float(packing.diameter.min()))
         limit = max(1, int(max_cluster_fraction * len(idx)))
         if all((not wraps) and len(m) <= limit for m, wraps in clusters):
             stage[movers] = RATTLER_STAGES.index("rattling_cluster")

@@ -1,6 +1,6 @@
 """Collective and strict jamming of linked packings by randomized LPs (chains paper Sec. V, Eqs. 40-42).
 
-The LP of :mod:`jamflow.strict_jamming` (its ``_MotionLP``: maximise ``b . y`` subject
+The LP of :mod:`jamflow.strict_jamming` (its ``MotionLP``: maximise ``b . y`` subject
 to ``A y >= 0``, ``|y_k| <= 1``, HiGHS) is run on the constrained extended rigidity
 matrix ``A = R_E = R0 B^T`` (:func:`jamflow.chains.hessian.extended_rigidity`): ``y``
 are the true degrees of freedom ``y_t`` (motions that keep every link, and with strain
@@ -35,9 +35,9 @@ from ..strict_jamming import (
     DEFAULT_LOADS,
     DEFAULT_MAX_CLUSTER_FRACTION,
     DEFAULT_SOLVER,
-    _loads,
-    _MotionLP,
-    _moving_clusters,
+    MotionLP,
+    moving_clusters,
+    random_loads,
 )
 from ..tolerances import CERTIFY_MOTION_TOL
 from .clusters import count_clusters
@@ -96,7 +96,7 @@ def _search(packing: Packing, active: NDArray[np.bool_], strain: bool, loads: li
         RE, _, _, basis = extended_rigidity(sub, strain=strain, potential=potential, translations=True)
         if RE.shape[1] == 0:
             return active, None, n_lp
-        lp = _MotionLP(sp.csr_matrix(RE), np.zeros(RE.shape[0]), np.ones(RE.shape[1]), solver)
+        lp = MotionLP(sp.csr_matrix(RE), np.zeros(RE.shape[0]), np.ones(RE.shape[1]), solver)
         motion = None
         for load in loads:
             b = load[: RE.shape[1]]  # loads are drawn for the largest basis (all spheres and strain)
@@ -118,7 +118,7 @@ def _search(packing: Packing, active: NDArray[np.bool_], strain: bool, loads: li
         edges = np.concatenate([np.stack([geo.pairs.i, geo.pairs.j], axis=1),
                                 np.stack([geo.links.i, geo.links.j], axis=1)])
         dx = np.concatenate([geo.pairs.dx, geo.link_vector])
-        groups = _moving_clusters(moving, edges, dx, 1e-6)
+        groups = moving_clusters(moving, edges, dx, 1e-6)
         small = all(not wraps and len(members) <= max_cluster_fraction * sub.n for members, wraps in groups)
         if strain_moves or not small or not np.any(moving):
             full = np.zeros((packing.n, packing.d))
@@ -140,7 +140,7 @@ def certify_linked(packing: Packing, strict: bool = True, loads: int = DEFAULT_L
     active = ~count_clusters(packing.n, packing.d, packing.links, packing.contacts).rattler
     rng = np.random.default_rng(seed)
     size = packing.n * packing.d + packing.d * (packing.d + 1) // 2
-    load_list = _loads(rng, size, loads)
+    load_list = random_loads(rng, size, loads)
     active, motion, n_lp = _search(packing, active, False, load_list, solver, max_cluster_fraction, potential)
     if motion is not None:
         return LinkedCertificate("not_jammed", ~active, motion, "collective", n_lp)
