@@ -18,8 +18,8 @@ Constraints ``Gamma`` (Eqs. 15-17): link ``k`` has gradient ``+-F^T u_k`` on its
 ends and ``u_k R0_k^T`` (symmetrised) on the strain, ``u_k`` the current unit link
 vector and ``R0_k`` the reference one (Eq. 16 at ``eps = 0``: ``tau_a tau_b l``);
 the volume has ``det F F^-T`` on the strain only. The strain columns couple every
-cluster, so the per-cluster QR of :mod:`jamflow.models.links` is kept for the link
-block ``A = B_y B_y^T = R^T R`` and the Gram matrix ``Gamma^T Gamma`` is solved by
+cluster, so the per-cluster Cholesky factors of :mod:`jamflow.models.links` are kept for the
+link block ``A = B_y B_y^T = L L^T`` and the Gram matrix ``Gamma^T Gamma`` is solved by
 Woodbury for the rank-``m`` strain coupling and a Schur complement for the volume
 row. Projection (Eq. 18) ``P g = g - Gamma (Gamma^T Gamma)^-1 Gamma^T g`` and Newton
 re-affixing (Eq. 7) ``dq = -Gamma (Gamma^T Gamma)^-1 c`` use that one solve.
@@ -163,8 +163,9 @@ class ShearStabilizedModel(LinkedSpheresModel):
         w = u @ F  # F^T u per link (rows)
         Be = strain_components(u[:, :, None] * R0[:, None, :], self.strain_scale)
         ce = strain_components(np.linalg.det(F) * np.linalg.inv(F).T, self.strain_scale)
-        groups = [group.factorise(w) for group in self._groups]
-        cache = {"w": w, "Be": Be, "ce": ce, "groups": groups}
+        w = np.ascontiguousarray(w)
+        self.gram.factorise(w)
+        cache = {"w": w, "Be": Be, "ce": ce}
         self._cache = cache
         AiBe = self._a_inverse(Be)
         cache["AiBe"] = AiBe
@@ -176,17 +177,8 @@ class ShearStabilizedModel(LinkedSpheresModel):
         return cache
 
     def _a_inverse(self, rhs: NDArray[np.float64]) -> NDArray[np.float64]:
-        """``A^-1 rhs`` for ``A = B_y B_y^T`` (block diagonal, ``R^T R`` per cluster); rhs (L,) or (L, k)."""
-        out = np.zeros_like(rhs)
-        for group, (_, R) in zip(self._groups, self._cache["groups"]):
-            block = rhs[group.links]
-            vector = rhs.ndim == 1
-            if vector:
-                block = block[:, :, None]
-            z = np.linalg.solve(np.swapaxes(R, 1, 2), block)
-            x = np.linalg.solve(R, z)
-            out[group.links] = x[:, :, 0] if vector else x
-        return out
+        """``A^-1 rhs`` for ``A = B_y B_y^T`` (block diagonal, Cholesky per cluster); rhs (L,) or (L, k)."""
+        return self.gram.solve(rhs)
 
     def _k_inverse(self, rhs: NDArray[np.float64]) -> NDArray[np.float64]:
         """``(A + B_e B_e^T)^-1 rhs`` by Woodbury, rhs (L,)."""
@@ -207,17 +199,15 @@ class ShearStabilizedModel(LinkedSpheresModel):
     def _gamma_t(self, q: NDArray[np.float64], g: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
         """``Gamma^T g``: (links (L,), volume)."""
         c = self._solver(q)
-        gy, ge = self._split(g)
-        links = np.einsum("ka,ka->k", c["w"], gy[self.links.j] - gy[self.links.i]) + c["Be"] @ ge
+        gy, ge = self._split(np.asarray(g, dtype=np.float64))
+        links = self.gram.apply(c["w"], np.ascontiguousarray(gy)) + c["Be"] @ ge
         return links, float(c["ce"] @ ge)
 
     def _gamma(self, q: NDArray[np.float64], lam: NDArray[np.float64], nu: float) -> NDArray[np.float64]:
         """``Gamma (lambda, nu)``, shape (n_dof,)."""
         c = self._solver(q)
         out = np.zeros(self.n_dof)
-        gy = out[: self.n * self.d].reshape(self.n, self.d)
-        np.add.at(gy, self.links.j, lam[:, None] * c["w"])
-        np.add.at(gy, self.links.i, -lam[:, None] * c["w"])
+        self.gram.subtract_transpose(c["w"], -lam, out[: self.n * self.d].reshape(self.n, self.d))
         out[self.n * self.d:] = c["Be"].T @ lam + c["ce"] * nu
         return out
 
