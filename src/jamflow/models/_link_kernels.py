@@ -129,3 +129,37 @@ def omega_t_subtract(w, li, lj, lam, out):
             v = lam[k] * w[k, a]
             out[lj[k], a] -= v
             out[li[k], a] += v
+
+
+@njit(cache=True)
+def strain_state(e, h0, scale):
+    """Deformation of scaled strain components ``e`` (m,) in the reference box ``h0`` (d, d).
+
+    Returns ``F = 1 + eps`` (``eps_aa = e / scale``, ``eps_ab = e / (sqrt 2 scale)``, components in
+    ``numpy.triu_indices`` order), ``Q`` and ``T = Q^T F`` with ``F h0 = Q U`` (``U`` upper
+    triangular with a positive diagonal, zeros below it), ``U``, ``det F`` and ``F^-1``.
+    """
+    d = h0.shape[0]
+    F = np.eye(d)
+    p = 0
+    for a in range(d):
+        for b in range(a, d):
+            if a == b:
+                F[a, a] += e[p] / scale
+            else:
+                v = e[p] / (np.sqrt(2.0) * scale)
+                F[a, b] += v
+                F[b, a] += v
+            p += 1
+    Q, U = np.linalg.qr(F @ h0)
+    for a in range(d):
+        if U[a, a] < 0.0:
+            for b in range(d):
+                Q[b, a] = -Q[b, a]
+                U[a, b] = -U[a, b]
+    T = np.ascontiguousarray(Q.T) @ F
+    for a in range(d):
+        for b in range(a):
+            T[a, b] = 0.0
+            U[a, b] = 0.0
+    return F, Q, T, U, np.linalg.det(F), np.linalg.inv(F)
