@@ -163,7 +163,7 @@ class ShearStabilizedModel(LinkedSpheresModel):
     # --- constraints ------------------------------------------------------------------
     def _solver(self, q: NDArray[np.float64]) -> dict:
         """Factorisation of ``Gamma^T Gamma`` at ``q`` (cached for the last ``q``)."""
-        if self._solver_q is not None and np.array_equal(q, self._solver_q):
+        if self._solver_q is not None and _link_kernels.same(q, self._solver_q):
             return self._cache
         F, _, _, _, det, F_inv = self._strain_state(q)
         R0 = self._reference_links(q)

@@ -163,3 +163,59 @@ def strain_state(e, h0, scale):
             T[a, b] = 0.0
             U[a, b] = 0.0
     return F, Q, T, U, np.linalg.det(F), np.linalg.inv(F)
+
+
+@njit(cache=True)
+def gram_project(w, li, lj, order, cptr, fptr, chol, g, lam):
+    """``g <- g - Omega^T lam`` with ``lam = G^-1 Omega g`` in place, cluster by cluster, two passes.
+
+    The second pass projects what the first left (``Omega g`` at round-off times
+    ``cond(G)``) and its multipliers are added to ``lam`` (L,), so ``lam`` are the
+    least-squares multipliers of the input ``g`` (N, d).
+    """
+    d = w.shape[1]
+    mmax = 0
+    for c in range(cptr.shape[0] - 1):
+        mmax = max(mmax, cptr[c + 1] - cptr[c])
+    b = np.empty(mmax)
+    for k in range(lam.shape[0]):
+        lam[k] = 0.0
+    for c in range(cptr.shape[0] - 1):
+        k0 = cptr[c]
+        m = cptr[c + 1] - k0
+        base = fptr[c]
+        for _ in range(2):
+            for a in range(m):
+                k = order[k0 + a]
+                s = 0.0
+                for e in range(d):
+                    s += w[k, e] * (g[lj[k], e] - g[li[k], e])
+                b[a] = s
+            for i in range(m):
+                t = b[i]
+                for p in range(i):
+                    t -= chol[base + i * m + p] * b[p]
+                b[i] = t / chol[base + i * m + i]
+            for i in range(m - 1, -1, -1):
+                t = b[i]
+                for p in range(i + 1, m):
+                    t -= chol[base + p * m + i] * b[p]
+                b[i] = t / chol[base + i * m + i]
+            for a in range(m):
+                k = order[k0 + a]
+                lam[k] += b[a]
+                for e in range(d):
+                    v = b[a] * w[k, e]
+                    g[lj[k], e] -= v
+                    g[li[k], e] += v
+
+
+@njit(cache=True)
+def same(a, b):
+    """Whether flat arrays ``a`` and ``b`` are equal element by element (the cache test of the link models)."""
+    if a.shape[0] != b.shape[0]:
+        return False
+    for k in range(a.shape[0]):
+        if a[k] != b[k]:
+            return False
+    return True

@@ -122,18 +122,16 @@ class ClusterGram:
         _link_kernels.omega_t_subtract(w, self.i, self.j, lam, out)
 
     def project(self, w: NDArray[np.float64], g: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """``(g - Omega^T lam, lam)`` with ``lam = G^-1 Omega g`` and one refinement step.
+        """``(g - Omega^T lam, lam)`` with ``lam = G^-1 Omega g``, ``g`` (N, d), in two passes.
 
-        The refinement repeats the projection on the residual: the normal equations
-        lose ``cond(G) = cond(Omega)^2`` in relative accuracy, the second pass brings
-        the residual ``Omega P g`` back to round-off of ``g``.
+        The second pass repeats the projection on what the first left: the normal
+        equations lose ``cond(G) = cond(Omega)^2`` in relative accuracy, the second pass
+        brings the residual ``Omega P g`` back to round-off of ``g``.
         """
         out = np.array(g, dtype=np.float64, order="C")
-        lam = self.solve(self.apply(w, out))
-        self.subtract_transpose(w, lam, out)
-        fix = self.solve(self.apply(w, out))
-        self.subtract_transpose(w, fix, out)
-        return out, lam + fix
+        lam = np.empty(len(self.i))
+        _link_kernels.gram_project(w, self.i, self.j, self.order, self.cptr, self.fptr, self.chol, out, lam)
+        return out, lam
 
 
 class LinkedSpheresModel(SphereBodies):
@@ -202,7 +200,7 @@ class LinkedSpheresModel(SphereBodies):
 
     def _geometry(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         """Unit link vectors at ``q`` (L, d), with lengths and the largest relative error (cached for the last ``q``)."""
-        if self._geometry_q is None or not np.array_equal(q, self._geometry_q):
+        if self._geometry_q is None or not _link_kernels.same(q, self._geometry_q):
             x = np.ascontiguousarray(self.positions(q))
             self._err = _link_kernels.link_geometry(x, self._li, self._lj, self.link_offset, self.links.length,
                                                     self._u, self._r)
@@ -212,7 +210,7 @@ class LinkedSpheresModel(SphereBodies):
     def _factorise(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         """The Gram factors at ``q`` (cached for the last ``q``); returns the constraint rows ``w = u``."""
         w = self._geometry(q)
-        if self._factor_q is None or not np.array_equal(q, self._factor_q):
+        if self._factor_q is None or not _link_kernels.same(q, self._factor_q):
             self.gram.factorise(w)
             self._factor_q = self._geometry_q
         return w
@@ -244,6 +242,10 @@ class LinkedSpheresModel(SphereBodies):
             out = self.newton_step(out)
         raise RuntimeError(f"Newton re-affixing of the links stalled at a relative length error {err:.3g} "
                            f"(asked {self.length_rtol:.3g}) after {LINK_NEWTON_MAX_ITERATIONS} sweeps")
+
+    def max_force(self, g: NDArray[np.float64]) -> float:
+        """Largest per-sphere norm of ``g`` (compiled: the generic FIRE asks once per step)."""
+        return float(np.sqrt(_kernels._max_force_sq(np.asarray(g, dtype=np.float64).reshape(self.n, self.d))))
 
     def _update_list(self, x: NDArray[np.float64]) -> None:
         """``nlist.update`` in this fixed box: the Verlet criterion ``2 max |x - x_build| >= skin`` compiled.
