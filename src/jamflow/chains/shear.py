@@ -45,8 +45,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..bodies import Links
 from ..box import Box
-from ..models.base import ModelEvaluation
 from ..models import _link_kernels
+from ..models.base import ModelEvaluation
 from ..models.links import LINK_NEWTON_MAX_ITERATIONS, LinkedSpheresModel
 from ..soft import _kernels
 from ..soft.potential import HARMONIC, NeighborList, PowerLawPotential
@@ -267,7 +267,7 @@ class ShearStabilizedModel(LinkedSpheresModel):
     # --- energy -----------------------------------------------------------------------
     def evaluate(self, q: NDArray[np.float64]) -> ModelEvaluation:
         y, _ = self._split(q)
-        F, Q, T, U, _, F_inv = self._strain_state(q)
+        _, Q, T, U, _, F_inv = self._strain_state(q)
         self._update_strained_list(np.ascontiguousarray(y @ T.T), U)
         self._pairs()
         force = np.zeros((self.n, self.d))

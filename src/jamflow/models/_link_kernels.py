@@ -37,8 +37,7 @@ def link_geometry(x, li, lj, offset, length, u, r):
         for a in range(d):
             u[k, a] /= rk
         e = abs(rk / length[k] - 1.0)
-        if e > err:
-            err = e
+        err = max(err, e)
     return err
 
 

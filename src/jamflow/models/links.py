@@ -44,9 +44,9 @@ from numpy.typing import ArrayLike, NDArray
 from ..bodies import Links
 from ..box import Box
 from ..soft import _kernels
-from . import _link_kernels
 from ..soft.potential import HARMONIC, NeighborList, PowerLawPotential
 from ..tolerances import LINK_LENGTH_RTOL, LINK_RANK_RTOL
+from . import _link_kernels
 from .base import ModelEvaluation
 from .spheres import SphereBodies
 
@@ -292,7 +292,7 @@ class LinkedSpheresModel(SphereBodies):
             virial = virial + (u.T * (mu * self._r)) @ u
         return ModelEvaluation(float(energy), gradient, virial, int(n_contacts))
 
-    def rescaled(self, factor: float, position: NDArray[np.float64]) -> tuple["LinkedSpheresModel", NDArray[np.float64]]:
+    def rescaled(self, factor: float, position: NDArray[np.float64]) -> tuple[LinkedSpheresModel, NDArray[np.float64]]:
         """The model in the box scaled by ``factor`` and the centres moved affinely.
 
         The affine move changes link lengths by ``factor - 1``; minimisers re-affix
