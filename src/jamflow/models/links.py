@@ -108,6 +108,8 @@ class ClusterGram:
     def solve(self, rhs: NDArray[np.float64]) -> NDArray[np.float64]:
         """``G^-1 rhs`` for ``rhs`` (L,) or (L, k) (a new array)."""
         out = np.array(rhs, dtype=np.float64, order="C")
+        if not out.size:
+            return out
         _link_kernels.gram_solve(self.order, self.cptr, self.fptr, self.chol, out.reshape(len(out), -1))
         return out
 
