@@ -18,6 +18,7 @@ from jamflow.analysis.forces import force_distribution
 from jamflow.analysis.gaps import gap_histogram
 from jamflow.analysis.overlap import overlap_series
 from jamflow.analysis.structure import structure_dataset
+from jamflow.chains.averages import moduli_against_links
 from jamflow.cli.analysis import PLOT_KINDS
 
 from test_analysis_eos import eos_run, series
@@ -55,6 +56,9 @@ def _figures(rng) -> dict[str, Figure]:
                           coords={"label": ("setting", ["a", "b", "ref"])},
                           attrs={"primary_error": "err", "stage": "synthetic"})
     gaps, forces = _gaps(rng), _forces(rng)
+    cemented = [xr.Dataset({f"{m}_{b}": ((), v) for m in ("bulk", "shear") for b, v in
+                            (("voigt", 2.0 + k + rng.random()), ("reuss", 1.0 + k + rng.random()))},
+                           attrs={"N": 64, "n_cemented": 8 * k, "d": 3}) for k in range(3) for _ in range(2)]
     return {
         "packing": plots.plot_packing(p),
         "gaps": plots.plot_gaps([gaps], ["synthetic"]),
@@ -68,6 +72,7 @@ def _figures(rng) -> dict[str, Figure]:
         "pareto": plots.pareto(tradeoff),
         "jamming-table": plots.plot_jamming_table(table),
         "eos": plots.plot_eos(eos),
+        "chains-moduli": plots.plot_chains_moduli(moduli_against_links(cemented)),
         "fit-windows (forces)": plots.plot_fit_windows(forces),
     }
 

@@ -300,6 +300,7 @@ def _moduli_linked(args: argparse.Namespace, packing: Packing) -> int:
         attrs=new_dataset_attrs("jamflow linked-packing compliance and moduli", stage_parameters(args, "input", "out"),
                                 d=packing.d, N=packing.n, n_links=len(packing.links), n_rigid=c.n_rigid,
                                 n_zero_modes=ch.n_zero, protocol=packing.protocol,
+                                n_cemented=int(packing.attrs.get("n_cemented", 0)),
                                 length_unit=packing.attrs.get("length_unit", "")),
     )
     write_dataset(ds, args.out)
@@ -316,7 +317,9 @@ def _moduli_linked(args: argparse.Namespace, packing: Packing) -> int:
 
 def _moduli(args: argparse.Namespace) -> int:
     packing = read_packing(args.input, None)
-    if packing.links is not None and len(packing.links):
+    if packing.links is not None and (len(packing.links) or packing.attrs.get("shear_stabilized")):
+        # a shear-stabilised packing gets the strain compliance of Sec. VI even with no links
+        # (the zero-link point of paper Fig. 5)
         return _moduli_linked(args, packing)
     potential = PowerLawPotential(exponent=args.exponent)
     m = elastic_moduli(packing.position, packing.box, packing.diameter, potential)
