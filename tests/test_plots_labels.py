@@ -10,6 +10,9 @@ import numpy as np
 import pytest
 import xarray as xr
 from matplotlib.figure import Figure
+from test_analysis_eos import eos_run, series
+from test_analysis_flow import flow_dataset
+from test_plots import lattice
 
 from jamflow import plots
 from jamflow.analysis.eos import jamming_table
@@ -20,10 +23,6 @@ from jamflow.analysis.overlap import overlap_series
 from jamflow.analysis.structure import structure_dataset
 from jamflow.chains.averages import moduli_against_links
 from jamflow.cli.analysis import PLOT_KINDS
-
-from test_analysis_eos import eos_run, series
-from test_analysis_flow import flow_dataset
-from test_plots import lattice
 
 
 def _gaps(rng) -> xr.Dataset:

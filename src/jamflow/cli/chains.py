@@ -9,6 +9,7 @@ from math import radians
 import numpy as np
 import xarray as xr
 
+from ..chains.averages import moduli_against_links
 from ..chains.builders import (
     CLUSTER_KINDS,
     cement,
@@ -17,9 +18,14 @@ from ..chains.builders import (
     read_link_file,
     remove_degenerate_links,
 )
-from ..chains.averages import moduli_against_links
 from ..chains.certify import certify_linked
-from ..io import new_dataset_attrs, read_dataset, read_packing, write_dataset, write_packing
+from ..io import (
+    new_dataset_attrs,
+    read_dataset,
+    read_packing,
+    write_dataset,
+    write_packing,
+)
 from .common import (
     add_command,
     add_quiet,
@@ -154,10 +160,10 @@ def _chains_moduli(args: argparse.Namespace) -> int:
     rows = []
     for k in range(table.sizes["links_per_sphere"]):
         t = table.isel(links_per_sphere=k)
-        rows.append((f"n_l / N = {float(t.links_per_sphere):.4g} ({int(t.n_packings)} packings)",
-                     f"G = {float(t.shear_weighted):.5g} +- {float(t.shear_se):.2g}, "
-                     f"K = {float(t.bulk_weighted):.5g} +- {float(t.bulk_se):.2g} epsilon / <D>^d "
-                     f"(infinite: G {int(t.shear_infinite)}, K {int(t.bulk_infinite)})"))
+        value = (f"G = {float(t.shear_weighted):.5g} +- {float(t.shear_se):.2g}, "
+                 f"K = {float(t.bulk_weighted):.5g} +- {float(t.bulk_se):.2g} epsilon / <D>^d "
+                 f"(infinite: G {int(t.shear_infinite)}, K {int(t.bulk_infinite)})")
+        rows.append((f"n_l / N = {float(t.links_per_sphere):.4g} ({int(t.n_packings)} packings)", value))
     print_summary(args, args.paths[-1], rows)
     return 0
 
