@@ -12,7 +12,8 @@ import xarray as xr
 from ..chains.averages import moduli_against_links
 from ..chains.builders import (
     CLUSTER_KINDS,
-    cement,
+    cement_links,
+    cement_pairs,
     check_linked_start,
     linked_packing,
     read_link_file,
@@ -111,7 +112,8 @@ def _link(args: argparse.Namespace) -> int:
     if args.cement is not None:
         if args.seed is None:
             raise ValueError("--cement needs --seed")
-        links, messages = cement(packing, args.cement, np.random.default_rng(args.seed), args.with_strain)
+        new = cement_pairs(packing, args.cement, np.random.default_rng(args.seed))
+        links, messages = cement_links(packing, new, args.with_strain)
         protocol = f">cement({args.cement})"
     else:
         pairs, lengths = read_link_file(args.file, packing.position, packing.box)
@@ -124,12 +126,10 @@ def _link(args: argparse.Namespace) -> int:
     keep = None
     if packing.contacts is not None:
         keep = ~links.contains(packing.contacts[:, 0], packing.contacts[:, 1])
-    # contacts that became links (paper Fig. 5's n_l; angle links count only where they join
-    # two spheres in contact); the packing's contacts never hold an already linked pair
+    # paper Fig. 5's n_l: cemented contacts kept as links (angle links not counted)
     attrs = dict(packing.attrs)
     if args.cement is not None:
-        attrs["n_cemented"] = int(packing.attrs.get("n_cemented", 0)) + int(
-            links.contains(packing.contacts[:, 0], packing.contacts[:, 1]).sum())
+        attrs["n_cemented"] = int(packing.attrs.get("n_cemented", 0)) + int(links.contains(new[:, 0], new[:, 1]).sum())
     out = packing.evolve(
         links=links, protocol=packing.protocol + protocol, attrs=attrs,
         contacts=None if keep is None else packing.contacts[keep],
