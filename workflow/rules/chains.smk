@@ -86,7 +86,7 @@ rule chains_plot_packing:
     conda:
         "../envs/jamflow.yaml"
     shell:
-        "jamflow plot packing {input} {output.png} > {log} 2>&1"
+        "jamflow plot packing {input} {output.png} --soft > {log} 2>&1"
 
 
 rule chains_cement:

@@ -474,6 +474,9 @@ def chains_start_command(wildcards, output):
 
 
 def chains_jam_options():
+    """soft-jam options of a chains scene (none in other scenes, whose rules never run)."""
+    if not CHAINS:
+        return ""
     flags = "--shear-stabilize" if CHAINS.get("shear_stabilize", True) else ""
     return (
         f"--pressure {CHAINS['pressure']} --pressure-rtol {CHAINS['pressure_rtol']}"
