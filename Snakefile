@@ -19,6 +19,7 @@ include: "workflow/rules/flow.smk"
 include: "workflow/rules/analysis.smk"
 include: "workflow/rules/figures.smk"
 include: "workflow/rules/tradeoff.smk"
+include: "workflow/rules/chains.smk"
 
 
 rule all:

@@ -14,8 +14,11 @@ measured side by side in this run, mean anything):
 Writes ``benchmarks/output/chains.nc`` and ``chains.png`` and prints the numbers.
 
 Usage: ``python benchmarks/chains.py [--sizes 2:150 3:256 ...] [--hessian-sizes 30 60 120]
-[--pressure 1e-4] [--pressure-rtol 1e-3]``; defaults are small (the issue's N = 600
-and N = 1024 are ``--sizes 2:600 3:1024``, hours in the pure-Python constrained FIRE).
+[--pressure 1e-4] [--pressure-rtol 1e-3]``; the defaults are the issue's sizes (2D rigid
+trimers N = 150 and 600 spheres, 3D chains N = 256 and 1024). Each linked run is timed
+without a profiler and repeated under cProfile for the shares (cumulative times of
+``project``, ``reproject``, ``evaluate`` (energy, link tensions and the factorisation at
+the new point) and neighbour-list ``build``; nested calls make them overlap).
 """
 
 from __future__ import annotations
@@ -88,20 +91,54 @@ def jamming_runs(sizes: list[tuple[int, int]], pressure: float, rtol: float, see
                                  delta_phi=1e-2)
         t_sphere = time.perf_counter() - t0
         for stabilize in (False, True):
-            res, total, parts = _profiled(lambda s=start, k=stabilize: jam_linked(s, pressure, settings=settings,
-                                                                                  shear_stabilize=k))
+            t0 = time.perf_counter()
+            res = jam_linked(start, pressure, settings=settings, shear_stabilize=stabilize)
+            total = time.perf_counter() - t0
+            # shares from a second, profiled run of the same start (cProfile slows the many small calls)
+            _, t_prof, parts = _profiled(lambda s=start, k=stabilize: jam_linked(s, pressure, settings=settings,
+                                                                                 shear_stabilize=k))
             p = res.packing
             rows.append({"d": d, "n": start.n, "shear": int(stabilize), "time_s": total, "sphere_time_s": t_sphere,
-                         "ratio": total / t_sphere, "steps": res.steps, "phi": p.packing_fraction,
-                         "sphere_phi": sphere.packing.packing_fraction, "n_contacts": p.attrs["n_contacts"],
-                         "isostatic_count": p.attrs["isostatic_count"], "max_link_error": p.attrs["max_link_error"],
-                         **{f"share_{k.replace(' ', '_').replace('-', '_')}": v / total for k, v in parts.items()}})
+                         "ratio": total / t_sphere, "steps": res.steps, "sphere_steps": sphere.steps,
+                         "phi": p.packing_fraction, "sphere_phi": sphere.packing.packing_fraction,
+                         "n_contacts": p.attrs["n_contacts"], "isostatic_count": p.attrs["isostatic_count"],
+                         "max_link_error": p.attrs["max_link_error"],
+                         **{f"share_{k.replace(' ', '_').replace('-', '_')}": v / t_prof for k, v in parts.items()}})
             r = rows[-1]
             print(f"d={d} N={start.n} {'shear-stabilised' if stabilize else 'fixed box'}: {total:.1f} s "
-                  f"({r['ratio']:.1f} x spheres {t_sphere:.2f} s), {res.steps} FIRE steps, phi {r['phi']:.5f} "
-                  f"(spheres {r['sphere_phi']:.5f}), N_c {r['n_contacts']} / iso {r['isostatic_count']}, "
-                  f"link error {r['max_link_error']:.1e} (<= {LINK_LENGTH_RTOL:g}); shares "
-                  + ", ".join(f"{k} {v / total:.0%}" for k, v in parts.items()))
+                  f"({r['ratio']:.1f} x spheres {t_sphere:.2f} s), {res.steps} FIRE steps (spheres {sphere.steps}), "
+                  f"phi {r['phi']:.5f} (spheres {r['sphere_phi']:.5f}), N_c {r['n_contacts']} / iso "
+                  f"{r['isostatic_count']}, link error {r['max_link_error']:.1e} (<= {LINK_LENGTH_RTOL:g}); "
+                  f"shares of the profiled run ({t_prof:.1f} s) " + ", ".join(f"{k} {v / t_prof:.0%}"
+                                                                             for k, v in parts.items()), flush=True)
+    return rows
+
+
+def protocol_runs(sizes: list[tuple[int, int]], levels: list[tuple[float, float]], seeds: int) -> list[dict]:
+    """Bisection to P0 against the energy-scaling decompression, same starts, interleaved (shear-stabilised)."""
+    rows = []
+    for d, n in sizes:
+        for seed in range(1, seeds + 1):
+            start = _start(d, n, seed)
+            for p0, etol in levels:
+                settings = JammingSettings(force_tol=1e-12, pressure_rtol=1e-3, delta_phi=1e-2)
+                for protocol in ("bisection", "energy"):
+                    t0 = time.perf_counter()
+                    res = jam_linked(start, p0 if protocol == "bisection" else None, settings=settings,
+                                     shear_stabilize=True, protocol=protocol, energy_tol=etol)
+                    t = time.perf_counter() - t0
+                    p = res.packing
+                    rows.append({"d": d, "n": p.n, "seed": seed, "level_pressure": p0, "level_energy": etol,
+                                 "energy_protocol": int(protocol == "energy"), "time_s": t, "steps": res.steps,
+                                 "minimisations": len(res.history["phi"]), "phi": p.packing_fraction,
+                                 "pressure": p.pressure, "energy_per_sphere": p.attrs["energy"] / p.n,
+                                 "n_contacts": p.attrs["n_contacts"], "isostatic_count": p.attrs["isostatic_count"],
+                                 "converged": int(res.converged)})
+                    r = rows[-1]
+                    print(f"protocols d={d} N={p.n} seed {seed} {protocol:9s} (P0 {p0:g} / U/N <= {etol:g}): "
+                          f"{t:.2f} s, {res.steps} steps, {r['minimisations']} minimisations, phi {r['phi']:.6f}, "
+                          f"P {r['pressure']:.3e}, U/N {r['energy_per_sphere']:.2e}, N_c {r['n_contacts']} / iso "
+                          f"{r['isostatic_count']}", flush=True)
     return rows
 
 
@@ -123,14 +160,28 @@ def hessian_runs(sizes: list[int], pressure: float, seed: int) -> list[dict]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", nargs="+", default=["2:150"], help="d:N pairs of the jamming runs")
+    ap.add_argument("--sizes", nargs="+", default=["2:150", "2:600", "3:256", "3:1024"],
+                    help="d:N pairs of the jamming runs (2D rigid trimers, 3D chains of 4 with frozen angles)")
     ap.add_argument("--hessian-sizes", nargs="+", type=int, default=[30, 60, 120, 240])
     ap.add_argument("--pressure", type=float, default=1e-4)
     ap.add_argument("--pressure-rtol", type=float, default=1e-3)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--protocol-sizes", nargs="*", default=["2:60", "3:128"],
+                    help="d:N of the bisection vs energy-scaling comparison (shear-stabilised; none to skip)")
+    ap.add_argument("--protocol-seeds", type=int, default=3)
+    ap.add_argument("--skip-jamming", action="store_true", help="only the protocol comparison and Hessian parts")
     args = ap.parse_args()
     sizes = [tuple(int(v) for v in s.split(":")) for s in args.sizes]
-    jam = jamming_runs(sizes, args.pressure, args.pressure_rtol, args.seed)
+    jam = [] if args.skip_jamming else jamming_runs(sizes, args.pressure, args.pressure_rtol, args.seed)
+    proto_sizes = [tuple(int(v) for v in s.split(":")) for s in args.protocol_sizes]
+    proto = protocol_runs(proto_sizes, [(1e-4, 2e-8), (1e-6, 2e-12)], args.protocol_seeds)
+    for d, n in proto_sizes:
+        for p0 in (1e-4, 1e-6):
+            sel = [r for r in proto if r["d"] == d and r["level_pressure"] == p0]
+            tb = sum(r["time_s"] for r in sel if not r["energy_protocol"])
+            te = sum(r["time_s"] for r in sel if r["energy_protocol"])
+            print(f"protocols d={d} N~{n} P0 {p0:g}: energy / bisection time {te / tb:.2f} "
+                  f"(sums over {len(sel) // 2} starts: {te:.1f} s / {tb:.1f} s)")
     hess = hessian_runs(args.hessian_sizes, args.pressure, args.seed)
     n = np.array([r["n"] for r in hess], float)
     fits = {}
@@ -138,21 +189,37 @@ def main() -> None:
         t = np.array([r[key] for r in hess])
         fits[key] = float(np.polyfit(np.log(n), np.log(t), 1)[0]) if len(n) > 1 else float("nan")
         print(f"{key.split('_')[0]} time ~ N^{fits[key]:.2f}")
+
+    def block(rows: list[dict], dim: str) -> dict:
+        return {(f"{dim}_{k}" if dim == "protocol_run" else k): ((dim,), [r[k] for r in rows],
+                                                                   {"units": "1", "long_name": k.replace("_", " ")})
+                for k in (rows[0] if rows else {})}
+
     ds = xr.Dataset(
-        {**{k: (("run",), [r[k] for r in jam], {"units": "1", "long_name": k.replace("_", " ")}) for k in jam[0]},
-         **{k: (("size",), [r[k] for r in hess], {"units": "1", "long_name": k.replace("_", " ")}) for k in hess[0]}},
+        {**block(jam, "run"), **block(proto, "protocol_run"), **block(hess, "size")},
         attrs=new_dataset_attrs("jamflow chains benchmark", vars(args), hessian_exponent=fits["hessian_s"],
                                 compliance_exponent=fits["compliance_s"],
                                 note="wall times on 2 shared cores; compare ratios within this run"),
     )
     OUT.mkdir(exist_ok=True)
     write_dataset(ds, OUT / "chains.nc")
-    fig, (a, b) = plt.subplots(1, 2, figsize=(9, 3.6))
+    fig, (a, b, c) = plt.subplots(1, 3, figsize=(13, 3.8))
     labels = [f"d={r['d']} N={r['n']}\n{'shear' if r['shear'] else 'fixed'}" for r in jam]
     a.bar(range(len(jam)), [r["ratio"] for r in jam])
     a.set_xticks(range(len(jam)), labels, fontsize=7)
     a.set_xlabel("linked packing (d, N spheres, box)")
     a.set_ylabel("jamming time / sphere jamming time (1)")
+    for d, n0 in proto_sizes:
+        for p0, marker in ((1e-4, "o"), (1e-6, "s")):
+            sel = [r for r in proto if r["d"] == d and r["level_pressure"] == p0]
+            tb = [r["time_s"] for r in sel if not r["energy_protocol"]]
+            te = [r["time_s"] for r in sel if r["energy_protocol"]]
+            c.loglog(tb, te, marker, label=f"d={d} N~{n0}, P0={p0:g}")
+    lim = [min([r["time_s"] for r in proto], default=0.1), max([r["time_s"] for r in proto], default=1.0)]
+    c.loglog(lim, lim, "k:", lw=1)
+    c.set_xlabel("bisection to P0: wall time (s)")
+    c.set_ylabel("energy-scaling steps: wall time (s)")
+    c.legend(fontsize=7)
     b.loglog(n, [r["hessian_s"] for r in hess], "o-", label=f"constrained Hessian, N^{fits['hessian_s']:.2f}")
     b.loglog(n, [r["compliance_s"] for r in hess], "s-", label=f"compliance, N^{fits['compliance_s']:.2f}")
     b.set_xlabel("N (spheres)")

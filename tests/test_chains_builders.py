@@ -183,3 +183,18 @@ def test_cli_init_chains(tmp_path, capsys):
     assert main(["init-chains", str(tmp_path / "x.nc"), "--d", "4", "--clusters", "3", "--cluster", "trimer",
                  "--seed", "1"]) == 1
     assert "d = 2 or 3" in capsys.readouterr().err
+
+
+def test_cli_cement_records_the_cemented_contacts_not_the_angle_links(tmp_path, jammed):
+    """n_l of paper Fig. 5 counts the contacts made links, not the links freezing bond angles."""
+    write_packing(jammed, tmp_path / "j.nc")
+    assert main(["link", str(tmp_path / "j.nc"), str(tmp_path / "c.nc"), "--cement", "12", "--seed", "2",
+                 "--quiet"]) == 0
+    p = read_packing(tmp_path / "c.nc", None)
+    links, _ = cement(jammed, 12, np.random.default_rng(2))
+    assert len(p.links) == len(links) > 12  # angle links were added
+    assert p.attrs["n_cemented"] == 12
+    # a second round adds to the count
+    assert main(["link", str(tmp_path / "c.nc"), str(tmp_path / "c2.nc"), "--cement", "3", "--seed", "4",
+                 "--quiet"]) == 0
+    assert read_packing(tmp_path / "c2.nc", None).attrs["n_cemented"] == 15

@@ -158,3 +158,32 @@ def test_cli_soft_jam_and_check_of_a_linked_packing(tmp_path, capsys, jammed_tri
     assert main(["soft-jam", str(tmp_path / "s.nc"), str(tmp_path / "x.nc"), "--pressure", "1e-4",
                  "--seed", "3"]) == 1
     assert "tear the links" in capsys.readouterr().err
+
+
+def test_energy_scaling_protocol_ends_jammed_below_the_threshold(jammed_trimers, tmp_path, capsys):
+    """Paper Sec. III: decompression by the energy scaling stops at 0 < U/N <= energy_tol, jammed and isostatic.
+
+    The bisection of the same start at P0 = 1e-4 ends at U/N ~ 1e-8; with energy_tol 1e-10 the
+    pressure must be lower (P ~ sqrt(U/N) for harmonic contacts: a factor ~10), the links held,
+    and the backbone isostatic by the cluster count.
+    """
+    start, bisected = jammed_trimers
+    settings = JammingSettings(force_tol=1e-13, pressure_rtol=1e-3, delta_phi=1e-2)
+    res = jam_linked(start, None, settings=settings, protocol="energy", energy_tol=1e-10)
+    p = res.packing
+    e = p.attrs["energy"] / p.n
+    assert res.converged and 1e-14 < e <= 1e-10
+    assert 0.0 < p.pressure < 0.3 * bisected.packing.pressure
+    assert np.max(np.abs(p.links.length_errors(p.position, p.box))) <= LINK_LENGTH_RTOL
+    assert p.attrs["n_contacts"] == p.attrs["isostatic_count"]
+    # fewer minimisations than the bisection's halving steps
+    assert len(res.history["phi"]) < len(bisected.history["phi"])
+    write_packing(start, tmp_path / "s.nc")
+    assert main(["soft-jam", str(tmp_path / "s.nc"), str(tmp_path / "e.nc"), "--jam-protocol", "energy",
+                 "--energy-tol", "1e-10", "--force-tol", "1e-13", "--delta-phi", "1e-2", "--quiet"]) == 0
+    np.testing.assert_allclose(read_packing(tmp_path / "e.nc", None).position, p.position, atol=1e-12)
+    assert main(["soft-jam", str(tmp_path / "s.nc"), str(tmp_path / "x.nc"), "--jam-protocol", "energy"]) == 1
+    assert "--energy-tol" in capsys.readouterr().err
+    assert main(["soft-jam", str(tmp_path / "s.nc"), str(tmp_path / "x.nc")]) == 1
+    assert "--pressure is required" in capsys.readouterr().err
+    assert not (tmp_path / "x.nc").exists()

@@ -75,6 +75,26 @@ def test_without_links_at_zero_strain_the_positions_part_is_the_sphere_model():
     np.testing.assert_allclose(a.virial, b.virial, rtol=1e-13)
 
 
+
+def test_shear_stabilised_spheres_without_links_project_onto_fixed_volume():
+    """Regression (empty link Gram solve): spheres alone project only the volume row, Tr-free strain forces.
+
+    The projected strain force is orthogonal to grad det F = (1, 0, 1) / q_s at zero strain,
+    the centre part is untouched, and a strain off the volume manifold is re-affixed to det F = 1.
+    """
+    p, _ = linked_packing(2, 8, "trimer", np.random.default_rng(4))
+    empty = Links(np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0))
+    model = ShearStabilizedModel(p.box, p.diameter, empty, p.position)
+    q = model.dofs(p.position)
+    g = np.random.default_rng(5).normal(size=model.n_dof)
+    pg = model.project(g, q)
+    np.testing.assert_array_equal(pg[: -model.m], g[: -model.m])
+    assert abs(pg[-3] + pg[-1]) <= 1e-14 * np.abs(g).max()
+    assert pg[-2] == g[-2]
+    q[-3] += 0.01 * model.strain_scale
+    assert abs(model.volume_error(model.reproject(q))) <= LINK_LENGTH_RTOL
+
+
 @pytest.fixture(scope="module")
 def stabilized():
     start, _ = linked_packing(2, 8, "trimer", np.random.default_rng(1))

@@ -10,6 +10,9 @@ import numpy as np
 import pytest
 import xarray as xr
 from matplotlib.figure import Figure
+from test_analysis_eos import eos_run, series
+from test_analysis_flow import flow_dataset
+from test_plots import lattice
 
 from jamflow import plots
 from jamflow.analysis.eos import jamming_table
@@ -18,11 +21,8 @@ from jamflow.analysis.forces import force_distribution
 from jamflow.analysis.gaps import gap_histogram
 from jamflow.analysis.overlap import overlap_series
 from jamflow.analysis.structure import structure_dataset
+from jamflow.chains.averages import moduli_against_links
 from jamflow.cli.analysis import PLOT_KINDS
-
-from test_analysis_eos import eos_run, series
-from test_analysis_flow import flow_dataset
-from test_plots import lattice
 
 
 def _gaps(rng) -> xr.Dataset:
@@ -55,6 +55,9 @@ def _figures(rng) -> dict[str, Figure]:
                           coords={"label": ("setting", ["a", "b", "ref"])},
                           attrs={"primary_error": "err", "stage": "synthetic"})
     gaps, forces = _gaps(rng), _forces(rng)
+    cemented = [xr.Dataset({f"{m}_{b}": ((), v) for m in ("bulk", "shear") for b, v in
+                            (("voigt", 2.0 + k + rng.random()), ("reuss", 1.0 + k + rng.random()))},
+                           attrs={"N": 64, "n_cemented": 8 * k, "d": 3}) for k in range(3) for _ in range(2)]
     return {
         "packing": plots.plot_packing(p),
         "gaps": plots.plot_gaps([gaps], ["synthetic"]),
@@ -68,6 +71,7 @@ def _figures(rng) -> dict[str, Figure]:
         "pareto": plots.pareto(tradeoff),
         "jamming-table": plots.plot_jamming_table(table),
         "eos": plots.plot_eos(eos),
+        "chains-moduli": plots.plot_chains_moduli(moduli_against_links(cemented)),
         "fit-windows (forces)": plots.plot_fit_windows(forces),
     }
 

@@ -469,3 +469,49 @@ def test_walls_scene_runs_end_to_end(tmp_path):
         assert ds.attrs["n_contacts"] == d * ds.attrs["n_stable"] + 1 == pair_force_bearing + n_wall
         assert ds.attrs["max_overlap"] < 1e-8
         assert (out / "figures" / f"packing_seed{s}.png").stat().st_size > 1000
+
+
+def _chains_scene(work: Path, name: str, **changes) -> tuple[Path, dict]:
+    """A shrunken copy of config/scenes/<name>.yaml (same keys, smaller sizes)."""
+    scene = yaml.safe_load((REPO / "config" / "scenes" / f"{name}.yaml").read_text())
+    scene["chains"].update(changes)
+    path = work / "config" / f"{name}-tiny.yaml"
+    path.write_text(yaml.safe_dump(scene))
+    return path, scene
+
+
+def test_chains_fig5_plans_one_cementing_and_moduli_job_per_draw(tmp_path):
+    work = _workdir(tmp_path)
+    path, scene = _chains_scene(work, "chains-fig5", seeds=[1, 2, 3], cement=[0, 8], draws=2)
+    jobs = _planned_jobs(work, "--configfile", str(path))
+    assert jobs["chains_jam"] == 3 and jobs["chains_cement"] == jobs["chains_moduli"] == 3 * 2 * 2
+    assert jobs["chains_moduli_table"] == jobs["chains_plot_moduli"] == 1 and "chains_check" not in jobs
+
+
+def test_chains_fig2_smallest_variant_runs_and_is_isostatic(tmp_path):
+    """12 rigid trimers in 2D, shear-stabilised at P0 = 1e-4: isostatic by the cluster count (docs/chains.md)."""
+    work = _workdir(tmp_path)
+    path, scene = _chains_scene(work, "chains-fig2", dims=[2], clusters=12)
+    res = _snakemake(work, "-c1", "--workflow-profile", "workflow/profiles/default", "--configfile", str(path))
+    assert res.returncode == 0, res.stderr[-4000:]
+    out = work / "results" / scene["scene"]
+    check = json.loads((out / "chains" / "d2" / "seed1" / "jammed.check.json").read_text())
+    assert check["n_links"] == 36 and check["max_link_error"] <= 1e-13
+    # 12 trimers shear-stabilised: 3 per trimer - 2 translations + 1 + 2 strain = 37 contacts
+    assert check["isostatic"] is True and check["n_contacts"] == check["isostatic_count"] == 37
+    png = out / "figures" / "chains-packing_d2_seed1.png"
+    assert png.stat().st_size > 1000 and png.with_suffix(".pdf").is_file()
+    assert (out / "benchmarks" / "chains" / "jam_d2_seed1.tsv").is_file()
+
+
+@pytest.mark.slow
+def test_chains_fig5_smallest_variant_runs_and_cementing_stiffens(tmp_path):
+    work = _workdir(tmp_path)
+    path, scene = _chains_scene(work, "chains-fig5", spheres=32, seeds=[1], cement=[0, 8], draws=1)
+    res = _snakemake(work, "-c1", "--workflow-profile", "workflow/profiles/default", "--configfile", str(path))
+    assert res.returncode == 0, res.stderr[-4000:]
+    out = work / "results" / scene["scene"]
+    table = xr.load_dataset(out / "analysis" / "chains-moduli.nc")
+    np.testing.assert_allclose(table.links_per_sphere.values, [0.0, 8 / 32])
+    assert np.all(table.shear_weighted.values > 0) and table.shear_weighted.values[1] > table.shear_weighted.values[0]
+    assert (out / "figures" / "chains-moduli.png").stat().st_size > 1000

@@ -69,6 +69,8 @@ DATASET_KINDS: dict[str, tuple[frozenset[str], str]] = {
                           "a jamming certificate of a linked packing (jamflow certify on links)"),
     "chain-moduli": (frozenset({"compliance", "bulk_hill", "shear_hill"}),
                      "compliance and moduli of a linked packing (jamflow moduli on links)"),
+    "chains-moduli-table": (frozenset({"bulk_weighted", "shear_weighted", "n_packings"}),
+                            "moduli of cemented packings against n_l / N (jamflow chains-moduli)"),
     "modes": (frozenset({"eigenvalue", "region", "rotational_weight"}),
               "a dynamical-matrix spectrum of a shape packing (jamflow modes)"),
     "tradeoff": (frozenset({"time", "on_front", "is_reference"}), "a speed/accuracy sweep (jamflow tradeoff)"),

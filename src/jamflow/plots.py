@@ -678,3 +678,35 @@ def plot_eos(datasets: Sequence[xr.Dataset], labels: Sequence[str] | None = None
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7)
     return fig
+
+
+def plot_chains_moduli(ds: xr.Dataset) -> Figure:
+    """Shear and bulk moduli of cemented packings against added links per sphere (chains paper Fig. 5).
+
+    ``ds`` is a ``jamflow chains-moduli`` output: Reuss-Voigt weighted values with
+    weighted standard errors (points), the mean Voigt and Reuss bounds (dashed and
+    dotted). Groups whose modulus is infinite in every packing are marked on the top edge.
+    """
+    fig = Figure(layout="constrained", figsize=(8.4, 3.6))
+    axes = fig.subplots(1, 2)
+    x = ds["links_per_sphere"].values
+    d = int(ds.attrs.get("d", 3))
+    for ax, name, symbol in zip(axes, ("shear", "bulk"), ("G", "K")):
+        y, err = ds[f"{name}_weighted"].values, ds[f"{name}_se"].values
+        finite = np.isfinite(y)
+        ax.errorbar(x[finite], y[finite], yerr=np.nan_to_num(err[finite]), fmt="o", ms=4, capsize=3,
+                    label="Reuss-Voigt weighted, standard error")
+        for part, style in (("voigt_mean", "--"), ("reuss_mean", ":")):
+            v = ds[f"{name}_{part}"].values
+            ok = np.isfinite(v)
+            ax.plot(x[ok], v[ok], style, color="0.4", lw=1, label=f"mean {part.split('_')[0].capitalize()} bound")
+        if (~finite).any():
+            top = np.nanmax(np.where(finite, y, np.nan)) if finite.any() else 1.0
+            ax.plot(x[~finite], np.full((~finite).sum(), 1.05 * top), "^", color="C3", label="infinite")
+        ax.set_xlabel(f"added links per sphere n_l / N {_DL}")
+        ax.set_ylabel(f"{name} modulus {symbol} [epsilon / <D>^{d}]")
+        ax.legend(fontsize=7)
+    n = ds["n_packings"].values
+    fig.suptitle(f"{int(n.min())}-{int(n.max())} packings per point" if n.min() != n.max()
+                 else f"{int(n.min())} packings per point", fontsize=9)
+    return fig

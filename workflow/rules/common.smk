@@ -213,6 +213,7 @@ def scene_targets():
         targets.append(f"{RESULTS}/analysis/jamming-table.nc")
     if "flow" in config:
         targets += shear_summaries()
+    targets += chains_targets()  # workflow/rules/chains.smk
     for stage in config.get("tradeoff", {}).get("stages", []):
         targets += [f"{RESULTS}/tradeoff/{stage}.nc", f"{RESULTS}/figures/pareto_{stage}.png"]
     for fig in config.get("figures", []):
@@ -425,3 +426,59 @@ localrules:
     plot_jamming_table,
     plot_eos,
     plot_pareto,
+
+
+# Linked-packing scenes (rules/chains.smk): chains-fig2, chains-fig5.
+CHAINS = config.get("chains", {})
+CHAINS_DIR = f"{RESULTS}/chains"
+
+
+def chains_samples():
+    """(d, seed) of every linked packing of the scene."""
+    dims = CHAINS.get("dims", [2, 3]) if CHAINS.get("figure") == "fig2" else [3]
+    return [(d, s) for d in dims for s in CHAINS.get("seeds", [])]
+
+
+def chains_cemented():
+    """(seed, cemented contacts, draw) of every cemented packing of a fig5 scene."""
+    return [(s, k, r) for s in CHAINS.get("seeds", []) for k in CHAINS["cement"] for r in range(CHAINS["draws"])]
+
+
+def chains_targets():
+    """The files a chains scene asks for (none for other scenes)."""
+    if not CHAINS:
+        return []
+    if CHAINS["figure"] == "fig2":
+        return [
+            path
+            for d, s in chains_samples()
+            for path in (
+                f"{RESULTS}/figures/chains-packing_d{d}_seed{s}.png",
+                f"{CHAINS_DIR}/d{d}/seed{s}/jammed.check.json",
+            )
+        ]
+    return [f"{RESULTS}/figures/chains-moduli.png"]
+
+
+def chains_start_command(wildcards, output):
+    """fig2: random rigid trimers; fig5: a random monomer packing (RSA)."""
+    if CHAINS["figure"] == "fig2":
+        return (
+            f"jamflow init-chains {output} --d {wildcards.d} --clusters {CHAINS['clusters']}"
+            f" --cluster trimer --seed {wildcards.seed}"
+        )
+    return (
+        f"jamflow init {output} --d {wildcards.d} --n {CHAINS['spheres']} --phi {CHAINS['phi']}"
+        f" --seed {wildcards.seed}"
+    )
+
+
+def chains_jam_options():
+    """soft-jam options of a chains scene (none in other scenes, whose rules never run)."""
+    if not CHAINS:
+        return ""
+    flags = "--shear-stabilize" if CHAINS.get("shear_stabilize", True) else ""
+    return (
+        f"--pressure {CHAINS['pressure']} --pressure-rtol {CHAINS['pressure_rtol']}"
+        f" --force-tol {CHAINS['force_tol']} --delta-phi {CHAINS['delta_phi']} {flags}"
+    )

@@ -44,6 +44,8 @@ __all__ = [
     "BOND_ANGLE_RANGE",
     "CLUSTER_KINDS",
     "cement",
+    "cement_links",
+    "cement_pairs",
     "chain_links",
     "chain_offsets",
     "check_linked_start",
@@ -355,11 +357,7 @@ def read_link_file(path: str, position: ArrayLike, box: Box) -> tuple[NDArray[np
 def cement(packing: Packing, k: int, rng: np.random.Generator, strain: bool = False) -> tuple[Links, list[str]]:
     """Turn ``k`` random contacts into links and freeze the bond angles they create (paper Fig. 5).
 
-    New links take the current centre distance. For every sphere, each pair of its
-    links of which at least one is new gets an angle link between the two other ends
-    at their current distance. Redundant links are then removed
-    (:func:`remove_degenerate_links`, with ``strain`` as there; existing links and
-    new contact links first).
+    :func:`cement_pairs` draws the contacts, :func:`cement_links` links them.
 
     Returns
     -------
@@ -368,14 +366,35 @@ def cement(packing: Packing, k: int, rng: np.random.Generator, strain: bool = Fa
     messages : list of str
         One per removed degenerate link.
     """
+    return cement_links(packing, cement_pairs(packing, k, rng), strain)
+
+
+def cement_pairs(packing: Packing, k: int, rng: np.random.Generator) -> NDArray[np.int64]:
+    """``k`` distinct random contacts of ``packing`` that are not linked yet, shape (k, 2)."""
     if packing.contacts is None:
         raise ValueError("cementing needs the packing's contacts")
-    old = packing.links if packing.links is not None else Links(np.empty(0, np.int64), np.empty(0, np.int64),
-                                                                  np.empty(0))
+    old = _links_or_empty(packing)
     c = packing.contacts[~old.contains(packing.contacts[:, 0], packing.contacts[:, 1])]
     if not 0 <= k <= len(c):
         raise ValueError(f"cannot cement {k} contacts: the packing has {len(c)} unlinked contacts")
-    new = c[np.sort(rng.choice(len(c), size=k, replace=False))]
+    return c[np.sort(rng.choice(len(c), size=k, replace=False))]
+
+
+def _links_or_empty(packing: Packing) -> Links:
+    if packing.links is not None:
+        return packing.links
+    return Links(np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0))
+
+
+def cement_links(packing: Packing, new: NDArray[np.int64], strain: bool = False) -> tuple[Links, list[str]]:
+    """Link the pairs ``new`` (K, 2) at their current distances and freeze the bond angles they create.
+
+    For every sphere, each pair of its links of which at least one is new gets an
+    angle link between the two other ends at their current distance. Redundant
+    links are then removed (:func:`remove_degenerate_links`, with ``strain`` as there;
+    existing links and new contact links first).
+    """
+    old = _links_or_empty(packing)
     x, box = packing.position, packing.box
     pairs = [(int(a), int(b)) for a, b in zip(old.i, old.j)] + [tuple(map(int, p)) for p in new]
     lengths = list(old.length) + list(_distances(new, x, box))

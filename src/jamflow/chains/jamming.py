@@ -12,9 +12,16 @@ the affine move stretches links by the scale factor and the first re-affixing
 restores them (the paper's "cluster size decreased while maintaining their average
 positions", seen from the clusters' frame).
 
-The bisection is the default (not the paper's energy-scaling steps of
-``phi - phi_J``): it is the project's one jamming protocol, it ends at a stated
-pressure, and its fixed-box continuation needs no box degrees of freedom.
+Two protocols (``protocol=``):
+
+- ``"bisection"`` (default): the project's bisection to ``P0`` above;
+- ``"energy"``: the paper's Sec. III steps (:func:`scale_to_energy`): from an
+  overjammed minimum, decompress by the amount the energy scaling
+  ``U / N = A (phi - phi_J)^w`` (O'Hern et al., ``w`` the potential exponent)
+  predicts, until ``0 < U / N <= energy_tol``.
+
+Default chosen by measurement (``benchmarks/chains.py --protocols``, same starts,
+side by side; numbers in docs/chains.md): see :data:`DEFAULT_PROTOCOL`.
 """
 
 from __future__ import annotations
@@ -26,16 +33,38 @@ import numpy as np
 
 from ..bodies import Links
 from ..box import Box
+from ..models.base import EnergyModel
 from ..models.links import LinkedSpheresModel
 from ..packing import Packing, sphere_volume
 from ..soft.jamming import JammingResult, JammingSettings, jam_model_to_pressure
-from ..soft.minimize import MinimizeResult
+from ..soft.minimize import FireParameters, MinimizeResult, minimize_fire
 from ..soft.potential import HARMONIC, PowerLawPotential, overlapping_pairs
 from .builders import check_linked_start
 from .clusters import count_clusters
 from .shear import ShearStabilizedModel
 
-__all__ = ["jam_linked", "linked_soft_packing"]
+__all__ = ["DEFAULT_PROTOCOL", "ENERGY_FLOOR", "PROTOCOLS", "jam_linked", "linked_soft_packing", "scale_to_energy"]
+
+#: Jamming protocols of :func:`jam_linked`.
+PROTOCOLS = ("bisection", "energy")
+
+#: The default protocol. Measured (docs/chains.md; 2D trimers N = 60, shear-stabilised, 3
+#: starts): the energy steps took 0.5-0.7 of the bisection's time in 5 of 6 runs but end
+#: at 0.48-0.87 of the equivalent pressure and, for one start, 0.014 lower in phi_J (a
+#: different path). The bisection ends at a stated pressure (to pressure_rtol), which
+#: contact numbers and moduli depend on, so it stays the default.
+DEFAULT_PROTOCOL = "bisection"
+
+#: A minimum whose energy per sphere is below ``ENERGY_FLOOR * energy_tol`` counts as
+#: unjammed (the step overshot phi_J): with ``U ~ (phi - phi_J)^2`` its distance to
+#: jamming, and so its pressure, is 100 times below the threshold's, while a FIRE
+#: minimum of an unjammed packing keeps only overlaps of the order of the force tolerance.
+ENERGY_FLOOR: float = 1e-4
+
+#: Largest reduction of the distance to the estimated phi_J in one decompression
+#: step of :func:`scale_to_energy` (the estimate is an extrapolation of the scaling
+#: from larger distances, where corrections to it are larger).
+ENERGY_STEP_RATIO: float = 0.1
 
 
 def linked_soft_packing(packing: Packing, model: LinkedSpheresModel, res: MinimizeResult, protocol_suffix: str,
@@ -69,28 +98,39 @@ def linked_soft_packing(packing: Packing, model: LinkedSpheresModel, res: Minimi
 
 def jam_linked(
     packing: Packing,
-    pressure: float,
+    pressure: float | None,
     potential: PowerLawPotential = HARMONIC,
     settings: JammingSettings | None = None,
     progress: Callable[[dict], None] | None = None,
     shear_stabilize: bool = False,
+    protocol: str = DEFAULT_PROTOCOL,
+    energy_tol: float | None = None,
 ) -> JammingResult:
-    """Bring a linked packing to the jamming onset at pressure ``P0`` in a fixed-shape box (module doc).
+    """Bring a linked packing to the jamming onset in a fixed-shape box or shear-stabilised (module doc).
 
     Parameters
     ----------
     packing : Packing
         Start with links (overlaps allowed; without links, spheres); checked by
         :func:`~jamflow.chains.builders.check_linked_start`.
-    pressure : float
-        ``P0`` [epsilon / <D>^d], > 0.
+    pressure : float or None
+        ``P0`` [epsilon / <D>^d], > 0, of the bisection; None with ``protocol="energy"``.
     settings : JammingSettings, optional
         Default :class:`~jamflow.soft.jamming.JammingSettings`; ``force_tol`` bounds the largest projected force per sphere; ``box_dof`` must
         be ``"isotropic"`` (a fixed-shape box).
+    protocol : {"bisection", "energy"}
+        :data:`PROTOCOLS`; ``"energy"`` runs :func:`scale_to_energy` (uses
+        ``settings.force_tol``, ``delta_phi`` and ``max_steps``).
+    energy_tol : float, optional
+        Energy per sphere [epsilon] at which ``"energy"`` stops.
     """
     settings = JammingSettings() if settings is None else settings
-    if not (np.isfinite(pressure) and pressure > 0.0):
+    if protocol not in PROTOCOLS:
+        raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
+    if protocol == "bisection" and not (pressure is not None and np.isfinite(pressure) and pressure > 0.0):
         raise ValueError(f"target pressure must be positive and finite, got {pressure}")
+    if protocol == "energy" and not (energy_tol is not None and np.isfinite(energy_tol) and energy_tol > 0.0):
+        raise ValueError(f"energy_tol must be positive and finite for the energy protocol, got {energy_tol}")
     if settings.box_dof != "isotropic":
         raise ValueError("linked packings are jammed in a fixed-shape box or shear-stabilised, not with box_dof 'full'")
     if packing.links is None:
@@ -102,20 +142,108 @@ def jam_linked(
     phi = float(sphere_volume(box.d, D).sum()) / box.volume
     kind = ShearStabilizedModel if shear_stabilize else LinkedSpheresModel
     model = kind(box, D, scaled.links, x, potential)
-    model, final, history, steps = jam_model_to_pressure(model, x, phi, pressure, settings, progress)
+    if protocol == "bisection":
+        model, final, history, steps = jam_model_to_pressure(model, x, phi, pressure, settings, progress)
+    else:
+        history = {"phi": [], "pressure": [], "steps": []}
+        model, final, _, steps = scale_to_energy(model, x, phi, energy_tol, settings.force_tol, settings.delta_phi,
+                                                 settings.max_steps, potential.exponent, settings.fire_params,
+                                                 progress, history)
     if shear_stabilize:
         final = replace(final, box=model.last_box())
     attrs = {
         "length_unit": "mean particle diameter", "force_unit": "epsilon / mean diameter",
         "pressure_unit": "epsilon / mean diameter^d", "energy": final.energy, "energy_unit": "epsilon",
-        "max_force_sq": final.max_force**2, "potential_exponent": potential.exponent, "target_pressure": pressure,
-        "fire_steps": steps, "converged": int(final.converged),
+        "max_force_sq": final.max_force**2, "potential_exponent": potential.exponent,
+        "fire_steps": steps, "converged": int(final.converged), "jamming_protocol": protocol,
+        **({"target_pressure": pressure} if protocol == "bisection" else {"energy_tol": energy_tol}),
     }
-    params = {"pressure": pressure, "force_tol": settings.force_tol, "pressure_rtol": settings.pressure_rtol,
-              "bisection_rtol": settings.bisection_rtol, "bisection_force_factor": settings.bisection_force_factor,
-              "delta_phi": settings.delta_phi, "potential_exponent": potential.exponent,
-              "fire": settings.fire_params.as_dict(), "length_rtol": model.length_rtol}
+    params = {"protocol": protocol, "force_tol": settings.force_tol, "delta_phi": settings.delta_phi,
+              "potential_exponent": potential.exponent, "fire": settings.fire_params.as_dict(),
+              "length_rtol": model.length_rtol,
+              **({"pressure": pressure, "pressure_rtol": settings.pressure_rtol,
+                  "bisection_rtol": settings.bisection_rtol,
+                  "bisection_force_factor": settings.bisection_force_factor}
+                 if protocol == "bisection" else {"energy_tol": energy_tol, "energy_floor": ENERGY_FLOOR,
+                                                   "energy_step_ratio": ENERGY_STEP_RATIO})}
     suffix = ">soft-shear-stabilized" if shear_stabilize else ">soft"
     out = linked_soft_packing(scaled, model, final, suffix, attrs, params, shear_stabilize)
-    converged = final.converged and abs(final.pressure - pressure) <= settings.pressure_rtol * pressure
+    if protocol == "bisection":
+        converged = final.converged and abs(final.pressure - pressure) <= settings.pressure_rtol * pressure
+    else:
+        converged = final.converged and ENERGY_FLOOR * energy_tol < final.energy / model.n <= energy_tol
     return JammingResult(out, bool(converged), history, steps)
+
+
+def scale_to_energy(
+    model: EnergyModel,
+    position: np.ndarray,
+    phi: float,
+    energy_tol: float,
+    force_tol: float,
+    delta_phi: float,
+    max_steps: int,
+    exponent: float = 2.0,
+    fire_params: FireParameters | None = None,
+    progress: Callable[[dict], None] | None = None,
+    history: dict[str, list] | None = None,
+) -> tuple[EnergyModel, MinimizeResult, float, int]:
+    """Decompress to the jamming onset by the energy scaling of ``phi - phi_J`` (chains paper Sec. III).
+
+    After each fixed-box FIRE minimisation to ``force_tol``, with ``e = U / N`` (energy
+    per sphere):
+
+    - ``e <= ENERGY_FLOOR energy_tol`` (unjammed): compress by ``delta_phi`` if no jammed
+      state was seen yet, else go halfway back to the last jammed ``phi``;
+    - ``e <= energy_tol``: done (jammed at a low energy);
+    - else decompress: ``phi_J`` is estimated from the two last jammed minima by
+      extrapolating ``e^(1/w)``, linear in ``phi - phi_J``, to zero (one jammed minimum:
+      ``phi_J = phi - delta_phi``), and the next ``phi`` is the distance at which the
+      scaling predicts ``e = energy_tol / 2``, but at least ``ENERGY_STEP_RATIO`` of the
+      present distance.
+
+    Returns
+    -------
+    model, result, phi, steps
+    """
+    fire_params = FireParameters() if fire_params is None else fire_params
+    d, n = model.box.d, model.n
+    steps = 0
+    x = position
+    jammed: list[tuple[float, float]] = []  # (phi, e) of jammed minima, newest last
+    while True:
+        res = minimize_fire(model, x, force_tol, max_steps - steps, fire_params)
+        steps += res.steps
+        x = res.position
+        e = res.energy / n
+        if history is not None:
+            history["phi"].append(phi)
+            history["pressure"].append(res.pressure)
+            history["steps"].append(res.steps)
+        if progress is not None:
+            progress({"phi": phi, "pressure": res.pressure, "energy_per_sphere": e, "steps": steps})
+        if not res.converged:
+            raise RuntimeError(f"FIRE step budget ({max_steps}) exhausted at phi = {phi:.10f}")
+        if e <= ENERGY_FLOOR * energy_tol:
+            new_phi = phi + delta_phi if not jammed else 0.5 * (phi + jammed[-1][0])
+        elif e <= energy_tol:
+            break
+        else:
+            jammed.append((phi, e))
+            if len(jammed) >= 2 and jammed[-2][1] > e:
+                (p1, e1), (p2, e2) = jammed[-2], jammed[-1]
+                s1, s2 = e1 ** (1.0 / exponent), e2 ** (1.0 / exponent)
+                phi_j = p2 - s2 * (p1 - p2) / (s1 - s2)
+            else:
+                phi_j = phi - delta_phi
+            distance = phi - phi_j
+            if not distance > 0.0:
+                phi_j, distance = phi - delta_phi, delta_phi
+            target = distance * (0.5 * energy_tol / e) ** (1.0 / exponent)
+            new_phi = phi_j + max(target, ENERGY_STEP_RATIO * distance)
+        if abs(new_phi - phi) < 4.0 * np.finfo(float).eps * phi:
+            break
+        factor = (phi / new_phi) ** (1.0 / d)
+        model, x = model.rescaled(factor, x)
+        phi = new_phi
+    return model, res, phi, steps

@@ -18,8 +18,8 @@ Constraints ``Gamma`` (Eqs. 15-17): link ``k`` has gradient ``+-F^T u_k`` on its
 ends and ``u_k R0_k^T`` (symmetrised) on the strain, ``u_k`` the current unit link
 vector and ``R0_k`` the reference one (Eq. 16 at ``eps = 0``: ``tau_a tau_b l``);
 the volume has ``det F F^-T`` on the strain only. The strain columns couple every
-cluster, so the per-cluster QR of :mod:`jamflow.models.links` is kept for the link
-block ``A = B_y B_y^T = R^T R`` and the Gram matrix ``Gamma^T Gamma`` is solved by
+cluster, so the per-cluster Cholesky factors of :mod:`jamflow.models.links` are kept for the
+link block ``A = B_y B_y^T = L L^T`` and the Gram matrix ``Gamma^T Gamma`` is solved by
 Woodbury for the rank-``m`` strain coupling and a Schur complement for the volume
 row. Projection (Eq. 18) ``P g = g - Gamma (Gamma^T Gamma)^-1 Gamma^T g`` and Newton
 re-affixing (Eq. 7) ``dq = -Gamma (Gamma^T Gamma)^-1 c`` use that one solve.
@@ -45,6 +45,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..bodies import Links
 from ..box import Box
+from ..models import _link_kernels
 from ..models.base import ModelEvaluation
 from ..models.links import LINK_NEWTON_MAX_ITERATIONS, LinkedSpheresModel
 from ..soft import _kernels
@@ -103,31 +104,39 @@ class ShearStabilizedModel(LinkedSpheresModel):
         self.inverse_mass = np.ones(self.n_dof)
         self._last_q: NDArray[np.float64] | None = None
         self._solver_q: NDArray[np.float64] | None = None
+        self._strain_key: bytes | None = None
+        self._h0 = np.ascontiguousarray(self.box.matrix)
+        self._h_build_key: NDArray[np.float64] | None = None
 
     # --- degrees of freedom -----------------------------------------------------------
     def dofs(self, position: ArrayLike) -> NDArray[np.float64]:
         """``q`` of centres ``position`` in the reference box at zero strain."""
         return np.concatenate([super().dofs(position), np.zeros(self.m)])
 
+    def _strain_state(self, q: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+        """``(F, Q, T, U, det F, F^-1)`` of the strain part of ``q``, cached for the last strain.
+
+        A minimiser asks for these several times per step at one strain (positions,
+        link vectors, constraint columns, volume error); each is a few small LAPACK calls.
+        """
+        e = q[self.n * self.d:]
+        key = e.tobytes()
+        if key != self._strain_key:
+            self._strain = _link_kernels.strain_state(np.ascontiguousarray(e), self._h0, self.strain_scale)
+            self._strain_key = key
+        return self._strain
+
     def deformation(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         """``F = 1 + eps`` (d, d)."""
-        return np.eye(self.d) + strain_matrix(q[self.n * self.d:], self.d, self.strain_scale)
-
-    def _frame(self, F: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """``(Q, T)``: ``F H0 = Q U`` with ``U`` upper triangular (positive diagonal), ``T = Q^T F``."""
-        Q, U = np.linalg.qr(F @ self.box.matrix)
-        sign = np.sign(np.diag(U))
-        Q = Q * sign
-        return Q, np.triu(Q.T @ F)
+        return self._strain_state(q)[0].copy()
 
     def current_box(self, q: NDArray[np.float64]) -> Box:
         """The deformed box ``U`` in the rotated frame."""
-        _, T = self._frame(self.deformation(q))
-        return Box(np.triu(T @ self.box.matrix))
+        return Box(self._strain_state(q)[3])
 
     def positions(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         """Centres in the rotated frame of :meth:`current_box`, shape (N, d)."""
-        _, T = self._frame(self.deformation(q))
+        T = self._strain_state(q)[2]
         return q[: self.n * self.d].reshape(self.n, self.d) @ T.T
 
     def last_box(self) -> Box:
@@ -141,7 +150,7 @@ class ShearStabilizedModel(LinkedSpheresModel):
 
     def link_vectors(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         """Current (unrotated) link vectors ``F R0_k``, shape (L, d)."""
-        return self._reference_links(q) @ self.deformation(q).T
+        return self._reference_links(q) @ self._strain_state(q)[0].T
 
     def _reference_links(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         y, _ = self._split(q)
@@ -149,22 +158,23 @@ class ShearStabilizedModel(LinkedSpheresModel):
 
     def volume_error(self, q: NDArray[np.float64]) -> float:
         """``det F - 1`` (0 when the volume is free)."""
-        return float(np.linalg.det(self.deformation(q)) - 1.0) if self.fixed_volume else 0.0
+        return self._strain_state(q)[4] - 1.0 if self.fixed_volume else 0.0
 
     # --- constraints ------------------------------------------------------------------
     def _solver(self, q: NDArray[np.float64]) -> dict:
         """Factorisation of ``Gamma^T Gamma`` at ``q`` (cached for the last ``q``)."""
-        if self._solver_q is not None and np.array_equal(q, self._solver_q):
+        if self._solver_q is not None and _link_kernels.same(q, self._solver_q):
             return self._cache
-        F = self.deformation(q)
+        F, _, _, _, det, F_inv = self._strain_state(q)
         R0 = self._reference_links(q)
         r = R0 @ F.T
         u = r / np.linalg.norm(r, axis=1)[:, None]
         w = u @ F  # F^T u per link (rows)
         Be = strain_components(u[:, :, None] * R0[:, None, :], self.strain_scale)
-        ce = strain_components(np.linalg.det(F) * np.linalg.inv(F).T, self.strain_scale)
-        groups = [group.factorise(w) for group in self._groups]
-        cache = {"w": w, "Be": Be, "ce": ce, "groups": groups}
+        ce = strain_components(det * F_inv.T, self.strain_scale)
+        w = np.ascontiguousarray(w)
+        self.gram.factorise(w)
+        cache = {"w": w, "Be": Be, "ce": ce}
         self._cache = cache
         AiBe = self._a_inverse(Be)
         cache["AiBe"] = AiBe
@@ -176,17 +186,8 @@ class ShearStabilizedModel(LinkedSpheresModel):
         return cache
 
     def _a_inverse(self, rhs: NDArray[np.float64]) -> NDArray[np.float64]:
-        """``A^-1 rhs`` for ``A = B_y B_y^T`` (block diagonal, ``R^T R`` per cluster); rhs (L,) or (L, k)."""
-        out = np.zeros_like(rhs)
-        for group, (_, R) in zip(self._groups, self._cache["groups"]):
-            block = rhs[group.links]
-            vector = rhs.ndim == 1
-            if vector:
-                block = block[:, :, None]
-            z = np.linalg.solve(np.swapaxes(R, 1, 2), block)
-            x = np.linalg.solve(R, z)
-            out[group.links] = x[:, :, 0] if vector else x
-        return out
+        """``A^-1 rhs`` for ``A = B_y B_y^T`` (block diagonal, Cholesky per cluster); rhs (L,) or (L, k)."""
+        return self.gram.solve(rhs)
 
     def _k_inverse(self, rhs: NDArray[np.float64]) -> NDArray[np.float64]:
         """``(A + B_e B_e^T)^-1 rhs`` by Woodbury, rhs (L,)."""
@@ -207,17 +208,15 @@ class ShearStabilizedModel(LinkedSpheresModel):
     def _gamma_t(self, q: NDArray[np.float64], g: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
         """``Gamma^T g``: (links (L,), volume)."""
         c = self._solver(q)
-        gy, ge = self._split(g)
-        links = np.einsum("ka,ka->k", c["w"], gy[self.links.j] - gy[self.links.i]) + c["Be"] @ ge
+        gy, ge = self._split(np.asarray(g, dtype=np.float64))
+        links = self.gram.apply(c["w"], np.ascontiguousarray(gy)) + c["Be"] @ ge
         return links, float(c["ce"] @ ge)
 
     def _gamma(self, q: NDArray[np.float64], lam: NDArray[np.float64], nu: float) -> NDArray[np.float64]:
         """``Gamma (lambda, nu)``, shape (n_dof,)."""
         c = self._solver(q)
         out = np.zeros(self.n_dof)
-        gy = out[: self.n * self.d].reshape(self.n, self.d)
-        np.add.at(gy, self.links.j, lam[:, None] * c["w"])
-        np.add.at(gy, self.links.i, -lam[:, None] * c["w"])
+        self.gram.subtract_transpose(c["w"], -lam, out[: self.n * self.d].reshape(self.n, self.d))
         out[self.n * self.d:] = c["Be"].T @ lam + c["ce"] * nu
         return out
 
@@ -236,13 +235,29 @@ class ShearStabilizedModel(LinkedSpheresModel):
         return q - self._gamma(q, lam, nu)
 
     def reproject(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Newton re-affixing until every link and ``det F`` hold to ``length_rtol`` (relative)."""
+        """Newton re-affixing until every link and ``det F`` hold to ``length_rtol`` (relative).
+
+        Chord iterations: the sweeps reuse the last factorised ``Gamma`` (a minimiser's
+        previous point, one FIRE step away) as long as each sweep at least halves the
+        error, and refactorise at the current point otherwise. Any fixed point lies on
+        the constraint manifold; the chord only changes which nearby point of it is
+        reached (by the square of the step), and saves the factorisation of the moved
+        point, which the next evaluation would discard.
+        """
         out = np.array(q, dtype=np.float64)
+        chord = self._solver_q is not None
+        previous = np.inf
         for _ in range(LINK_NEWTON_MAX_ITERATIONS + 1):
-            err = max(float(np.max(np.abs(self.link_errors(out)), initial=0.0)), abs(self.volume_error(out)))
+            c_links = np.linalg.norm(self.link_vectors(out), axis=1) - self.links.length
+            c_volume = self.volume_error(out)
+            err = max(float(np.max(np.abs(c_links / self.links.length), initial=0.0)), abs(c_volume))
             if err <= self.length_rtol:
                 return out
-            out = self.newton_step(out)
+            chord = chord and err <= 0.5 * previous
+            base = self._solver_q if chord else out
+            previous = err
+            lam, nu = self._gram_solve(base, c_links, c_volume)
+            out = out - self._gamma(base, lam, nu)
         raise RuntimeError(f"Newton re-affixing of links and volume stalled at a relative error {err:.3g} "
                            f"(asked {self.length_rtol:.3g}) after {LINK_NEWTON_MAX_ITERATIONS} sweeps")
 
@@ -252,10 +267,8 @@ class ShearStabilizedModel(LinkedSpheresModel):
     # --- energy -----------------------------------------------------------------------
     def evaluate(self, q: NDArray[np.float64]) -> ModelEvaluation:
         y, _ = self._split(q)
-        F = self.deformation(q)
-        Q, T = self._frame(F)
-        current = Box(np.triu(T @ self.box.matrix))
-        self.nlist.update(np.ascontiguousarray(y @ T.T), current)
+        _, Q, T, U, _, F_inv = self._strain_state(q)
+        self._update_strained_list(np.ascontiguousarray(y @ T.T), U)
         self._pairs()
         force = np.zeros((self.n, self.d))
         virial = np.zeros((self.d, self.d))
@@ -263,13 +276,31 @@ class ShearStabilizedModel(LinkedSpheresModel):
             np.ascontiguousarray(y), T, self._offset, self._pi, self._pj, self._sigma,
             self.potential.epsilon, self.potential.exponent, force, virial)
         W = Q @ virial @ Q.T  # unrotated pair virial
-        gradient = np.concatenate([-(force @ T).ravel(), strain_components(-W @ np.linalg.inv(F), self.strain_scale)])
+        gradient = np.concatenate([-(force @ T).ravel(), strain_components(-W @ F_inv, self.strain_scale)])
         if len(self.links):
             r = self.link_vectors(q)
             mu = self.multipliers(gradient, q)
             W = W + np.einsum("k,ka,kb->ab", mu / np.linalg.norm(r, axis=1), r, r)
         self._last_q = np.array(q)
         return ModelEvaluation(float(energy), gradient, Q.T @ W @ Q, int(n_contacts))
+
+    def _update_strained_list(self, x: NDArray[np.float64], U: NDArray[np.float64]) -> None:
+        """``nlist.update`` in the deformed box ``U``, with the Verlet test compiled.
+
+        The deformation since the build, ``A = U h_build^-1``, enters through the
+        Frobenius norm ``||A - 1||_F >= ||A - 1||_2`` (no SVD per step; a list is at
+        worst rebuilt a little earlier than needed), and the box object is made only
+        when the list is rebuilt.
+        """
+        nl = self.nlist
+        if nl.x_build.shape == x.shape:
+            if self._h_build_key is not nl.h_build:
+                self._h_build_inv, self._h_build_key = np.linalg.inv(nl.h_build), nl.h_build
+            A = U @ self._h_build_inv
+            slack = float(np.sqrt(np.sum((A - np.eye(self.d)) ** 2))) * nl.reach
+            if not _kernels._needs_rebuild(x, nl.x_build @ A.T, 1.0, 1.0, nl.reach, nl.skin, slack):
+                return
+        nl.build(x, Box(U))
 
     def max_force(self, g: NDArray[np.float64]) -> float:
         """Largest per-sphere norm of the centre part and the norm of the strain part of ``g``."""

@@ -36,6 +36,7 @@ PLOT_KINDS: dict[str, str] = {
     "pareto": "one `jamflow tradeoff` output",
     "jamming-table": "one `jamflow jamming-table` output",
     "eos": "one or more LS equation-of-state datasets (`jamflow ls --eos`)",
+    "chains-moduli": "one `jamflow chains-moduli` output (moduli against added links per sphere)",
 }
 #: the dataset kinds (jamflow.io.DATASET_KINDS) each figure kind reads
 PLOT_INPUT_KINDS: dict[str, tuple[str, ...]] = {
@@ -51,6 +52,7 @@ PLOT_INPUT_KINDS: dict[str, tuple[str, ...]] = {
     "pareto": ("tradeoff",),
     "jamming-table": ("jamming-table",),
     "eos": ("eos",),
+    "chains-moduli": ("chains-moduli-table",),
 }
 
 
@@ -336,7 +338,8 @@ def _plot(args: argparse.Namespace) -> int:
         raise ValueError(f"--labels needs one label per input ({len(inputs)}), got {len(args.labels)}")
     single = {"packing": None, "forces": plots.plot_forces, "fit-windows": plots.plot_fit_windows,
               "phi-kappa": plots.plot_phi_kappa, "flow-curve": plots.plot_flow_curve,
-              "pareto": plots.pareto, "jamming-table": plots.plot_jamming_table}
+              "pareto": plots.pareto, "jamming-table": plots.plot_jamming_table,
+              "chains-moduli": plots.plot_chains_moduli}
     labelled = {"gaps": plots.plot_gaps, "rdf": plots.plot_rdf, "stress-strain": plots.plot_stress_strain,
                 "eos": plots.plot_eos}
     if args.kind in single and len(inputs) != 1:

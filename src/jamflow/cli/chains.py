@@ -9,16 +9,24 @@ from math import radians
 import numpy as np
 import xarray as xr
 
+from ..chains.averages import moduli_against_links
 from ..chains.builders import (
     CLUSTER_KINDS,
-    cement,
+    cement_links,
+    cement_pairs,
     check_linked_start,
     linked_packing,
     read_link_file,
     remove_degenerate_links,
 )
 from ..chains.certify import certify_linked
-from ..io import new_dataset_attrs, read_packing, write_dataset, write_packing
+from ..io import (
+    new_dataset_attrs,
+    read_dataset,
+    read_packing,
+    write_dataset,
+    write_packing,
+)
 from .common import (
     add_command,
     add_quiet,
@@ -63,6 +71,15 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "fixed box)")
     add_quiet(p)
 
+    p = add_command(sub, "chains-moduli", _chains_moduli,
+                    "moduli of cemented packings against the added links per sphere n_l / N (chains paper Fig. 5)",
+                    "Groups `jamflow moduli` outputs of packings made by `jamflow link --cement` by n_l / N and "
+                    "averages each group's Hill moduli weighted by their Reuss-Voigt spread, with the weighted "
+                    "standard error; infinite moduli are counted, not averaged (jamflow.chains.averages).",
+                    reads=("paths[:-1]",), writes=("paths[-1]",))
+    p.add_argument("paths", nargs="+", metavar="MODULI.nc ... OUT.nc", help="moduli datasets, then the output")
+    add_quiet(p)
+
 
 def _messages(messages: list[str]) -> None:
     for line in messages:
@@ -95,7 +112,8 @@ def _link(args: argparse.Namespace) -> int:
     if args.cement is not None:
         if args.seed is None:
             raise ValueError("--cement needs --seed")
-        links, messages = cement(packing, args.cement, np.random.default_rng(args.seed), args.with_strain)
+        new = cement_pairs(packing, args.cement, np.random.default_rng(args.seed))
+        links, messages = cement_links(packing, new, args.with_strain)
         protocol = f">cement({args.cement})"
     else:
         pairs, lengths = read_link_file(args.file, packing.position, packing.box)
@@ -108,8 +126,12 @@ def _link(args: argparse.Namespace) -> int:
     keep = None
     if packing.contacts is not None:
         keep = ~links.contains(packing.contacts[:, 0], packing.contacts[:, 1])
+    # paper Fig. 5's n_l: cemented contacts kept as links (angle links not counted)
+    attrs = dict(packing.attrs)
+    if args.cement is not None:
+        attrs["n_cemented"] = int(packing.attrs.get("n_cemented", 0)) + int(links.contains(new[:, 0], new[:, 1]).sum())
     out = packing.evolve(
-        links=links, protocol=packing.protocol + protocol,
+        links=links, protocol=packing.protocol + protocol, attrs=attrs,
         contacts=None if keep is None else packing.contacts[keep],
         force=None if keep is None or packing.force is None else packing.force[keep], rattler=None,
         seed=args.seed if args.cement is not None else packing.seed,
@@ -117,7 +139,32 @@ def _link(args: argparse.Namespace) -> int:
     if args.file is not None:
         check_linked_start(out)
     write_packing(out, args.out, stage_parameters(args, "input", "out"))
-    print_summary(args, args.out, [*_link_rows(out), ("degenerate links removed", len(messages))])
+    rows = [*_link_rows(out), ("degenerate links removed", len(messages))]
+    if args.cement is not None:
+        rows.append(("cemented contacts n_l", f"{attrs['n_cemented']} (n_l / N = {attrs['n_cemented'] / out.n:.4g})"))
+    print_summary(args, args.out, rows)
+    return 0
+
+
+def _chains_moduli(args: argparse.Namespace) -> int:
+    datasets = [read_dataset(path, "chain-moduli") for path in args.paths[:-1]]
+    for path, ds in zip(args.paths[:-1], datasets):
+        if "n_cemented" not in ds.attrs:
+            raise ValueError(f"{path} has no n_cemented attribute (moduli of a packing made by jamflow link --cement)")
+    table = moduli_against_links(datasets)
+    table.attrs = new_dataset_attrs("jamflow moduli of cemented packings against n_l / N",
+                                    stage_parameters(args, "paths"), d=int(datasets[0].attrs["d"]),
+                                    method=("Reuss-Voigt weighted average (chains paper Fig. 5): Hill values "
+                                            "weighted by 1 / ((V - R)^2 / 12), scatter standard error"))
+    write_dataset(table, args.paths[-1])
+    rows = []
+    for k in range(table.sizes["links_per_sphere"]):
+        t = table.isel(links_per_sphere=k)
+        value = (f"G = {float(t.shear_weighted):.5g} +- {float(t.shear_se):.2g}, "
+                 f"K = {float(t.bulk_weighted):.5g} +- {float(t.bulk_se):.2g} epsilon / <D>^d "
+                 f"(infinite: G {int(t.shear_infinite)}, K {int(t.bulk_infinite)})")
+        rows.append((f"n_l / N = {float(t.links_per_sphere):.4g} ({int(t.n_packings)} packings)", value))
+    print_summary(args, args.paths[-1], rows)
     return 0
 
 

@@ -13,7 +13,7 @@ from ..packing import LENGTH_UNITS, Packing, length_unit
 from ..soft.hessian import backbone_pairs, elastic_moduli, hessian, lowest_modes
 from ..chains.compliance import compliance
 from ..chains.hessian import constrained_hessian
-from ..chains.jamming import jam_linked
+from ..chains.jamming import DEFAULT_PROTOCOL, PROTOCOLS, jam_linked
 from ..soft.jamming import FORCE_TOL_VANDERWERF, JammingSettings, jam_to_pressure
 from ..soft.potential import PowerLawPotential
 from ..soft.shear import LERNER_DELTA_R, aqs_shear, lerner_sd_shear
@@ -29,8 +29,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                     reads=("input",), writes=("out",), packings=("out",))
     p.add_argument("input", help="input netCDF packing (overlaps allowed)")
     p.add_argument("out", help="output netCDF packing (lengths in units of the mean diameter)")
-    p.add_argument("--pressure", type=float, required=True,
-                   help="target pressure P0 [epsilon / mean diameter^d], e.g. 1e-7")
+    p.add_argument("--pressure", type=float, default=None,
+                   help="target pressure P0 [epsilon / mean diameter^d], e.g. 1e-7 (required unless "
+                        "--jam-protocol energy)")
     p.add_argument("--seed", type=seed, default=None,
                    help="start from uniformly random centres drawn with this seed (O'Hern's "
                         "infinite-temperature quench); default: start from the input centres")
@@ -46,6 +47,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--shear-stabilize", action="store_true",
                    help="strain degrees of freedom at fixed volume in every minimisation (chains paper Sec. II D): "
                         "the final stress is isotropic; spheres and linked packings")
+    p.add_argument("--jam-protocol", choices=PROTOCOLS, default=DEFAULT_PROTOCOL,
+                   help=f"linked packings: bisection to --pressure, or the chains paper's decompression by the "
+                        f"energy scaling of phi - phi_J down to --energy-tol (default {DEFAULT_PROTOCOL}; "
+                        f"docs/chains.md has the measurement)")
+    p.add_argument("--energy-tol", type=float, default=None,
+                   help="energy per sphere [epsilon] at which --jam-protocol energy stops, e.g. 1e-12")
     add_quiet(p)
     add_preset(p)
 
@@ -120,20 +127,28 @@ def _soft_jam_linked(args: argparse.Namespace, packing: Packing) -> int:
         bar.update(1)
         bar.set_postfix(phi=f"{info['phi']:.8f}", P=f"{info['pressure']:.3e}")
 
+    energy = args.jam_protocol == "energy"
+    if energy and args.energy_tol is None:
+        raise ValueError("--jam-protocol energy needs --energy-tol (energy per sphere at which it stops)")
+    if energy and args.pressure is not None:
+        raise ValueError("--pressure is the bisection's target; --jam-protocol energy stops at --energy-tol instead")
     settings = JammingSettings(args.force_tol, args.pressure_rtol, args.delta_phi, max_steps=args.max_steps)
     result = jam_linked(packing, args.pressure, PowerLawPotential(exponent=args.exponent), settings, progress,
-                        args.shear_stabilize)
+                        args.shear_stabilize, args.jam_protocol, args.energy_tol)
     bar.close()
     if not result.converged:
-        raise RuntimeError(f"the linked bisection did not reach force_tol {args.force_tol:g} and pressure_rtol "
-                           f"{args.pressure_rtol:g} within {args.max_steps} steps")
+        goal = (f"0 < U/N <= energy_tol {args.energy_tol:g}" if energy else f"pressure_rtol {args.pressure_rtol:g}")
+        raise RuntimeError(f"the linked {args.jam_protocol} protocol did not reach force_tol {args.force_tol:g} and "
+                           f"{goal} within {args.max_steps} steps")
     out = result.packing
     write_packing(out, args.out, stage_parameters(args, "input", "out"))
     a = out.attrs
     stress = out.attrs["stress_deviation"]
     print_summary(args, args.out, [
         ("phi_J", f"{out.packing_fraction:.10f}"),
-        ("pressure", f"{out.pressure:.6g} (target {args.pressure:g}) epsilon / mean diameter^d"),
+        ("pressure", f"{out.pressure:.6g} ("
+                     + (f"energy per sphere {a['energy'] / out.n:.3g} <= {args.energy_tol:g}" if energy
+                        else f"target {args.pressure:g}") + ") epsilon / mean diameter^d"),
         ("shear-stabilised", f"{'yes' if args.shear_stabilize else 'no'} (max |sigma_ab - P delta_ab| / P = {stress:.3g})"),
         ("links", f"{len(out.links)} (max relative length error {a['max_link_error']:.3g})"),
         ("contacts N_c (backbone)", f"{a['n_contacts']} (cluster isostatic count {a['isostatic_count']}, "
@@ -147,9 +162,14 @@ def _soft_jam_linked(args: argparse.Namespace, packing: Packing) -> int:
 
 def _soft_jam(args: argparse.Namespace) -> int:
     packing = read_packing(args.input, None)
+    linked = bool((packing.links is not None and len(packing.links)) or args.shear_stabilize)
+    if args.jam_protocol != "bisection" and not linked:
+        raise ValueError("--jam-protocol energy is for linked or shear-stabilised packings (spheres: the bisection)")
+    if args.pressure is None and not (linked and args.jam_protocol == "energy"):
+        raise ValueError("--pressure is required (the target pressure P0)")
     if packing.shapes is not None:
         return _soft_jam_shapes(args, packing)
-    if (packing.links is not None and len(packing.links)) or args.shear_stabilize:
+    if linked:
         return _soft_jam_linked(args, packing)
     if args.seed is not None:
         packing = _random_start(packing, args.seed)
@@ -280,6 +300,7 @@ def _moduli_linked(args: argparse.Namespace, packing: Packing) -> int:
         attrs=new_dataset_attrs("jamflow linked-packing compliance and moduli", stage_parameters(args, "input", "out"),
                                 d=packing.d, N=packing.n, n_links=len(packing.links), n_rigid=c.n_rigid,
                                 n_zero_modes=ch.n_zero, protocol=packing.protocol,
+                                n_cemented=int(packing.attrs.get("n_cemented", 0)),
                                 length_unit=packing.attrs.get("length_unit", "")),
     )
     write_dataset(ds, args.out)
@@ -296,7 +317,9 @@ def _moduli_linked(args: argparse.Namespace, packing: Packing) -> int:
 
 def _moduli(args: argparse.Namespace) -> int:
     packing = read_packing(args.input, None)
-    if packing.links is not None and len(packing.links):
+    if packing.links is not None and (len(packing.links) or packing.attrs.get("shear_stabilized")):
+        # a shear-stabilised packing gets the strain compliance of Sec. VI even with no links
+        # (the zero-link point of paper Fig. 5)
         return _moduli_linked(args, packing)
     potential = PowerLawPotential(exponent=args.exponent)
     m = elastic_moduli(packing.position, packing.box, packing.diameter, potential)

@@ -9,19 +9,24 @@ centres ``(N, d)`` flattened, unit masses.
 
 Constraint Jacobian (Eq. 4, with the exact gradient): the row of link ``k`` is
 ``+u_k`` on ``j`` and ``-u_k`` on ``i``, ``u_k = x_ij / |x_ij|``. Clusters (connected
-components of the link graph) share no degrees of freedom, so ``Omega^T`` is block
-diagonal. Each block is factorised as ``Omega_c^T = Q_c R_c`` (LAPACK Householder QR
-via ``numpy.linalg.qr``, batched over clusters of one size and link count: chains and
-rigid bodies of one kind come in many copies, and a dense QR of a block of
-``n_c d`` rows costs microseconds, while a sparse factorisation of the whole
-``Omega`` would couple nothing that is not already decoupled). ``Q_c`` is the
-orthonormal constraint basis ``Omega_o`` of the paper, and
+components of the link graph) share no degrees of freedom, so the Gram matrix
+``G = Omega Omega^T`` is block diagonal, one ``m_c x m_c`` block per cluster of
+``m_c`` links. Each block is Cholesky-factorised (:class:`ClusterGram`, numba
+kernels in :mod:`jamflow.models._link_kernels`; the factor is the ``R`` of a QR of
+``Omega_c^T``, so the orthonormal basis ``Omega_o = Omega^T L^-T`` of the paper is
+implicit). One sweep over all clusters in a compiled loop replaced the batched
+LAPACK QR (``numpy.linalg.qr`` per group of equal clusters): for the few-link
+clusters of chains and rigid bodies the per-call overhead of LAPACK and numpy, not
+arithmetic, was the cost (2D trimers N = 60: 23 % of the jamming time in
+re-affixing, 9-15 % in projection). Then
 
-- the tangent projection (Eq. 6) is ``P g = g - Q (Q^T g)`` per cluster;
+- the tangent projection (Eq. 6) is ``P g = g - Omega^T G^-1 Omega g``, applied twice
+  (one refinement step), which keeps ``Omega P g`` at round-off although the normal
+  equations square the condition number of ``Omega``;
 - Newton re-affixing (Eq. 7) takes the minimum-norm step solving
-  ``Omega dx = -c``: ``dx = -Q R^-T c``, repeated until every link satisfies
+  ``Omega dx = -c``: ``dx = -Omega^T G^-1 c``, repeated until every link satisfies
   ``|r - l| / l <= LINK_LENGTH_RTOL``;
-- the constraint forces are the least-squares multipliers ``mu = R^-1 Q^T grad U``
+- the constraint forces are the least-squares multipliers ``mu = G^-1 Omega grad U``
   (the link tensions, positive when a link pushes its ends apart); they enter the
   virial as ``mu_k r_k u_k u_k^T``, so the pressure of a linked packing at force
   balance includes the rods' stress.
@@ -41,46 +46,94 @@ from ..box import Box
 from ..soft import _kernels
 from ..soft.potential import HARMONIC, NeighborList, PowerLawPotential
 from ..tolerances import LINK_LENGTH_RTOL, LINK_RANK_RTOL
+from . import _link_kernels
 from .base import ModelEvaluation
 from .spheres import SphereBodies
 
-__all__ = ["LINK_NEWTON_MAX_ITERATIONS", "LinkedSpheresModel"]
+__all__ = ["LINK_NEWTON_MAX_ITERATIONS", "ClusterGram", "LinkedSpheresModel"]
 
 #: Newton sweeps allowed per re-affixing before it is declared failed: from a
 #: violation of 1e-2 quadratic convergence needs ~4 sweeps to reach 1e-13.
 LINK_NEWTON_MAX_ITERATIONS: int = 50
 
 
-class _ClusterGroup:
-    """Clusters of one particle count ``nc`` and link count ``lc`` (batched QR)."""
+class ClusterGram:
+    """The block-diagonal Gram matrix ``Omega Omega^T`` of links, one Cholesky block per cluster.
 
-    def __init__(self, particles: NDArray[np.int64], links: NDArray[np.int64],
-                 local_i: NDArray[np.int64], local_j: NDArray[np.int64], d: int) -> None:
-        self.particles = particles  # (G, nc)
-        self.links = links  # (G, lc) global link indices
-        g, lc = links.shape
-        a = np.arange(d)
-        self.rows_i = local_i[:, :, None] * d + a  # (G, lc, d)
-        self.rows_j = local_j[:, :, None] * d + a
-        self.shape = (g, particles.shape[1] * d, lc)
+    Kernels in :mod:`jamflow.models._link_kernels` (numba). Rows of ``Omega`` are
+    ``-w_k`` on ``i_k`` and ``+w_k`` on ``j_k`` for any per-link vectors ``w`` (L, d)
+    given to :meth:`factorise`.
 
-    def factorise(self, u: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """``Q, R`` of ``Omega^T`` of every cluster from unit link vectors ``u`` (L, d)."""
-        g, m, lc = self.shape
-        omega_t = np.zeros(self.shape)
-        gi = np.arange(g)[:, None, None]
-        ki = np.arange(lc)[None, :, None]
-        uu = u[self.links]  # (G, lc, d)
-        omega_t[gi, self.rows_i, ki] = -uu
-        omega_t[gi, self.rows_j, ki] = uu
-        q, r = np.linalg.qr(omega_t)
-        diag = np.abs(np.diagonal(r, axis1=1, axis2=2))
-        bad = diag.min(axis=1) < LINK_RANK_RTOL * diag.max(axis=1)
-        if np.any(bad):
-            first = self.particles[int(np.flatnonzero(bad)[0])]
+    Parameters
+    ----------
+    links : Links
+    n, d : int
+        Sphere count and dimension.
+    """
+
+    def __init__(self, links: Links, n: int, d: int) -> None:
+        self.i = np.ascontiguousarray(links.i, dtype=np.int64)
+        self.j = np.ascontiguousarray(links.j, dtype=np.int64)
+        self.n, self.d = n, d
+        if not len(links):
+            self.labels = np.arange(n)
+            self.order = np.empty(0, np.int64)
+            self.cptr = self.fptr = np.zeros(1, np.int64)
+            self.chol = np.empty(0)
+            return
+        self.labels = links.clusters(n)
+        link_cluster = self.labels[self.i]
+        self.order = np.argsort(link_cluster, kind="stable").astype(np.int64)
+        clusters, m = np.unique(link_cluster, return_counts=True)
+        spheres = np.bincount(self.labels)[clusters]
+        over = np.flatnonzero(m > spheres * d)
+        if over.size:
+            c = over[0]
+            raise ValueError(f"a cluster of {spheres[c]} particles has {m[c]} links, more than its "
+                             f"{spheres[c] * d} coordinates: the links are redundant")
+        self.clusters = clusters
+        self.cptr = np.concatenate([[0], np.cumsum(m)]).astype(np.int64)
+        self.fptr = np.concatenate([[0], np.cumsum(m * m)]).astype(np.int64)
+        self.chol = np.zeros(int(self.fptr[-1]))
+
+    def factorise(self, w: NDArray[np.float64]) -> None:
+        """Cholesky factors of the Gram blocks of rows ``w`` (L, d); ValueError if a cluster is degenerate."""
+        bad = _link_kernels.gram_factor(w, self.i, self.j, self.order, self.cptr, self.fptr, self.chol,
+                                        LINK_RANK_RTOL)
+        if bad >= 0:
+            first = np.flatnonzero(self.labels == self.clusters[bad])
             raise ValueError(f"the links of the cluster of particles {first.tolist()} are degenerate "
                              f"(redundant constraints); remove a redundant link")
-        return q, r
+
+    def solve(self, rhs: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``G^-1 rhs`` for ``rhs`` (L,) or (L, k) (a new array)."""
+        out = np.array(rhs, dtype=np.float64, order="C")
+        if not out.size:
+            return out
+        _link_kernels.gram_solve(self.order, self.cptr, self.fptr, self.chol, out.reshape(len(out), -1))
+        return out
+
+    def apply(self, w: NDArray[np.float64], g: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``Omega g`` (L,) of ``g`` (N, d)."""
+        out = np.empty(len(self.i))
+        _link_kernels.omega_apply(w, self.i, self.j, g, out)
+        return out
+
+    def subtract_transpose(self, w: NDArray[np.float64], lam: NDArray[np.float64], out: NDArray[np.float64]) -> None:
+        """``out -= Omega^T lam`` in place, ``out`` (N, d)."""
+        _link_kernels.omega_t_subtract(w, self.i, self.j, lam, out)
+
+    def project(self, w: NDArray[np.float64], g: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``(g - Omega^T lam, lam)`` with ``lam = G^-1 Omega g``, ``g`` (N, d), in two passes.
+
+        The second pass repeats the projection on what the first left: the normal
+        equations lose ``cond(G) = cond(Omega)^2`` in relative accuracy, the second pass
+        brings the residual ``Omega P g`` back to round-off of ``g``.
+        """
+        out = np.array(g, dtype=np.float64, order="C")
+        lam = np.empty(len(self.i))
+        _link_kernels.gram_project(w, self.i, self.j, self.order, self.cptr, self.fptr, self.chol, out, lam)
+        return out, lam
 
 
 class LinkedSpheresModel(SphereBodies):
@@ -129,37 +182,14 @@ class LinkedSpheresModel(SphereBodies):
         raw = x[links.j] - x[links.i]
         image = np.round((box.minimum_image(raw) - raw) @ box.inverse.T)
         self.link_offset = image @ box.matrix.T
-        self._groups = self._cluster_groups()
-        self._pair_build = -1
+        self.gram = ClusterGram(links, self.n, self.d)
+        self._li, self._lj = self.gram.i, self.gram.j
         self._geometry_q: NDArray[np.float64] | None = None
-        self._geometry: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
-
-    def _cluster_groups(self) -> list[_ClusterGroup]:
-        links, n = self.links, self.n
-        if not len(links):
-            return []
-        labels = links.clusters(n)
-        counts = np.bincount(labels)
-        link_cluster = labels[links.i]
-        link_counts = np.bincount(link_cluster, minlength=counts.size)
-        order_p = np.argsort(labels, kind="stable")
-        start_p = np.concatenate([[0], np.cumsum(counts)])
-        local = np.empty(n, np.int64)
-        local[order_p] = np.arange(n) - start_p[labels[order_p]]
-        order_l = np.argsort(link_cluster, kind="stable")
-        start_l = np.concatenate([[0], np.cumsum(link_counts)])
-        linked = np.flatnonzero(link_counts > 0)
-        kinds = np.unique(np.stack([counts[linked], link_counts[linked]], axis=1), axis=0)
-        groups = []
-        for nc, lc in kinds:
-            if lc > nc * self.d:
-                raise ValueError(f"a cluster of {nc} particles has {lc} links, more than its {nc * self.d} "
-                                 f"coordinates: the links are redundant")
-            cl = linked[(counts[linked] == nc) & (link_counts[linked] == lc)]
-            particles = order_p[start_p[cl][:, None] + np.arange(nc)]
-            glinks = order_l[start_l[cl][:, None] + np.arange(lc)]
-            groups.append(_ClusterGroup(particles, glinks, local[links.i[glinks]], local[links.j[glinks]], self.d))
-        return groups
+        self._factor_q: NDArray[np.float64] | None = None
+        self._u = np.zeros((len(links), self.d))
+        self._r = np.zeros(len(links))
+        self._err = 0.0
+        self._pair_build = -1
 
     def link_vectors(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         """``x_ij`` of every link, shape (L, d) [length]."""
@@ -170,36 +200,35 @@ class LinkedSpheresModel(SphereBodies):
         """Relative link-length errors ``(|x_ij| - l) / l``, shape (L,)."""
         return np.linalg.norm(self.link_vectors(q), axis=1) / self.links.length - 1.0
 
-    def _factorise(self, q: NDArray[np.float64]) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
-        """Per-group ``(Q, R)`` at ``q``, cached for the last ``q`` asked for."""
-        if self._geometry_q is None or not np.array_equal(q, self._geometry_q):
-            rvec = self.link_vectors(q)
-            u = rvec / np.linalg.norm(rvec, axis=1)[:, None]
-            self._geometry = [group.factorise(u) for group in self._groups]
+    def _geometry(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Unit link vectors at ``q`` (L, d), with lengths and the largest relative error (cached for the last ``q``)."""
+        if self._geometry_q is None or not _link_kernels.same(q, self._geometry_q):
+            x = np.ascontiguousarray(self.positions(q))
+            self._err = _link_kernels.link_geometry(x, self._li, self._lj, self.link_offset, self.links.length,
+                                                    self._u, self._r)
             self._geometry_q = np.array(q)
-        return self._geometry
+        return self._u
 
-    def _blocks(self, g: NDArray[np.float64], group: _ClusterGroup) -> NDArray[np.float64]:
-        return g.reshape(self.n, self.d)[group.particles].reshape(group.shape[0], -1)
+    def _factorise(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The Gram factors at ``q`` (cached for the last ``q``); returns the constraint rows ``w = u``."""
+        w = self._geometry(q)
+        if self._factor_q is None or not _link_kernels.same(q, self._factor_q):
+            self.gram.factorise(w)
+            self._factor_q = self._geometry_q
+        return w
 
     def project(self, g: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
-        out = np.array(g, dtype=np.float64)
-        view = out.reshape(self.n, self.d)
-        for group, (Q, _) in zip(self._groups, self._factorise(q)):
-            block = self._blocks(out, group)
-            block -= np.einsum("gmk,gk->gm", Q, np.einsum("gmk,gm->gk", Q, block))
-            view[group.particles] = block.reshape(group.particles.shape + (self.d,))
-        return out
+        if not len(self.links):
+            return np.array(g, dtype=np.float64)
+        w = self._factorise(q)
+        return self.gram.project(w, np.asarray(g, dtype=np.float64).reshape(self.n, self.d))[0].ravel()
 
     def newton_step(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         """One Newton sweep of Eq. 7: the minimum-norm ``dx`` with ``Omega dx = -c``."""
+        w = self._factorise(q)
         out = np.array(q, dtype=np.float64)
-        view = out.reshape(self.n, self.d)
-        c = np.linalg.norm(self.link_vectors(q), axis=1) - self.links.length
-        for group, (Q, R) in zip(self._groups, self._factorise(q)):
-            y = np.linalg.solve(np.swapaxes(R, 1, 2), -c[group.links][:, :, None])[:, :, 0]
-            dx = np.einsum("gmk,gk->gm", Q, y)
-            view[group.particles] += dx.reshape(group.particles.shape + (self.d,))
+        lam = self.gram.solve(self._r - self.links.length)
+        self.gram.subtract_transpose(w, lam, out.reshape(self.n, self.d))
         return out
 
     def reproject(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -208,12 +237,28 @@ class LinkedSpheresModel(SphereBodies):
             return q
         out = np.array(q, dtype=np.float64)
         for _ in range(LINK_NEWTON_MAX_ITERATIONS + 1):
-            err = float(np.max(np.abs(self.link_errors(out))))
+            self._geometry(out)
+            err = self._err
             if err <= self.length_rtol:
                 return out
             out = self.newton_step(out)
         raise RuntimeError(f"Newton re-affixing of the links stalled at a relative length error {err:.3g} "
                            f"(asked {self.length_rtol:.3g}) after {LINK_NEWTON_MAX_ITERATIONS} sweeps")
+
+    def max_force(self, g: NDArray[np.float64]) -> float:
+        """Largest per-sphere norm of ``g`` (compiled: the generic FIRE asks once per step)."""
+        return float(np.sqrt(_kernels._max_force_sq(np.asarray(g, dtype=np.float64).reshape(self.n, self.d))))
+
+    def _update_list(self, x: NDArray[np.float64]) -> None:
+        """``nlist.update`` in this fixed box: the Verlet criterion ``2 max |x - x_build| >= skin`` compiled.
+
+        The box never deforms between builds here, so the affine map and its norm
+        (an SVD and an inverse per call, a third of a 2D N = 60 trimer step) are skipped.
+        """
+        nl = self.nlist
+        if (nl.x_build.shape != x.shape or not np.array_equal(nl.h_build, self.box.matrix)
+                or _kernels._needs_rebuild(x, nl.x_build, 1.0, 1.0, nl.reach, nl.skin, 0.0)):
+            nl.build(x, self.box)
 
     def _pairs(self) -> None:
         """Listed pairs minus linked pairs, refreshed after each neighbour-list build."""
@@ -226,16 +271,15 @@ class LinkedSpheresModel(SphereBodies):
         self._pair_build = nl.builds
 
     def multipliers(self, gradient: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Link tensions ``mu = R^-1 Q^T grad U`` per link, shape (L,) [energy / length]."""
-        mu = np.zeros(len(self.links))
-        for group, (Q, R) in zip(self._groups, self._factorise(q)):
-            rhs = np.einsum("gmk,gm->gk", Q, self._blocks(gradient, group))
-            mu[group.links] = np.linalg.solve(R, rhs[:, :, None])[:, :, 0]
-        return mu
+        """Link tensions ``mu = G^-1 Omega grad U`` per link, shape (L,) [energy / length]."""
+        if not len(self.links):
+            return np.zeros(0)
+        w = self._factorise(q)
+        return self.gram.project(w, np.asarray(gradient, dtype=np.float64).reshape(self.n, self.d))[1]
 
     def evaluate(self, q: NDArray[np.float64]) -> ModelEvaluation:
         x = np.ascontiguousarray(self.positions(q))
-        self.nlist.update(x, self.box)
+        self._update_list(x)
         self._pairs()
         force = np.zeros_like(x)
         virial = np.zeros((self.d, self.d))
@@ -245,13 +289,12 @@ class LinkedSpheresModel(SphereBodies):
         )
         gradient = -force.ravel()
         if len(self.links):
-            rvec = self.link_vectors(q)
-            r = np.linalg.norm(rvec, axis=1)
             mu = self.multipliers(gradient, q)
-            virial = virial + np.einsum("k,ka,kb->ab", mu / r, rvec, rvec)
+            u = self._u
+            virial = virial + (u.T * (mu * self._r)) @ u
         return ModelEvaluation(float(energy), gradient, virial, int(n_contacts))
 
-    def rescaled(self, factor: float, position: NDArray[np.float64]) -> tuple["LinkedSpheresModel", NDArray[np.float64]]:
+    def rescaled(self, factor: float, position: NDArray[np.float64]) -> tuple[LinkedSpheresModel, NDArray[np.float64]]:
         """The model in the box scaled by ``factor`` and the centres moved affinely.
 
         The affine move changes link lengths by ``factor - 1``; minimisers re-affix
