@@ -36,6 +36,12 @@ PLOT_KINDS: dict[str, str] = {
     "pareto": "one `jamflow tradeoff` output",
     "jamming-table": "one `jamflow jamming-table` output",
     "eos": "one or more LS equation-of-state datasets (`jamflow ls --eos`)",
+    "phi-asphericity": "one `jamflow shape-survey` output (phi_J against A - 1, VanderWerf et al. Fig. 5)",
+    "z-asphericity": "one `jamflow shape-survey` output (<z> against A - 1, VanderWerf et al. Fig. 8)",
+    "contact-angles": "one or more `jamflow contact-angles` outputs (P(psi), VanderWerf et al. Fig. 14)",
+    "spectra": "one or more `jamflow modes` outputs (sorted eigenvalues, VanderWerf et al. Fig. 7)",
+    "quartic-pressure": "`jamflow modes` outputs at several P0 (region-1 eigenvalues and fourth derivatives, "
+                        "VanderWerf et al. Figs. 10-11)",
 }
 #: the dataset kinds (jamflow.io.DATASET_KINDS) each figure kind reads
 PLOT_INPUT_KINDS: dict[str, tuple[str, ...]] = {
@@ -51,6 +57,11 @@ PLOT_INPUT_KINDS: dict[str, tuple[str, ...]] = {
     "pareto": ("tradeoff",),
     "jamming-table": ("jamming-table",),
     "eos": ("eos",),
+    "phi-asphericity": ("shape-survey",),
+    "z-asphericity": ("shape-survey",),
+    "contact-angles": ("contact-angles",),
+    "spectra": ("modes",),
+    "quartic-pressure": ("modes",),
 }
 
 
@@ -328,6 +339,7 @@ def _flow_curve(args: argparse.Namespace) -> int:
 
 def _plot(args: argparse.Namespace) -> int:
     from .. import plots
+    from ..shapes import figures as shape_figures
 
     inputs, out = _split(args.paths, "input")
     if Path(out).suffix.lower() not in (".png", ".pdf"):
@@ -336,9 +348,12 @@ def _plot(args: argparse.Namespace) -> int:
         raise ValueError(f"--labels needs one label per input ({len(inputs)}), got {len(args.labels)}")
     single = {"packing": None, "forces": plots.plot_forces, "fit-windows": plots.plot_fit_windows,
               "phi-kappa": plots.plot_phi_kappa, "flow-curve": plots.plot_flow_curve,
-              "pareto": plots.pareto, "jamming-table": plots.plot_jamming_table}
+              "pareto": plots.pareto, "jamming-table": plots.plot_jamming_table,
+              "phi-asphericity": lambda ds: shape_figures.plot_survey(ds, "phi_J"),
+              "z-asphericity": lambda ds: shape_figures.plot_survey(ds, "z")}
     labelled = {"gaps": plots.plot_gaps, "rdf": plots.plot_rdf, "stress-strain": plots.plot_stress_strain,
-                "eos": plots.plot_eos}
+                "eos": plots.plot_eos, "contact-angles": shape_figures.plot_contact_angles,
+                "spectra": shape_figures.plot_spectra}
     if args.kind in single and len(inputs) != 1:
         raise ValueError(f"plot {args.kind} takes one input, got {len(inputs)}")
     if args.kind == "packing":
@@ -349,6 +364,8 @@ def _plot(args: argparse.Namespace) -> int:
             fig = single[args.kind](data[0])
         elif args.kind in labelled:
             fig = labelled[args.kind](data, args.labels)
+        elif args.kind == "quartic-pressure":
+            fig = shape_figures.plot_quartic_pressure(data)
         else:
             fig = plots.plot_overlap_series(data)
     plots.save_figure(fig, out)
