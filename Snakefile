@@ -19,6 +19,8 @@ include: "workflow/rules/flow.smk"
 include: "workflow/rules/analysis.smk"
 include: "workflow/rules/figures.smk"
 include: "workflow/rules/tradeoff.smk"
+include: "workflow/rules/shapes_common.smk"
+include: "workflow/rules/shapes.smk"
 
 
 rule all:

@@ -95,3 +95,13 @@ def test_shape_survey_and_contact_angles_commands(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "jamflow", "contact-angles", str(angles)],
                          capture_output=True, text=True)
     assert bad.returncode != 0 and "at least one input" in bad.stderr
+
+
+def test_families_without_contact_points_report_phi_only():
+    from jamflow.shapes.generation import bidisperse_shapes, random_shape_packing, unit_shape
+
+    p = random_shape_packing(bidisperse_shapes(unit_shape("reuleaux", None, None, None)), 8, 0.3, 1)
+    row = survey_row(p)
+    assert row["family"] == "reuleaux" and row["phi_J"] == pytest.approx(0.3)
+    assert np.isnan(row["z"]) and row["n_contacts"] == -1 and row["counting"] == "not counted"
+    assert row["asphericity"] == pytest.approx(np.pi / (2 * (np.pi - np.sqrt(3))), rel=1e-12)
