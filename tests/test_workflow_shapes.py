@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import yaml
 
 from jamflow.io import read_dataset, read_packing
@@ -12,7 +13,7 @@ from test_workflow import _planned_jobs, _snakemake, _workdir
 #: sixteen circulo-lines and disks at high P0 (fewer bodies: the neighbour cutoff must fit the box) at a high P0 (jams in seconds), with disks, modes and angles
 TINY = {
     "scene": "tiny-shapes",
-    "shapes": {"n": 16, "seeds": [3], "pressures": [1.0e-3, 1.0e-2], "pressure_chain": True, "disks": True,
+    "shapes": {"n": 16, "phi": 0.5, "seeds": [3], "pressures": [1.0e-3, 1.0e-2], "pressure_chain": True, "disks": True,
                "modes": True, "contact_angles": True, "parallel_contacts": "twice",
                "families": [{"shape": "circulo-line", "asphericities": [1.2]}]},
     "figures": ["phi-asphericity", "z-asphericity", "spectra", "quartic-pressure", "contact-angles", "shape-packing"],
@@ -39,11 +40,12 @@ def test_shape_and_system_together_are_refused(tmp_path):
     assert res.returncode != 0 and "Error validating config" in res.stderr + res.stdout
 
 
+@pytest.mark.slow  # ~1-2 CPU minutes of FIRE (16 bodies, four jammings, spectra); 10+ wall minutes when loaded
 def test_tiny_shape_scene_runs(tmp_path):
     work = _workdir(tmp_path)
     path = work / "scene.yaml"
     path.write_text(yaml.safe_dump(TINY))
-    res = _snakemake(work, "-j1", "--configfile", str(path), timeout=600)
+    res = _snakemake(work, "-j1", "--configfile", str(path), timeout=3600)
     assert res.returncode == 0, res.stderr[-3000:]
     out = work / "results" / "tiny-shapes"
     survey = read_dataset(out / "analysis" / "shape-survey.nc", "shape-survey")
