@@ -35,25 +35,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=seed, required=True, help="random seed")
     add_quiet(p)
 
-    p = add_command(sub, "contact-angles", _contact_angles,
-                    "contact-angle distribution P(psi) of elongated bodies (VanderWerf et al. Fig. 14): psi is the "
-                    "angle between a body's long axis and the vector from its centre to a contact point, "
-                    "pooled over packings, contacts between non-rattlers",
-                    reads=("paths[:-1]",), writes=("paths[-1]",))
-    p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc", help="jammed shape packings, then the output")
+    p = _pooled_command(sub, "contact-angles", _contact_angles,
+                        "contact-angle distribution P(psi) of elongated bodies (VanderWerf et al. Fig. 14): psi "
+                        "is the angle between a body's long axis and the vector from its centre to a contact "
+                        "point, pooled over packings, contacts between non-rattlers", "jammed shape packings")
     p.add_argument("--bins", type=int, default=18, help="bins on [0, pi/2] (default 18, 5 degrees each)")
-    _add_parallel(p)
     add_quiet(p)
-
-    p = add_command(sub, "shape-survey", _shape_survey,
-                    "phi_J and <z> (Eq. 3) against asphericity over jammed packings of shapes and disks "
-                    "(VanderWerf et al. Figs. 5, 8): one row per packing, mean and standard error per shape "
-                    "family and asphericity",
-                    reads=("paths[:-1]",), writes=("paths[-1]",))
-    p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc",
-                   help="jammed 2D packings (shapes from soft-jam, or bidisperse disks), then the output")
-    _add_parallel(p)
-    add_quiet(p)
+    add_quiet(_pooled_command(sub, "shape-survey", _shape_survey,
+                              "phi_J and <z> (Eq. 3) against asphericity over jammed packings of shapes and disks "
+                              "(VanderWerf et al. Figs. 5, 8): one row per packing, mean and standard error per "
+                              "shape family and asphericity",
+                              "jammed 2D packings (shapes from soft-jam, or bidisperse disks)"))
 
     p = add_command(sub, "modes", _modes,
                     "dynamical-matrix spectrum of a shape packing: regions 0-3, quartic modes N_1 and their "
@@ -67,11 +59,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_quiet(p)
 
 
-def _add_parallel(p: argparse.ArgumentParser) -> None:
+def _pooled_command(sub: argparse._SubParsersAction, name: str, handler, help: str,
+                    inputs: str) -> argparse.ArgumentParser:
+    """A command reading packings ``IN ... OUT`` with ``--parallel-contacts`` (Fig. 6)."""
     from ..shapes.counting import PARALLEL_MODES
 
+    p = add_command(sub, name, handler, help, reads=("paths[:-1]",), writes=("paths[-1]",))
+    p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc", help=f"{inputs}, then the output")
     p.add_argument("--parallel-contacts", choices=PARALLEL_MODES, default="once",
                    help="a parallel circulo contact counts once or twice (Fig. 6; default once)")
+    return p
 
 
 def _contact_angles(args: argparse.Namespace) -> int:
