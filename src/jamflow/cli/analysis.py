@@ -337,6 +337,16 @@ def _flow_curve(args: argparse.Namespace) -> int:
     return 0
 
 
+def _with_shape_rattlers(packing):
+    """A shape packing with its rattlers marked (Sec. III B counting), when its family is counted."""
+    from ..models.shapes import shape_family
+    from ..shapes.counting import COUNTED_FAMILIES, count_constraints
+
+    if packing.shapes is None or packing.rattler is not None or shape_family(packing.shapes.kind) not in COUNTED_FAMILIES:
+        return packing
+    return packing.evolve(rattler=count_constraints(packing)[1])
+
+
 def _plot(args: argparse.Namespace) -> int:
     from .. import plots
     from ..shapes import figures as shape_figures
@@ -357,7 +367,7 @@ def _plot(args: argparse.Namespace) -> int:
     if args.kind in single and len(inputs) != 1:
         raise ValueError(f"plot {args.kind} takes one input, got {len(inputs)}")
     if args.kind == "packing":
-        fig = plots.plot_packing(_load_packing(inputs[0], overlap_tol(args)), args.slab_axis)
+        fig = plots.plot_packing(_with_shape_rattlers(_load_packing(inputs[0], overlap_tol(args))), args.slab_axis)
     else:
         data = [read_dataset(p, PLOT_INPUT_KINDS[args.kind]) for p in inputs]
         if args.kind in single:
