@@ -49,6 +49,12 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args()
     settings = JammingSettings(delta_phi=1e-2, pressure_rtol=1e-2)
+    # untimed warm-up: numba compiles every family's kernels (and the spectrum's) on first use
+    for family in FAMILIES[1:]:
+        table = bidisperse_shapes(unit_shape(family, asphericity=args.asphericity))
+        warm = jam_shapes(random_shape_packing(table, 16, 0.5, args.seed), 1e-3, settings).packing
+        spectrum(warm, fourth=False)
+    jam_to_pressure(random_packing(16, 2, 0.5, "bi", args.seed, 1.4, 0.5), 1e-3, HARMONIC)
     shape = (len(FAMILIES), len(args.n))
     jam_time, phi, z, steps, spec_time, n_quartic, jam_cpu, spec_cpu = (np.full(shape, np.nan) for _ in range(8))
     for b, n in enumerate(args.n):
