@@ -12,6 +12,7 @@ from collections.abc import Sequence
 import numpy as np
 import xarray as xr
 from matplotlib.figure import Figure
+from matplotlib.ticker import NullFormatter
 
 from .survey import DISK_FAMILY
 
@@ -55,6 +56,8 @@ def plot_survey(ds: xr.Dataset, quantity: str) -> Figure:
             ax.axhline(value, color="grey", lw=0.8, ls=":")
             ax.annotate(text, (0.01, value), xycoords=("axes fraction", "data"), fontsize=7, va="bottom")
     ax.set_xscale("log")
+    # minor-tick labels of a narrow log range overprint each other
+    ax.xaxis.set_minor_formatter(NullFormatter())
     ax.set_xlabel(f"asphericity A - 1 {_DL}")
     ax.set_ylabel(f"{_SURVEY[quantity]} {_DL}")
     ax.legend(fontsize=7)
