@@ -20,6 +20,8 @@ include: "workflow/rules/analysis.smk"
 include: "workflow/rules/figures.smk"
 include: "workflow/rules/tradeoff.smk"
 include: "workflow/rules/chains.smk"
+include: "workflow/rules/shapes_common.smk"
+include: "workflow/rules/shapes.smk"
 
 
 rule all:

@@ -24,6 +24,13 @@ from jamflow.analysis.structure import structure_dataset
 from jamflow.chains.averages import moduli_against_links
 from jamflow.cli.analysis import PLOT_KINDS
 
+from jamflow.shapes import figures as shape_figures
+from jamflow.shapes.survey import survey_dataset
+
+from test_analysis_eos import eos_run, series
+from test_analysis_flow import flow_dataset
+from test_plots import lattice
+
 
 def _gaps(rng) -> xr.Dataset:
     h = [(1e-9 ** 0.6 + rng.random(3000) * (0.1 ** 0.6 - 1e-9 ** 0.6)) ** (1 / 0.6) for _ in range(3)]
@@ -35,6 +42,33 @@ def _gaps(rng) -> xr.Dataset:
 def _forces(rng) -> xr.Dataset:
     p = lattice(20, 20)
     return force_distribution([p.evolve(force=rng.random(len(p.contacts))) for _ in range(3)], n_boot=20)
+
+
+def _modes(rng, pressure: float) -> xr.Dataset:
+    lam = np.sort(np.concatenate([[0.0, 0.0], pressure * rng.random(4), 1e-2 + rng.random(42)]))
+    region = np.array([0, 0] + [1] * 4 + [2] * 20 + [3] * 22)
+    d4 = np.where(region == 1, rng.random(48), np.nan)
+    return xr.Dataset({"eigenvalue": ("mode", lam), "region": ("mode", region), "fourth_derivative": ("mode", d4),
+                       "rotational_weight": ("mode", rng.random(48))},
+                      attrs={"pressure": pressure, "n_quartic": 4, "lambda_c": 1e-3, "N": 16,
+                             "isostatic_count": 47, "n_contacts_twice": 43})
+
+
+def _shape_figures(rng) -> dict[str, Figure]:
+    rows = [dict(family=f, asphericity=a, N=16, phi_J=0.85 + 0.01 * rng.random(), pressure=1e-6, n_contacts=40,
+                 n_rattlers=1, n_sliders=0, z=4.5 + rng.random(), isostatic_count=44, counting="hypostatic")
+            for f, a in [("disk", 1.0), ("ellipse", 1.01), ("ellipse", 1.01), ("circulo_line", 1.1)]]
+    survey = survey_dataset(rows, ["a", "b", "c", "d"])
+    angles = xr.Dataset({"P_psi": ("bin", 2 / np.pi * np.ones(9)), "P_psi_err": ("bin", 0.1 * np.ones(9))},
+                        coords={"psi": ("bin", (np.arange(9) + 0.5) * np.pi / 18)},
+                        attrs={"family": "ellipse", "asphericity": 1.01, "N": 16, "n_packings": 2, "n_angles": 90})
+    return {
+        "phi-asphericity": shape_figures.plot_survey(survey, "phi_J"),
+        "z-asphericity": shape_figures.plot_survey(survey, "z"),
+        "contact-angles": shape_figures.plot_contact_angles([angles]),
+        "spectra": shape_figures.plot_spectra([_modes(rng, 1e-6), _modes(rng, 1e-5)], ["a", "b"]),
+        "quartic-pressure": shape_figures.plot_quartic_pressure([_modes(rng, 1e-6), _modes(rng, 1e-5)]),
+    }
 
 
 def _figures(rng) -> dict[str, Figure]:
@@ -73,6 +107,7 @@ def _figures(rng) -> dict[str, Figure]:
         "eos": plots.plot_eos(eos),
         "chains-moduli": plots.plot_chains_moduli(moduli_against_links(cemented)),
         "fit-windows (forces)": plots.plot_fit_windows(forces),
+        **_shape_figures(rng),
     }
 
 

@@ -168,3 +168,15 @@ def test_disk_limit_of_ellipses():
             expected.append(t)
     for t in expected:
         assert np.linalg.norm(zero.T @ t) == pytest.approx(1.0, abs=1e-9)
+
+
+def test_fourth_derivatives_do_not_depend_on_pressure_down_to_1e_7():
+    # regression: one packing (32 circulo-lines, A = 1.03, the vanderwerf-fig10-11 scene)
+    # jammed at P0 = 1e-7 and compressed to 1e-6; a fixed step 1e-3 opened contacts at
+    # 1e-7 (overlaps ~1e-7 < h^2) and gave fourth derivatives 40 to 1e5 times larger
+    data = Path(__file__).parent / "data"
+    low, high = (spectrum(read_packing(data / f"shapes_circulo_line_a1.03_n32_p{p}.nc", None)) for p in ("1e-7", "1e-6"))
+    assert low.n_quartic == high.n_quartic == 9
+    np.testing.assert_allclose(high.eigenvalue[high.region == 1] / low.eigenvalue[low.region == 1], 10.0, rtol=1e-3)
+    np.testing.assert_allclose(low.fourth_derivative[low.region == 1], high.fourth_derivative[high.region == 1],
+                               rtol=1e-2)

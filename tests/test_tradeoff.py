@@ -54,3 +54,30 @@ def test_unknown_stage_is_refused(tmp_path, capsys):
     assert exc.value.code == 2
     assert "invalid choice" in capsys.readouterr().err
     assert not (tmp_path / "x.nc").exists()
+
+
+def test_shapes_stage_errors_and_grid():
+    # phi_J error relative to the reference, N_1 error in modes, force from the packing's
+    # max_force_sq; the grid always holds soft-jam's default tolerance at every P0
+    from jamflow.bodies import ShapeTable
+    from jamflow.box import Box
+    from jamflow.packing import Packing
+    from jamflow.tolerances import SOFT_FORCE_TOL
+    from jamflow.tradeoff import _shapes_compare
+
+    lines = ShapeTable.from_shapes([dict(kind="circulo_line", vertices=[(-0.5, 0.0), (0.5, 0.0)], radius=0.2)])
+
+    def packing(side: float, force_sq: float) -> Packing:
+        return Packing(position=np.array([[0.5, 0.5], [2.0, 2.0]]), diameter=np.full(2, 1.4), box=Box.cubic(2, side),
+                       orientation=np.zeros(2), shapes=lines, shape_index=np.zeros(2, dtype=np.int64),
+                       attrs={"max_force_sq": force_sq})
+
+    ref, out = packing(4.0, 1e-30), packing(4.0 * (1 - 1e-6), 1e-24)
+    m = _shapes_compare((out, 3), (ref, 5))
+    assert m["phi_J_error"] == pytest.approx((1 - 1e-6) ** -2 - 1, rel=1e-6)
+    assert m["n_quartic_error"] == 2.0 and m["max_force"] == pytest.approx(1e-12)
+    sw = STAGES["shapes"]
+    for quick in (True, False):
+        grid = sw.grid(quick)
+        assert {g["pressure"] for g in grid if g["force_tol"] == SOFT_FORCE_TOL} == {g["pressure"] for g in grid}
+        assert sw.reference(quick)["pressure"] < min(g["pressure"] for g in grid)

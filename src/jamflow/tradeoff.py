@@ -481,6 +481,43 @@ def _ls_grid(quick: bool) -> list[dict[str, Any]]:
 
 
 #: The registry: stage name -> sweep.
+# --- shaped bodies: jamming onset and quartic modes ------------------------------------
+
+#: Circulo-line asphericity of the shapes sweep (hypostatic, regions 1 and 2 separate).
+SHAPES_ASPHERICITY: float = 1.1
+
+
+def _shapes_prepare(seed: int, quick: bool) -> Packing:
+    from .shapes.generation import bidisperse_shapes, random_shape_packing, unit_shape
+
+    table = bidisperse_shapes(unit_shape("circulo-line", None, SHAPES_ASPHERICITY, None))
+    return random_shape_packing(table, 16 if quick else 32, 0.5, seed)
+
+
+def _shapes_run(start: Packing, knobs: dict[str, Any], quick: bool) -> tuple[Packing, int]:
+    from .shapes.jamming import jam_shapes
+    from .shapes.spectrum import spectrum
+    from .soft.jamming import JammingSettings
+
+    out = jam_shapes(start, knobs["pressure"], JammingSettings(force_tol=knobs["force_tol"])).packing
+    return out, spectrum(out).n_quartic
+
+
+def _shapes_compare(out: tuple[Packing, int], ref: tuple[Packing, int]) -> dict[str, float]:
+    (p, n1), (p_ref, n1_ref) = out, ref
+    return {
+        "phi_J_error": abs(p.packing_fraction - p_ref.packing_fraction) / p_ref.packing_fraction,
+        "n_quartic_error": float(abs(n1 - n1_ref)),
+        "max_force": float(np.sqrt(p.attrs["max_force_sq"])),
+    }
+
+
+def _shapes_grid(quick: bool) -> list[dict[str, Any]]:
+    tols = (1e-10, 1e-12, SOFT_FORCE_TOL)
+    pressures = (1e-6, 1e-7) if quick else (1e-5, 1e-6, 1e-7, 1e-8)
+    return [{"force_tol": t, "pressure": p} for p in pressures for t in tols]
+
+
 STAGES: dict[str, StageSweep] = {
     "soft": StageSweep(
         name="soft",
@@ -499,6 +536,27 @@ STAGES: dict[str, StageSweep] = {
         grid=_soft_grid,
         run=_soft_run,
         compare=_soft_compare,
+    ),
+    "shapes": StageSweep(
+        name="shapes",
+        description=f"jamming of 2D bidisperse circulo-lines (A = {SHAPES_ASPHERICITY:g}, N = 16 quick, 32 full, "
+                    "RSA start at phi = 0.5) with rotations to P0, then the dynamical-matrix spectrum "
+                    "(VanderWerf et al.); errors against a tight reference at the lowest P0",
+        commands=("soft-jam",),
+        knobs={"force_tol": "final max_i sqrt(F_i^2 + (tau_i / l)^2) [k length]",
+               "pressure": "target pressure P0 [k]"},
+        preset_options={"force_tol": "force_tol"},
+        metrics={"phi_J_error": "|phi_J - phi_J(reference)| / phi_J(reference)",
+                 "n_quartic_error": "|N_1 - N_1(reference)|, quartic modes (region 1)",
+                 "max_force": "final max generalised force [k length]"},
+        primary="phi_J_error",
+        thresholds={"fast": {"phi_J_error": 1e-4}, "default": {"phi_J_error": 1e-6, "n_quartic_error": 0.0},
+                    "publication": {"phi_J_error": 1e-7, "n_quartic_error": 0.0}},
+        prepare=_shapes_prepare,
+        reference=lambda quick: {"force_tol": 10**-13.5, "pressure": 1e-8 if quick else 1e-9},
+        grid=_shapes_grid,
+        run=_shapes_run,
+        compare=_shapes_compare,
     ),
     "aqs": StageSweep(
         name="aqs",

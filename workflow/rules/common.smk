@@ -216,6 +216,7 @@ def scene_targets():
     targets += chains_targets()  # workflow/rules/chains.smk
     for stage in config.get("tradeoff", {}).get("stages", []):
         targets += [f"{RESULTS}/tradeoff/{stage}.nc", f"{RESULTS}/figures/pareto_{stage}.png"]
+    targets += shape_targets()
     for fig in config.get("figures", []):
         if fig == "packing":
             targets += [f"{RESULTS}/figures/packing_{s}{variants()[-1]}.png" for s in samples()]
@@ -320,6 +321,8 @@ def scene_size():
     for a tradeoff-only scene (its sweeps choose their own inputs)."""
     if "system" in config:
         return config["system"]["n"], config["system"]["d"]
+    if "shapes" in config:
+        return config["shapes"]["n"], 2
     if "import" in config:
         sizes = [_dat_header(path) for path in config["import"].values()]
         return max(n for n, _ in sizes), max(d for _, d in sizes)

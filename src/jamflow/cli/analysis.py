@@ -37,6 +37,12 @@ PLOT_KINDS: dict[str, str] = {
     "jamming-table": "one `jamflow jamming-table` output",
     "eos": "one or more LS equation-of-state datasets (`jamflow ls --eos`)",
     "chains-moduli": "one `jamflow chains-moduli` output (moduli against added links per sphere)",
+    "phi-asphericity": "one `jamflow shape-survey` output (phi_J against A - 1, VanderWerf et al. Fig. 5)",
+    "z-asphericity": "one `jamflow shape-survey` output (<z> against A - 1, VanderWerf et al. Fig. 8)",
+    "contact-angles": "one or more `jamflow contact-angles` outputs (P(psi), VanderWerf et al. Fig. 14)",
+    "spectra": "one or more `jamflow modes` outputs (sorted eigenvalues, VanderWerf et al. Fig. 7)",
+    "quartic-pressure": "`jamflow modes` outputs at several P0 (region-1 eigenvalues and fourth derivatives, "
+                        "VanderWerf et al. Figs. 10-11)",
 }
 #: the dataset kinds (jamflow.io.DATASET_KINDS) each figure kind reads
 PLOT_INPUT_KINDS: dict[str, tuple[str, ...]] = {
@@ -53,6 +59,11 @@ PLOT_INPUT_KINDS: dict[str, tuple[str, ...]] = {
     "jamming-table": ("jamming-table",),
     "eos": ("eos",),
     "chains-moduli": ("chains-moduli-table",),
+    "phi-asphericity": ("shape-survey",),
+    "z-asphericity": ("shape-survey",),
+    "contact-angles": ("contact-angles",),
+    "spectra": ("modes",),
+    "quartic-pressure": ("modes",),
 }
 
 
@@ -328,8 +339,19 @@ def _flow_curve(args: argparse.Namespace) -> int:
     return 0
 
 
+def _with_shape_rattlers(packing):
+    """A shape packing with its rattlers marked (Sec. III B counting), when its family is counted."""
+    from ..models.shapes import shape_family
+    from ..shapes.counting import COUNTED_FAMILIES, count_constraints
+
+    if packing.shapes is None or packing.rattler is not None or shape_family(packing.shapes.kind) not in COUNTED_FAMILIES:
+        return packing
+    return packing.evolve(rattler=count_constraints(packing)[1])
+
+
 def _plot(args: argparse.Namespace) -> int:
     from .. import plots
+    from ..shapes import figures as shape_figures
 
     inputs, out = _split(args.paths, "input")
     if Path(out).suffix.lower() not in (".png", ".pdf"):
@@ -339,19 +361,24 @@ def _plot(args: argparse.Namespace) -> int:
     single = {"packing": None, "forces": plots.plot_forces, "fit-windows": plots.plot_fit_windows,
               "phi-kappa": plots.plot_phi_kappa, "flow-curve": plots.plot_flow_curve,
               "pareto": plots.pareto, "jamming-table": plots.plot_jamming_table,
-              "chains-moduli": plots.plot_chains_moduli}
+              "chains-moduli": plots.plot_chains_moduli,
+              "phi-asphericity": lambda ds: shape_figures.plot_survey(ds, "phi_J"),
+              "z-asphericity": lambda ds: shape_figures.plot_survey(ds, "z")}
     labelled = {"gaps": plots.plot_gaps, "rdf": plots.plot_rdf, "stress-strain": plots.plot_stress_strain,
-                "eos": plots.plot_eos}
+                "eos": plots.plot_eos, "contact-angles": shape_figures.plot_contact_angles,
+                "spectra": shape_figures.plot_spectra}
     if args.kind in single and len(inputs) != 1:
         raise ValueError(f"plot {args.kind} takes one input, got {len(inputs)}")
     if args.kind == "packing":
-        fig = plots.plot_packing(_load_packing(inputs[0], overlap_tol(args)), args.slab_axis)
+        fig = plots.plot_packing(_with_shape_rattlers(_load_packing(inputs[0], overlap_tol(args))), args.slab_axis)
     else:
         data = [read_dataset(p, PLOT_INPUT_KINDS[args.kind]) for p in inputs]
         if args.kind in single:
             fig = single[args.kind](data[0])
         elif args.kind in labelled:
             fig = labelled[args.kind](data, args.labels)
+        elif args.kind == "quartic-pressure":
+            fig = shape_figures.plot_quartic_pressure(data)
         else:
             fig = plots.plot_overlap_series(data)
     plots.save_figure(fig, out)

@@ -35,6 +35,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=seed, required=True, help="random seed")
     add_quiet(p)
 
+    p = _pooled_command(sub, "contact-angles", _contact_angles,
+                        "contact-angle distribution P(psi) of elongated bodies (VanderWerf et al. Fig. 14): psi "
+                        "is the angle between a body's long axis and the vector from its centre to a contact "
+                        "point, pooled over packings, contacts between non-rattlers", "jammed shape packings")
+    p.add_argument("--bins", type=int, default=18, help="bins on [0, pi/2] (default 18, 5 degrees each)")
+    add_quiet(p)
+    add_quiet(_pooled_command(sub, "shape-survey", _shape_survey,
+                              "phi_J and <z> (Eq. 3) against asphericity over jammed packings of shapes and disks "
+                              "(VanderWerf et al. Figs. 5, 8): one row per packing, mean and standard error per "
+                              "shape family and asphericity",
+                              "jammed 2D packings (shapes from soft-jam, or bidisperse disks)"))
+
     p = add_command(sub, "modes", _modes,
                     "dynamical-matrix spectrum of a shape packing: regions 0-3, quartic modes N_1 and their "
                     "fourth derivatives, and the check N_c = N_c^0 - N_1 (VanderWerf et al. Sec. III B)",
@@ -45,6 +57,60 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="cutoff between regions 1 and 2 [k]; default: the widest gap of log(lambda) in the "
                         "lower half of the nonzero spectrum")
     add_quiet(p)
+
+
+def _pooled_command(sub: argparse._SubParsersAction, name: str, handler, help: str,
+                    inputs: str) -> argparse.ArgumentParser:
+    """A command reading packings ``IN ... OUT`` with ``--parallel-contacts`` (Fig. 6)."""
+    from ..shapes.counting import PARALLEL_MODES
+
+    p = add_command(sub, name, handler, help, reads=("paths[:-1]",), writes=("paths[-1]",))
+    p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc", help=f"{inputs}, then the output")
+    p.add_argument("--parallel-contacts", choices=PARALLEL_MODES, default="once",
+                   help="a parallel circulo contact counts once or twice (Fig. 6; default once)")
+    return p
+
+
+def _contact_angles(args: argparse.Namespace) -> int:
+    from ..shapes.analysis import contact_angle_dataset
+
+    inputs, out = args.paths[:-1], args.paths[-1]
+    if not inputs:
+        raise ValueError("contact-angles needs at least one input packing before the output")
+    if args.bins < 1:
+        raise ValueError(f"--bins must be at least 1, got {args.bins}")
+    ds = contact_angle_dataset([read_packing(p, None) for p in inputs], args.parallel_contacts, args.bins)
+    ds.attrs.update(new_dataset_attrs("jamflow contact-angle distribution", stage_parameters(args, "paths")))
+    write_dataset(ds, out)
+    a = ds.attrs
+    print_summary(args, out, [
+        ("packings, angles", f"{a['n_packings']}, {a['n_angles']} ({a['family']}, A - 1 = {a['asphericity'] - 1:.4g})"),
+        ("mean psi", f"{a['psi_mean']:.4f} rad (uniform directions: {np.pi / 4:.4f})"),
+        ("fraction psi < pi/4", f"{a['tip_fraction']:.4f}"),
+        ("P(psi) first, last bin", f"{ds.P_psi.values[0]:.4f}, {ds.P_psi.values[-1]:.4f} 1/rad "
+                                   f"(uniform 2/pi = {2 / np.pi:.4f})"),
+    ])
+    return 0
+
+
+def _shape_survey(args: argparse.Namespace) -> int:
+    from ..shapes.survey import survey_dataset, survey_row
+
+    inputs, out = args.paths[:-1], args.paths[-1]
+    if not inputs:
+        raise ValueError("shape-survey needs at least one input packing before the output")
+    rows = [survey_row(read_packing(p, None), args.parallel_contacts) for p in inputs]
+    ds = survey_dataset(rows, inputs)
+    ds.attrs.update(new_dataset_attrs("jamflow phi_J and <z> against asphericity",
+                                      stage_parameters(args, "paths"), n_packings=len(rows)))
+    write_dataset(ds, out)
+    print_summary(args, out, [
+        (f"{f} A-1={a - 1:.3g}", f"phi_J {pm:.5f} ± {ps:.5f}, <z> {zm:.4f} ± {zs:.4f} ({n} packings, N = {nn})")
+        for f, a, pm, ps, zm, zs, n, nn in zip(ds.group_family.values, ds.group_asphericity.values,
+                                               ds.phi_J_mean.values, ds.phi_J_sem.values, ds.z_mean.values,
+                                               ds.z_sem.values, ds.n_packings.values, ds.group_N.values, strict=True)
+    ])
+    return 0
 
 
 def _modes(args: argparse.Namespace) -> int:

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
+import xarray as xr
 from numpy.typing import NDArray
 
 from ..packing import Packing
 from .counting import count_constraints
 
-__all__ = ["contact_angles", "contact_angle_distribution"]
+__all__ = ["contact_angle_dataset", "contact_angle_distribution", "contact_angles"]
 
 _ELONGATED = ("ellipse", "circulo_line")
 
@@ -44,3 +47,36 @@ def contact_angle_distribution(psi: NDArray[np.float64], bins: int = 18) -> tupl
     """Normalised histogram ``P(psi)`` on [0, pi/2]: bin centres [rad] and densities [1/rad]."""
     density, edges = np.histogram(psi, bins=bins, range=(0.0, 0.5 * np.pi), density=True)
     return 0.5 * (edges[1:] + edges[:-1]), density
+
+
+def contact_angle_dataset(packings: Sequence[Packing], parallel: str = "once", bins: int = 18) -> xr.Dataset:
+    """``P(psi)`` pooled over packings (Fig. 14): ``P_psi(bin)`` [1/rad] at ``psi(bin)`` [rad].
+
+    Two angles per contact between non-rattlers (one per body). ``P_psi_err`` is the
+    counting (Poisson) error of each bin, ``sqrt(n_bin) / (n width)``; the density
+    integrates to 1 over [0, pi/2], and a contact direction uniform relative to the
+    body axis gives the flat ``2 / pi``.
+    """
+    if not packings:
+        raise ValueError("contact angles need at least one packing")
+    psi = np.concatenate([contact_angles(p, parallel) for p in packings])
+    if psi.size == 0:
+        raise ValueError("no contacts between non-rattlers in the input packings")
+    centres, density = contact_angle_distribution(psi, bins)
+    width = 0.5 * np.pi / bins
+    counts = density * psi.size * width
+    a = np.concatenate([p.shapes.asphericity[p.shape_index] for p in packings])
+    b = ("bin",)
+    return xr.Dataset(
+        data_vars={
+            "P_psi": (b, density, {"units": "1/rad", "long_name": "contact-angle density P(psi)"}),
+            "P_psi_err": (b, np.sqrt(counts) / (psi.size * width),
+                          {"units": "1/rad", "long_name": "counting error of P(psi)"}),
+            "count": (b, np.rint(counts).astype(np.int64), {"units": "1", "long_name": "angles in the bin"}),
+        },
+        coords={"psi": (b, centres, {"units": "rad", "long_name": "contact angle psi (bin centre), 0 at the tip"})},
+        attrs={"n_angles": int(psi.size), "n_packings": len(packings), "parallel": parallel,
+               "asphericity": float(np.mean(a)), "family": ",".join(sorted(set(packings[0].shapes.kind))),
+               "N": int(max(p.n for p in packings)), "psi_mean": float(np.mean(psi)),
+               "tip_fraction": float(np.mean(psi < np.pi / 4))},
+    )

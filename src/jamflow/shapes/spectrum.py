@@ -19,7 +19,8 @@ Regions (Fig. 7):
 ``log lambda`` among the nonzero eigenvalues in the lower half of the spectrum (the
 paper separates regions 1 and 2 by such a gap, ``lambda_c ~ 4e-8`` at ``P0 = 1e-9``;
 region 1 scales with ``P0``, region 2 does not). The fourth derivative of ``U`` along
-each region-1 mode ``v`` (Fig. 11) is the second difference of ``v^T M(q + h v) v``.
+each region-1 mode ``v`` (Fig. 11) is the second difference of ``v^T M(q + h v) v`` with a
+step that opens no contact (:func:`fourth_derivative_step`).
 """
 
 from __future__ import annotations
@@ -32,16 +33,33 @@ from numpy.typing import NDArray
 from ..packing import Packing
 from .counting import count_constraints, shape_model
 
-__all__ = ["ZERO_EIGENVALUE_RTOL", "FOURTH_DERIVATIVE_STEP", "Spectrum", "spectrum"]
+__all__ = ["ZERO_EIGENVALUE_RTOL", "FOURTH_DERIVATIVE_STEP", "fourth_derivative_step", "Spectrum", "spectrum"]
 
 #: Eigenvalues with ``|lambda| <= ZERO_EIGENVALUE_RTOL * lambda_max`` are zero modes:
 #: LAPACK's eigenvalues err by ``O(eps ||M||) ~ 1e-16 lambda_max``; 1e-13 leaves a
 #: factor of ~500 for the round-off of M itself (complex-step entries to ~eps).
 ZERO_EIGENVALUE_RTOL: float = 1e-13
 
-#: Step [length, or rad] of the second difference of ``v^T M v`` along a quartic mode:
-#: truncation ``h^2 U^(6) ~ 1e-6`` relative; round-off ``eps ||M|| / h^2 ~ 1e-9``.
+#: Largest step [length, or rad] of the second difference of ``v^T M v`` along a quartic
+#: mode: truncation ``h^2 U^(6) ~ 1e-6`` relative; round-off ``eps ||M|| / h^2 ~ 1e-9``.
 FOURTH_DERIVATIVE_STEP: float = 1e-3
+
+#: The step is also at most this fraction of ``sqrt(delta_min)``, ``delta_min`` the
+#: smallest pair overlap: along a quartic mode contact distances change at second order,
+#: ``~ h^2``, so a step ``h^2 << delta_min`` opens no contact. With the fixed 1e-3 the
+#: steps at P0 = 1e-7 (overlaps ~1e-7) broke contacts and gave fourth derivatives 1e3-1e5
+#: times those of the same packing at P0 = 1e-6.
+FOURTH_STEP_OVERLAP_FRACTION: float = 0.1
+
+#: Smallest step: round-off ``eps ||M|| / h^2`` stays below ~1e-3 of ``||M||`` (a pair
+#: touching by less than ``(h / FOURTH_STEP_OVERLAP_FRACTION)^2 = 1e-10`` may then open).
+FOURTH_DERIVATIVE_MIN_STEP: float = 1e-6
+
+
+def fourth_derivative_step(min_overlap: float) -> float:
+    """Step [length or rad] of the fourth derivative for a packing whose smallest overlap is ``min_overlap``."""
+    return float(np.clip(FOURTH_STEP_OVERLAP_FRACTION * np.sqrt(max(min_overlap, 0.0)), FOURTH_DERIVATIVE_MIN_STEP,
+                         FOURTH_DERIVATIVE_STEP))
 
 
 @dataclass(frozen=True)
@@ -102,7 +120,9 @@ def spectrum(packing: Packing, lambda_c: float | None = None, fourth: bool = Tru
     region = np.where(np.abs(lam) <= lambda_0, 0, np.where(lam < lambda_c, 1, np.where(rot > 0.5, 2, 3)))
     d4 = np.full(lam.size, np.nan)
     if fourth:
-        h = FOURTH_DERIVATIVE_STEP
+        energy = model.pair_table(q)["energy"]
+        # one harmonic term per pair: U = (k/2) delta^2 (the shallowest term of a pair bounds this from above)
+        h = fourth_derivative_step(float(np.sqrt(2.0 * energy.min() / model.k)) if energy.size else 0.0)
         for k in np.flatnonzero(region == 1):
             v = vec[:, k]
             curv = [v @ (model.hessian(q + s * h * v) @ v) for s in (-1.0, 1.0)]
