@@ -190,6 +190,7 @@ class Integrator:
         self._nl_version = 0
         self._pairs_key = None
         self._sep_key = None
+        self._err_key = None
         self.factor_cache = FactorCache()
         self.solution: Solution = self._solution_now()
         self.last_correction: tuple[float, float] = (np.nan, np.nan)
@@ -233,6 +234,7 @@ class Integrator:
         integ._nl_version = 0
         integ._pairs_key = None
         integ._sep_key = None
+        integ._err_key = None
         integ.factor_cache = FactorCache()
         if contact.any():
             integ._rewire(contact.copy())
@@ -503,11 +505,14 @@ class Integrator:
 
     # -------------------------------------------------------------- diagnostics
     def contact_errors(self) -> NDArray[np.float64]:
-        """Relative constraint errors ``(r_ij - sigma_ij) / sigma_ij`` of contacts, shape (Nc,)."""
+        """Relative constraint errors ``(r_ij - sigma_ij) / sigma_ij`` of contacts, shape (Nc,) (read-only)."""
         st = self.state
         R = self._separations(st.contact)
-        sig = st.nl.sigma[st.contact]
-        return np.linalg.norm(R, axis=1) / sig - 1.0
+        if self._err_key != self._sep_key:
+            # the step's drift check and the recorder ask at the same state
+            self._err_key = self._sep_key
+            self._err_value = np.linalg.norm(R, axis=1) / st.nl.sigma[st.contact] - 1.0
+        return self._err_value
 
     def constraint_error(self) -> float:
         """Largest ``|r_ij - sigma_ij| / sigma_ij`` over contacts (0 without contacts)."""

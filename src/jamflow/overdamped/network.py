@@ -302,14 +302,15 @@ def _bordered(lu, old_codes, codes, pairs, unit, n, cond_limit, max_changes):
         E = np.zeros((len(old_codes), len(Q)))
         E[Q, np.arange(len(Q))] = 1.0
         W = lu.solve(E)
-        WQQ = W[Q]
+        # small dense |Q| x |Q| (and below |P| x |P|) inverses, applied at every CG iteration
+        WQQ_inv = np.linalg.inv(W[Q])
 
     def solve_cc(g):
         G = np.zeros((len(old_codes),) + g.shape[1:])
         G[pos_c] = g
         y = lu.solve(G)
         if len(Q):
-            y = y + W @ np.linalg.solve(WQQ, -y[Q])
+            y = y - W @ (WQQ_inv @ y[Q])
         return y[pos_c]
 
     if len(P):
@@ -323,12 +324,13 @@ def _bordered(lu, old_codes, codes, pairs, unit, n, cond_limit, max_changes):
         T = NPP - NCP.T @ B
         if np.any(np.diag(T) <= np.diag(NPP) / cond_limit):
             return None
+        T_inv = np.linalg.inv(T)
 
     def apply(g):
         out = np.empty(len(codes))
         a = solve_cc(g[C])
         if len(P):
-            xp = np.linalg.solve(T, g[P] - NCP.T @ a)
+            xp = T_inv @ (g[P] - NCP.T @ a)
             out[P] = xp
             out[C] = a - B @ xp
         else:
