@@ -36,6 +36,7 @@ __all__ = [
     "FactorCache",
     "SingularNetworkError",
     "Solution",
+    "TriangularFactor",
     "affine_rates",
     "pair_vectors",
     "pair_velocities",
