@@ -158,3 +158,53 @@ def test_pair_closing_a_self_stress_is_not_solved_by_the_bordered_path():
     with pytest.raises(SingularNetworkError):
         solve_network(x, h, pairs, images, E, check_pivots=False, cache=cache)
     assert cache.n_bordered == 0 and cache.n_factor == 1
+
+
+@pytest.mark.parametrize("eps", [None, 1e-3])
+def test_compiled_triangular_solve_matches_a_dense_solve(rng, eps):
+    """The cached factor's compiled substitution solves N x = b as a dense solve does (random and
+    nearly singular N, one and several right-hand sides)."""
+    import scipy.sparse.linalg as spla
+
+    from jamflow.overdamped.network import TriangularFactor, pair_vectors, s_matrix
+
+    if eps is None:
+        x, box, pairs, images = _random_network(rng, 40, 2, n_contacts=45)
+        h = box.matrix
+    else:
+        x, h, pairs, images = _bent_ring(eps)
+    R = pair_vectors(x, h, pairs, images)
+    S = s_matrix(pairs, R / np.linalg.norm(R, axis=1)[:, None], len(x))
+    N = (S @ S.T).tocsc()
+    fac = TriangularFactor(spla.splu(N, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0))
+    B = rng.normal(size=(N.shape[0], 3))
+    dense = np.linalg.solve(N.toarray(), B)
+    cond = np.linalg.cond(N.toarray())
+    # a backward-stable solve is accurate to ~ cond * machine epsilon
+    assert _rel(fac.solve(B[:, 0]), dense[:, 0]) < 1e3 * cond * np.finfo(float).eps
+    assert _rel(fac.solve(B), dense) < 1e3 * cond * np.finfo(float).eps
+
+
+@pytest.mark.parametrize("mode", ["shear", "fixed_pressure"])
+def test_extrapolated_warm_starts_and_memoised_borders_match_direct_solves(rng, mode):
+    """A run-like sequence (geometry moving in time, then one pair added and the changed network
+    solved again at later times) through one cache: every solve equals a fresh direct solve to
+    1e-10, and the changed network is solved on the bordered preconditioner, built once."""
+    n, d, length = 30, 2, 5.0
+    x = rng.uniform(0, length, size=(n, d))
+    box = Box.cubic(d, length)
+    nl = build_neighbor_list(x, box, np.full(n, 0.5), skin=0.4 * length - 1.0)
+    pick = rng.choice(len(nl.pairs), size=n + 4, replace=False)
+    kw = _drive_kwargs(mode, n, d, rng)
+    U = rng.normal(size=x.shape)
+    cache = FactorCache()
+    for step in range(8):
+        t = 1e-3 * step
+        sel = np.sort(pick[:-1] if step < 4 else pick)
+        xt = x + t * U
+        fast = solve_network(xt, box.matrix, nl.pairs[sel], nl.images[sel], check_pivots=False, cache=cache,
+                             time=t, **kw)
+        direct = solve_network(xt, box.matrix, nl.pairs[sel], nl.images[sel], **kw)
+        assert _rel(fast.force, direct.force) < FORCE_REL, step
+    assert cache.n_factor == 1 and cache.n_cg == 7 and cache.n_bordered == 4
+    assert len(cache.bordered) == 1

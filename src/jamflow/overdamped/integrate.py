@@ -189,6 +189,8 @@ class Integrator:
         self._count = None
         self._nl_version = 0
         self._pairs_key = None
+        self._sep_key = None
+        self._err_key = None
         self.factor_cache = FactorCache()
         self.solution: Solution = self._solution_now()
         self.last_correction: tuple[float, float] = (np.nan, np.nan)
@@ -231,6 +233,8 @@ class Integrator:
         integ._count = None
         integ._nl_version = 0
         integ._pairs_key = None
+        integ._sep_key = None
+        integ._err_key = None
         integ.factor_cache = FactorCache()
         if contact.any():
             integ._rewire(contact.copy())
@@ -251,13 +255,30 @@ class Integrator:
             self._pairs_value = (self.state.nl.pairs[mask], self.state.nl.images[mask])
         return self._pairs_value
 
+    def _separations(self, mask: NDArray[np.bool_]) -> NDArray[np.float64]:
+        """Separations ``R`` of the sub-network ``mask`` at the current positions, shape (Nc, d) (read-only).
+
+        Memoised on the last (mask, positions, box): the step rule, the solve, the
+        constraint error and the recorder all need them at the same state. Positions
+        and box are replaced, never modified in place, and the memo holds the arrays
+        it was computed from, so their identities name the state.
+        """
+        st = self.state
+        pairs, images = self._pairs(mask)
+        key = (self._pairs_key, id(st.x), id(st.h))
+        if self._sep_key != key:
+            self._sep_key = key
+            self._sep_value = (pair_vectors(st.x, st.h, pairs, images), st.x, st.h)
+        return self._sep_value[0]
+
     def _solve(self, mask: NDArray[np.bool_], check_pivots: bool = True) -> Solution:
         pairs, images = self._pairs(mask)
         return solve_network(
             self.state.x, self.state.h, pairs, images, self.base_gradient,
             external=self.drive.external_forces(), xi0=self.drive.xi0,
             pressure=self.pressure_internal, rate=self.drive.rate, cond_limit=self.options.cond_limit,
-            check_pivots=check_pivots, cache=self.factor_cache,
+            check_pivots=check_pivots, cache=self.factor_cache, time=self.state.time,
+            separations=self._separations(mask),
         )
 
     def count(self, mask: NDArray[np.bool_]):
@@ -363,8 +384,8 @@ class Integrator:
         st = self.state
         dt = min(o.dt_max, st.event_interval / o.steps_per_event) * self.drive.time_unit
         if st.contact.any() and self.solution.velocity.shape == st.x.shape:
-            pairs, images = self._pairs(st.contact)
-            R = pair_vectors(st.x, st.h, pairs, images)
+            pairs, _ = self._pairs(st.contact)
+            R = self._separations(st.contact)
             sol = self.solution
             W = R @ sol.gradient.T + sol.velocity[pairs[:, 1]] - sol.velocity[pairs[:, 0]]
             w = float(np.sqrt(np.max(np.einsum("ck,ck->c", W, W) / st.nl.sigma[st.contact] ** 2)))
@@ -447,13 +468,14 @@ class Integrator:
         st = self.state
         if not st.contact.any() or self.drive.mode == "self_propelled":
             return sol
-        saved = (st.x, st.h, st.nl.displacement.copy(), st.nl.strain_norm)
+        saved = (st.x, st.h, st.nl.displacement.copy(), st.nl.strain_norm, st.time)
         self._move(0.5 * dt, sol.velocity, sol.gradient)
+        st.time = saved[4] + 0.5 * dt
         try:
             ev = self.evaluate(st.contact)
         finally:
             st.x, st.h = saved[0], saved[1]
-            st.nl.displacement, st.nl.strain_norm = saved[2], saved[3]
+            st.nl.displacement, st.nl.strain_norm, st.time = saved[2], saved[3], saved[4]
         if ev.solution is None:
             return sol
         f = ev.force
@@ -483,12 +505,14 @@ class Integrator:
 
     # -------------------------------------------------------------- diagnostics
     def contact_errors(self) -> NDArray[np.float64]:
-        """Relative constraint errors ``(r_ij - sigma_ij) / sigma_ij`` of contacts, shape (Nc,)."""
+        """Relative constraint errors ``(r_ij - sigma_ij) / sigma_ij`` of contacts, shape (Nc,) (read-only)."""
         st = self.state
-        pairs, images = self._pairs(st.contact)
-        R = pair_vectors(st.x, st.h, pairs, images)
-        sig = st.nl.sigma[st.contact]
-        return np.linalg.norm(R, axis=1) / sig - 1.0
+        R = self._separations(st.contact)
+        if self._err_key != self._sep_key:
+            # the step's drift check and the recorder ask at the same state
+            self._err_key = self._sep_key
+            self._err_value = np.linalg.norm(R, axis=1) / st.nl.sigma[st.contact] - 1.0
+        return self._err_value
 
     def constraint_error(self) -> float:
         """Largest ``|r_ij - sigma_ij| / sigma_ij`` over contacts (0 without contacts)."""
@@ -505,8 +529,7 @@ class Integrator:
     def stress(self) -> NDArray[np.float64]:
         """Contact stress tensor [force / lambda^(d-1)] (see :func:`stress_tensor`)."""
         st = self.state
-        pairs, images = self._pairs(st.contact)
-        R = pair_vectors(st.x, st.h, pairs, images)
+        R = self._separations(st.contact)
         return stress_tensor(R, self.solution.force, abs(float(np.linalg.det(st.h))))
 
     def z_bar(self) -> float:

@@ -36,6 +36,7 @@ __all__ = [
     "FactorCache",
     "SingularNetworkError",
     "Solution",
+    "TriangularFactor",
     "affine_rates",
     "pair_vectors",
     "pair_velocities",
@@ -187,10 +188,22 @@ class FactorCache:
         Identity of the factorised network (its pairs).
     codes : ndarray of int64 or None
         Pair codes ``i N + j`` of the factorised network, in its order.
-    lu : SuperLU or None
+    lu : TriangularFactor or None
     guesses : list of ndarray
         Last solutions per right-hand side (warm starts), on the pairs ``guess_codes``.
     guess_codes : ndarray of int64 or None
+    guess_time : float or None
+        Time of the state ``guesses`` were solved at (None when the caller gave none).
+    history : tuple or None
+        The solutions before ``guesses`` as ``(codes, time, solutions)``: on an unchanged
+        network the warm start is the linear extrapolation in time of the last two
+        solutions (the forces vary smoothly between events), which saves CG iterations.
+    bordered : dict
+        Bordered preconditioners built on the current factorisation, by network (pair
+        codes as bytes): the network after an event is solved at every step until the
+        next factorisation, and its set-up (|P| + |Q| solves) is done once. A
+        preconditioner built at an earlier geometry of the same network is still an
+        approximate inverse; CG converges to the same tolerance on the current one.
     iterations : int
         CG iterations of the last cached solve (diagnostic).
     n_factor, n_cg, n_bordered : int
@@ -206,6 +219,9 @@ class FactorCache:
     lu: Any = None
     guesses: list = field(default_factory=list)
     guess_codes: NDArray[np.int64] | None = None
+    guess_time: float | None = None
+    history: tuple | None = None
+    bordered: dict = field(default_factory=dict)
     iterations: int = 0
     n_factor: int = 0
     n_cg: int = 0
@@ -214,13 +230,30 @@ class FactorCache:
     def reset(self) -> None:
         """Forget the factorisation (the next solve factorises from scratch)."""
         self.key, self.codes, self.lu, self.guesses, self.guess_codes = None, None, None, [], None
+        self.guess_time, self.history, self.bordered = None, None, {}
 
-    def warm_starts(self, codes: NDArray[np.int64], count: int) -> list[NDArray[np.float64]]:
-        """The last solutions carried over to the pairs ``codes`` (zero on new pairs)."""
+    def remember(self, codes: NDArray[np.int64], solutions: list[NDArray[np.float64]], time: float | None) -> None:
+        """Keep the solutions of a solve as the next warm start (and the last ones as history)."""
+        if self.guess_codes is not None and len(self.guesses) == len(solutions):
+            self.history = (self.guess_codes, self.guess_time, self.guesses)
+        self.guesses, self.guess_codes, self.guess_time = solutions, codes, time
+
+    def warm_starts(self, codes: NDArray[np.int64], count: int, time: float | None = None) -> list[NDArray[np.float64]]:
+        """Initial guesses for a solve on the pairs ``codes`` at ``time``.
+
+        The last solutions, linearly extrapolated in time from the two before when
+        both were on the same network at known distinct times, else carried over as
+        they are to the pairs ``codes`` (zero on new pairs).
+        """
         m = len(codes)
         if self.guess_codes is None or len(self.guesses) < count:
             return [np.zeros(m) for _ in range(count)]
         if np.array_equal(self.guess_codes, codes):
+            h = self.history
+            if (time is not None and self.guess_time is not None and h is not None and h[1] is not None
+                    and h[1] != self.guess_time and len(h[2]) >= count and np.array_equal(h[0], codes)):
+                w = (time - self.guess_time) / (self.guess_time - h[1])
+                return [g1 + w * (g1 - g0) for g0, g1 in zip(h[2][:count], self.guesses[:count])]
             return self.guesses[:count]
         pos = _locate(self.guess_codes, codes)
         out = []
@@ -270,14 +303,15 @@ def _bordered(lu, old_codes, codes, pairs, unit, n, cond_limit, max_changes):
         E = np.zeros((len(old_codes), len(Q)))
         E[Q, np.arange(len(Q))] = 1.0
         W = lu.solve(E)
-        WQQ = W[Q]
+        # small dense |Q| x |Q| (and below |P| x |P|) inverses, applied at every CG iteration
+        WQQ_inv = np.linalg.inv(W[Q])
 
     def solve_cc(g):
         G = np.zeros((len(old_codes),) + g.shape[1:])
         G[pos_c] = g
         y = lu.solve(G)
         if len(Q):
-            y = y + W @ np.linalg.solve(WQQ, -y[Q])
+            y = y - W @ (WQQ_inv @ y[Q])
         return y[pos_c]
 
     if len(P):
@@ -291,12 +325,13 @@ def _bordered(lu, old_codes, codes, pairs, unit, n, cond_limit, max_changes):
         T = NPP - NCP.T @ B
         if np.any(np.diag(T) <= np.diag(NPP) / cond_limit):
             return None
+        T_inv = np.linalg.inv(T)
 
     def apply(g):
         out = np.empty(len(codes))
         a = solve_cc(g[C])
         if len(P):
-            xp = np.linalg.solve(T, g[P] - NCP.T @ a)
+            xp = T_inv @ (g[P] - NCP.T @ a)
             out[P] = xp
             out[C] = a - B @ xp
         else:
@@ -337,6 +372,65 @@ def _pcg(pairs, unit, n, precond, b, x0, rtol, max_iter):
     return None, max_iter
 
 
+@numba.njit(cache=True)
+def _triangular_solve(Lp, Li, Lx, Up, Ui, Ux, udiag, perm_r, perm_c, b):  # pragma: no cover - numba
+    """``x`` with ``A x = b`` from ``Pr A Pc = L U`` (L unit lower, U upper; CSC, off-diagonal parts)."""
+    n = b.shape[0]
+    y = np.empty(n)
+    for k in range(n):
+        y[perm_r[k]] = b[k]
+    for j in range(n):
+        yj = y[j]
+        for p in range(Lp[j], Lp[j + 1]):
+            y[Li[p]] -= Lx[p] * yj
+    for j in range(n - 1, -1, -1):
+        yj = y[j] / udiag[j]
+        y[j] = yj
+        for p in range(Up[j], Up[j + 1]):
+            y[Ui[p]] -= Ux[p] * yj
+    x = np.empty(n)
+    for k in range(n):
+        x[k] = y[perm_c[k]]
+    return x
+
+
+class TriangularFactor:
+    """The triangular factors of a SuperLU factorisation, solved by compiled substitution.
+
+    SuperLU's own ``solve`` costs several times a plain forward and backward
+    substitution for the small, very sparse N of a contact network (per-call and
+    per-supernode overhead), and the cached factor is applied a few times per step.
+    Same factors, so the same solution to round-off.
+
+    Parameters
+    ----------
+    lu : scipy.sparse.linalg.SuperLU
+        ``Pr A Pc = L U`` with unit-diagonal L.
+    """
+
+    def __init__(self, lu) -> None:
+        L = sp.tril(lu.L, -1, format="csc")
+        U = lu.U.tocsc()
+        udiag = U.diagonal()
+        U = sp.triu(U, 1, format="csc")
+        self._args = (
+            L.indptr.astype(np.int64), L.indices.astype(np.int64), L.data,
+            U.indptr.astype(np.int64), U.indices.astype(np.int64), U.data, udiag,
+            lu.perm_r.astype(np.int64), lu.perm_c.astype(np.int64),
+        )
+        self.shape = lu.shape
+
+    def solve(self, b: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``N^-1 b`` for b of shape (n,) or (n, k)."""
+        b = np.asarray(b, dtype=np.float64)
+        if b.ndim == 1:
+            return _triangular_solve(*self._args, np.ascontiguousarray(b))
+        out = np.empty(b.shape)
+        for k in range(b.shape[1]):
+            out[:, k] = _triangular_solve(*self._args, np.ascontiguousarray(b[:, k]))
+        return out
+
+
 def _factorize(S: sp.csr_matrix, cond_limit: float, check_pivots: bool = True):
     """Sparse LU of N = S S^T with an explicit singularity check.
 
@@ -347,7 +441,9 @@ def _factorize(S: sp.csr_matrix, cond_limit: float, check_pivots: bool = True):
     """
     Nmat = (S @ S.T).tocsc()
     try:
-        lu = spla.splu(Nmat, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0)
+        # N is symmetric positive (semi)definite: diagonal pivots, and SymmetricMode keeps
+        # the row order equal to the column order (same fill, several times faster)
+        lu = spla.splu(Nmat, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
     except RuntimeError as exc:  # "Factor is exactly singular"
         raise SingularNetworkError(str(exc)) from exc
     if check_pivots:
@@ -370,6 +466,8 @@ def solve_network(
     cond_limit: float = 1e13,
     check_pivots: bool = True,
     cache: FactorCache | None = None,
+    time: float | None = None,
+    separations: NDArray[np.float64] | None = None,
 ) -> Solution:
     """Forces and velocities of a contact network (Eqs. 11–12, 18–19, 23–25).
 
@@ -400,6 +498,11 @@ def solve_network(
         fresh factorisation with its pivot check. CG that does not converge within
         ``cache.max_iter`` iterations falls back to the direct solve, which refreshes
         the cache.
+    time : float, optional
+        Time of the state (any monotonic clock of the caller): lets the cache
+        extrapolate its warm starts in time. Never changes which network is solved.
+    separations : ndarray, shape (Nc, d), optional
+        ``pair_vectors(x, h, pairs, images)`` if the caller has them already.
 
     Raises
     ------
@@ -417,7 +520,7 @@ def solve_network(
             # gas is sheared at fixed volume (kappa = 0) until the first collision
             kappa = 0.0
         return Solution(np.zeros(0), xi0 * ext.copy(), E, kappa)
-    R = pair_vectors(x, h, pairs, images)
+    R = pair_vectors(x, h, pairs, images) if separations is None else separations
     r = np.linalg.norm(R, axis=1)
     unit = R / r[:, None]
     pairs = np.ascontiguousarray(pairs, dtype=np.int64)
@@ -428,11 +531,16 @@ def solve_network(
     codes = pairs[:, 0] * n + pairs[:, 1]
     if cache is not None and not check_pivots and cache.lu is not None:
         same = cache.key == key
-        precond = cache.lu.solve if same else _bordered(
-            cache.lu, cache.codes, codes, pairs, unit, n, cond_limit, cache.max_changes)
+        if same:
+            precond = cache.lu.solve
+        elif key in cache.bordered:
+            precond = cache.bordered[key]
+        else:
+            precond = cache.bordered[key] = _bordered(
+                cache.lu, cache.codes, codes, pairs, unit, n, cond_limit, cache.max_changes)
         if precond is not None:
             sols = []
-            for b, x0 in zip(rhs_list, cache.warm_starts(codes, len(rhs_list))):
+            for b, x0 in zip(rhs_list, cache.warm_starts(codes, len(rhs_list), time)):
                 xk, it = _pcg(pairs, unit, n, precond, b, x0, cache.rtol, cache.max_iter)
                 if xk is None:
                     sols = None
@@ -452,10 +560,11 @@ def solve_network(
             if not np.all(np.isfinite(f)) or res > 1e-8 * max(np.linalg.norm(rhs), 1e-300):
                 raise SingularNetworkError(f"N = S S^T solve inaccurate (relative residual {res / max(np.linalg.norm(rhs), 1e-300):.3g})")
         if cache is not None:
-            cache.key, cache.codes, cache.lu, cache.iterations = key, codes, lu, 0
+            cache.key, cache.codes, cache.lu, cache.iterations = key, codes, TriangularFactor(lu), 0
+            cache.bordered = {}
             cache.n_factor += 1
     if cache is not None:
-        cache.guesses, cache.guess_codes = sols, codes
+        cache.remember(codes, sols, time)
     if pressure is None:
         f = sols[0]
         E = np.array(gradient, dtype=np.float64)
