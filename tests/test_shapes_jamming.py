@@ -69,7 +69,7 @@ def test_init_shapes_writes_overlap_free_start(tmp_path, capsys):
     (["--shape", "circulo-polygon", "--sides", "3", "--asphericity", "2.0"], "asphericity in"),
     (["--shape", "ellipse", "--asphericity", "0.9"], "--asphericity >"),
     (["--shape", "ellipse", "--aspect-ratio", "1.5", "--asphericity", "1.1"], "not both"),
-    (["--shape", "dumbbell", "--aspect-ratio", "3"], "no energy model"),
+    (["--shape", "dumbbell", "--aspect-ratio", "1.9"], "--aspect-ratio >"),
 ])
 def test_init_shapes_bad_input(tmp_path, capsys, argv, needle):
     out = tmp_path / "bad.nc"

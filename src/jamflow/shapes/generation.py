@@ -148,12 +148,13 @@ def random_shape_packing(shapes: ShapeTable, n: int, phi: float, seed: int,
 
     Each body gets a uniform centre in the square box and a uniform orientation and is
     kept only if it overlaps no body placed before (exact shape test of the energy
-    model, plus intersecting cores for circulo-shapes), so the start has no overlap.
+    model, plus intersecting cores for circulo-shapes and dumbbell shafts), so the
+    start has no overlap.
 
     Raises
     ------
     ValueError
-        Bad ``n`` or ``phi``, a family without an energy model (dumbbells), or a body that finds
+        Bad ``n`` or ``phi``, a family without an energy model, or a body that finds
         no free place in ``max_attempts`` tries (``phi`` too high for addition).
     """
     if n < 2 or n % 2:
@@ -167,7 +168,7 @@ def random_shape_packing(shapes: ShapeTable, n: int, phi: float, seed: int,
     bound = shapes.bounding_radius[index]
     model = ShapeModel(box, shapes, index)
     pair, params = model._pair, model.params
-    circulo = model.family == "circulo"
+    cores = model.family in ("circulo", "dumbbell")
     conf = np.zeros((n, 3))
     done = np.zeros(n, dtype=bool)
     g = np.zeros(6)
@@ -178,7 +179,7 @@ def random_shape_packing(shapes: ShapeTable, n: int, phi: float, seed: int,
             dx = box.minimum_image(conf[placed, :2] - trial[:2])
             near = np.flatnonzero(np.hypot(dx[:, 0], dx[:, 1]) < bound[b] + bound[placed])
             if not any(pair(dx[m, 0], dx[m, 1], trial[2], conf[placed[m], 2], params[b], params[placed[m]], 1.0, g) > 0.0
-                       or (circulo and _kernels.circulo_cores_intersect(dx[m, 0], dx[m, 1], trial[2],
+                       or (cores and _kernels.circulo_cores_intersect(dx[m, 0], dx[m, 1], trial[2],
                                                                       conf[placed[m], 2], params[b],
                                                                       params[placed[m]]))
                        for m in near):
