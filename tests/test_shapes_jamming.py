@@ -69,7 +69,7 @@ def test_init_shapes_writes_overlap_free_start(tmp_path, capsys):
     (["--shape", "circulo-polygon", "--sides", "3", "--asphericity", "2.0"], "asphericity in"),
     (["--shape", "ellipse", "--asphericity", "0.9"], "--asphericity >"),
     (["--shape", "ellipse", "--aspect-ratio", "1.5", "--asphericity", "1.1"], "not both"),
-    (["--shape", "dumbbell", "--aspect-ratio", "3"], "no energy model"),
+    (["--shape", "dumbbell", "--aspect-ratio", "1.9"], "--aspect-ratio >"),
 ])
 def test_init_shapes_bad_input(tmp_path, capsys, argv, needle):
     out = tmp_path / "bad.nc"
@@ -159,14 +159,22 @@ def test_soft_jam_cli_prints_its_numbers(tmp_path, capsys):
     assert "max |torque|" in printed
 
 
-def test_reuleaux_triangles_jam_but_are_not_counted(capsys):
+def test_reuleaux_triangles_jam_and_are_counted():
+    """Reuleaux triangles jam; convex bodies touch once per pair, so contacts counted once
+    are the interacting pairs between non-rattlers, and every non-rattler keeps >= 3."""
+    from jamflow.shapes.counting import count_constraints
+
     table = bidisperse_shapes(unit_shape("reuleaux"))
     start = random_shape_packing(table, 16, 0.4, 2)
     res = jam_shapes(start, 1e-3, JammingSettings(force_tol=1e-12, pressure_rtol=1e-3, delta_phi=1e-2))
     p = res.packing
     assert res.converged and abs(p.pressure - 1e-3) <= 1e-6
     assert p.attrs["max_force_sq"] <= 1e-24
-    with pytest.raises(ValueError, match="not implemented"):
-        from jamflow.shapes.counting import count_constraints
+    counting, rattler, _, cs = count_constraints(p)
+    pairs = p.contacts
+    live = ~(rattler[pairs[:, 0]] | rattler[pairs[:, 1]])
+    assert counting.n_contacts == int(live.sum()) == cs.n_contacts - int((rattler[cs.i] | rattler[cs.j]).sum())
+    degree = np.bincount(pairs[live].ravel(), minlength=p.n)
+    assert np.all(degree[~rattler] >= 3)
+    assert counting.isostatic_count == 3 * (p.n - counting.n_rattlers) - 1 - counting.n_sliders
 
-        count_constraints(p)

@@ -296,10 +296,10 @@ class ShapeTable:
         """Polar second moment of area about the centroid per unit area, shape (S,) [length^2].
 
         A body of uniform density and mass ``m`` has the moment of inertia
-        ``m * gyration_squared`` about its centroid. Exact for every kind but
-        ``dumbbell`` (not implemented: NaN): circulo-shapes as polygon + edge
-        rectangles + vertex sectors, a Reuleaux triangle as three sectors minus twice
-        the triangle.
+        ``m * gyration_squared`` about its centroid. Exact for every kind:
+        circulo-shapes as polygon + edge rectangles + vertex sectors, a Reuleaux
+        triangle as three sectors minus twice the triangle, a dumbbell as two disks
+        plus the shaft minus the shaft's caps inside the lobes (closed form).
         """
         return np.array([_gyration_squared(self, k) for k in range(len(self))])
 
@@ -481,4 +481,27 @@ def _gyration_squared(table: ShapeTable, k: int) -> float:
             area += a_sec
             j += j_sec
         return float(j / area)
-    return float("nan")
+    return _dumbbell_gyration_squared(r, float(table.shaft_half_width[k]), 0.5 * float(np.linalg.norm(v[1] - v[0])))
+
+
+def _dumbbell_gyration_squared(r: float, w: float, h: float) -> float:
+    """Polar second moment per unit area of a dumbbell: lobes ``r`` at ``+-h`` on x, shaft half-width ``w``.
+
+    Two disks (``J = pi r^4 / 2 + pi r^2 h^2`` each) plus the shaft rectangle
+    ``[-h, h] x [-w, w]`` minus twice its part inside a lobe, the cap
+    ``{|y| <= w, -h <= x <= -h + s(y)}``, ``s = sqrt(r^2 - y^2)``, whose moment about
+    the origin is ``int (s^3/3 - h s^2 + h^2 s + y^2 s) dy`` over ``[-w, w]`` in closed form.
+    """
+    s = sqrt(r * r - w * w)
+    angle = asin(w / r)
+    int_s = w * s + r * r * angle                                          # int s dy
+    int_s2 = 2.0 * w * r * r - 2.0 * w**3 / 3.0                            # int s^2 dy
+    int_s3 = w * (5.0 * r * r - 2.0 * w * w) * s / 4.0 + 3.0 * r**4 * angle / 4.0  # int s^3 dy
+    int_y2s = w * (2.0 * w * w - r * r) * s / 4.0 + r**4 * angle / 4.0    # int y^2 s dy
+    cap_area = int_s
+    cap_j = int_s3 / 3.0 - h * int_s2 + h * h * int_s + int_y2s
+    rect_area = 4.0 * h * w
+    rect_j = rect_area * (4.0 * h * h + 4.0 * w * w) / 12.0
+    area = 2.0 * pi * r * r + rect_area - 2.0 * cap_area
+    j = 2.0 * (0.5 * pi * r**4 + pi * r * r * h * h) + rect_j - 2.0 * cap_j
+    return j / area

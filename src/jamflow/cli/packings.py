@@ -141,8 +141,7 @@ def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
     ``--gap-tol`` or none stored, pairs within the gap tolerance), never linked pairs.
     Shape packings of a family with an energy model get the counting of
     :mod:`jamflow.shapes.counting` (contacts, rattlers, sliders, ``<z>`` of Eq. 3,
-    isostatic count ``3N' - 1 - N_s``). Linked shapes, dumbbells and Reuleaux
-    triangles are not counted.
+    isostatic count ``3N' - 1 - N_s``). Linked shapes are not counted.
     """
     report: dict = {"N": packing.n, "d": packing.d, "phi": packing.packing_fraction}
     links_counted = packing.links is not None and packing.shapes is None
@@ -190,7 +189,7 @@ def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
                  ("coordination <z> (Eq. 3)", f"{report['z']:.6f}"),
                  ("isostatic count 3N' - 1 - N_s", f"{report['isostatic_count']} ({report['counting']})")]
     elif "shapes" in report:
-        rows.append(("contacts, rattlers", "not counted for linked shapes, dumbbells and Reuleaux triangles"))
+        rows.append(("contacts, rattlers", "not counted for linked shapes"))
     print(format_rows(rows))
     return 0
 

@@ -9,7 +9,8 @@ import numpy as np
 import xarray as xr
 
 from ..io import new_dataset_attrs, read_packing, write_dataset, write_packing
-from ..shapes.generation import SHAPE_CHOICES, bidisperse_shapes, random_shape_packing, unit_shape
+from ..shapes.generation import (SHAPE_CHOICES, bidisperse_shapes, random_polygon_shapes, random_shape_packing,
+                                 unit_shape)
 from .common import add_command, add_quiet, packing_rows, print_summary, seed, stage_parameters
 
 #: Default packing fraction of the random start: random sequential addition of
@@ -29,6 +30,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--asphericity", type=float, default=None,
                    help="target asphericity A = p^2 / (4 pi a) > 1 (met exactly by bisection on the shape parameter)")
     p.add_argument("--sides", type=int, default=None, help="circulo-polygon: number of sides n >= 3 (regular polygon)")
+    p.add_argument("--random", action="store_true",
+                   help="circulo-polygon: a random polygon per body at --asphericity (VanderWerf et al. App. B, "
+                        "kept convex; the shapes draw from --seed)")
     p.add_argument("--n", type=int, required=True, help="number of bodies (even: half small, half large)")
     p.add_argument("--phi", type=float, default=INIT_SHAPES_PHI,
                    help=f"packing fraction of the random start (default {INIT_SHAPES_PHI})")
@@ -153,17 +157,23 @@ def _modes(args: argparse.Namespace) -> int:
 
 
 def _init_shapes(args: argparse.Namespace) -> int:
-    shape = unit_shape(args.shape, args.aspect_ratio, args.asphericity, args.sides)
-    table = bidisperse_shapes(shape)
+    if args.random:
+        if args.shape != "circulo-polygon" or args.aspect_ratio is not None or args.asphericity is None \
+                or args.sides is None:
+            raise ValueError("--random needs --shape circulo-polygon with --sides and --asphericity (no --aspect-ratio)")
+        table = random_polygon_shapes(args.n, args.sides, args.asphericity, args.seed)
+    else:
+        table = bidisperse_shapes(unit_shape(args.shape, args.aspect_ratio, args.asphericity, args.sides))
     packing = random_shape_packing(table, args.n, args.phi, args.seed)
     params = stage_parameters(args, "out")
     packing = packing.evolve(parameters=params)
     write_packing(packing, args.out, params)
     print_summary(args, args.out, packing_rows(packing) + [
         ("shape", f"{args.shape} ({', '.join(sorted(set(table.kind)))})"),
-        ("asphericity A", f"{table.asphericity[0]:.12g} (A - 1 = {table.asphericity[0] - 1.0:.6g})"),
-        ("areas small, large", f"{table.area[0]:.10g}, {table.area[1]:.10g} (ratio {table.area[1] / table.area[0]:.6g})"),
-        ("bounding diameters", ", ".join(f"{2 * r:.6g}" for r in table.bounding_radius)),
+        ("asphericity A", f"{table.asphericity[0]:.12g} (A - 1 = {table.asphericity[0] - 1.0:.6g}; "
+                          f"max |A - A_0| over shapes {np.ptp(table.asphericity):.2g})"),
+        ("areas small, large", f"{table.area[0]:.10g}, {table.area[-1]:.10g} (ratio {table.area[-1] / table.area[0]:.6g})"),
+        ("bounding diameters", f"{2 * table.bounding_radius.min():.6g} .. {2 * table.bounding_radius.max():.6g}"),
         ("mean area-equivalent diameter", f"{np.mean(2.0 * np.sqrt(table.area[packing.shape_index] / np.pi)):.12g}"),
     ])
     return 0

@@ -3,7 +3,15 @@
 - **Contacts**: every interacting body pair is one contact; with
   ``parallel="twice"`` a circulo pair whose overlap holds two end-middle terms
   from two different vertices (a parallel or nearly parallel contact, Figs. 16-17)
-  counts as two (Fig. 6 shows both conventions).
+  counts as two (Fig. 6 shows both conventions). Dumbbells are not convex, so a
+  pair can touch at distinct points (two lobes, or a lobe in the concave corner on a
+  lobe and the shaft): every end-end term is its own contact, and the end-shaft
+  terms of one pair on one shaft (two lobes on a flat shaft, the analogue of Fig. 6)
+  count once or, with ``parallel="twice"``, once per lobe. Reuleaux triangles are
+  convex, so a pair touches in one overlap region: one contact per pair (with
+  ``"twice"``, one per term; the arc-arc and vertex-arc terms exclude each other, so
+  two terms in one pair need two vertices in one overlap, which jammed packings at
+  small ``P0`` do not show).
 - **Rattlers** (free translation and rotation): bodies with fewer than three
   contacts, removed repeatedly (:func:`jamflow.network.prune_rattlers` with two
   translational degrees of freedom per body). Three contacts are the fewest that
@@ -27,7 +35,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..models.shapes import ShapeModel
+from ..models.shapes import POINT_TERM_FAMILIES, ShapeModel
 from ..models.shapes import _kernels
 from ..network import ContactSet, contact_jacobian, find_sliders, isostatic_count, prune_rattlers, rigidity_counting
 from ..packing import Packing
@@ -38,7 +46,7 @@ __all__ = ["COUNTED_FAMILIES", "PARALLEL_MODES", "ShapeCounting", "count_constra
 PARALLEL_MODES = ("once", "twice")
 
 #: Model families whose contacts (points, normals) are implemented.
-COUNTED_FAMILIES = ("circulo", "ellipse")
+COUNTED_FAMILIES = ("circulo", "ellipse", "reuleaux", "dumbbell")
 
 
 def shape_model(packing: Packing) -> tuple[ShapeModel, NDArray[np.float64]]:
@@ -53,9 +61,10 @@ def shape_model(packing: Packing) -> tuple[ShapeModel, NDArray[np.float64]]:
 def shape_contacts(model: ShapeModel, q: NDArray[np.float64], parallel: str = "once") -> ContactSet:
     """Contacts of a shape configuration with normals and arms (rotations).
 
-    One row per interacting pair at its deepest term (circulo) or Perram–Wertheim
-    contact point (ellipse); with ``parallel="twice"`` a second row for the other
-    end-middle term of a parallel circulo contact.
+    One row per interacting pair at its deepest term (circulo, Reuleaux) or
+    Perram–Wertheim contact point (ellipse); with ``parallel="twice"`` a second row
+    for the other end-middle term of a parallel circulo contact. Dumbbells: see the
+    module doc (:func:`_point_contacts`).
     """
     if parallel not in PARALLEL_MODES:
         raise ValueError(f"parallel contacts are counted {' or '.join(PARALLEL_MODES)}, got {parallel!r}")
@@ -66,6 +75,8 @@ def shape_contacts(model: ShapeModel, q: NDArray[np.float64], parallel: str = "o
         pairs = model.pair_table(q)
         geo = _kernels.ellipse_contact_geometry(pairs["i"], pairs["j"], pairs["dx"], q[2 * model.n:], model.params)
         return ContactSet(pairs["i"], pairs["j"], geo[:, 2:], pairs["dx"], geo[:, :2], geo[:, :2] - pairs["dx"])
+    if model.family in POINT_TERM_FAMILIES:
+        return _point_contacts(model, q, parallel)
     t = model.contact_terms(q)
     x = model.positions(q)[:, :2]
     dx = model.box.minimum_image(x[t["j"]] - x[t["i"]])
@@ -90,6 +101,32 @@ def shape_contacts(model: ShapeModel, q: NDArray[np.float64], parallel: str = "o
                 keep[rows] = False
                 keep[[order[0], second]] = True
     return ContactSet(t["i"][keep], t["j"][keep], normal[keep], dx[keep], arm_i[keep], arm_j[keep])
+
+
+def _point_contacts(model: ShapeModel, q: NDArray[np.float64], parallel: str) -> ContactSet:
+    """Contacts of a Reuleaux or dumbbell configuration from its point terms (module doc).
+
+    A term joins two body-fixed points; the force acts along the line through them, so
+    the normal (from ``i`` to ``j``) is their direction and ``i``'s point is an arm
+    on that line. Terms of one contact are reduced to the deepest.
+    """
+    t = model.point_terms(q)
+    x = model.positions(q)[:, :2]
+    dx = model.box.minimum_image(x[t["j"]] - x[t["i"]])
+    normal = (t["point_j"] - t["point_i"]) / t["r"][:, None]
+    if model.family == "reuleaux":
+        group = np.zeros(len(dx), dtype=np.int64) if parallel == "once" else np.arange(len(dx))
+    else:
+        # end-end terms alone; end-shaft terms together per shaft (type 1 or 2), or alone with "twice"
+        group = np.where(t["type"] == 0, 3 + 2 * t["a"] + t["b"],
+                         t["type"] if parallel == "once" else 10 + 3 * t["type"] + t["a"] + t["b"])
+    key = (t["i"] * model.n + t["j"]) * 64 + group
+    keep = np.zeros(len(key), dtype=bool)
+    for k in np.unique(key):
+        rows = np.flatnonzero(key == k)
+        keep[rows[np.argmax(t["delta"][rows])]] = True
+    return ContactSet(t["i"][keep], t["j"][keep], normal[keep], dx[keep], t["point_i"][keep],
+                      t["point_i"][keep] - dx[keep])
 
 
 @dataclass(frozen=True)

@@ -2,9 +2,10 @@
 
 :mod:`~jamflow.models.shapes.model` (the model: centres and orientations, one family
 per packing), :mod:`~jamflow.models.shapes._kernels` (compiled pair kernels:
-circulo-lines and -polygons, App. A; ellipses, Perram–Wertheim).
+circulo-lines and -polygons, App. A; ellipses, Perram–Wertheim; Reuleaux triangles;
+dumbbells).
 """
 
-from .model import SHAPE_FAMILIES, ShapeModel, shape_family
+from .model import POINT_TERM_FAMILIES, SHAPE_FAMILIES, ShapeModel, shape_family
 
-__all__ = ["SHAPE_FAMILIES", "ShapeModel", "shape_family"]
+__all__ = ["POINT_TERM_FAMILIES", "SHAPE_FAMILIES", "ShapeModel", "shape_family"]

@@ -478,6 +478,12 @@ def _point_term(pax, pay, pbx, pby, dx0, dx1, sigma, k, g, oa, ob):
 
 @njit(cache=True)
 def reuleaux_pair(dx0, dx1, ti, tj, pi, pj, k, g):
+    """Reuleaux pair energy and gradient (see :func:`reuleaux_terms`)."""
+    return reuleaux_terms(dx0, dx1, ti, tj, pi, pj, k, g, False, np.empty((0, 9)))[0]
+
+
+@njit(cache=True)
+def reuleaux_terms(dx0, dx1, ti, tj, pi, pj, k, g, record, out):
     """Reuleaux-triangle pair (VanderWerf et al. Fig. 2); parameters ``[s, 3, vertices]`` (``s`` the side).
 
     Arc ``m`` of a body is centred on its vertex ``m`` with radius ``s`` and joins the
@@ -493,13 +499,19 @@ def reuleaux_pair(dx0, dx1, ti, tj, pi, pj, k, g):
 
     At a validity boundary the arc-arc contact point is the vertex of the vertex-arc
     term, so the two ``delta`` agree and share a normal: ``U`` and its gradient are
-    continuous. All terms are distances between body-fixed points.
+    continuous. All terms are distances between body-fixed points. Returns the energy
+    and the number of terms; when ``record`` is true one row per term goes to ``out``
+    (:data:`POINT_TERM_COLUMNS` without ``pair``: type 0 arc-arc, 1 a vertex of ``i``
+    on an arc of ``j``, 2 a vertex of ``j`` on an arc of ``i``; the arc or vertex
+    index on ``i`` and on ``j``; the two arc centres / vertices relative to ``i``'s
+    centre; r; delta).
     """
     si = pi[0]
     sj = pj[0]
     vi = _world_vertices(pi, ti, 0.0 * dx0, 0.0 * dx1)
     vj = _world_vertices(pj, tj, dx0, dx1)
     energy = 0.0 * dx0
+    rows = 0
     for m in range(3):
         m1 = (m + 1) % 3
         m2 = (m + 2) % 3
@@ -516,7 +528,11 @@ def reuleaux_pair(dx0, dx1, ti, tj, pi, pj, k, g):
                 ok_j = _in_arc(-ux.real, -uy.real, (vj[n1, 0] - vj[n, 0]).real, (vj[n1, 1] - vj[n, 1]).real,
                                (vj[n2, 0] - vj[n, 0]).real, (vj[n2, 1] - vj[n, 1]).real)
                 if ok_i and ok_j:
-                    energy += _point_term(vi[m, 0], vi[m, 1], vj[n, 0], vj[n, 1], dx0, dx1, si + sj, k, g, 0, 3)[0]
+                    u, rr, delta, _, _ = _point_term(vi[m, 0], vi[m, 1], vj[n, 0], vj[n, 1], dx0, dx1, si + sj,
+                                                     k, g, 0, 3)
+                    energy += u
+                    rows = _record_point(out, rows, record, 0, m, n, vi[m, 0], vi[m, 1], vj[n, 0], vj[n, 1],
+                                         rr, delta)
             # vertex n of j against arc m of i: u in the arc's angle and -u in the
             # vertex's normal cone (between the normals of the two arcs ending there),
             # exclusive with the arc-arc terms of the arcs meeting at the vertex
@@ -525,12 +541,146 @@ def reuleaux_pair(dx0, dx1, ti, tj, pi, pj, k, g):
                                             (vi[m2, 1] - vi[m, 1]).real) \
                     and _in_arc(-ux.real, -uy.real, (vj[n, 0] - vj[n1, 0]).real, (vj[n, 1] - vj[n1, 1]).real,
                                 (vj[n, 0] - vj[n2, 0]).real, (vj[n, 1] - vj[n2, 1]).real):
-                energy += _point_term(vi[m, 0], vi[m, 1], vj[n, 0], vj[n, 1], dx0, dx1, si, k, g, 0, 3)[0]
+                u, rr, delta, _, _ = _point_term(vi[m, 0], vi[m, 1], vj[n, 0], vj[n, 1], dx0, dx1, si, k, g, 0, 3)
+                energy += u
+                rows = _record_point(out, rows, record, 2, m, n, vi[m, 0], vi[m, 1], vj[n, 0], vj[n, 1], rr, delta)
             # vertex m of i against arc n of j (the mirror image)
             if r.real < sj.real and _in_arc(-ux.real, -uy.real, (vj[n1, 0] - vj[n, 0]).real,
                                             (vj[n1, 1] - vj[n, 1]).real, (vj[n2, 0] - vj[n, 0]).real,
                                             (vj[n2, 1] - vj[n, 1]).real) \
                     and _in_arc(ux.real, uy.real, (vi[m, 0] - vi[m1, 0]).real, (vi[m, 1] - vi[m1, 1]).real,
                                 (vi[m, 0] - vi[m2, 0]).real, (vi[m, 1] - vi[m2, 1]).real):
-                energy += _point_term(vi[m, 0], vi[m, 1], vj[n, 0], vj[n, 1], dx0, dx1, sj, k, g, 0, 3)[0]
-    return energy
+                u, rr, delta, _, _ = _point_term(vi[m, 0], vi[m, 1], vj[n, 0], vj[n, 1], dx0, dx1, sj, k, g, 0, 3)
+                energy += u
+                rows = _record_point(out, rows, record, 1, m, n, vi[m, 0], vi[m, 1], vj[n, 0], vj[n, 1], rr, delta)
+    return energy, rows
+
+
+#: Columns of a point-term table (dumbbells, Reuleaux triangles; see :func:`point_terms`).
+POINT_TERM_COLUMNS = ("pair", "type", "a", "b", "point_i_x", "point_i_y", "point_j_x", "point_j_y", "r", "delta")
+
+
+@njit(cache=True)
+def _record_point(out, rows, record, kind, a, b, pix, piy, pjx, pjy, r, delta):
+    """Write one point-term row (see :data:`POINT_TERM_COLUMNS`, without the pair column)."""
+    if record:
+        out[rows, 0] = kind
+        out[rows, 1] = a
+        out[rows, 2] = b
+        out[rows, 3] = pix.real
+        out[rows, 4] = piy.real
+        out[rows, 5] = pjx.real
+        out[rows, 6] = pjy.real
+        out[rows, 7] = r.real
+        out[rows, 8] = delta.real
+        return rows + 1
+    return rows
+
+
+@njit(cache=True)
+def dumbbell_terms(dx0, dx1, ti, tj, pi, pj, k, g, record, out):
+    """Dumbbell pair terms (VanderWerf et al. Sec. II); parameters ``[R, 2, v0x, v0y, v1x, v1y, w]``.
+
+    A dumbbell is two lobes of radius ``R`` centred on ``v0, v1`` joined by a shaft of
+    half-width ``w < R`` along the segment ``[v0, v1]``. Terms, each
+    ``(k/2)(sigma - r)^2`` when ``r < sigma`` (Eq. 1), all added:
+
+    - end-end (type 0): ``r`` = distance of a lobe centre of ``i`` and one of ``j``,
+      ``sigma = R_i + R_j``;
+    - end-shaft (type 1: a lobe of ``i`` on the shaft of ``j``; type 2: the mirror):
+      ``r`` = distance from the lobe centre to the nearest point of the other's
+      segment ``[v0, v1]`` (foot parameter clamped to [0, 1]), ``sigma = R + w``.
+
+    The distance to a segment is C^1 away from it, so ``U``, forces and torques are
+    continuous everywhere (the second derivative jumps where the foot reaches a segment
+    end or a term switches on). Where the foot is clamped, the end-shaft term is a disk
+    of radius ``w`` inside the lobe: it only acts when the lobes overlap by more than
+    ``R - w``, far beyond any jammed packing. Shaft against shaft has no term: two
+    shafts closer than ``2 w`` without crossing have a segment end (a lobe centre)
+    within ``2 w <= R + w`` of the other shaft, so an end-shaft term acts; crossed
+    shafts are refused by the callers (:func:`circulo_cores_intersect`). Every term is
+    a distance between two body-fixed points (the foot at fixed ``t``, envelope
+    theorem), added through :func:`_point_term`. When ``record`` is true one row per
+    term goes to ``out`` (:data:`POINT_TERM_COLUMNS` without ``pair``: type, lobe of
+    ``i`` or -1, lobe of ``j`` or -1, the two points relative to ``i``'s centre, r, delta).
+    """
+    ri = pi[0]
+    rj = pj[0]
+    wi = pi[6]
+    wj = pj[6]
+    vi = _world_vertices(pi, ti, 0.0 * dx0, 0.0 * dx1)
+    vj = _world_vertices(pj, tj, dx0, dx1)
+    energy = 0.0 * dx0
+    rows = 0
+    sigma = ri + rj
+    for m in range(2):
+        for n in range(2):
+            qx = vi[m, 0] - vj[n, 0]
+            qy = vi[m, 1] - vj[n, 1]
+            if (qx * qx + qy * qy).real < (sigma * sigma).real:
+                u, r, delta, _, _ = _point_term(vi[m, 0], vi[m, 1], vj[n, 0], vj[n, 1], dx0, dx1, sigma, k, g, 0, 3)
+                energy += u
+                rows = _record_point(out, rows, record, 0, m, n, vi[m, 0], vi[m, 1], vj[n, 0], vj[n, 1], r, delta)
+    for side in range(2):
+        # side 0: lobes of i on the shaft of j; side 1: lobes of j on the shaft of i
+        if side == 0:
+            lobes = vi
+            shaft = vj
+            sigma = ri + wj
+        else:
+            lobes = vj
+            shaft = vi
+            sigma = rj + wi
+        ex = shaft[1, 0] - shaft[0, 0]
+        ey = shaft[1, 1] - shaft[0, 1]
+        for m in range(2):
+            px = lobes[m, 0]
+            py = lobes[m, 1]
+            t = ((px - shaft[0, 0]) * ex + (py - shaft[0, 1]) * ey) / (ex * ex + ey * ey)
+            if t.real < 0.0:
+                t = 0.0 * t
+            elif t.real > 1.0:
+                t = 0.0 * t + 1.0
+            cx = shaft[0, 0] + t * ex
+            cy = shaft[0, 1] + t * ey
+            qx = px - cx
+            qy = py - cy
+            if (qx * qx + qy * qy).real >= (sigma * sigma).real:
+                continue
+            if side == 0:
+                u, r, delta, _, _ = _point_term(px, py, cx, cy, dx0, dx1, sigma, k, g, 0, 3)
+                rows = _record_point(out, rows, record, 1, m, -1, px, py, cx, cy, r, delta)
+            else:
+                u, r, delta, _, _ = _point_term(cx, cy, px, py, dx0, dx1, sigma, k, g, 0, 3)
+                rows = _record_point(out, rows, record, 2, -1, m, cx, cy, px, py, r, delta)
+            energy += u
+    return energy, rows
+
+
+@njit(cache=True)
+def dumbbell_pair(dx0, dx1, ti, tj, pi, pj, k, g):
+    """Dumbbell pair energy and gradient (see :func:`dumbbell_terms`)."""
+    return dumbbell_terms(dx0, dx1, ti, tj, pi, pj, k, g, False, np.empty((0, 9)))[0]
+
+
+@njit(cache=True)
+def point_terms(terms, i, j, dx, theta, params, k, max_terms):
+    """Every term of the listed pairs of a point-term family, one row each.
+
+    ``terms`` is :func:`dumbbell_terms` or :func:`reuleaux_terms`; columns
+    :data:`POINT_TERM_COLUMNS` (pair row first; points relative to ``i``'s centre).
+    """
+    buf = np.zeros((max_terms, 9))
+    rows = []
+    g = np.zeros(6)
+    for p in range(i.size):
+        _, n = terms(dx[p, 0], dx[p, 1], theta[i[p]], theta[j[p]], params[i[p]], params[j[p]], k, g, True, buf)
+        for r in range(n):
+            row = np.empty(10)
+            row[0] = p
+            row[1:] = buf[r]
+            rows.append(row)
+    out = np.empty((len(rows), 10))
+    for r in range(len(rows)):
+        out[r] = rows[r]
+    return out

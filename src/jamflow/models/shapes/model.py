@@ -14,7 +14,8 @@ per shape family:
   vertex against each edge of the other body (:func:`._kernels.circulo_vertex_edge`);
 - ``ellipse``: centre distance and the Perram–Wertheim contact distance
   (:func:`._kernels.perram_wertheim`);
-- ``reuleaux``: arc-arc and vertex-arc distances of Fig. 2 (:func:`._kernels.reuleaux_pair`).
+- ``reuleaux``: arc-arc and vertex-arc distances of Fig. 2 (:func:`._kernels.reuleaux_pair`);
+- ``dumbbell``: end-end and end-shaft distances of Sec. II (:func:`._kernels.dumbbell_terms`).
 
 Masses are equal (``mass``, default 1); the moment of inertia of body ``i`` is
 ``mass * gyration_squared`` of its shape (uniform density), entering as the inverse
@@ -35,16 +36,22 @@ from ...soft.potential import NeighborList
 from ..base import ModelEvaluation
 from . import _kernels
 
-__all__ = ["SHAPE_FAMILIES", "ShapeModel", "shape_family"]
+__all__ = ["POINT_TERM_FAMILIES", "SHAPE_FAMILIES", "ShapeModel", "shape_family"]
 
 #: Shape kinds each model family handles (one family per packing).
 SHAPE_FAMILIES: dict[str, tuple[str, ...]] = {
     "circulo": ("circulo_line", "circulo_polygon"),
     "ellipse": ("ellipse",),
     "reuleaux": ("reuleaux",),
+    "dumbbell": ("dumbbell",),
 }
 
-_PAIR = {"circulo": _kernels.circulo_pair, "ellipse": _kernels.ellipse_pair, "reuleaux": _kernels.reuleaux_pair}
+#: Families whose pair terms are distances of two body-fixed points (:meth:`ShapeModel.point_terms`).
+POINT_TERM_FAMILIES = ("reuleaux", "dumbbell")
+
+_PAIR = {"circulo": _kernels.circulo_pair, "ellipse": _kernels.ellipse_pair, "reuleaux": _kernels.reuleaux_pair,
+         "dumbbell": _kernels.dumbbell_pair}
+_TERMS = {"reuleaux": (_kernels.reuleaux_terms, 27), "dumbbell": (_kernels.dumbbell_terms, 8)}
 
 
 def shape_family(kinds: ArrayLike) -> str:
@@ -70,6 +77,10 @@ def _shape_parameters(shapes: ShapeTable, family: str) -> NDArray[np.float64]:
     if family == "ellipse":
         return np.array(shapes.semi_axes, dtype=np.float64)
     width = 2 + 2 * int(shapes.n_vertices.max())
+    if family == "dumbbell":
+        # [R, 2, v0, v1, w]: the lobe radius, the lobe centres and the shaft half-width
+        return np.column_stack([shapes.radius, np.full(len(shapes), 2.0), shapes.vertices[:, :2].reshape(-1, 4),
+                                shapes.shaft_half_width])
     out = np.zeros((len(shapes), width))
     for k in range(len(shapes)):
         v = shapes.vertex_list(k)
@@ -176,16 +187,16 @@ class ShapeModel:
                 "gradient": table[keep, 1:][order], "dx": dx[keep][order]}
 
     def check_cores(self, q: NDArray[np.float64]) -> None:
-        """Raise ``ValueError`` if two circulo cores intersect (outside the App. A model)."""
-        if self.family != "circulo":
+        """Raise ``ValueError`` if two circulo cores or dumbbell shafts cross (outside the contact model)."""
+        if self.family not in ("circulo", "dumbbell"):
             return
         i, j, dx, theta = self._pairs(q)
         crossed = _kernels.circulo_crossed_pairs(i, j, dx, theta, self.params)
         if np.any(crossed):
             k = int(np.flatnonzero(crossed)[0])
             raise ValueError(
-                f"{int(crossed.sum())} pair(s) of circulo bodies have intersecting cores, e.g. "
-                f"({i[k]}, {j[k]}): an overlap deeper than the rounding radius, outside the contact model"
+                f"{int(crossed.sum())} pair(s) of {self.family} bodies have intersecting cores, e.g. "
+                f"({i[k]}, {j[k]}): an overlap deeper than the rounding radius or shaft, outside the contact model"
             )
 
     def contact_terms(self, q: NDArray[np.float64]) -> dict[str, NDArray]:
@@ -212,6 +223,28 @@ class ShapeModel:
             "r": rows[:, 4], "delta": rows[:, 5], "weight": rows[:, 6], "point": rows[:, 7:9],
             "normal": rows[:, 9:11], "t": rows[:, 11],
         }
+
+    def point_terms(self, q: NDArray[np.float64]) -> dict[str, NDArray]:
+        """Overlapping terms of a Reuleaux or dumbbell packing, one row each.
+
+        Returns
+        -------
+        dict of arrays, one entry per row
+            ``i, j`` (``i < j``), ``type`` (see :func:`._kernels.dumbbell_terms` and
+            :func:`._kernels.reuleaux_terms`), ``a, b`` (lobe / arc / vertex index on
+            ``i`` and ``j``, -1 for a shaft), ``point_i, point_j`` (N_t, 2) the two
+            body-fixed points of the term relative to ``i``'s centre [length] (the line
+            of the force joins them), ``r``, ``delta`` [length].
+        """
+        if self.family not in POINT_TERM_FAMILIES:
+            raise ValueError(f"point terms are defined for {', '.join(POINT_TERM_FAMILIES)} packings, not {self.family}")
+        i, j, dx, theta = self._pairs(q)
+        terms, most = _TERMS[self.family]
+        rows = _kernels.point_terms(terms, i, j, dx, theta, self.params, self.k, most)
+        pair = rows[:, 0].astype(np.int64)
+        return {"i": i[pair], "j": j[pair], "type": rows[:, 1].astype(np.int64), "a": rows[:, 2].astype(np.int64),
+                "b": rows[:, 3].astype(np.int64), "point_i": rows[:, 4:6], "point_j": rows[:, 6:8],
+                "r": rows[:, 8], "delta": rows[:, 9]}
 
     def project(self, g: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
         return g
