@@ -97,11 +97,14 @@ def test_shape_survey_and_contact_angles_commands(tmp_path):
     assert bad.returncode != 0 and "at least one input" in bad.stderr
 
 
-def test_families_without_contact_points_report_phi_only():
+def test_reuleaux_rows_are_counted_from_their_contact_points():
     from jamflow.shapes.generation import bidisperse_shapes, random_shape_packing, unit_shape
 
     p = random_shape_packing(bidisperse_shapes(unit_shape("reuleaux", None, None, None)), 8, 0.3, 1)
     row = survey_row(p)
+    c, _, _, _ = count_constraints(p, "once")
     assert row["family"] == "reuleaux" and row["phi_J"] == pytest.approx(0.3)
-    assert np.isnan(row["z"]) and row["n_contacts"] == -1 and row["counting"] == "not counted"
+    assert (row["n_contacts"], row["n_rattlers"]) == (c.n_contacts, c.n_rattlers)
+    # a dilute non-overlapping start touches nowhere: every body rattles
+    assert (row["n_contacts"], row["n_rattlers"]) == (0, 8)
     assert row["asphericity"] == pytest.approx(np.pi / (2 * (np.pi - np.sqrt(3))), rel=1e-12)

@@ -18,13 +18,11 @@ import xarray as xr
 
 from ..network import isostatic_count, prune_rattlers, rigidity_counting
 from ..packing import Packing
-from ..models.shapes import shape_family
-from .counting import COUNTED_FAMILIES, count_constraints
+from .counting import count_constraints
 
-__all__ = ["DISK_FAMILY", "NOT_COUNTED", "shape_label", "survey_dataset", "survey_row"]
+__all__ = ["DISK_FAMILY", "shape_label", "survey_dataset", "survey_row"]
 
 #: Count stored for families without contact points (their <z> is NaN).
-NOT_COUNTED: int = -1
 
 #: Family name of plain (sphere-code) disk packings in a survey.
 DISK_FAMILY: str = "disk"
@@ -63,21 +61,16 @@ def survey_row(packing: Packing, parallel: str = "once") -> dict:
         n_iso = isostatic_count(n - n_r, 2, global_dofs=2) if n > n_r else 0
         z = 2.0 * (n_c + 1) / (n - n_r) if n > n_r else 0.0
         asphericity = 1.0
-    elif shape_family(packing.shapes.kind) in COUNTED_FAMILIES:
+    else:
         c, _, _, _ = count_constraints(packing, parallel)
         n_c, n_r, n_s, z, n_iso = c.n_contacts, c.n_rattlers, c.n_sliders, c.z, c.isostatic_count
-    else:
-        # no contact points for this family (counting.COUNTED_FAMILIES): phi_J only
-        n_c = n_r = n_s = n_iso = NOT_COUNTED
-        z = np.nan
-    if family != DISK_FAMILY:
         areas = packing.shapes.area[packing.shape_index]
         # both species share A (bidisperse copies of one shape); the area-weighted mean guards the rest
         asphericity = float(np.sum(packing.shapes.asphericity[packing.shape_index] * areas) / areas.sum())
     return dict(family=family, asphericity=asphericity, N=n, phi_J=packing.packing_fraction,
                 pressure=float(packing.pressure if packing.pressure is not None else np.nan),
                 n_contacts=n_c, n_rattlers=n_r, n_sliders=n_s, z=z, isostatic_count=n_iso,
-                counting="not counted" if n_c == NOT_COUNTED else rigidity_counting(n_c, n_iso))
+                counting=rigidity_counting(n_c, n_iso))
 
 
 def _group_stats(values: np.ndarray) -> tuple[float, float]:
