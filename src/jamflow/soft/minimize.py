@@ -145,7 +145,8 @@ class _SphereFire:
         """At most ``budget`` steps; returns ``(status, steps)`` (status of :mod:`._kernels`)."""
         nlist, potential, h_ref = self.model.nlist, self.model.potential, self.model.box
         s = self.box_state[2]
-        current = h_ref.scaled(s)
+        # the reference box itself at s = 1 (fixed box): its cached widths serve every build
+        current = h_ref if s == 1.0 else h_ref.scaled(s)
         if rebuild:
             nlist.build(s * self.y, current)
         else:
