@@ -127,48 +127,6 @@ def cell_pairs(x, L, cutoff, diameter, skin):
         if verlet:
             Ds[q] = diameter[members[q]]
     cut2 = cutoff * cutoff
-    # stencil of every cell once (integer divisions per cell, not per particle): the
-    # neighbour cell ids and the image shift of their members (-+L across the boundary
-    # along axes with at least 3 cells; fewer cells along an axis round instead). Every
-    # cell's stencil lists distinct cells and is symmetric, so keeping only neighbours
-    # with a larger id (and pairs within the cell once) visits each cell pair once
-    nb = np.empty((n_cells, n_stencil), dtype=np.int64)
-    nb_shift = np.zeros((n_cells, n_stencil, d))
-    # cells and stencil offsets counted like odometers (last axis fastest): integer
-    # divisions per entry cost more than the whole 3D pair sweep
-    own = np.zeros(d, dtype=np.int64)
-    step = np.zeros(d, dtype=np.int64)
-    for ci in range(n_cells):
-        step[:] = 0
-        for t in range(n_stencil):
-            cid = 0
-            for k in range(d):
-                if span[k] == 3:
-                    c = own[k] + step[k] - 1
-                    if c < 0:
-                        c += ncell[k]
-                        nb_shift[ci, t, k] = -L[k]
-                    elif c >= ncell[k]:
-                        c -= ncell[k]
-                        nb_shift[ci, t, k] = L[k]
-                else:
-                    c = step[k]
-                cid = cid * ncell[k] + c
-            nb[ci, t] = cid
-            k = d - 1
-            while k >= 0:
-                step[k] += 1
-                if step[k] < span[k]:
-                    break
-                step[k] = 0
-                k -= 1
-        k = d - 1
-        while k >= 0:
-            own[k] += 1
-            if own[k] < ncell[k]:
-                break
-            own[k] = 0
-            k -= 1
     # half-stencil sweep in cell order over the contiguous cell-ordered positions
     # (no per-candidate j > i test); pairs are then sorted by (i, j) below
     capacity = 8 * n + 16
@@ -180,9 +138,39 @@ def cell_pairs(x, L, cutoff, diameter, skin):
     for k in range(d):
         shifted &= span[k] == 3
     centre = np.empty(d)
+    shift = np.zeros(d)
+    # cells and stencil offsets counted like odometers (last axis fastest); the
+    # neighbour cell and the image shift of its members (-+L across the boundary along
+    # axes with at least 3 cells; fewer cells along an axis round instead) follow
+    # without integer divisions. A stencil lists distinct cells and is symmetric, so
+    # keeping neighbours with a larger id (and pairs within a cell once) visits each
+    # cell pair once
+    own = np.zeros(d, dtype=np.int64)
+    step = np.zeros(d, dtype=np.int64)
     for ci in range(n_cells):
+        step[:] = 0
         for t in range(n_stencil):
-            cid = nb[ci, t]
+            cid = 0
+            for k in range(d):
+                shift[k] = 0.0
+                if span[k] == 3:
+                    c = own[k] + step[k] - 1
+                    if c < 0:
+                        c += ncell[k]
+                        shift[k] = -L[k]
+                    elif c >= ncell[k]:
+                        c -= ncell[k]
+                        shift[k] = L[k]
+                else:
+                    c = step[k]
+                cid = cid * ncell[k] + c
+            k = d - 1
+            while k >= 0:
+                step[k] += 1
+                if step[k] < span[k]:
+                    break
+                step[k] = 0
+                k -= 1
             if cid < ci:
                 continue
             end = start[cid + 1]
@@ -195,7 +183,7 @@ def cell_pairs(x, L, cutoff, diameter, skin):
             for p in range(start[ci], start[ci + 1]):
                 # particle p seen from the neighbour cell's image
                 for k in range(d):
-                    centre[k] = ws[p, k] - nb_shift[ci, t, k]
+                    centre[k] = ws[p, k] - shift[k]
                 first = p + 1 if cid == ci else start[cid]
                 # d = 2 and 3 with the dimension a constant: the runtime loop over k
                 # measured 1.5x slower
@@ -224,6 +212,13 @@ def cell_pairs(x, L, cutoff, diameter, skin):
                         if _keep(r2, p, q, Ds, skin, cut2, verlet):
                             pa[m], pb[m] = p, q
                             m += 1
+        k = d - 1
+        while k >= 0:
+            own[k] += 1
+            if own[k] < ncell[k]:
+                break
+            own[k] = 0
+            k -= 1
     # lexicographic order: counting sort by i, then each row's few partners by insertion
     row = np.zeros(n + 1, dtype=np.int64)
     for e in range(m):
