@@ -64,6 +64,18 @@ def sort_by_cell(cell, n_cells):
 
 
 @njit(inline="always")
+def _tick(counter, limit):
+    """Advance a multi-index ``counter`` (last axis fastest, ``0 <= counter < limit``) by one, wrapping."""
+    k = counter.shape[0] - 1
+    while k >= 0:
+        counter[k] += 1
+        if counter[k] < limit[k]:
+            return
+        counter[k] = 0
+        k -= 1
+
+
+@njit(inline="always")
 def _keep(r2, p, q, Ds, skin, cut2, verlet):
     """Whether cell-ordered particles ``p, q`` at squared distance ``r2`` form a listed pair."""
     if verlet:
@@ -164,13 +176,7 @@ def cell_pairs(x, L, cutoff, diameter, skin):
                 else:
                     c = step[k]
                 cid = cid * ncell[k] + c
-            k = d - 1
-            while k >= 0:
-                step[k] += 1
-                if step[k] < span[k]:
-                    break
-                step[k] = 0
-                k -= 1
+            _tick(step, span)
             if cid < ci:
                 continue
             end = start[cid + 1]
@@ -212,13 +218,7 @@ def cell_pairs(x, L, cutoff, diameter, skin):
                         if _keep(r2, p, q, Ds, skin, cut2, verlet):
                             pa[m], pb[m] = p, q
                             m += 1
-        k = d - 1
-        while k >= 0:
-            own[k] += 1
-            if own[k] < ncell[k]:
-                break
-            own[k] = 0
-            k -= 1
+        _tick(own, ncell)
     # lexicographic order: counting sort by i, then each row's few partners by insertion
     row = np.zeros(n + 1, dtype=np.int64)
     for e in range(m):
