@@ -55,7 +55,8 @@ def main() -> None:
         for _ in range(args.repeat):
             for name, module in kernels.items():
                 y, v = x.copy(), np.zeros_like(x)
-                fire_state = np.array([DEFAULT_FIRE.dt * unit, DEFAULT_FIRE.alpha0, 0.0])
+                # [dt, alpha, n_positive, steps]; kernels before the run step count read three
+                fire_state = np.array([DEFAULT_FIRE.dt * unit, DEFAULT_FIRE.alpha0, 0.0, 0.0])
                 # infinite skin: the timed steps never stop for a rebuild
                 t0 = time.perf_counter()
                 out = module.fire(y, v, np.array([0.0, 0.0, 1.0]), fire_state, _fire_params(DEFAULT_FIRE, unit),

@@ -138,3 +138,49 @@ def test_verlet_pairs_match_brute_force(d: int, strain: float, skin_fraction: fl
     np.testing.assert_array_equal(np.stack([i, j], 1), np.stack([a[keep], b[keep]], 1))
     assert np.array_equal(image, np.round(image))
     np.testing.assert_allclose(x[j] - x[i] + image @ box.matrix.T, dx[keep], rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+@pytest.mark.parametrize("strain", [0.0, 0.3])
+def test_a_verlet_list_misses_no_contact_within_its_rebuild_criterion(d: int, strain: float) -> None:
+    """After moves with ``2 max|u| < skin`` (NeighborList.stale false) every overlap is a listed pair.
+
+    Dense random spheres (many pairs within the skin), each moved by just under
+    ``skin / 2`` in a random direction, and unlisted pairs within 2 % of the skin
+    edge pushed straight towards each other (they end within 2 % of the skin from
+    contact): the brute-force contacts (r < sigma_ij) with their minimum images must
+    all be in the list built before the moves.
+    """
+    from jamflow.soft.potential import NeighborList
+
+    rng = np.random.default_rng(7 + d + int(10 * strain))
+    box = _box(d, strain, rng)
+    n = 400
+    half = 0.5 * float(np.min(box.widths))
+    D = rng.choice([0.1, 0.14] if d == 2 else [0.25, 0.35], n) * half  # dense: hundreds of overlaps
+    x = box.to_cartesian(rng.uniform(0.0, 1.0, (n, d)))
+    nlist = NeighborList(D, skin=0.3 * D.mean())
+    nlist.build(x, box)
+    u = rng.normal(size=(n, d))
+    u *= (0.5 - 1e-9) * nlist.skin / np.linalg.norm(u, axis=1, keepdims=True)
+    # pairs just outside sigma + skin: each partner moves skin / 2 straight towards the other
+    a, b = np.triu_indices(n, k=1)
+    dx = box.minimum_image(x[b] - x[a])
+    r = np.linalg.norm(dx, axis=1)
+    edge = np.flatnonzero((r >= 0.5 * (D[a] + D[b]) + nlist.skin) & (r < 0.5 * (D[a] + D[b]) + 1.02 * nlist.skin))
+    used = np.zeros(n, dtype=bool)
+    for k in edge:
+        if not used[a[k]] and not used[b[k]]:
+            step = (0.5 - 1e-9) * nlist.skin * dx[k] / r[k]
+            u[a[k]], u[b[k]] = step, -step
+            used[a[k]] = used[b[k]] = True
+    assert used.sum() >= 20  # the worst case is exercised
+    y = x + u
+    assert not nlist.stale(y, box)
+    dy = box.minimum_image(y[b] - y[a])
+    contact = np.linalg.norm(dy, axis=1) < 0.5 * (D[a] + D[b])
+    assert contact.sum() > n  # dense enough to mean something
+    listed = {(i, j): k for k, (i, j) in enumerate(zip(nlist.i.tolist(), nlist.j.tolist()))}
+    for i, j, v in zip(a[contact].tolist(), b[contact].tolist(), dy[contact]):
+        k = listed[(i, j)]
+        np.testing.assert_allclose(y[j] - y[i] + nlist.image[k] @ box.matrix.T, v, rtol=0, atol=1e-12)

@@ -52,6 +52,7 @@ _LAZY: dict[str, str] = {
     "read_dat": ".io",
     "write_dat": ".io",
     "write_xyz": ".io",
+    "write_gsd": ".io",
     "write_table": ".io",
     "load_scene": ".summary",
 }

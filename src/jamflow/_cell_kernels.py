@@ -63,6 +63,27 @@ def sort_by_cell(cell, n_cells):
     return start, members
 
 
+@njit(inline="always")
+def _tick(counter, limit):
+    """Advance a multi-index ``counter`` (last axis fastest, ``0 <= counter < limit``) by one, wrapping."""
+    k = counter.shape[0] - 1
+    while k >= 0:
+        counter[k] += 1
+        if counter[k] < limit[k]:
+            return
+        counter[k] = 0
+        k -= 1
+
+
+@njit(inline="always")
+def _keep(r2, p, q, Ds, skin, cut2, verlet):
+    """Whether cell-ordered particles ``p, q`` at squared distance ``r2`` form a listed pair."""
+    if verlet:
+        reach = 0.5 * (Ds[p] + Ds[q]) + skin
+        return r2 < reach * reach
+    return r2 <= cut2
+
+
 @njit(cache=True)
 def cell_pairs(x, L, cutoff, diameter, skin):
     """Pairs ``i < j`` closer than a cutoff in an orthogonal box, with their periodic images.
@@ -71,8 +92,9 @@ def cell_pairs(x, L, cutoff, diameter, skin):
     Kept are the pairs with minimum-image distance ``r <= cutoff`` (``diameter`` empty) or ``r < (D_i + D_j) / 2 + skin`` (a Verlet
     list; then ``cutoff`` must be at least ``max D + skin``). Cells are at least
     ``cutoff`` wide, so partners lie in the 3^d cells around a particle's (fewer
-    distinct cells along an axis with fewer than 3); each particle collects its
-    partners ``j > i`` and sorts them, so the pairs come out lexicographically sorted.
+    distinct cells along an axis with fewer than 3); each pair of cells is swept once
+    (half stencil) and the pairs are sorted afterwards (counting sort by ``i``, then
+    by ``j``), so they come out lexicographically sorted.
 
     Returns
     -------
@@ -117,84 +139,112 @@ def cell_pairs(x, L, cutoff, diameter, skin):
         if verlet:
             Ds[q] = diameter[members[q]]
     cut2 = cutoff * cutoff
+    # half-stencil sweep in cell order over the contiguous cell-ordered positions
+    # (no per-candidate j > i test); pairs are then sorted by (i, j) below
     capacity = 8 * n + 16
-    out_i = np.empty(capacity, dtype=np.int64)
-    out_j = np.empty(capacity, dtype=np.int64)
-    found = np.empty(n, dtype=np.int64)
-    # stencil of every cell once (integer divisions per cell, not per particle): the
-    # neighbour cell ids and the image shift of their members (-+L across the boundary
-    # along axes with at least 3 cells; fewer cells along an axis round instead)
-    nb = np.empty((n_cells, n_stencil), dtype=np.int64)
-    nb_shift = np.zeros((n_cells, n_stencil, d))
-    own = np.empty(d, dtype=np.int64)
+    pa = np.empty(capacity, dtype=np.int64)
+    pb = np.empty(capacity, dtype=np.int64)
+    m = 0
+    # with at least 3 cells along every axis all images are stencil shifts (no rounding)
+    shifted = True
+    for k in range(d):
+        shifted &= span[k] == 3
+    centre = np.empty(d)
+    shift = np.zeros(d)
+    # cells and stencil offsets counted like odometers (last axis fastest); the
+    # neighbour cell and the image shift of its members (-+L across the boundary along
+    # axes with at least 3 cells; fewer cells along an axis round instead) follow
+    # without integer divisions. A stencil lists distinct cells and is symmetric, so
+    # keeping neighbours with a larger id (and pairs within a cell once) visits each
+    # cell pair once
+    own = np.zeros(d, dtype=np.int64)
+    step = np.zeros(d, dtype=np.int64)
     for ci in range(n_cells):
-        rest = ci
-        for k in range(d - 1, -1, -1):
-            own[k] = rest % ncell[k]
-            rest //= ncell[k]
+        step[:] = 0
         for t in range(n_stencil):
-            rest = t
             cid = 0
             for k in range(d):
-                step = rest % span[k]
-                rest //= span[k]
+                shift[k] = 0.0
                 if span[k] == 3:
-                    c = own[k] + step - 1
-                    nb_shift[ci, t, k] = -L[k] if c < 0 else (L[k] if c >= ncell[k] else 0.0)
-                    c %= ncell[k]
+                    c = own[k] + step[k] - 1
+                    if c < 0:
+                        c += ncell[k]
+                        shift[k] = -L[k]
+                    elif c >= ncell[k]:
+                        c -= ncell[k]
+                        shift[k] = L[k]
                 else:
-                    c = step
+                    c = step[k]
                 cid = cid * ncell[k] + c
-            nb[ci, t] = cid
-    wi = np.empty(d)
-    m = 0
-    for i in range(n):
-        ci = cell[i]
-        for k in range(d):
-            wi[k] = wrapped[i, k]
-        n_found = 0
-        for t in range(n_stencil):
-            cid = nb[ci, t]
-            shift = nb_shift[ci, t]
-            for q in range(start[cid], start[cid + 1]):
-                j = members[q]
-                if j <= i:
-                    continue
-                r2 = 0.0
+            _tick(step, span)
+            if cid < ci:
+                continue
+            end = start[cid + 1]
+            if m + (start[ci + 1] - start[ci]) * (end - start[cid]) > capacity:
+                # grown outside the candidate loop: arrays reassigned inside it
+                # would be reference-counted on every candidate
+                capacity = 2 * capacity + (start[ci + 1] - start[ci]) * (end - start[cid])
+                pa = np.concatenate((pa[:m], np.empty(capacity - m, dtype=np.int64)))
+                pb = np.concatenate((pb[:m], np.empty(capacity - m, dtype=np.int64)))
+            for p in range(start[ci], start[ci + 1]):
+                # particle p seen from the neighbour cell's image
                 for k in range(d):
-                    if span[k] == 3:
-                        dx = ws[q, k] + shift[k] - wi[k]
-                    else:
-                        dx = ws[q, k] - wi[k]
-                        dx -= L[k] * np.round(dx / L[k])
-                    r2 += dx * dx
-                if verlet:
-                    reach = 0.5 * (diameter[i] + Ds[q]) + skin
-                    keep = r2 < reach * reach
+                    centre[k] = ws[p, k] - shift[k]
+                first = p + 1 if cid == ci else start[cid]
+                # d = 2 and 3 with the dimension a constant: the runtime loop over k
+                # measured 1.5x slower
+                if shifted and d == 2:
+                    c0, c1 = centre[0], centre[1]
+                    for q in range(first, end):
+                        dx, dy = ws[q, 0] - c0, ws[q, 1] - c1
+                        if _keep(dx * dx + dy * dy, p, q, Ds, skin, cut2, verlet):
+                            pa[m], pb[m] = p, q
+                            m += 1
+                elif shifted and d == 3:
+                    c0, c1, c2 = centre[0], centre[1], centre[2]
+                    for q in range(first, end):
+                        dx, dy, dz = ws[q, 0] - c0, ws[q, 1] - c1, ws[q, 2] - c2
+                        if _keep(dx * dx + dy * dy + dz * dz, p, q, Ds, skin, cut2, verlet):
+                            pa[m], pb[m] = p, q
+                            m += 1
                 else:
-                    keep = r2 <= cut2
-                if keep:
-                    found[n_found] = j
-                    n_found += 1
-        if m + n_found > capacity:
-            capacity = 2 * capacity + n_found
-            out_i = np.concatenate((out_i[:m], np.empty(capacity - m, dtype=np.int64)))
-            out_j = np.concatenate((out_j[:m], np.empty(capacity - m, dtype=np.int64)))
-        # insertion sort of the few partners in place (no allocation per particle)
-        for q in range(1, n_found):
-            key = found[q]
+                    for q in range(first, end):
+                        r2 = 0.0
+                        for k in range(d):
+                            dx = ws[q, k] - centre[k]
+                            if span[k] < 3:
+                                dx -= L[k] * np.round(dx / L[k])
+                            r2 += dx * dx
+                        if _keep(r2, p, q, Ds, skin, cut2, verlet):
+                            pa[m], pb[m] = p, q
+                            m += 1
+        _tick(own, ncell)
+    # lexicographic order: counting sort by i, then each row's few partners by insertion
+    row = np.zeros(n + 1, dtype=np.int64)
+    for e in range(m):
+        row[min(members[pa[e]], members[pb[e]]) + 1] += 1
+    for i in range(n):
+        row[i + 1] += row[i]
+    slot = row[:n].copy()
+    out_i = np.empty(m, dtype=np.int64)
+    out_j = np.empty(m, dtype=np.int64)
+    for e in range(m):
+        a, b = members[pa[e]], members[pb[e]]
+        i, j = min(a, b), max(a, b)
+        out_i[slot[i]] = i
+        out_j[slot[i]] = j
+        slot[i] += 1
+    for i in range(n):
+        for q in range(row[i] + 1, row[i + 1]):
+            key = out_j[q]
             r = q - 1
-            while r >= 0 and found[r] > key:
-                found[r + 1] = found[r]
+            while r >= row[i] and out_j[r] > key:
+                out_j[r + 1] = out_j[r]
                 r -= 1
-            found[r + 1] = key
-        for q in range(n_found):
-            out_i[m] = i
-            out_j[m] = found[q]
-            m += 1
+            out_j[r + 1] = key
     image = np.empty((m, d), dtype=np.int64)
     for p in range(m):
         for k in range(d):
             raw = x[out_j[p], k] - x[out_i[p], k]
             image[p, k] = -int(np.round(raw / L[k]))
-    return out_i[:m].copy(), out_j[:m].copy(), image
+    return out_i, out_j, image

@@ -35,6 +35,8 @@ __all__ = [
     "read_dat",
     "write_dat",
     "write_xyz",
+    "write_gsd",
+    "gsd_types",
     "size_classes",
     "write_table",
 ]
@@ -330,6 +332,54 @@ def size_classes(diameter: np.ndarray) -> tuple[list[str], np.ndarray]:
     return names, index
 
 
+def _frames(frames: Packing | Sequence[Packing]) -> list[Packing]:
+    frames = [frames] if isinstance(frames, Packing) else list(frames)
+    if not frames:
+        raise ValueError("no packing to write")
+    return frames
+
+
+def _frame_scalars(packing: Packing) -> dict[str, float]:
+    """Per-frame numbers of an export: ``phi`` and, when known, ``strain``, ``time``, ``pressure``."""
+    scalars = {"phi": packing.packing_fraction}
+    scalars.update({key: float(packing.attrs[key]) for key in ("strain", "time") if key in packing.attrs})
+    if packing.pressure is not None and np.isfinite(packing.pressure):
+        scalars["pressure"] = float(packing.pressure)
+    return scalars
+
+
+def _particle_columns(packing: Packing) -> dict[str, np.ndarray]:
+    """Per-particle export columns after the centres, each of shape (N, width), in file order.
+
+    ``radius``; ``rattler`` (0/1) when known; for shaped bodies ``shape_index``,
+    ``angle`` [rad], ``orientation`` (quaternion ``(x, y, z, w)`` of the rotation
+    about z) and, with ellipses, ``aspherical_shape`` (semi-axes ``(a, b, b)``, zeros
+    for other bodies); with contact forces ``force_sum`` and ``force_residual``.
+    """
+    from .analysis.contacts import force_balance_residual
+
+    n = packing.n
+    columns: dict[str, np.ndarray] = {"radius": 0.5 * packing.diameter[:, None]}
+    if packing.rattler is not None:
+        columns["rattler"] = packing.rattler.astype(np.int64)[:, None]
+    if packing.shapes is not None:
+        theta = np.asarray(packing.orientation, dtype=np.float64)
+        quat = np.zeros((n, 4))
+        quat[:, 2], quat[:, 3] = np.sin(0.5 * theta), np.cos(0.5 * theta)
+        columns.update(shape_index=packing.shape_index.astype(np.int64)[:, None], angle=theta[:, None],
+                       orientation=quat)
+        kind = packing.shapes.kind[packing.shape_index]
+        if np.any(kind == "ellipse"):
+            semi = np.where((kind == "ellipse")[:, None], packing.shapes.semi_axes[packing.shape_index], 0.0)
+            columns["aspherical_shape"] = np.column_stack([semi, semi[:, 1]])
+    if packing.force is not None:
+        load = np.zeros(n)
+        np.add.at(load, packing.contacts[:, 0], np.abs(packing.force))
+        np.add.at(load, packing.contacts[:, 1], np.abs(packing.force))
+        columns.update(force_sum=load[:, None], force_residual=force_balance_residual(packing)[:, None])
+    return columns
+
+
 def write_xyz(frames: Packing | Sequence[Packing], path: str | os.PathLike, pos_2d: bool = False) -> Path:
     """Write extended XYZ readable by OVITO and ASE: one frame per packing.
 
@@ -355,11 +405,7 @@ def write_xyz(frames: Packing | Sequence[Packing], path: str | os.PathLike, pos_
     when the file has no z column; ``pos_2d=True`` writes ``pos:R:2`` for that (ASE
     cannot read such files). d > 3 keeps the first three coordinates and says so.
     """
-    from .analysis.contacts import force_balance_residual
-
-    frames = [frames] if isinstance(frames, Packing) else list(frames)
-    if not frames:
-        raise ValueError("no packing to write")
+    frames = _frames(frames)
     lines: list[str] = []
     for packing in frames:
         d, n = packing.d, packing.n
@@ -372,43 +418,125 @@ def write_xyz(frames: Packing | Sequence[Packing], path: str | os.PathLike, pos_
         pos[:, :k] = packing.box.wrap(packing.position)[:, :k]
         names, index = size_classes(packing.diameter)
         width = 2 if (d == 2 and pos_2d) else 3
-        props = [f"type:S:1:pos:R:{width}:radius:R:1"]
-        columns: list[np.ndarray] = [pos[:, :width], 0.5 * packing.diameter[:, None]]
-        if packing.rattler is not None:
-            props.append("rattler:I:1")
-            columns.append(packing.rattler.astype(np.int64)[:, None])
-        if packing.shapes is not None:
-            theta = np.asarray(packing.orientation, dtype=np.float64)
-            quat = np.zeros((n, 4))
-            quat[:, 2], quat[:, 3] = np.sin(0.5 * theta), np.cos(0.5 * theta)
-            props.append("shape_index:I:1:angle:R:1:orientation:R:4")
-            columns += [packing.shape_index.astype(np.int64)[:, None], theta[:, None], quat]
-            kind = packing.shapes.kind[packing.shape_index]
-            if np.any(kind == "ellipse"):
-                semi = np.where((kind == "ellipse")[:, None], packing.shapes.semi_axes[packing.shape_index], 0.0)
-                props.append("aspherical_shape:R:3")
-                columns.append(np.column_stack([semi, semi[:, 1]]))
-        if packing.force is not None:
-            load = np.zeros(n)
-            np.add.at(load, packing.contacts[:, 0], np.abs(packing.force))
-            np.add.at(load, packing.contacts[:, 1], np.abs(packing.force))
-            props.append("force_sum:R:1:force_residual:R:1")
-            columns += [load[:, None], force_balance_residual(packing)[:, None]]
+        columns = _particle_columns(packing)
+        props = [f"type:S:1:pos:R:{width}"]
+        props += [f"{name}:{'I' if c.dtype.kind == 'i' else 'R'}:{c.shape[1]}" for name, c in columns.items()]
+        columns = {"pos": pos[:, :width], **columns}
         info = [f'Lattice="{" ".join(repr(float(v)) for v in h.T.ravel())}"', f"Properties={':'.join(props)}",
-                f'pbc="T T {"T" if d > 2 else "F"}"', f"phi={packing.packing_fraction!r}"]
-        info += [f"{key}={float(packing.attrs[key])!r}" for key in ("strain", "time") if key in packing.attrs]
-        if packing.pressure is not None and np.isfinite(packing.pressure):
-            info.append(f"pressure={float(packing.pressure)!r}")
+                f'pbc="T T {"T" if d > 2 else "F"}"']
+        info += [f"{key}={value!r}" for key, value in _frame_scalars(packing).items()]
         if d > 3:
             info.append(f'projection="first 3 of {d} coordinates"')
-        table = np.hstack(columns)
-        kinds = [c.dtype.kind for c in columns for _ in range(c.shape[1])]
+        table = np.hstack(list(columns.values()))
+        kinds = [c.dtype.kind for c in columns.values() for _ in range(c.shape[1])]
         lines += [str(n), " ".join(info)]
         lines += [" ".join([names[t], *(str(int(v)) if kind == "i" else repr(float(v)) for v, kind in zip(row, kinds))])
                   for t, row in zip(index.tolist(), table.tolist())]
     path = Path(path)
     _refuse_clobbering_a_packing(path, "this writes an extended XYZ file")
     return _atomic_text(path, "\n".join(lines) + "\n")
+
+
+def write_gsd(frames: Packing | Sequence[Packing], path: str | os.PathLike) -> Path:
+    """Write a HOOMD-blue GSD trajectory readable by OVITO: one frame per packing, links as bonds.
+
+    The format for packings with links (extended XYZ has no bonds). Per frame:
+    ``configuration/box`` (``[Lx, Ly, Lz, xy, xz, yz]``, HOOMD tilt factors; ``Lz = 0``
+    and ``dimensions = 2`` in 2D), ``particles/position`` centred on the box origin as
+    HOOMD stores it, ``particles/diameter``; ``bonds/group`` = the links (bond type
+    ``link``); ``log/<name>`` for ``phi`` and, when known, ``strain``, ``time`` and
+    ``pressure``; ``log/particles/<name>`` for every other column of
+    :func:`write_xyz` (``rattler``, ``shape_index``, ``angle``, ``force_sum``,
+    ``force_residual``), which OVITO reads as particle properties of that name.
+
+    Spheres get the size-class types of :func:`size_classes`. Shaped bodies get one
+    type per row of the shape table (``<kind><row>``) with its ``particles/type_shapes``
+    entry (``Ellipsoid`` with semi-axes ``(a, b, b)``, ``Sphere`` for disks,
+    ``Polygon`` with the rounding radius for circulo-polygons; other kinds ``{}``,
+    drawn as their bounding disk) and ``particles/orientation``, the quaternion
+    ``(w, x, y, z) = (cos(theta/2), 0, 0, sin(theta/2))``.
+
+    The GSD schema stores the box, positions, diameters and orientations in single precision
+    (relative 6e-8): enough to look at a packing, not to recount its contacts.
+
+    Raises
+    ------
+    ValueError
+        d not 2 or 3, or a box that is not upper triangular (HOOMD's box form).
+    ModuleNotFoundError
+        Without the ``gsd`` package (``pip install gsd``, the ``gsd`` extra).
+    """
+    import gsd.hoomd
+
+    snapshots = [_gsd_frame(packing, gsd.hoomd.Frame()) for packing in _frames(frames)]
+    path = Path(path)
+    _refuse_clobbering_a_packing(path, "this writes a GSD file")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with _atomic(path) as (fd, tmp):
+        os.close(fd)
+        with gsd.hoomd.open(tmp, mode="w") as trajectory:
+            trajectory.extend(snapshots)
+    return path
+
+
+def _gsd_frame(packing: Packing, frame: Any) -> Any:
+    """Fill a ``gsd.hoomd.Frame`` with one packing (see :func:`write_gsd`)."""
+    d, n = packing.d, packing.n
+    if d not in (2, 3):
+        raise ValueError(f"GSD holds 2D and 3D systems, got d = {d}")
+    h = packing.box.matrix
+    if np.any(np.tril(h, -1) != 0.0):
+        raise ValueError("GSD needs an upper-triangular box matrix (HOOMD's box form)")
+    lz = h[2, 2] if d == 3 else 0.0
+    frame.configuration.dimensions = d
+    frame.configuration.box = [h[0, 0], h[1, 1], lz, h[0, 1] / h[1, 1],
+                               h[0, 2] / lz if d == 3 else 0.0, h[1, 2] / lz if d == 3 else 0.0]
+    s = packing.box.to_fractional(packing.box.wrap(packing.position)) - 0.5
+    position = np.zeros((n, 3))
+    position[:, :d] = packing.box.to_cartesian(s)
+    frame.particles.N = n
+    frame.particles.position = position
+    columns = _particle_columns(packing)
+    frame.particles.diameter = 2.0 * columns.pop("radius")[:, 0]
+    frame.particles.types, frame.particles.typeid = gsd_types(packing)
+    if packing.shapes is not None:
+        table = packing.shapes
+        frame.particles.type_shapes = [_type_shape(table, k) for k in range(len(table))]
+        frame.particles.orientation = columns.pop("orientation")[:, [3, 0, 1, 2]]
+        columns.pop("aspherical_shape", None)  # in type_shapes
+    if packing.links is not None:
+        frame.bonds.N = len(packing.links)
+        frame.bonds.types = ["link"]
+        frame.bonds.typeid = np.zeros(len(packing.links), dtype=np.uint32)
+        frame.bonds.group = np.column_stack([packing.links.i, packing.links.j])
+    frame.log = {name: np.array([value]) for name, value in _frame_scalars(packing).items()}
+    frame.log.update({f"particles/{name}": column[:, 0] for name, column in columns.items()})
+    return frame
+
+
+def gsd_types(packing: Packing) -> tuple[list[str], np.ndarray]:
+    """Particle-type names and each particle's type in :func:`write_gsd`.
+
+    Spheres: the size classes of :func:`size_classes`. Shaped bodies: one type per
+    row ``k`` of the shape table, named ``<kind><k>`` (GSD attaches shapes to types).
+    """
+    if packing.shapes is None:
+        return size_classes(packing.diameter)
+    return [f"{kind}{k}" for k, kind in enumerate(packing.shapes.kind)], packing.shape_index
+
+
+def _type_shape(table: Any, k: int) -> dict[str, Any]:
+    """HOOMD ``type_shapes`` entry of shape row ``k`` (``{}`` where OVITO has no such shape)."""
+    kind = str(table.kind[k])
+    if kind == "ellipse":
+        a, b = (float(v) for v in table.semi_axes[k])
+        return {"type": "Ellipsoid", "a": a, "b": b, "c": b}
+    if kind == "disk":
+        return {"type": "Sphere", "diameter": 2.0 * float(table.radius[k])}
+    if kind == "circulo_polygon":
+        return {"type": "Polygon", "rounding_radius": float(table.radius[k]),
+                "vertices": table.vertex_list(k).tolist()}
+    return {}
 
 
 def write_table(table: pd.DataFrame, path: str | os.PathLike) -> Path:

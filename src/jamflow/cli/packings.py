@@ -12,11 +12,28 @@ from tqdm import tqdm
 from ..analysis.contacts import contact_network, summarize
 from ..chains.clusters import count_clusters
 from ..initial import random_packing
-from ..io import read_dat, read_dataset, read_packing, size_classes, write_packing, write_xyz
+from ..io import (
+    gsd_types,
+    read_dat,
+    read_dataset,
+    read_packing,
+    size_classes,
+    write_gsd,
+    write_packing,
+    write_xyz,
+)
 from ..overdamped.run import snapshot_packings
 from ..packing import Packing
 from ..tolerances import OVERLAP_TOL
-from .common import add_command, add_quiet, format_rows, packing_rows, print_summary, seed, stage_parameters
+from .common import (
+    add_command,
+    add_quiet,
+    format_rows,
+    packing_rows,
+    print_summary,
+    seed,
+    stage_parameters,
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -44,14 +61,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_quiet(p)
 
     p = add_command(sub, "export-xyz", _export_xyz,
-                    "write extended XYZ for OVITO and ASE: size-class types, radius, rattler and force columns",
+                    "write extended XYZ (OVITO, ASE) or, for links, HOOMD GSD (OVITO): types, radius, rattler, "
+                    "forces, orientations, bonds",
                     "One frame for a packing; one frame per snapshot for a flow snapshot file (OUT.snapshots.nc "
                     "of compress, shear or drive --snapshots N). Columns: type (size class: sphere, small/large, "
                     "size1..sizeK, or poly), pos, radius, rattler (0/1, when known), force_sum (sum of contact-force "
-                    "magnitudes) and force_residual (|net contact force| / mean force), when the input has forces.",
+                    "magnitudes) and force_residual (|net contact force| / mean force), when the input has forces; "
+                    "shaped bodies add shape_index, angle, orientation (quaternion) and, with ellipses, "
+                    "aspherical_shape. OUT ending in .gsd writes a HOOMD GSD file instead, which OVITO reads with "
+                    "bonds: the links of chains and clusters (extended XYZ cannot hold bonds, so a packing with "
+                    "links needs .gsd), orientations as quaternions, one particle type per shape with its "
+                    "type_shapes entry, the other columns as log/particles/<name>; GSD stores positions in "
+                    "single precision.",
                     reads=("packing",), writes=("out",))
     p.add_argument("packing", help="input netCDF packing or flow snapshot file")
-    p.add_argument("out", help="output .xyz")
+    p.add_argument("out", help="output .xyz (extended XYZ) or .gsd (HOOMD GSD with links as bonds)")
     p.add_argument("--pos-2d", action="store_true",
                    help="2D: write x and y only (pos:R:2), which OVITO reads as a 2D system; ASE cannot read it")
     add_overlap_option(p)
@@ -123,13 +147,23 @@ def _export_xyz(args: argparse.Namespace) -> int:
             # shaped bodies overlap by their energy model's contact distance, not the spheres' check
             frame.validate(overlap_tol(args))
         frames = [frame]
-    if args.pos_2d and frames[0].d != 2:
-        raise ValueError(f"--pos-2d is for 2D packings, got d = {frames[0].d}")
-    write_xyz(frames, args.out, pos_2d=args.pos_2d)
-    names, _ = size_classes(frames[0].diameter)
+    if str(args.out).endswith(".gsd"):
+        if args.pos_2d:
+            raise ValueError("--pos-2d is for .xyz output; a .gsd file marks 2D itself")
+        write_gsd(frames, args.out)
+    else:
+        if frames[0].links is not None:
+            raise ValueError(f"{args.packing} has {len(frames[0].links)} links, which extended XYZ cannot hold; "
+                             "write OUT.gsd (HOOMD GSD, links as bonds)")
+        if args.pos_2d and frames[0].d != 2:
+            raise ValueError(f"--pos-2d is for 2D packings, got d = {frames[0].d}")
+        write_xyz(frames, args.out, pos_2d=args.pos_2d)
+    gsd = str(args.out).endswith(".gsd")
+    names = (gsd_types if gsd else lambda p: size_classes(p.diameter))(frames[0])[0]
     rows = packing_rows(frames[0]) if len(frames) == 1 else [("frames", len(frames)), ("N, d", f"{frames[0].n}, "
                                                                                              f"{frames[0].d}")]
-    print_summary(args, args.out, [*rows, ("particle types", " ".join(names))])
+    links = [] if frames[0].links is None else [("bonds (links)", len(frames[0].links))]
+    print_summary(args, args.out, [*rows, ("particle types", " ".join(names)), *links])
     return 0
 
 

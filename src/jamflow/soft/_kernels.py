@@ -264,7 +264,7 @@ def fire(
     y, v : (N, d) reference-box coordinates and velocities.
     box_state : (3,) ``[q, v_q, s]`` with ``s = exp(q / q_scale)`` the box scale
         (only evolves when ``barostat``).
-    fire_state : (3,) ``[dt, alpha, n_positive]``.
+    fire_state : (4,) ``[dt, alpha, n_positive, steps]``, ``steps`` taken by the run before this call.
     fire_params : (8,) ``[dt_max, dt_min, f_inc, f_dec, alpha0, f_alpha, n_delay,
         initial_delay]``.
     barostat : bool
@@ -277,6 +277,9 @@ def fire(
     """
     d = y.shape[1]
     dt, alpha, npos = fire_state[0], fire_state[1], int(fire_state[2])
+    # steps of the run before this call: the initial delay counts from the run's start,
+    # not from the last neighbour-list rebuild
+    done = int(fire_state[3])
     dt_max, dt_min, f_inc, f_dec = fire_params[0], fire_params[1], fire_params[2], fire_params[3]
     alpha0, f_alpha, n_delay = fire_params[4], fire_params[5], int(fire_params[6])
     initial_delay = fire_params[7] > 0.0
@@ -301,7 +304,8 @@ def fire(
         fq = d * volume * (pressure - pressure0) / q_scale if barostat else 0.0
         power = s * _dot(force, v) + fq * vq
         npos, dt, alpha = _fire_adapt(
-            power, step, npos, dt, alpha, n_delay, f_inc, f_dec, f_alpha, alpha0, dt_max, dt_min, initial_delay
+            power, done + step, npos, dt, alpha, n_delay, f_inc, f_dec, f_alpha, alpha0, dt_max, dt_min,
+            initial_delay,
         )
         if not power > 0.0:
             _fire_step_back(y, v, dt)
@@ -329,7 +333,7 @@ def fire(
     if not barostat:
         energy, n_contact = pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial)
         pressure = np.trace(virial) / (d * volume)
-    fire_state[0], fire_state[1], fire_state[2] = dt, alpha, npos
+    fire_state[0], fire_state[1], fire_state[2], fire_state[3] = dt, alpha, npos, done + step
     box_state[0], box_state[1], box_state[2] = q, vq, s
     return status, step, energy, n_contact, fmax2, pressure
 
@@ -443,6 +447,9 @@ def fire_stress(
     """
     d = y.shape[1]
     dt, alpha, npos = fire_state[0], fire_state[1], int(fire_state[2])
+    # steps of the run before this call: the initial delay counts from the run's start,
+    # not from the last neighbour-list rebuild
+    done = int(fire_state[3])
     dt_max, dt_min, f_inc, f_dec = fire_params[0], fire_params[1], fire_params[2], fire_params[3]
     alpha0, f_alpha, n_delay = fire_params[4], fire_params[5], int(fire_params[6])
     initial_delay = fire_params[7] > 0.0
@@ -493,7 +500,8 @@ def fire_stress(
                 fy[i, b] = acc
         power = _dot(fy, v) + _dot(fA, vA)
         npos, dt, alpha = _fire_adapt(
-            power, step, npos, dt, alpha, n_delay, f_inc, f_dec, f_alpha, alpha0, dt_max, dt_min, initial_delay
+            power, done + step, npos, dt, alpha, n_delay, f_inc, f_dec, f_alpha, alpha0, dt_max, dt_min,
+            initial_delay,
         )
         if not power > 0.0:
             _axpy(-0.5 * dt / q_scale, vA, A)
@@ -512,5 +520,5 @@ def fire_stress(
                 A[a, b] += dt * vA[a, b] / q_scale
         energy, n_contact = pair_forces_affine(y, A, offset, pi, pj, sigma, eps, w, force, virial)
         step += 1
-    fire_state[0], fire_state[1], fire_state[2] = dt, alpha, npos
+    fire_state[0], fire_state[1], fire_state[2], fire_state[3] = dt, alpha, npos, done + step
     return status, step, energy, n_contact, fmax2, err

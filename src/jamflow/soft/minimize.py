@@ -136,7 +136,7 @@ class _SphereFire:
         self.v = np.zeros_like(self.y)
         self.q_scale = float(np.sqrt(len(self.y)) * model.diameter.mean())
         self.box_state = np.array([0.0, 0.0, 1.0])
-        self.fire_state = np.array([params.dt * unit, params.alpha0, 0.0])
+        self.fire_state = np.array([params.dt * unit, params.alpha0, 0.0, 0.0])
         self.fparams = _fire_params(params, unit)
         self.force = np.zeros_like(self.y)
         self.virial = np.zeros((model.box.d, model.box.d))
@@ -145,7 +145,8 @@ class _SphereFire:
         """At most ``budget`` steps; returns ``(status, steps)`` (status of :mod:`._kernels`)."""
         nlist, potential, h_ref = self.model.nlist, self.model.potential, self.model.box
         s = self.box_state[2]
-        current = h_ref.scaled(s)
+        # the reference box itself at s = 1 (fixed box): its cached widths serve every build
+        current = h_ref if s == 1.0 else h_ref.scaled(s)
         if rebuild:
             nlist.build(s * self.y, current)
         else:
@@ -188,7 +189,7 @@ class _SphereFireFullBox:
         self.A = np.eye(d)
         self.vA = np.zeros((d, d))
         self.q_scale = float(np.sqrt(len(self.y)) * model.diameter.mean())
-        self.fire_state = np.array([params.dt * unit, params.alpha0, 0.0])
+        self.fire_state = np.array([params.dt * unit, params.alpha0, 0.0, 0.0])
         self.fparams = _fire_params(params, unit)
         self.force = np.zeros_like(self.y)
         self.virial = np.zeros((d, d))
