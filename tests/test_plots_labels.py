@@ -23,13 +23,8 @@ from jamflow.analysis.overlap import overlap_series
 from jamflow.analysis.structure import structure_dataset
 from jamflow.chains.averages import moduli_against_links
 from jamflow.cli.analysis import PLOT_KINDS
-
 from jamflow.shapes import figures as shape_figures
 from jamflow.shapes.survey import survey_dataset
-
-from test_analysis_eos import eos_run, series
-from test_analysis_flow import flow_dataset
-from test_plots import lattice
 
 
 def _gaps(rng) -> xr.Dataset:
