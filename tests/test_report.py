@@ -26,7 +26,7 @@ RULES = sorted((REPO / "workflow" / "rules").glob("*.smk"))
 def _render(path: Path) -> str:
     """The caption as Snakemake renders it (same Jinja2 settings), as HTML; a Docutils warning raises."""
     # the wildcards the figure rules have; StrictUndefined makes a missing one an error too
-    wildcards = SimpleNamespace(sample="seed1", condition="p10", variant="_k0.001_p1e+06")
+    wildcards = SimpleNamespace(sample="seed1", condition="p10", variant="_k0.001_p1e+06", d="2", seed="1")
     snakemake = SimpleNamespace(wildcards=wildcards, config={}, params=SimpleNamespace())
     env = Environment(trim_blocks=True, lstrip_blocks=True, undefined=StrictUndefined)
     text = env.from_string(path.read_text()).render(snakemake=snakemake, categories=[], files=[])
