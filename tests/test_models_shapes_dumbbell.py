@@ -18,7 +18,7 @@ from shapely.geometry import Polygon
 from jamflow.bodies import ShapeTable, _polygon_moment
 from jamflow.box import Box
 from jamflow.models.shapes import ShapeModel
-from shape_numerics import numerical_gradient, numerical_hessian
+from shape_numerics import numerical_gradient, numerical_hessian, onset_distances
 
 # lobes R at +-h, shaft half-width R/2 (Fig. 4 a: shaft length 2h = 4R), small and large
 TABLE = ShapeTable.from_shapes([dict(kind="dumbbell", vertices=[(-0.5, 0.0), (0.5, 0.0)], radius=0.25,
@@ -124,30 +124,13 @@ def test_contact_distance_against_exact_outlines():
     done = 0
     while done < 10:
         index = list(rng.integers(0, 2, 2))
-        m = ShapeModel(BOX, TABLE, index)
         ti, tj, phi = rng.uniform(0.0, 2.0 * np.pi, 3)
         e = np.array([np.cos(phi), np.sin(phi)])
-        pi = _outline(index[0], ti, (4.0, 4.0))
-
-        def touching(model_side: bool, r: float) -> bool:
-            centre = np.array([4.0, 4.0]) + r * e
-            if model_side:
-                return m.evaluate(m.dofs([[4.0, 4.0, ti], [*centre, tj]])).energy > 0.0
-            return pi.intersects(_outline(index[1], tj, centre))
-
-        found = []
-        for side in (True, False):
-            lo, hi = 0.05, 2.2
-            if not touching(side, lo):
-                break
-            for _ in range(50):
-                mid = 0.5 * (lo + hi)
-                lo, hi = (mid, hi) if touching(side, mid) else (lo, mid)
-            found.append(0.5 * (lo + hi))
-        if len(found) < 2:
+        onsets = onset_distances(ShapeModel(BOX, TABLE, index), _outline, index, ti, tj, e, (4.0, 4.0), 0.05, 2.2)
+        if onsets is None:  # a side does not touch at the smallest distance: no onset to compare
             continue
         done += 1
-        assert abs(found[0] - found[1]) <= 1e-8
+        assert abs(onsets[0] - onsets[1]) <= 1e-8
 
 
 def test_zero_modes_of_an_overlapping_pair():

@@ -14,7 +14,7 @@ from shapely.geometry import Polygon
 from jamflow.bodies import ShapeTable
 from jamflow.box import Box
 from jamflow.models.shapes import ShapeModel
-from shape_numerics import numerical_gradient, numerical_hessian
+from shape_numerics import numerical_gradient, numerical_hessian, onset_distances
 
 _A = 2.0 * np.pi * np.arange(3) / 3
 TABLE = ShapeTable.from_shapes([dict(kind="reuleaux", vertices=0.5 * np.stack([np.cos(_A), np.sin(_A)], 1)),
@@ -50,25 +50,11 @@ def test_contact_distance_against_sampled_outlines():
     rng = np.random.default_rng(3)
     for _ in range(8):
         index = list(rng.integers(0, 2, 2))
-        m = ShapeModel(BOX, TABLE, index)
         ti, tj, phi = rng.uniform(0.0, 2.0 * np.pi, 3)
         e = np.array([np.cos(phi), np.sin(phi)])
-        pi = _outline(index[0], ti, (3.0, 3.0))
-
-        def touching(model_side: bool, r: float) -> bool:
-            centre = np.array([3.0, 3.0]) + r * e
-            if model_side:
-                return m.evaluate(m.dofs([[3.0, 3.0, ti], [*centre, tj]])).energy > 0.0
-            return pi.intersects(_outline(index[1], tj, centre))
-
-        found = []
-        for side in (True, False):
-            lo, hi = 0.2, 2.5
-            for _ in range(50):
-                mid = 0.5 * (lo + hi)
-                lo, hi = (mid, hi) if touching(side, mid) else (lo, mid)
-            found.append(0.5 * (lo + hi))
-        assert -1e-10 <= found[0] - found[1] <= 4e-8
+        model_r, outline_r = onset_distances(ShapeModel(BOX, TABLE, index), _outline, index, ti, tj, e,
+                                             (3.0, 3.0), 0.2, 2.5)
+        assert -1e-10 <= model_r - outline_r <= 4e-8
 
 
 def test_continuous_from_arc_arc_to_vertex_arc():
