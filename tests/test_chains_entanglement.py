@@ -64,6 +64,9 @@ def test_threaded_trimers_are_a_trapped_minimum_refused_by_the_jamming_bisection
     err = capsys.readouterr().err
     assert "entangled clusters" in err and "--no-overlap" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "j.nc").exists()
+    # a plain minimisation of the same start is refused as well
+    assert main(["minimize", str(tmp_path / "s.nc"), str(tmp_path / "m.nc"), "--quiet"]) == 1
+    assert "entangled clusters" in capsys.readouterr().err and not (tmp_path / "m.nc").exists()
 
 
 def test_crossed_trimers_in_2d_are_refused_naming_the_clusters():
