@@ -198,3 +198,15 @@ def test_cli_cement_records_the_cemented_contacts_not_the_angle_links(tmp_path, 
     assert main(["link", str(tmp_path / "c.nc"), str(tmp_path / "c2.nc"), "--cement", "3", "--seed", "4",
                  "--quiet"]) == 0
     assert read_packing(tmp_path / "c2.nc", None).attrs["n_cemented"] == 15
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_no_overlap_placement_is_a_hard_sphere_start(d, tmp_path):
+    from jamflow.tolerances import OVERLAP_TOL
+
+    p, _ = linked_packing(d, 30, "trimer", np.random.default_rng(2), phi=0.2, no_overlap=True)
+    p.validate(OVERLAP_TOL)  # raises OverlapError on any overlap beyond the hard-sphere tolerance
+    # the default placement of the same draw does overlap (what --no-overlap is for)
+    q, _ = linked_packing(d, 30, "trimer", np.random.default_rng(2), phi=0.2)
+    with pytest.raises(ValueError, match="overlap"):
+        q.validate(OVERLAP_TOL)

@@ -27,7 +27,7 @@ def test_without_links_the_chain_lp_is_jamflow_certify(seed):
 
 @pytest.fixture(scope="module", params=[False, True], ids=["fixed-box", "shear-stabilized"])
 def trimers(request):
-    start, _ = linked_packing(2, 8, "trimer", np.random.default_rng(1))
+    start, _ = linked_packing(2, 8, "trimer", np.random.default_rng(1), phi=0.3, no_overlap=True)
     settings = JammingSettings(force_tol=1e-12, pressure_rtol=1e-2, delta_phi=1e-2)
     return request.param, jam_linked(start, 1e-3, settings=settings, shear_stabilize=request.param).packing
 

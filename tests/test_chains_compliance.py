@@ -18,7 +18,7 @@ from jamflow.soft.minimize import minimize_fire
 
 @pytest.fixture(scope="module")
 def stabilized():
-    start, _ = linked_packing(2, 8, "trimer", np.random.default_rng(1))
+    start, _ = linked_packing(2, 8, "trimer", np.random.default_rng(1), phi=0.3, no_overlap=True)
     settings = JammingSettings(force_tol=1e-12, pressure_rtol=1e-2, delta_phi=1e-2)
     return jam_linked(start, 1e-3, settings=settings, shear_stabilize=True).packing
 

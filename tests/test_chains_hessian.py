@@ -21,7 +21,7 @@ from jamflow.soft.potential import HARMONIC, overlapping_pairs
 
 @pytest.fixture(scope="module", params=[False, True], ids=["fixed-box", "shear-stabilized"])
 def jammed(request):
-    start, _ = linked_packing(2, 8, "trimer", np.random.default_rng(1))
+    start, _ = linked_packing(2, 8, "trimer", np.random.default_rng(1), phi=0.3, no_overlap=True)
     settings = JammingSettings(force_tol=1e-12, pressure_rtol=1e-2, delta_phi=1e-2)
     return request.param, jam_linked(start, 1e-3, settings=settings, shear_stabilize=request.param).packing
 

@@ -97,7 +97,7 @@ def test_shear_stabilised_spheres_without_links_project_onto_fixed_volume():
 
 @pytest.fixture(scope="module")
 def stabilized():
-    start, _ = linked_packing(2, 8, "trimer", np.random.default_rng(1))
+    start, _ = linked_packing(2, 8, "trimer", np.random.default_rng(1), phi=0.3, no_overlap=True)
     settings = JammingSettings(force_tol=1e-11, pressure_rtol=1e-2, delta_phi=1e-2)
     return start, jam_linked(start, 1e-4, settings=settings, shear_stabilize=True)
 

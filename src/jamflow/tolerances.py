@@ -105,3 +105,22 @@ LINK_LENGTH_RTOL: float = 1e-13
 #: basis would then carry a direction set by round-off. Unit link directions give
 #: ``|R_kk| ~ 1``; 1e-8 keeps projections accurate to ~1e-8 relative at worst.
 LINK_RANK_RTOL: float = 1e-8
+
+#: Entangled linked packings (:mod:`jamflow.chains.entanglement`): a pair of spheres that
+#: are not linked counts as trapped (links of soft spheres passed through each other
+#: during a minimisation from an overlapping start) when its relative overlap exceeds
+#: this bound *and* its force exceeds :data:`ENTANGLED_FORCE_RATIO` times the pressure's
+#: force scale. At the jamming onset (P0 << 1) overlaps are of the order of P0 (measured:
+#: <= 7e-4 at P0 = 1e-4 in 2D and 3D trimer packings), while links threaded through
+#: spheres hold them at geometric overlaps of 0.16-0.45 diameters; 0.1 separates the two
+#: and keeps residual overlaps of unjammed minima (~force_tol) from ever counting.
+ENTANGLED_OVERLAP: float = 0.1
+
+#: Largest ratio of a contact force to the pressure's force scale ``f_P = d V P / sum_c r_c``
+#: (the mean contact force if the pressure P, contacts and link tensions together, were
+#: carried by the contacts alone) before a pair counts as trapped (with
+#: :data:`ENTANGLED_OVERLAP`). Force distributions of jammed packings have exponential
+#: tails: max / f_P is 3-10 even for 10^6 contacts (measured 5.1 in a 3D trimer packing at
+#: P0 = 1e-4); the entangled 2D trimer packing of chains-fig2 had 800-2200 (contact forces
+#: balanced by link tensions, not by the pressure). 100 leaves a factor ten either side.
+ENTANGLED_FORCE_RATIO: float = 100.0

@@ -38,7 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..bodies import Links
 from ..box import Box
 from ..packing import Packing, sphere_volume
-from ..tolerances import LINK_RANK_RTOL
+from ..tolerances import LINK_RANK_RTOL, OVERLAP_TOL
 
 __all__ = [
     "BOND_ANGLE_RANGE",
@@ -426,7 +426,7 @@ def _distances(pairs: NDArray[np.int64], x: NDArray[np.float64], box: Box) -> ND
 
 def linked_packing(
     d: int, clusters: int, kind: str, rng: np.random.Generator, chain_length: int = 3,
-    free_angles: bool = False, phi: float | None = None, bond_angle: float | None = None,
+    free_angles: bool = False, phi: float | None = None, bond_angle: float | None = None, no_overlap: bool = False,
 ) -> tuple[Packing, list[str]]:
     """A random start of ``clusters`` chains (or trimers) of unit spheres at packing fraction ``phi``.
 
@@ -434,8 +434,11 @@ def linked_packing(
     Cluster centroids are uniform in a cubic box; bond angles are uniform in
     :data:`BOND_ANGLE_RANGE` (or all ``bond_angle``); orientations (and 3D torsions)
     are uniform. A cluster spanning half the box or more, or in 2D one whose links
-    would cross a placed link (or one of its own), is redrawn, up to :data:`PLACEMENT_TRIES` times. Overlaps are allowed:
-    the start is meant for soft jamming from above the jamming density (paper Sec. III).
+    would cross a placed link (or one of its own), is redrawn, up to :data:`PLACEMENT_TRIES` times. Overlaps are allowed
+    unless ``no_overlap``: the start is meant for soft jamming from above the jamming density (paper Sec. III). But
+    where soft spheres overlap, a link can pass through a sphere or another link during the minimisation, and the
+    clusters can end entangled (refused by :mod:`jamflow.chains.entanglement`); a dilute start without overlaps
+    (``no_overlap``, e.g. ``phi = 0.3``), compressed by the bisection, avoids it.
 
     Parameters
     ----------
@@ -450,6 +453,10 @@ def linked_packing(
         sphere jamming densities, so the jamming bisection decompresses).
     bond_angle : float, optional
         Every bond angle [rad]; default random.
+    no_overlap : bool
+        Redraw a cluster whose spheres overlap a placed sphere or each other (random
+        sequential placement; relative overlaps up to :data:`~jamflow.tolerances.OVERLAP_TOL`
+        pass, e.g. next-nearest spheres at a bond angle of exactly pi/3).
 
     Returns
     -------
@@ -487,10 +494,13 @@ def linked_packing(
             p, r = chain_links(m, c * m, body, free_angles)
             if d == 2 and _crosses(pairs + p, lengths + r, x[:(c + 1) * m], box, len(pairs)):
                 continue
+            if no_overlap and _overlaps(x[:(c + 1) * m], box, c * m):
+                continue
             break
         else:
             raise ValueError(f"could not place cluster {c} within half the box width ({0.5 * side:.4g}) and without "
-                             f"crossing links in {PLACEMENT_TRIES} tries: lower --phi or add clusters")
+                             f"crossing links{' or overlaps' if no_overlap else ''} in {PLACEMENT_TRIES} tries: "
+                             f"lower --phi or add clusters")
         pairs += p
         lengths += r
     links, messages = remove_degenerate_links(pairs, lengths, x, box)
@@ -507,3 +517,11 @@ def _crosses(pairs: list, lengths: list, x: NDArray[np.float64], box: Box, first
     order = np.lexsort((p[:, 1], p[:, 0]))  # the row order of Links
     new = np.flatnonzero(order >= first_new)
     return bool(np.any(_cross(Links(p[:, 0], p[:, 1], np.array(lengths)), new, np.arange(len(p)), x, box)))
+
+
+def _overlaps(x: NDArray[np.float64], box: Box, first_new: int) -> bool:
+    """Whether a unit sphere from index ``first_new`` of ``x`` overlaps another beyond :data:`OVERLAP_TOL` (minimum images)."""
+    new = np.arange(first_new, len(x))
+    r = np.linalg.norm(box.minimum_image(x[None, :, :] - x[new, None, :]), axis=2)
+    r[np.arange(len(new)), new] = np.inf
+    return bool(np.any(r < 1.0 - OVERLAP_TOL))

@@ -41,6 +41,7 @@ from ..soft.minimize import FireParameters, MinimizeResult, minimize_fire
 from ..soft.potential import HARMONIC, PowerLawPotential, overlapping_pairs
 from .builders import check_linked_start
 from .clusters import count_clusters
+from .entanglement import check_untangled
 from .shear import ShearStabilizedModel
 
 __all__ = ["DEFAULT_PROTOCOL", "ENERGY_FLOOR", "PROTOCOLS", "jam_linked", "linked_soft_packing", "scale_to_energy"]
@@ -123,6 +124,13 @@ def jam_linked(
         ``settings.force_tol``, ``delta_phi`` and ``max_steps``).
     energy_tol : float, optional
         Energy per sphere [epsilon] at which ``"energy"`` stops.
+
+    Raises
+    ------
+    EntanglementError
+        After any minimum (intermediate or final) whose clusters are entangled
+        (:func:`~jamflow.chains.entanglement.check_untangled`): links passed through
+        each other, so the state is not a jammed packing.
     """
     settings = JammingSettings() if settings is None else settings
     if protocol not in PROTOCOLS:
@@ -142,15 +150,23 @@ def jam_linked(
     phi = float(sphere_volume(box.d, D).sum()) / box.volume
     kind = ShearStabilizedModel if shear_stabilize else LinkedSpheresModel
     model = kind(box, D, scaled.links, x, potential)
+
+    def checked(info: dict) -> None:
+        # refuse an entangled minimum as soon as it appears (module doc of .entanglement)
+        m = info["model"]
+        check_untangled(m.links, info["position"], _current_box(m), D, info["pressure"], potential, info["phi"])
+        if progress is not None:
+            progress(info)
+
     if protocol == "bisection":
-        model, final, history, steps = jam_model_to_pressure(model, x, phi, pressure, settings, progress)
+        model, final, history, steps = jam_model_to_pressure(model, x, phi, pressure, settings, checked)
     else:
         history = {"phi": [], "pressure": [], "steps": []}
         model, final, _, steps = scale_to_energy(model, x, phi, energy_tol, settings.force_tol, settings.delta_phi,
                                                  settings.max_steps, potential.exponent, settings.fire_params,
-                                                 progress, history)
-    if shear_stabilize:
-        final = replace(final, box=model.last_box())
+                                                 checked, history)
+    final = replace(final, box=_current_box(model))
+    check_untangled(model.links, final.position, final.box, D, final.pressure, potential)
     attrs = {
         "length_unit": "mean particle diameter", "force_unit": "epsilon / mean diameter",
         "pressure_unit": "epsilon / mean diameter^d", "energy": final.energy, "energy_unit": "epsilon",
@@ -173,6 +189,11 @@ def jam_linked(
     else:
         converged = final.converged and ENERGY_FLOOR * energy_tol < final.energy / model.n <= energy_tol
     return JammingResult(out, bool(converged), history, steps)
+
+
+def _current_box(model: LinkedSpheresModel) -> Box:
+    """The box of a model's last minimum: the strained box of a shear-stabilised model, else its fixed box."""
+    return model.last_box() if isinstance(model, ShearStabilizedModel) else model.box
 
 
 def scale_to_energy(
@@ -221,7 +242,8 @@ def scale_to_energy(
             history["pressure"].append(res.pressure)
             history["steps"].append(res.steps)
         if progress is not None:
-            progress({"phi": phi, "pressure": res.pressure, "energy_per_sphere": e, "steps": steps})
+            progress({"phi": phi, "pressure": res.pressure, "energy_per_sphere": e, "steps": steps,
+                      "model": model, "position": res.position})
         if not res.converged:
             raise RuntimeError(f"FIRE step budget ({max_steps}) exhausted at phi = {phi:.10f}")
         if e <= ENERGY_FLOOR * energy_tol:

@@ -39,8 +39,8 @@ from .common import (
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "init-chains", _init_chains,
-                    "random start of chains or rigid trimers of unit spheres (links, overlaps allowed; "
-                    "no crossing links in 2D)", writes=("out",), packings=("out",))
+                    "random start of chains or rigid trimers of unit spheres (links, overlaps allowed unless "
+                    "--no-overlap; no crossing links in 2D)", writes=("out",), packings=("out",))
     p.add_argument("out", help="output netCDF packing with links")
     p.add_argument("--d", type=int, required=True, help="dimension (2 or 3)")
     p.add_argument("--clusters", type=int, required=True, help="number of clusters K (N = K M spheres)")
@@ -52,6 +52,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--bond-angle", type=float, default=None,
                    help="every bond angle [degrees]; default uniform in [60, 150] degrees")
     p.add_argument("--phi", type=float, default=None, help="packing fraction (default 0.86 in 2D, 0.66 in 3D)")
+    p.add_argument("--no-overlap", action="store_true",
+                   help="place clusters without overlaps (random sequential placement; use a dilute --phi, e.g. "
+                        "0.3): where soft spheres overlap, links can pass through each other during soft-jam and "
+                        "the clusters end entangled (docs/chains.md)")
     p.add_argument("--seed", type=seed, required=True, help="random seed")
     add_quiet(p)
 
@@ -99,7 +103,8 @@ def _link_rows(packing) -> list[tuple[str, object]]:
 def _init_chains(args: argparse.Namespace) -> int:
     angle = None if args.bond_angle is None else radians(args.bond_angle)
     packing, messages = linked_packing(args.d, args.clusters, args.cluster, np.random.default_rng(args.seed),
-                                       args.chain_length, args.free_angles, args.phi, angle)
+                                       args.chain_length, args.free_angles, args.phi, angle,
+                                       args.no_overlap)
     _messages(messages)
     packing = packing.evolve(seed=args.seed)
     write_packing(packing, args.out, stage_parameters(args, "out"))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from ..chains.entanglement import check_untangled
 from ..chains.jamming import linked_soft_packing
 from ..io import read_packing, write_packing
 from ..models import LinkedSpheresModel, SphereModel
@@ -52,6 +53,7 @@ def _minimize(args: argparse.Namespace) -> int:
              "potential_exponent": potential.exponent}
     parameters = stage_parameters(args, "input", "out")
     if isinstance(model, LinkedSpheresModel):
+        check_untangled(model.links, res.position, model.box, packing.diameter, res.pressure, potential)
         out = linked_soft_packing(packing, model, res, ">minimize", attrs, parameters)
     else:
         out = soft_packing(res.position, packing.box, packing.diameter, potential, packing, ">minimize",

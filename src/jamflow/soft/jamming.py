@@ -235,6 +235,10 @@ def bisect_to_pressure(
     position : ndarray, shape (N, d)
     phi : float
         Packing fraction of the start (the bisection variable; ``phi ~ 1 / V``).
+    progress : callable, optional
+        Called after every minimisation with ``phi``, ``pressure``, ``delta_phi``,
+        ``steps``, the ``model`` and the minimum's centres ``position`` (so a caller can
+        check the state, e.g. :mod:`jamflow.chains.entanglement`).
     history : dict of lists, optional
         ``phi``, ``pressure``, ``steps`` are appended per bisection step.
     direction : int
@@ -257,7 +261,8 @@ def bisect_to_pressure(
             history["pressure"].append(res.pressure)
             history["steps"].append(res.steps)
         if progress is not None:
-            progress({"phi": phi, "pressure": res.pressure, "delta_phi": delta_phi, "steps": steps})
+            progress({"phi": phi, "pressure": res.pressure, "delta_phi": delta_phi, "steps": steps,
+                      "model": model, "position": res.position})
         if not res.converged:
             raise RuntimeError(f"FIRE step budget ({max_steps}) exhausted at phi = {phi:.10f}")
         if abs(res.pressure - pressure) <= rtol * pressure:
