@@ -16,8 +16,8 @@ Same start, same potential, same FIRE 2.0 parameters, same stopping rule, one th
   cap ``dmax`` and its abort after ``vdfmax`` uphill steps are switched off
   (jamflow has neither);
 - stop: ``max_i |F_i| <= 1e-12`` (``min_modify norm max``, ``etol 0``);
-- Verlet skin ``0.15 <D>`` in both (jamflow's ``DEFAULT_SKIN``; LAMMPS ``neighbor
-  0.15<D> bin``, ``neigh_modify every 1 delay 0 check yes``);
+- the same Verlet skin in both: jamflow's ``SPHERE_SKIN`` of the dimension (0.4 <D> in
+  2D, 0.3 <D> in 3D; LAMMPS ``neighbor <skin> bin``, ``neigh_modify every 1 delay 0 check yes``);
 - one thread: ``NUMBA_NUM_THREADS = OMP_NUM_THREADS = 1``, LAMMPS one MPI rank.
 
 The two codes take different paths to different minima (round-off differs from the
@@ -47,6 +47,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import argparse
 import ctypes
+import json
 import re
 import sys
 import tempfile
@@ -65,7 +66,7 @@ from jamflow.initial import random_packing
 from jamflow.io import new_dataset_attrs, write_dataset
 from jamflow.soft import fire
 from jamflow.soft.minimize import DEFAULT_FIRE
-from jamflow.soft.potential import DEFAULT_SKIN, evaluate
+from jamflow.soft.potential import SPHERE_SKIN, evaluate
 
 OUT = Path(__file__).resolve().parent / "output"
 #: (d, N, phi) of the Bodies issue (#16)
@@ -129,7 +130,7 @@ def run_lammps(x, box, D, max_steps: int) -> dict:
                 cmds.append(f"pair_coeff {a + 1} {b + 1} {1.0 / (2.0 * sigma**2)!r} {sigma!r}")
         p = DEFAULT_FIRE
         cmds += [
-            f"neighbor {DEFAULT_SKIN * mean!r} bin", "neigh_modify every 1 delay 0 check yes",
+            f"neighbor {SPHERE_SKIN[d] * mean!r} bin", "neigh_modify every 1 delay 0 check yes",
             "thermo_modify norm no",
             f"timestep {p.dt * mean!r}",
             "min_style fire",
@@ -220,7 +221,7 @@ def main() -> None:
                 "d": ("case", [c[0] for c in cases]), "n": ("case", [c[1] for c in cases]),
                 "phi": ("case", [c[2] for c in cases])},
         attrs=new_dataset_attrs("minimize_vs_lammps", {"force_tol": FORCE_TOL, "seed": args.seed,
-                                "fire": DEFAULT_FIRE.as_dict(), "skin_over_mean_diameter": DEFAULT_SKIN,
+                                "fire": DEFAULT_FIRE.as_dict(), "skin_over_mean_diameter": json.dumps(SPHERE_SKIN),
                                 "clock": "cpu" if args.cpu_time else "wall"},
                                 note="runs interleaved jamflow, LAMMPS, ...; medians over runs; "
                                      "one thread on a shared, loaded machine"),

@@ -32,7 +32,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ...bodies import ShapeTable
 from ...box import Box
-from ...soft.potential import NeighborList
+from ...soft.potential import DEFAULT_SKIN, NeighborList
 from ..base import ModelEvaluation
 from . import _kernels
 
@@ -128,7 +128,8 @@ class ShapeModel:
         self.d = 2
         self.n_dof = 3 * self.n
         self.bounding_diameter = 2.0 * shapes.bounding_radius[self.shape_index]
-        self.nlist = NeighborList(self.bounding_diameter) if nlist is None else nlist
+        self.nlist = (NeighborList(self.bounding_diameter, DEFAULT_SKIN * float(self.bounding_diameter.mean()))
+                      if nlist is None else nlist)
         self.params = np.ascontiguousarray(_shape_parameters(shapes, self.family)[self.shape_index])
         inertia = self.mass * shapes.gyration_squared[self.shape_index]
         self.inverse_mass = np.concatenate([np.full(2 * self.n, 1.0 / self.mass), 1.0 / inertia])
