@@ -16,7 +16,7 @@ Same start, same potential, same FIRE 2.0 parameters, same stopping rule, one th
   cap ``dmax`` and its abort after ``vdfmax`` uphill steps are switched off
   (jamflow has neither);
 - stop: ``max_i |F_i| <= 1e-12`` (``min_modify norm max``, ``etol 0``);
-- the same Verlet skin in both: jamflow's ``SPHERE_SKIN`` of the dimension (0.4 <D> in
+- the same Verlet skin in both: jamflow's ``SPHERE_SKIN`` of the dimension (0.15 <D> in
   2D, 0.3 <D> in 3D; LAMMPS ``neighbor <skin> bin``, ``neigh_modify every 1 delay 0 check yes``);
 - one thread: ``NUMBA_NUM_THREADS = OMP_NUM_THREADS = 1``, LAMMPS one MPI rank.
 

@@ -49,11 +49,11 @@ __all__ = [
 #: takes the d = 3 value): pairs closer than ``sigma_ij + skin`` are listed, and the
 #: list is rebuilt when displacements use up the skin. The skin changes no result (a
 #: listed pair beyond contact adds nothing, and FIRE's state survives a rebuild), only
-#: the split of time between pair loops and rebuilds. Measured with FIRE to
-#: max|F| <= 1e-12 (docs/energy-models.md, "Neighbour rebuilds, third pass"): rebuild
-#: share of CPU time 2D N = 1024 9.9 % at 0.15, 4.3 % at 0.4; 3D N = 4096 6.9 % at 0.15,
-#: 2.5 % at 0.3; time per force evaluation equal within the 4 % run-to-run spread.
-SPHERE_SKIN: dict[int, float] = {2: 0.4, 3: 0.3}
+#: the split of time between pair loops and rebuilds. Measured with FIRE, CPU time
+#: (docs/energy-models.md, "Neighbour rebuilds, third pass"): in 3D N = 4096 0.3 cuts
+#: the rebuild share from 6.9 % to 2.5 % at an unchanged time per evaluation; in 2D a
+#: larger skin helps N = 1024 (-4 %) but costs N = 16384 8-10 % per evaluation.
+SPHERE_SKIN: dict[int, float] = {2: 0.15, 3: 0.3}
 #: Verlet skin of the bounding-diameter lists of non-spherical models, as a fraction
 #: of the mean bounding diameter (their pair kernels cost more per listed pair).
 DEFAULT_SKIN: float = 0.15
