@@ -180,3 +180,18 @@ def test_fourth_derivatives_do_not_depend_on_pressure_down_to_1e_7():
     np.testing.assert_allclose(high.eigenvalue[high.region == 1] / low.eigenvalue[low.region == 1], 10.0, rtol=1e-3)
     np.testing.assert_allclose(low.fourth_derivative[low.region == 1], high.fourth_derivative[high.region == 1],
                                rtol=1e-2)
+
+
+def test_a_packing_without_a_quartic_band_has_no_region_1():
+    # regression: 32 dumbbells (`jamflow init-shapes db.nc --shape dumbbell --aspect-ratio 3
+    # --n 32 --seed 1`, `jamflow soft-jam db.nc OUT --pressure 1e-9`). The widest gap of the
+    # lower spectrum lies between its two lowest nonzero modes (2e-3 and 4e-3, a factor 2),
+    # and the bare widest-gap rule put the lowest one into region 1, with a negative fourth
+    # derivative: 2e-3 is a million times the pressure, not a stress-scale quartic mode
+    p = read_packing(Path(__file__).parent / "data" / "shapes_dumbbell_ar3_n32_p1e-9.nc", None)
+    spec = spectrum(p)
+    nonzero = spec.eigenvalue[spec.region > 0]
+    assert nonzero.min() > 1e6 * 1e-9
+    assert spec.n_quartic == 0
+    assert spec.lambda_c == spec.lambda_0
+    assert spec.n_zero == 2

@@ -59,7 +59,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("out", help="output netCDF spectrum (dim mode)")
     p.add_argument("--lambda-c", type=float, default=None,
                    help="cutoff between regions 1 and 2 [k]; default: the widest gap of log(lambda) in the "
-                        "lower half of the nonzero spectrum")
+                        "lower half of the nonzero spectrum that spans a decade and starts at most "
+                        "1e3 P (region 1 empty without one)")
     add_quiet(p)
 
 

@@ -18,7 +18,13 @@ Regions (Fig. 7):
 ``lambda_c`` is given, or placed at the geometric middle of the widest gap of
 ``log lambda`` among the nonzero eigenvalues in the lower half of the spectrum (the
 paper separates regions 1 and 2 by such a gap, ``lambda_c ~ 4e-8`` at ``P0 = 1e-9``;
-region 1 scales with ``P0``, region 2 does not). The fourth derivative of ``U`` along
+region 1 scales with ``P0``, region 2 does not). Only a gap that can separate a
+quartic band counts: its lower edge is a stress-scale eigenvalue,
+``lambda <= QUARTIC_PRESSURE_RATIO * P`` (``P`` the packing's virial pressure), and it
+spans at least ``REGION_GAP_MIN_RATIO``. Without such a gap region 1 is empty
+(``lambda_c = lambda_0``): the widest gap alone put a lone ordinary mode
+(``lambda = 2e-3`` at ``P = 1e-9``, negative fourth derivative) of a dumbbell packing
+into region 1. The fourth derivative of ``U`` along
 each region-1 mode ``v`` (Fig. 11) is the second difference of ``v^T M(q + h v) v`` with a
 step that opens no contact (:func:`fourth_derivative_step`).
 """
@@ -30,15 +36,27 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..models.base import pressure_of
 from ..packing import Packing
 from .counting import count_constraints, shape_model
 
-__all__ = ["ZERO_EIGENVALUE_RTOL", "FOURTH_DERIVATIVE_STEP", "fourth_derivative_step", "Spectrum", "spectrum"]
+__all__ = ["ZERO_EIGENVALUE_RTOL", "QUARTIC_PRESSURE_RATIO", "REGION_GAP_MIN_RATIO", "FOURTH_DERIVATIVE_STEP", "fourth_derivative_step", "Spectrum", "spectrum"]
 
 #: Eigenvalues with ``|lambda| <= ZERO_EIGENVALUE_RTOL * lambda_max`` are zero modes:
 #: LAPACK's eigenvalues err by ``O(eps ||M||) ~ 1e-16 lambda_max``; 1e-13 leaves a
 #: factor of ~500 for the round-off of M itself (complex-step entries to ~eps).
 ZERO_EIGENVALUE_RTOL: float = 1e-13
+
+#: Region-1 (quartic) eigenvalues are stress terms and vanish with the pressure: a gap
+#: opens region 1 only when its lower edge is at most this many times the pressure
+#: [k units]. Measured ``lambda / P``: at most 1.1 (circulo-lines, A = 1.03 and 1.1,
+#: P = 1e-7, 1e-6) and 0.004 (ellipses, alpha = 1.001), while region 2 does not scale
+#: with P (lowest 7e-4 .. 2e-2 on the same packings).
+QUARTIC_PRESSURE_RATIO: float = 1e3
+
+#: A gap that separates regions 1 and 2 spans at least this factor in ``lambda``
+#: (measured: 1.1e4, 990 and 5e7 on the packings above).
+REGION_GAP_MIN_RATIO: float = 10.0
 
 #: Largest step [length, or rad] of the second difference of ``v^T M v`` along a quartic
 #: mode: truncation ``h^2 U^(6) ~ 1e-6`` relative; round-off ``eps ||M|| / h^2 ~ 1e-9``.
@@ -94,13 +112,17 @@ class Spectrum:
     n_zero: int
 
 
-def _auto_cutoff(lam: NDArray[np.float64], lambda_0: float) -> float:
+def _auto_cutoff(lam: NDArray[np.float64], lambda_0: float, pressure: float) -> float:
+    """``lambda_c`` from the widest admissible gap (module doc); ``lambda_0`` when there is none."""
     nonzero = lam[lam > lambda_0]
     low = nonzero[: max(2, nonzero.size // 2)]
     if low.size < 2:
         return float(lambda_0)
     gaps = np.diff(np.log(low))
-    k = int(np.argmax(gaps))
+    admissible = (low[:-1] <= QUARTIC_PRESSURE_RATIO * pressure) & (gaps >= np.log(REGION_GAP_MIN_RATIO))
+    if not np.any(admissible):
+        return float(lambda_0)
+    k = int(np.argmax(np.where(admissible, gaps, -np.inf)))
     return float(np.sqrt(low[k] * low[k + 1]))
 
 
@@ -114,7 +136,7 @@ def spectrum(packing: Packing, lambda_c: float | None = None, fourth: bool = Tru
     rot = np.sum(vec[2 * n:] ** 2, axis=0)
     lambda_0 = ZERO_EIGENVALUE_RTOL * float(max(abs(lam[-1]), abs(lam[0])))
     if lambda_c is None:
-        lambda_c = _auto_cutoff(lam, lambda_0)
+        lambda_c = _auto_cutoff(lam, lambda_0, pressure_of(model.evaluate(q), packing.box))
     if not (np.isfinite(lambda_c) and lambda_c > 0.0):
         raise ValueError(f"--lambda-c must be positive and finite, got {lambda_c}")
     region = np.where(np.abs(lam) <= lambda_0, 0, np.where(lam < lambda_c, 1, np.where(rot > 0.5, 2, 3)))
