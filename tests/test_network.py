@@ -16,6 +16,7 @@ from jamflow.network import (
     isostatic_count,
     jacobian_rank,
     link_jacobian,
+    pair_rows,
     prune_rattlers,
     self_stresses,
     sphere_contacts,
@@ -229,3 +230,18 @@ def test_self_stresses_count_is_contacts_minus_rank() -> None:
     rng = np.random.default_rng(0)
     J = sp.random(30, 20, density=0.2, random_state=rng, format="csr")
     assert self_stresses(J).shape == (30, 30 - jacobian_rank(J)[0])
+
+
+def test_pair_rows_are_the_centre_block_of_the_contact_jacobian():
+    # with unit normals the rows are the sphere Jacobian exactly; with any vectors
+    # v_c = s_c n_c they are that Jacobian with row c scaled by s_c (CALiPPSO's LP rows)
+    p = random_packing(40, 3, 0.3, "bi", seed=8, ratio=1.4)
+    pairs = np.array([[0, 5], [3, 4], [7, 39], [2, 21]])
+    cs = sphere_contacts(p.position, p.box, pairs)
+    J = contact_jacobian(cs, p.n, p.d)
+    R = pair_rows(pairs, cs.normal, p.n)
+    assert R.shape == J.shape and (R != J).nnz == 0
+    scale = np.array([0.5, 2.0, -3.0, 7.5])
+    np.testing.assert_allclose(pair_rows(pairs, scale[:, None] * cs.normal, p.n).toarray(),
+                               (sp.diags(scale) @ J).toarray(), rtol=1e-15, atol=0.0)
+    assert pair_rows(np.zeros((0, 2), int), np.zeros((0, 3)), p.n).shape == (0, 3 * p.n)

@@ -153,6 +153,7 @@ from .box import Box
 from .force_network import MIN_NORM, balance_matrix, min_norm_forces
 from .highs import new_highs
 from .neighbors import pairs_within
+from .network import pair_rows
 from .packing import Packing, max_overlap, near_pairs
 from .rigidity import contact_geometry
 from .tolerances import CONTACT_GAP_TOL, OVERLAP_TOL
@@ -554,23 +555,14 @@ def _row_geometry(rows: _Rows, x: NDArray[np.float64], D: NDArray[np.float64], b
 
 def _matrix(rows: _Rows, geo: _RowGeometry, n: int, d: int, unit: float) -> sp.csc_matrix:
     """Scaled constraint matrix (rows x (d N + 1)), column ``d N`` is ``g``."""
-    P = rows.n_pairs
     coef = 2.0 * unit * geo.dx / geo.sig[:, None] ** 2  # (P, d)
-    k = np.arange(d)
-    r_pair = np.repeat(np.arange(P), d)
-    ci = (rows.i[:, None] * d + k).ravel()
-    cj = (rows.j[:, None] * d + k).ravel()
+    pairs = pair_rows(np.stack([rows.i, rows.j], axis=1), -coef, n)
     W = len(rows.wall_particle)
-    axis = rows.wall_face // 2
     sign = np.where(rows.wall_face % 2 == _UPPER, 1.0, -1.0)
     wcoef = sign * 2.0 * unit * geo.a / geo.rad**2
-    r_wall = P + np.arange(W)
-    cw = rows.wall_particle * d + axis
-    m = P + W
-    row = np.concatenate([r_pair, r_pair, r_wall, np.arange(m)])
-    col = np.concatenate([ci, cj, cw, np.full(m, d * n)])
-    val = np.concatenate([coef.ravel(), -coef.ravel(), wcoef, np.ones(m)])
-    A = sp.csc_matrix((val, (row, col)), shape=(m, d * n + 1))
+    walls = sp.csr_matrix((wcoef, (np.arange(W), rows.wall_particle * d + rows.wall_face // 2)), shape=(W, d * n))
+    m = rows.n_pairs + W
+    A = sp.hstack([sp.vstack([pairs, walls]), sp.csr_matrix(np.ones((m, 1)))], format="csc")
     A.sort_indices()
     return A
 

@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 from scipy.sparse.linalg import lsqr, splu
 
 from .highs import new_highs
+from .network import pair_rows
 from .tolerances import FORCE_BALANCE_TOL
 
 __all__ = ["MIN_NORM", "balance_matrix", "min_norm_forces"]
@@ -78,21 +79,15 @@ def balance_matrix(
         Row ``d i + a`` is component ``a`` of the net force on ``i``: a repulsive pair
         force ``f`` adds ``-f n_ij`` on ``i`` and ``+f n_ij`` on ``j``.
     """
-    unit = np.asarray(unit, dtype=np.float64).reshape(-1, d)
-    c = np.asarray(contacts, dtype=np.int64).reshape(-1, 2)
-    nc = len(c)
-    axis = np.arange(d)
-    rows = np.concatenate([(d * c[:, 0:1] + axis).ravel(), (d * c[:, 1:2] + axis).ravel()])
-    cols = np.concatenate([np.repeat(np.arange(nc), d)] * 2)
-    vals = np.concatenate([-unit.ravel(), unit.ravel()])
-    if wall_particles is not None and len(wall_particles):
-        wp = np.asarray(wall_particles, dtype=np.int64)
-        wf = np.asarray(wall_faces, dtype=np.int64)
-        rows = np.concatenate([rows, d * wp + wf // 2])
-        cols = np.concatenate([cols, nc + np.arange(len(wp))])
-        vals = np.concatenate([vals, np.where(wf % 2 == 0, 1.0, -1.0)])
-        nc += len(wp)
-    return sp.csr_matrix((vals, (rows, cols)), shape=(d * n, nc))
+    # the pair columns are the transposed contact Jacobian (virtual work)
+    pairs = pair_rows(contacts, np.asarray(unit, dtype=np.float64).reshape(-1, d), n).T
+    if wall_particles is None or not len(wall_particles):
+        return pairs.tocsr()
+    wp = np.asarray(wall_particles, dtype=np.int64)
+    wf = np.asarray(wall_faces, dtype=np.int64)
+    walls = sp.csc_matrix((np.where(wf % 2 == 0, 1.0, -1.0), (d * wp + wf // 2, np.arange(len(wp)))),
+                          shape=(d * n, len(wp)))
+    return sp.hstack([pairs, walls], format="csr")
 
 
 def min_norm_forces(B: sp.spmatrix, weight: NDArray[np.float64], d: int,

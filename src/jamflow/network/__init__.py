@@ -6,7 +6,8 @@ this package (``docs/network.md``):
 - :mod:`.contacts`: :class:`ContactSet` (body pairs, normals, separations, contact
   arms) and :func:`sphere_contacts`;
 - :mod:`.jacobian`: :func:`contact_jacobian` (``d gap / d q`` with optional
-  rotation and strain columns), :func:`link_jacobian`, :func:`strain_basis`;
+  rotation and strain columns), :func:`pair_rows` (its centre block for any row
+  vectors), :func:`link_jacobian`, :func:`strain_basis`;
 - :mod:`.counting`: :func:`prune_rattlers`, :func:`find_sliders`,
   :func:`isostatic_count`, :func:`rigidity_counting`;
 - :mod:`.self_stress`: :func:`self_stresses`, :func:`positive_self_stress`,
@@ -15,7 +16,7 @@ this package (``docs/network.md``):
 
 from .contacts import ContactSet, sphere_contacts
 from .counting import find_sliders, isostatic_count, prune_rattlers, rigidity_counting
-from .jacobian import contact_jacobian, link_jacobian, n_strain, strain_basis
+from .jacobian import contact_jacobian, link_jacobian, n_strain, pair_rows, strain_basis
 from .self_stress import (
     RigidNetwork,
     jacobian_rank,
@@ -34,6 +35,7 @@ __all__ = [
     "jacobian_rank",
     "link_jacobian",
     "n_strain",
+    "pair_rows",
     "positive_self_stress",
     "prune_rattlers",
     "rigid_network",

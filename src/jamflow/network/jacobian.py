@@ -35,7 +35,7 @@ from ..bodies import Links
 from ..box import Box
 from .contacts import ContactSet, sphere_contacts
 
-__all__ = ["contact_jacobian", "link_jacobian", "n_strain", "strain_basis"]
+__all__ = ["contact_jacobian", "link_jacobian", "n_strain", "pair_rows", "strain_basis"]
 
 
 def strain_basis(d: int, volume_preserving: bool = True) -> NDArray[np.float64]:
@@ -180,6 +180,33 @@ def contact_jacobian(
         return sp.csr_matrix((val.ravel(), (rows, col.ravel())), shape=(nc, n_cols))
     indptr = np.arange(0, col.size + 1, col.shape[1]) if nc else np.zeros(1, dtype=np.int64)
     return sp.csr_matrix((val.ravel(), col.ravel(), indptr), shape=(nc, n_cols))
+
+
+def pair_rows(pairs: ArrayLike, vectors: ArrayLike, n_bodies: int) -> sp.csr_matrix:
+    """Rows ``-v_c`` on the centre columns of body ``i`` and ``+v_c`` on those of ``j``.
+
+    The centre block of :func:`contact_jacobian` with any row vectors ``v_c`` in place
+    of the unit normals: the gradient of any function of the separation ``r_j - r_i``.
+    CALiPPSO's LP rows are these with ``v = -2 <D> r_ij / sigma_ij^2`` (the scaled
+    gradient of ``-|r_ij|^2 / sigma_ij^2``).
+
+    Parameters
+    ----------
+    pairs : array_like of int, shape (n_c, 2)
+        Body pairs ``(i, j)``.
+    vectors : array_like, shape (n_c, d)
+        Row vectors ``v_c``.
+    n_bodies : int
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix, shape (n_c, d n_bodies)
+        Canonical CSR.
+    """
+    c = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    v = np.asarray(vectors, dtype=np.float64)
+    # the separation enters only strain columns, which these rows do not have
+    return contact_jacobian(ContactSet(c[:, 0], c[:, 1], v, v), n_bodies, v.shape[1])
 
 
 def link_jacobian(links: Links, position: NDArray[np.float64], box: Box, *,
