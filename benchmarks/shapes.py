@@ -52,7 +52,7 @@ def main() -> None:
     # untimed warm-up: numba compiles every family's kernels (and the spectrum's) on first use
     for family in FAMILIES[1:]:
         table = bidisperse_shapes(unit_shape(family, asphericity=args.asphericity))
-        warm = jam_shapes(random_shape_packing(table, 16, 0.5, args.seed), 1e-3, settings).packing
+        warm = jam_shapes(random_shape_packing(table, 16, 0.4, args.seed), 1e-3, settings).packing
         spectrum(warm, fourth=False)
     jam_to_pressure(random_packing(16, 2, 0.5, "bi", args.seed, 1.4, 0.5), 1e-3, HARMONIC)
     shape = (len(FAMILIES), len(args.n))

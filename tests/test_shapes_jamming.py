@@ -178,3 +178,32 @@ def test_reuleaux_triangles_jam_and_are_counted():
     assert np.all(degree[~rattler] >= 3)
     assert counting.isostatic_count == 3 * (p.n - counting.n_rattlers) - 1 - counting.n_sliders
 
+
+
+def test_minimize_command_takes_shapes_and_fire_and_cg_find_the_same_minimum(tmp_path, capsys):
+    # the vendored 16 circulo-lines (A = 1.1, P0 = 1e-6) compressed by dphi = 1e-3 at fixed
+    # shapes: FIRE (with moments of inertia) and Polak-Ribiere CG are independent
+    # minimisers of the same energy and must meet in one minimum
+    from pathlib import Path
+
+    from jamflow.io import read_dataset, write_packing
+
+    base = read_packing(Path(__file__).parent / "data" / "shapes_circulo_line_a1.1_n16_p1e-6.nc", None)
+    s = (1.0 + 1e-3) ** -0.5
+    src = tmp_path / "c.nc"
+    write_packing(base.evolve(position=base.position * s, box=base.box.scaled(s)), src)
+    out = {}
+    for method in ("fire", "cg"):
+        path = tmp_path / f"{method}.nc"
+        assert main(["minimize", str(src), str(path), "--method", method, "--force-tol", "1e-12"]) == 0
+        assert "n_force_evaluations" in capsys.readouterr().out
+        ds = read_dataset(path)
+        assert ds.attrs["max_force"] <= 1e-12
+        out[method] = (read_packing(path, None), ds.attrs["energy"])
+    (pf, ef), (pc, ec) = out["fire"], out["cg"]
+    assert ec == pytest.approx(ef, rel=1e-10)
+    assert ef > 10.0 * base.attrs["energy"]  # the compression stored energy: a real minimisation
+    assert np.abs(pf.box.minimum_image(pc.position - pf.position)).max() < 1e-6
+    assert np.abs(np.angle(np.exp(1j * (pc.orientation - pf.orientation)))).max() < 1e-6
+    assert main(["minimize", str(src), str(tmp_path / "x.nc"), "--exponent", "2.5"]) == 1
+    assert "linear spring" in capsys.readouterr().err

@@ -8,6 +8,9 @@ from ..chains.entanglement import check_untangled
 from ..chains.jamming import linked_soft_packing
 from ..io import read_packing, write_packing
 from ..models import LinkedSpheresModel, SphereModel
+from ..packing import Packing
+from ..shapes.counting import shape_model
+from ..shapes.jamming import shape_packing
 from ..soft.jamming import soft_packing
 from ..soft.minimize import METHODS, minimize
 from ..soft.potential import PowerLawPotential
@@ -17,16 +20,18 @@ from .common import add_command, add_quiet, print_summary, stage_parameters
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "minimize", _minimize,
-                    "minimise the energy at a fixed box (soft spheres, linked spheres) with FIRE, CG or "
-                    "steepest descent", reads=("input",), writes=("out",), packings=("out",))
-    p.add_argument("input", help="input netCDF packing (overlaps allowed; links make it a linked-spheres model)")
+                    "minimise the energy at a fixed box (soft spheres, linked spheres, shaped bodies with "
+                    "rotations) with FIRE, CG or steepest descent", reads=("input",), writes=("out",), packings=("out",))
+    p.add_argument("input", help="input netCDF packing (overlaps allowed; links make it a linked-spheres model, "
+                                 "a shape table a shaped-body model)")
     p.add_argument("out", help="output netCDF packing (contacts = overlapping unlinked pairs with their forces)")
     p.add_argument("--force-tol", type=float, default=MINIMIZE_FORCE_TOL,
                    help=f"stop when the largest per-particle (projected) force norm is at most this "
                         f"[epsilon / length] (default {MINIMIZE_FORCE_TOL:g})")
     p.add_argument("--max-steps", type=int, default=1_000_000, help="step budget (default 1000000)")
     p.add_argument("--method", choices=METHODS, default="fire", help="minimiser (default fire)")
-    p.add_argument("--exponent", type=float, default=2.0, help="contact potential exponent w (2 harmonic, 2.5 Hertz)")
+    p.add_argument("--exponent", type=float, default=2.0,
+                   help="contact potential exponent w of spheres (2 harmonic, 2.5 Hertz; shapes: linear spring only)")
     add_quiet(p)
 
 
@@ -37,8 +42,7 @@ def _minimize(args: argparse.Namespace) -> int:
         raise ValueError(f"--max-steps must be at least 1, got {args.max_steps}")
     packing = read_packing(args.input, None)
     if packing.shapes is not None:
-        raise ValueError(f"{args.input}: shaped particles have no energy model yet; minimize handles "
-                         "spheres and linked spheres")
+        return _minimize_shapes(args, packing)
     potential = PowerLawPotential(exponent=args.exponent)
     if packing.links is not None and len(packing.links):
         model = LinkedSpheresModel(packing.box, packing.diameter, packing.links, packing.position, potential)
@@ -66,5 +70,30 @@ def _minimize(args: argparse.Namespace) -> int:
         ("max_force", f"{res.max_force:.3g} epsilon/length"),
         ("pressure", f"{res.pressure:.10g} epsilon/length^d"),
         ("contacts", res.n_contacts),
+    ])
+    return 0
+
+
+def _minimize_shapes(args: argparse.Namespace, packing: Packing) -> int:
+    """Shaped bodies: centres and orientations (with moments of inertia), linear springs of stiffness k."""
+    if args.exponent != 2.0:
+        raise ValueError(f"--exponent {args.exponent:g}: shaped bodies interact by the linear spring (Eq. 1) only")
+    model, q = shape_model(packing)
+    res = minimize(model, model.positions(q), args.method, args.force_tol, args.max_steps)
+    if not res.converged:
+        raise RuntimeError(f"{args.method} did not reach --force-tol {args.force_tol:g} within "
+                           f"--max-steps {args.max_steps} (max_force {res.max_force:.3g}); nothing written")
+    attrs = {**packing.attrs, "energy": res.energy, "energy_unit": "k", "max_force": res.max_force,
+             "n_force_evaluations": res.evaluations, "minimize_steps": res.steps, "converged": 1}
+    parameters = stage_parameters(args, "input", "out")
+    out = shape_packing(model, res.position, packing, parameters, attrs)
+    write_packing(out, args.out, parameters)
+    print_summary(args, args.out, [
+        ("method", f"{args.method}, converged after {res.steps} steps"),
+        ("n_force_evaluations", res.evaluations),
+        ("energy", f"{res.energy:.15g} k"),
+        ("max_force", f"{res.max_force:.3g} (force and torque / mean bounding diameter)"),
+        ("pressure", f"{res.pressure:.10g} k"),
+        ("interacting pairs", res.n_contacts),
     ])
     return 0
