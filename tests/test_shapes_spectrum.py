@@ -195,3 +195,21 @@ def test_a_packing_without_a_quartic_band_has_no_region_1():
     assert spec.n_quartic == 0
     assert spec.lambda_c == spec.lambda_0
     assert spec.n_zero == 2
+
+
+def test_modes_warns_when_residual_forces_are_not_small_against_the_pressure(tmp_path, capsys):
+    # the vendored packing (A = 1.1, P0 = 1e-6) has max F ~ 1e-14: balanced; shifting one
+    # body by 1e-6 leaves forces ~1e-6 > 1e-3 P, which shift the quartic eigenvalues (~P)
+    p = read_packing(DATA, None)
+    assert spectrum(p, fourth=False).balanced
+    moved = p.position.copy()
+    moved[0, 0] += 1e-6
+    spec = spectrum(p.evolve(position=moved), fourth=False)
+    assert spec.max_force > 1e-3 * spec.pressure and not spec.balanced
+    from jamflow.io import write_packing
+
+    src = tmp_path / "moved.nc"
+    write_packing(p.evolve(position=moved), src)
+    assert main(["modes", str(src), str(tmp_path / "m.nc")]) == 0
+    assert "N_1 may be wrong" in capsys.readouterr().err
+    assert xr.open_dataset(tmp_path / "m.nc").attrs["force_balanced_for_spectrum"] == 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 import numpy as np
 
@@ -119,12 +120,16 @@ def _shape_survey(args: argparse.Namespace) -> int:
 
 
 def _modes(args: argparse.Namespace) -> int:
-    from ..shapes.spectrum import quartic_check, spectrum
+    from ..shapes.spectrum import SPECTRUM_FORCE_RATIO, quartic_check, spectrum
 
     packing = read_packing(args.input, None)
     if packing.shapes is None:
         raise ValueError(f"{args.input}: not a shape packing (modes needs shapes and orientations)")
     spec = spectrum(packing, args.lambda_c)
+    if not spec.balanced:
+        print(f"jamflow modes: warning: {args.input}: largest generalised force {spec.max_force:.3g} exceeds "
+              f"{SPECTRUM_FORCE_RATIO:g} P = {SPECTRUM_FORCE_RATIO * spec.pressure:.3g}: residual forces shift the "
+              "quartic eigenvalues (~P), so N_1 may be wrong; jam with a smaller --force-tol", file=sys.stderr)
     check = quartic_check(packing, spec)
     mode = ("mode",)
     ds = xr.Dataset(
@@ -141,7 +146,9 @@ def _modes(args: argparse.Namespace) -> int:
         },
         attrs=new_dataset_attrs("jamflow shape-packing spectrum", stage_parameters(args, "input", "out"),
                                 N=packing.n, n_quartic=spec.n_quartic, n_zero=spec.n_zero, lambda_c=spec.lambda_c,
-                                lambda_0=spec.lambda_0, pressure=float(packing.pressure or np.nan), **check),
+                                lambda_0=spec.lambda_0, pressure=float(packing.pressure or np.nan),
+                                max_generalized_force=spec.max_force, force_balanced_for_spectrum=int(spec.balanced),
+                                **check),
     )
     write_dataset(ds, args.out)
     d4 = spec.fourth_derivative[spec.region == 1]

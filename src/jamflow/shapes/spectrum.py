@@ -40,7 +40,7 @@ from ..models.base import pressure_of
 from ..packing import Packing
 from .counting import count_constraints, shape_model
 
-__all__ = ["ZERO_EIGENVALUE_RTOL", "QUARTIC_PRESSURE_RATIO", "REGION_GAP_MIN_RATIO", "FOURTH_DERIVATIVE_STEP", "fourth_derivative_step", "Spectrum", "spectrum"]
+__all__ = ["ZERO_EIGENVALUE_RTOL", "QUARTIC_PRESSURE_RATIO", "REGION_GAP_MIN_RATIO", "SPECTRUM_FORCE_RATIO", "FOURTH_DERIVATIVE_STEP", "fourth_derivative_step", "Spectrum", "spectrum"]
 
 #: Eigenvalues with ``|lambda| <= ZERO_EIGENVALUE_RTOL * lambda_max`` are zero modes:
 #: LAPACK's eigenvalues err by ``O(eps ||M||) ~ 1e-16 lambda_max``; 1e-13 leaves a
@@ -57,6 +57,13 @@ QUARTIC_PRESSURE_RATIO: float = 1e3
 #: A gap that separates regions 1 and 2 spans at least this factor in ``lambda``
 #: (measured: 1.1e4, 990 and 5e7 on the packings above).
 REGION_GAP_MIN_RATIO: float = 10.0
+
+#: The spectrum's region 1 is trusted only when the largest generalised force of the
+#: packing is at most this fraction of its pressure: quartic eigenvalues are ~P, and
+#: residual forces shift them. Measured on 32 circulo-lines (A = 1.1, tradeoff stage
+#: ``shapes``): max F / P = 9.3e-3 (force_tol 1e-10, P0 = 1e-8) miscounted N_1 by one;
+#: 5e-4 (1e-10, 1e-7) and 7.5e-5 (1e-12, 1e-8) counted it right.
+SPECTRUM_FORCE_RATIO: float = 1e-3
 
 #: Largest step [length, or rad] of the second difference of ``v^T M v`` along a quartic
 #: mode: truncation ``h^2 U^(6) ~ 1e-6`` relative; round-off ``eps ||M|| / h^2 ~ 1e-9``.
@@ -100,6 +107,10 @@ class Spectrum:
         ``N_1``, the number of region-1 eigenvalues.
     n_zero : int
         Number of region-0 eigenvalues.
+    pressure : float
+        Virial pressure of the packing [k].
+    max_force : float
+        Largest generalised force ``sqrt(F^2 + (tau / l)^2)`` of the packing [k length].
     """
 
     eigenvalue: NDArray[np.float64]
@@ -110,6 +121,13 @@ class Spectrum:
     lambda_c: float
     n_quartic: int
     n_zero: int
+    pressure: float
+    max_force: float
+
+    @property
+    def balanced(self) -> bool:
+        """Whether the packing is force balanced well enough for region 1 (:data:`SPECTRUM_FORCE_RATIO`)."""
+        return self.max_force <= SPECTRUM_FORCE_RATIO * self.pressure
 
 
 def _auto_cutoff(lam: NDArray[np.float64], lambda_0: float, pressure: float) -> float:
@@ -135,8 +153,10 @@ def spectrum(packing: Packing, lambda_c: float | None = None, fourth: bool = Tru
     # dofs are centres first, then orientations
     rot = np.sum(vec[2 * n:] ** 2, axis=0)
     lambda_0 = ZERO_EIGENVALUE_RTOL * float(max(abs(lam[-1]), abs(lam[0])))
+    ev = model.evaluate(q)
+    pressure = pressure_of(ev, packing.box)
     if lambda_c is None:
-        lambda_c = _auto_cutoff(lam, lambda_0, pressure_of(model.evaluate(q), packing.box))
+        lambda_c = _auto_cutoff(lam, lambda_0, pressure)
     if not (np.isfinite(lambda_c) and lambda_c > 0.0):
         raise ValueError(f"--lambda-c must be positive and finite, got {lambda_c}")
     region = np.where(np.abs(lam) <= lambda_0, 0, np.where(lam < lambda_c, 1, np.where(rot > 0.5, 2, 3)))
@@ -150,7 +170,8 @@ def spectrum(packing: Packing, lambda_c: float | None = None, fourth: bool = Tru
             curv = [v @ (model.hessian(q + s * h * v) @ v) for s in (-1.0, 1.0)]
             d4[k] = (curv[0] - 2.0 * lam[k] + curv[1]) / (h * h)
     return Spectrum(lam, region.astype(np.int64), rot, d4, lambda_0, float(lambda_c),
-                    int(np.count_nonzero(region == 1)), int(np.count_nonzero(region == 0)))
+                    int(np.count_nonzero(region == 1)), int(np.count_nonzero(region == 0)), pressure,
+                    float(model.max_force(ev.gradient)))
 
 
 def quartic_check(packing: Packing, spec: Spectrum) -> dict:
