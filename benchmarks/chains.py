@@ -61,7 +61,6 @@ PROFILE_PARTS = {
 
 
 def _start(d: int, n: int, seed: int):
-    if d == 2:
     # the default dilute starts without overlaps: from overlapping starts links pass through
     # each other and the run is refused as entangled (3D N = 1024 chains from phi = 0.6 were)
     if d == 2:

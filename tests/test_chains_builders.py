@@ -185,7 +185,7 @@ def test_cli_init_chains(tmp_path, capsys):
     from jamflow.chains.builders import DILUTE_PHI, OVERLAP_PHI
     from jamflow.tolerances import OVERLAP_TOL
 
-    assert p.packing_fraction == pytest.approx(DILUTE_PHI[0], rel=1e-12)
+    assert p.packing_fraction == pytest.approx(DILUTE_PHI[2], rel=1e-12)
     p.validate(OVERLAP_TOL)
     assert main(["init-chains", str(tmp_path / "o.nc"), "--d", "2", "--clusters", "30", "--cluster", "trimer",
                  "--overlap", "--seed", "4", "--quiet"]) == 0
@@ -193,11 +193,11 @@ def test_cli_init_chains(tmp_path, capsys):
     assert q.packing_fraction == pytest.approx(OVERLAP_PHI[2], rel=1e-12)
     with pytest.raises(ValueError, match="overlap"):
         q.validate(OVERLAP_TOL)
-    # and it places chains longer than trimers too (3D chains of 4 fail at the trimers' 0.2)
+    # and in 3D it places chains longer than trimers too (64 chains of 4 fail at 0.2)
     assert main(["init-chains", str(tmp_path / "c4.nc"), "--d", "3", "--clusters", "64", "--cluster", "chain",
                  "--chain-length", "4", "--seed", "2", "--quiet"]) == 0
     c4 = read_packing(tmp_path / "c4.nc", None)
-    assert c4.packing_fraction == pytest.approx(DILUTE_PHI[1], rel=1e-12)
+    assert c4.packing_fraction == pytest.approx(DILUTE_PHI[3], rel=1e-12)
     c4.validate(OVERLAP_TOL)
     assert main(["init-chains", str(tmp_path / "x.nc"), "--d", "4", "--clusters", "3", "--cluster", "trimer",
                  "--seed", "1"]) == 1

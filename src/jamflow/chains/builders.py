@@ -426,13 +426,13 @@ def _distances(pairs: NDArray[np.int64], x: NDArray[np.float64], box: Box) -> ND
     return np.linalg.norm(box.minimum_image(x[pairs[:, 1]] - x[pairs[:, 0]]), axis=1)
 
 
-#: Default packing fraction of the start without overlaps, for clusters of at most 3
-#: spheres and for longer chains: random sequential placement places 50 rigid trimers at
-#: 0.2 in 2D and 3D (0.25 fails in 3D), but no 64 chains of 4 in 3D at 0.2 (4 of 4 seeds
-#: at 0.15 and 0.1) and 32 chains of 8 in 3D only at 0.1 (4 of 4; 1 of 4 at 0.15). The
-#: bisection's compression steps of ``delta_phi`` make overlaps too small for a link to
-#: pass through a sphere.
-DILUTE_PHI: tuple[float, float] = (0.2, 0.1)
+#: Default packing fraction of the start without overlaps, per d. Random sequential
+#: placement of chains of M = 3, 4, 6 spheres, K = 8 to 64 clusters, 8 seeds each: in 2D
+#: every draw places at 0.2; in 3D 0.2 fails (3 to 8 of 8 draws fail for M >= 4, 1 of 8
+#: for 32 and 64 trimers), 0.15 fails once (64 chains of 6) and 0.1 never (also 32
+#: chains of 8). The bisection's compression steps of ``delta_phi`` make overlaps too
+#: small for a link to pass through a sphere.
+DILUTE_PHI: dict[int, float] = {2: 0.2, 3: 0.1}
 #: Packing fraction of the paper's start with overlaps (Sec. III), per d: just above the
 #: sphere jamming densities, so the bisection decompresses.
 OVERLAP_PHI: dict[int, float] = {2: 0.86, 3: 0.66}
@@ -463,8 +463,8 @@ def linked_packing(
     kind : {"trimer", "chain"}
         ``trimer``: M = 3, angle frozen unless ``free_angles``; ``chain``: M = ``chain_length``.
     phi : float, optional
-        Packing fraction; default :data:`DILUTE_PHI` without overlaps (0.2 for at most 3
-        spheres per cluster, 0.1 for longer chains), else
+        Packing fraction; default :data:`DILUTE_PHI` without overlaps (0.2 in 2D, 0.1
+        in 3D), else
         :data:`OVERLAP_PHI` (slightly above the sphere jamming densities, so the
         jamming bisection decompresses).
     bond_angle : float, optional
@@ -488,7 +488,7 @@ def linked_packing(
         raise ValueError(f"a chain needs at least 2 spheres, got --chain-length {m}")
     if clusters < 1:
         raise ValueError(f"need at least one cluster, got {clusters}")
-    phi = (DILUTE_PHI[m > 3] if no_overlap else OVERLAP_PHI[d]) if phi is None else phi
+    phi = (DILUTE_PHI[d] if no_overlap else OVERLAP_PHI[d]) if phi is None else phi
     if not 0.0 < phi < 1.5:
         raise ValueError(f"packing fraction must lie in (0, 1.5), got {phi}")
     lo, hi = BOND_ANGLE_RANGE

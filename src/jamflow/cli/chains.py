@@ -54,7 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--bond-angle", type=float, default=None,
                    help="every bond angle [degrees]; default uniform in [60, 150] degrees")
     p.add_argument("--phi", type=float, default=None,
-                   help=f"packing fraction (default without overlaps {DILUTE_PHI[0]}, {DILUTE_PHI[1]} for chains longer than 3; "
+                   help=f"packing fraction (default without overlaps {DILUTE_PHI[2]} in 2D, {DILUTE_PHI[3]} in 3D; "
                         f"with --overlap "
                         f"{OVERLAP_PHI[2]} in 2D, {OVERLAP_PHI[3]} in 3D)")
     start = p.add_mutually_exclusive_group()
