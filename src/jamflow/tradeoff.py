@@ -550,6 +550,14 @@ def _chains_compare(out: Packing, ref: Packing) -> dict[str, float]:
     }
 
 
+_CHAINS_METRICS = {
+    "phi_J_error": "|phi_J - phi_J(reference)| / phi_J(reference)",
+    "pressure_error": "|P - P(reference)| / P(reference)",
+    "one_minus_Q": "1 - Q of the contact network against the reference's",
+    "max_link_error": "largest relative link-length error of the jammed packing",
+}
+
+
 def _chains_grid(quick: bool) -> list[dict[str, Any]]:
     from .tolerances import LINK_LENGTH_RTOL
 
@@ -609,10 +617,7 @@ STAGES: dict[str, StageSweep] = {
         knobs={"length_rtol": "relative link-length precision of Newton re-affixing (also sets how often it sweeps)",
                "force_tol": "final max_i |P F_i| [epsilon / mean diameter]"},
         preset_options={"force_tol": "force_tol"},
-        metrics={"phi_J_error": "|phi_J - phi_J(reference)| / phi_J(reference)",
-                 "pressure_error": "|P - P(reference)| / P(reference)",
-                 "one_minus_Q": "1 - Q of the contact network against the reference's",
-                 "max_link_error": "largest relative link-length error of the jammed packing"},
+        metrics=_CHAINS_METRICS,
         primary="phi_J_error",
         thresholds={"fast": {"phi_J_error": 1e-4}, "default": {"phi_J_error": 1e-6},
                     "publication": {"phi_J_error": 1e-9, "max_link_error": 1e-12}},
