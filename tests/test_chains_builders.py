@@ -48,7 +48,7 @@ def _floppy_modes(links: Links, x: np.ndarray, box: Box, members: np.ndarray) ->
 
 @pytest.mark.parametrize("d", [2, 3])
 def test_trimers_are_rigid_clusters_with_bond_angles_in_range(d):
-    p, messages = linked_packing(d, 12, "trimer", np.random.default_rng(3))
+    p, messages = linked_packing(d, 12, "trimer", np.random.default_rng(3), no_overlap=False)
     assert messages == [] and p.n == 36 and len(p.links) == 36
     labels = p.clusters
     for c in range(12):
@@ -70,7 +70,7 @@ def test_trimers_are_rigid_clusters_with_bond_angles_in_range(d):
 @pytest.mark.parametrize("free", [True, False])
 def test_chains_have_the_degrees_of_freedom_of_their_links(free):
     m = 6
-    p, _ = linked_packing(3, 10, "chain", np.random.default_rng(5), chain_length=m, free_angles=free, phi=0.3)
+    p, _ = linked_packing(3, 10, "chain", np.random.default_rng(5), chain_length=m, free_angles=free, phi=0.3, no_overlap=False)
     assert len(p.links) == 10 * ((m - 1) if free else (2 * m - 3))
     members = np.flatnonzero(p.clusters == 4)
     # free: 3 m - (m - 1); frozen angles in 3D leave the m - 3 torsions + 6 rigid motions
@@ -78,7 +78,7 @@ def test_chains_have_the_degrees_of_freedom_of_their_links(free):
 
 
 def test_2d_placement_has_no_crossing_links_and_crossings_are_found():
-    p, _ = linked_packing(2, 20, "chain", np.random.default_rng(7), chain_length=6, free_angles=True, phi=0.5)
+    p, _ = linked_packing(2, 20, "chain", np.random.default_rng(7), chain_length=6, free_angles=True, phi=0.5, no_overlap=False)
     assert len(crossing_links(p.links, p.position, p.box)) == 0
     # two dimers crossing as an X (one of them across the periodic boundary) are found, touching ones are not
     box = Box.cubic(2, 10.0)
@@ -89,7 +89,7 @@ def test_2d_placement_has_no_crossing_links_and_crossings_are_found():
 
 
 def test_degenerate_links_are_removed_with_a_message():
-    p, messages = linked_packing(2, 4, "trimer", np.random.default_rng(1), bond_angle=pi, phi=0.3)
+    p, messages = linked_packing(2, 4, "trimer", np.random.default_rng(1), bond_angle=pi, phi=0.3, no_overlap=False)
     # a straight trimer's angle link depends linearly on its bonds
     assert len(messages) == 4 and all("degenerate link" in m for m in messages)
     assert len(p.links) == 8 and np.all(p.links.j - p.links.i == 1)
@@ -180,6 +180,25 @@ def test_cli_init_chains(tmp_path, capsys):
     rows = dict(line.split(None, 1) for line in text.splitlines()[1:] if line.startswith("  links "))
     assert rows["links"].strip() == "90"
     assert len(crossing_links(p.links, p.position, p.box)) == 0
+    # the default start is the dilute one without overlaps (overlapping starts entangle, docs/chains.md);
+    # --overlap gives the paper's start above jamming, with overlaps
+    from jamflow.chains.builders import DILUTE_PHI, OVERLAP_PHI
+    from jamflow.tolerances import OVERLAP_TOL
+
+    assert p.packing_fraction == pytest.approx(DILUTE_PHI[2], rel=1e-12)
+    p.validate(OVERLAP_TOL)
+    assert main(["init-chains", str(tmp_path / "o.nc"), "--d", "2", "--clusters", "30", "--cluster", "trimer",
+                 "--overlap", "--seed", "4", "--quiet"]) == 0
+    q = read_packing(tmp_path / "o.nc", None)
+    assert q.packing_fraction == pytest.approx(OVERLAP_PHI[2], rel=1e-12)
+    with pytest.raises(ValueError, match="overlap"):
+        q.validate(OVERLAP_TOL)
+    # and in 3D it places chains longer than trimers too (64 chains of 4 fail at 0.2)
+    assert main(["init-chains", str(tmp_path / "c4.nc"), "--d", "3", "--clusters", "64", "--cluster", "chain",
+                 "--chain-length", "4", "--seed", "2", "--quiet"]) == 0
+    c4 = read_packing(tmp_path / "c4.nc", None)
+    assert c4.packing_fraction == pytest.approx(DILUTE_PHI[3], rel=1e-12)
+    c4.validate(OVERLAP_TOL)
     assert main(["init-chains", str(tmp_path / "x.nc"), "--d", "4", "--clusters", "3", "--cluster", "trimer",
                  "--seed", "1"]) == 1
     assert "d = 2 or 3" in capsys.readouterr().err
@@ -206,7 +225,7 @@ def test_no_overlap_placement_is_a_hard_sphere_start(d, tmp_path):
 
     p, _ = linked_packing(d, 30, "trimer", np.random.default_rng(2), phi=0.2, no_overlap=True)
     p.validate(OVERLAP_TOL)  # raises OverlapError on any overlap beyond the hard-sphere tolerance
-    # the default placement of the same draw does overlap (what --no-overlap is for)
-    q, _ = linked_packing(d, 30, "trimer", np.random.default_rng(2), phi=0.2)
+    # the paper's placement with overlaps of the same draw does overlap
+    q, _ = linked_packing(d, 30, "trimer", np.random.default_rng(2), phi=0.2, no_overlap=False)
     with pytest.raises(ValueError, match="overlap"):
         q.validate(OVERLAP_TOL)

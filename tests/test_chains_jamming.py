@@ -35,7 +35,7 @@ def _omega(model: LinkedSpheresModel, q: np.ndarray) -> np.ndarray:
 @pytest.mark.parametrize("d", [2, 3])
 def test_projection_of_a_push_on_a_rigid_trimer_is_the_rigid_body_response(d):
     """P F on an isolated rigid trimer = t + omega x r with t = sum F / 3 and I omega = torque (unit masses)."""
-    p, _ = linked_packing(d, 1, "trimer", np.random.default_rng(4), phi=0.01)
+    p, _ = linked_packing(d, 1, "trimer", np.random.default_rng(4), phi=0.01, no_overlap=False)
     model = LinkedSpheresModel(p.box, p.diameter, p.links, p.position)
     q = model.dofs(p.position)
     r = p.box.minimum_image(p.position - p.position[0])  # unwrapped across the boundary
@@ -67,7 +67,7 @@ class _Pushed(LinkedSpheresModel):
 
 
 def test_rigid_trimer_under_a_torque_free_push_translates_rigidly():
-    p, _ = linked_packing(2, 1, "trimer", np.random.default_rng(6), phi=0.01)
+    p, _ = linked_packing(2, 1, "trimer", np.random.default_rng(6), phi=0.01, no_overlap=False)
     model = _Pushed(p.box, p.diameter, p.links, p.position)
     model.push = np.array([0.3, -0.2])
     steps, dt = 50, 0.1
@@ -80,7 +80,7 @@ def test_rigid_trimer_under_a_torque_free_push_translates_rigidly():
 
 @pytest.fixture(scope="module")
 def jammed_trimers():
-    start, _ = linked_packing(2, 12, "trimer", np.random.default_rng(1))
+    start, _ = linked_packing(2, 12, "trimer", np.random.default_rng(1), no_overlap=False)
     settings = JammingSettings(force_tol=1e-13, pressure_rtol=1e-3, delta_phi=1e-2)
     return start, jam_linked(start, 1e-4, settings=settings)
 
@@ -109,7 +109,7 @@ def test_jammed_rigid_trimers_are_force_balanced_on_the_manifold_and_isostatic(j
 
 
 def test_without_links_the_linked_model_is_the_sphere_model():
-    p, _ = linked_packing(2, 10, "trimer", np.random.default_rng(2))
+    p, _ = linked_packing(2, 10, "trimer", np.random.default_rng(2), no_overlap=False)
     empty = Links(np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0))
     linked = LinkedSpheresModel(p.box, p.diameter, empty, p.position)
     spheres = SphereModel(p.box, p.diameter)

@@ -16,7 +16,7 @@ from jamflow.tolerances import LINK_LENGTH_RTOL
 
 
 def _model(seed: int = 3, strain: float = 0.02):
-    p, _ = linked_packing(2, 8, "trimer", np.random.default_rng(seed))
+    p, _ = linked_packing(2, 8, "trimer", np.random.default_rng(seed), no_overlap=False)
     model = ShearStabilizedModel(p.box, p.diameter, p.links, p.position)
     q = model.dofs(p.position)
     q[-model.m:] = np.random.default_rng(seed + 1).normal(scale=strain * model.strain_scale, size=model.m)
@@ -64,7 +64,7 @@ def test_projection_is_orthogonal_to_every_constraint_gradient_and_idempotent():
 
 
 def test_without_links_at_zero_strain_the_positions_part_is_the_sphere_model():
-    p, _ = linked_packing(2, 8, "trimer", np.random.default_rng(4))
+    p, _ = linked_packing(2, 8, "trimer", np.random.default_rng(4), no_overlap=False)
     empty = Links(np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0))
     model = ShearStabilizedModel(p.box, p.diameter, empty, p.position)
     spheres = SphereModel(p.box, p.diameter)
@@ -82,7 +82,7 @@ def test_shear_stabilised_spheres_without_links_project_onto_fixed_volume():
     The projected strain force is orthogonal to grad det F = (1, 0, 1) / q_s at zero strain,
     the centre part is untouched, and a strain off the volume manifold is re-affixed to det F = 1.
     """
-    p, _ = linked_packing(2, 8, "trimer", np.random.default_rng(4))
+    p, _ = linked_packing(2, 8, "trimer", np.random.default_rng(4), no_overlap=False)
     empty = Links(np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0))
     model = ShearStabilizedModel(p.box, p.diameter, empty, p.position)
     q = model.dofs(p.position)

@@ -24,7 +24,7 @@ def chains(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A 2D packing of 12 rigid trimers (a random start: non-linked spheres may overlap)."""
     out = tmp_path_factory.mktemp("gsd") / "trimers.nc"
     assert main(["init-chains", str(out), "--d", "2", "--clusters", "12", "--cluster", "trimer", "--seed", "4",
-                 "--quiet"]) == 0
+                 "--overlap", "--quiet"]) == 0
     return out
 
 

@@ -81,3 +81,26 @@ def test_shapes_stage_errors_and_grid():
         grid = sw.grid(quick)
         assert {g["pressure"] for g in grid if g["force_tol"] == SOFT_FORCE_TOL} == {g["pressure"] for g in grid}
         assert sw.reference(quick)["pressure"] < min(g["pressure"] for g in grid)
+
+
+def test_chains_stage_keeps_the_asked_link_precision():
+    # the swept knob reaches the model: each jammed packing's links, measured from its
+    # positions, hold to the asked length_rtol, and the loose setting really is looser;
+    # the packings are jammed at the stage's P0 and agree in phi_J to the loose precision
+    from jamflow.tradeoff import CHAINS_P0, _chains_compare
+
+    sw = STAGES["chains"]
+    start = sw.prepare(0, True)
+    out = {}
+    for rtol in (1e-6, 1e-14):
+        p = sw.run(start, {"length_rtol": rtol, "force_tol": 1e-13}, True)
+        links = p.links
+        r = np.linalg.norm(p.box.displacement(p.position[links.i], p.position[links.j]), axis=1)
+        err = np.abs(r - links.length) / links.length
+        assert err.max() <= rtol and err.max() == pytest.approx(p.attrs["max_link_error"], rel=1e-6, abs=1e-15)
+        assert abs(p.pressure - CHAINS_P0) <= 1e-6 * CHAINS_P0
+        out[rtol] = (p, err.max())
+    assert out[1e-6][1] > 1e3 * out[1e-14][1]
+    m = _chains_compare(out[1e-6][0], out[1e-14][0])
+    assert m["phi_J_error"] <= 1e-6 and m["one_minus_Q"] == 0.0
+    assert m["max_link_error"] == pytest.approx(out[1e-6][1], rel=1e-6)

@@ -518,6 +518,56 @@ def _shapes_grid(quick: bool) -> list[dict[str, Any]]:
     return [{"force_tol": t, "pressure": p} for p in pressures for t in tols]
 
 
+# --- linked packings: re-affixing precision ---------------------------------------------
+
+#: Target pressure of the chains sweep [epsilon / <D>^d].
+CHAINS_P0: float = 1e-4
+
+
+def _chains_prepare(seed: int, quick: bool) -> Packing:
+    from .chains.builders import linked_packing
+
+    # the dilute start without overlaps (docs/chains.md): links cannot pass through each other
+    return linked_packing(2, 10 if quick else 20, "trimer", np.random.default_rng(seed), phi=0.2,
+                          no_overlap=True)[0]
+
+
+def _chains_run(start: Packing, knobs: dict[str, Any], quick: bool) -> Packing:
+    from .chains.jamming import jam_linked
+    from .soft.jamming import JammingSettings
+
+    return jam_linked(start, CHAINS_P0, settings=JammingSettings(force_tol=knobs["force_tol"]),
+                      length_rtol=knobs["length_rtol"]).packing
+
+
+def _chains_compare(out: Packing, ref: Packing) -> dict[str, float]:
+    rel_phi = abs(out.packing_fraction - ref.packing_fraction) / ref.packing_fraction
+    return {
+        "phi_J_error": rel_phi,
+        "pressure_error": abs(out.pressure - ref.pressure) / ref.pressure,
+        "one_minus_Q": 1.0 - _q(out, ref),
+        "max_link_error": float(out.attrs["max_link_error"]),
+    }
+
+
+_CHAINS_METRICS = {
+    "phi_J_error": "|phi_J - phi_J(reference)| / phi_J(reference)",
+    "pressure_error": "|P - P(reference)| / P(reference)",
+    "one_minus_Q": "1 - Q of the contact network against the reference's",
+    "max_link_error": "largest relative link-length error of the jammed packing",
+}
+
+
+def _chains_grid(quick: bool) -> list[dict[str, Any]]:
+    from .tolerances import LINK_LENGTH_RTOL
+
+    # re-affixing runs after every move but only sweeps while a link is off by more than
+    # length_rtol: the precision also sets how often Newton runs (no separate frequency knob)
+    rtols = (1e-6, 1e-9, LINK_LENGTH_RTOL) if quick else (1e-4, 1e-6, 1e-8, 1e-10, LINK_LENGTH_RTOL)
+    return [{"length_rtol": r, "force_tol": SOFT_FORCE_TOL} for r in rtols] + [
+        {"length_rtol": 1e-6, "force_tol": 1e-10}]
+
+
 STAGES: dict[str, StageSweep] = {
     "soft": StageSweep(
         name="soft",
@@ -557,6 +607,25 @@ STAGES: dict[str, StageSweep] = {
         grid=_shapes_grid,
         run=_shapes_run,
         compare=_shapes_compare,
+    ),
+    "chains": StageSweep(
+        name="chains",
+        description=f"fixed-box jamming of 2D rigid trimers at P0 = {CHAINS_P0:g} (10 trimers quick, 20 full, "
+                    "dilute start without overlaps at phi = 0.2): bisection with constraint projection and "
+                    "Newton re-affixing to length_rtol after every FIRE move",
+        commands=("soft-jam",),
+        knobs={"length_rtol": "relative link-length precision of Newton re-affixing (also sets how often it sweeps)",
+               "force_tol": "final max_i |P F_i| [epsilon / mean diameter]"},
+        preset_options={"force_tol": "force_tol"},
+        metrics=_CHAINS_METRICS,
+        primary="phi_J_error",
+        thresholds={"fast": {"phi_J_error": 1e-4}, "default": {"phi_J_error": 1e-6},
+                    "publication": {"phi_J_error": 1e-9, "max_link_error": 1e-12}},
+        prepare=_chains_prepare,
+        reference=lambda quick: {"length_rtol": 1e-14, "force_tol": 10**-13.5},
+        grid=_chains_grid,
+        run=_chains_run,
+        compare=_chains_compare,
     ),
     "aqs": StageSweep(
         name="aqs",

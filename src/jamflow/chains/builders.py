@@ -43,6 +43,8 @@ from ..tolerances import LINK_RANK_RTOL, OVERLAP_TOL
 __all__ = [
     "BOND_ANGLE_RANGE",
     "CLUSTER_KINDS",
+    "DILUTE_PHI",
+    "OVERLAP_PHI",
     "cement",
     "cement_links",
     "cement_pairs",
@@ -424,9 +426,21 @@ def _distances(pairs: NDArray[np.int64], x: NDArray[np.float64], box: Box) -> ND
     return np.linalg.norm(box.minimum_image(x[pairs[:, 1]] - x[pairs[:, 0]]), axis=1)
 
 
+#: Default packing fraction of the start without overlaps, per d. Random sequential
+#: placement of chains of M = 3, 4, 6 spheres, K = 8 to 64 clusters, 8 seeds each: in 2D
+#: every draw places at 0.2; in 3D 0.2 fails (3 to 8 of 8 draws fail for M >= 4, 1 of 8
+#: for 32 and 64 trimers), 0.15 fails once (64 chains of 6) and 0.1 never (also 32
+#: chains of 8). The bisection's compression steps of ``delta_phi`` make overlaps too
+#: small for a link to pass through a sphere.
+DILUTE_PHI: dict[int, float] = {2: 0.2, 3: 0.1}
+#: Packing fraction of the paper's start with overlaps (Sec. III), per d: just above the
+#: sphere jamming densities, so the bisection decompresses.
+OVERLAP_PHI: dict[int, float] = {2: 0.86, 3: 0.66}
+
+
 def linked_packing(
     d: int, clusters: int, kind: str, rng: np.random.Generator, chain_length: int = 3,
-    free_angles: bool = False, phi: float | None = None, bond_angle: float | None = None, no_overlap: bool = False,
+    free_angles: bool = False, phi: float | None = None, bond_angle: float | None = None, no_overlap: bool = True,
 ) -> tuple[Packing, list[str]]:
     """A random start of ``clusters`` chains (or trimers) of unit spheres at packing fraction ``phi``.
 
@@ -434,11 +448,11 @@ def linked_packing(
     Cluster centroids are uniform in a cubic box; bond angles are uniform in
     :data:`BOND_ANGLE_RANGE` (or all ``bond_angle``); orientations (and 3D torsions)
     are uniform. A cluster spanning half the box or more, or in 2D one whose links
-    would cross a placed link (or one of its own), is redrawn, up to :data:`PLACEMENT_TRIES` times. Overlaps are allowed
-    unless ``no_overlap``: the start is meant for soft jamming from above the jamming density (paper Sec. III). But
-    where soft spheres overlap, a link can pass through a sphere or another link during the minimisation, and the
-    clusters can end entangled (refused by :mod:`jamflow.chains.entanglement`); a dilute start without overlaps
-    (``no_overlap``, e.g. ``phi = 0.3``), compressed by the bisection, avoids it.
+    would cross a placed link (or one of its own), is redrawn, up to :data:`PLACEMENT_TRIES` times. By default
+    clusters are placed without overlaps at the dilute :data:`DILUTE_PHI` and the jamming bisection compresses them.
+    This departs from the paper (Sec. III starts above jamming with overlaps, ``no_overlap=False``): where soft
+    spheres overlap, a link can pass through a sphere or another link during the minimisation, and the clusters end
+    entangled (refused by :mod:`jamflow.chains.entanglement`) from a third of such starts (docs/chains.md).
 
     Parameters
     ----------
@@ -449,12 +463,14 @@ def linked_packing(
     kind : {"trimer", "chain"}
         ``trimer``: M = 3, angle frozen unless ``free_angles``; ``chain``: M = ``chain_length``.
     phi : float, optional
-        Packing fraction; default 0.86 in 2D and 0.66 in 3D (slightly above the
-        sphere jamming densities, so the jamming bisection decompresses).
+        Packing fraction; default :data:`DILUTE_PHI` without overlaps (0.2 in 2D, 0.1
+        in 3D), else
+        :data:`OVERLAP_PHI` (slightly above the sphere jamming densities, so the
+        jamming bisection decompresses).
     bond_angle : float, optional
         Every bond angle [rad]; default random.
     no_overlap : bool
-        Redraw a cluster whose spheres overlap a placed sphere or each other (random
+        Default True: redraw a cluster whose spheres overlap a placed sphere or each other (random
         sequential placement; relative overlaps up to :data:`~jamflow.tolerances.OVERLAP_TOL`
         pass, e.g. next-nearest spheres at a bond angle of exactly pi/3).
 
@@ -472,7 +488,7 @@ def linked_packing(
         raise ValueError(f"a chain needs at least 2 spheres, got --chain-length {m}")
     if clusters < 1:
         raise ValueError(f"need at least one cluster, got {clusters}")
-    phi = (0.86 if d == 2 else 0.66) if phi is None else phi
+    phi = (DILUTE_PHI[d] if no_overlap else OVERLAP_PHI[d]) if phi is None else phi
     if not 0.0 < phi < 1.5:
         raise ValueError(f"packing fraction must lie in (0, 1.5), got {phi}")
     lo, hi = BOND_ANGLE_RANGE

@@ -34,8 +34,8 @@ from .builders import crossing_links
 __all__ = ["EntanglementError", "check_untangled"]
 
 #: The remedy named by every entanglement error.
-REMEDY = ("start from a dilute placement without overlaps (jamflow init-chains --phi 0.3 --no-overlap) so that "
-          "links cannot pass through spheres")
+REMEDY = ("start from the dilute placement without overlaps (jamflow init-chains --no-overlap, its default) so "
+          "that links cannot pass through spheres")
 
 
 class EntanglementError(RuntimeError):

@@ -39,6 +39,7 @@ from ..packing import Packing, sphere_volume
 from ..soft.jamming import JammingResult, JammingSettings, jam_model_to_pressure
 from ..soft.minimize import FireParameters, MinimizeResult, minimize_fire
 from ..soft.potential import HARMONIC, PowerLawPotential, overlapping_pairs
+from ..tolerances import LINK_LENGTH_RTOL
 from .builders import check_linked_start
 from .clusters import count_clusters
 from .entanglement import check_untangled
@@ -106,6 +107,7 @@ def jam_linked(
     shear_stabilize: bool = False,
     protocol: str = DEFAULT_PROTOCOL,
     energy_tol: float | None = None,
+    length_rtol: float = LINK_LENGTH_RTOL,
 ) -> JammingResult:
     """Bring a linked packing to the jamming onset in a fixed-shape box or shear-stabilised (module doc).
 
@@ -124,6 +126,10 @@ def jam_linked(
         ``settings.force_tol``, ``delta_phi`` and ``max_steps``).
     energy_tol : float, optional
         Energy per sphere [epsilon] at which ``"energy"`` stops.
+    length_rtol : float
+        Relative link-length precision kept by Newton re-affixing after every move
+        (:meth:`~jamflow.models.links.LinkedSpheresModel.reproject`); default
+        :data:`~jamflow.tolerances.LINK_LENGTH_RTOL`.
 
     Raises
     ------
@@ -149,7 +155,7 @@ def jam_linked(
     D, box, x = scaled.diameter, Box(scaled.box.matrix), scaled.position
     phi = float(sphere_volume(box.d, D).sum()) / box.volume
     kind = ShearStabilizedModel if shear_stabilize else LinkedSpheresModel
-    model = kind(box, D, scaled.links, x, potential)
+    model = kind(box, D, scaled.links, x, potential, length_rtol=length_rtol)
 
     def checked(info: dict) -> None:
         # refuse an entangled minimum as soon as it appears (module doc of .entanglement)

@@ -12,6 +12,8 @@ import xarray as xr
 from ..chains.averages import moduli_against_links
 from ..chains.builders import (
     CLUSTER_KINDS,
+    DILUTE_PHI,
+    OVERLAP_PHI,
     cement_links,
     cement_pairs,
     check_linked_start,
@@ -39,8 +41,8 @@ from .common import (
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "init-chains", _init_chains,
-                    "random start of chains or rigid trimers of unit spheres (links, overlaps allowed unless "
-                    "--no-overlap; no crossing links in 2D)", writes=("out",), packings=("out",))
+                    "random start of chains or rigid trimers of unit spheres (links, no overlaps unless "
+                    "--overlap; no crossing links in 2D)", writes=("out",), packings=("out",))
     p.add_argument("out", help="output netCDF packing with links")
     p.add_argument("--d", type=int, required=True, help="dimension (2 or 3)")
     p.add_argument("--clusters", type=int, required=True, help="number of clusters K (N = K M spheres)")
@@ -51,11 +53,17 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="bonds only (flexible); default: every bond angle frozen by an angle link")
     p.add_argument("--bond-angle", type=float, default=None,
                    help="every bond angle [degrees]; default uniform in [60, 150] degrees")
-    p.add_argument("--phi", type=float, default=None, help="packing fraction (default 0.86 in 2D, 0.66 in 3D)")
-    p.add_argument("--no-overlap", action="store_true",
-                   help="place clusters without overlaps (random sequential placement; use a dilute --phi, e.g. "
-                        "0.3): where soft spheres overlap, links can pass through each other during soft-jam and "
-                        "the clusters end entangled (docs/chains.md)")
+    p.add_argument("--phi", type=float, default=None,
+                   help=f"packing fraction (default without overlaps {DILUTE_PHI[2]} in 2D, {DILUTE_PHI[3]} in 3D; "
+                        f"with --overlap "
+                        f"{OVERLAP_PHI[2]} in 2D, {OVERLAP_PHI[3]} in 3D)")
+    start = p.add_mutually_exclusive_group()
+    start.add_argument("--no-overlap", dest="no_overlap", action="store_true", default=True,
+                       help="place clusters without overlaps (random sequential placement, dilute; the default)")
+    start.add_argument("--overlap", dest="no_overlap", action="store_false",
+                       help="the paper's Sec. III start above jamming with overlaps: links can pass through each "
+                            "other during soft-jam and a third of such starts end entangled, which soft-jam refuses "
+                            "(docs/chains.md)")
     p.add_argument("--seed", type=seed, required=True, help="random seed")
     add_quiet(p)
 
