@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import argparse
 
+import numpy as np
+
 from ..chains.entanglement import check_untangled
 from ..chains.jamming import linked_soft_packing
 from ..io import read_packing, write_packing
-from ..models import LinkedSpheresModel, SphereModel
+from ..models import EnergyModel, LinkedSpheresModel, SphereModel
+from ..models.shapes import ShapeModel
 from ..packing import Packing
 from ..shapes.counting import shape_model
 from ..shapes.jamming import shape_packing
@@ -41,59 +44,48 @@ def _minimize(args: argparse.Namespace) -> int:
     if args.max_steps < 1:
         raise ValueError(f"--max-steps must be at least 1, got {args.max_steps}")
     packing = read_packing(args.input, None)
-    if packing.shapes is not None:
-        return _minimize_shapes(args, packing)
-    potential = PowerLawPotential(exponent=args.exponent)
-    if packing.links is not None and len(packing.links):
-        model = LinkedSpheresModel(packing.box, packing.diameter, packing.links, packing.position, potential)
-    else:
-        model = SphereModel(packing.box, packing.diameter, potential)
-    res = minimize(model, packing.position, args.method, args.force_tol, args.max_steps)
+    model, start = _model(args, packing)
+    res = minimize(model, start, args.method, args.force_tol, args.max_steps)
     if not res.converged:
         raise RuntimeError(f"{args.method} did not reach --force-tol {args.force_tol:g} within "
                            f"--max-steps {args.max_steps} (max_force {res.max_force:.3g}); nothing written")
-    attrs = {"energy": res.energy, "energy_unit": "epsilon", "max_force": res.max_force,
-             "n_force_evaluations": res.evaluations, "minimize_steps": res.steps, "converged": 1,
-             "potential_exponent": potential.exponent}
+    shaped = isinstance(model, ShapeModel)
+    energy_unit = "k" if shaped else "epsilon"
+    attrs = {"energy": res.energy, "energy_unit": energy_unit, "max_force": res.max_force,
+             "n_force_evaluations": res.evaluations, "minimize_steps": res.steps, "converged": 1}
     parameters = stage_parameters(args, "input", "out")
-    if isinstance(model, LinkedSpheresModel):
-        check_untangled(model.links, res.position, model.box, packing.diameter, res.pressure, potential)
+    if shaped:
+        out = shape_packing(model, res.position, packing, parameters, {**packing.attrs, **attrs})
+    elif isinstance(model, LinkedSpheresModel):
+        attrs["potential_exponent"] = model.potential.exponent
+        check_untangled(model.links, res.position, model.box, packing.diameter, res.pressure, model.potential)
         out = linked_soft_packing(packing, model, res, ">minimize", attrs, parameters)
     else:
-        out = soft_packing(res.position, packing.box, packing.diameter, potential, packing, ">minimize",
+        attrs["potential_exponent"] = model.potential.exponent
+        out = soft_packing(res.position, packing.box, packing.diameter, model.potential, packing, ">minimize",
                            parameters, {**packing.attrs, **attrs})
     write_packing(out, args.out, parameters)
     print_summary(args, args.out, [
         ("method", f"{args.method}, converged after {res.steps} steps"),
         ("n_force_evaluations", res.evaluations),
-        ("energy", f"{res.energy:.15g} epsilon"),
-        ("max_force", f"{res.max_force:.3g} epsilon/length"),
-        ("pressure", f"{res.pressure:.10g} epsilon/length^d"),
+        ("energy", f"{res.energy:.15g} {energy_unit}"),
+        ("max_force", f"{res.max_force:.3g} " + ("k length (force and torque / mean bounding diameter)" if shaped
+                                                 else "epsilon/length")),
+        ("pressure", f"{res.pressure:.10g} " + ("k" if shaped else "epsilon/length^d")),
         ("contacts", res.n_contacts),
     ])
     return 0
 
 
-def _minimize_shapes(args: argparse.Namespace, packing: Packing) -> int:
-    """Shaped bodies: centres and orientations (with moments of inertia), linear springs of stiffness k."""
-    if args.exponent != 2.0:
-        raise ValueError(f"--exponent {args.exponent:g}: shaped bodies interact by the linear spring (Eq. 1) only")
-    model, q = shape_model(packing)
-    res = minimize(model, model.positions(q), args.method, args.force_tol, args.max_steps)
-    if not res.converged:
-        raise RuntimeError(f"{args.method} did not reach --force-tol {args.force_tol:g} within "
-                           f"--max-steps {args.max_steps} (max_force {res.max_force:.3g}); nothing written")
-    attrs = {**packing.attrs, "energy": res.energy, "energy_unit": "k", "max_force": res.max_force,
-             "n_force_evaluations": res.evaluations, "minimize_steps": res.steps, "converged": 1}
-    parameters = stage_parameters(args, "input", "out")
-    out = shape_packing(model, res.position, packing, parameters, attrs)
-    write_packing(out, args.out, parameters)
-    print_summary(args, args.out, [
-        ("method", f"{args.method}, converged after {res.steps} steps"),
-        ("n_force_evaluations", res.evaluations),
-        ("energy", f"{res.energy:.15g} k"),
-        ("max_force", f"{res.max_force:.3g} (force and torque / mean bounding diameter)"),
-        ("pressure", f"{res.pressure:.10g} k"),
-        ("interacting pairs", res.n_contacts),
-    ])
-    return 0
+def _model(args: argparse.Namespace, packing: Packing) -> tuple[EnergyModel, np.ndarray]:
+    """The energy model of a packing and its start: soft, linked or shaped bodies."""
+    if packing.shapes is not None:
+        if args.exponent != 2.0:
+            raise ValueError(f"--exponent {args.exponent:g}: shaped bodies interact by the linear spring (Eq. 1) only")
+        model, q = shape_model(packing)
+        return model, model.positions(q)
+    potential = PowerLawPotential(exponent=args.exponent)
+    if packing.links is not None and len(packing.links):
+        return LinkedSpheresModel(packing.box, packing.diameter, packing.links, packing.position,
+                                  potential), packing.position
+    return SphereModel(packing.box, packing.diameter, potential), packing.position

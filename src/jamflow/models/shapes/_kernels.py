@@ -231,7 +231,10 @@ def ellipse_pair(dx0, dx1, ti, tj, pi, pj, k, g):
     return 0.5 * k * delta * delta
 
 
-@njit(cache=True)
+# not cached: a cached kernel that takes a jitted function (the family's pair kernel) as
+# an argument corrupts numba's cache index across processes ("underlying object has
+# vanished", numba issue #2956); seen when two jamflow processes shared the cache
+@njit
 def pair_sum(pair, i, j, dx, theta, params, k, grad, virial):
     """Energy, gradient ``(N, 3)`` (x, y, theta) and virial of all listed pairs.
 
@@ -259,7 +262,10 @@ def pair_sum(pair, i, j, dx, theta, params, k, grad, virial):
     return energy, n
 
 
-@njit(cache=True)
+# not cached: a cached kernel that takes a jitted function (the family's pair kernel) as
+# an argument corrupts numba's cache index across processes ("underlying object has
+# vanished", numba issue #2956); seen when two jamflow processes shared the cache
+@njit
 def pair_hessian_blocks(pair, i, j, dx, theta, params, k, h):
     """Complex-step Hessian blocks ``d^2 U / dq dq`` of every listed pair, shape (P, 6, 6).
 
@@ -411,7 +417,10 @@ def circulo_crossed_pairs(i, j, dx, theta, params):
     return out
 
 
-@njit(cache=True)
+# not cached: a cached kernel that takes a jitted function (the family's pair kernel) as
+# an argument corrupts numba's cache index across processes ("underlying object has
+# vanished", numba issue #2956); seen when two jamflow processes shared the cache
+@njit
 def pair_table(pair, i, j, dx, theta, params, k):
     """Energy and gradient ``(x_i, y_i, theta_i, x_j, y_j, theta_j)`` of every listed pair, shape (P, 7)."""
     out = np.zeros((i.size, 7))
