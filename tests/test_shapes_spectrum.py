@@ -213,3 +213,15 @@ def test_modes_warns_when_residual_forces_are_not_small_against_the_pressure(tmp
     assert main(["modes", str(src), str(tmp_path / "m.nc")]) == 0
     assert "N_1 may be wrong" in capsys.readouterr().err
     assert xr.open_dataset(tmp_path / "m.nc").attrs["force_balanced_for_spectrum"] == 0
+
+
+def test_modes_flags_a_region_1_mode_with_a_non_positive_fourth_derivative(tmp_path, capsys):
+    # 16 circulo-lines at A = 1.3, P0 = 1e-6 (the vanderwerf-fig7 scene, seed 1): one
+    # quartic mode (lambda = 1.6e-6 ~ P, N_c(twice) = N_c^0 - 1) whose second difference of
+    # v^T M v gives d^4U/ds^4 < 0, impossible for a stable quartic mode: it must be flagged
+    src = Path(__file__).parent / "data" / "shapes_circulo_line_a1.3_n16_p1e-6.nc"
+    assert main(["modes", str(src), str(tmp_path / "m.nc")]) == 0
+    assert "non-positive fourth derivative" in capsys.readouterr().err
+    ds = xr.open_dataset(tmp_path / "m.nc")
+    assert ds.attrs["n_quartic"] == 1 and ds.attrs["n_nonpositive_fourth_derivative"] == 1
+    assert ds.attrs["n_contacts_twice"] == ds.attrs["isostatic_minus_quartic"]

@@ -148,10 +148,15 @@ def _modes(args: argparse.Namespace) -> int:
                                 N=packing.n, n_quartic=spec.n_quartic, n_zero=spec.n_zero, lambda_c=spec.lambda_c,
                                 lambda_0=spec.lambda_0, pressure=float(packing.pressure or np.nan),
                                 max_generalized_force=spec.max_force, force_balanced_for_spectrum=int(spec.balanced),
+                                n_nonpositive_fourth_derivative=int(np.sum(spec.fourth_derivative[spec.region == 1] <= 0.0)),
                                 **check),
     )
     write_dataset(ds, args.out)
     d4 = spec.fourth_derivative[spec.region == 1]
+    if np.any(d4 <= 0.0):
+        print(f"jamflow modes: warning: {args.input}: {int(np.sum(d4 <= 0.0))} region-1 mode(s) with a non-positive "
+              "fourth derivative: a stable quartic mode has d^4U/ds^4 > 0, so the second difference crossed a "
+              "change of contact (type) along the mode, or the mode is not quartic", file=sys.stderr)
     print_summary(args, args.out, [
         ("N, modes", f"{packing.n}, {spec.eigenvalue.size}"),
         ("zero modes (region 0)", f"{spec.n_zero} (|lambda| <= {spec.lambda_0:.3g})"),
