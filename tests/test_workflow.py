@@ -504,6 +504,20 @@ def test_chains_fig2_smallest_variant_runs_and_is_isostatic(tmp_path):
     assert (out / "benchmarks" / "chains" / "jam_d2_seed1.tsv").is_file()
 
 
+def test_vanderwerf_fig3b_smallest_variant_runs_and_dimers_are_isostatic(tmp_path):
+    """12 asymmetric dimers in a fixed 2D box: N_c = 3 N' - 1 - N_rot and <z> = 6 (docs/chains.md)."""
+    work = _workdir(tmp_path)
+    path, scene = _chains_scene(work, "vanderwerf-fig3b", clusters=12, seeds=[1], pressure=1e-5)
+    res = _snakemake(work, "-c1", "--workflow-profile", "workflow/profiles/default", "--configfile", str(path))
+    assert res.returncode == 0, res.stderr[-4000:]
+    out = work / "results" / scene["scene"]
+    check = json.loads((out / "chains" / "d2" / "seed1" / "jammed.check.json").read_text())
+    assert check["n_dimers"] == check["n_links"] == 12 and check["isostatic"] is True
+    assert check["n_contacts"] == 3 * (12 - check["n_rattling_dimers"]) - 1 - check["n_rotators"]
+    assert check["z"] == pytest.approx(6.0, rel=1e-14)
+    assert (out / "figures" / "chains-packing_d2_seed1.png").stat().st_size > 1000
+
+
 @pytest.mark.slow
 def test_chains_fig5_smallest_variant_runs_and_cementing_stiffens(tmp_path):
     work = _workdir(tmp_path)

@@ -177,8 +177,10 @@ def plot_packing(packing: Packing, slab_axis: int = 2, title: str | None = None)
                 lc.set_clip_path(clip)
                 ax.add_collection(lc)
             ax.plot([], [], color="#8b0000", lw=1.5, label=label)
+    # in linked packings the free spheres are rattling clusters and danglers (a dimer's free monomer: a rotator)
+    free = "rattlers" if packing.links is None else "rattlers and danglers"
     if np.any(rattler[shown]):
-        ax.plot([], [], "o", color="tab:orange", label="rattlers")
+        ax.plot([], [], "o", color="tab:orange", label=free)
     pad = 0.03 * max(packing.box.lengths[:2])
     xs = corners[:, 0]
     ax.set_xlim(xs.min() - pad, xs.max() + pad)
@@ -190,7 +192,7 @@ def plot_packing(packing: Packing, slab_axis: int = 2, title: str | None = None)
     slab = "" if packing.d == 2 else f", slab |x_{slab_axis} - L/2| < D/2 ({int(shown.sum())} particles)"
     n_r = int(np.sum(rattler))
     ax.set_title(title or f"d={packing.d}, N={packing.n}, phi={packing.packing_fraction:.5f}, "
-                          f"{len(contacts)} contacts{source}, {n_r} rattlers{slab}", fontsize=9)
+                          f"{len(contacts)} contacts{source}, {n_r} {free}{slab}", fontsize=9)
     if ax.get_legend_handles_labels()[0]:
         ax.legend(loc="upper right", fontsize=8, framealpha=0.8)
     return fig

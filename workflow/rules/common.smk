@@ -464,11 +464,11 @@ def chains_targets():
 
 
 def chains_start_command(wildcards, output):
-    """fig2: random rigid trimers without overlaps (dilute: no links pass through each other); fig5: RSA monomers."""
+    """fig2: random rigid trimers or dimers without overlaps (dilute: no links pass through each other); fig5: RSA monomers."""
     if CHAINS["figure"] == "fig2":
         return (
             f"jamflow init-chains {output} --d {wildcards.d} --clusters {CHAINS['clusters']}"
-            f" --cluster trimer --phi {CHAINS['phi']} --no-overlap --seed {wildcards.seed}"
+            f" --cluster {CHAINS['cluster']} --phi {CHAINS['phi']} --no-overlap --seed {wildcards.seed}"
         )
     return (
         f"jamflow init {output} --d {wildcards.d} --n {CHAINS['spheres']} --phi {CHAINS['phi']}"

@@ -37,8 +37,15 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..bodies import Links
 from ..box import Box
-from ..packing import Packing, sphere_volume
+from ..packing import Packing, linked_volume
 from ..tolerances import LINK_RANK_RTOL, OVERLAP_TOL
+from .dimers import (
+    DIMER_DIAMETER_RATIO,
+    DIMER_SEPARATION,
+    DIMER_SIZE_RATIO,
+    check_dimer,
+    dimer_asphericity,
+)
 
 __all__ = [
     "BOND_ANGLE_RANGE",
@@ -60,7 +67,7 @@ __all__ = [
 ]
 
 #: Cluster kinds of :func:`linked_packing`.
-CLUSTER_KINDS = ("trimer", "chain")
+CLUSTER_KINDS = ("trimer", "chain", "dimer")
 
 #: Range [rad] of random bond angles (the angle at a sphere between its two bonds).
 #: Below pi/3 the spheres next-but-one overlap (their distance ``2 b sin(theta/2)`` is
@@ -441,13 +448,18 @@ OVERLAP_PHI: dict[int, float] = {2: 0.86, 3: 0.66}
 def linked_packing(
     d: int, clusters: int, kind: str, rng: np.random.Generator, chain_length: int = 3,
     free_angles: bool = False, phi: float | None = None, bond_angle: float | None = None, no_overlap: bool = True,
+    diameter_ratio: float = DIMER_DIAMETER_RATIO, size_ratio: float = DIMER_SIZE_RATIO,
+    separation: float = DIMER_SEPARATION,
 ) -> tuple[Packing, list[str]]:
-    """A random start of ``clusters`` chains (or trimers) of unit spheres at packing fraction ``phi``.
+    """A random start of ``clusters`` chains, trimers or dimers at packing fraction ``phi``.
 
-    Spheres have diameter 1 (the length unit) and bonds the contact length 1.
-    Cluster centroids are uniform in a cubic box; bond angles are uniform in
-    :data:`BOND_ANGLE_RANGE` (or all ``bond_angle``); orientations (and 3D torsions)
-    are uniform. A cluster spanning half the box or more, or in 2D one whose links
+    Chains and trimers are of unit spheres (the length unit) with bonds of the contact
+    length 1; bond angles are uniform in :data:`BOND_ANGLE_RANGE` (or all
+    ``bond_angle``). Dimers (:mod:`jamflow.chains.dimers`) are a small monomer of
+    diameter 1 (the length unit) and a large one of ``diameter_ratio`` at a distance
+    ``separation``; every second dimer is scaled by ``size_ratio`` (bidisperse, half
+    large). Cluster centroids are uniform in a cubic box and orientations (and 3D
+    torsions) uniform. A cluster spanning half the box or more, or in 2D one whose links
     would cross a placed link (or one of its own), is redrawn, up to :data:`PLACEMENT_TRIES` times. By default
     clusters are placed without overlaps at the dilute :data:`DILUTE_PHI` and the jamming bisection compresses them.
     This departs from the paper (Sec. III starts above jamming with overlaps, ``no_overlap=False``): where soft
@@ -460,19 +472,25 @@ def linked_packing(
         2 or 3.
     clusters : int
         Number of clusters K; N = K M spheres.
-    kind : {"trimer", "chain"}
-        ``trimer``: M = 3, angle frozen unless ``free_angles``; ``chain``: M = ``chain_length``.
+    kind : {"trimer", "chain", "dimer"}
+        ``trimer``: M = 3, angle frozen unless ``free_angles``; ``chain``: M = ``chain_length``;
+        ``dimer``: M = 2.
     phi : float, optional
-        Packing fraction; default :data:`DILUTE_PHI` without overlaps (0.2 in 2D, 0.1
-        in 3D), else
-        :data:`OVERLAP_PHI` (slightly above the sphere jamming densities, so the
-        jamming bisection decompresses).
+        Packing fraction (the union of each cluster's spheres,
+        :func:`~jamflow.packing.linked_volume`); default :data:`DILUTE_PHI` without
+        overlaps (0.2 in 2D, 0.1 in 3D), else :data:`OVERLAP_PHI` (slightly above the
+        sphere jamming densities, so the jamming bisection decompresses).
     bond_angle : float, optional
         Every bond angle [rad]; default random.
     no_overlap : bool
         Default True: redraw a cluster whose spheres overlap a placed sphere or each other (random
         sequential placement; relative overlaps up to :data:`~jamflow.tolerances.OVERLAP_TOL`
-        pass, e.g. next-nearest spheres at a bond angle of exactly pi/3).
+        pass, e.g. next-nearest spheres at a bond angle of exactly pi/3). The linked
+        monomers of a dimer overlap by construction.
+    diameter_ratio, size_ratio, separation : float
+        Dimers only: large over small monomer diameter, large over small dimer length,
+        and the monomers' centre distance in small-monomer diameters
+        (defaults: the paper's 1.4, 1.4 and 1).
 
     Returns
     -------
@@ -483,7 +501,7 @@ def linked_packing(
         raise ValueError(f"linked packings are built in d = 2 or 3, got d = {d}")
     if kind not in CLUSTER_KINDS:
         raise ValueError(f"cluster kind must be one of {', '.join(CLUSTER_KINDS)}, got {kind!r}")
-    m = 3 if kind == "trimer" else chain_length
+    m = {"trimer": 3, "dimer": 2}.get(kind, chain_length)
     if m < 2 and kind == "chain":
         raise ValueError(f"a chain needs at least 2 spheres, got --chain-length {m}")
     if clusters < 1:
@@ -494,8 +512,21 @@ def linked_packing(
     lo, hi = BOND_ANGLE_RANGE
     if bond_angle is not None and not lo <= bond_angle <= pi:
         raise ValueError(f"bond angle must lie in [pi/3, pi] rad, got {bond_angle}")
+    scale = np.ones(clusters)
+    if kind == "dimer":
+        check_dimer(diameter_ratio, separation)
+        if not (np.isfinite(size_ratio) and size_ratio >= 1.0):
+            raise ValueError(f"dimer size ratio (large over small dimers) must be >= 1, got {size_ratio}")
+        scale[1::2] = size_ratio
+        body_d, bond = np.array([1.0, diameter_ratio]), separation
+    else:
+        body_d, bond = np.ones(m), 1.0
     n = clusters * m
-    side = (n * float(sphere_volume(d, 1.0)) / phi) ** (1.0 / d)
+    D = np.concatenate([s * body_d for s in scale])
+    # volume of a cluster of scale 1: chains' spheres do not overlap, a dimer's share a lens
+    body_link = Links(np.array([0]), np.array([1]), np.array([bond])) if kind == "dimer" else None
+    unit_volume = linked_volume(d, body_d, body_link)
+    side = (float(np.sum(scale**d)) * unit_volume / phi) ** (1.0 / d)
     box = Box.cubic(d, side)
     x = np.zeros((n, d))
     pairs: list[tuple[int, int]] = []
@@ -503,14 +534,14 @@ def linked_packing(
     for c in range(clusters):
         for _ in range(PLACEMENT_TRIES):
             angles = np.full(max(m - 2, 0), bond_angle) if bond_angle is not None else rng.uniform(lo, hi, max(m - 2, 0))
-            body = chain_offsets(m, d, 1.0, angles, rng)
+            body = chain_offsets(m, d, bond * scale[c], angles, rng)
             if np.max(np.linalg.norm(body[:, None, :] - body[None, :, :], axis=2)) >= 0.5 * side:
                 continue  # would meet its own image: redraw the bond directions
             x[c * m:(c + 1) * m] = box.wrap(body + rng.random(d) * side)
             p, r = chain_links(m, c * m, body, free_angles)
             if d == 2 and _crosses(pairs + p, lengths + r, x[:(c + 1) * m], box, len(pairs)):
                 continue
-            if no_overlap and _overlaps(x[:(c + 1) * m], box, c * m):
+            if no_overlap and _overlaps(x[:(c + 1) * m], D[:(c + 1) * m], box, c * m, p):
                 continue
             break
         else:
@@ -520,9 +551,13 @@ def linked_packing(
         pairs += p
         lengths += r
     links, messages = remove_degenerate_links(pairs, lengths, x, box)
-    packing = Packing(x, np.ones(n), box, protocol=f"init-chains({kind})", links=links,
-                      attrs={"length_unit": "sphere diameter", "cluster_kind": kind, "chain_length": m,
-                             "free_angles": int(free_angles)})
+    attrs = {"length_unit": "small monomer diameter" if kind == "dimer" else "sphere diameter",
+             "cluster_kind": kind, "chain_length": m, "free_angles": int(free_angles)}
+    if kind == "dimer":
+        attrs.update(dimer_diameter_ratio=diameter_ratio, dimer_size_ratio=size_ratio, dimer_separation=separation)
+        if d == 2:
+            attrs["asphericity"] = dimer_asphericity(diameter_ratio, separation)
+    packing = Packing(x, D, box, protocol=f"init-chains({kind})", links=links, attrs=attrs)
     check_linked_start(packing)
     return packing, messages
 
@@ -535,9 +570,16 @@ def _crosses(pairs: list, lengths: list, x: NDArray[np.float64], box: Box, first
     return bool(np.any(_cross(Links(p[:, 0], p[:, 1], np.array(lengths)), new, np.arange(len(p)), x, box)))
 
 
-def _overlaps(x: NDArray[np.float64], box: Box, first_new: int) -> bool:
-    """Whether a unit sphere from index ``first_new`` of ``x`` overlaps another beyond :data:`OVERLAP_TOL` (minimum images)."""
+def _overlaps(x: NDArray[np.float64], diameter: NDArray[np.float64], box: Box, first_new: int,
+              linked: list[tuple[int, int]]) -> bool:
+    """Whether a sphere from index ``first_new`` of ``x`` overlaps another beyond :data:`OVERLAP_TOL` (minimum images).
+
+    Pairs in ``linked`` (the new cluster's links) are exempt: a dimer's monomers overlap.
+    """
     new = np.arange(first_new, len(x))
     r = np.linalg.norm(box.minimum_image(x[None, :, :] - x[new, None, :]), axis=2)
+    sigma = 0.5 * (diameter[None, :] + diameter[new, None])
     r[np.arange(len(new)), new] = np.inf
-    return bool(np.any(r < 1.0 - OVERLAP_TOL))
+    for a, b in linked:
+        r[a - first_new, b] = r[b - first_new, a] = np.inf
+    return bool(np.any(r < sigma * (1.0 - OVERLAP_TOL)))

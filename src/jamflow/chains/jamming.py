@@ -35,13 +35,14 @@ from ..bodies import Links
 from ..box import Box
 from ..models.base import EnergyModel
 from ..models.links import LinkedSpheresModel
-from ..packing import Packing, sphere_volume
+from ..packing import Packing, linked_volume
 from ..soft.jamming import JammingResult, JammingSettings, jam_model_to_pressure
 from ..soft.minimize import FireParameters, MinimizeResult, minimize_fire
 from ..soft.potential import HARMONIC, PowerLawPotential, overlapping_pairs
 from ..tolerances import LINK_LENGTH_RTOL
 from .builders import check_linked_start
 from .clusters import count_clusters
+from .dimers import dimer_report
 from .entanglement import check_untangled
 from .shear import ShearStabilizedModel
 
@@ -75,7 +76,7 @@ def linked_soft_packing(packing: Packing, model: LinkedSpheresModel, res: Minimi
 
     Rattlers are the danglers and rattling clusters of
     :func:`~jamflow.chains.clusters.count_clusters`; their counts, the clusters'
-    isostatic count, the largest relative link-length error and the stress
+    isostatic count (for 2D dimers also rotators and ``<z>``, :func:`~jamflow.chains.dimers.dimer_report`), the largest relative link-length error and the stress
     anisotropy ``stress_deviation = max_ab |W_ab - P' delta_ab| / P'`` (``W`` the
     total virial of pairs and link tensions, ``P' = tr W / d``) go into the attributes.
     """
@@ -89,7 +90,8 @@ def linked_soft_packing(packing: Packing, model: LinkedSpheresModel, res: Minimi
     # total virial (pairs and link tensions) of the final configuration in its box
     W = LinkedSpheresModel(box, model.diameter, model.links, x, model.potential).evaluate(x.ravel()).virial
     p_virial = float(np.trace(W)) / box.d
-    attrs = {**packing.attrs, **attrs, **count.as_dict(), "shear_stabilized": int(shear_stabilized),
+    attrs = {**packing.attrs, **attrs, **count.as_dict(), **dimer_report(count, box.d),
+             "shear_stabilized": int(shear_stabilized),
              "max_link_error": float(err.max(initial=0.0)),
              "stress_deviation": float(np.max(np.abs(W - p_virial * np.eye(box.d))) / p_virial) if p_virial else 0.0,
              "pressure_comment": "virial pressure of the contact forces and the link tensions"}
@@ -153,7 +155,7 @@ def jam_linked(
     unit = float(packing.diameter.mean())
     scaled = packing.in_units(unit)
     D, box, x = scaled.diameter, Box(scaled.box.matrix), scaled.position
-    phi = float(sphere_volume(box.d, D).sum()) / box.volume
+    phi = linked_volume(box.d, D, scaled.links) / box.volume
     kind = ShearStabilizedModel if shear_stabilize else LinkedSpheresModel
     model = kind(box, D, scaled.links, x, potential, length_rtol=length_rtol)
 

@@ -22,6 +22,7 @@ from ..chains.builders import (
     remove_degenerate_links,
 )
 from ..chains.certify import certify_linked
+from ..chains.dimers import DIMER_DIAMETER_RATIO, DIMER_SEPARATION, DIMER_SIZE_RATIO
 from ..io import (
     new_dataset_attrs,
     read_dataset,
@@ -41,20 +42,30 @@ from .common import (
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "init-chains", _init_chains,
-                    "random start of chains or rigid trimers of unit spheres (links, no overlaps unless "
-                    "--overlap; no crossing links in 2D)", writes=("out",), packings=("out",))
+                    "random start of chains or rigid trimers of unit spheres, or of bidisperse asymmetric dimers "
+                    "(links, no overlaps unless --overlap; no crossing links in 2D)", writes=("out",),
+                    packings=("out",))
     p.add_argument("out", help="output netCDF packing with links")
     p.add_argument("--d", type=int, required=True, help="dimension (2 or 3)")
     p.add_argument("--clusters", type=int, required=True, help="number of clusters K (N = K M spheres)")
     p.add_argument("--cluster", choices=CLUSTER_KINDS, required=True,
-                   help="trimer: three spheres with the bond angle frozen (rigid); chain: --chain-length spheres")
+                   help="trimer: three spheres with the bond angle frozen (rigid); chain: --chain-length spheres; "
+                        "dimer: a small and a large monomer at a fixed distance (van der Werf et al. Fig. 3b), "
+                        "half of the dimers scaled by --size-ratio")
     p.add_argument("--chain-length", type=int, default=3, help="spheres per chain M (default 3)")
     p.add_argument("--free-angles", action="store_true",
                    help="bonds only (flexible); default: every bond angle frozen by an angle link")
     p.add_argument("--bond-angle", type=float, default=None,
                    help="every bond angle [degrees]; default uniform in [60, 150] degrees")
+    p.add_argument("--diameter-ratio", type=float, default=DIMER_DIAMETER_RATIO,
+                   help=f"dimer: large over small monomer diameter (default {DIMER_DIAMETER_RATIO})")
+    p.add_argument("--separation", type=float, default=DIMER_SEPARATION,
+                   help=f"dimer: monomer centre distance in small-monomer diameters (default {DIMER_SEPARATION}, "
+                        f"the paper's A - 1 = 0.349)")
+    p.add_argument("--size-ratio", type=float, default=DIMER_SIZE_RATIO,
+                   help=f"dimer: length of large over small dimers (default {DIMER_SIZE_RATIO})")
     p.add_argument("--phi", type=float, default=None,
-                   help=f"packing fraction (default without overlaps {DILUTE_PHI[2]} in 2D, {DILUTE_PHI[3]} in 3D; "
+                   help=f"packing fraction of the union of each cluster's spheres (default without overlaps {DILUTE_PHI[2]} in 2D, {DILUTE_PHI[3]} in 3D; "
                         f"with --overlap "
                         f"{OVERLAP_PHI[2]} in 2D, {OVERLAP_PHI[3]} in 3D)")
     start = p.add_mutually_exclusive_group()
@@ -112,11 +123,12 @@ def _init_chains(args: argparse.Namespace) -> int:
     angle = None if args.bond_angle is None else radians(args.bond_angle)
     packing, messages = linked_packing(args.d, args.clusters, args.cluster, np.random.default_rng(args.seed),
                                        args.chain_length, args.free_angles, args.phi, angle,
-                                       args.no_overlap)
+                                       args.no_overlap, args.diameter_ratio, args.size_ratio, args.separation)
     _messages(messages)
     packing = packing.evolve(seed=args.seed)
     write_packing(packing, args.out, stage_parameters(args, "out"))
-    print_summary(args, args.out, [*_link_rows(packing), ("degenerate links removed", len(messages))])
+    shape = [("dimer asphericity A", f"{packing.attrs['asphericity']:.6f}")] if "asphericity" in packing.attrs else []
+    print_summary(args, args.out, [*_link_rows(packing), *shape, ("degenerate links removed", len(messages))])
     return 0
 
 

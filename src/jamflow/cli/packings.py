@@ -11,6 +11,7 @@ from tqdm import tqdm
 
 from ..analysis.contacts import contact_network, summarize
 from ..chains.clusters import count_clusters
+from ..chains.dimers import dimer_report
 from ..initial import random_packing
 from ..io import (
     gsd_types,
@@ -172,7 +173,8 @@ def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
 
     Linked spheres get the cluster count of :func:`jamflow.chains.clusters.count_clusters`
     (stated in ``docs/chains.md``) over the packing's stored contacts (or, with
-    ``--gap-tol`` or none stored, pairs within the gap tolerance), never linked pairs.
+    ``--gap-tol`` or none stored, pairs within the gap tolerance), never linked pairs;
+    2D packings of dimers add rotators and ``<z>`` (:func:`jamflow.chains.dimers.dimer_report`).
     Shape packings of a family with an energy model get the counting of
     :mod:`jamflow.shapes.counting` (contacts, rattlers, sliders, ``<z>`` of Eq. 3,
     isostatic count ``3N' - 1 - N_s``). Linked shapes are not counted.
@@ -191,7 +193,7 @@ def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
         stabilized = bool(packing.attrs.get("shear_stabilized", 0))
         count = count_clusters(packing.n, packing.d, packing.links, contacts, stabilized)
         report.update({**count.as_dict(), "isostatic": count.n_contacts == count.isostatic_count,
-                       "contact_source": source, "shear_stabilized": stabilized})
+                       "contact_source": source, "shear_stabilized": stabilized, **dimer_report(count, packing.d)})
     if packing.shapes is not None:
         kinds, counts = np.unique(packing.shapes.kind[packing.shape_index], return_counts=True)
         report["shapes"] = {str(k): int(c) for k, c in zip(kinds, counts)}
@@ -215,6 +217,10 @@ def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
                  ("isostatic", f"{str(report['isostatic']).lower()}  (N_c = {report['n_contacts']}, "
                                f"sum f_c - d + 1{' + d(d+1)/2 - 1' if stabilized else ''} = "
                                f"{report['isostatic_count']}: {report['rigidity_counting']})")]
+        if "n_dimers" in report:
+            rows += [("dimers", f"{report['n_dimers']} ({report['n_rotators']} rotators, "
+                                f"{report['n_rattling_dimers']} rattling)"),
+                     ("coordination <z> (Eq. 3)", f"{report['z']:.6f} (rotators count 1/3)")]
     if "shapes" in report:
         rows.append(("shapes", ", ".join(f"{c} {k}" for k, c in report["shapes"].items())))
     if shapes_counted:
