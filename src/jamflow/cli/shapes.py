@@ -149,14 +149,19 @@ def _modes(args: argparse.Namespace) -> int:
                                 lambda_0=spec.lambda_0, pressure=float(packing.pressure or np.nan),
                                 max_generalized_force=spec.max_force, force_balanced_for_spectrum=int(spec.balanced),
                                 n_nonpositive_fourth_derivative=int(np.sum(spec.fourth_derivative[spec.region == 1] <= 0.0)),
+                                n_unresolved_fourth_derivative=int(np.sum(np.isnan(spec.fourth_derivative[spec.region == 1]))),
                                 **check),
     )
     write_dataset(ds, args.out)
     d4 = spec.fourth_derivative[spec.region == 1]
     if np.any(d4 <= 0.0):
         print(f"jamflow modes: warning: {args.input}: {int(np.sum(d4 <= 0.0))} region-1 mode(s) with a non-positive "
-              "fourth derivative: a stable quartic mode has d^4U/ds^4 > 0, so the second difference crossed a "
-              "change of contact (type) along the mode, or the mode is not quartic", file=sys.stderr)
+              "fourth derivative: a stable quartic mode has d^4U/ds^4 > 0, so the mode is not quartic",
+              file=sys.stderr)
+    if np.any(np.isnan(d4)):
+        print(f"jamflow modes: warning: {args.input}: {int(np.sum(np.isnan(d4)))} region-1 mode(s) without a fourth "
+              "derivative (NaN): the contact network changes on both sides within the step, so no second "
+              "difference of v^T M v is smooth", file=sys.stderr)
     print_summary(args, args.out, [
         ("N, modes", f"{packing.n}, {spec.eigenvalue.size}"),
         ("zero modes (region 0)", f"{spec.n_zero} (|lambda| <= {spec.lambda_0:.3g})"),

@@ -26,7 +26,9 @@ spans at least ``REGION_GAP_MIN_RATIO``. Without such a gap region 1 is empty
 (``lambda = 2e-3`` at ``P = 1e-9``, negative fourth derivative) of a dumbbell packing
 into region 1. The fourth derivative of ``U`` along
 each region-1 mode ``v`` (Fig. 11) is the second difference of ``v^T M(q + h v) v`` with a
-step that opens no contact (:func:`fourth_derivative_step`).
+step that opens no contact (:func:`fourth_derivative_step`), central where it is smooth,
+else one-sided on the side where it is (:func:`fourth_derivative_along`): a contact at the
+verge of opening, or of changing type, makes ``M`` jump between two samples.
 """
 
 from __future__ import annotations
@@ -40,7 +42,8 @@ from ..models.base import pressure_of
 from ..packing import Packing
 from .counting import count_constraints, shape_model
 
-__all__ = ["ZERO_EIGENVALUE_RTOL", "QUARTIC_PRESSURE_RATIO", "REGION_GAP_MIN_RATIO", "SPECTRUM_FORCE_RATIO", "FOURTH_DERIVATIVE_STEP", "fourth_derivative_step", "Spectrum", "spectrum"]
+__all__ = ["ZERO_EIGENVALUE_RTOL", "QUARTIC_PRESSURE_RATIO", "REGION_GAP_MIN_RATIO", "SPECTRUM_FORCE_RATIO", "FOURTH_DERIVATIVE_STEP",
+           "FOURTH_AGREEMENT_RTOL", "fourth_derivative_step", "fourth_derivative_along", "Spectrum", "spectrum"]
 
 #: Eigenvalues with ``|lambda| <= ZERO_EIGENVALUE_RTOL * lambda_max`` are zero modes:
 #: LAPACK's eigenvalues err by ``O(eps ||M||) ~ 1e-16 lambda_max``; 1e-13 leaves a
@@ -79,6 +82,15 @@ FOURTH_STEP_OVERLAP_FRACTION: float = 0.1
 #: Smallest step: round-off ``eps ||M|| / h^2`` stays below ~1e-3 of ``||M||`` (a pair
 #: touching by less than ``(h / FOURTH_STEP_OVERLAP_FRACTION)^2 = 1e-10`` may then open).
 FOURTH_DERIVATIVE_MIN_STEP: float = 1e-6
+
+
+#: Two second differences of ``v^T M v`` (steps ``h`` and ``h / 2``) agree when they
+#: differ by at most this fraction of the larger magnitude. Smooth data agree far better:
+#: truncation is ``~ h U^(5) / U^(4)`` one-sided (1e-3 measured at ``h = 1e-6``) and
+#: round-off ``~ 4 eps ||M|| / (h / 2)^2`` (~1e-3 of the smallest measured fourth
+#: derivative, 0.1, at the smallest step); a jump of ``M`` between samples changes the
+#: estimate by orders of magnitude (8e5 against 9.7 on the vendored A = 1.3 packing).
+FOURTH_AGREEMENT_RTOL: float = 0.05
 
 
 def fourth_derivative_step(min_overlap: float) -> float:
@@ -130,6 +142,43 @@ class Spectrum:
         return self.max_force <= SPECTRUM_FORCE_RATIO * self.pressure
 
 
+def fourth_derivative_along(model, q: NDArray[np.float64], v: NDArray[np.float64], lam: float, h: float) -> float:
+    """``d^4 U / ds^4`` along the unit mode ``v`` (eigenvalue ``lam``) at ``q``, or NaN [k].
+
+    The second derivative of ``f(s) = v^T M(q + s v) v`` from samples at
+    ``s = 0, +-h/2, +-h, +-2h``: central, right and left second differences at steps
+    ``h`` and ``h / 2``. The first of these three (in that order) whose two steps agree
+    (:data:`FOURTH_AGREEMENT_RTOL`) gives the value at step ``h``; a jump of ``M`` (a
+    contact opening or changing type between samples) spoils the central difference
+    and the one-sided difference on its side, not the other. NaN when none agrees.
+
+    Parameters
+    ----------
+    model : ShapeModel
+        Anything with ``hessian(q)`` returning a sparse matrix.
+    q : ndarray, shape (3N,)
+    v : ndarray, shape (3N,)
+        Unit eigenvector.
+    lam : float
+        Its eigenvalue ``f(0)``.
+    h : float
+        Step [length or rad], from :func:`fourth_derivative_step`.
+    """
+    f = {0.0: lam}
+    for s in (-2.0, -1.0, -0.5, 0.5, 1.0, 2.0):
+        f[s] = float(v @ (model.hessian(q + s * h * v) @ v))
+
+    def second(a: float, b: float, c: float, step: float) -> float:
+        return (f[a] - 2.0 * f[b] + f[c]) / (step * step)
+
+    for coarse, fine in ((second(-1.0, 0.0, 1.0, h), second(-0.5, 0.0, 0.5, 0.5 * h)),
+                         (second(0.0, 1.0, 2.0, h), second(0.0, 0.5, 1.0, 0.5 * h)),
+                         (second(0.0, -1.0, -2.0, h), second(0.0, -0.5, -1.0, 0.5 * h))):
+        if abs(coarse - fine) <= FOURTH_AGREEMENT_RTOL * max(abs(coarse), abs(fine)):
+            return coarse
+    return float("nan")
+
+
 def _auto_cutoff(lam: NDArray[np.float64], lambda_0: float, pressure: float) -> float:
     """``lambda_c`` from the widest admissible gap (module doc); ``lambda_0`` when there is none."""
     nonzero = lam[lam > lambda_0]
@@ -166,9 +215,7 @@ def spectrum(packing: Packing, lambda_c: float | None = None, fourth: bool = Tru
         # one harmonic term per pair: U = (k/2) delta^2 (the shallowest term of a pair bounds this from above)
         h = fourth_derivative_step(float(np.sqrt(2.0 * energy.min() / model.k)) if energy.size else 0.0)
         for k in np.flatnonzero(region == 1):
-            v = vec[:, k]
-            curv = [v @ (model.hessian(q + s * h * v) @ v) for s in (-1.0, 1.0)]
-            d4[k] = (curv[0] - 2.0 * lam[k] + curv[1]) / (h * h)
+            d4[k] = fourth_derivative_along(model, q, vec[:, k], float(lam[k]), h)
     return Spectrum(lam, region.astype(np.int64), rot, d4, lambda_0, float(lambda_c),
                     int(np.count_nonzero(region == 1)), int(np.count_nonzero(region == 0)), pressure,
                     float(model.max_force(ev.gradient)))
