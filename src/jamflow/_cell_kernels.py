@@ -154,18 +154,40 @@ def cell_pairs(x, L, cutoff, diameter, skin):
     # cells and stencil offsets counted like odometers (last axis fastest); the
     # neighbour cell and the image shift of its members (-+L across the boundary along
     # axes with at least 3 cells; fewer cells along an axis round instead) follow
-    # without integer divisions. A stencil lists distinct cells and is symmetric, so
-    # keeping neighbours with a larger id (and pairs within a cell once) visits each
-    # cell pair once
+    # without integer divisions. Each cell pair is visited once: with 3 cells or more
+    # along every axis by the forward half of the stencil (offsets lexicographically
+    # >= 0; the pair (c, c + o) is met from c with o > 0, never from c + o with -o),
+    # else by keeping, of the distinct and symmetric stencil cells, those with a larger
+    # id (pairs within a cell once). The forward half skips the 4 (2D) or 13 (3D)
+    # offsets the id test would compute and drop: about 10 % of a build
     own = np.zeros(d, dtype=np.int64)
     step = np.zeros(d, dtype=np.int64)
+    if shifted:
+        n_fwd = (n_stencil - 1) // 2 + 1
+        fwd = np.empty((n_fwd, d), dtype=np.int64)
+        for t in range(n_fwd):
+            tt = t + (n_stencil - 1) // 2
+            for k in range(d - 1, -1, -1):
+                fwd[t, k] = tt % 3 - 1
+                tt //= 3
+    else:
+        n_fwd = n_stencil
+        fwd = np.empty((0, d), dtype=np.int64)
     for ci in range(n_cells):
         step[:] = 0
-        for t in range(n_stencil):
+        for t in range(n_fwd):
             cid = 0
             for k in range(d):
                 shift[k] = 0.0
-                if span[k] == 3:
+                if shifted:
+                    c = own[k] + fwd[t, k]
+                    if c < 0:
+                        c += ncell[k]
+                        shift[k] = -L[k]
+                    elif c >= ncell[k]:
+                        c -= ncell[k]
+                        shift[k] = L[k]
+                elif span[k] == 3:
                     c = own[k] + step[k] - 1
                     if c < 0:
                         c += ncell[k]
@@ -176,9 +198,10 @@ def cell_pairs(x, L, cutoff, diameter, skin):
                 else:
                     c = step[k]
                 cid = cid * ncell[k] + c
-            _tick(step, span)
-            if cid < ci:
-                continue
+            if not shifted:
+                _tick(step, span)
+                if cid < ci:
+                    continue
             end = start[cid + 1]
             if m + (start[ci + 1] - start[ci]) * (end - start[cid]) > capacity:
                 # grown outside the candidate loop: arrays reassigned inside it
@@ -246,5 +269,5 @@ def cell_pairs(x, L, cutoff, diameter, skin):
     for p in range(m):
         for k in range(d):
             raw = x[out_j[p], k] - x[out_i[p], k]
-            image[p, k] = -int(np.round(raw / L[k]))
+            image[p, k] = -int(np.floor(raw / L[k] + 0.5))
     return out_i, out_j, image
