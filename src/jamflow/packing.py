@@ -88,8 +88,9 @@ def linked_volume(d: int, diameter: ArrayLike, links: Links | None) -> float:
 
     Sum of the sphere volumes minus the lens of every linked pair at its link length:
     exact when no point lies in three linked spheres (dimers; chains and clusters whose
-    links are contact distances or longer), an upper bound otherwise. Unlinked soft
-    overlaps count whole, as in the packing fraction of soft spheres.
+    links are contact distances or longer), otherwise short of the union by the volume
+    shared by three or more (Bonferroni). Unlinked soft overlaps count whole, as in the
+    packing fraction of soft spheres.
     """
     D = np.asarray(diameter, dtype=np.float64)
     total = float(sphere_volume(d, D).sum())
