@@ -178,6 +178,20 @@ def test_zero_modes_of_jammed_dimers_are_translations_rotators_and_rattlers(jamm
         assert np.linalg.norm(zero.T @ t) == pytest.approx(1.0, rel=1e-8)
 
 
+def test_jammed_3d_dimers_are_isostatic_with_z_10_and_rotator_zero_modes():
+    """3D: f = 5 per dimer, a rotator keeps 2 free turns; N_c = 5 N' - 2 N_rot - 2 and <z> = 10."""
+    start, _ = linked_packing(3, 24, "dimer", np.random.default_rng(5))
+    result = jam_linked(start, 1e-6, settings=JammingSettings(force_tol=1e-13, pressure_rtol=1e-3, delta_phi=1e-2))
+    p = result.packing
+    assert result.converged
+    count = count_clusters(p.n, 3, p.links, p.contacts)
+    n_rot, n_rat = p.attrs["n_rotators"], p.attrs["n_rattling_dimers"]
+    assert n_rot > 0  # the case under test
+    assert count.n_contacts == count.isostatic_count == 5 * (24 - n_rat) - 2 * n_rot - 2
+    assert p.attrs["z"] == pytest.approx(10.0, rel=1e-14)
+    assert constrained_hessian(p, strain=False).n_zero == 3 + 2 * n_rot + 5 * n_rat
+
+
 def test_cli_dimers_init_jam_check(tmp_path, capsys):
     start, out = tmp_path / "d0.nc", tmp_path / "d1.nc"
     assert main(["init-chains", str(start), "--d", "2", "--clusters", "16", "--cluster", "dimer", "--seed", "2"]) == 0

@@ -10,17 +10,18 @@ dimers, the large ones the small ones scaled by 1.4 (area ratio 1.4^2), all with
 same mass. Monomers of different dimers interact by the sphere potential at
 ``r_ij`` against ``sigma_ij`` (the sum of their radii), monomers of one dimer do not.
 
-Counting (the paper's Fig. 3b): a dimer is a rigid body with ``f = d m - L = 3``
-degrees of freedom in 2D, so a jammed packing of ``N'`` non-rattling dimers is
-isostatic with ``N_c = 3 N' - 1 - N_rot`` contacts, where a **rotator** is a dimer
-held only through one monomer (its other monomer touches nothing): it keeps one free
-rotation about the held monomer's centre. In the cluster count of
-:mod:`jamflow.chains.clusters` the free monomer is a dangler and the rest a
-one-sphere cluster, which gives exactly this count (a rattling dimer is a rattling
-cluster, or two danglers). :func:`dimer_counting` names the
-rotators and gives ``<z>`` of the paper's Eq. 3 with a rotator counted, like a slider,
-as a third of a particle (one of its three degrees of freedom is free), so an
-isostatic dimer packing has ``<z> = 6``.
+Counting (the paper's Fig. 3b): a dimer is a rigid body with ``f = d m - L = 2 d - 1``
+degrees of freedom (3 in 2D, 5 in 3D, where the turn about its axis is no degree of
+freedom), so a jammed packing of ``N'`` non-rattling dimers in a fixed box is isostatic
+with ``N_c = f N' - (d - 1) N_rot - d + 1`` contacts (2D: ``3 N' - 1 - N_rot``), where a
+**rotator** is a dimer held only through one monomer (its other monomer touches
+nothing): it keeps ``d - 1`` free rotations about the held monomer's centre. In the
+cluster count of :mod:`jamflow.chains.clusters` the free monomer is a dangler and the
+rest a one-sphere cluster, which gives exactly this count (a rattling dimer is a
+rattling cluster, or two danglers). :func:`dimer_counting` names the rotators and gives
+``<z>`` of the paper's Eq. 3 (2D) and its d-dimensional form, with a rotator counted as
+the fraction ``(f - d + 1) / f`` of a particle that is held (like a slider in 2D, a
+third missing), so an isostatic dimer packing has ``<z> = 2 f``: 6 in 2D, 10 in 3D.
 """
 
 from __future__ import annotations
@@ -105,34 +106,37 @@ def dimer_aspect_ratio(diameter_ratio: float = DIMER_DIAMETER_RATIO, separation:
     return (separation + 0.5 * (1.0 + diameter_ratio)) / diameter_ratio
 
 
-def dimer_counting(count: ClusterCount) -> dict:
-    """Rotators and ``<z>`` (Eq. 3, rotators as a third of a particle) of a 2D dimer packing (module doc).
+def dimer_counting(count: ClusterCount, d: int = 2) -> dict:
+    """Rotators and ``<z>`` (Eq. 3, rotators counted in part) of a dimer packing in d dimensions (module doc).
 
     Parameters
     ----------
     count : ClusterCount
-        Cluster count of the packing, whose clusters are dimers (two spheres each).
+        Fixed-box cluster count of the packing, whose clusters are dimers (two spheres each).
+    d : int
+        Dimension.
 
     Returns
     -------
     dict
         ``n_dimers``, ``n_rotators`` (dimers with one monomer outside the backbone: a
         dangler), ``n_rattling_dimers`` (both monomers outside) and ``z``
-        (``2 (N_c + 1) / (N - N_r - N_rot / 3)``; NaN when every dimer rattles).
+        (``2 (N_c + d - 1) / (N - N_r - N_rot (d - 1) / f)`` with ``f = 2 d - 1``; in 2D
+        the paper's ``2 (N_c + 1) / (N - N_r - N_rot / 3)``; NaN when every dimer rattles).
     """
     sizes = np.bincount(count.cluster)
     if np.any(sizes != 2):
         raise ValueError(f"a dimer packing has clusters of two spheres, found sizes {sorted(set(sizes.tolist()))}")
     free = np.bincount(count.cluster[count.rattler], minlength=sizes.size)  # rattling monomers per dimer
     n, n_rot, n_rat = sizes.size, int(np.sum(free == 1)), int(np.sum(free == 2))
-    held = n - n_rat - n_rot / 3.0
-    z = 2.0 * (count.n_contacts + 1) / held if held > 0 else float("nan")
+    f = 2 * d - 1
+    held = n - n_rat - n_rot * (d - 1) / f
+    z = 2.0 * (count.n_contacts + d - 1) / held if held > 0 else float("nan")
     return {"n_dimers": n, "n_rotators": n_rot, "n_rattling_dimers": n_rat, "z": z}
 
 
-
 def dimer_report(count: ClusterCount, d: int) -> dict:
-    """:func:`dimer_counting` for a 2D packing whose clusters are all dimers, else an empty dict."""
-    if d != 2 or count.cluster.size == 0 or np.any(np.bincount(count.cluster) != 2):
+    """:func:`dimer_counting` for a packing whose clusters are all dimers, else an empty dict."""
+    if count.cluster.size == 0 or np.any(np.bincount(count.cluster) != 2):
         return {}
-    return dimer_counting(count)
+    return dimer_counting(count, d)

@@ -76,7 +76,7 @@ def linked_soft_packing(packing: Packing, model: LinkedSpheresModel, res: Minimi
 
     Rattlers are the danglers and rattling clusters of
     :func:`~jamflow.chains.clusters.count_clusters`; their counts, the clusters'
-    isostatic count (for 2D dimers also rotators and ``<z>``, :func:`~jamflow.chains.dimers.dimer_report`), the largest relative link-length error and the stress
+    isostatic count (for dimers also rotators and ``<z>``, :func:`~jamflow.chains.dimers.dimer_report`), the largest relative link-length error and the stress
     anisotropy ``stress_deviation = max_ab |W_ab - P' delta_ab| / P'`` (``W`` the
     total virial of pairs and link tensions, ``P' = tr W / d``) go into the attributes.
     """

@@ -174,7 +174,7 @@ def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
     Linked spheres get the cluster count of :func:`jamflow.chains.clusters.count_clusters`
     (stated in ``docs/chains.md``) over the packing's stored contacts (or, with
     ``--gap-tol`` or none stored, pairs within the gap tolerance), never linked pairs;
-    2D packings of dimers add rotators and ``<z>`` (:func:`jamflow.chains.dimers.dimer_report`).
+    packings of dimers add rotators and ``<z>`` (:func:`jamflow.chains.dimers.dimer_report`).
     Shape packings of a family with an energy model get the counting of
     :mod:`jamflow.shapes.counting` (contacts, rattlers, sliders, ``<z>`` of Eq. 3,
     isostatic count ``3N' - 1 - N_s``). Linked shapes are not counted.
@@ -220,7 +220,7 @@ def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
         if "n_dimers" in report:
             rows += [("dimers", f"{report['n_dimers']} ({report['n_rotators']} rotators, "
                                 f"{report['n_rattling_dimers']} rattling)"),
-                     ("coordination <z> (Eq. 3)", f"{report['z']:.6f} (rotators count 1/3)")]
+                     ("coordination <z> (Eq. 3)", f"{report['z']:.6f} (isostatic: {2 * (2 * packing.d - 1)})")]
     if "shapes" in report:
         rows.append(("shapes", ", ".join(f"{c} {k}" for k, c in report["shapes"].items())))
     if shapes_counted:
