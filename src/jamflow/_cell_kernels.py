@@ -179,16 +179,8 @@ def cell_pairs(x, L, cutoff, diameter, skin):
             cid = 0
             for k in range(d):
                 shift[k] = 0.0
-                if shifted:
-                    c = own[k] + fwd[t, k]
-                    if c < 0:
-                        c += ncell[k]
-                        shift[k] = -L[k]
-                    elif c >= ncell[k]:
-                        c -= ncell[k]
-                        shift[k] = L[k]
-                elif span[k] == 3:
-                    c = own[k] + step[k] - 1
+                if span[k] == 3:
+                    c = own[k] + (fwd[t, k] if shifted else step[k] - 1)
                     if c < 0:
                         c += ncell[k]
                         shift[k] = -L[k]
