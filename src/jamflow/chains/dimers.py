@@ -30,6 +30,7 @@ from math import acos, pi
 
 import numpy as np
 
+from ..packing import lens_volume
 from .clusters import ClusterCount
 
 __all__ = [
@@ -72,7 +73,7 @@ def dimer_perimeter_area(r1: float, r2: float, separation: float) -> tuple[float
 
     The boundary is the two circles outside their lens: arcs of ``2 (pi - theta_k)``
     with ``cos theta_1 = (l^2 + r1^2 - r2^2) / (2 l r1)``; the area is the two disks
-    minus the lens ``sum_k r_k^2 (theta_k - sin theta_k cos theta_k)``.
+    minus their lens (:func:`~jamflow.packing.lens_volume`).
 
     Returns
     -------
@@ -89,8 +90,7 @@ def dimer_perimeter_area(r1: float, r2: float, separation: float) -> tuple[float
     t1 = acos(min(1.0, (l * l + r1 * r1 - r2 * r2) / (2.0 * l * r1)))
     t2 = acos(min(1.0, (l * l + r2 * r2 - r1 * r1) / (2.0 * l * r2)))
     perimeter = 2.0 * r1 * (pi - t1) + 2.0 * r2 * (pi - t2)
-    lens = sum(r * r * (t - np.sin(t) * np.cos(t)) for r, t in ((r1, t1), (r2, t2)))
-    return perimeter, float(pi * (r1 * r1 + r2 * r2) - lens)
+    return perimeter, float(pi * (r1 * r1 + r2 * r2) - lens_volume(2, 2.0 * r1, 2.0 * r2, l))
 
 
 def dimer_asphericity(diameter_ratio: float = DIMER_DIAMETER_RATIO, separation: float = DIMER_SEPARATION) -> float:
