@@ -50,7 +50,7 @@ Protocol mapping (read from the reference's source, ``LubachevsckyStillingerStep
   ``maxPressure``); lower targets are read from its per-step log (the timed process is
   ended once the highest target is passed). jamflow stops at the first window with
   ``p >= target``. Targets above 1e12 are not supported by the reference.
-* CPU time: the reference's process CPU time (user + system, ``/proc/PID/stat``, 10 ms
+* CPU time: the reference's process CPU time (user + system, ``psutil``, the kernel's 10 ms
   ticks) at the moment its log line reporting the step that crossed the target appears
   (stdout line-buffered with ``stdbuf -oL``), including its start-up; jamflow's
   ``time.process_time`` as reported by ``compress`` (numba kernels compiled beforehand by
@@ -67,7 +67,7 @@ Usage::
     benchmarks/build_packing_generation.sh /path/to/packing-generation /tmp/pgbin
     python benchmarks/ls_vs_reference.py --reference-bin /tmp/pgbin [--quick] [--cases ...]
 
-``--quick``: 3D monodisperse N = 256 to p = 1e6 only. Linux only (``/proc``, ``stdbuf``).
+``--quick``: 3D monodisperse N = 256 to p = 1e6 only. Needs ``stdbuf`` (GNU coreutils).
 """
 
 from __future__ import annotations
@@ -75,6 +75,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import platform
 import re
 import shutil
 import signal
@@ -89,6 +90,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+import psutil
 import xarray as xr
 
 from jamflow.box import Box
@@ -115,7 +117,6 @@ QUICK_TARGETS: tuple[float, ...] = (1e6,)
 #: Relative gap (file diameters) within which the closest pair of the -fba output is sought.
 START_GAP_SEARCH: float = 0.5
 
-_CLK_TCK = os.sysconf("SC_CLK_TCK")
 _RE_STEP = re.compile(r"^Time: (\S+), reduced pressure: (\S+), actual temperature: (\S+)")
 _RE_COLL = re.compile(r"^Collision occurrence count: (\d+)")
 _RE_RATIO = re.compile(r"^Step (\d+)\. Inner diameter ratio is (\S+)\.")
@@ -209,10 +210,9 @@ def start_packing(case: Case, xyzd: Path) -> tuple[Packing, float]:
 
 # --- running the reference ---------------------------------------------------------------
 def _cpu_seconds(pid: int) -> float:
-    """User + system CPU time of a running process [s] from /proc/PID/stat."""
-    with open(f"/proc/{pid}/stat") as fh:
-        fields = fh.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / _CLK_TCK
+    """User + system CPU time of a running process [s] (psutil, a snakemake dependency)."""
+    times = psutil.Process(pid).cpu_times()
+    return times.user + times.system
 
 
 def run_reference(exe: Path, case: Case, xyzd: Path, folder: Path, targets: tuple[float, ...],
@@ -473,10 +473,8 @@ def main() -> None:
 
 
 def _cpu_model() -> str:
-    for line in Path("/proc/cpuinfo").read_text().splitlines():
-        if line.startswith("model name"):
-            return line.split(":", 1)[1].strip()
-    return "unknown"
+    """The machine as the standard library reports it (architecture, processor, CPU count)."""
+    return f"{platform.machine()} {platform.processor() or 'unknown processor'}, {os.cpu_count()} CPUs"
 
 
 def print_table(ds: xr.Dataset) -> None:
