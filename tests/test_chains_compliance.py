@@ -5,14 +5,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from jamflow.box import Box
 from jamflow.chains.builders import cement, linked_packing
-from jamflow.chains.compliance import compliance, strain_compliance
+from jamflow.chains.compliance import compliance, strain_compliance, total_virial
 from jamflow.chains.jamming import jam_linked
 from jamflow.chains.shear import ShearStabilizedModel
 from jamflow.cli import main
+from jamflow.initial import random_packing
 from jamflow.io import read_dataset, write_packing
 from jamflow.models.base import ModelEvaluation
-from jamflow.soft.jamming import JammingSettings
+from jamflow.models.links import LinkedSpheresModel
+from jamflow.soft.hessian import elastic_moduli
+from jamflow.soft.jamming import JammingSettings, jam_to_pressure
 from jamflow.soft.minimize import minimize_fire
 
 
@@ -83,3 +87,73 @@ def test_cli_moduli_of_a_linked_packing(tmp_path, capsys, stabilized):
     assert float(ds["bulk_hill"]) == pytest.approx(c.bulk_hill, rel=1e-12)
     assert f"{c.bulk_hill:.6g}" in out and ds.attrs["n_zero_modes"] == 2
     assert np.all(ds["eigenvalue"].values > 0)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_without_links_the_moduli_are_those_of_jamflow_moduli(d):
+    """C with the stress terms of the module doc gives -V dP/dV and the simple-shear G of the sphere code.
+
+    Fixed-box packings of few spheres can be unstable to shear (negative G): the
+    negative compliance is kept and counted, not reported as an infinite modulus.
+    """
+    start = random_packing(64, d, 0.5 if d == 2 else 0.3, "bi", seed=3)
+    p = jam_to_pressure(start, 1e-3, force_tol=1e-13, pressure_rtol=1e-3).packing
+    spheres = elastic_moduli(p.position, p.box, p.diameter)
+    c = compliance(p)
+    assert c.pressure == pytest.approx(spheres.pressure, rel=1e-12)
+    assert c.bulk_dilation == pytest.approx(spheres.bulk, rel=1e-10)
+    assert c.shear_simple == pytest.approx(spheres.shear, rel=1e-10)
+    # these fixed-box starts are unstable to simple shear: the negative compliance is
+    # counted and its moduli stay finite (no links, so nothing is rigid)
+    assert spheres.shear < 0
+    assert c.n_rigid == 0 and c.n_unstable == int(np.sum(np.linalg.eigvalsh(c.S) < 0)) > 0
+    assert np.isfinite([c.bulk_voigt, c.bulk_reuss, c.shear_voigt, c.shear_reuss]).all()
+
+
+def _relaxed_virial(p, F):
+    """Total virial after minimising at fixed links in the box and centres deformed by ``F``."""
+    model = LinkedSpheresModel(Box(F @ p.box.matrix), p.diameter, p.links, p.position @ F.T)
+    res = minimize_fire(model, p.position @ F.T, force_tol=1e-14, max_steps=400_000)
+    assert res.converged
+    return model.evaluate(model.dofs(res.position)).virial
+
+
+@pytest.fixture(scope="module")
+def fixed_box():
+    start, _ = linked_packing(2, 8, "trimer", np.random.default_rng(4), phi=0.3, no_overlap=True)
+    settings = JammingSettings(force_tol=1e-13, pressure_rtol=1e-2, delta_phi=1e-2)
+    return jam_linked(start, 1e-3, settings=settings).packing
+
+
+@pytest.mark.parametrize("name", ["fixed_box", "stabilized"])
+def test_dilation_and_simple_shear_moduli_of_linked_packings_against_finite_strains(name, request):
+    """B and G_xy from C and the link tensions' stress against relaxed central differences of the virial."""
+    p = request.getfixturevalue(name)
+    c = compliance(p)
+    W = total_virial(p)
+    V = p.box.volume
+    assert c.pressure == pytest.approx(np.trace(W) / (2 * V), rel=1e-12)
+    assert c.pressure == pytest.approx(p.pressure, rel=1e-6)
+    # central differences at h = 1e-6: truncation ~h^2, minimiser noise (|F| <= 1e-14) ~1e-8 relative
+    h = 1e-6
+    # simple shear x-y: G = -(1/V) dW_xy / dgamma (volume unchanged)
+    shear = np.array([[0.0, 1.0], [0.0, 0.0]])
+    dW = _relaxed_virial(p, np.eye(2) + h * shear) - _relaxed_virial(p, np.eye(2) - h * shear)
+    assert c.shear_simple == pytest.approx(-dW[0, 1] / (2 * h * V), rel=1e-6)
+    # dilation: B = -V dP/dV = -(1/d) dP/de, P = tr W / (d V (1 + e)^d)
+    pressures = [np.trace(_relaxed_virial(p, (1 + e) * np.eye(2))) / (2 * V * (1 + e) ** 2) for e in (h, -h)]
+    assert c.bulk_dilation == pytest.approx(-(pressures[0] - pressures[1]) / (2 * h * 2), rel=1e-6)
+
+
+def test_cli_moduli_warns_of_strains_a_fixed_box_packing_is_unstable_to(fixed_box, tmp_path, capsys):
+    write_packing(fixed_box, tmp_path / "p.nc")
+    assert main(["moduli", str(tmp_path / "p.nc"), str(tmp_path / "m.nc"), "--modes", "4"]) == 0
+    captured = capsys.readouterr()
+    ds = read_dataset(tmp_path / "m.nc", "chain-moduli")
+    c = compliance(fixed_box)
+    assert c.n_unstable > 0 and ds.attrs["n_unstable"] == c.n_unstable
+    assert "negative stiffness" in captured.err
+    assert float(ds["shear_simple"]) == pytest.approx(c.shear_simple, rel=1e-12)
+    # the lowest listed eigenvalues are the negative ones, none of them a zero mode
+    w = ds["eigenvalue"].values
+    assert w[0] < 0 and np.all(np.abs(w) > 1e-10 * np.abs(w).max())

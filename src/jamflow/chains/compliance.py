@@ -27,7 +27,22 @@ deviatoric projector, ``n_dev = d (d + 1) / 2 - 1`` its rank):
 Where ``S`` has zero eigenvalues (stresses the links carry without strain) the
 stiffness is infinite along them: a Voigt modulus is ``inf`` when the null space of
 ``S`` has a component along its strain (volumetric ``v`` or deviatoric); a packing
-with every contact a link has ``S = 0`` and every modulus infinite.
+with every contact a link has ``S = 0`` and every modulus infinite. Negative
+eigenvalues of ``S`` are strains the packing is unstable to (a fixed-box packing
+can have a negative shear modulus, Dagois-Bohy et al., PRL 109, 095703 (2012);
+shear stabilisation removes them): they are kept, counted (``n_unstable``) and give
+negative moduli, never infinite ones.
+
+The moduli of :func:`jamflow.soft.hessian.elastic_moduli` (``jamflow moduli`` of
+spheres) follow from ``C`` without another solve. With ``W`` the total virial
+(contacts and link tensions, ``P = tr W / (d V)``), ``F = 1 + eps`` linear:
+
+- dilation ``F = (1 + e) 1``: ``B = -V dP/dV = K_V + (d - 1) P / d``;
+- simple shear ``F = 1 + gamma e_x e_y^T`` is the symmetric strain
+  ``eps_xy = gamma / 2`` up to a rotation and the second-order stretch
+  ``gamma^2 (e_y e_y^T / 2 - (e_x e_x^T + e_y e_y^T) / 8)`` of its polar
+  decomposition, so ``G_xy = (1/V) d^2U/dgamma^2 = C_xy,xy / 2 + (-W_yy + (W_xx + W_yy) / 4) / V``
+  (``C_xy,xy`` the Mandel component): ``G_xy = C_xy,xy / 2 - P / 2`` at isotropic stress.
 """
 
 from __future__ import annotations
@@ -42,13 +57,14 @@ from ..soft.potential import HARMONIC, PowerLawPotential
 from .hessian import (
     ZERO_MODE_RTOL,
     _geometry,
+    constraint_multipliers,
     gamma_matrix,
     tangent_basis,
     tension_hessian,
 )
 from .shear import _upper
 
-__all__ = ["Compliance", "compliance"]
+__all__ = ["Compliance", "compliance", "total_virial"]
 
 
 @dataclass(frozen=True)
@@ -67,6 +83,13 @@ class Compliance:
         Universal anisotropy index (NaN when a modulus is infinite).
     n_rigid : int
         Zero eigenvalues of ``S`` (stress directions without strain).
+    n_unstable : int
+        Negative eigenvalues of ``S`` (strains of negative stiffness).
+    bulk_dilation, shear_simple : float
+        ``-V dP/dV`` and the simple-shear modulus in the x-y plane (module doc), the
+        definitions of :func:`jamflow.soft.hessian.elastic_moduli`; ``inf`` where infinite.
+    pressure : float
+        Virial pressure of contacts and link tensions [epsilon / length^d].
     """
 
     S: NDArray[np.float64]
@@ -79,10 +102,15 @@ class Compliance:
     poisson: float
     anisotropy: float
     n_rigid: int
+    n_unstable: int
+    bulk_dilation: float
+    shear_simple: float
+    pressure: float
 
     def as_dict(self) -> dict:
         return {k: getattr(self, k) for k in ("bulk_voigt", "bulk_reuss", "bulk_hill", "shear_voigt", "shear_reuss",
-                                               "shear_hill", "poisson", "anisotropy", "n_rigid")}
+                                               "shear_hill", "poisson", "anisotropy", "n_rigid", "n_unstable",
+                                               "bulk_dilation", "shear_simple", "pressure")}
 
 
 def strain_compliance(packing: Packing, potential: PowerLawPotential = HARMONIC
@@ -106,6 +134,21 @@ def strain_compliance(packing: Packing, potential: PowerLawPotential = HARMONIC
     return (Vs / w[keep]) @ Vs.T, geo.strain_scale, stiffness
 
 
+def total_virial(packing: Packing, potential: PowerLawPotential = HARMONIC) -> NDArray[np.float64]:
+    """``W`` (d, d) of the contacts and the link tensions [epsilon] (:class:`jamflow.models.base.ModelEvaluation`).
+
+    The tensions are those of :func:`~jamflow.chains.hessian.constraint_multipliers`.
+    """
+    geo = _geometry(packing, potential)
+    u = geo.pairs.dx / geo.pairs.distance[:, None]
+    W = np.einsum("p,pa,pb->ab", geo.force, u, geo.pairs.dx)
+    if len(geo.links):
+        mu, _ = constraint_multipliers(geo, strain=True)
+        r = np.linalg.norm(geo.link_vector, axis=1)
+        W = W + np.einsum("k,ka,kb->ab", mu / r, geo.link_vector, geo.link_vector)
+    return W
+
+
 def compliance(packing: Packing, potential: PowerLawPotential = HARMONIC) -> Compliance:
     """Compliance matrix and Voigt, Reuss and Hill moduli of a force-balanced packing (module doc)."""
     S_e, scale, stiffness = strain_compliance(packing, potential)
@@ -120,7 +163,7 @@ def compliance(packing: Packing, potential: PowerLawPotential = HARMONIC) -> Com
     w, U = np.linalg.eigh(S)
     # the smallest non-zero compliance is ~ 1 / (n_dof stiffness) in e units; zero below a tiny fraction of that
     scale = to_mandel / (max(stiffness, np.finfo(float).tiny) * S_e.shape[0] * packing.n * d)
-    soft = w > ZERO_MODE_RTOL * scale
+    soft = np.abs(w) > ZERO_MODE_RTOL * scale
     null = U[:, ~soft]
     C = (U[:, soft] / w[soft]) @ U[:, soft].T
     tol = 1e-8
@@ -128,9 +171,9 @@ def compliance(packing: Packing, potential: PowerLawPotential = HARMONIC) -> Com
     bulk_voigt = inf if np.linalg.norm(null.T @ v) > tol else float(v @ C @ v) / d**2
     shear_voigt = inf if np.linalg.norm(dev @ null) > tol else float(np.trace(C @ dev)) / (2 * n_dev)
     vsv = float(v @ S @ v)
-    bulk_reuss = inf if vsv <= ZERO_MODE_RTOL * scale else 1.0 / vsv
+    bulk_reuss = inf if abs(vsv) <= ZERO_MODE_RTOL * scale else 1.0 / vsv
     tsd = float(np.trace(S @ dev))
-    shear_reuss = inf if tsd <= ZERO_MODE_RTOL * scale else n_dev / (2.0 * tsd)
+    shear_reuss = inf if abs(tsd) <= ZERO_MODE_RTOL * scale else n_dev / (2.0 * tsd)
     bulk_hill, shear_hill = 0.5 * (bulk_voigt + bulk_reuss), 0.5 * (shear_voigt + shear_reuss)
     finite = np.isfinite([bulk_hill, shear_hill]).all()
     if not finite:
@@ -141,5 +184,11 @@ def compliance(packing: Packing, potential: PowerLawPotential = HARMONIC) -> Com
         poisson = (bulk_hill - shear_hill) / (bulk_hill + shear_hill)
     anisotropy = (n_dev * shear_voigt / shear_reuss + bulk_voigt / bulk_reuss - (n_dev + 1)
                   if np.isfinite([bulk_voigt, shear_voigt, bulk_reuss, shear_reuss]).all() else float("nan"))
+    W = total_virial(packing, potential)
+    V = packing.box.volume
+    pressure = float(np.trace(W)) / (d * V)
+    xy = int(np.flatnonzero((a == 0) & (b == 1))[0])
+    simple = inf if np.linalg.norm(null[xy]) > tol else float(C[xy, xy]) / 2 + (-W[1, 1] + (W[0, 0] + W[1, 1]) / 4) / V
     return Compliance(S, bulk_voigt, bulk_reuss, bulk_hill, shear_voigt, shear_reuss, shear_hill, float(poisson),
-                      float(anisotropy), int((~soft).sum()))
+                      float(anisotropy), int((~soft).sum()), int(np.sum(w[soft] < 0)),
+                      bulk_voigt + (d - 1) * pressure / d, simple, pressure)

@@ -54,6 +54,7 @@ __all__ = [
     "ZERO_MODE_RTOL",
     "ConstrainedHessian",
     "constrained_hessian",
+    "constraint_multipliers",
     "extended_rigidity",
     "pair_second_derivatives",
 ]
@@ -145,6 +146,12 @@ class ConstrainedHessian:
     n_zero: int
     strain: bool
 
+    @property
+    def nonzero_eigenvalues(self) -> NDArray[np.float64]:
+        """Eigenvalues above the zero threshold in magnitude, ascending (negative ones, if unstable, first)."""
+        w = self.eigenvalues
+        return w[np.abs(w) > ZERO_MODE_RTOL * np.abs(w).max()]
+
 
 @dataclass(frozen=True)
 class _Geometry:
@@ -211,27 +218,50 @@ def energy_gradient(geo: _Geometry, strain: bool) -> NDArray[np.float64]:
     return np.r_[g.ravel(), strain_components(-W, geo.strain_scale)]
 
 
-def tension_hessian(geo: _Geometry, strain: bool, volume: bool) -> NDArray[np.float64]:
-    """``M = H0 - sum_k mu_k grad^2 c_k [- nu grad^2 det F]`` with least-squares multipliers of ``grad U``.
+def constraint_multipliers(geo: _Geometry, strain: bool) -> tuple[NDArray[np.float64], float]:
+    """Link tensions ``mu`` (L,) [epsilon / length] and the volume multiplier ``nu`` [epsilon].
 
-    With strain the multipliers always include the volume column: the isotropic part
-    of the strain gradient (the pressure) is carried either by the constraint
-    ``det F = 1`` (``volume``; its curvature then enters) or by an external load
-    linear in the strain (the compliance of Sec. VI; no curvature).
+    The tensions balance the position gradient exactly, ``Omega^T mu = dU/dx``: the
+    centres are at force balance whatever holds the box. Where that leaves ``mu``
+    free (links closing loops through the box, whose self-stress only the strain
+    rows fix), the free part and ``nu`` are the least-squares balance of the strain
+    gradient; that balance is exact for a shear-stabilised packing and leaves the
+    deviatoric stress of a fixed-box packing to the box. ``nu = 0`` without strain.
+    """
+    n_x = geo.n * geo.d
+    G = gamma_matrix(geo, strain, volume=True)
+    g = energy_gradient(geo, strain)
+    L = len(geo.links)
+    if L == 0:
+        mu = np.zeros(0)
+    else:
+        Gx = G[:n_x, :L]
+        mu = np.linalg.lstsq(Gx, g[:n_x], rcond=None)[0]
+    if not strain:
+        return mu, 0.0
+    loops = sla.null_space(G[:n_x, :L], rcond=ZERO_MODE_RTOL) if L else np.zeros((0, 0))
+    columns = np.hstack([G[n_x:, :L] @ loops, G[n_x:, L:]])
+    z = np.linalg.lstsq(columns, g[n_x:] - G[n_x:, :L] @ mu, rcond=None)[0]
+    return mu + loops @ z[:-1], float(z[-1])
+
+
+def tension_hessian(geo: _Geometry, strain: bool, volume: bool) -> NDArray[np.float64]:
+    """``M = H0 - sum_k mu_k grad^2 c_k [- nu grad^2 det F]`` with the multipliers of :func:`constraint_multipliers`.
+
+    With ``volume`` the isotropic part of the strain gradient (the pressure) is
+    carried by the constraint ``det F = 1``, whose curvature then enters; without, by
+    an external load linear in the strain (the compliance of Sec. VI; no curvature).
     """
     scale = geo.strain_scale if strain else None
     p = geo.pairs
     M = pair_second_derivatives(geo.n, geo.d, p.i, p.j, p.dx, -geo.force, geo.k, scale)
-    G = gamma_matrix(geo, strain, volume=True)
-    if G.shape[1] == 0:
-        return M
-    mult = np.linalg.lstsq(G, energy_gradient(geo, strain), rcond=None)[0]
+    mu, nu = constraint_multipliers(geo, strain)
     L = len(geo.links)
     if L:
-        M -= pair_second_derivatives(geo.n, geo.d, geo.links.i, geo.links.j, geo.link_vector, mult[:L],
+        M -= pair_second_derivatives(geo.n, geo.d, geo.links.i, geo.links.j, geo.link_vector, mu,
                                      np.zeros(L), scale)
     if strain and volume:
-        M[geo.n * geo.d:, geo.n * geo.d:] -= mult[L] * _volume_curvature(geo.d, geo.strain_scale)
+        M[geo.n * geo.d:, geo.n * geo.d:] -= nu * _volume_curvature(geo.d, geo.strain_scale)
     return M
 
 

@@ -3,23 +3,32 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 import numpy as np
 import xarray as xr
 from tqdm import tqdm
 
-from ..io import new_dataset_attrs, read_packing, write_dataset, write_packing
-from ..packing import LENGTH_UNITS, Packing, length_unit
-from ..soft.hessian import backbone_pairs, elastic_moduli, hessian, lowest_modes
+from ..analysis.contacts import summarize
 from ..chains.compliance import compliance
 from ..chains.hessian import constrained_hessian
 from ..chains.jamming import DEFAULT_PROTOCOL, PROTOCOLS, jam_linked
+from ..io import new_dataset_attrs, read_packing, write_dataset, write_packing
+from ..packing import LENGTH_UNITS, Packing, length_unit
+from ..soft.hessian import backbone_pairs, elastic_moduli, hessian, lowest_modes
 from ..soft.jamming import FORCE_TOL_VANDERWERF, JammingSettings, jam_to_pressure
 from ..soft.potential import PowerLawPotential
 from ..soft.shear import LERNER_DELTA_R, aqs_shear, lerner_sd_shear
 from ..tolerances import MINIMIZE_FORCE_TOL
-from ..analysis.contacts import summarize
-from .common import add_command, add_preset, add_quiet, positive, print_summary, seed, stage_parameters
+from .common import (
+    add_command,
+    add_preset,
+    add_quiet,
+    positive,
+    print_summary,
+    seed,
+    stage_parameters,
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -278,12 +287,18 @@ def _moduli_linked(args: argparse.Namespace, packing: Packing) -> int:
     potential = PowerLawPotential(exponent=args.exponent)
     c = compliance(packing, potential)
     ch = constrained_hessian(packing, potential, strain=True)
-    eigenvalues = ch.eigenvalues[ch.n_zero:][: args.modes]
+    eigenvalues = ch.nonzero_eigenvalues[: args.modes]
     unit = "epsilon / length^d"
     names = [f"{'xyz'[a]}{'xyz'[b]}" for a, b in zip(*np.triu_indices(packing.d))]
     scalars = {name: ((), getattr(c, name), {"units": "1", "long_name": name.replace("_", " ") + " modulus",
                                               "comment": unit + " (inf: infinite, links forbid the strain)"})
                for name in ("bulk_voigt", "bulk_reuss", "bulk_hill", "shear_voigt", "shear_reuss", "shear_hill")}
+    scalars["bulk_dilation"] = ((), c.bulk_dilation, {
+        "units": "1", "long_name": "bulk modulus -V dP/dV under dilation (jamflow moduli's bulk)",
+        "comment": unit + " (inf: infinite)"})
+    scalars["shear_simple"] = ((), c.shear_simple, {
+        "units": "1", "long_name": "simple-shear modulus (1/V) d2U/dgamma2, flow x, gradient y (jamflow moduli's shear)",
+        "comment": unit + " (inf: infinite)"})
     ds = xr.Dataset(
         data_vars={
             **scalars,
@@ -299,16 +314,22 @@ def _moduli_linked(args: argparse.Namespace, packing: Packing) -> int:
         coords={"strain_component": names, "stress_component": names},
         attrs=new_dataset_attrs("jamflow linked-packing compliance and moduli", stage_parameters(args, "input", "out"),
                                 d=packing.d, N=packing.n, n_links=len(packing.links), n_rigid=c.n_rigid,
+                                n_unstable=c.n_unstable, pressure=c.pressure,
                                 n_zero_modes=ch.n_zero, protocol=packing.protocol,
                                 n_cemented=int(packing.attrs.get("n_cemented", 0)),
                                 length_unit=packing.attrs.get("length_unit", "")),
     )
     write_dataset(ds, args.out)
+    if c.n_unstable:
+        print(f"jamflow moduli: warning: {args.input}: {c.n_unstable} strain direction(s) of negative stiffness: the "
+              "packing is unstable to them at a fixed box (shear-stabilise it for positive moduli)", file=sys.stderr)
     print_summary(args, args.out, [
         ("bulk modulus K (Voigt, Reuss, Hill)", f"{c.bulk_voigt:.6g}, {c.bulk_reuss:.6g}, {c.bulk_hill:.6g} {unit}"),
         ("shear modulus G (Voigt, Reuss, Hill)", f"{c.shear_voigt:.6g}, {c.shear_reuss:.6g}, {c.shear_hill:.6g} {unit}"),
+        ("bulk -V dP/dV, simple-shear G_xy", f"{c.bulk_dilation:.6g}, {c.shear_simple:.6g} {unit}"),
         ("Poisson ratio, anisotropy", f"{c.poisson:.4g}, {c.anisotropy:.4g}"),
         ("rigid stress directions (S = 0)", c.n_rigid),
+        ("unstable strain directions (S < 0)", c.n_unstable),
         ("zero modes (constrained Hessian)", ch.n_zero),
         ("lowest eigenvalue", f"{eigenvalues[0]:.4g} epsilon / length^2" if len(eigenvalues) else "none"),
     ])
