@@ -184,3 +184,30 @@ def test_a_verlet_list_misses_no_contact_within_its_rebuild_criterion(d: int, st
     for i, j, v in zip(a[contact].tolist(), b[contact].tolist(), dy[contact]):
         k = listed[(i, j)]
         np.testing.assert_allclose(y[j] - y[i] + nlist.image[k] @ box.matrix.T, v, rtol=0, atol=1e-12)
+
+
+def test_a_box_too_small_for_the_skin_builds_with_a_smaller_skin_and_the_same_minimum() -> None:
+    """max D + skin >= half the width > max D: the build takes SMALL_BOX_SKIN_SHARE of the room; results unchanged."""
+    from jamflow.models.spheres import SphereModel
+    from jamflow.soft.minimize import minimize_fire
+    from jamflow.soft.potential import SMALL_BOX_SKIN_SHARE, SPHERE_SKIN, NeighborList
+
+    rng = np.random.default_rng(3)
+    box = Box.cubic(3, 2.5)  # half width 1.25: room 0.25 for unit spheres, below the 3D skin 0.3
+    D = np.ones(24)  # phi = 0.80: jammed, the minimum has overlaps
+    x = box.to_cartesian(rng.uniform(0.0, 1.0, (24, 3)))
+    nlist = NeighborList(D)
+    nlist.build(x, box)
+    assert SPHERE_SKIN[3] > 0.25 and nlist.skin == SMALL_BOX_SKIN_SHARE * 0.25 and nlist.reach == 1.0 + nlist.skin
+    a, b = np.triu_indices(24, k=1)
+    r = np.linalg.norm(box.minimum_image(x[b] - x[a]), axis=1)
+    want = {(i, j) for i, j, keep in zip(a.tolist(), b.tolist(), r < 1.0 + nlist.skin) if keep}
+    assert set(zip(nlist.i.tolist(), nlist.j.tolist())) == want
+    # a build in a roomy box is back at the default skin
+    nlist.build(2.0 * x, box.scaled(2.0))
+    assert nlist.skin == SPHERE_SKIN[3]
+    # the skin changes no result: FIRE from an overlapping start ends bitwise where an explicit small skin does
+    ends = [minimize_fire(SphereModel(box, D, nlist=NeighborList(D, skin)), x, force_tol=1e-12)
+            for skin in (None, 0.02)]
+    assert all(end.converged for end in ends) and ends[0].energy > 0.0
+    np.testing.assert_array_equal(ends[0].position, ends[1].position)

@@ -36,6 +36,7 @@ from . import _kernels
 
 __all__ = [
     "DEFAULT_SKIN",
+    "SMALL_BOX_SKIN_SHARE",
     "SPHERE_SKIN",
     "HARMONIC",
     "Evaluation",
@@ -54,6 +55,11 @@ __all__ = [
 #: the rebuild share from 6.9 % to 2.5 % at an unchanged time per evaluation; in 2D a
 #: larger skin helps N = 1024 (-4 %) but costs N = 16384 8-10 % per evaluation.
 SPHERE_SKIN: dict[int, float] = {2: 0.15, 3: 0.3}
+#: In a box too small for the skin (``max D + skin`` at or above half the smallest
+#: width, e.g. a few shear-stabilised spheres compressed into a flattened box) a build
+#: uses this share of the room ``min(widths) / 2 - max D`` instead: the list stays a
+#: minimum-image list, and since the skin changes no result, nothing else changes.
+SMALL_BOX_SKIN_SHARE: float = 0.5
 #: Verlet skin of the bounding-diameter lists of non-spherical models, as a fraction
 #: of the mean bounding diameter (their pair kernels cost more per listed pair).
 DEFAULT_SKIN: float = 0.15
@@ -120,14 +126,17 @@ class NeighborList:
         Diameters [length].
     skin : float, optional
         Skin [length]; default :data:`SPHERE_SKIN` of the dimension of the first build
-        times the mean diameter.
+        times the mean diameter. A build in a box too small for it uses
+        :data:`SMALL_BOX_SKIN_SHARE` of the room left; ``skin`` and ``reach`` are those
+        of the last build.
     """
 
     def __init__(self, diameter: ArrayLike, skin: float | None = None) -> None:
         self.diameter = np.asarray(diameter, dtype=np.float64)
-        self.skin = np.nan if skin is None else float(skin)
-        if skin is not None and not self.skin > 0.0:
-            raise ValueError(f"skin must be positive, got {self.skin}")
+        self.requested_skin = np.nan if skin is None else float(skin)
+        if skin is not None and not self.requested_skin > 0.0:
+            raise ValueError(f"skin must be positive, got {self.requested_skin}")
+        self.skin = self.requested_skin
         self.reach = float(self.diameter.max()) + self.skin
         self.builds = 0
         self.i = self.j = np.empty(0, np.int64)
@@ -138,9 +147,14 @@ class NeighborList:
 
     def build(self, x: NDArray[np.float64], box: Box) -> None:
         """(Re)build the list for positions ``x`` (N, d) in ``box``."""
-        if np.isnan(self.skin):
-            self.skin = SPHERE_SKIN.get(box.d, SPHERE_SKIN[3]) * float(self.diameter.mean())
-            self.reach = float(self.diameter.max()) + self.skin
+        skin = self.requested_skin
+        if np.isnan(skin):
+            skin = SPHERE_SKIN.get(box.d, SPHERE_SKIN[3]) * float(self.diameter.mean())
+        room = 0.5 * float(np.min(box.widths)) - float(self.diameter.max())
+        if 0.0 < room <= skin:
+            skin = SMALL_BOX_SKIN_SHARE * room
+        self.skin = skin
+        self.reach = float(self.diameter.max()) + skin
         self.i, self.j, self.image = verlet_pairs(x, box, self.diameter, self.skin)
         self.sigma = 0.5 * (self.diameter[self.i] + self.diameter[self.j])
         self.x_build = np.array(x, dtype=np.float64)
