@@ -9,10 +9,11 @@ import xarray as xr
 from jamflow.chains.averages import moduli_against_links, weighted_modulus
 
 
-def _moduli(n_cemented: int, bulk: tuple[float, float], shear: tuple[float, float], n: int = 100) -> xr.Dataset:
+def _moduli(n_cemented: int, bulk: tuple[float, float], shear: tuple[float, float], n: int = 100,
+            n_unstable: int = 0) -> xr.Dataset:
     return xr.Dataset({"bulk_voigt": ((), bulk[0]), "bulk_reuss": ((), bulk[1]),
                        "shear_voigt": ((), shear[0]), "shear_reuss": ((), shear[1])},
-                      attrs={"N": n, "n_cemented": n_cemented, "d": 3})
+                      attrs={"N": n, "n_cemented": n_cemented, "d": 3, "n_unstable": n_unstable})
 
 
 def test_weighted_average_favours_the_packing_with_tighter_bounds():
@@ -37,3 +38,11 @@ def test_infinite_moduli_are_counted_not_averaged_and_groups_follow_links_per_sp
     assert table.bulk_weighted.values[0] == pytest.approx(1.5)
     every = moduli_against_links([_moduli(90, (np.inf, np.inf), (np.inf, np.inf))])
     assert np.isinf(every.shear_weighted.values[0]) and int(every.shear_infinite.values[0]) == 1
+
+
+def test_unstable_packings_are_counted_and_left_out_of_the_averages():
+    """A negative compliance eigenvalue: no Reuss-Voigt bracket, so the packing is not averaged."""
+    table = moduli_against_links([_moduli(0, (2, 1), (1, 0.5)), _moduli(0, (0.5, -3.0), (-0.2, -1.0), n_unstable=1)])
+    assert int(table.n_packings.values[0]) == 2 and int(table.n_unstable.values[0]) == 1
+    assert table.shear_weighted.values[0] == pytest.approx(0.75) and table.bulk_weighted.values[0] == pytest.approx(1.5)
+    assert table.shear_reuss_mean.values[0] == pytest.approx(0.5)

@@ -86,7 +86,7 @@ def _figures(rng) -> dict[str, Figure]:
     gaps, forces = _gaps(rng), _forces(rng)
     cemented = [xr.Dataset({f"{m}_{b}": ((), v) for m in ("bulk", "shear") for b, v in
                             (("voigt", 2.0 + k + rng.random()), ("reuss", 1.0 + k + rng.random()))},
-                           attrs={"N": 64, "n_cemented": 8 * k, "d": 3}) for k in range(3) for _ in range(2)]
+                           attrs={"N": 64, "n_cemented": 8 * k, "d": 3, "n_unstable": 0}) for k in range(3) for _ in range(2)]
     return {
         "packing": plots.plot_packing(p),
         "gaps": plots.plot_gaps([gaps], ["synthetic"]),

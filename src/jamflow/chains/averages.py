@@ -11,6 +11,9 @@ independent packings whatever the weights; NaN for a single packing). Bounds tha
 coincide (an isotropic compliance) are widened to ``s_i = MIN_RELATIVE_SPREAD x_i``
 so one packing cannot take all the weight. Packings with an infinite modulus (a
 zero-compliance direction: links forbid that strain) are counted, not averaged.
+Packings unstable to some strain (a negative eigenvalue of the compliance, e.g. a
+fixed-box packing) have no Reuss-Voigt bracket: they are counted and left out of
+every average.
 """
 
 from __future__ import annotations
@@ -49,15 +52,16 @@ def moduli_against_links(datasets: Sequence[xr.Dataset]) -> xr.Dataset:
     Parameters
     ----------
     datasets : sequence of xr.Dataset
-        ``jamflow moduli`` outputs of linked packings, with attributes ``N`` and
-        ``n_cemented`` (contacts turned into links, angle links not counted).
+        ``jamflow moduli`` outputs of linked packings, with attributes ``N``,
+        ``n_cemented`` (contacts turned into links, angle links not counted) and
+        ``n_unstable`` (negative compliance eigenvalues).
 
     Returns
     -------
     xr.Dataset
         Dimension ``links_per_sphere`` (``n_l / N``): weighted bulk and shear moduli,
         standard errors, the mean Voigt and Reuss bounds of the finite packings, and
-        the counts of packings and of infinite moduli.
+        the counts of packings, of unstable packings (not averaged) and of infinite moduli.
     """
     if not datasets:
         raise ValueError("no moduli datasets given")
@@ -65,8 +69,10 @@ def moduli_against_links(datasets: Sequence[xr.Dataset]) -> xr.Dataset:
     groups = np.unique(key)
     out: dict[str, list[float]] = {}
     for g in groups:
-        members = [ds for ds, k in zip(datasets, key) if k == g]
-        out.setdefault("n_packings", []).append(len(members))
+        group = [ds for ds, k in zip(datasets, key) if k == g]
+        members = [ds for ds in group if ds.attrs["n_unstable"] == 0]
+        out.setdefault("n_packings", []).append(len(group))
+        out.setdefault("n_unstable", []).append(len(group) - len(members))
         for name in ("bulk", "shear"):
             v = np.array([float(ds[f"{name}_voigt"]) for ds in members])
             r = np.array([float(ds[f"{name}_reuss"]) for ds in members])
@@ -84,7 +90,9 @@ def moduli_against_links(datasets: Sequence[xr.Dataset]) -> xr.Dataset:
         "infinite": "packings with an infinite modulus",
     }
     data = {"n_packings": (("links_per_sphere",), np.array(out["n_packings"]),
-                           {"units": "1", "long_name": "packings in the group"})}
+                           {"units": "1", "long_name": "packings in the group"}),
+            "n_unstable": (("links_per_sphere",), np.array(out["n_unstable"]),
+                           {"units": "1", "long_name": "packings unstable to some strain, not averaged"})}
     for name in ("bulk", "shear"):
         for part, text in meaning.items():
             data[f"{name}_{part}"] = (("links_per_sphere",), np.array(out[f"{name}_{part}"]),

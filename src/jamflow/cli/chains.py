@@ -176,6 +176,8 @@ def _chains_moduli(args: argparse.Namespace) -> int:
     for path, ds in zip(args.paths[:-1], datasets):
         if "n_cemented" not in ds.attrs:
             raise ValueError(f"{path} has no n_cemented attribute (moduli of a packing made by jamflow link --cement)")
+        if "n_unstable" not in ds.attrs:
+            raise ValueError(f"{path} has no n_unstable attribute (written by an older jamflow moduli: rerun it)")
     table = moduli_against_links(datasets)
     table.attrs = new_dataset_attrs("jamflow moduli of cemented packings against n_l / N",
                                     stage_parameters(args, "paths"), d=int(datasets[0].attrs["d"]),
@@ -188,7 +190,9 @@ def _chains_moduli(args: argparse.Namespace) -> int:
         value = (f"G = {float(t.shear_weighted):.5g} +- {float(t.shear_se):.2g}, "
                  f"K = {float(t.bulk_weighted):.5g} +- {float(t.bulk_se):.2g} epsilon / <D>^d "
                  f"(infinite: G {int(t.shear_infinite)}, K {int(t.bulk_infinite)})")
-        rows.append((f"n_l / N = {float(t.links_per_sphere):.4g} ({int(t.n_packings)} packings)", value))
+        label = f"n_l / N = {float(t.links_per_sphere):.4g} ({int(t.n_packings)} packings"
+        label += f", {int(t.n_unstable)} unstable, not averaged)" if int(t.n_unstable) else ")"
+        rows.append((label, value))
     print_summary(args, args.paths[-1], rows)
     return 0
 
