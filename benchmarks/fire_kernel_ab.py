@@ -1,8 +1,8 @@
 """A/B timing of the compiled sphere FIRE kernel of two versions in one process.
 
 Loads ``soft/_kernels.py`` of an old source tree (``--old``, e.g. from
-``git archive 68bf334 src | tar -x -C /tmp/base``) and of this tree under different
-module names, and calls both kernels alternately on the same relaxed state (2D
+``git archive 68bf334 src | tar -x -C /tmp/base``) under another module name beside
+this tree's, and calls both kernels alternately on the same relaxed state (2D
 N = 1024 at phi = 0.86 and 3D N = 4096 at phi = 0.66, bidisperse, no list rebuilds),
 reporting the best time per force evaluation of each and the two final energies
 (which must be equal). Alternating in one process cancels most of the load of a
@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import inspect
 import time
 from pathlib import Path
 
@@ -28,7 +29,7 @@ def _load(path: Path, name: str):
 
 def main() -> None:
     from jamflow.initial import random_packing
-    from jamflow.soft import fire
+    from jamflow.soft import _kernels, fire
     from jamflow.soft.minimize import DEFAULT_FIRE, _fire_params
     from jamflow.soft.potential import NeighborList
 
@@ -39,7 +40,7 @@ def main() -> None:
     args = parser.parse_args()
     kernels = {
         "old": _load(args.old / "jamflow" / "soft" / "_kernels.py", "old_kernels"),
-        "new": _load(Path(__file__).resolve().parents[1] / "src" / "jamflow" / "soft" / "_kernels.py", "new_kernels"),
+        "new": _kernels,
     }
     for d, n, phi in ((2, 1024, 0.86), (3, 4096, 0.66)):
         start = random_packing(n, d, 0.5 if d == 2 else 0.3, "bi", seed=1)
@@ -58,11 +59,14 @@ def main() -> None:
                 # [dt, alpha, n_positive, steps]; kernels before the run step count read three
                 fire_state = np.array([DEFAULT_FIRE.dt * unit, DEFAULT_FIRE.alpha0, 0.0, 0.0])
                 # infinite skin: the timed steps never stop for a rebuild
+                # kernels since the in-loop rebuild also take the box sides and diameters
+                inline = "lengths" in inspect.signature(module.fire.py_func).parameters
+                extra = (box.lengths, D) if inline else ()
                 t0 = time.perf_counter()
                 out = module.fire(y, v, np.array([0.0, 0.0, 1.0]), fire_state, _fire_params(DEFAULT_FIRE, unit),
                                   nlist.image @ box.matrix.T, nlist.i, nlist.j, nlist.sigma, 1.0, 2.0,
                                   affine, 1.0, nlist.reach, np.inf, slack, False, 0.0, box.volume, 1.0,
-                                  0.0, 0.0, args.steps, np.zeros_like(x), np.zeros((d, d)))
+                                  0.0, 0.0, args.steps, np.zeros_like(x), np.zeros((d, d)), *extra)
                 best[name] = min(best[name], (time.perf_counter() - t0) / out[1])
                 energy[name] = out[2]
         print(f"{d}D N = {n} phi = {phi}: old {1e6 * best['old']:.1f} us, new {1e6 * best['new']:.1f} us per "

@@ -130,3 +130,26 @@ def test_fire_trajectory_does_not_depend_on_the_neighbour_list_skin(enthalpy):
     np.testing.assert_array_equal(a.position, b.position)
     assert a.box == b.box
     assert a.energy == b.energy
+
+
+@pytest.mark.parametrize("pressure", [None, 1e-2])
+def test_lists_rebuilt_inside_the_compiled_loop_give_the_path_of_python_rebuilds(pressure):
+    """An orthogonal box lets the FIRE kernel rebuild its list itself; the path, the
+    evaluations and the builds must be those of returning to Python for every rebuild."""
+    from jamflow.models.spheres import SphereModel
+    from jamflow.soft.minimize import DEFAULT_FIRE, _fire, _SphereFire
+
+    start = random_packing(256, 2, 0.5, "bi", seed=3)
+    factor = (start.packing_fraction / 0.86) ** 0.5
+    x, box, D = start.position * factor, start.box.scaled(factor), start.diameter
+    runs = []
+    for inline in (True, False):
+        engine = _SphereFire(SphereModel(box, D), x, DEFAULT_FIRE, pressure, 1e-6)
+        if not inline:
+            engine.lengths = np.empty(0)  # what a sheared box passes: every rebuild returns to Python
+        runs.append((_fire(engine, 1e-10, 5_000 if pressure else 20_000), engine.inline_builds))
+    (a, inline_builds), (b, none) = runs
+    assert inline_builds == a.rebuilds - 1 > 10 and none == 0
+    assert a.rebuilds == b.rebuilds and a.steps == b.steps and a.evaluations == b.evaluations
+    np.testing.assert_array_equal(a.position, b.position)
+    assert a.box == b.box and a.energy == b.energy and a.pressure == b.pressure

@@ -150,7 +150,6 @@ def cell_pairs(x, L, cutoff, diameter, skin):
     for k in range(d):
         shifted &= span[k] == 3
     centre = np.empty(d)
-    shift = np.zeros(d)
     # cells and stencil offsets counted like odometers (last axis fastest); the
     # neighbour cell and the image shift of its members (-+L across the boundary along
     # axes with at least 3 cells; fewer cells along an axis round instead) follow
@@ -173,39 +172,90 @@ def cell_pairs(x, L, cutoff, diameter, skin):
     else:
         n_fwd = n_stencil
         fwd = np.empty((0, d), dtype=np.int64)
+    # with 3 cells or more along every axis, the forward stencil of a cell whose last-axis
+    # index is not on the boundary is a few runs of consecutive cells (last axis fastest):
+    # the cell and its successor (prefix 0), and for every forward prefix of the other
+    # axes the 3 cells around it. Their members are contiguous, so each run is one scan:
+    # 2 in 2D and 5 in 3D instead of 5 and 14 cell visits. Every cell's runs (or, on the
+    # boundary, its stencil cells) are collected first and swept by one loop below
+    last = d - 1
+    n_pre = 0
+    pre = np.empty((0, last), dtype=np.int64)
+    if shifted:
+        n_pre = (3**last - 1) // 2
+        pre = np.empty((n_pre, last), dtype=np.int64)
+        for t in range(n_pre):
+            tt = t + n_pre + 1
+            for k in range(last - 1, -1, -1):
+                pre[t, k] = tt % 3 - 1
+                tt //= 3
+    run_first = np.empty(n_fwd, dtype=np.int64)
+    run_end = np.empty(n_fwd, dtype=np.int64)
+    run_own = np.empty(n_fwd, dtype=np.bool_)
+    run_shift = np.empty((n_fwd, d))
     for ci in range(n_cells):
-        step[:] = 0
-        for t in range(n_fwd):
-            cid = 0
-            for k in range(d):
-                shift[k] = 0.0
-                if span[k] == 3:
-                    c = own[k] + (fwd[t, k] if shifted else step[k] - 1)
+        n_runs = 0
+        if shifted and 1 <= own[last] <= ncell[last] - 2:
+            run_first[0], run_end[0], run_own[0] = start[ci], start[ci + 2], True
+            run_shift[0, :] = 0.0
+            n_runs = 1
+            for t in range(n_pre):
+                cid = 0
+                for k in range(last):
+                    run_shift[n_runs, k] = 0.0
+                    c = own[k] + pre[t, k]
                     if c < 0:
                         c += ncell[k]
-                        shift[k] = -L[k]
+                        run_shift[n_runs, k] = -L[k]
                     elif c >= ncell[k]:
                         c -= ncell[k]
-                        shift[k] = L[k]
-                else:
-                    c = step[k]
-                cid = cid * ncell[k] + c
-            if not shifted:
-                _tick(step, span)
-                if cid < ci:
-                    continue
-            end = start[cid + 1]
-            if m + (start[ci + 1] - start[ci]) * (end - start[cid]) > capacity:
-                # grown outside the candidate loop: arrays reassigned inside it
-                # would be reference-counted on every candidate
-                capacity = 2 * capacity + (start[ci + 1] - start[ci]) * (end - start[cid])
-                pa = np.concatenate((pa[:m], np.empty(capacity - m, dtype=np.int64)))
-                pb = np.concatenate((pb[:m], np.empty(capacity - m, dtype=np.int64)))
-            for p in range(start[ci], start[ci + 1]):
-                # particle p seen from the neighbour cell's image
+                        run_shift[n_runs, k] = L[k]
+                    cid = cid * ncell[k] + c
+                cid = cid * ncell[last] + own[last] - 1
+                run_first[n_runs], run_end[n_runs], run_own[n_runs] = start[cid], start[cid + 3], False
+                run_shift[n_runs, last] = 0.0
+                n_runs += 1
+        else:
+            step[:] = 0
+            for t in range(n_fwd):
+                cid = 0
                 for k in range(d):
-                    centre[k] = ws[p, k] - shift[k]
-                first = p + 1 if cid == ci else start[cid]
+                    run_shift[n_runs, k] = 0.0
+                    if span[k] == 3:
+                        c = own[k] + (fwd[t, k] if shifted else step[k] - 1)
+                        if c < 0:
+                            c += ncell[k]
+                            run_shift[n_runs, k] = -L[k]
+                        elif c >= ncell[k]:
+                            c -= ncell[k]
+                            run_shift[n_runs, k] = L[k]
+                    else:
+                        c = step[k]
+                    cid = cid * ncell[k] + c
+                if not shifted:
+                    _tick(step, span)
+                    if cid < ci:
+                        continue
+                run_first[n_runs], run_end[n_runs], run_own[n_runs] = start[cid], start[cid + 1], cid == ci
+                n_runs += 1
+        _tick(own, ncell)
+        need = 0
+        for t in range(n_runs):
+            need += run_end[t] - run_first[t]
+        need *= start[ci + 1] - start[ci]
+        if m + need > capacity:
+            # grown outside the candidate loop: arrays reassigned inside it
+            # would be reference-counted on every candidate
+            capacity = 2 * capacity + need
+            pa = np.concatenate((pa[:m], np.empty(capacity - m, dtype=np.int64)))
+            pb = np.concatenate((pb[:m], np.empty(capacity - m, dtype=np.int64)))
+        for t in range(n_runs):
+            end = run_end[t]
+            for p in range(start[ci], start[ci + 1]):
+                # particle p seen from the run's image
+                for k in range(d):
+                    centre[k] = ws[p, k] - run_shift[t, k]
+                first = p + 1 if run_own[t] else run_first[t]
                 # d = 2 and 3 with the dimension a constant: the runtime loop over k
                 # measured 1.5x slower
                 if shifted and d == 2:
@@ -233,7 +283,6 @@ def cell_pairs(x, L, cutoff, diameter, skin):
                         if _keep(r2, p, q, Ds, skin, cut2, verlet):
                             pa[m], pb[m] = p, q
                             m += 1
-        _tick(own, ncell)
     # lexicographic order: counting sort by i, then each row's few partners by insertion
     row = np.zeros(n + 1, dtype=np.int64)
     for e in range(m):

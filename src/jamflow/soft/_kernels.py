@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .._cell_kernels import cell_pairs
+
 #: Status codes returned by the iterative kernels.
 CONVERGED, REBUILD, MAX_STEPS, STALLED = 0, 1, 2, 3
 
@@ -250,12 +252,32 @@ def _needs_rebuild(y, y_build, s, s_build, reach, skin, slack):
 
 
 @njit(cache=True)
+def _inline_list(y, s, lengths, diameter, reach, skin):
+    """A Verlet list built inside the loop (orthogonal reference box ``lengths``, scale ``s``).
+
+    The same call as :meth:`jamflow.soft.potential.NeighborList.build` makes, so the
+    same pairs in the same (lexicographic) order. Returns ``(pi, pj, image, offset,
+    sigma)`` with ``offset = h_ref n``.
+    """
+    pi, pj, image = cell_pairs(s * y, s * lengths, reach, diameter, skin)
+    m, d = image.shape
+    offset = np.empty((m, d))
+    sigma = np.empty(m)
+    for p in range(m):
+        for a in range(d):
+            offset[p, a] = image[p, a] * lengths[a]
+        sigma[p] = 0.5 * (diameter[pi[p]] + diameter[pj[p]])
+    return pi, pj, image, offset, sigma
+
+
+@njit(cache=True)
 def fire(
     y, v, box_state, fire_state, fire_params,
     offset, pi, pj, sigma, eps, w,
     y_build, s_build, reach, skin, slack,
     barostat, pressure0, volume_ref, q_scale,
     force_tol, pressure_rtol, max_steps, force, virial,
+    lengths, diameter,
 ):
     """FIRE 2.0 (Guénolé et al. 2020, Algorithm 2; Bitzek et al. 2006) with unit masses.
 
@@ -270,10 +292,20 @@ def fire(
     barostat : bool
         Minimise the enthalpy ``H = U + P0 V`` with ``q`` as a degree of freedom, whose
         generalised force is ``d V (P - P0) / q_scale``.
+    lengths : (d,) or (0,)
+        Sides of an orthogonal reference box: the list is rebuilt inside the loop
+        (:func:`_inline_list`) while ``reach`` stays below half the scaled sides; empty
+        (a sheared box), or a box too small, returns ``REBUILD`` to the caller instead.
+        Either way the forces are evaluated again with the new list (one evaluation per
+        build) and the convergence test repeated, so the path is the same.
+    diameter : (N,)
 
     Returns
     -------
-    status, steps, energy, n_contact, max_force_sq, pressure
+    status, steps, energy, n_contact, max_force_sq, pressure, builds, pi, pj, image, y_build, s_build
+        ``builds`` lists made inside the loop (each with one more force evaluation); the
+        last one's pairs, integer images, build positions (reference coordinates) and
+        scale (the inputs when ``builds`` is 0).
     """
     d = y.shape[1]
     dt, alpha, npos = fire_state[0], fire_state[1], int(fire_state[2])
@@ -284,6 +316,12 @@ def fire(
     alpha0, f_alpha, n_delay = fire_params[4], fire_params[5], int(fire_params[6])
     initial_delay = fire_params[7] > 0.0
     q, vq, s = box_state[0], box_state[1], box_state[2]
+    builds = 0
+    image = np.empty((0, d), dtype=np.int64)
+    # no sides (a sheared box): shortest 0, so every rebuild goes back to the caller
+    shortest = np.inf if lengths.shape[0] else 0.0
+    for a in range(lengths.shape[0]):
+        shortest = min(shortest, lengths[a])
     # at a fixed box the virial is needed only once, at the end
     energy, n_contact = pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial, barostat)
     volume = volume_ref * s**d
@@ -299,8 +337,17 @@ def fire(
             status = CONVERGED
             break
         if _needs_rebuild(y, y_build, s, s_build, reach, skin, slack):
-            status = REBUILD
-            break
+            if not reach < 0.5 * s * shortest:
+                status = REBUILD
+                break
+            pi, pj, image, offset, sigma = _inline_list(y, s, lengths, diameter, reach, skin)
+            y_build, s_build, slack = y.copy(), s, 0.0
+            builds += 1
+            # the forces at y came from the used-up list: evaluate again, then test again
+            energy, n_contact = pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial, barostat)
+            pressure = np.trace(virial) / (d * volume)
+            fmax2 = _max_force_sq(force)
+            continue
         fq = d * volume * (pressure - pressure0) / q_scale if barostat else 0.0
         power = s * _dot(force, v) + fq * vq
         npos, dt, alpha = _fire_adapt(
@@ -335,7 +382,7 @@ def fire(
         pressure = np.trace(virial) / (d * volume)
     fire_state[0], fire_state[1], fire_state[2], fire_state[3] = dt, alpha, npos, done + step
     box_state[0], box_state[1], box_state[2] = q, vq, s
-    return status, step, energy, n_contact, fmax2, pressure
+    return status, step, energy, n_contact, fmax2, pressure, builds, pi, pj, image, y_build, s_build
 
 
 @njit(cache=True)

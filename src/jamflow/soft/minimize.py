@@ -140,6 +140,9 @@ class _SphereFire:
         self.fparams = _fire_params(params, unit)
         self.force = np.zeros_like(self.y)
         self.virial = np.zeros((model.box.d, model.box.d))
+        # an orthogonal box lets the compiled loop rebuild the list itself
+        self.lengths = np.diag(model.box.matrix).copy() if model.box.is_orthogonal else np.empty(0)
+        self.inline_builds = 0
 
     def advance(self, force_tol: float, budget: int, rebuild: bool) -> tuple[int, int]:
         """At most ``budget`` steps; returns ``(status, steps)`` (status of :mod:`._kernels`)."""
@@ -152,14 +155,18 @@ class _SphereFire:
         else:
             nlist.update(s * self.y, current)
         affine, slack = nlist.affine_reference(current)
-        status, n, *self.last = _kernels.fire(
+        status, n, *self.last, builds, i, j, image, y_build, s_build = _kernels.fire(
             self.y, self.v, self.box_state, self.fire_state, self.fparams,
             nlist.image @ h_ref.matrix.T, nlist.i, nlist.j, nlist.sigma,
             potential.epsilon, potential.exponent,
             affine / s, s, nlist.reach, nlist.skin, slack,
             self.barostat, self.pressure0, h_ref.volume, self.q_scale,
             float(force_tol), self.pressure_rtol, int(budget), self.force, self.virial,
+            self.lengths, nlist.diameter,
         )
+        if builds:
+            nlist.adopt(i, j, image.astype(np.float64), s_build * y_build, h_ref.scaled(s_build), builds)
+            self.inline_builds += builds
         return status, n
 
     def result(self, steps: int, calls: int, status: int) -> MinimizeResult:
@@ -170,7 +177,7 @@ class _SphereFire:
             position=s * self.y, box=box.scaled(s) if self.barostat else box, energy=float(energy),
             pressure=float(pressure), max_force=float(np.sqrt(fmax2)), n_contacts=int(n_contacts),
             steps=steps, converged=status == _kernels.CONVERGED, rebuilds=self.model.nlist.builds - self.builds0,
-            evaluations=steps + calls,
+            evaluations=steps + calls + self.inline_builds,
         )
 
 

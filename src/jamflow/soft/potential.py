@@ -155,11 +155,20 @@ class NeighborList:
             skin = SMALL_BOX_SKIN_SHARE * room
         self.skin = skin
         self.reach = float(self.diameter.max()) + skin
-        self.i, self.j, self.image = verlet_pairs(x, box, self.diameter, self.skin)
+        self.adopt(*verlet_pairs(x, box, self.diameter, self.skin), x, box)
+
+    def adopt(self, i: NDArray[np.int64], j: NDArray[np.int64], image: NDArray[np.float64], x: NDArray[np.float64],
+              box: Box, builds: int = 1) -> None:
+        """Take a list built elsewhere with this skin (e.g. inside a compiled FIRE loop) at ``x`` in ``box``.
+
+        ``i, j`` (P,) and ``image`` (P, d) as :func:`jamflow.neighbors.verlet_pairs`
+        returns them; ``builds`` counts the lists made since this object's last one.
+        """
+        self.i, self.j, self.image = i, j, image
         self.sigma = 0.5 * (self.diameter[self.i] + self.diameter[self.j])
         self.x_build = np.array(x, dtype=np.float64)
         self.h_build = np.array(box.matrix)
-        self.builds += 1
+        self.builds += builds
 
     def offsets(self, box: Box) -> NDArray[np.float64]:
         """Image offsets ``h n`` of every listed pair for ``box``, shape (P, d) [length]."""
