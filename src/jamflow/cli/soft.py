@@ -286,7 +286,10 @@ def _moduli_linked(args: argparse.Namespace, packing: Packing) -> int:
     """Compliance (Sec. VI) and the constrained Hessian's lowest modes (Sec. IV) of a linked packing."""
     potential = PowerLawPotential(exponent=args.exponent)
     c = compliance(packing, potential)
-    ch = constrained_hessian(packing, potential, strain=True)
+    # strain modes only where the strain is a degree of freedom: a fixed-box packing is
+    # not in equilibrium in the strain, and its box does not move
+    stabilized = bool(packing.attrs.get("shear_stabilized", 0))
+    ch = constrained_hessian(packing, potential, strain=stabilized)
     eigenvalues = ch.nonzero_eigenvalues[: args.modes]
     unit = "epsilon / length^d"
     names = [f"{'xyz'[a]}{'xyz'[b]}" for a, b in zip(*np.triu_indices(packing.d))]
@@ -308,14 +311,15 @@ def _moduli_linked(args: argparse.Namespace, packing: Packing) -> int:
             "poisson_ratio": ((), c.poisson, {"units": "1", "long_name": "Poisson ratio (Hill moduli)"}),
             "anisotropy": ((), c.anisotropy, {"units": "1", "long_name": "universal anisotropy index"}),
             "eigenvalue": (("mode",), eigenvalues,
-                           {"units": "1", "long_name": "lowest non-zero eigenvalues of the constrained extended Hessian",
+                           {"units": "1", "long_name": "lowest non-zero eigenvalues of the constrained Hessian "
+                            + ("with strain at fixed volume" if stabilized else "at a fixed box"),
                             "comment": "epsilon / length^2 (unit mass)"}),
         },
         coords={"strain_component": names, "stress_component": names},
         attrs=new_dataset_attrs("jamflow linked-packing compliance and moduli", stage_parameters(args, "input", "out"),
                                 d=packing.d, N=packing.n, n_links=len(packing.links), n_rigid=c.n_rigid,
                                 n_unstable=c.n_unstable, pressure=c.pressure,
-                                n_zero_modes=ch.n_zero, protocol=packing.protocol,
+                                n_zero_modes=ch.n_zero, hessian_strain=int(stabilized), protocol=packing.protocol,
                                 n_cemented=int(packing.attrs.get("n_cemented", 0)),
                                 length_unit=packing.attrs.get("length_unit", "")),
     )
@@ -330,7 +334,7 @@ def _moduli_linked(args: argparse.Namespace, packing: Packing) -> int:
         ("Poisson ratio, anisotropy", f"{c.poisson:.4g}, {c.anisotropy:.4g}"),
         ("rigid stress directions (S = 0)", c.n_rigid),
         ("unstable strain directions (S < 0)", c.n_unstable),
-        ("zero modes (constrained Hessian)", ch.n_zero),
+        (f"zero modes (constrained Hessian, {'with strain' if stabilized else 'fixed box'})", ch.n_zero),
         ("lowest eigenvalue", f"{eigenvalues[0]:.4g} epsilon / length^2" if len(eigenvalues) else "none"),
     ])
     return 0
