@@ -104,6 +104,14 @@ def test_wrap_lands_in_primary_cell_by_a_lattice_vector(data: st.DataObject, box
     np.testing.assert_allclose(box.wrap(w), w, rtol=0, atol=1e-9)
 
 
+def test_wrap_is_idempotent_at_a_face_of_a_tilted_cell() -> None:
+    """Hypothesis counterexample: s_0 = 2 - 2^-52 came back at 1 through H^-1 (H s)."""
+    box = Box(np.array([[0.3125, -2.0], [0.0, 1.0]]))
+    w = box.wrap(np.array([[0.0, 0.3125]]))
+    np.testing.assert_array_equal(box.wrap(w), w)
+    assert np.all(box.contains(w, tol=1e-15))
+
+
 def test_wrap_edge_values() -> None:
     box = Box.cubic(3, 2.0)
     w = box.wrap(np.array([[-1e-300, 2.0, -2.0], [4.0 - 1e-17, 1.0, 0.0]]))

@@ -137,9 +137,16 @@ class Box:
         """Map positions into the primary cell (fractional coordinates in [0, 1))."""
         s = self.to_fractional(x)
         s -= np.floor(s)
-        # floor can leave exactly 1.0 after rounding of a tiny negative number
-        s[s >= 1.0] = 0.0
+        # floor leaves 1.0 after a tiny negative number, and a coordinate within the
+        # round-off of H^-1 (H s) below 1 would come back at 1 (wrap would not be
+        # idempotent in a tilted cell): both go to the face at 0 (a move of <= 1e-13 L)
+        s[s >= 1.0 - self._face_tol] = 0.0
         return self.to_cartesian(s)
+
+    @cached_property
+    def _face_tol(self) -> float:
+        """Fractional band below 1 that :meth:`wrap` puts at 0: 8 eps times the condition number of ``h``."""
+        return 8.0 * float(np.finfo(np.float64).eps) * float(np.linalg.cond(self.matrix, np.inf))
 
     def contains(self, x: ArrayLike, tol: float = 1e-12) -> NDArray[np.bool_]:
         """Whether fractional coordinates lie in [-tol, 1 + tol), shape (...,)."""
