@@ -153,3 +153,30 @@ def test_lists_rebuilt_inside_the_compiled_loop_give_the_path_of_python_rebuilds
     assert a.rebuilds == b.rebuilds and a.steps == b.steps and a.evaluations == b.evaluations
     np.testing.assert_array_equal(a.position, b.position)
     assert a.box == b.box and a.energy == b.energy and a.pressure == b.pressure
+
+
+def test_large_runs_sorted_by_cell_return_the_callers_order_and_differ_by_round_off(monkeypatch):
+    """At N >= SPATIAL_SORT_MIN_N FIRE runs on the spheres sorted by cell: its path is
+    independent of the skin (bitwise), its result comes back in the caller's order, and
+    a short run agrees with the caller-order run to round-off (the sums are reordered)."""
+    import sys
+
+    from jamflow.soft.potential import NeighborList
+
+    minimize = sys.modules["jamflow.soft.minimize"]
+    start = random_packing(minimize.SPATIAL_SORT_MIN_N, 2, 0.5, "bi", seed=1)
+    factor = (start.packing_fraction / 0.86) ** 0.5
+    x, box, D = start.position * factor, start.box.scaled(factor), start.diameter
+    order = minimize._cell_order(x, box, float(D.max()))
+    assert np.array_equal(np.sort(order), np.arange(len(x))) and not np.array_equal(order, np.arange(len(x)))
+    runs = [fire(x, box, D, force_tol=1e-12, max_steps=300, nlist=NeighborList(D, skin * D.mean()))
+            for skin in (0.1, 0.4)]
+    np.testing.assert_array_equal(runs[0].position, runs[1].position)
+    assert runs[0].rebuilds > runs[1].rebuilds
+    monkeypatch.setattr(minimize, "SPATIAL_SORT_MIN_N", len(x) + 1)
+    caller = fire(x, box, D, force_tol=1e-12, max_steps=300, nlist=NeighborList(D, 0.1 * D.mean()))
+    assert caller.rebuilds == runs[0].rebuilds and caller.energy > 0.0
+    assert not np.array_equal(caller.position, runs[0].position)
+    # 300 steps from an overlapping start: measured 8.5e-12 <D> and 9e-14 relative
+    np.testing.assert_allclose(runs[0].position, caller.position, rtol=0, atol=1e-10 * D.mean())
+    assert runs[0].energy == pytest.approx(caller.energy, rel=1e-12)

@@ -72,6 +72,27 @@ class FireParameters:
 #: FIRE 2.0 with the default parameters.
 DEFAULT_FIRE = FireParameters()
 
+#: Sphere FIRE runs of at least this many spheres work on them sorted by cell (as
+#: LAMMPS's ``atom_modify sort``) and return them in the caller's order: the pair and
+#: particle arrays are then walked nearly in memory order (2D N = 16384: about 4 % less
+#: time per force evaluation; 3D N = 4096: no measurable change; docs/energy-models.md).
+#: The order is fixed for the run, taken from the start (a minimisation moves spheres little), so a
+#: run stays deterministic and independent of the skin; its sums differ from the
+#: caller-order run's by round-off. Smaller systems fit the cache and keep the
+#: caller's order, and their paths.
+SPATIAL_SORT_MIN_N: int = 4096
+
+
+def _cell_order(x: NDArray[np.float64], box: Box, size: float) -> NDArray[np.int64]:
+    """Particles ordered by cell (cells at least ``size`` wide, last axis fastest; by index within a cell), shape (N,)."""
+    from .._cell_kernels import cell_index, sort_by_cell
+
+    frac = box.to_fractional(x)
+    frac -= np.floor(frac)
+    ncell = np.maximum((box.widths // size).astype(np.int64), 1)
+    _, order = sort_by_cell(cell_index(frac, np.ones(box.d), ncell), int(np.prod(ncell)))
+    return order
+
 
 @dataclass(frozen=True)
 class MinimizeResult:
@@ -127,7 +148,16 @@ class _SphereFire:
     def __init__(self, model: SphereModel, x: NDArray[np.float64], params: FireParameters,
                  pressure0: float | None, pressure_rtol: float) -> None:
         self.model = model
-        self.builds0 = model.nlist.builds
+        # large systems run sorted by cell, on a list of their own (SPATIAL_SORT_MIN_N)
+        self.order = (_cell_order(x, model.box, float(model.diameter.max())) if len(x) >= SPATIAL_SORT_MIN_N
+                      else None)
+        if self.order is None:
+            self.nlist = model.nlist
+        else:
+            skin = model.nlist.requested_skin
+            self.nlist = NeighborList(model.diameter[self.order], None if np.isnan(skin) else skin)
+            x = x[self.order]
+        self.builds0 = self.nlist.builds
         unit = model.time_unit
         self.barostat = pressure0 is not None
         self.pressure0 = 0.0 if pressure0 is None else float(pressure0)
@@ -146,7 +176,7 @@ class _SphereFire:
 
     def advance(self, force_tol: float, budget: int, rebuild: bool) -> tuple[int, int]:
         """At most ``budget`` steps; returns ``(status, steps)`` (status of :mod:`._kernels`)."""
-        nlist, potential, h_ref = self.model.nlist, self.model.potential, self.model.box
+        nlist, potential, h_ref = self.nlist, self.model.potential, self.model.box
         s = self.box_state[2]
         # the reference box itself at s = 1 (fixed box): its cached widths serve every build
         current = h_ref if s == 1.0 else h_ref.scaled(s)
@@ -173,10 +203,13 @@ class _SphereFire:
         energy, n_contacts, fmax2, pressure = self.last
         s = self.box_state[2]
         box = self.model.box
+        position = s * self.y
+        if self.order is not None:
+            position[self.order] = position.copy()
         return MinimizeResult(
-            position=s * self.y, box=box.scaled(s) if self.barostat else box, energy=float(energy),
+            position=position, box=box.scaled(s) if self.barostat else box, energy=float(energy),
             pressure=float(pressure), max_force=float(np.sqrt(fmax2)), n_contacts=int(n_contacts),
-            steps=steps, converged=status == _kernels.CONVERGED, rebuilds=self.model.nlist.builds - self.builds0,
+            steps=steps, converged=status == _kernels.CONVERGED, rebuilds=self.nlist.builds - self.builds0,
             evaluations=steps + calls + self.inline_builds,
         )
 
