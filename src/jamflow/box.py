@@ -139,7 +139,8 @@ class Box:
         s -= np.floor(s)
         # floor leaves 1.0 after a tiny negative number, and a coordinate within the
         # round-off of H^-1 (H s) below 1 would come back at 1 (wrap would not be
-        # idempotent in a tilted cell): both go to the face at 0 (a move of <= 1e-13 L)
+        # idempotent in a tilted cell): both go to the face at 0, a move by _face_tol
+        # in fractional units (2e-15 in an orthogonal box)
         s[s >= 1.0 - self._face_tol] = 0.0
         return self.to_cartesian(s)
 

@@ -434,7 +434,8 @@ def fire(
         Step budget; ``converged`` is False when it runs out.
     params : FireParameters
     nlist : NeighborList, optional
-        Reused between calls (rebuilt only when stale).
+        Reused between calls (rebuilt only when stale); from :data:`SPATIAL_SORT_MIN_N`
+        spheres on only its skin is used (the run keeps a list in cell order).
     """
     return minimize_fire(SphereModel(box, diameter, potential, nlist), x, force_tol, max_steps, params)
 
