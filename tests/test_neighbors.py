@@ -143,7 +143,7 @@ def test_verlet_pairs_match_brute_force(d: int, strain: float, skin_fraction: fl
 @pytest.mark.parametrize("d", [2, 3])
 @pytest.mark.parametrize("strain", [0.0, 0.3])
 def test_a_verlet_list_misses_no_contact_within_its_rebuild_criterion(d: int, strain: float) -> None:
-    """After moves with ``2 max|u| < skin`` (NeighborList.stale false) every overlap is a listed pair.
+    """After moves with ``u1 + u2 < skin`` (NeighborList.stale false) every overlap is a listed pair.
 
     Dense random spheres (many pairs within the skin), each moved by just under
     ``skin / 2`` in a random direction, and unlisted pairs within 2 % of the skin
@@ -211,3 +211,23 @@ def test_a_box_too_small_for_the_skin_builds_with_a_smaller_skin_and_the_same_mi
             for skin in (None, 0.02)]
     assert all(end.converged for end in ends) and ends[0].energy > 0.0
     np.testing.assert_array_equal(ends[0].position, ends[1].position)
+
+
+def test_the_rebuild_criterion_is_the_sum_of_the_two_largest_displacements() -> None:
+    """One sphere moved by 0.6 skin and the rest by 0.3: u1 + u2 = 0.9 skin keeps the list
+    (2 u1 = 1.2 skin would not); one more sphere pushed to 0.41 skin makes it stale."""
+    from jamflow.soft.potential import NeighborList
+
+    rng = np.random.default_rng(5)
+    box = Box.cubic(2, 10.0)
+    D = np.ones(60)
+    x = box.to_cartesian(rng.uniform(0.0, 1.0, (60, 2)))
+    nlist = NeighborList(D, skin=0.4)
+    nlist.build(x, box)
+    u = rng.normal(size=(60, 2))
+    u *= 0.3 * nlist.skin / np.linalg.norm(u, axis=1, keepdims=True)
+    u[7] *= 2.0
+    y = x + u
+    assert not nlist.stale(y, box)
+    y[8] += 0.11 * nlist.skin * u[8] / np.linalg.norm(u[8])  # u1 + u2 = 1.01 skin
+    assert nlist.stale(y, box)

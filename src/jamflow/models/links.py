@@ -250,7 +250,7 @@ class LinkedSpheresModel(SphereBodies):
         return float(np.sqrt(_kernels._max_force_sq(np.asarray(g, dtype=np.float64).reshape(self.n, self.d))))
 
     def _update_list(self, x: NDArray[np.float64]) -> None:
-        """``nlist.update`` in this fixed box: the Verlet criterion ``2 max |x - x_build| >= skin`` compiled.
+        """``nlist.update`` in this fixed box: the Verlet criterion (:func:`jamflow.soft._kernels._needs_rebuild`) compiled.
 
         The box never deforms between builds here, so the affine map and its norm
         (an SVD and an inverse per call, a third of a 2D N = 60 trimer step) are skipped.

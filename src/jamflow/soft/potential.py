@@ -117,8 +117,9 @@ class NeighborList:
     its periodic image as integer lattice coordinates ``n``, so the pair vector at any
     later time is ``x_j - x_i + h n`` for the current box ``h`` (positions are kept
     unwrapped between builds). The list stays valid while
-    ``2 max|u_i| + ||A - 1|| (D_max + skin) < skin``, with ``u_i`` the non-affine
-    displacement since the build and ``A = h h_build^-1`` the box deformation.
+    ``u1 + u2 + ||A - 1|| (D_max + skin) < skin``, with ``u1 >= u2`` the two largest
+    non-affine displacements since the build and ``A = h h_build^-1`` the box
+    deformation (:func:`jamflow.soft._kernels._needs_rebuild`).
 
     Parameters
     ----------
@@ -191,8 +192,8 @@ class NeighborList:
         if self.x_build.shape != np.shape(x):
             return True
         affine, slack = self.affine_reference(box)
-        u = np.sqrt(np.max(np.sum((x - affine) ** 2, axis=1)))
-        return bool(2.0 * u + slack >= self.skin)
+        return bool(_kernels._needs_rebuild(np.asarray(x, dtype=np.float64), affine, 1.0, 1.0, self.reach,
+                                            self.skin, slack))
 
     def update(self, x: NDArray[np.float64], box: Box) -> None:
         """Rebuild only when :meth:`stale`."""
