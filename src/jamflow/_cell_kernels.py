@@ -76,6 +76,16 @@ def _tick(counter, limit):
 
 
 @njit(inline="always")
+def _periodic_cell(c, n, length):
+    """Cell index ``c`` (one step outside ``[0, n)`` at most) wrapped, and the image shift of its members."""
+    if c < 0:
+        return c + n, -length
+    if c >= n:
+        return c - n, length
+    return c, 0.0
+
+
+@njit(inline="always")
 def _keep(r2, p, q, Ds, skin, cut2, verlet):
     """Whether cell-ordered particles ``p, q`` at squared distance ``r2`` form a listed pair."""
     if verlet:
@@ -202,14 +212,7 @@ def cell_pairs(x, L, cutoff, diameter, skin):
             for t in range(n_pre):
                 cid = 0
                 for k in range(last):
-                    run_shift[n_runs, k] = 0.0
-                    c = own[k] + pre[t, k]
-                    if c < 0:
-                        c += ncell[k]
-                        run_shift[n_runs, k] = -L[k]
-                    elif c >= ncell[k]:
-                        c -= ncell[k]
-                        run_shift[n_runs, k] = L[k]
+                    c, run_shift[n_runs, k] = _periodic_cell(own[k] + pre[t, k], ncell[k], L[k])
                     cid = cid * ncell[k] + c
                 cid = cid * ncell[last] + own[last] - 1
                 run_first[n_runs], run_end[n_runs], run_own[n_runs] = start[cid], start[cid + 3], False
@@ -220,17 +223,11 @@ def cell_pairs(x, L, cutoff, diameter, skin):
             for t in range(n_fwd):
                 cid = 0
                 for k in range(d):
-                    run_shift[n_runs, k] = 0.0
                     if span[k] == 3:
-                        c = own[k] + (fwd[t, k] if shifted else step[k] - 1)
-                        if c < 0:
-                            c += ncell[k]
-                            run_shift[n_runs, k] = -L[k]
-                        elif c >= ncell[k]:
-                            c -= ncell[k]
-                            run_shift[n_runs, k] = L[k]
+                        c, run_shift[n_runs, k] = _periodic_cell(own[k] + (fwd[t, k] if shifted else step[k] - 1),
+                                                                 ncell[k], L[k])
                     else:
-                        c = step[k]
+                        c, run_shift[n_runs, k] = step[k], 0.0
                     cid = cid * ncell[k] + c
                 if not shifted:
                     _tick(step, span)
