@@ -56,8 +56,10 @@ from ..packing import Packing
 from ..soft.potential import HARMONIC, PowerLawPotential
 from .hessian import (
     ZERO_MODE_RTOL,
+    _Geometry,
     _geometry,
     constraint_multipliers,
+    contact_virial,
     gamma_matrix,
     tangent_basis,
     tension_hessian,
@@ -123,8 +125,13 @@ def strain_compliance(packing: Packing, potential: PowerLawPotential = HARMONIC
     threshold on the eigenvalues alone would invert round-off when every mode is zero.
     """
     geo = _geometry(packing, potential)
+    return _strain_compliance(geo, constraint_multipliers(geo, strain=True))
+
+
+def _strain_compliance(geo: _Geometry, multipliers: tuple[NDArray[np.float64], float]
+                       ) -> tuple[NDArray[np.float64], float, float]:
     n, d = geo.n, geo.d
-    M = tension_hessian(geo, strain=True, volume=False)
+    M = tension_hessian(geo, strain=True, volume=False, multipliers=multipliers)
     stiffness = float(np.abs(M).max(initial=0.0))
     B = tangent_basis(gamma_matrix(geo, strain=True, volume=False))
     HE = B @ M @ B.T
@@ -140,18 +147,19 @@ def total_virial(packing: Packing, potential: PowerLawPotential = HARMONIC) -> N
     The tensions are those of :func:`~jamflow.chains.hessian.constraint_multipliers`.
     """
     geo = _geometry(packing, potential)
-    u = geo.pairs.dx / geo.pairs.distance[:, None]
-    W = np.einsum("p,pa,pb->ab", geo.force, u, geo.pairs.dx)
-    if len(geo.links):
-        mu, _ = constraint_multipliers(geo, strain=True)
-        r = np.linalg.norm(geo.link_vector, axis=1)
-        W = W + np.einsum("k,ka,kb->ab", mu / r, geo.link_vector, geo.link_vector)
-    return W
+    return _total_virial(geo, constraint_multipliers(geo, strain=True)[0])
+
+
+def _total_virial(geo: _Geometry, mu: NDArray[np.float64]) -> NDArray[np.float64]:
+    r = np.linalg.norm(geo.link_vector, axis=1)
+    return contact_virial(geo) + np.einsum("k,ka,kb->ab", mu / r, geo.link_vector, geo.link_vector)
 
 
 def compliance(packing: Packing, potential: PowerLawPotential = HARMONIC) -> Compliance:
     """Compliance matrix and Voigt, Reuss and Hill moduli of a force-balanced packing (module doc)."""
-    S_e, scale, stiffness = strain_compliance(packing, potential)
+    geo = _geometry(packing, potential)
+    multipliers = constraint_multipliers(geo, strain=True)
+    S_e, scale, stiffness = _strain_compliance(geo, multipliers)
     d = packing.d
     to_mandel = packing.box.volume / scale**2
     S = to_mandel * S_e
@@ -184,7 +192,7 @@ def compliance(packing: Packing, potential: PowerLawPotential = HARMONIC) -> Com
         poisson = (bulk_hill - shear_hill) / (bulk_hill + shear_hill)
     anisotropy = (n_dev * shear_voigt / shear_reuss + bulk_voigt / bulk_reuss - (n_dev + 1)
                   if np.isfinite([bulk_voigt, shear_voigt, bulk_reuss, shear_reuss]).all() else float("nan"))
-    W = total_virial(packing, potential)
+    W = _total_virial(geo, multipliers[0])
     V = packing.box.volume
     pressure = float(np.trace(W)) / (d * V)
     xy = int(np.flatnonzero((a == 0) & (b == 1))[0])

@@ -55,6 +55,7 @@ __all__ = [
     "ConstrainedHessian",
     "constrained_hessian",
     "constraint_multipliers",
+    "contact_virial",
     "extended_rigidity",
     "pair_second_derivatives",
 ]
@@ -214,8 +215,12 @@ def energy_gradient(geo: _Geometry, strain: bool) -> NDArray[np.float64]:
     np.add.at(g, geo.pairs.j, -geo.force[:, None] * u)
     if not strain:
         return g.ravel()
-    W = np.einsum("p,pa,pb->ab", geo.force, u, geo.pairs.dx)
-    return np.r_[g.ravel(), strain_components(-W, geo.strain_scale)]
+    return np.r_[g.ravel(), strain_components(-contact_virial(geo), geo.strain_scale)]
+
+
+def contact_virial(geo: _Geometry) -> NDArray[np.float64]:
+    """``W = sum f r r^T / r`` (d, d) of the contacts [epsilon]."""
+    return np.einsum("p,pa,pb->ab", geo.force / geo.pairs.distance, geo.pairs.dx, geo.pairs.dx)
 
 
 def constraint_multipliers(geo: _Geometry, strain: bool) -> tuple[NDArray[np.float64], float]:
@@ -245,17 +250,19 @@ def constraint_multipliers(geo: _Geometry, strain: bool) -> tuple[NDArray[np.flo
     return mu + loops @ z[:-1], float(z[-1])
 
 
-def tension_hessian(geo: _Geometry, strain: bool, volume: bool) -> NDArray[np.float64]:
+def tension_hessian(geo: _Geometry, strain: bool, volume: bool,
+                    multipliers: tuple[NDArray[np.float64], float] | None = None) -> NDArray[np.float64]:
     """``M = H0 - sum_k mu_k grad^2 c_k [- nu grad^2 det F]`` with the multipliers of :func:`constraint_multipliers`.
 
     With ``volume`` the isotropic part of the strain gradient (the pressure) is
     carried by the constraint ``det F = 1``, whose curvature then enters; without, by
     an external load linear in the strain (the compliance of Sec. VI; no curvature).
+    ``multipliers`` are ``constraint_multipliers(geo, strain)`` when already computed.
     """
     scale = geo.strain_scale if strain else None
     p = geo.pairs
     M = pair_second_derivatives(geo.n, geo.d, p.i, p.j, p.dx, -geo.force, geo.k, scale)
-    mu, nu = constraint_multipliers(geo, strain)
+    mu, nu = constraint_multipliers(geo, strain) if multipliers is None else multipliers
     L = len(geo.links)
     if L:
         M -= pair_second_derivatives(geo.n, geo.d, geo.links.i, geo.links.j, geo.link_vector, mu,
