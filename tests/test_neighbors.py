@@ -6,7 +6,12 @@ import numpy as np
 import pytest
 
 from jamflow.box import Box
-from jamflow.neighbors import PairList, pairs_within, pairs_within_brute_force, verlet_pairs
+from jamflow.neighbors import (
+    PairList,
+    pairs_within,
+    pairs_within_brute_force,
+    verlet_pairs,
+)
 
 
 def _box(d: int, strain: float, rng: np.random.Generator) -> Box:
@@ -231,3 +236,34 @@ def test_the_rebuild_criterion_is_the_sum_of_the_two_largest_displacements() -> 
     assert not nlist.stale(y, box)
     y[8] += 0.11 * nlist.skin * u[8] / np.linalg.norm(u[8])  # u1 + u2 = 1.01 skin
     assert nlist.stale(y, box)
+
+
+def test_a_search_reusing_its_work_arrays_finds_the_pairs_of_a_fresh_one() -> None:
+    """``cell_pairs_into`` with the buffers of earlier searches (other N, other d, more
+    pairs than the buffers hold, more cells) returns what a search with fresh buffers
+    returns, and every pair by brute force; the buffers grow where needed."""
+    from jamflow._cell_kernels import cell_pairs, cell_pairs_into, pair_buffers
+
+    rng = np.random.default_rng(17)
+    buffers = pair_buffers(40, 2)
+    grown = []
+    # dense (about 20 pairs per particle: the pair arrays grow), fewer particles than the
+    # buffers hold, then 3D in a long box (more cells than 2 N + 10: the cell table grows)
+    # with the particles in a short stretch of it, so that they have neighbours
+    for n, L, D, skin in ((300, [6.0, 7.0], 1.0, 0.4), (25, [8.0, 8.0], 1.2, 0.3), (20, [300.0, 2.5, 2.5], 1.0, 0.1)):
+        L = np.array(L)
+        x = rng.uniform(-1.0, 2.0, (n, L.size)) * np.minimum(L, 10.0)
+        diameter = np.full(n, D)
+        i, j, image, buffers = cell_pairs_into(x, L, D + skin, diameter, skin, buffers)
+        grown.append((buffers[5].shape[1], buffers[4].shape[1]))
+        fresh = cell_pairs(x, L, D + skin, diameter, skin)
+        for got, want in zip((i, j, image), fresh):
+            np.testing.assert_array_equal(got, want)
+        a, b = np.triu_indices(n, k=1)
+        dx = x[b] - x[a]
+        dx -= L * np.round(dx / L)
+        keep = np.linalg.norm(dx, axis=1) < D + skin
+        assert keep.sum() > 0
+        np.testing.assert_array_equal(np.stack([i, j], 1), np.stack([a[keep], b[keep]], 1))
+        np.testing.assert_allclose(x[j] - x[i] + image * L, dx[keep], rtol=0, atol=1e-12)
+    assert grown[0][0] > 8 * 300 + 16 and grown[1] == grown[0] and grown[2][1] > 2 * 20 + 10

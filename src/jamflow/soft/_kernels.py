@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .._cell_kernels import cell_pairs
+from .._cell_kernels import cell_pairs_into, pair_buffers
 
 #: Status codes returned by the iterative kernels.
 CONVERGED, REBUILD, MAX_STEPS, STALLED = 0, 1, 2, 3
@@ -259,22 +259,36 @@ def _needs_rebuild(y, y_build, s, s_build, reach, skin, slack):
 
 
 @njit(cache=True)
-def _inline_list(y, s, lengths, diameter, reach, skin):
+def _list_buffers(n, d):
+    """Work arrays of :func:`_inline_list` for N particles: the cell search's, scaled positions, offsets and sigmas."""
+    cells = pair_buffers(n, d)
+    capacity = cells[5].shape[1]
+    return cells, np.empty((n, d)), np.empty((capacity, d)), np.empty(capacity)
+
+
+@njit(cache=True)
+def _inline_list(y, s, lengths, diameter, reach, skin, buffers):
     """A Verlet list built inside the loop (orthogonal reference box ``lengths``, scale ``s``).
 
     The same call as :meth:`jamflow.soft.potential.NeighborList.build` makes, so the
-    same pairs in the same (lexicographic) order. Returns ``(pi, pj, image, offset,
-    sigma)`` with ``offset = h_ref n``.
+    same pairs in the same (lexicographic) order, in the work arrays ``buffers`` of
+    :func:`_list_buffers`. Returns ``(pi, pj, image, offset, sigma, buffers)`` with
+    ``offset = h_ref n``; the lists are views the next build overwrites.
     """
-    pi, pj, image = cell_pairs(s * y, s * lengths, reach, diameter, skin)
-    m, d = image.shape
-    offset = np.empty((m, d))
-    sigma = np.empty(m)
+    cells, scaled, offset, sigma = buffers
+    n, d = y.shape
+    for i in range(n):
+        for a in range(d):
+            scaled[i, a] = s * y[i, a]
+    pi, pj, image, cells = cell_pairs_into(scaled, s * lengths, reach, diameter, skin, cells)
+    m = pi.shape[0]
+    if offset.shape[0] < m:
+        offset, sigma = np.empty((cells[5].shape[1], d)), np.empty(cells[5].shape[1])
     for p in range(m):
         for a in range(d):
             offset[p, a] = image[p, a] * lengths[a]
         sigma[p] = 0.5 * (diameter[pi[p]] + diameter[pj[p]])
-    return pi, pj, image, offset, sigma
+    return pi, pj, image, offset[:m], sigma[:m], (cells, scaled, offset, sigma)
 
 
 @njit(cache=True)
@@ -325,6 +339,8 @@ def fire(
     q, vq, s = box_state[0], box_state[1], box_state[2]
     builds = 0
     image = np.empty((0, d), dtype=np.int64)
+    # reused by every build of this call (fresh memory page-faults on first touch)
+    buffers = _list_buffers(y.shape[0] if lengths.shape[0] else 0, d)
     # no sides (a sheared box): shortest 0, so every rebuild goes back to the caller
     shortest = np.inf if lengths.shape[0] else 0.0
     for a in range(lengths.shape[0]):
@@ -347,7 +363,7 @@ def fire(
             if not reach < 0.5 * s * shortest:
                 status = REBUILD
                 break
-            pi, pj, image, offset, sigma = _inline_list(y, s, lengths, diameter, reach, skin)
+            pi, pj, image, offset, sigma, buffers = _inline_list(y, s, lengths, diameter, reach, skin, buffers)
             y_build, s_build, slack = y.copy(), s, 0.0
             builds += 1
             # the forces at y came from the used-up list: evaluate again, then test again
