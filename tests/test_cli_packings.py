@@ -197,3 +197,21 @@ def test_overlapping_packing_needs_soft(tmp_path: Path, capsys: pytest.CaptureFi
     code, _, err = _run(capsys, "check", nc, "--overlap-tol", "1e-8")
     assert code == 1
     _one_line_error(err)
+
+
+def test_the_command_table_names_the_module_that_registers_each_command() -> None:
+    """``COMMAND_MODULE`` (which lets a command line import one topic module) lists
+    every registered subcommand with its module, and nothing else."""
+    import argparse
+    import importlib
+
+    from jamflow.cli import COMMAND_MODULE, COMMAND_MODULES
+
+    registered = {}
+    for module in COMMAND_MODULES:
+        sub = argparse.ArgumentParser().add_subparsers()
+        importlib.import_module(f"jamflow.cli.{module}").register(sub)
+        registered.update(dict.fromkeys(sub.choices, module))
+    assert registered == COMMAND_MODULE
+    for command, module in COMMAND_MODULE.items():
+        assert set(build_parser(command).subcommands) == {c for c, m in COMMAND_MODULE.items() if m == module}

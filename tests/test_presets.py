@@ -22,7 +22,7 @@ def test_preset_changes_defaults_and_explicit_options_win(monkeypatch):
     parser = build_parser()
     sub = parser.subcommands["certify"]
     monkeypatch.setattr(sub, "_defaults", dict(sub._defaults, handler=lambda args: seen.update(vars(args)) or 0))
-    monkeypatch.setattr("jamflow.cli.build_parser", lambda: parser)
+    monkeypatch.setattr("jamflow.cli.build_parser", lambda command=None: parser)
     assert main(["certify", "in.nc", "out.nc", "--preset", "publication"]) == 0
     assert seen["loads"] == PRESETS["certify"]["publication"]["loads"]
     assert main(["certify", "in.nc", "out.nc", "--preset", "publication", "--loads", "3"]) == 0

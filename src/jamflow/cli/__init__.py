@@ -23,6 +23,22 @@ from .common import path_arguments
 COMMAND_MODULES: tuple[str, ...] = ("packings", "analysis", "soft", "flow", "certify", "tradeoff", "ls", "calippso",
                                      "summary", "minimize", "chains", "shapes")
 
+#: Subcommand -> the topic module that registers it. A command line naming one of
+#: these imports that module only: the others pull in every stage of the package
+#: (0.4-0.6 s per command; a workflow runs the CLI once per job). A test checks the
+#: table against the registrations.
+COMMAND_MODULE: dict[str, str] = {
+    **dict.fromkeys(("init", "import-dat", "export-xyz", "check"), "packings"),
+    **dict.fromkeys(("gaps", "forces", "overlap", "overlap-series", "jamming-table", "rdf", "flow-summary",
+                     "flow-curve", "plot"), "analysis"),
+    **dict.fromkeys(("soft-jam", "aqs", "sd-shear", "moduli"), "soft"),
+    **dict.fromkeys(("shear", "compress", "decompress", "drive"), "flow"),
+    "certify": "certify", "tradeoff": "tradeoff", "ls": "ls", "calippso": "calippso", "summary": "summary",
+    "minimize": "minimize",
+    **dict.fromkeys(("init-chains", "link", "chains-moduli"), "chains"),
+    **dict.fromkeys(("init-shapes", "contact-angles", "shape-survey", "modes"), "shapes"),
+}
+
 
 class _Parser(argparse.ArgumentParser):
     """Reports usage errors as one line (``prog: error: message``) with exit code 2.
@@ -39,10 +55,17 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The full argument parser with every registered subcommand.
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The argument parser: every registered subcommand, or only those of ``command``'s module.
 
     The subcommand parsers are kept in ``parser.subcommands`` (name -> parser).
+
+    Parameters
+    ----------
+    command : str, optional
+        A subcommand of :data:`COMMAND_MODULE`: only its topic module is imported and
+        registered. None, or an unknown name (whose error then lists every command):
+        all of them.
     """
     parser = _Parser(
         prog="jamflow",
@@ -50,7 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"jamflow {jamflow_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for name in COMMAND_MODULES:
+    for name in (COMMAND_MODULE[command],) if command in COMMAND_MODULE else COMMAND_MODULES:
         importlib.import_module(f"{__name__}.{name}").register(sub)
     parser.subcommands = dict(sub.choices)
     return parser
@@ -58,7 +81,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``jamflow`` console script."""
-    parser = build_parser()
+    words = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(words[0] if words else None)
     args = parser.parse_args(argv)
     try:
         preset = getattr(args, "preset", "default")
