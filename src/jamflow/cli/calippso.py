@@ -15,9 +15,9 @@ from ..calippso import (
     DEFAULT_SOLVER,
     DEFAULT_TOL_GAMMA,
     DEFAULT_TOL_S,
-    SOLVER_TOL,
     FINISHES,
     INTERIOR_POINTS,
+    SOLVER_TOL,
     SOLVERS,
     calippso,
     result_to_dataset,
@@ -92,7 +92,8 @@ def _calippso(args: argparse.Namespace) -> int:
     counting = "hyperstatic" if a["hyperstatic"] else "isostatic" if a["isostatic"] else "not isostatic"
     print_summary(args, args.out, [
         ("phi_J", f"{a['phi_J']:.10f}"),
-        ("LPs", f"{a['n_lps']} (converged {bool(result.converged)})"),
+        ("LPs", f"{a['n_lps']} (converged {bool(result.converged)}; "
+                f"{'near-jamming start: interior point LPs without presolve' if a['near_start'] else 'far start'})"),
         ("finish", f"{a['finish']} ({a['newton_attempts']} Newton attempt(s) in {a['newton_time']:.2f} s, "
                    f"{a['newton_rejections']} rejected, last because: {a['newton_last_rejection']})"),
         ("contacts N_c", f"{a['n_contacts']} (isostatic count d(N_s-1)+1 = {a['isostatic_count']}: {counting})"),
