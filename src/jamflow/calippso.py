@@ -1314,7 +1314,8 @@ def calippso(
     cutoff : float
         Neighbour cutoff ``ell`` [current largest diameters] far from jamming, > 1.2.
     cutoff_near : float
-        Cutoff in the last bound phase and for unbounded LPs [current largest diameters].
+        Cutoff in the last bound phase, for unbounded LPs and for every LP of a start
+        near jamming (:data:`NEAR_START_GAP`) [current largest diameters].
     bound : tuple of (threshold, bound)
         Bound schedule: below each ``sqrt(Gamma*) - 1`` threshold the displacement
         bound (per coordinate) becomes ``bound`` mean radii; above the first threshold

@@ -17,6 +17,7 @@ from ..calippso import (
     DEFAULT_TOL_S,
     FINISHES,
     INTERIOR_POINTS,
+    NEAR_START_GAP,
     SOLVER_TOL,
     SOLVERS,
     calippso,
@@ -48,9 +49,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--solver-tol", type=float, default=SOLVER_TOL,
                    help=f"HiGHS feasibility/optimality tolerance of the scaled rows, 1e-10..2e-8 (default {SOLVER_TOL:g})")
     p.add_argument("--cutoff", type=float, default=DEFAULT_CUTOFF,
-                   help=f"neighbour cutoff far from jamming, in largest diameters (default {DEFAULT_CUTOFF})")
+                   help="neighbour cutoff far from jamming, in largest diameters; unused by a start near jamming "
+                        f"(median nearest gap below {NEAR_START_GAP:g} of the contact distance) (default {DEFAULT_CUTOFF})")
     p.add_argument("--cutoff-near", type=float, default=DEFAULT_CUTOFF_NEAR,
-                   help=f"neighbour cutoff close to jamming, in largest diameters (default {DEFAULT_CUTOFF_NEAR})")
+                   help="neighbour cutoff close to jamming (last bound phase, unbounded LPs, every LP of a start near "
+                        f"jamming), in largest diameters (default {DEFAULT_CUTOFF_NEAR})")
     p.add_argument("--bound", type=float, nargs=2, default=None, metavar=("MID", "NEAR"),
                    help="displacement bounds in mean radii for 5e-4 >= sqrt(Gamma)-1 > 1e-5 and below "
                         "(default 0.1 0.01)")
