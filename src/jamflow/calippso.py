@@ -97,7 +97,7 @@ A start near jamming (attribute ``near_start``: the median particle's nearest ga
 below :data:`NEAR_START_GAP`) moves little: it takes ``cutoff_near`` from the first
 LP on (the growth cap ``sqrt(Gamma) <= (ell - 2 sqrt(d) b) / sigma_max`` keeps every
 LP safe with any cutoff; d = 5 LS example: the first LP has 26413 rows instead of
-71567 and takes 23 s instead of 33 s), and solves its interior point LPs without
+71567 and took 23-30 s instead of 33-38 s), and solves its interior point LPs without
 HiGHS presolve, whose vertex is the better warm start (:data:`NEAR_START_PRESOLVE`).
 
 Newton finish

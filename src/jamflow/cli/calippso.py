@@ -96,7 +96,7 @@ def _calippso(args: argparse.Namespace) -> int:
     print_summary(args, args.out, [
         ("phi_J", f"{a['phi_J']:.10f}"),
         ("LPs", f"{a['n_lps']} (converged {bool(result.converged)}; "
-                f"{'near-jamming start: interior point LPs without presolve' if a['near_start'] else 'far start'})"),
+                f"{'near-jamming start: near cutoff, interior point LPs without presolve' if a['near_start'] else 'far start'})"),
         ("finish", f"{a['finish']} ({a['newton_attempts']} Newton attempt(s) in {a['newton_time']:.2f} s, "
                    f"{a['newton_rejections']} rejected, last because: {a['newton_last_rejection']})"),
         ("contacts N_c", f"{a['n_contacts']} (isostatic count d(N_s-1)+1 = {a['isostatic_count']}: {counting})"),
