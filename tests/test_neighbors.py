@@ -267,3 +267,26 @@ def test_a_search_reusing_its_work_arrays_finds_the_pairs_of_a_fresh_one() -> No
         np.testing.assert_array_equal(np.stack([i, j], 1), np.stack([a[keep], b[keep]], 1))
         np.testing.assert_allclose(x[j] - x[i] + image * L, dx[keep], rtol=0, atol=1e-12)
     assert grown[0][0] > 8 * 300 + 16 and grown[1] == grown[0] and grown[2][1] > 2 * 20 + 10
+
+
+@pytest.mark.parametrize("d", [2, 3, 4, 5])
+def test_the_tree_and_the_cell_list_find_the_same_pairs(d: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Orthogonal boxes are searched by the periodic k-d tree up to KDTREE_MAX_N particles
+    and by the compiled cell list above: both give the same pairs, in the same order,
+    with the same separations, for unwrapped positions and coordinates a rounding error
+    below 0 (which wrap to the box's upper face)."""
+    import jamflow.neighbors as neighbors
+
+    rng = np.random.default_rng(40 + d)
+    L = rng.uniform(4.0, 6.0, d)
+    box = Box.orthogonal(L)
+    x = rng.uniform(-2.0, 3.0, (300, d)) * L
+    x[:5, 0] = -1e-17
+    cutoff = 0.45 * float(L.min()) * (0.6 if d < 4 else 1.0)
+    tree = pairs_within(x, box, cutoff)
+    monkeypatch.setattr(neighbors, "KDTREE_MAX_N", 0)
+    cells = pairs_within(x, box, cutoff)
+    assert len(tree.i) > 300
+    np.testing.assert_array_equal(tree.i, cells.i)
+    np.testing.assert_array_equal(tree.j, cells.j)
+    np.testing.assert_array_equal(tree.dx, cells.dx)
