@@ -317,7 +317,7 @@ def test_a_near_start_takes_the_near_cutoff_and_jams_to_the_packing_of_the_far_s
     """The LS example is a near-jamming start (median nearest gap ~1e-6), a random start
     is not; the near start's first LP uses ``cutoff_near`` (fewer rows) and its
     interior point LPs skip presolve, and the chain ends in the same packing as with
-    the far settings: same contacts (Q = 1) and forces to 1e-8 relative."""
+    the far settings: same contacts (Q = 1) and forces to 1e-8 in norm."""
     start = read_dat(ls_dat(3))
     container = cal._Container(start.box, False)
     assert cal._near_start(start.box.wrap(start.position), start.diameter, container)
