@@ -112,10 +112,8 @@ def pairs_within(positions: ArrayLike, box: Box, cutoff: float) -> PairList:
         return _pairs_sheared(x, box, cutoff)
     L = box.lengths
     if len(x) <= KDTREE_MAX_N:
-        wrapped = np.mod(x, L)
-        # round-off can put a tiny negative coordinate at L, outside the tree's box
-        wrapped[wrapped >= L] = 0.0
-        ij = cKDTree(wrapped, boxsize=L).query_pairs(cutoff, output_type="ndarray")
+        # Box.wrap keeps every coordinate in [0, L), as the periodic tree requires
+        ij = cKDTree(box.wrap(x), boxsize=L).query_pairs(cutoff, output_type="ndarray")
         return _make(box, x, ij[:, 0], ij[:, 1])
     from ._cell_kernels import cell_pairs
 
