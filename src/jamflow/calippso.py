@@ -254,6 +254,8 @@ NEAR_START_GAP: float = 1e-3
 #: ("choose"): without it, 4 of 6 chains from 3D N = 256 random starts (seeds 1-6)
 #: took more LPs, up to 2.5 times as many, and the six 20 % more time.
 NEAR_START_PRESOLVE: str = "off"
+#: HiGHS's own presolve setting, kept by every other LP.
+_HIGHS_PRESOLVE: str = "choose"
 
 #: A warm simplex may take this many pivots per row before the LP is re-solved by
 #: interior point (a pivot limit, not a time limit, so that the same input always
@@ -731,7 +733,7 @@ class _Solver:
         #: hybrid: a simplex LP without a basis to carry is solved by interior point
         self.cold_simplex_as_ipm = False
         #: HiGHS presolve of the interior point LPs (see NEAR_START_PRESOLVE)
-        self.ipm_presolve = "choose"
+        self.ipm_presolve = _HIGHS_PRESOLVE
 
     def solve(self, A: sp.csc_matrix, rhs, col_lower, col_upper, method: str, rows: _Rows) -> _Solution:
         """Solve the LP ``min -g`` s.t. ``A z <= rhs``, ``col_lower <= z <= col_upper``."""
@@ -813,7 +815,7 @@ class _Solver:
             # dual simplex needed thousands (d = 4 LS example: 2 against 5184)
             h.setOptionValue("solver", "simplex")
             h.setOptionValue("simplex_strategy", 4 if basis is not None else 1)
-            h.setOptionValue("presolve", "choose")
+            h.setOptionValue("presolve", _HIGHS_PRESOLVE)
         h.passModel(lp)
         limit = _NO_PIVOT_LIMIT
         if basis is not None:
