@@ -208,3 +208,117 @@ def test_extrapolated_warm_starts_and_memoised_borders_match_direct_solves(rng, 
         assert _rel(fast.force, direct.force) < FORCE_REL, step
     assert cache.n_factor == 1 and cache.n_cg == 7 and cache.n_bordered == 4
     assert len(cache.bordered) == 1
+
+
+@pytest.mark.parametrize("eps", [None, 1e-3])
+def test_symmetric_factor_keeps_only_l_and_solves_as_superlu_does(rng, eps):
+    """The factorisation the solver caches (SymmetricMode, diagonal pivots) has no row pivoting, so
+    U = diag(U) L^T and only L is kept; its solves agree with SuperLU's own solve with L and U
+    (random N and N near a self-stress, cond ~ 1e6) to the backward-stable bound."""
+    from jamflow.overdamped.network import (
+        TriangularFactor,
+        _factorize,
+        pair_vectors,
+        s_matrix,
+    )
+
+    if eps is None:
+        x, box, pairs, images = _random_network(rng, 40, 2, n_contacts=45)
+        h = box.matrix
+    else:
+        x, h, pairs, images = _bent_ring(eps)
+    R = pair_vectors(x, h, pairs, images)
+    S = s_matrix(pairs, R / np.linalg.norm(R, axis=1)[:, None], len(x))
+    lu = _factorize(S, cond_limit=1e13, check_pivots=False)
+    fac = TriangularFactor(lu)
+    assert fac.symmetric and fac.args[3].size == 0
+    N = (S @ S.T).toarray()
+    bound = 1e3 * np.linalg.cond(N) * np.finfo(float).eps
+    for _ in range(3):
+        b = rng.normal(size=N.shape[0])
+        assert _rel(fac.solve(b), lu.solve(b)) < bound
+        assert _rel(fac.solve(b), np.linalg.solve(N, b)) < bound
+
+
+@pytest.mark.parametrize("mode", ["shear", "fixed_pressure"])
+def test_bordered_preconditioner_with_several_added_and_removed_pairs(rng, mode):
+    """Three pairs added and three removed (within ``max_changes``): the bordered CG still gives the
+    direct solve's forces to 1e-10; one more change than ``max_changes`` is refactorised."""
+    n, d = 30, 2
+    x = rng.uniform(0, 5.0, size=(n, d))
+    box = Box.cubic(d, 5.0)
+    nl = build_neighbor_list(x, box, np.full(n, 0.5), skin=1.0)
+    pick = rng.choice(len(nl.pairs), size=n + 3, replace=False)
+    base, spare = np.sort(pick[:n]), pick[n:]
+    new = np.sort(np.concatenate([base[3:], spare]))
+    kw = _drive_kwargs(mode, n, d, rng)
+    x1 = x + 1e-3 * rng.normal(size=x.shape)
+    cache = FactorCache()
+    solve_network(x, box.matrix, nl.pairs[base], nl.images[base], check_pivots=False, cache=cache, **kw)
+    fast = solve_network(x1, box.matrix, nl.pairs[new], nl.images[new], check_pivots=False, cache=cache, **kw)
+    assert (cache.n_factor, cache.n_bordered) == (1, 1), "the bordered CG path was not taken"
+    direct = solve_network(x1, box.matrix, nl.pairs[new], nl.images[new], **kw)
+    assert _rel(fast.force, direct.force) < FORCE_REL
+    few = FactorCache(max_changes=5)
+    solve_network(x, box.matrix, nl.pairs[base], nl.images[base], check_pivots=False, cache=few, **kw)
+    solve_network(x1, box.matrix, nl.pairs[new], nl.images[new], check_pivots=False, cache=few, **kw)
+    assert (few.n_factor, few.n_bordered) == (2, 0)
+
+
+def test_warm_starts_extrapolate_polynomials_of_their_order_exactly(rng):
+    """Solutions that are a quadratic in time are extrapolated exactly from three remembered solves
+    (a linear one from two); a changed network gets the last solution on its kept pairs, zero on new
+    ones; a solve at a remembered time gets that solution."""
+    codes = np.array([3, 7, 11, 20])
+    a, b, c = rng.normal(size=(3, 4))
+
+    def f(t):
+        return a + b * t + c * t * t
+
+    cache = FactorCache()
+    for t in (0.0, 0.4, 1.0):
+        cache.remember(codes, [f(t)], t)
+    assert _rel(cache.warm_starts(codes, 1, 1.7)[0], f(1.7)) < 1e-13
+    lin = FactorCache(warm_order=1)
+    for t in (0.4, 1.0):
+        lin.remember(codes, [a + b * t], t)
+    assert _rel(lin.warm_starts(codes, 1, 1.7)[0], a + b * 1.7) < 1e-13
+    assert np.array_equal(cache.warm_starts(codes, 1, 1.0)[0], f(1.0))
+    moved = np.array([3, 9, 20])
+    assert np.array_equal(cache.warm_starts(moved, 1, 1.7)[0], np.array([f(1.0)[0], 0.0, f(1.0)[3]]))
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_compiled_pair_kernels_match_their_formulas(rng, d):
+    """Separations, affine rates, pair rates, the step-drift rate and the stress tensor from the
+    compiled kernels agree with the formulas of their docstrings written in numpy."""
+    from jamflow.overdamped.network import (
+        Solution,
+        affine_rates,
+        max_relative_rate,
+        max_row_norm,
+        pair_vectors,
+        pair_velocities,
+        stress_tensor,
+    )
+
+    n, m = 25, 40
+    x = rng.uniform(0, 4.0, size=(n, d))
+    h = np.triu(rng.uniform(0.5, 1.0, size=(d, d))) + 4.0 * np.eye(d)
+    pairs = np.array([rng.choice(n, size=2, replace=False) for _ in range(m)])
+    images = rng.integers(-1, 2, size=(m, d))
+    E = rng.normal(size=(d, d))
+    U = rng.normal(size=(n, d))
+    f = rng.uniform(0.1, 1.0, size=m)
+    sigma = rng.uniform(0.8, 1.2, size=m)
+    R = x[pairs[:, 1]] - x[pairs[:, 0]] + images @ h.T
+    r = np.linalg.norm(R, axis=1)
+    sol = Solution(f, U, E, np.nan)
+    W = R @ E.T + U[pairs[:, 1]] - U[pairs[:, 0]]
+    assert _rel(pair_vectors(x, h, pairs, images), R) < 1e-14
+    assert _rel(affine_rates(R, E), np.einsum("ck,kl,cl->c", R, E, R) / r) < 1e-13
+    assert _rel(pair_velocities(R, pairs, sol), np.einsum("ck,ck->c", R, W) / r) < 1e-13
+    assert max_relative_rate(R, pairs, sol, sigma) == pytest.approx(np.max(np.linalg.norm(W, axis=1) / sigma), rel=1e-14)
+    assert _rel(stress_tensor(R, f, 3.0), np.einsum("c,ca,cb->ab", f / r, R, R) / 3.0) < 1e-14
+    assert max_row_norm(U) == pytest.approx(np.max(np.linalg.norm(U, axis=1)), rel=1e-15)
+    assert max_row_norm(np.zeros((0, d))) == 0.0

@@ -28,6 +28,7 @@ import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 
 from ..box import Box
+from ..packing import sphere_volume
 from ..tolerances import CONTACT_DRIFT_TOL, REWIRE_REL_TOL
 from .collisions import NeighborList, build_neighbor_list, images_of, next_collision
 from .driving import Drive
@@ -35,9 +36,11 @@ from .jamming import constrained_subset, self_stress
 from .network import (
     FactorCache,
     SingularNetworkError,
-    _factorize,
     Solution,
+    _factorize,
     affine_rates,
+    max_relative_rate,
+    max_row_norm,
     pair_vectors,
     pair_velocities,
     s_matrix,
@@ -178,22 +181,26 @@ class Integrator:
     """
 
     def __init__(self, state: FlowState, drive: Drive, options: FlowOptions) -> None:
-        self.state = state
-        self.drive = drive
-        self.options = options
-        self.d = state.x.shape[1]
-        self.n = state.x.shape[0]
+        self._setup(state, drive, options)
+        self.solution: Solution = self._solution_now()
+
+    def _setup(self, state: FlowState, drive: Drive, options: FlowOptions) -> None:
+        """Everything but the solution: derived constants, empty memos and factorisation cache."""
+        self.state, self.drive, self.options = state, drive, options
+        self.n, self.d = state.x.shape
         self.base_gradient = drive.gradient(self.d)
         self.pressure_internal = None if drive.pressure is None else drive.pressure * drive.force_unit
+        self.particle_volume = float(sphere_volume(self.d, 2 * state.radius).sum())
+        self.last_correction: tuple[float, float] = (np.nan, np.nan)
         self._count_key = None
         self._count = None
         self._nl_version = 0
         self._pairs_key = None
+        self._sigma_value = None
+        self._volume_of = None
         self._sep_key = None
         self._err_key = None
         self.factor_cache = FactorCache()
-        self.solution: Solution = self._solution_now()
-        self.last_correction: tuple[float, float] = (np.nan, np.nan)
 
     # ---------------------------------------------------------------- construction
     @classmethod
@@ -224,18 +231,7 @@ class Integrator:
         state = FlowState(x, np.array(box.matrix), np.asarray(radius, float), nl, contact, permanent)
         state.event_interval = options.dt_max * options.steps_per_event
         integ = cls.__new__(cls)
-        integ.state, integ.drive, integ.options = state, drive, options
-        integ.d, integ.n = x.shape[1], n
-        integ.base_gradient = drive.gradient(integ.d)
-        integ.pressure_internal = None if drive.pressure is None else drive.pressure * drive.force_unit
-        integ.last_correction = (np.nan, np.nan)
-        integ._count_key = None
-        integ._count = None
-        integ._nl_version = 0
-        integ._pairs_key = None
-        integ._sep_key = None
-        integ._err_key = None
-        integ.factor_cache = FactorCache()
+        integ._setup(state, drive, options)
         if contact.any():
             integ._rewire(contact.copy())
             # the initial network is the reference state, not a sequence of events
@@ -253,7 +249,15 @@ class Integrator:
         if self._pairs_key != key:
             self._pairs_key = key
             self._pairs_value = (self.state.nl.pairs[mask], self.state.nl.images[mask])
+            self._sigma_value = None
         return self._pairs_value
+
+    def _contact_sigma(self) -> NDArray[np.float64]:
+        """Contact distances ``sigma_ij`` of the current network, shape (Nc,) (memoised with its pairs; read-only)."""
+        self._pairs(self.state.contact)
+        if self._sigma_value is None:
+            self._sigma_value = self.state.nl.sigma[self.state.contact]
+        return self._sigma_value
 
     def _separations(self, mask: NDArray[np.bool_]) -> NDArray[np.float64]:
         """Separations ``R`` of the sub-network ``mask`` at the current positions, shape (Nc, d) (read-only).
@@ -385,10 +389,7 @@ class Integrator:
         dt = min(o.dt_max, st.event_interval / o.steps_per_event) * self.drive.time_unit
         if st.contact.any() and self.solution.velocity.shape == st.x.shape:
             pairs, _ = self._pairs(st.contact)
-            R = self._separations(st.contact)
-            sol = self.solution
-            W = R @ sol.gradient.T + sol.velocity[pairs[:, 1]] - sol.velocity[pairs[:, 0]]
-            w = float(np.sqrt(np.max(np.einsum("ck,ck->c", W, W) / st.nl.sigma[st.contact] ** 2)))
+            w = max_relative_rate(self._separations(st.contact), pairs, self.solution, self._contact_sigma())
             if w > 0:
                 dt = min(dt, np.sqrt(2.0 * o.step_drift) / w)
         return float(max(o.dt_min * self.drive.time_unit, dt))
@@ -402,8 +403,7 @@ class Integrator:
         by ``t max|U|``, the accumulated strain norm by ``t |E|_2``).
         """
         nl = self.state.nl
-        a = float(np.sqrt(np.max(np.einsum("nk,nk->n", nl.displacement, nl.displacement), initial=0.0)))
-        u = float(np.sqrt(np.max(np.einsum("nk,nk->n", sol.velocity, sol.velocity), initial=0.0)))
+        a, u = max_row_norm(nl.displacement), max_row_norm(sol.velocity)
         g = spectral_norm(sol.gradient)
         s0, c = nl.strain_norm, nl.cutoff
         # 2 (a + t u) + (s0 + t g) (1 + s0 + t g) c < skin, a quadratic A t^2 + B t + C < 0
@@ -511,7 +511,7 @@ class Integrator:
         if self._err_key != self._sep_key:
             # the step's drift check and the recorder ask at the same state
             self._err_key = self._sep_key
-            self._err_value = np.linalg.norm(R, axis=1) / st.nl.sigma[st.contact] - 1.0
+            self._err_value = np.linalg.norm(R, axis=1) / self._contact_sigma() - 1.0
         return self._err_value
 
     def constraint_error(self) -> float:
@@ -530,7 +530,18 @@ class Integrator:
         """Contact stress tensor [force / lambda^(d-1)] (see :func:`stress_tensor`)."""
         st = self.state
         R = self._separations(st.contact)
-        return stress_tensor(R, self.solution.force, abs(float(np.linalg.det(st.h))))
+        return stress_tensor(R, self.solution.force, self.volume())
+
+    def packing_fraction(self) -> float:
+        """Volume fraction of the particles in the current box."""
+        return self.particle_volume / self.volume()
+
+    def volume(self) -> float:
+        """Box volume ``|det h|`` [lambda^d] (memoised on the box array, which is replaced, never modified)."""
+        h = self.state.h
+        if self._volume_of is not h:
+            self._volume_of, self._volume = h, abs(float(np.linalg.det(h)))
+        return self._volume
 
     def z_bar(self) -> float:
         """Constrained coordination of the current network (Eq. 29)."""

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba
 import numpy as np
@@ -38,6 +38,8 @@ __all__ = [
     "Solution",
     "TriangularFactor",
     "affine_rates",
+    "max_relative_rate",
+    "max_row_norm",
     "pair_vectors",
     "pair_velocities",
     "s_matrix",
@@ -71,7 +73,39 @@ def pair_vectors(
     -------
     ndarray, shape (P, d)
     """
-    return x[pairs[:, 1]] - x[pairs[:, 0]] + images @ h.T
+    return _pair_vectors(np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(h, dtype=np.float64),
+                         np.ascontiguousarray(pairs, dtype=np.int64), np.ascontiguousarray(images, dtype=np.int64))
+
+
+@numba.njit(cache=True)
+def _pair_vectors(x, h, pairs, images):  # pragma: no cover - numba
+    npairs = pairs.shape[0]
+    d = x.shape[1]
+    out = np.empty((npairs, d))
+    for c in range(npairs):
+        i, j = pairs[c, 0], pairs[c, 1]
+        for k in range(d):
+            shift = 0.0
+            for m in range(d):
+                shift += images[c, m] * h[k, m]
+            out[c, k] = x[j, k] - x[i, k] + shift
+    return out
+
+
+def max_row_norm(a: NDArray[np.float64]) -> float:
+    """Largest Euclidean norm of the rows of an (n, d) array (0 when empty)."""
+    return _max_row_norm(np.ascontiguousarray(a, dtype=np.float64))
+
+
+@numba.njit(cache=True)
+def _max_row_norm(a):  # pragma: no cover - numba
+    top = 0.0
+    for i in range(a.shape[0]):
+        s = 0.0
+        for k in range(a.shape[1]):
+            s += a[i, k] * a[i, k]
+        top = max(top, s)
+    return np.sqrt(top)
 
 
 def s_matrix(pairs: NDArray[np.int64], unit: NDArray[np.float64], n: int) -> sp.csr_matrix:
@@ -106,8 +140,38 @@ def spectral_norm(E: NDArray[np.float64]) -> float:
 
 def affine_rates(R: NDArray[np.float64], gradient: NDArray[np.float64]) -> NDArray[np.float64]:
     """``S V_aff`` for contacts with separations R: ``n . E R`` (Eq. 13), shape (Nc,)."""
-    r = np.linalg.norm(R, axis=1)
-    return np.einsum("ck,kl,cl->c", R, gradient, R) / r
+    return _affine_rates(np.ascontiguousarray(R, dtype=np.float64), np.ascontiguousarray(gradient, dtype=np.float64))
+
+
+@numba.njit(cache=True)
+def _affine_rates(R, E):  # pragma: no cover - numba
+    nc, d = R.shape
+    out = np.empty(nc)
+    for c in range(nc):
+        q = 0.0
+        rr = 0.0
+        for k in range(d):
+            rr += R[c, k] * R[c, k]
+            for m in range(d):
+                q += R[c, k] * E[k, m] * R[c, m]
+        out[c] = q / np.sqrt(rr)
+    return out
+
+
+@numba.njit(cache=True)
+def _normals(R):  # pragma: no cover - numba
+    """Lengths r, shape (P,), and unit vectors ``R / r``, shape (P, d), of separations R."""
+    nc, d = R.shape
+    r = np.empty(nc)
+    unit = np.empty((nc, d))
+    for c in range(nc):
+        rr = 0.0
+        for k in range(d):
+            rr += R[c, k] * R[c, k]
+        r[c] = np.sqrt(rr)
+        for k in range(d):
+            unit[c, k] = R[c, k] / r[c]
+    return r, unit
 
 
 @dataclass(frozen=True)
@@ -189,18 +253,17 @@ class FactorCache:
     codes : ndarray of int64 or None
         Pair codes ``i N + j`` of the factorised network, in its order.
     lu : TriangularFactor or None
-    guesses : list of ndarray
-        Last solutions per right-hand side (warm starts), on the pairs ``guess_codes``.
-    guess_codes : ndarray of int64 or None
-    guess_time : float or None
-        Time of the state ``guesses`` were solved at (None when the caller gave none).
-    history : tuple or None
-        The solutions before ``guesses`` as ``(codes, time, solutions)``: on an unchanged
-        network the warm start is the linear extrapolation in time of the last two
-        solutions (the forces vary smoothly between events), which saves CG iterations.
+    recent : list of (codes, time, solutions)
+        The last solves, newest first (at most ``warm_order + 1``): pair codes, time of
+        the state (None when the caller gave none) and solutions per right-hand side.
+    warm_order : int
+        Degree of the extrapolation in time of warm starts: on an unchanged network the
+        initial guess is the polynomial through the last ``warm_order + 1`` solutions
+        (the forces vary smoothly between events; quadratic saves about a third of the
+        CG iterations of linear at N = 1024).
     bordered : dict
-        Bordered preconditioners built on the current factorisation, by network (pair
-        codes as bytes): the network after an event is solved at every step until the
+        Bordered preconditioners (:class:`Border`, None where refused) built on the
+        current factorisation, by network (pair codes as bytes): the network after an event is solved at every step until the
         next factorisation, and its set-up (|P| + |Q| solves) is done once. A
         preconditioner built at an earlier geometry of the same network is still an
         approximate inverse; CG converges to the same tolerance on the current one.
@@ -213,14 +276,12 @@ class FactorCache:
 
     rtol: float = 1e-13
     max_iter: int = 8
-    max_changes: int = 4
+    max_changes: int = 8
     key: bytes | None = None
     codes: NDArray[np.int64] | None = None
     lu: Any = None
-    guesses: list = field(default_factory=list)
-    guess_codes: NDArray[np.int64] | None = None
-    guess_time: float | None = None
-    history: tuple | None = None
+    recent: list = field(default_factory=list)
+    warm_order: int = 2
     bordered: dict = field(default_factory=dict)
     iterations: int = 0
     n_factor: int = 0
@@ -229,39 +290,42 @@ class FactorCache:
 
     def reset(self) -> None:
         """Forget the factorisation (the next solve factorises from scratch)."""
-        self.key, self.codes, self.lu, self.guesses, self.guess_codes = None, None, None, [], None
-        self.guess_time, self.history, self.bordered = None, None, {}
+        self.key, self.codes, self.lu, self.recent, self.bordered = None, None, None, [], {}
 
     def remember(self, codes: NDArray[np.int64], solutions: list[NDArray[np.float64]], time: float | None) -> None:
-        """Keep the solutions of a solve as the next warm start (and the last ones as history)."""
-        if self.guess_codes is not None and len(self.guesses) == len(solutions):
-            self.history = (self.guess_codes, self.guess_time, self.guesses)
-        self.guesses, self.guess_codes, self.guess_time = solutions, codes, time
+        """Keep the solutions of a solve for the next warm starts."""
+        self.recent = [(codes, time, solutions)] + self.recent[:self.warm_order]
 
     def warm_starts(self, codes: NDArray[np.int64], count: int, time: float | None = None) -> list[NDArray[np.float64]]:
         """Initial guesses for a solve on the pairs ``codes`` at ``time``.
 
-        The last solutions, linearly extrapolated in time from the two before when
-        both were on the same network at known distinct times, else carried over as
-        they are to the pairs ``codes`` (zero on new pairs).
+        On the network of the last solve: the polynomial extrapolation in time through
+        the last solves on it at known distinct times (Lagrange form, up to degree
+        ``warm_order``), or the last solutions themselves. On another network: the last
+        solutions carried over to the pairs ``codes`` (zero on new pairs).
         """
         m = len(codes)
-        if self.guess_codes is None or len(self.guesses) < count:
+        if not self.recent or len(self.recent[0][2]) < count:
             return [np.zeros(m) for _ in range(count)]
-        if np.array_equal(self.guess_codes, codes):
-            h = self.history
-            if (time is not None and self.guess_time is not None and h is not None and h[1] is not None
-                    and h[1] != self.guess_time and len(h[2]) >= count and np.array_equal(h[0], codes)):
-                w = (time - self.guess_time) / (self.guess_time - h[1])
-                return [g1 + w * (g1 - g0) for g0, g1 in zip(h[2][:count], self.guesses[:count])]
-            return self.guesses[:count]
-        pos = _locate(self.guess_codes, codes)
-        out = []
-        for g in self.guesses[:count]:
-            x0 = np.zeros(m)
-            x0[pos >= 0] = g[pos[pos >= 0]]
-            out.append(x0)
-        return out
+        last_codes, _, last = self.recent[0]
+        if not np.array_equal(last_codes, codes):
+            pos = _locate(last_codes, codes)
+            out = []
+            for g in last[:count]:
+                x0 = np.zeros(m)
+                x0[pos >= 0] = g[pos[pos >= 0]]
+                out.append(x0)
+            return out
+        nodes: list[tuple[float, list]] = []
+        for c, t, sols in self.recent:
+            if (time is None or t is None or t == time or len(sols) < count or any(t == u for u, _ in nodes)
+                    or not np.array_equal(c, codes)):
+                break
+            nodes.append((t, sols))
+        if len(nodes) < 2:
+            return last[:count]
+        weights = [np.prod([(time - u) / (t - u) for u, _ in nodes if u != t]) for t, _ in nodes]
+        return [sum(w * sols[k] for w, (_, sols) in zip(weights, nodes)) for k in range(count)]
 
 
 def _network_key(pairs: NDArray[np.int64], n: int) -> bytes:
@@ -278,8 +342,51 @@ def _locate(codes_from: NDArray[np.int64], codes_to: NDArray[np.int64]) -> NDArr
     return np.where(srt[loc] == codes_to, order[loc], -1)
 
 
+class Border(NamedTuple):
+    """A preconditioner for N on a network a few pairs away from the factorised one.
+
+    Applies the exact inverse of ``[[M_CC, N_CP], [N_PC, N_PP]]`` (see :func:`_bordered`)
+    with the cached LU of M; the network the LU was made for has the trivial border
+    (:func:`_plain_border`: every pair kept, none removed or added).
+
+    Attributes
+    ----------
+    size : int
+        Pairs of the factorised network.
+    pos_c, kept : ndarray of int64, shape (|C|,)
+        Kept pairs: their position in the factorised network and in the new one.
+    removed : ndarray of int64, shape (|Q|,)
+        Removed pairs Q (positions in the factorised network).
+    W, WQQ_inv : ndarray, shapes (size, |Q|) and (|Q|, |Q|)
+        ``M^-1 e_Q`` and the inverse of its Q rows (capacitance trick).
+    added : ndarray of int64, shape (|P|,)
+        Added pairs P (positions in the new network).
+    NCP, B, T_inv : ndarray, shapes (|C|, |P|), (|C|, |P|), (|P|, |P|)
+        ``N_CP``, ``M_CC^-1 N_CP`` and the inverse of the Schur complement T.
+    """
+
+    size: int
+    pos_c: NDArray[np.int64]
+    kept: NDArray[np.int64]
+    removed: NDArray[np.int64]
+    W: NDArray[np.float64]
+    WQQ_inv: NDArray[np.float64]
+    added: NDArray[np.int64]
+    NCP: NDArray[np.float64]
+    B: NDArray[np.float64]
+    T_inv: NDArray[np.float64]
+
+
+def _plain_border(m: int) -> Border:
+    """The border of the factorised network itself (``M^-1`` unchanged)."""
+    every = np.arange(m, dtype=np.int64)
+    none = np.zeros(0, dtype=np.int64)
+    return Border(m, every, every, none, np.zeros((m, 0)), np.zeros((0, 0)), none,
+                  np.zeros((m, 0)), np.zeros((m, 0)), np.zeros((0, 0)))
+
+
 def _bordered(lu, old_codes, codes, pairs, unit, n, cond_limit, max_changes):
-    """Preconditioner for N on a network a few pairs away from the factorised one, or None.
+    """Bordered preconditioner for N on a network a few pairs away from the factorised one, or None.
 
     With C the kept pairs, Q the removed and P the added ones, it applies the exact
     inverse of ``[[M_CC, N_CP], [N_PC, N_PP]]``: ``M_CC^-1`` from the cached LU of M by
@@ -289,6 +396,10 @@ def _bordered(lu, old_codes, codes, pairs, unit, n, cond_limit, max_changes):
     complement below ``diag(N_PP) / cond_limit`` means an added pair is (nearly)
     dependent on the others — a possible self-stress — and returns None so that the
     caller factorises directly with its singularity checks.
+
+    Returns
+    -------
+    Border or None
     """
     pos = _locate(old_codes, codes)
     C = np.flatnonzero(pos >= 0)
@@ -298,83 +409,145 @@ def _bordered(lu, old_codes, codes, pairs, unit, n, cond_limit, max_changes):
     Q = np.flatnonzero(~kept)
     if len(P) + len(Q) > max_changes or len(C) == 0:
         return None
+    m = len(old_codes)
     pos_c = pos[C]
+    W, WQQ_inv = np.zeros((m, 0)), np.zeros((0, 0))
     if len(Q):
-        E = np.zeros((len(old_codes), len(Q)))
+        E = np.zeros((m, len(Q)))
         E[Q, np.arange(len(Q))] = 1.0
         W = lu.solve(E)
-        # small dense |Q| x |Q| (and below |P| x |P|) inverses, applied at every CG iteration
         WQQ_inv = np.linalg.inv(W[Q])
+    border = Border(m, pos_c, C, Q, W, WQQ_inv, P, np.zeros((len(C), 0)), np.zeros((len(C), 0)), np.zeros((0, 0)))
+    if len(P) == 0:
+        return border
+    cols = np.empty((len(codes), len(P)))
+    for a, k in enumerate(P):
+        e = np.zeros(len(codes))
+        e[k] = 1.0
+        cols[:, a] = _s_apply(pairs, unit, _st_apply(pairs, unit, e, n))
+    NCP, NPP = np.ascontiguousarray(cols[C]), cols[P]
+    B = np.empty_like(NCP)
+    for a in range(len(P)):
+        B[:, a] = _solve_cc(lu.args, border, NCP[:, a])
+    T = NPP - NCP.T @ B
+    if np.any(np.diag(T) <= np.diag(NPP) / cond_limit):
+        return None
+    return border._replace(NCP=NCP, B=B, T_inv=np.linalg.inv(T))
 
-    def solve_cc(g):
-        G = np.zeros((len(old_codes),) + g.shape[1:])
-        G[pos_c] = g
-        y = lu.solve(G)
-        if len(Q):
-            y = y - W @ (WQQ_inv @ y[Q])
-        return y[pos_c]
 
-    if len(P):
-        cols = np.empty((len(codes), len(P)))
-        for a, k in enumerate(P):
-            e = np.zeros(len(codes))
-            e[k] = 1.0
-            cols[:, a] = _s_apply(pairs, unit, _st_apply(pairs, unit, e, n))
-        NCP, NPP = cols[C], cols[P]
-        B = solve_cc(NCP)
-        T = NPP - NCP.T @ B
-        if np.any(np.diag(T) <= np.diag(NPP) / cond_limit):
-            return None
-        T_inv = np.linalg.inv(T)
+@numba.njit(cache=True)
+def _solve_cc(lu, border, g):  # pragma: no cover - numba
+    """``M_CC^-1 g`` for g on the kept pairs C, shape (|C|,): the capacitance trick on the cached LU."""
+    Lp, Li, Lx, Up, Ui, Ux, udiag, perm_r, perm_c = lu
+    pos_c, Q, W, WQQ_inv = border.pos_c, border.removed, border.W, border.WQQ_inv
+    G = np.zeros(border.size)
+    for k in range(len(pos_c)):
+        G[pos_c[k]] = g[k]
+    y = _triangular_solve(Lp, Li, Lx, Up, Ui, Ux, udiag, perm_r, perm_c, G)
+    nq = len(Q)
+    if nq:
+        t = np.zeros(nq)
+        for a in range(nq):
+            for b in range(nq):
+                t[a] += WQQ_inv[a, b] * y[Q[b]]
+        for i in range(border.size):
+            s = 0.0
+            for a in range(nq):
+                s += W[i, a] * t[a]
+            y[i] -= s
+    out = np.empty(len(pos_c))
+    for k in range(len(pos_c)):
+        out[k] = y[pos_c[k]]
+    return out
 
-    def apply(g):
-        out = np.empty(len(codes))
-        a = solve_cc(g[C])
-        if len(P):
-            xp = T_inv @ (g[P] - NCP.T @ a)
-            out[P] = xp
-            out[C] = a - B @ xp
-        else:
-            out[C] = a
+
+@numba.njit(cache=True)
+def _precondition(lu, border, g):  # pragma: no cover - numba
+    """The bordered preconditioner applied to g (length of the new network)."""
+    C, P = border.kept, border.added
+    gc = np.empty(len(C))
+    for k in range(len(C)):
+        gc[k] = g[C[k]]
+    a = _solve_cc(lu, border, gc)
+    out = np.empty(len(g))
+    npp = len(P)
+    if npp == 0:
+        for k in range(len(C)):
+            out[C[k]] = a[k]
         return out
+    NCP, B, T_inv = border.NCP, border.B, border.T_inv
+    u = np.empty(npp)
+    for e in range(npp):
+        s = g[P[e]]
+        for k in range(len(C)):
+            s -= NCP[k, e] * a[k]
+        u[e] = s
+    xp = np.zeros(npp)
+    for e in range(npp):
+        for f in range(npp):
+            xp[e] += T_inv[e, f] * u[f]
+        out[P[e]] = xp[e]
+    for k in range(len(C)):
+        s = a[k]
+        for e in range(npp):
+            s -= B[k, e] * xp[e]
+        out[C[k]] = s
+    return out
 
-    return apply
+
+@numba.njit(cache=True)
+def _n_apply(pairs, unit, n, v):  # pragma: no cover - numba
+    """``N v = S S^T v`` for contact values v, shape (Nc,)."""
+    return _s_apply(pairs, unit, _st_apply(pairs, unit, v, n))
 
 
-def _pcg(pairs, unit, n, precond, b, x0, rtol, max_iter):
-    """Conjugate gradients on ``N x = b`` with preconditioner ``precond(r) ≈ N^-1 r``.
+@numba.njit(cache=True)
+def _max_abs(v):  # pragma: no cover - numba
+    m = 0.0
+    for k in range(len(v)):
+        m = max(m, abs(v[k]))
+    return m
 
-    Returns (x, iterations), or (None, max_iter) without convergence. Converged when
-    ``|M^-1 r|_inf <= rtol |x|_inf``: with M close to N the preconditioned residual
-    estimates the error ``N^-1 r`` of x itself.
+
+@numba.njit(cache=True)
+def _pcg(pairs, unit, n, lu, border, b, x0, rtol, max_iter):  # pragma: no cover - numba
+    """Conjugate gradients on ``N x = b`` preconditioned by the bordered cached LU.
+
+    Returns (x, iterations), iterations = -1 without convergence within ``max_iter``.
+    Converged when ``|M^-1 r|_inf <= rtol |x|_inf``: with M close to N the
+    preconditioned residual estimates the error ``N^-1 r`` of x itself.
     """
     x = x0.copy()
-    r = b - _s_apply(pairs, unit, _st_apply(pairs, unit, x, n))
-    z = precond(r)
+    r = b - _n_apply(pairs, unit, n, x)
+    z = _precondition(lu, border, r)
     p = z.copy()
-    rz = float(r @ z)
+    rz = np.dot(r, z)
     for it in range(max_iter + 1):
-        if np.max(np.abs(z), initial=0.0) <= rtol * np.max(np.abs(x), initial=0.0):
+        if _max_abs(z) <= rtol * _max_abs(x):
             return x, it
         if it == max_iter or not rz > 0.0:
             break
-        q = _s_apply(pairs, unit, _st_apply(pairs, unit, p, n))
-        pq = float(p @ q)
+        q = _n_apply(pairs, unit, n, p)
+        pq = np.dot(p, q)
         if not pq > 0.0:
             break
         alpha = rz / pq
         x += alpha * p
         r -= alpha * q
-        z = precond(r)
-        rz_new = float(r @ z)
+        z = _precondition(lu, border, r)
+        rz_new = np.dot(r, z)
         p = z + (rz_new / rz) * p
         rz = rz_new
-    return None, max_iter
+    return x, -1
 
 
 @numba.njit(cache=True)
 def _triangular_solve(Lp, Li, Lx, Up, Ui, Ux, udiag, perm_r, perm_c, b):  # pragma: no cover - numba
-    """``x`` with ``A x = b`` from ``Pr A Pc = L U`` (L unit lower, U upper; CSC, off-diagonal parts)."""
+    """``x`` with ``A x = b`` from ``Pr A Pc = L U`` (L unit lower, U upper; CSC, off-diagonal parts).
+
+    An empty ``Up`` means the symmetric factorisation ``U = diag(udiag) L^T``: the
+    backward substitution then runs over the columns of L (rows of L^T).
+    """
     n = b.shape[0]
     y = np.empty(n)
     for k in range(n):
@@ -383,15 +556,43 @@ def _triangular_solve(Lp, Li, Lx, Up, Ui, Ux, udiag, perm_r, perm_c, b):  # prag
         yj = y[j]
         for p in range(Lp[j], Lp[j + 1]):
             y[Li[p]] -= Lx[p] * yj
-    for j in range(n - 1, -1, -1):
-        yj = y[j] / udiag[j]
-        y[j] = yj
-        for p in range(Up[j], Up[j + 1]):
-            y[Ui[p]] -= Ux[p] * yj
+    if len(Up) == 0:
+        for j in range(n - 1, -1, -1):
+            s = y[j] / udiag[j]
+            for p in range(Lp[j], Lp[j + 1]):
+                s -= Lx[p] * y[Li[p]]
+            y[j] = s
+    else:
+        for j in range(n - 1, -1, -1):
+            yj = y[j] / udiag[j]
+            y[j] = yj
+            for p in range(Up[j], Up[j + 1]):
+                y[Ui[p]] -= Ux[p] * yj
     x = np.empty(n)
     for k in range(n):
         x[k] = y[perm_c[k]]
     return x
+
+
+@numba.njit(cache=True)
+def _off_diagonal(indptr, indices, data):  # pragma: no cover - numba
+    """The off-diagonal part of a square CSC matrix (entries in their order) and its diagonal."""
+    n = len(indptr) - 1
+    diag = np.zeros(n)
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    idx = np.empty(len(indices), dtype=np.int64)
+    val = np.empty(len(data))
+    k = 0
+    for j in range(n):
+        for p in range(indptr[j], indptr[j + 1]):
+            if indices[p] == j:
+                diag[j] += data[p]
+            else:
+                idx[k] = indices[p]
+                val[k] = data[p]
+                k += 1
+        ptr[j + 1] = k
+    return ptr, idx[:k].copy(), val[:k].copy(), diag
 
 
 class TriangularFactor:
@@ -406,28 +607,37 @@ class TriangularFactor:
     ----------
     lu : scipy.sparse.linalg.SuperLU
         ``Pr A Pc = L U`` with unit-diagonal L.
+
+    Attributes
+    ----------
+    args : tuple
+        ``(Lp, Li, Lx, Up, Ui, Ux, udiag, perm_r, perm_c)``: the strictly triangular CSC
+        parts of L and U, U's diagonal and the permutations, as the compiled solvers take them.
+    plain : Border
+        The trivial border (the factorised network itself).
     """
 
     def __init__(self, lu) -> None:
-        L = sp.tril(lu.L, -1, format="csc")
-        U = lu.U.tocsc()
-        udiag = U.diagonal()
-        U = sp.triu(U, 1, format="csc")
-        self._args = (
-            L.indptr.astype(np.int64), L.indices.astype(np.int64), L.data,
-            U.indptr.astype(np.int64), U.indices.astype(np.int64), U.data, udiag,
-            lu.perm_r.astype(np.int64), lu.perm_c.astype(np.int64),
-        )
+        L, U = lu.L, lu.U  # CSC
+        Lp, Li, Lx, _ = _off_diagonal(L.indptr.astype(np.int64), L.indices.astype(np.int64), L.data)
+        Up, Ui, Ux, udiag = _off_diagonal(U.indptr.astype(np.int64), U.indices.astype(np.int64), U.data)
+        self.symmetric = bool(np.array_equal(lu.perm_r, lu.perm_c))
+        if self.symmetric:
+            # no row pivoting on a symmetric N: U = diag(U) L^T, so L alone is kept (half
+            # the memory the solves stream through, and a symmetric preconditioner for CG)
+            Up, Ui, Ux = np.zeros(0, dtype=np.int64), Ui[:0], Ux[:0]
+        self.args = (Lp, Li, Lx, Up, Ui, Ux, udiag, lu.perm_r.astype(np.int64), lu.perm_c.astype(np.int64))
         self.shape = lu.shape
+        self.plain = _plain_border(lu.shape[0])
 
     def solve(self, b: NDArray[np.float64]) -> NDArray[np.float64]:
         """``N^-1 b`` for b of shape (n,) or (n, k)."""
         b = np.asarray(b, dtype=np.float64)
         if b.ndim == 1:
-            return _triangular_solve(*self._args, np.ascontiguousarray(b))
+            return _triangular_solve(*self.args, np.ascontiguousarray(b))
         out = np.empty(b.shape)
         for k in range(b.shape[1]):
-            out[:, k] = _triangular_solve(*self._args, np.ascontiguousarray(b[:, k]))
+            out[:, k] = _triangular_solve(*self.args, np.ascontiguousarray(b[:, k]))
         return out
 
 
@@ -521,8 +731,7 @@ def solve_network(
             kappa = 0.0
         return Solution(np.zeros(0), xi0 * ext.copy(), E, kappa)
     R = pair_vectors(x, h, pairs, images) if separations is None else separations
-    r = np.linalg.norm(R, axis=1)
-    unit = R / r[:, None]
+    r, unit = _normals(np.ascontiguousarray(R, dtype=np.float64))
     pairs = np.ascontiguousarray(pairs, dtype=np.int64)
     rhs = -(affine_rates(R, gradient) / xi0 + _s_apply(pairs, unit, np.ascontiguousarray(ext, dtype=np.float64).ravel()))
     rhs_list = [rhs] if pressure is None else [rhs, rate * r / xi0]
@@ -532,17 +741,17 @@ def solve_network(
     if cache is not None and not check_pivots and cache.lu is not None:
         same = cache.key == key
         if same:
-            precond = cache.lu.solve
+            border = cache.lu.plain
         elif key in cache.bordered:
-            precond = cache.bordered[key]
+            border = cache.bordered[key]
         else:
-            precond = cache.bordered[key] = _bordered(
+            border = cache.bordered[key] = _bordered(
                 cache.lu, cache.codes, codes, pairs, unit, n, cond_limit, cache.max_changes)
-        if precond is not None:
+        if border is not None:
             sols = []
             for b, x0 in zip(rhs_list, cache.warm_starts(codes, len(rhs_list), time)):
-                xk, it = _pcg(pairs, unit, n, precond, b, x0, cache.rtol, cache.max_iter)
-                if xk is None:
+                xk, it = _pcg(pairs, unit, n, cache.lu.args, border, b, x0, cache.rtol, cache.max_iter)
+                if it < 0:
                     sols = None
                     break
                 cache.iterations = it
@@ -584,9 +793,55 @@ def pair_velocities(
     R: NDArray[np.float64], pairs: NDArray[np.int64], sol: Solution
 ) -> NDArray[np.float64]:
     """Rates ``dr_ij/dt = n_ij . (V_j - V_i)`` (Eq. 26) of pairs with separations R, shape (P,)."""
-    r = np.linalg.norm(R, axis=1)
-    dU = sol.velocity[pairs[:, 1]] - sol.velocity[pairs[:, 0]]
-    return (np.einsum("pk,pk->p", R, dU) + np.einsum("pk,kl,pl->p", R, sol.gradient, R)) / r
+    return _pair_rates(np.ascontiguousarray(R, dtype=np.float64), np.ascontiguousarray(pairs, dtype=np.int64),
+                       np.ascontiguousarray(sol.velocity), np.ascontiguousarray(sol.gradient))
+
+
+@numba.njit(cache=True)
+def _pair_rates(R, pairs, U, E):  # pragma: no cover - numba
+    nc, d = R.shape
+    out = np.empty(nc)
+    for c in range(nc):
+        i, j = pairs[c, 0], pairs[c, 1]
+        s = 0.0
+        rr = 0.0
+        for k in range(d):
+            w = U[j, k] - U[i, k]
+            for m in range(d):
+                w += E[k, m] * R[c, m]
+            s += R[c, k] * w
+            rr += R[c, k] * R[c, k]
+        out[c] = s / np.sqrt(rr)
+    return out
+
+
+def max_relative_rate(
+    R: NDArray[np.float64], pairs: NDArray[np.int64], sol: Solution, sigma: NDArray[np.float64]
+) -> float:
+    """Largest ``|W_c| / sigma_c`` over contacts, W the full relative velocity ``E R + U_j - U_i`` [1/time].
+
+    A contact moving on a straight line with relative velocity W perpendicular to it
+    opens by ``dt^2 |W|^2 / (2 sigma)`` in a step dt (the step-drift bound of the step rule).
+    """
+    return _max_relative_rate(np.ascontiguousarray(R, dtype=np.float64), np.ascontiguousarray(pairs, dtype=np.int64),
+                              np.ascontiguousarray(sol.velocity), np.ascontiguousarray(sol.gradient),
+                              np.ascontiguousarray(sigma, dtype=np.float64))
+
+
+@numba.njit(cache=True)
+def _max_relative_rate(R, pairs, U, E, sigma):  # pragma: no cover - numba
+    nc, d = R.shape
+    top = 0.0
+    for c in range(nc):
+        i, j = pairs[c, 0], pairs[c, 1]
+        ww = 0.0
+        for k in range(d):
+            w = U[j, k] - U[i, k]
+            for m in range(d):
+                w += E[k, m] * R[c, m]
+            ww += w * w
+        top = max(top, ww / (sigma[c] * sigma[c]))
+    return np.sqrt(top)
 
 
 def stress_tensor(R: NDArray[np.float64], force: NDArray[np.float64], volume: float) -> NDArray[np.float64]:
@@ -594,5 +849,19 @@ def stress_tensor(R: NDArray[np.float64], force: NDArray[np.float64], volume: fl
 
     Pressure (Eq. 24) is ``trace / d``; the shear stress of Eq. 30 is ``-Sigma_01``.
     """
-    r = np.linalg.norm(R, axis=1)
-    return np.einsum("c,ca,cb->ab", force / r, R, R) / volume
+    return _stress_sum(np.ascontiguousarray(R, dtype=np.float64), np.ascontiguousarray(force, dtype=np.float64)) / volume
+
+
+@numba.njit(cache=True)
+def _stress_sum(R, force):  # pragma: no cover - numba
+    nc, d = R.shape
+    out = np.zeros((d, d))
+    for c in range(nc):
+        rr = 0.0
+        for k in range(d):
+            rr += R[c, k] * R[c, k]
+        w = force[c] / np.sqrt(rr)
+        for a in range(d):
+            for b in range(d):
+                out[a, b] += w * R[c, a] * R[c, b]
+    return out

@@ -12,7 +12,6 @@ from typing import Any
 
 import numpy as np
 
-from ..packing import sphere_volume
 from .integrate import Integrator
 
 __all__ = ["SERIES", "Recorder"]
@@ -34,17 +33,16 @@ class Recorder:
         st = integ.state
         drive = integ.drive
         sig = integ.stress() / drive.force_unit
-        vol = abs(float(np.linalg.det(st.h)))
         row = {
             "strain": st.strain,
             "time": st.time / drive.time_unit,
             "shear_stress": -sig[0, 1],
             "pressure": float(np.trace(sig)) / integ.d,
-            "packing_fraction": float(sphere_volume(integ.d, 2 * st.radius).sum() / vol),
+            "packing_fraction": integ.packing_fraction(),
             "kappa": st.kappa,
             "n_contacts": int(st.contact.sum()),
             "z_bar": integ.z_bar(),
-            "volume": vol,
+            "volume": integ.volume(),
             "constraint_error": integ.constraint_error(),
         }
         for k, v in row.items():

@@ -24,7 +24,7 @@ import xarray as xr
 from ..analysis.contacts import find_rattlers
 from ..box import Box
 from ..io import new_dataset_attrs
-from ..packing import Packing, length_unit, near_pairs, sphere_volume
+from ..packing import Packing, length_unit, near_pairs
 from ..tolerances import OVERLAP_TOL
 from .checkpoint import load_checkpoint, save_checkpoint
 from .driving import Drive
@@ -123,7 +123,7 @@ def _horizon(integ: Integrator, stop: Stop) -> float:
     if stop.time is not None:
         hz = min(hz, stop.time * drive.time_unit - st.time)
     if stop.packing_fraction is not None and drive.compresses:
-        phi = sphere_volume(integ.d, 2 * st.radius).sum() / abs(np.linalg.det(st.h))
+        phi = integ.packing_fraction()
         # h scales by (1 - rate t) within a step: phi grows as (1 - rate t)^-d
         hz = min(hz, (1.0 - (phi / stop.packing_fraction) ** (1.0 / integ.d)) / drive.rate)
     return max(hz, 0.0)
@@ -139,7 +139,7 @@ def _done(integ: Integrator, stop: Stop) -> bool:
     if stop.time is not None and st.time >= (stop.time - tiny * max(1.0, stop.time)) * integ.drive.time_unit:
         return True
     if stop.packing_fraction is not None and integ.drive.compresses:
-        phi = sphere_volume(integ.d, 2 * st.radius).sum() / abs(np.linalg.det(st.h))
+        phi = integ.packing_fraction()
         if phi >= stop.packing_fraction * (1 - tiny):
             return True
     return False
