@@ -170,6 +170,32 @@ def test_pruning_cascades_and_walls_hold() -> None:
     np.testing.assert_array_equal(prune_rattlers(c, 6, dofs_per_body=2, active=active), [0, 0, 0, 0, 0, 1])
 
 
+def test_compiled_peeling_removes_the_rattlers_of_the_numpy_rounds() -> None:
+    """The numba kernel (one pass with a stack) and the numpy rounds remove the same bodies: on the
+    cascade above with walls and earlier removals, and on 300 random graphs of every density."""
+    c = _k4_plus_tail()
+    cases = [(6, c, {}), (6, c[:-1], {}), (6, np.delete(c, 7, axis=0), {}),
+             (6, np.delete(c, 7, axis=0), {"wall_contacts": [4]}),
+             (6, c, {"active": np.array([1, 1, 1, 1, 0, 1], dtype=bool)}), (3, np.zeros((0, 2), dtype=np.int64), {})]
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        n = int(rng.integers(2, 60))
+        m = int(rng.integers(0, 4 * n))
+        pairs = np.sort(rng.integers(0, n, size=(m, 2)), axis=1)
+        pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+        kw = {"wall_contacts": rng.integers(0, n, size=int(rng.integers(0, 5)))} if rng.random() < 0.3 else {}
+        if rng.random() < 0.3:
+            kw["active"] = rng.random(n) < 0.8
+        cases.append((n, pairs, kw))
+    removed = 0
+    for n, pairs, kw in cases:
+        for f in (2, 3):
+            ref = prune_rattlers(pairs, n, dofs_per_body=f, **kw)
+            np.testing.assert_array_equal(prune_rattlers(pairs, n, dofs_per_body=f, compiled=True, **kw), ref)
+            removed += int(ref.sum())
+    assert removed > 1000  # the random graphs do peel
+
+
 def test_slider_is_the_body_whose_normals_leave_one_translation_free() -> None:
     # 2D discs: body 0 pressed from above and below only (three normals along y)
     x = np.array([[0.0, 0.0], [0.3, 1.0], [-0.3, 1.0], [0.0, -1.0]])

@@ -290,10 +290,11 @@ def test_warm_starts_extrapolate_polynomials_of_their_order_exactly(rng):
 
 @pytest.mark.parametrize("d", [2, 3])
 def test_compiled_pair_kernels_match_their_formulas(rng, d):
-    """Separations, affine rates, pair rates, the step-drift rate and the stress tensor from the
-    compiled kernels agree with the formulas of their docstrings written in numpy."""
+    """Separations, affine rates, pair rates, the step-drift rate, the stress tensor and the
+    straight-line move from the compiled kernels agree with their formulas written in numpy."""
     from jamflow.overdamped.network import (
         Solution,
+        advance_positions,
         affine_rates,
         max_relative_rate,
         max_row_norm,
@@ -322,3 +323,4 @@ def test_compiled_pair_kernels_match_their_formulas(rng, d):
     assert _rel(stress_tensor(R, f, 3.0), np.einsum("c,ca,cb->ab", f / r, R, R) / 3.0) < 1e-14
     assert max_row_norm(U) == pytest.approx(np.max(np.linalg.norm(U, axis=1)), rel=1e-15)
     assert max_row_norm(np.zeros((0, d))) == 0.0
+    assert _rel(advance_positions(x, U, E, 0.3), x + 0.3 * (x @ E.T + U)) < 1e-14

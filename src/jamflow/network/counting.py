@@ -42,6 +42,7 @@ def prune_rattlers(
     dofs_per_body: int,
     wall_contacts: ArrayLike | None = None,
     active: NDArray[np.bool_] | None = None,
+    compiled: bool = False,
 ) -> NDArray[np.bool_]:
     """Rattlers by iterative removal of bodies with fewer than ``dofs_per_body + 1`` contacts.
 
@@ -65,6 +66,12 @@ def prune_rattlers(
     active : ndarray of bool, shape (n_bodies,), optional
         Bodies still in the network; the others were removed earlier (their
         contacts do not count) and are not reported again.
+    compiled : bool
+        Peel with the numba kernel (:mod:`._peel`, one pass with a stack) instead of
+        numpy rounds. Same result (the core that survives is unique); for callers that
+        prune thousands of times and load numba anyway (the event-driven network, where
+        a flowing packing peels in ~15 rounds). Off by default so that a command
+        pruning once does not load numba.
 
     Returns
     -------
@@ -76,6 +83,11 @@ def prune_rattlers(
         pairs = pairs[active[pairs[:, 0]] & active[pairs[:, 1]]]
     z_wall = (np.zeros(n_bodies, dtype=np.int64) if wall_contacts is None
               else np.bincount(np.asarray(wall_contacts, dtype=np.int64), minlength=n_bodies))
+    if compiled:
+        from ._peel import peel
+
+        rattler = peel(np.ascontiguousarray(pairs, dtype=np.int64), n_bodies, dofs_per_body + 1, z_wall)
+        return rattler if active is None else rattler & active
     rattler = np.zeros(n_bodies, dtype=bool)
     alive = np.ones(len(pairs), dtype=bool)
     while True:

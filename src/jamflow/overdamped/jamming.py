@@ -73,7 +73,7 @@ def constrained_subset(n: int, d: int, pairs: NDArray[np.int64]) -> ConstrainedC
     pairs : ndarray of int64, shape (Nc, 2)
     """
     pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-    member = ~prune_rattlers(pairs, n, dofs_per_body=d)
+    member = ~prune_rattlers(pairs, n, dofs_per_body=d, compiled=True)
     alive = member[pairs[:, 0]] & member[pairs[:, 1]]
     return ConstrainedCount(member, int(member.sum()), int(alive.sum()), d)
 

@@ -21,6 +21,7 @@ and rate 1 unless given; lengths in units of lambda.
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
@@ -37,12 +38,15 @@ __all__ = [
     "SingularNetworkError",
     "Solution",
     "TriangularFactor",
+    "advance_positions",
     "affine_rates",
+    "max_relative_error",
     "max_relative_rate",
     "max_row_norm",
     "pair_vectors",
     "pair_velocities",
     "s_matrix",
+    "solve_contact_system",
     "solve_network",
     "spectral_norm",
     "stress_tensor",
@@ -90,6 +94,43 @@ def _pair_vectors(x, h, pairs, images):  # pragma: no cover - numba
                 shift += images[c, m] * h[k, m]
             out[c, k] = x[j, k] - x[i, k] + shift
     return out
+
+
+def advance_positions(
+    x: NDArray[np.float64], velocity: NDArray[np.float64], gradient: NDArray[np.float64], t: float
+) -> NDArray[np.float64]:
+    """Positions after a straight-line move of duration t: ``x + t (E x + U)``, shape (N, d) (a new array)."""
+    return _advance_positions(np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(velocity, dtype=np.float64),
+                              np.ascontiguousarray(gradient, dtype=np.float64), float(t))
+
+
+@numba.njit(cache=True)
+def _advance_positions(x, U, E, t):  # pragma: no cover - numba
+    n, d = x.shape
+    out = np.empty((n, d))
+    for i in range(n):
+        for k in range(d):
+            v = 0.0
+            for m in range(d):
+                v += x[i, m] * E[k, m]
+            out[i, k] = x[i, k] + t * (v + U[i, k])
+    return out
+
+
+def max_relative_error(R: NDArray[np.float64], sigma: NDArray[np.float64]) -> float:
+    """Largest ``|r_c - sigma_c| / sigma_c`` over pairs with separations R, shape (P, d) (0 when empty)."""
+    return _max_relative_error(np.ascontiguousarray(R, dtype=np.float64), np.ascontiguousarray(sigma, dtype=np.float64))
+
+
+@numba.njit(cache=True)
+def _max_relative_error(R, sigma):  # pragma: no cover - numba
+    top = 0.0
+    for c in range(R.shape[0]):
+        rr = 0.0
+        for k in range(R.shape[1]):
+            rr += R[c, k] * R[c, k]
+        top = max(top, abs(np.sqrt(rr) / sigma[c] - 1.0))
+    return top
 
 
 def max_row_norm(a: NDArray[np.float64]) -> float:
@@ -253,6 +294,8 @@ class FactorCache:
     codes : ndarray of int64 or None
         Pair codes ``i N + j`` of the factorised network, in its order.
     lu : TriangularFactor or None
+    solves : BorderSolves or None
+        The solves with ``lu`` that the bordered preconditioners share.
     recent : list of (codes, time, solutions)
         The last solves, newest first (at most ``warm_order + 1``): pair codes, time of
         the state (None when the caller gave none) and solutions per right-hand side.
@@ -280,6 +323,7 @@ class FactorCache:
     key: bytes | None = None
     codes: NDArray[np.int64] | None = None
     lu: Any = None
+    solves: Any = None
     recent: list = field(default_factory=list)
     warm_order: int = 2
     bordered: dict = field(default_factory=dict)
@@ -290,10 +334,12 @@ class FactorCache:
 
     def reset(self) -> None:
         """Forget the factorisation (the next solve factorises from scratch)."""
-        self.key, self.codes, self.lu, self.recent, self.bordered = None, None, None, [], {}
+        self.key, self.codes, self.lu, self.solves, self.recent, self.bordered = None, None, None, None, [], {}
 
     def remember(self, codes: NDArray[np.int64], solutions: list[NDArray[np.float64]], time: float | None) -> None:
         """Keep the solutions of a solve for the next warm starts."""
+        if self.recent and np.array_equal(self.recent[0][0], codes):
+            codes = self.recent[0][0]  # one array per network: later comparisons by identity
         self.recent = [(codes, time, solutions)] + self.recent[:self.warm_order]
 
     def warm_starts(self, codes: NDArray[np.int64], count: int, time: float | None = None) -> list[NDArray[np.float64]]:
@@ -316,16 +362,22 @@ class FactorCache:
                 x0[pos >= 0] = g[pos[pos >= 0]]
                 out.append(x0)
             return out
-        nodes: list[tuple[float, list]] = []
+        times: list[float] = []
         for c, t, sols in self.recent:
-            if (time is None or t is None or t == time or len(sols) < count or any(t == u for u, _ in nodes)
-                    or not np.array_equal(c, codes)):
+            if (time is None or t is None or t == time or t in times or len(sols) < count
+                    or (c is not last_codes and not np.array_equal(c, codes))):
                 break
-            nodes.append((t, sols))
-        if len(nodes) < 2:
+            times.append(t)
+        if len(times) < 2:
             return last[:count]
-        weights = [np.prod([(time - u) / (t - u) for u, _ in nodes if u != t]) for t, _ in nodes]
-        return [sum(w * sols[k] for w, (_, sols) in zip(weights, nodes)) for k in range(count)]
+        weights = [math.prod((time - u) / (t - u) for u in times if u != t) for t in times]
+        out = []
+        for k in range(count):
+            x0 = weights[0] * self.recent[0][2][k]
+            for w, (_, _, sols) in zip(weights[1:], self.recent[1:]):
+                x0 += w * sols[k]
+            out.append(x0)
+        return out
 
 
 def _network_key(pairs: NDArray[np.int64], n: int) -> bytes:
@@ -385,15 +437,109 @@ def _plain_border(m: int) -> Border:
                   np.zeros((m, 0)), np.zeros((m, 0)), np.zeros((0, 0)))
 
 
-def _bordered(lu, old_codes, codes, pairs, unit, n, cond_limit, max_changes):
+class BorderSolves:
+    """The solves with a cached factor M that bordered preconditioners share.
+
+    Between two factorisations the networks differ from the factorised one by a few
+    pairs, mostly the same ones (a pair added at an event stays; a removed one stays
+    removed). ``M^-1 e_q`` of a removed pair q and ``M^-1 g_p`` of an added pair p
+    (``g_p`` its column of N against every factorised pair) do not depend on the other
+    changes, so each is solved once per factorisation and every border is assembled
+    from them without further solves. ``g_p`` uses the geometry M was made at for the
+    factorised pairs and p's unit vector when it was first added: one consistent
+    symmetric matrix near N, which is all a preconditioner needs.
+
+    Parameters
+    ----------
+    lu : TriangularFactor
+        Factor of N on the pairs ``pairs`` with unit vectors ``unit``.
+    pairs : ndarray of int64, shape (m, 2)
+    unit : ndarray, shape (m, d)
+    n : int
+        Number of particles.
+    """
+
+    def __init__(self, lu: TriangularFactor, pairs: NDArray[np.int64], unit: NDArray[np.float64], n: int) -> None:
+        self.lu, self.pairs, self.unit = lu, pairs, unit
+        self.ptr, self.incident = _incidence(pairs, n)
+        self.removed: dict[int, NDArray[np.float64]] = {}
+        self.added: dict[int, tuple[int, int, NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]] = {}
+
+    def removal(self, q: int) -> NDArray[np.float64]:
+        """``M^-1 e_q`` for the factorised pair at position q, shape (m,)."""
+        if q not in self.removed:
+            e = np.zeros(len(self.pairs))
+            e[q] = 1.0
+            self.removed[q] = self.lu.solve(e)
+        return self.removed[q]
+
+    def addition(self, code: int, i: int, j: int, u: NDArray[np.float64]):
+        """``(i, j, u, g, M^-1 g)`` of the added pair ``code`` (first unit vector u kept)."""
+        if code not in self.added:
+            u = np.array(u, dtype=np.float64)
+            g = _coupling(i, j, u, self.pairs, self.unit, self.ptr, self.incident)
+            self.added[code] = (i, j, u, g, self.lu.solve(g))
+        return self.added[code]
+
+
+@numba.njit(cache=True)
+def _incidence(pairs, n):  # pragma: no cover - numba
+    """Pairs at every particle (CSR: ``incident[ptr[k]:ptr[k + 1]]``)."""
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    for c in range(pairs.shape[0]):
+        ptr[pairs[c, 0] + 1] += 1
+        ptr[pairs[c, 1] + 1] += 1
+    for k in range(n):
+        ptr[k + 1] += ptr[k]
+    fill = ptr[:-1].copy()
+    incident = np.empty(2 * pairs.shape[0], dtype=np.int64)
+    for c in range(pairs.shape[0]):
+        for e in range(2):
+            k = pairs[c, e]
+            incident[fill[k]] = c
+            fill[k] += 1
+    return ptr, incident
+
+
+@numba.njit(cache=True)
+def _pair_coupling(i, j, u, a, b, v):  # pragma: no cover - numba
+    """``S_p . S_c`` of pairs p = (i, j) and c = (a, b) with unit vectors u, v (Eq. 2: -u at i, +u at j)."""
+    uv = 0.0
+    for k in range(u.shape[0]):
+        uv += u[k] * v[k]
+    s = 0.0
+    if i == a:
+        s += uv
+    if i == b:
+        s -= uv
+    if j == a:
+        s -= uv
+    if j == b:
+        s += uv
+    return s
+
+
+@numba.njit(cache=True)
+def _coupling(i, j, u, pairs, unit, ptr, incident):  # pragma: no cover - numba
+    """Column of N of a pair (i, j) with unit vector u against the pairs ``pairs``, shape (m,)."""
+    g = np.zeros(pairs.shape[0])
+    for end in (i, j):
+        for p in range(ptr[end], ptr[end + 1]):
+            c = incident[p]
+            g[c] = _pair_coupling(i, j, u, pairs[c, 0], pairs[c, 1], unit[c])
+    return g
+
+
+def _bordered(solves, old_codes, codes, pairs, unit, cond_limit, max_changes):
     """Bordered preconditioner for N on a network a few pairs away from the factorised one, or None.
 
     With C the kept pairs, Q the removed and P the added ones, it applies the exact
-    inverse of ``[[M_CC, N_CP], [N_PC, N_PP]]``: ``M_CC^-1`` from the cached LU of M by
-    the capacitance trick (solve with M, then cancel the Q components with
-    ``(M^-1)_QQ``, |Q| extra solves once), the added pairs by their Schur complement
-    ``T = N_PP - N_PC M_CC^-1 N_CP`` (current geometry, |P| solves once). A Schur
-    complement below ``diag(N_PP) / cond_limit`` means an added pair is (nearly)
+    inverse of ``K = [[M_CC, G_CP], [G_PC, G_PP]]`` (G: couplings of the added pairs,
+    :class:`BorderSolves`): ``M_CC^-1`` from the cached factor by the capacitance trick
+    (solve with M, then cancel the Q components with ``(M^-1)_QQ``), the added pairs by
+    their Schur complement ``T = G_PP - G_PC M_CC^-1 G_CP``. The solves come from
+    ``solves`` (one per pair not seen before since the factorisation). A Schur
+    complement below ``diag(G_PP) / cond_limit`` means an added pair is (nearly)
     dependent on the others — a possible self-stress — and returns None so that the
     caller factorises directly with its singularity checks.
 
@@ -413,26 +559,24 @@ def _bordered(lu, old_codes, codes, pairs, unit, n, cond_limit, max_changes):
     pos_c = pos[C]
     W, WQQ_inv = np.zeros((m, 0)), np.zeros((0, 0))
     if len(Q):
-        E = np.zeros((m, len(Q)))
-        E[Q, np.arange(len(Q))] = 1.0
-        W = lu.solve(E)
+        W = np.column_stack([solves.removal(q) for q in Q])
         WQQ_inv = np.linalg.inv(W[Q])
     border = Border(m, pos_c, C, Q, W, WQQ_inv, P, np.zeros((len(C), 0)), np.zeros((len(C), 0)), np.zeros((0, 0)))
     if len(P) == 0:
         return border
-    cols = np.empty((len(codes), len(P)))
-    for a, k in enumerate(P):
-        e = np.zeros(len(codes))
-        e[k] = 1.0
-        cols[:, a] = _s_apply(pairs, unit, _st_apply(pairs, unit, e, n))
-    NCP, NPP = np.ascontiguousarray(cols[C]), cols[P]
-    B = np.empty_like(NCP)
-    for a in range(len(P)):
-        B[:, a] = _solve_cc(lu.args, border, NCP[:, a])
-    T = NPP - NCP.T @ B
-    if np.any(np.diag(T) <= np.diag(NPP) / cond_limit):
+    added = [solves.addition(int(codes[k]), int(pairs[k, 0]), int(pairs[k, 1]), unit[k]) for k in P]
+    G = np.column_stack([a[3] for a in added])
+    Y = np.column_stack([a[4] for a in added])
+    if len(Q):
+        # M^-1 of the couplings with the removed pairs' rows cut, then M_CC^-1 by capacitance
+        Y = Y - W @ G[Q]
+        Y = Y - W @ (WQQ_inv @ Y[Q])
+    GCP, B = np.ascontiguousarray(G[pos_c]), np.ascontiguousarray(Y[pos_c])
+    GPP = np.array([[_pair_coupling(a[0], a[1], a[2], b[0], b[1], b[2]) for b in added] for a in added])
+    T = GPP - GCP.T @ B
+    if np.any(np.diag(T) <= np.diag(GPP) / cond_limit):
         return None
-    return border._replace(NCP=NCP, B=B, T_inv=np.linalg.inv(T))
+    return border._replace(NCP=GCP, B=B, T_inv=np.linalg.inv(T))
 
 
 @numba.njit(cache=True)
@@ -663,6 +807,83 @@ def _factorize(S: sp.csr_matrix, cond_limit: float, check_pivots: bool = True):
     return lu
 
 
+def solve_contact_system(
+    pairs: NDArray[np.int64],
+    unit: NDArray[np.float64],
+    n: int,
+    rhs_list: list[NDArray[np.float64]],
+    cond_limit: float = 1e13,
+    check_pivots: bool = True,
+    cache: FactorCache | None = None,
+    time: float | None = None,
+    warm: bool = True,
+) -> list[NDArray[np.float64]]:
+    """Solutions of ``N x = b``, ``N = S S^T`` of one contact network, for every b of ``rhs_list``.
+
+    Parameters
+    ----------
+    pairs : ndarray of int64, shape (Nc, 2)
+    unit : ndarray, shape (Nc, d)
+        Unit vectors of the contacts.
+    n : int
+        Number of particles.
+    rhs_list : list of ndarray, shape (Nc,)
+    cond_limit, check_pivots, cache, time
+        As in :func:`solve_network`.
+    warm : bool
+        Start CG from the cache's warm starts and remember the solutions for later ones
+        (solves of forces along a trajectory); False starts from zero and leaves them
+        alone (other right-hand sides, e.g. the drift correction's).
+
+    Raises
+    ------
+    SingularNetworkError
+    """
+    key = _network_key(pairs, n) if cache is not None else None
+    codes = pairs[:, 0] * n + pairs[:, 1]
+    sols = None
+    if cache is not None and not check_pivots and cache.lu is not None:
+        same = cache.key == key
+        if same:
+            border = cache.lu.plain
+        elif key in cache.bordered:
+            border = cache.bordered[key]
+        else:
+            border = cache.bordered[key] = _bordered(
+                cache.solves, cache.codes, codes, pairs, unit, cond_limit, cache.max_changes)
+        if border is not None:
+            starts = (cache.warm_starts(codes, len(rhs_list), time) if warm
+                      else [np.zeros(len(codes)) for _ in rhs_list])
+            sols = []
+            for b, x0 in zip(rhs_list, starts):
+                xk, it = _pcg(pairs, unit, n, cache.lu.args, border, b, x0, cache.rtol, cache.max_iter)
+                if it < 0:
+                    sols = None
+                    break
+                cache.iterations = it
+                sols.append(xk)
+            if sols is not None:
+                cache.n_cg += 1
+                cache.n_bordered += not same
+    if sols is None:
+        S = s_matrix(pairs, unit, n)
+        lu = _factorize(S, cond_limit, check_pivots)
+        sols = [lu.solve(b) for b in rhs_list]
+        if not check_pivots:
+            f, rhs = sols[0], rhs_list[0]
+            res = np.linalg.norm(S @ (S.T @ f) - rhs)
+            if not np.all(np.isfinite(f)) or res > 1e-8 * max(np.linalg.norm(rhs), 1e-300):
+                raise SingularNetworkError(f"N = S S^T solve inaccurate (relative residual {res / max(np.linalg.norm(rhs), 1e-300):.3g})")
+        if cache is not None:
+            cache.key, cache.codes, cache.lu, cache.iterations = key, codes, TriangularFactor(lu), 0
+            cache.solves = BorderSolves(cache.lu, pairs, unit, n)
+            cache.bordered = {}
+            cache.n_factor += 1
+    if cache is not None and warm:
+        cache.remember(codes, sols, time)
+    return sols
+
+
 def solve_network(
     x: NDArray[np.float64],
     h: NDArray[np.float64],
@@ -733,47 +954,11 @@ def solve_network(
     R = pair_vectors(x, h, pairs, images) if separations is None else separations
     r, unit = _normals(np.ascontiguousarray(R, dtype=np.float64))
     pairs = np.ascontiguousarray(pairs, dtype=np.int64)
-    rhs = -(affine_rates(R, gradient) / xi0 + _s_apply(pairs, unit, np.ascontiguousarray(ext, dtype=np.float64).ravel()))
+    rhs = -affine_rates(R, gradient) / xi0
+    if external is not None:
+        rhs -= _s_apply(pairs, unit, np.ascontiguousarray(ext, dtype=np.float64).ravel())
     rhs_list = [rhs] if pressure is None else [rhs, rate * r / xi0]
-    sols = None
-    key = _network_key(pairs, n) if cache is not None else None
-    codes = pairs[:, 0] * n + pairs[:, 1]
-    if cache is not None and not check_pivots and cache.lu is not None:
-        same = cache.key == key
-        if same:
-            border = cache.lu.plain
-        elif key in cache.bordered:
-            border = cache.bordered[key]
-        else:
-            border = cache.bordered[key] = _bordered(
-                cache.lu, cache.codes, codes, pairs, unit, n, cond_limit, cache.max_changes)
-        if border is not None:
-            sols = []
-            for b, x0 in zip(rhs_list, cache.warm_starts(codes, len(rhs_list), time)):
-                xk, it = _pcg(pairs, unit, n, cache.lu.args, border, b, x0, cache.rtol, cache.max_iter)
-                if it < 0:
-                    sols = None
-                    break
-                cache.iterations = it
-                sols.append(xk)
-            if sols is not None:
-                cache.n_cg += 1
-                cache.n_bordered += not same
-    if sols is None:
-        S = s_matrix(pairs, unit, n)
-        lu = _factorize(S, cond_limit, check_pivots)
-        sols = [lu.solve(b) for b in rhs_list]
-        if not check_pivots:
-            f = sols[0]
-            res = np.linalg.norm(S @ (S.T @ f) - rhs)
-            if not np.all(np.isfinite(f)) or res > 1e-8 * max(np.linalg.norm(rhs), 1e-300):
-                raise SingularNetworkError(f"N = S S^T solve inaccurate (relative residual {res / max(np.linalg.norm(rhs), 1e-300):.3g})")
-        if cache is not None:
-            cache.key, cache.codes, cache.lu, cache.iterations = key, codes, TriangularFactor(lu), 0
-            cache.bordered = {}
-            cache.n_factor += 1
-    if cache is not None:
-        cache.remember(codes, sols, time)
+    sols = solve_contact_system(pairs, unit, n, rhs_list, cond_limit, check_pivots, cache, time)
     if pressure is None:
         f = sols[0]
         E = np.array(gradient, dtype=np.float64)
@@ -785,7 +970,10 @@ def solve_network(
         kappa = float((pressure * omega * d - a @ r) / (b @ r))
         f = a + kappa * b
         E = np.array(gradient, dtype=np.float64) - kappa * rate * np.eye(d)
-    U = xi0 * (ext.ravel() + _st_apply(pairs, unit, f, n))
+    U = _st_apply(pairs, unit, f, n)
+    if external is not None:
+        U += ext.ravel()
+    U *= xi0
     return Solution(f, U.reshape(n, d), E, kappa)
 
 
