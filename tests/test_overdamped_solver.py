@@ -290,12 +290,16 @@ def test_warm_starts_extrapolate_polynomials_of_their_order_exactly(rng):
 
 @pytest.mark.parametrize("d", [2, 3])
 def test_compiled_pair_kernels_match_their_formulas(rng, d):
-    """Separations, affine rates, pair rates, the step-drift rate, the stress tensor and the
-    straight-line move from the compiled kernels agree with their formulas written in numpy."""
+    """Separations, affine rates, pair rates, the step-drift rate, the constraint error, the stress
+    tensor, the negative-force test and the straight-line move of positions and box from the
+    compiled kernels agree with their formulas written in numpy."""
     from jamflow.overdamped.network import (
         Solution,
+        advance_box,
         advance_positions,
         affine_rates,
+        has_negative,
+        max_relative_error,
         max_relative_rate,
         max_row_norm,
         pair_vectors,
@@ -324,3 +328,9 @@ def test_compiled_pair_kernels_match_their_formulas(rng, d):
     assert max_row_norm(U) == pytest.approx(np.max(np.linalg.norm(U, axis=1)), rel=1e-15)
     assert max_row_norm(np.zeros((0, d))) == 0.0
     assert _rel(advance_positions(x, U, E, 0.3), x + 0.3 * (x @ E.T + U)) < 1e-14
+    assert _rel(advance_box(h, E, 0.3), np.triu(h + 0.3 * E @ h)) < 1e-14
+    assert max_relative_error(R, sigma) == pytest.approx(np.max(np.abs(r / sigma - 1.0)), rel=1e-14)
+    g = f - 0.5
+    free = rng.random(m) < 0.5
+    for tol in (0.0, 0.3, 0.9):
+        assert has_negative(g, free, tol) == bool(np.any((g < -tol * np.max(np.abs(g))) & free))

@@ -37,8 +37,10 @@ from .network import (
     FactorCache,
     SingularNetworkError,
     Solution,
+    advance_box,
     advance_positions,
     affine_rates,
+    has_negative,
     max_relative_error,
     max_relative_rate,
     max_row_norm,
@@ -199,6 +201,7 @@ class Integrator:
         self._nl_version = 0
         self._pairs_key = None
         self._sigma_value = None
+        self._free_value = None
         self._volume_of = None
         self._sep_key = None
         self._err_key = None
@@ -252,6 +255,7 @@ class Integrator:
             self._pairs_key = key
             self._pairs_value = (self.state.nl.pairs[mask], self.state.nl.images[mask])
             self._sigma_value = None
+            self._free_value = None
         return self._pairs_value
 
     def _contact_sigma(self) -> NDArray[np.float64]:
@@ -378,10 +382,7 @@ class Integrator:
     # -------------------------------------------------------------------- motion
     def _move(self, t: float, velocity: NDArray[np.float64], gradient: NDArray[np.float64]) -> None:
         st = self.state
-        st.x = advance_positions(st.x, velocity, gradient, t)
-        st.h = st.h + t * (gradient @ st.h)
-        # Lees–Edwards Euler update must keep h upper triangular exactly
-        st.h = np.triu(st.h)
+        st.x, st.h = advance_positions(st.x, velocity, gradient, t), advance_box(st.h, gradient, t)
         st.nl.advance(velocity, gradient, t)
 
     def dt(self) -> float:
@@ -480,24 +481,27 @@ class Integrator:
             st.nl.displacement, st.nl.strain_norm, st.time = saved[2], saved[3], saved[4]
         if ev.solution is None:
             return sol
-        f = ev.force
-        free = ~st.permanent[st.contact]
-        if np.any((f < -self.options.rel_tol * float(np.max(np.abs(f), initial=0.0))) & free):
+        if self._has_negative_force(ev.force):
             return sol
         return ev.solution
 
     def _refresh(self) -> None:
         """Forces on the moved network; rewire if some turned negative (Sec. IV A ii.b)."""
         ev = self.evaluate(self.state.contact)
-        if ev.solution is not None:
-            f = ev.force
-            free = ~self.state.permanent[self.state.contact]
-            tol = self.options.rel_tol * float(np.max(np.abs(f), initial=0.0))
-            if not np.any((f < -tol) & free):
-                self.solution = ev.solution
-                self.state.kappa = ev.solution.kappa
-                return
+        if ev.solution is not None and not self._has_negative_force(ev.force):
+            self.solution = ev.solution
+            self.state.kappa = ev.solution.kappa
+            return
         self._rewire(self.state.contact.copy())
+
+    def _has_negative_force(self, force: NDArray[np.float64]) -> bool:
+        """Whether a non-permanent contact of the current network carries a force below
+        ``-rel_tol max |f|`` (the rewiring's "negative")."""
+        st = self.state
+        self._pairs(st.contact)
+        if self._free_value is None:
+            self._free_value = ~st.permanent[st.contact]
+        return has_negative(force, self._free_value, self.options.rel_tol)
 
     def next_switch(self) -> float:
         """Time until the next self-propulsion redraw (inf otherwise)."""
@@ -541,6 +545,10 @@ class Integrator:
         if self._volume_of is not h:
             self._volume_of, self._volume = h, abs(float(np.linalg.det(h)))
         return self._volume
+
+    def n_contacts(self) -> int:
+        """Contacts of the current network."""
+        return len(self._pairs(self.state.contact)[0])
 
     def z_bar(self) -> float:
         """Constrained coordination of the current network (Eq. 29)."""

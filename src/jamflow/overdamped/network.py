@@ -38,8 +38,10 @@ __all__ = [
     "SingularNetworkError",
     "Solution",
     "TriangularFactor",
+    "advance_box",
     "advance_positions",
     "affine_rates",
+    "has_negative",
     "max_relative_error",
     "max_relative_rate",
     "max_row_norm",
@@ -115,6 +117,44 @@ def _advance_positions(x, U, E, t):  # pragma: no cover - numba
                 v += x[i, m] * E[k, m]
             out[i, k] = x[i, k] + t * (v + U[i, k])
     return out
+
+
+def advance_box(h: NDArray[np.float64], gradient: NDArray[np.float64], t: float) -> NDArray[np.float64]:
+    """Box after a move of duration t, ``h + t E h`` with its lower triangle set to zero (a new array).
+
+    The Lees–Edwards Euler update must keep h upper triangular exactly.
+    """
+    return _advance_box(np.ascontiguousarray(h, dtype=np.float64), np.ascontiguousarray(gradient, dtype=np.float64),
+                        float(t))
+
+
+@numba.njit(cache=True)
+def _advance_box(h, E, t):  # pragma: no cover - numba
+    d = h.shape[0]
+    out = np.zeros((d, d))
+    for a in range(d):
+        for b in range(a, d):
+            s = 0.0
+            for m in range(d):
+                s += E[a, m] * h[m, b]
+            out[a, b] = h[a, b] + t * s
+    return out
+
+
+def has_negative(force: NDArray[np.float64], free: NDArray[np.bool_], rel_tol: float) -> bool:
+    """Whether a free entry of ``force`` is below ``-rel_tol max |force|`` (all entries count in the max)."""
+    return bool(_has_negative(np.ascontiguousarray(force, dtype=np.float64), np.ascontiguousarray(free), float(rel_tol)))
+
+
+@numba.njit(cache=True)
+def _has_negative(f, free, rel_tol):  # pragma: no cover - numba
+    top = 0.0
+    for c in range(f.shape[0]):
+        top = max(top, abs(f[c]))
+    for c in range(f.shape[0]):
+        if free[c] and f[c] < -rel_tol * top:
+            return True
+    return False
 
 
 def max_relative_error(R: NDArray[np.float64], sigma: NDArray[np.float64]) -> float:
@@ -200,19 +240,24 @@ def _affine_rates(R, E):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True)
-def _normals(R):  # pragma: no cover - numba
-    """Lengths r, shape (P,), and unit vectors ``R / r``, shape (P, d), of separations R."""
+def _normals_and_drive(R, E, xi0):  # pragma: no cover - numba
+    """Lengths r, shape (P,), unit vectors ``R / r``, shape (P, d), and ``-S V_aff / xi0`` of separations R."""
     nc, d = R.shape
     r = np.empty(nc)
     unit = np.empty((nc, d))
+    rhs = np.empty(nc)
     for c in range(nc):
         rr = 0.0
+        q = 0.0
         for k in range(d):
             rr += R[c, k] * R[c, k]
+            for m in range(d):
+                q += R[c, k] * E[k, m] * R[c, m]
         r[c] = np.sqrt(rr)
         for k in range(d):
             unit[c, k] = R[c, k] / r[c]
-    return r, unit
+        rhs[c] = -(q / r[c] / xi0)
+    return r, unit, rhs
 
 
 @dataclass(frozen=True)
@@ -952,9 +997,9 @@ def solve_network(
             kappa = 0.0
         return Solution(np.zeros(0), xi0 * ext.copy(), E, kappa)
     R = pair_vectors(x, h, pairs, images) if separations is None else separations
-    r, unit = _normals(np.ascontiguousarray(R, dtype=np.float64))
+    r, unit, rhs = _normals_and_drive(np.ascontiguousarray(R, dtype=np.float64),
+                                      np.ascontiguousarray(gradient, dtype=np.float64), float(xi0))
     pairs = np.ascontiguousarray(pairs, dtype=np.int64)
-    rhs = -affine_rates(R, gradient) / xi0
     if external is not None:
         rhs -= _s_apply(pairs, unit, np.ascontiguousarray(ext, dtype=np.float64).ravel())
     rhs_list = [rhs] if pressure is None else [rhs, rate * r / xi0]

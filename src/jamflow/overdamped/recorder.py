@@ -40,7 +40,7 @@ class Recorder:
             "pressure": float(np.trace(sig)) / integ.d,
             "packing_fraction": integ.packing_fraction(),
             "kappa": st.kappa,
-            "n_contacts": int(st.contact.sum()),
+            "n_contacts": integ.n_contacts(),
             "z_bar": integ.z_bar(),
             "volume": integ.volume(),
             "constraint_error": integ.constraint_error(),
