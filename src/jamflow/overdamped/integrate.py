@@ -319,13 +319,7 @@ class Integrator:
         singular = count.potentially_jammed and not self.state.permanent.any()
         if not singular:
             try:
-                # a self-stress needs an over-constrained subset: check pivots only when
-                # the constrained count is within d of potential jamming, or hyperstatic.
-                # An empty constrained subset carries none: a particle with <= d
-                # contacts balances nonzero forces only in degenerate (collinear)
-                # geometry, which the unchecked solve still reports as singular
-                near = count.n_particles > 0 and count.excess >= -self.d
-                sol = self._solve(mask, check_pivots=near)
+                sol = self._solve(mask, check_pivots=count.may_self_stress)
                 return Evaluation(sol.force, sol)
             except SingularNetworkError:
                 singular = True
@@ -581,12 +575,11 @@ class Integrator:
             unit = R / r[:, None]
             S = s_matrix(pairs, unit, self.n)
             grad = zero
-            count = self.count(st.contact)
             try:
-                # on the cached factor unless near potential jamming (as the force solves)
-                near = count.potentially_jammed or (count.n_particles > 0 and count.excess >= -self.d)
+                # on the cached factor unless a self-stress is possible (as the force solves)
                 dx = solve_contact_system(pairs, unit, self.n, [dr], self.options.cond_limit,
-                                          check_pivots=near, cache=self.factor_cache, warm=False)[0]
+                                          check_pivots=self.count(st.contact).may_self_stress,
+                                          cache=self.factor_cache, warm=False)[0]
                 dR = -(S.T @ dx)
             except SingularNetworkError:
                 # a self-stress f0 (jammed network): S^T f0 = 0 makes the error component

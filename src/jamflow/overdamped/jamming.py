@@ -55,6 +55,17 @@ class ConstrainedCount:
         return self.n_particles > 0 and self.n_contacts == isostatic_count(self.n_particles, self.d, global_dofs=self.d)
 
     @property
+    def may_self_stress(self) -> bool:
+        """Whether the network may carry a self-stress: the constrained count is within d of
+        potential jamming, or hyperstatic (solves then check N's pivots).
+
+        An empty constrained subset carries none: a particle with at most d contacts
+        balances nonzero forces only in degenerate (collinear) geometry, which an
+        unchecked solve still reports as singular.
+        """
+        return self.n_particles > 0 and self.excess >= -self.d
+
+    @property
     def excess(self) -> int:
         """``N_c_bar - (d N_bar - d + 1)``: > 0 hyperstatic, 0 potentially jammed; -1 if empty."""
         if self.n_particles == 0:
