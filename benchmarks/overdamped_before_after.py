@@ -12,6 +12,9 @@ Start packings: ``--start FILE.nc`` (any jamflow packing; contacts need not be s
 default, the trade-off harness's start (:func:`jamflow.tradeoff.flow_start`, event-driven
 compression of 2D 1:1.4 bidisperse 3 % polydisperse discs to ``--phi``).
 
+Writes ``benchmarks/output/overdamped_before_after.nc`` (events/s, wall time, steps and strain
+per tree and round) and ``.png`` (events per second of both trees and their ratio per round).
+
 Usage::
 
     git worktree add /tmp/base 68bf334
@@ -30,6 +33,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 SRC = HERE.parent / "src"
+OUTPUT = HERE / "output"
 
 CHILD = r"""
 import json, sys, time
@@ -79,9 +83,11 @@ def main() -> None:
 
             start = Path(tmp) / "start.nc"
             write_packing(flow_start(args.n, args.phi, args.seed), start)
+        runs = []
         for r in range(args.repeats):
             base = run_child(args.base_src, start, args.steps)
             new = run_child(SRC, start, args.steps, args.options)
+            runs.append((base, new))
             rates = [x["events"] / x["wall"] for x in (base, new)]
             print(f"round {r}: base {rates[0]:.2f} events/s ({base['wall']:.2f} s), this tree {rates[1]:.2f} events/s "
                   f"({new['wall']:.2f} s): ratio {rates[1] / rates[0]:.2f}; {new['events']} events over strain "
@@ -89,6 +95,63 @@ def main() -> None:
                   f"strain/min {60 * base['strain'] / base['wall']:.3g} -> {60 * new['strain'] / new['wall']:.3g}; "
                   f"final stress rel. difference {abs(new['stress'] - base['stress']) / abs(base['stress']):.1e}",
                   flush=True)
+        write_outputs(runs, args, start)
+
+
+def write_outputs(runs: list[tuple[dict, dict]], args: argparse.Namespace, start: Path) -> None:
+    """The rounds as a dataset (tree x round) and a figure of events/s and their ratio."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+    import xarray as xr
+
+    sys.path.insert(0, str(SRC))
+    from jamflow.io import new_dataset_attrs, read_packing, write_dataset
+    from jamflow.overdamped.driving import Drive
+    from jamflow.overdamped.run import stress_unit
+
+    d = read_packing(start).d
+
+    def table(key: str) -> np.ndarray:
+        return np.array([[run[t][key] for run in runs] for t in range(2)], dtype=float)
+
+    events, wall = table("events"), table("wall")
+    dims = ("tree", "round")
+    ds = xr.Dataset(
+        {
+            "events_per_second": (dims, events / wall, {"units": "1/s", "long_name": "rewiring events per wall second"}),
+            "wall_time": (dims, wall, {"units": "s", "long_name": "wall time of the timed run"}),
+            "events": (dims, events, {"units": "1", "long_name": "events in the timed run"}),
+            "strain": (dims, table("strain"), {"units": "1", "long_name": "shear strain reached"}),
+            "final_shear_stress": (dims, table("stress"), {"units": stress_unit(Drive("shear"), d),
+                                                            "long_name": "shear stress at the last step"}),
+        },
+        coords={"tree": ("tree", ["base", "this"]), "round": ("round", np.arange(len(runs)))},
+        attrs=new_dataset_attrs("jamflow event-driven shear speed, two source trees side by side", vars(args),
+                                host_cpus=os.cpu_count()),
+    )
+    OUTPUT.mkdir(exist_ok=True)
+    write_dataset(ds, OUTPUT / "overdamped_before_after.nc")
+    rates = events / wall
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.8), constrained_layout=True)
+    rounds = np.arange(len(runs))
+    for t, name in enumerate(("base", "this tree")):
+        axes[0].bar(rounds + (t - 0.5) * 0.4, rates[t], 0.4, label=name)
+    axes[0].set_yscale("log")
+    axes[0].set_ylim(top=5 * float(np.nanmax(rates)))  # room for the legend
+    axes[0].set_ylabel("events per second [1/s]")
+    axes[1].bar(rounds, rates[1] / rates[0], 0.6, color="C2")
+    axes[1].axhline(30.0, color="k", ls="--", lw=1, label="issue 20 target 30x")
+    axes[1].set_ylim(0, 1.35 * max(30.0, float(np.nanmax(rates[1] / rates[0]))))
+    axes[1].set_ylabel("events/s ratio, this tree / base [1]")
+    for ax in axes:
+        ax.set_xlabel("round [1]")
+        ax.set_xticks(rounds)
+        ax.legend(loc="upper left", ncols=2)
+    fig.savefig(OUTPUT / "overdamped_before_after.png", dpi=120)
+    print(f"wrote {OUTPUT / 'overdamped_before_after.nc'} and .png")
 
 
 if __name__ == "__main__":

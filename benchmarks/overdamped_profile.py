@@ -2,8 +2,9 @@
 
 Shears a start packing for ``--steps`` steps (after a short untimed run that loads the numba
 caches) and prints (1) the cProfile table by own time and by cumulative time, (2) with
-``line_profiler`` (extra ``bench``) the per-line times of the step, the force refresh and the
-network solve. Used for docs/overdamped-profile.md.
+``line_profiler`` (extra ``bench``) the per-line times of the step, the force refresh, the
+network solve and the choice between CG and a factorisation (the CG itself is compiled).
+Used for docs/overdamped-profile.md.
 
 Usage: python benchmarks/overdamped_profile.py START.nc [--steps 300] [--record-every 1] [--no-lines]
 """
@@ -17,7 +18,7 @@ import pstats
 import time
 
 from jamflow.io import read_packing
-from jamflow.overdamped import integrate, network
+from jamflow.overdamped import integrate, network, solver
 from jamflow.overdamped.driving import Drive
 from jamflow.overdamped.integrate import FlowOptions
 from jamflow.overdamped.run import Stop, run_flow
@@ -57,8 +58,8 @@ def main() -> None:
     from line_profiler import LineProfiler
 
     lp = LineProfiler()
-    targets = [integrate.Integrator.step, integrate.Integrator._refresh, network.solve_network]
-    targets += [f for f in (getattr(network, "_pcg", None),) if f is not None]
+    targets = [integrate.Integrator.step, integrate.Integrator._refresh, network.solve_network,
+               solver.solve_contact_system]
     for f in targets:
         lp.add_function(f)
     lp.runcall(run)

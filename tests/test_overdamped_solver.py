@@ -215,12 +215,8 @@ def test_symmetric_factor_keeps_only_l_and_solves_as_superlu_does(rng, eps):
     """The factorisation the solver caches (SymmetricMode, diagonal pivots) has no row pivoting, so
     U = diag(U) L^T and only L is kept; its solves agree with SuperLU's own solve with L and U
     (random N and N near a self-stress, cond ~ 1e6) to the backward-stable bound."""
-    from jamflow.overdamped.network import (
-        TriangularFactor,
-        _factorize,
-        pair_vectors,
-        s_matrix,
-    )
+    from jamflow.overdamped.network import pair_vectors
+    from jamflow.overdamped.solver import TriangularFactor, _factorize, s_matrix
 
     if eps is None:
         x, box, pairs, images = _random_network(rng, 40, 2, n_contacts=45)

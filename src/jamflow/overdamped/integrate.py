@@ -34,8 +34,6 @@ from .collisions import NeighborList, build_neighbor_list, images_of, next_colli
 from .driving import Drive
 from .jamming import constrained_subset, self_stress
 from .network import (
-    FactorCache,
-    SingularNetworkError,
     Solution,
     advance_box,
     advance_positions,
@@ -46,13 +44,12 @@ from .network import (
     max_row_norm,
     pair_vectors,
     pair_velocities,
-    s_matrix,
-    solve_contact_system,
     solve_network,
     spectral_norm,
     stress_tensor,
 )
 from .rewiring import Evaluation, rewire
+from .solver import FactorCache, SingularNetworkError, s_matrix, solve_contact_system
 
 __all__ = ["FlowOptions", "FlowState", "Integrator", "EVENT_MADE", "EVENT_BROKEN"]
 

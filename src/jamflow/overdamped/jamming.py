@@ -17,7 +17,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..network import isostatic_count, prune_rattlers
-from .network import pair_vectors, s_matrix
+from .network import pair_vectors
+from .solver import s_matrix
 
 __all__ = ["ConstrainedCount", "constrained_subset", "self_stress"]
 
