@@ -123,10 +123,10 @@ class FactorCache:
         CG iterations of linear at N = 1024).
     bordered : dict
         Bordered preconditioners (:class:`Border`, None where refused) built on the
-        current factorisation, by network (pair codes as bytes): the network after an event is solved at every step until the
-        next factorisation, and its set-up (|P| + |Q| solves) is done once. A
-        preconditioner built at an earlier geometry of the same network is still an
-        approximate inverse; CG converges to the same tolerance on the current one.
+        current factorisation, by network (pair codes as bytes): the network after an
+        event is solved at every step until the next factorisation, and its set-up is
+        done once. A preconditioner built at an earlier geometry of the same network is
+        still an approximate inverse; CG converges to the same tolerance on the current one.
     iterations : int
         CG iterations of the last cached solve (diagnostic).
     n_factor, n_cg, n_bordered : int
