@@ -125,6 +125,32 @@ def test_drift_correction_restores_constraints(dense32):
     _check_invariants(integ)
 
 
+def test_drift_correction_on_the_cached_factor_matches_a_fresh_factorisation(dense32):
+    """Far from potential jamming the correction solves Eq. 28 by CG on the cached factor (here a few
+    steps old: a synchronisation point factorises afresh): the same corrected positions as from a
+    fresh factorisation (cache dropped) to 1e-12 of the box, and the same network."""
+    import copy
+
+    loose = FlowOptions(dt_max=1e-2, step_drift=1e-5, drift_tol=1.0, correct_every=0)
+    integ = _integrator(dense32, Drive("shear"), loose)
+    while integ.state.strain < 0.01:
+        integ.step()
+    integ.synchronize()
+    for _ in range(3):
+        integ.step()
+    assert not integ.count(integ.state.contact).may_self_stress, "the test needs the cached path"
+    fresh = copy.deepcopy(integ)
+    fresh.factor_cache.reset()
+    n_factor = integ.factor_cache.n_factor
+    _, after = integ.correct()
+    _, after_fresh = fresh.correct()
+    assert integ.factor_cache.n_factor == n_factor, "the correction factorised instead of using the cached factor"
+    assert after < 1e-12 and after_fresh < 1e-12
+    assert np.array_equal(integ.state.contact, fresh.state.contact)
+    L = abs(np.linalg.det(integ.state.h)) ** 0.5
+    assert np.max(np.abs(integ.state.x - fresh.state.x)) < 1e-12 * L
+
+
 def test_compression_ends_jammed_isostatic_with_positive_self_stress():
     res = run_flow(_bidisperse(16, seed=2), Drive("compress"), Stop(strain=5.0),
                    FlowOptions(dt_max=1e-2, step_drift=1e-6, drift_tol=1e-5), unit="small_diameter",
