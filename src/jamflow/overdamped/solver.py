@@ -214,9 +214,10 @@ def _locate(codes_from: NDArray[np.int64], codes_to: NDArray[np.int64]) -> NDArr
 class Border(NamedTuple):
     """A preconditioner for N on a network a few pairs away from the factorised one.
 
-    Applies the exact inverse of ``[[M_CC, N_CP], [N_PC, N_PP]]`` (see :func:`_bordered`)
-    with the cached LU of M; the network the LU was made for has the trivial border
-    (:func:`_plain_border`: every pair kept, none removed or added).
+    Applies the exact inverse of ``K = [[M_CC, G_CP], [G_PC, G_PP]]`` (G: the couplings
+    of the added pairs, see :func:`_bordered`) with the cached LU of M; the network the
+    LU was made for has the trivial border (:func:`_plain_border`: every pair kept,
+    none removed or added).
 
     Attributes
     ----------
@@ -231,7 +232,7 @@ class Border(NamedTuple):
     added : ndarray of int64, shape (|P|,)
         Added pairs P (positions in the new network).
     NCP, B, T_inv : ndarray, shapes (|C|, |P|), (|C|, |P|), (|P|, |P|)
-        ``N_CP``, ``M_CC^-1 N_CP`` and the inverse of the Schur complement T.
+        ``G_CP``, ``M_CC^-1 G_CP`` and the inverse of the Schur complement T.
     """
 
     size: int
