@@ -330,3 +330,22 @@ def test_compiled_pair_kernels_match_their_formulas(rng, d):
     free = rng.random(m) < 0.5
     for tol in (0.0, 0.3, 0.9):
         assert has_negative(g, free, tol) == bool(np.any((g < -tol * np.max(np.abs(g))) & free))
+    # a NaN propagates through every maximum, as through numpy's
+    Rn, Un = R.copy(), U.copy()
+    Rn[3, 0], Un[pairs[7, 1], 1] = np.nan, np.nan
+    assert np.isnan(max_row_norm(Un)) and np.isnan(max_relative_error(Rn, sigma))
+    assert np.isnan(max_relative_rate(R, pairs, Solution(f, Un, E, np.nan), sigma))
+
+
+def test_a_nan_right_hand_side_is_never_a_converged_cg_solve(rng):
+    """NaN external forces: CG on the cached factor must not report convergence (its maxima see the
+    NaN), the direct fallback reports the non-finite solve as SingularNetworkError."""
+    n, d = 30, 2
+    x, box, pairs, images = _random_network(rng, n, d, n_contacts=n)
+    F = rng.normal(size=(n, d))
+    cache = FactorCache()
+    solve_network(x, box.matrix, pairs, images, np.zeros((d, d)), external=F, check_pivots=False, cache=cache)
+    F[pairs[0, 0], 0] = np.nan
+    with pytest.raises(SingularNetworkError):
+        solve_network(x, box.matrix, pairs, images, np.zeros((d, d)), external=F, check_pivots=False, cache=cache)
+    assert cache.n_cg == 0

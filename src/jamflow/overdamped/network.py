@@ -152,7 +152,9 @@ def has_negative(force: NDArray[np.float64], free: NDArray[np.bool_], rel_tol: f
 def _has_negative(f, free, rel_tol):  # pragma: no cover - numba
     top = 0.0
     for c in range(f.shape[0]):
-        top = max(top, abs(f[c]))
+        v = abs(f[c])
+        if v > top or v != v:  # NaN propagates, as in numpy's max
+            top = v
     for c in range(f.shape[0]):
         if free[c] and f[c] < -rel_tol * top:
             return True
@@ -171,7 +173,9 @@ def _max_relative_error(R, sigma):  # pragma: no cover - numba
         rr = 0.0
         for k in range(R.shape[1]):
             rr += R[c, k] * R[c, k]
-        top = max(top, abs(np.sqrt(rr) / sigma[c] - 1.0))
+        v = abs(np.sqrt(rr) / sigma[c] - 1.0)
+        if v > top or v != v:  # NaN propagates, as in numpy's max
+            top = v
     return top
 
 
@@ -187,7 +191,8 @@ def _max_row_norm(a):  # pragma: no cover - numba
         s = 0.0
         for k in range(a.shape[1]):
             s += a[i, k] * a[i, k]
-        top = max(top, s)
+        if s > top or s != s:  # NaN propagates, as in numpy's max
+            top = s
     return np.sqrt(top)
 
 
@@ -400,7 +405,9 @@ def _max_relative_rate(R, pairs, U, E, sigma):  # pragma: no cover - numba
             for m in range(d):
                 w += E[k, m] * R[c, m]
             ww += w * w
-        top = max(top, ww / (sigma[c] * sigma[c]))
+        v = ww / (sigma[c] * sigma[c])
+        if v > top or v != v:  # NaN propagates, as in numpy's max
+            top = v
     return np.sqrt(top)
 
 

@@ -465,9 +465,12 @@ def _n_apply(pairs, unit, n, v):  # pragma: no cover - numba
 
 @numba.njit(cache=True)
 def _max_abs(v):  # pragma: no cover - numba
+    """``max |v|``, NaN if any entry is NaN (a NaN solve must never count as converged)."""
     m = 0.0
     for k in range(len(v)):
-        m = max(m, abs(v[k]))
+        a = abs(v[k])
+        if a > m or a != a:
+            m = a
     return m
 
 
