@@ -160,13 +160,9 @@ def test_pair_closing_a_self_stress_is_not_solved_by_the_bordered_path():
     assert cache.n_bordered == 0 and cache.n_factor == 1
 
 
-@pytest.mark.parametrize("eps", [None, 1e-3])
-def test_compiled_triangular_solve_matches_a_dense_solve(rng, eps):
-    """The cached factor's compiled substitution solves N x = b as a dense solve does (random and
-    nearly singular N, one and several right-hand sides)."""
-    import scipy.sparse.linalg as spla
-
-    from jamflow.overdamped.network import TriangularFactor, pair_vectors, s_matrix
+def _s_operator(rng, eps):
+    """S of a random 40-disc network (``eps`` None) or of the bent ring near a self-stress."""
+    from jamflow.overdamped.network import pair_vectors, s_matrix
 
     if eps is None:
         x, box, pairs, images = _random_network(rng, 40, 2, n_contacts=45)
@@ -174,7 +170,18 @@ def test_compiled_triangular_solve_matches_a_dense_solve(rng, eps):
     else:
         x, h, pairs, images = _bent_ring(eps)
     R = pair_vectors(x, h, pairs, images)
-    S = s_matrix(pairs, R / np.linalg.norm(R, axis=1)[:, None], len(x))
+    return s_matrix(pairs, R / np.linalg.norm(R, axis=1)[:, None], len(x))
+
+
+@pytest.mark.parametrize("eps", [None, 1e-3])
+def test_compiled_triangular_solve_matches_a_dense_solve(rng, eps):
+    """The cached factor's compiled substitution solves N x = b as a dense solve does (random and
+    nearly singular N, one and several right-hand sides)."""
+    import scipy.sparse.linalg as spla
+
+    from jamflow.overdamped.network import TriangularFactor
+
+    S = _s_operator(rng, eps)
     N = (S @ S.T).tocsc()
     fac = TriangularFactor(spla.splu(N, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0))
     B = rng.normal(size=(N.shape[0], 3))
@@ -215,16 +222,9 @@ def test_symmetric_factor_keeps_only_l_and_solves_as_superlu_does(rng, eps):
     """The factorisation the solver caches (SymmetricMode, diagonal pivots) has no row pivoting, so
     U = diag(U) L^T and only L is kept; its solves agree with SuperLU's own solve with L and U
     (random N and N near a self-stress, cond ~ 1e6) to the backward-stable bound."""
-    from jamflow.overdamped.network import pair_vectors
-    from jamflow.overdamped.solver import TriangularFactor, _factorize, s_matrix
+    from jamflow.overdamped.solver import TriangularFactor, _factorize
 
-    if eps is None:
-        x, box, pairs, images = _random_network(rng, 40, 2, n_contacts=45)
-        h = box.matrix
-    else:
-        x, h, pairs, images = _bent_ring(eps)
-    R = pair_vectors(x, h, pairs, images)
-    S = s_matrix(pairs, R / np.linalg.norm(R, axis=1)[:, None], len(x))
+    S = _s_operator(rng, eps)
     lu = _factorize(S, cond_limit=1e13, check_pivots=False)
     fac = TriangularFactor(lu)
     assert fac.symmetric and fac.args[3].size == 0

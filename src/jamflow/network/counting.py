@@ -67,7 +67,7 @@ def prune_rattlers(
         Bodies still in the network; the others were removed earlier (their
         contacts do not count) and are not reported again.
     compiled : bool
-        Peel with the numba kernel (:mod:`._peel`, one pass with a stack) instead of
+        Peel with the numba kernel (:mod:`._graph_kernels`, one pass with a stack) instead of
         numpy rounds. Same result (the core that survives is unique); for callers that
         prune thousands of times and load numba anyway (the event-driven network, where
         a flowing packing peels in ~15 rounds). Off by default so that a command
@@ -84,7 +84,7 @@ def prune_rattlers(
     z_wall = (np.zeros(n_bodies, dtype=np.int64) if wall_contacts is None
               else np.bincount(np.asarray(wall_contacts, dtype=np.int64), minlength=n_bodies))
     if compiled:
-        from ._peel import peel
+        from ._graph_kernels import peel
 
         rattler = peel(np.ascontiguousarray(pairs, dtype=np.int64), n_bodies, dofs_per_body + 1, z_wall)
         return rattler if active is None else rattler & active

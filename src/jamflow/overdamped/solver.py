@@ -24,6 +24,7 @@ import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 
 from ..network import ContactSet, contact_jacobian
+from ..network._graph_kernels import incidence
 
 __all__ = [
     "Border",
@@ -279,7 +280,7 @@ class BorderSolves:
 
     def __init__(self, lu: TriangularFactor, pairs: NDArray[np.int64], unit: NDArray[np.float64], n: int) -> None:
         self.lu, self.pairs, self.unit = lu, pairs, unit
-        self.ptr, self.incident = _incidence(pairs, n)
+        self.ptr, self.incident = incidence(pairs, n)
         self.removed: dict[int, NDArray[np.float64]] = {}
         self.added: dict[int, tuple[int, int, NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]] = {}
 
@@ -298,25 +299,6 @@ class BorderSolves:
             g = _coupling(i, j, u, self.pairs, self.unit, self.ptr, self.incident)
             self.added[code] = (i, j, u, g, self.lu.solve(g))
         return self.added[code]
-
-
-@numba.njit(cache=True)
-def _incidence(pairs, n):  # pragma: no cover - numba
-    """Pairs at every particle (CSR: ``incident[ptr[k]:ptr[k + 1]]``)."""
-    ptr = np.zeros(n + 1, dtype=np.int64)
-    for c in range(pairs.shape[0]):
-        ptr[pairs[c, 0] + 1] += 1
-        ptr[pairs[c, 1] + 1] += 1
-    for k in range(n):
-        ptr[k + 1] += ptr[k]
-    fill = ptr[:-1].copy()
-    incident = np.empty(2 * pairs.shape[0], dtype=np.int64)
-    for c in range(pairs.shape[0]):
-        for e in range(2):
-            k = pairs[c, e]
-            incident[fill[k]] = c
-            fill[k] += 1
-    return ptr, incident
 
 
 @numba.njit(cache=True)

@@ -1,8 +1,9 @@
-"""Numba kernel of the coordination pruning (:func:`jamflow.network.prune_rattlers`).
+"""Numba kernels of the contact graph: pair incidence and coordination peeling.
 
 Kept apart from :mod:`jamflow.network.counting` so that importing the package does not
 load numba: only callers that prune thousands of times per run (the event-driven
-network, which loads numba anyway) ask for it.
+network, which loads numba anyway) ask for the compiled peeling, and the event-driven
+bordered preconditioners use the incidence.
 """
 
 from __future__ import annotations
@@ -10,7 +11,37 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["peel"]
+__all__ = ["incidence", "peel"]
+
+
+@njit(cache=True)
+def incidence(pairs, n):  # pragma: no cover - numba
+    """Pairs at every body, CSR: the pairs of body k are ``incident[ptr[k]:ptr[k + 1]]``.
+
+    Parameters
+    ----------
+    pairs : ndarray of int64, shape (n_c, 2)
+    n : int
+
+    Returns
+    -------
+    ptr : ndarray of int64, shape (n + 1,)
+    incident : ndarray of int64, shape (2 n_c,)
+    """
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    for c in range(pairs.shape[0]):
+        ptr[pairs[c, 0] + 1] += 1
+        ptr[pairs[c, 1] + 1] += 1
+    for k in range(n):
+        ptr[k + 1] += ptr[k]
+    fill = ptr[:-1].copy()
+    incident = np.empty(2 * pairs.shape[0], dtype=np.int64)
+    for c in range(pairs.shape[0]):
+        for e in range(2):
+            k = pairs[c, e]
+            incident[fill[k]] = c
+            fill[k] += 1
+    return ptr, incident
 
 
 @njit(cache=True)
@@ -33,23 +64,8 @@ def peel(pairs, n, k_min, z_extra):  # pragma: no cover - numba
         bodies round by round.
     """
     nc = pairs.shape[0]
-    z = z_extra.copy()
-    for c in range(nc):
-        z[pairs[c, 0]] += 1
-        z[pairs[c, 1]] += 1
-    ptr = np.zeros(n + 1, dtype=np.int64)
-    for c in range(nc):
-        ptr[pairs[c, 0] + 1] += 1
-        ptr[pairs[c, 1] + 1] += 1
-    for b in range(n):
-        ptr[b + 1] += ptr[b]
-    fill = ptr[:-1].copy()
-    incident = np.empty(2 * nc, dtype=np.int64)
-    for c in range(nc):
-        for e in range(2):
-            b = pairs[c, e]
-            incident[fill[b]] = c
-            fill[b] += 1
+    ptr, incident = incidence(pairs, n)
+    z = z_extra + (ptr[1:] - ptr[:-1])
     rattler = np.zeros(n, dtype=np.bool_)
     alive = np.ones(nc, dtype=np.bool_)
     stack = np.empty(n, dtype=np.int64)
