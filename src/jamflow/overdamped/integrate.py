@@ -47,6 +47,7 @@ from .network import (
     solve_network,
     spectral_norm,
     stress_tensor,
+    tangent_velocities,
 )
 from .rewiring import Evaluation, rewire
 from .solver import FactorCache, SingularNetworkError, s_matrix, solve_contact_system
@@ -55,6 +56,17 @@ __all__ = ["FlowOptions", "FlowState", "Integrator", "EVENT_MADE", "EVENT_BROKEN
 
 EVENT_MADE = 1
 EVENT_BROKEN = -1
+#: Relative accuracy of each Newton step of the drift correction on the cached factor:
+#: a step solved to relative error eps leaves about eps * err + O(err^2) of a constraint
+#: error err (<= drift_tol), and the steps repeat until the error reaches their target.
+CORRECTION_RTOL: float = 1e-6
+#: Relative accuracy of the midpoint step's two solves on the cached factor (the probe
+#: and the projection of its velocities on the contacts). The velocities only move the
+#: particles: an error eps shifts a step by eps * dt * |U|, far below the step's own
+#: error, and leaves contact rates of eps times the projected rates, themselves O(dt):
+#: gaps change by O(eps dt^2), below round-off. The probe's forces only choose between
+#: the midpoint and the Euler step; every state's forces come from a full solve.
+MIDPOINT_RTOL: float = 1e-9
 
 
 @dataclass(frozen=True)
@@ -92,10 +104,11 @@ class FlowOptions:
     order : int
         1: each step moves on a straight line with the velocities at its start (the
         paper's scheme; trajectory error O(dt)). 2: explicit midpoint — the velocities
-        are re-solved on the same network at the half step and the whole step moves
-        with those (trajectory error O(dt^2) for one extra CG solve on the cached
-        factorisation); a half-step probe that meets a negative force or a singular
-        network falls back to the order-1 step.
+        are re-solved on the same network at the half step, projected on the contacts
+        of the step's start (so that contacts only open, as in the Euler step) and the
+        whole step moves with those (two extra CG solves on the cached factorisation);
+        a half-step probe that meets a negative force or a singular network, and a
+        network that may carry a self-stress, fall back to the order-1 step.
     """
 
     dt_max: float = 1e-3
@@ -278,14 +291,14 @@ class Integrator:
             self._sep_value = (pair_vectors(st.x, st.h, pairs, images), st.x, st.h)
         return self._sep_value[0]
 
-    def _solve(self, mask: NDArray[np.bool_], check_pivots: bool = True) -> Solution:
+    def _solve(self, mask: NDArray[np.bool_], check_pivots: bool = True, rtol: float | None = None) -> Solution:
         pairs, images = self._pairs(mask)
         return solve_network(
             self.state.x, self.state.h, pairs, images, self.base_gradient,
             external=self.drive.external_forces(), xi0=self.drive.xi0,
             pressure=self.pressure_internal, rate=self.drive.rate, cond_limit=self.options.cond_limit,
             check_pivots=check_pivots, cache=self.factor_cache, time=self.state.time,
-            separations=self._separations(mask),
+            separations=self._separations(mask), rtol=rtol,
         )
 
     def count(self, mask: NDArray[np.bool_]):
@@ -309,14 +322,15 @@ class Integrator:
             out = out + s_matrix(pairs, unit, self.n) @ ext.ravel()
         return out
 
-    def evaluate(self, mask: NDArray[np.bool_]) -> Evaluation:
-        """Forces on the sub-network ``mask``, or its self-stress if potentially jammed."""
+    def evaluate(self, mask: NDArray[np.bool_], rtol: float | None = None) -> Evaluation:
+        """Forces on the sub-network ``mask``, or its self-stress if potentially jammed
+        (``rtol``: CG tolerance on the cached factor, default the cache's)."""
         pairs, images = self._pairs(mask)
         count = self.count(mask)
         singular = count.potentially_jammed and not self.state.permanent.any()
         if not singular:
             try:
-                sol = self._solve(mask, check_pivots=count.may_self_stress)
+                sol = self._solve(mask, check_pivots=count.may_self_stress, rtol=rtol)
                 return Evaluation(sol.force, sol)
             except SingularNetworkError:
                 singular = True
@@ -451,30 +465,39 @@ class Integrator:
         return k >= 0
 
     def _midpoint(self, sol: Solution, dt: float) -> Solution:
-        """Velocities on the current network at ``time + dt / 2`` (explicit midpoint probe).
+        """Velocities of the midpoint step of length ``dt`` from the current state.
 
-        The state is moved half a step with ``sol``, solved, and restored exactly; the
-        probe ignores collisions (it only samples the velocity field of the fixed network).
-        Returns ``sol`` itself when the probe meets no contacts, a singular network or a
-        negative force (the step then falls back to order 1 and the rewiring at its end
-        handles the event).
+        The state is moved half a step with ``sol``, solved on the same network (a probe
+        that ignores collisions), and restored exactly; the probe's velocities are then
+        projected on the contacts of the current state (:func:`tangent_velocities`).
+        Moved with the raw probe velocities, contacts would drift by O(dt^3) of either
+        sign and could leave the network overlapping; projected, they drift like the
+        Euler step's, by ``+dt^2 |W|^2 / (2 sigma)`` (contacts only open), and the
+        motion along the contacts keeps the midpoint's second order.
+
+        Returns ``sol`` itself (the Euler step) without contacts, under self-propulsion,
+        on a network that may carry a self-stress, or when the probe meets a singular
+        network or a negative force (the rewiring at the step's end handles the event).
         """
         st = self.state
-        if not st.contact.any() or self.drive.mode == "self_propelled":
+        if not st.contact.any() or self.drive.mode == "self_propelled" or self.count(st.contact).may_self_stress:
             return sol
         saved = (st.x, st.h, st.nl.displacement.copy(), st.nl.strain_norm, st.time)
         self._move(0.5 * dt, sol.velocity, sol.gradient)
         st.time = saved[4] + 0.5 * dt
         try:
-            ev = self.evaluate(st.contact)
+            ev = self.evaluate(st.contact, rtol=MIDPOINT_RTOL)
         finally:
             st.x, st.h = saved[0], saved[1]
             st.nl.displacement, st.nl.strain_norm, st.time = saved[2], saved[3], saved[4]
-        if ev.solution is None:
+        if ev.solution is None or self._has_negative_force(ev.force):
             return sol
-        if self._has_negative_force(ev.force):
+        pairs, _ = self._pairs(st.contact)
+        try:
+            return tangent_velocities(self._separations(st.contact), pairs, ev.solution, self.factor_cache,
+                                      self.options.cond_limit, rtol=MIDPOINT_RTOL)
+        except SingularNetworkError:
             return sol
-        return ev.solution
 
     def _refresh(self) -> None:
         """Forces on the moved network; rewire if some turned negative (Sec. IV A ii.b)."""
@@ -576,7 +599,7 @@ class Integrator:
                 # on the cached factor unless a self-stress is possible (as the force solves)
                 dx = solve_contact_system(pairs, unit, self.n, [dr], self.options.cond_limit,
                                           check_pivots=self.count(st.contact).may_self_stress,
-                                          cache=self.factor_cache, warm=False)[0]
+                                          cache=self.factor_cache, warm=False, rtol=CORRECTION_RTOL)[0]
                 dR = -(S.T @ dx)
             except SingularNetworkError:
                 # a self-stress f0 (jammed network): S^T f0 = 0 makes the error component

@@ -58,6 +58,7 @@ __all__ = [
     "solve_network",
     "spectral_norm",
     "stress_tensor",
+    "tangent_velocities",
 ]
 
 
@@ -276,6 +277,7 @@ def solve_network(
     cache: FactorCache | None = None,
     time: float | None = None,
     separations: NDArray[np.float64] | None = None,
+    rtol: float | None = None,
 ) -> Solution:
     """Forces and velocities of a contact network (Eqs. 11–12, 18–19, 23–25).
 
@@ -311,6 +313,8 @@ def solve_network(
         extrapolate its warm starts in time. Never changes which network is solved.
     separations : ndarray, shape (Nc, d), optional
         ``pair_vectors(x, h, pairs, images)`` if the caller has them already.
+    rtol : float, optional
+        CG tolerance on the cached factor (default ``cache.rtol``).
 
     Raises
     ------
@@ -335,7 +339,7 @@ def solve_network(
     if external is not None:
         rhs -= _s_apply(pairs, unit, np.ascontiguousarray(ext, dtype=np.float64).ravel())
     rhs_list = [rhs] if pressure is None else [rhs, rate * r / xi0]
-    sols = solve_contact_system(pairs, unit, n, rhs_list, cond_limit, check_pivots, cache, time)
+    sols = solve_contact_system(pairs, unit, n, rhs_list, cond_limit, check_pivots, cache, time, rtol=rtol)
     if pressure is None:
         f = sols[0]
         E = np.array(gradient, dtype=np.float64)
@@ -352,6 +356,43 @@ def solve_network(
         U += ext.ravel()
     U *= xi0
     return Solution(f, U.reshape(n, d), E, kappa)
+
+
+def tangent_velocities(
+    R: NDArray[np.float64],
+    pairs: NDArray[np.int64],
+    sol: Solution,
+    cache: FactorCache | None = None,
+    cond_limit: float = 1e13,
+    rtol: float | None = None,
+) -> Solution:
+    """``sol`` with the least change of its non-affine velocities that leaves every
+    contact with separation R at rate zero: ``U - S^T N^-1 (dr/dt)``.
+
+    Parameters
+    ----------
+    R : ndarray, shape (Nc, d)
+        Separations of the contacts (need not be those ``sol`` was solved at).
+    pairs : ndarray of int64, shape (Nc, 2)
+    sol : Solution
+    cache, cond_limit, rtol
+        As in :func:`solve_network` (the solve never checks pivots: callers project only
+        networks that carry no self-stress).
+
+    Raises
+    ------
+    SingularNetworkError
+    """
+    n, d = sol.velocity.shape
+    if len(pairs) == 0:
+        return sol
+    R = np.ascontiguousarray(R, dtype=np.float64)
+    pairs = np.ascontiguousarray(pairs, dtype=np.int64)
+    rates = pair_velocities(R, pairs, sol)
+    unit = R / np.linalg.norm(R, axis=1)[:, None]
+    y = solve_contact_system(pairs, unit, n, [rates], cond_limit, False, cache, warm=False, rtol=rtol)[0]
+    U = sol.velocity - _st_apply(pairs, unit, y, n).reshape(n, d)
+    return Solution(sol.force, U, sol.gradient, sol.kappa)
 
 
 def pair_velocities(

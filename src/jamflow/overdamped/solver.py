@@ -620,6 +620,7 @@ def solve_contact_system(
     cache: FactorCache | None = None,
     time: float | None = None,
     warm: bool = True,
+    rtol: float | None = None,
 ) -> list[NDArray[np.float64]]:
     """Solutions of ``N x = b``, ``N = S S^T`` of one contact network, for every b of ``rhs_list``.
 
@@ -637,6 +638,9 @@ def solve_contact_system(
         Start CG from the cache's warm starts and remember the solutions for later ones
         (solves of forces along a trajectory); False starts from zero and leaves them
         alone (other right-hand sides, e.g. the drift correction's).
+    rtol : float, optional
+        CG tolerance on the cached factor (default the cache's); a fresh factorisation
+        solves exactly.
 
     Raises
     ------
@@ -659,7 +663,8 @@ def solve_contact_system(
                       else [np.zeros(len(codes)) for _ in rhs_list])
             sols = []
             for b, x0 in zip(rhs_list, starts):
-                xk, it = _pcg(pairs, unit, n, cache.lu.args, border, b, x0, cache.rtol, cache.max_iter)
+                xk, it = _pcg(pairs, unit, n, cache.lu.args, border, b, x0,
+                              cache.rtol if rtol is None else rtol, cache.max_iter)
                 if it < 0:
                     sols = None
                     break
