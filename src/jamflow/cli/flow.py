@@ -100,6 +100,8 @@ def _common_options(p: argparse.ArgumentParser) -> None:
                    help=f"target steps between events (default {d.steps_per_event:g})")
     p.add_argument("--step-drift", type=float, default=d.step_drift,
                    help=f"largest relative constraint error created per step (default {d.step_drift:g})")
+    p.add_argument("--order", type=int, choices=(1, 2), default=d.order,
+                   help=f"1: Euler step (the paper's), 2: explicit midpoint step (default {d.order})")
     p.add_argument("--correct-every", type=int, default=d.correct_every, metavar="M",
                    help=f"drift correction every M steps, 0 = only on --drift-tol (default {d.correct_every})")
     p.add_argument("--drift-tol", type=float, default=d.drift_tol,
@@ -116,7 +118,8 @@ def _common_options(p: argparse.ArgumentParser) -> None:
 
 def _options(args: argparse.Namespace) -> FlowOptions:
     return FlowOptions(dt_max=args.dt_max, steps_per_event=args.steps_per_event, step_drift=args.step_drift,
-                       correct_every=args.correct_every, drift_tol=args.drift_tol, sync_every=args.sync_every)
+                       order=args.order, correct_every=args.correct_every, drift_tol=args.drift_tol,
+                       sync_every=args.sync_every)
 
 
 def _permanent(args: argparse.Namespace) -> np.ndarray:
