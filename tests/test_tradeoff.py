@@ -104,3 +104,36 @@ def test_chains_stage_keeps_the_asked_link_precision():
     m = _chains_compare(out[1e-6][0], out[1e-14][0])
     assert m["phi_J_error"] <= 1e-6 and m["one_minus_Q"] == 0.0
     assert m["max_link_error"] == pytest.approx(out[1e-6][1], rel=1e-6)
+
+
+def test_flow_errors_separate_the_computed_values_from_the_step_spacing():
+    # a run that computes the reference's stress exactly but records it at a tenth of the
+    # steps: the held error counts the spacing, the error at its own steps is round-off;
+    # an offset of 1e-6 in every computed value shows in both
+    from types import SimpleNamespace
+
+    import xarray as xr
+
+    from jamflow.box import Box
+    from jamflow.packing import Packing
+    from jamflow.tradeoff import _flow_compare
+
+    def run(strain: np.ndarray, offset: float = 0.0) -> SimpleNamespace:
+        stress = 1.0 + 0.3 * np.sin(40.0 * strain) + offset
+        empty = np.zeros(0, dtype=np.int64)
+        series = xr.Dataset({"strain": ("step", strain), "shear_stress": ("step", stress),
+                             "constraint_error": ("step", np.zeros_like(strain)),
+                             "event_strain": ("event", np.zeros(0)), "event_i": ("event", empty),
+                             "event_j": ("event", empty), "event_kind": ("event", empty)})
+        final = Packing(position=np.array([[0.5, 0.5], [1.5, 0.5]]), diameter=np.ones(2), box=Box.cubic(2, 3.0),
+                        contacts=np.array([[0, 1]]))
+        return SimpleNamespace(series=series, final=final)
+
+    ref = run(np.linspace(0.0, 0.1, 10_001))
+    sparse = _flow_compare(run(np.linspace(0.0, 0.1, 1_001)), ref)
+    assert sparse["error"] > 1e-5 and sparse["error_at_steps"] < 1e-12 and sparse["p90_error_at_steps"] < 1e-12
+    shifted = _flow_compare(run(np.linspace(0.0, 0.1, 10_001), 1e-6), ref)
+    scale = float(np.mean(np.abs(ref.series.shear_stress.values)))  # errors are relative to <|sigma_ref|>
+    assert shifted["error_at_steps"] == pytest.approx(1e-6 / scale, rel=1e-6)
+    assert shifted["error"] == pytest.approx(1e-6 / scale, rel=1e-6)
+    assert shifted["one_minus_Q"] == 0.0 and shifted["event_disagreement"] == 0.0
