@@ -7,6 +7,8 @@ final shear stress (both runs must follow the same trajectory to round-off over 
 
 ``--options`` changes this tree's FlowOptions (e.g. a larger ``step_drift``): then the runs
 cover different strains in the same number of steps and the stress difference is not a check.
+``--strain`` runs both trees to the same strain instead, each with its own step rule (the
+trees' defaults may differ): events per second then compare the same stretch of flow.
 
 Start packings: ``--start FILE.nc`` (any jamflow packing; contacts need not be set) or, by
 default, the trade-off harness's start (:func:`jamflow.tradeoff.flow_start`, event-driven
@@ -41,22 +43,24 @@ from jamflow.io import read_packing
 from jamflow.overdamped.driving import Drive
 from jamflow.overdamped.integrate import FlowOptions
 from jamflow.overdamped.run import Stop, run_flow
-path, steps, opts = sys.argv[1], int(sys.argv[2]), FlowOptions(**json.loads(sys.argv[3]))
+path, steps, strain = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
+opts = FlowOptions(**json.loads(sys.argv[4]))
 p = read_packing(path)
 run_flow(p, Drive("shear"), Stop(strain=10.0, max_steps=5), FlowOptions(), unit="small_diameter")  # numba caches
+stop = Stop(strain=strain) if strain > 0 else Stop(strain=10.0, max_steps=steps)
 t0 = time.perf_counter()
-res = run_flow(p, Drive("shear"), Stop(strain=10.0, max_steps=steps), opts, unit="small_diameter")
+res = run_flow(p, Drive("shear"), stop, opts, unit="small_diameter")
 wall = time.perf_counter() - t0
 s = res.series
 print(json.dumps({"wall": wall, "events": int(s.sizes["event"]), "strain": float(s.strain.values[-1]),
-                  "stress": float(s.shear_stress.values[-1]), "steps": steps}))
+                  "stress": float(s.shear_stress.values[-1]), "steps": int(s.sizes["step"]) - 1}))
 """
 
 
-def run_child(src: Path, start: Path, steps: int, options: str = "{}") -> dict:
+def run_child(src: Path, start: Path, steps: int, strain: float, options: str = "{}") -> dict:
     env = dict(os.environ, PYTHONPATH=str(src))
-    out = subprocess.run([sys.executable, "-c", CHILD, str(start), str(steps), options], env=env, check=True,
-                         capture_output=True, text=True)
+    out = subprocess.run([sys.executable, "-c", CHILD, str(start), str(steps), str(strain), options], env=env,
+                         check=True, capture_output=True, text=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -68,6 +72,8 @@ def main() -> None:
     ap.add_argument("--phi", type=float, default=0.83)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--steps", type=int, default=600)
+    ap.add_argument("--strain", type=float, default=0.0,
+                    help="run both trees to this strain instead of --steps steps (each with its own step rule)")
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--options", default="{}", help="FlowOptions of this tree's run as JSON, e.g. '{\"step_drift\": 1e-7}' "
                     "(the base tree always runs the defaults)")
@@ -85,13 +91,14 @@ def main() -> None:
             write_packing(flow_start(args.n, args.phi, args.seed), start)
         runs = []
         for r in range(args.repeats):
-            base = run_child(args.base_src, start, args.steps)
-            new = run_child(SRC, start, args.steps, args.options)
+            base = run_child(args.base_src, start, args.steps, args.strain)
+            new = run_child(SRC, start, args.steps, args.strain, args.options)
             runs.append((base, new))
             rates = [x["events"] / x["wall"] for x in (base, new)]
             print(f"round {r}: base {rates[0]:.2f} events/s ({base['wall']:.2f} s), this tree {rates[1]:.2f} events/s "
                   f"({new['wall']:.2f} s): ratio {rates[1] / rates[0]:.2f}; {new['events']} events over strain "
-                  f"{new['strain']:.4g} in {args.steps} steps ({args.steps / max(new['events'], 1):.1f} steps/event); "
+                  f"{new['strain']:.4g} in {new['steps']} steps ({new['steps'] / max(new['events'], 1):.1f} steps/event; "
+                  f"base {base['events']} events, {base['steps']} steps); "
                   f"strain/min {60 * base['strain'] / base['wall']:.3g} -> {60 * new['strain'] / new['wall']:.3g}; "
                   f"final stress rel. difference {abs(new['stress'] - base['stress']) / abs(base['stress']):.1e}",
                   flush=True)
@@ -125,6 +132,7 @@ def write_outputs(runs: list[tuple[dict, dict]], args: argparse.Namespace, start
             "wall_time": (dims, wall, {"units": "s", "long_name": "wall time of the timed run"}),
             "events": (dims, events, {"units": "1", "long_name": "events in the timed run"}),
             "strain": (dims, table("strain"), {"units": "1", "long_name": "shear strain reached"}),
+            "steps": (dims, table("steps"), {"units": "1", "long_name": "integration steps of the timed run"}),
             "final_shear_stress": (dims, table("stress"), {"units": stress_unit(Drive("shear"), d),
                                                             "long_name": "shear stress at the last step"}),
         },

@@ -74,7 +74,7 @@ def main() -> None:
     ap.add_argument("--sd-step", type=float, default=1e-4)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--sd-strain", type=float, help="strain window of the SD run (time extrapolated to --strain)")
-    ap.add_argument("--order", type=int, default=1, help="FlowOptions.order of the event-driven run")
+    ap.add_argument("--order", type=int, default=FlowOptions().order, help="FlowOptions.order of the event-driven run")
     ap.add_argument("--step-drift", type=float, default=FlowOptions().step_drift)
     args = ap.parse_args()
     sd_strain = args.strain if args.sd_strain is None else args.sd_strain
