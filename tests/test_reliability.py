@@ -229,6 +229,7 @@ def _shear(start: Path, out: Path, *extra: object, changes: dict[str, str] | Non
     ({"--strain": "0.03"}, "stop.strain"),
     ({"--rate": "2"}, "drive.rate"),
     ({"--step-drift": "1e-6"}, "options.step_drift"),
+    ({"--order": "2"}, "options.order"),
 ])
 def test_a_checkpoint_of_another_run_is_refused(capsys, tmp_path, starts, change, differs):
     ck = tmp_path / "ck.nc"
@@ -242,13 +243,15 @@ def test_a_checkpoint_of_another_run_is_refused(capsys, tmp_path, starts, change
     assert not (tmp_path / "x.nc").exists() and _sha(ck) == before
 
 
-def test_a_resumed_run_equals_the_uninterrupted_one_and_removes_its_checkpoint(capsys, tmp_path, starts):
+@pytest.mark.parametrize("order", ["1", "2"])
+def test_a_resumed_run_equals_the_uninterrupted_one_and_removes_its_checkpoint(capsys, tmp_path, starts, order):
     ck = tmp_path / "ck.nc"
     full, part, resumed = tmp_path / "full.nc", tmp_path / "part.nc", tmp_path / "resumed.nc"
-    assert _run(capsys, *_shear(starts[0], full))[0] == 0
-    assert _run(capsys, *_shear(starts[0], part, "--checkpoint", ck, "--max-steps", "25"))[0] == 0
+    step = {"--order": order}
+    assert _run(capsys, *_shear(starts[0], full, changes=step))[0] == 0
+    assert _run(capsys, *_shear(starts[0], part, "--checkpoint", ck, "--max-steps", "25", changes=step))[0] == 0
     assert ck.exists() and read_dataset(part).attrs["complete"] == 0
-    code, _, err = _run(capsys, *_shear(starts[0], resumed, "--checkpoint", ck))
+    code, _, err = _run(capsys, *_shear(starts[0], resumed, "--checkpoint", ck, changes=step))
     assert code == 0, err
     assert not ck.exists()
     a, b = read_dataset(full, "flow"), read_dataset(resumed, "flow")
