@@ -58,7 +58,7 @@ def test_midpoint_step_tracks_the_reference_closer_than_the_straight_step(start)
 
 def test_midpoint_contacts_only_open_so_no_pair_leaves_the_network_overlapping():
     # moved with the raw half-step velocities, contacts drift by O(dt^3) of either sign and a
-    # contact leaving the network could overlap its partner (-1.5e-8 in this run at
+    # contact leaving the network could overlap its partner (-9.4e-9 in this run at
     # step_drift 1e-7); projected on the contacts, they only open, as in the Euler step
     p = random_packing(32, 2, 0.5, "bi", seed=3)
     p = p.evolve(diameter=p.diameter * (1 - 0.03 * np.random.default_rng(3).uniform(size=p.n)))
