@@ -9,6 +9,8 @@ resumed run repeats an uninterrupted one bit for bit.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -77,6 +79,19 @@ def test_shear_keeps_contacts_forces_and_no_overlaps_after_every_step(dense32):
         n_events += collided
         _check_invariants(integ)
     assert n_events >= 5  # the check covered real collisions and rewirings
+    assert any(e[4] == -1 for e in integ.state.events)
+
+
+@pytest.mark.parametrize("pressure", [None, 4.0])
+def test_midpoint_step_keeps_contacts_forces_and_no_overlaps_after_every_step(dense32, pressure):
+    # the midpoint step from event to event, at fixed volume and at fixed pressure
+    drive = Drive("shear") if pressure is None else Drive("shear_fixed_pressure", pressure=pressure)
+    integ = _integrator(dense32, drive, replace(FAST, order=2, steps_per_event=1.0))
+    n_events = 0
+    while integ.state.strain < 0.1:
+        n_events += integ.step()
+        _check_invariants(integ)
+    assert n_events >= 5
     assert any(e[4] == -1 for e in integ.state.events)
 
 
