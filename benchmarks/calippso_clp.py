@@ -87,7 +87,8 @@ def capture(start: Path, n_warm: int) -> list[WarmLP]:
 
     def capturing_run(self, lp, method, basis):
         status, seconds = run(self, lp, method, basis)
-        if basis is not None and method == "simplex":
+        # warm LPs that ran out of pivots go on by interior point: only optimal vertices compare
+        if basis is not None and method == "simplex" and status == highspy.HighsModelStatus.kOptimal:
             a = lp.a_matrix_
             info = self.h.getInfo()
             captured.append(WarmLP(
