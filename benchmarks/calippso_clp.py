@@ -134,7 +134,8 @@ def clp_solve(w: WarmLP, col_status, row_status) -> tuple[float, int, float, tup
     seconds = time.perf_counter() - t0
     if s.getStatusString() != "optimal":
         raise RuntimeError(f"CLP ended with {s.getStatusString()}")
-    return seconds, int(s.iteration), float(s.objectiveValue), s.getBasisStatus()
+    # copies: cylp's arrays view CLP's memory, freed with the model
+    return seconds, int(s.iteration), float(s.objectiveValue), tuple(np.array(v, copy=True) for v in s.getBasisStatus())
 
 
 def highs_refactor(w: WarmLP) -> float:
