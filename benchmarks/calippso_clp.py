@@ -3,14 +3,14 @@
 The warm LPs of a near-jamming start cost the LU factorisation of the simplex basis
 (``docs/calippso-scaling.md``). This benchmark asks whether CLP, the other open-source
 simplex on PyPI with a warm-basis interface (``cylp``; OR-Tools' GLOP takes no
-starting basis through its Python solver wrapper), factorises or pivots these bases better. For each near start (LS to
-p = 1e7, cached by ``benchmarks/calippso.py``) the chain runs as ``jamflow calippso``
-does and its first warm LPs are captured as HiGHS is given them: matrix, bounds and
-the carried basis. Each is then solved by CLP's primal simplex from the same basis at
+starting basis through its Python solver wrapper), factorises or pivots these bases
+better. For each near start (LS to p = 1e7, cached by ``benchmarks/calippso.py``) the
+chain runs as ``jamflow calippso`` does and its first warm LPs are captured as HiGHS
+is given them: matrix, bounds and the carried basis. Each is then solved by CLP's primal simplex from the same basis at
 the chain's feasibility tolerances (``SOLVER_TOL``). Per LP:
 
 - the chain's HiGHS solve (time, pivots) against CLP (time, iterations), and the
-  objective ``-g`` of both (their difference is within the LP tolerances);
+  objective ``-g`` of both, printed side by side;
 - the basis factorisation alone: a re-solve from each solver's own optimal basis
   (zero pivots), with the exponent of its growth with N.
 
@@ -175,7 +175,8 @@ def compare(n: int, n_warm: int) -> xr.Dataset:
     names = ("highs_time", "highs_pivots", "highs_objective", "clp_time", "clp_iterations", "clp_objective",
              "highs_factor_time", "clp_factor_time")
     data = np.array(rows, dtype=float)
-    return xr.Dataset({name: (("N", "lp"), data[None, :, k]) for k, name in enumerate(names)},
+    return xr.Dataset({name: (("N", "lp"), data[None, :, k], {"units": "s" if name.endswith("time") else "1"})
+                       for k, name in enumerate(names)},
                       coords={"N": [n], "lp": np.arange(1, len(rows) + 1)})
 
 
@@ -212,7 +213,7 @@ def main() -> None:
     OUT.mkdir(exist_ok=True)
     ds = xr.concat([compare(n, args.warm_lps) for n in args.sizes], dim="N")
     for name in ("highs_factor_time", "clp_factor_time"):
-        ds.attrs[name + "_exponent"] = fit(ds["N"].values, ds[name].median("lp").values) if ds.sizes["N"] > 1 else np.nan
+        ds.attrs[name + "_exponent"] = fit(ds["N"].values, ds[name].median("lp").values)  # NaN below two sizes
         print(f"{name}: exponent {ds.attrs[name + '_exponent']:.2f} over N = {list(ds['N'].values)}")
     ds.attrs.update(new_dataset_attrs("benchmark calippso_clp", {"sizes": args.sizes, "warm_lps": args.warm_lps,
                                                                  "solver_tol": SOLVER_TOL}))
