@@ -42,6 +42,7 @@ from .network import (
     max_relative_error,
     max_relative_rate,
     max_row_norm,
+    pair_normals,
     pair_vectors,
     pair_velocities,
     solve_network,
@@ -318,8 +319,7 @@ class Integrator:
         out = affine_rates(R, E) / self.drive.xi0
         ext = self.drive.external_forces()
         if ext is not None:
-            unit = R / np.linalg.norm(R, axis=1)[:, None]
-            out = out + s_matrix(pairs, unit, self.n) @ ext.ravel()
+            out = out + s_matrix(pairs, pair_normals(R), self.n) @ ext.ravel()
         return out
 
     def evaluate(self, mask: NDArray[np.bool_], rtol: float | None = None) -> Evaluation:

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..network import isostatic_count, prune_rattlers
-from .network import pair_vectors
+from .network import pair_normals, pair_vectors
 from .solver import s_matrix
 
 __all__ = ["ConstrainedCount", "constrained_subset", "self_stress"]
@@ -120,8 +120,7 @@ def self_stress(
     """
     n = len(x)
     R = pair_vectors(x, h, pairs, images)
-    unit = R / np.linalg.norm(R, axis=1)[:, None]
-    S = s_matrix(pairs, unit, n).toarray()
+    S = s_matrix(pairs, pair_normals(R), n).toarray()
     # smallest right singular vector of S^T (shape (Nd, Nc)) = smallest left singular vector of S
     u, s, _ = np.linalg.svd(S, full_matrices=True)
     f0 = u[:, -1] if len(s) < S.shape[0] else u[:, np.argmin(s)]

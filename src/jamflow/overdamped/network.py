@@ -51,6 +51,7 @@ __all__ = [
     "max_relative_error",
     "max_relative_rate",
     "max_row_norm",
+    "pair_normals",
     "pair_vectors",
     "pair_velocities",
     "s_matrix",
@@ -99,6 +100,11 @@ def _pair_vectors(x, h, pairs, images):  # pragma: no cover - numba
                 shift += images[c, m] * h[k, m]
             out[c, k] = x[j, k] - x[i, k] + shift
     return out
+
+
+def pair_normals(R: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Unit vectors ``n_ij = r_ij / |r_ij|`` of separations R, shape (P, d) (the rows of S)."""
+    return R / np.linalg.norm(R, axis=1)[:, None]
 
 
 def advance_positions(
@@ -389,7 +395,7 @@ def tangent_velocities(
     R = np.ascontiguousarray(R, dtype=np.float64)
     pairs = np.ascontiguousarray(pairs, dtype=np.int64)
     rates = pair_velocities(R, pairs, sol)
-    unit = R / np.linalg.norm(R, axis=1)[:, None]
+    unit = pair_normals(R)
     y = solve_contact_system(pairs, unit, n, [rates], cond_limit, False, cache, warm=False, rtol=rtol)[0]
     U = sol.velocity - _st_apply(pairs, unit, y, n).reshape(n, d)
     return Solution(sol.force, U, sol.gradient, sol.kappa)
