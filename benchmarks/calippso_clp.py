@@ -139,20 +139,12 @@ def clp_solve(w: WarmLP, col_status, row_status) -> tuple[float, int, float, tup
 
 
 def highs_refactor(w: WarmLP) -> float:
-    """HiGHS from its own optimal basis (zero pivots): the basis factorisation [s]."""
-    h = highspy.Highs()
-    h.setOptionValue("output_flag", False)
-    h.setOptionValue("threads", 1)
-    for option in ("primal_feasibility_tolerance", "dual_feasibility_tolerance"):
-        h.setOptionValue(option, SOLVER_TOL)
-    h.setOptionValue("solver", "simplex")
-    h.setOptionValue("simplex_strategy", 4)
-    h.passModel(calippso_module._highs_lp(w.A, w.row_upper, w.col_lower, w.col_upper))
-    h.setBasis(w.optimal_basis)
-    t0 = time.perf_counter()
-    h.run()
-    seconds = time.perf_counter() - t0
-    if h.getInfo().simplex_iteration_count != 0:
+    """HiGHS from its own optimal basis (zero pivots), solved as the chain solves a warm
+    LP (``_Solver._run``): the basis factorisation [s]."""
+    solver = calippso_module._Solver()
+    lp = calippso_module._highs_lp(w.A, w.row_upper, w.col_lower, w.col_upper)
+    _, seconds = solver._run(lp, "simplex", w.optimal_basis)
+    if solver.h.getInfo().simplex_iteration_count != 0:
         raise RuntimeError("HiGHS pivoted from its own optimal basis")
     return seconds
 
