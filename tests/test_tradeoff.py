@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
+import xarray as xr
 
+from jamflow.box import Box
 from jamflow.cli import main
 from jamflow.io import read_dataset
-from jamflow.tradeoff import STAGES, pareto_front, recommend
+from jamflow.packing import Packing
+from jamflow.tradeoff import STAGES, _flow_compare, pareto_front, recommend
 
 
 def test_pareto_front_against_brute_force(rng):
@@ -110,14 +115,6 @@ def test_flow_errors_separate_the_computed_values_from_the_step_spacing():
     # a run that computes the reference's stress exactly but records it at a tenth of the
     # steps: the held error counts the spacing, the error at its own steps is round-off;
     # an offset of 1e-6 in every computed value shows in both
-    from types import SimpleNamespace
-
-    import xarray as xr
-
-    from jamflow.box import Box
-    from jamflow.packing import Packing
-    from jamflow.tradeoff import _flow_compare
-
     def run(strain: np.ndarray, offset: float = 0.0) -> SimpleNamespace:
         stress = 1.0 + 0.3 * np.sin(40.0 * strain) + offset
         empty = np.zeros(0, dtype=np.int64)
