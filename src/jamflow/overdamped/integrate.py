@@ -51,7 +51,13 @@ from .network import (
     tangent_velocities,
 )
 from .rewiring import Evaluation, rewire
-from .solver import FactorCache, SingularNetworkError, s_matrix, solve_contact_system
+from .solver import (
+    COND_LIMIT,
+    FactorCache,
+    SingularNetworkError,
+    s_matrix,
+    solve_contact_system,
+)
 
 __all__ = ["FlowOptions", "FlowState", "Integrator", "EVENT_MADE", "EVENT_BROKEN"]
 
@@ -120,7 +126,7 @@ class FlowOptions:
     drift_tol: float = CONTACT_DRIFT_TOL
     skin: float = 0.3
     sync_every: int = 2000
-    cond_limit: float = 1e13
+    cond_limit: float = COND_LIMIT
     rel_tol: float = REWIRE_REL_TOL
     order: int = 1
 

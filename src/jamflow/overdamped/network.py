@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .solver import (
+    COND_LIMIT,
     FactorCache,
     SingularNetworkError,
     TriangularFactor,
@@ -278,7 +279,7 @@ def solve_network(
     xi0: float = 1.0,
     pressure: float | None = None,
     rate: float = 1.0,
-    cond_limit: float = 1e13,
+    cond_limit: float = COND_LIMIT,
     check_pivots: bool = True,
     cache: FactorCache | None = None,
     time: float | None = None,
@@ -369,7 +370,7 @@ def tangent_velocities(
     pairs: NDArray[np.int64],
     sol: Solution,
     cache: FactorCache | None = None,
-    cond_limit: float = 1e13,
+    cond_limit: float = COND_LIMIT,
     rtol: float | None = None,
 ) -> Solution:
     """``sol`` with the least change of its non-affine velocities that leaves every

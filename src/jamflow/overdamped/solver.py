@@ -27,6 +27,7 @@ from ..network import ContactSet, contact_jacobian
 from ..network._graph_kernels import incidence
 
 __all__ = [
+    "COND_LIMIT",
     "Border",
     "BorderSolves",
     "FactorCache",
@@ -35,6 +36,10 @@ __all__ = [
     "s_matrix",
     "solve_contact_system",
 ]
+
+#: Default ratio of the largest to the smallest pivot of N = S S^T above which the
+#: network is treated as singular (a self-stress: potentially jammed).
+COND_LIMIT: float = 1e13
 
 
 class SingularNetworkError(RuntimeError):
@@ -615,7 +620,7 @@ def solve_contact_system(
     unit: NDArray[np.float64],
     n: int,
     rhs_list: list[NDArray[np.float64]],
-    cond_limit: float = 1e13,
+    cond_limit: float = COND_LIMIT,
     check_pivots: bool = True,
     cache: FactorCache | None = None,
     time: float | None = None,
