@@ -271,6 +271,8 @@ class Integrator:
         if self._pairs_key != key:
             self._pairs_key = key
             self._pairs_value = (self.state.nl.pairs[mask], self.state.nl.images[mask])
+            for a in self._pairs_value:
+                a.flags.writeable = False  # read-only: the solver's cache knows the network by identity
             self._sigma_value = None
             self._free_value = None
         return self._pairs_value

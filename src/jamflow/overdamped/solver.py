@@ -157,6 +157,23 @@ class FactorCache:
     n_factor: int = 0
     n_cg: int = 0
     n_bordered: int = 0
+    _named: tuple | None = field(default=None, init=False, repr=False)
+
+    def network(self, pairs: NDArray[np.int64], n: int) -> tuple[bytes, NDArray[np.int64]]:
+        """Key and pair codes ``i n + j`` of the network ``pairs``.
+
+        Memoised on a read-only ``pairs`` array: a caller that solves one network at
+        every step passes the same read-only array, whose identity then names its
+        content (the memo holds the array, so the identity cannot be reused). The same
+        codes object then also lets the warm starts recognise the network by identity.
+        """
+        named = self._named
+        if named is not None and named[0] is pairs and named[1] == n:
+            return named[2], named[3]
+        key, codes = _network_key(pairs, n), pairs[:, 0] * n + pairs[:, 1]
+        if not pairs.flags.writeable:
+            self._named = (pairs, n, key, codes)
+        return key, codes
 
     def reset(self) -> None:
         """Forget the factorisation (the next solve factorises from scratch)."""
@@ -164,7 +181,7 @@ class FactorCache:
 
     def remember(self, codes: NDArray[np.int64], solutions: list[NDArray[np.float64]], time: float | None) -> None:
         """Keep the solutions of a solve for the next warm starts."""
-        if self.recent and np.array_equal(self.recent[0][0], codes):
+        if self.recent and (self.recent[0][0] is codes or np.array_equal(self.recent[0][0], codes)):
             codes = self.recent[0][0]  # one array per network: later comparisons by identity
         self.recent = [(codes, time, solutions)] + self.recent[:self.warm_order]
 
@@ -180,7 +197,7 @@ class FactorCache:
         if not self.recent or len(self.recent[0][2]) < count:
             return [np.zeros(m) for _ in range(count)]
         last_codes, _, last = self.recent[0]
-        if not np.array_equal(last_codes, codes):
+        if last_codes is not codes and not np.array_equal(last_codes, codes):
             pos = _locate(last_codes, codes)
             out = []
             for g in last[:count]:
@@ -654,8 +671,7 @@ def solve_contact_system(
     ------
     SingularNetworkError
     """
-    key = _network_key(pairs, n) if cache is not None else None
-    codes = pairs[:, 0] * n + pairs[:, 1]
+    key, codes = cache.network(pairs, n) if cache is not None else (None, pairs[:, 0] * n + pairs[:, 1])
     sols = None
     if cache is not None and not check_pivots and cache.lu is not None:
         same = cache.key == key
