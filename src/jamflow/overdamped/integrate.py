@@ -38,6 +38,7 @@ from .network import (
     advance_box,
     advance_positions,
     affine_rates,
+    box_volume,
     has_negative,
     max_relative_error,
     max_relative_rate,
@@ -565,7 +566,7 @@ class Integrator:
         """Box volume ``|det h|`` [lambda^d] (memoised on the box array, which is replaced, never modified)."""
         h = self.state.h
         if self._volume_of is not h:
-            self._volume_of, self._volume = h, abs(float(np.linalg.det(h)))
+            self._volume_of, self._volume = h, box_volume(h)
         return self._volume
 
     def n_contacts(self) -> int:

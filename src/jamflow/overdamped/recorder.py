@@ -10,8 +10,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
 from .integrate import Integrator
 
 __all__ = ["SERIES", "Recorder"]
@@ -37,7 +35,7 @@ class Recorder:
             "strain": st.strain,
             "time": st.time / drive.time_unit,
             "shear_stress": -sig[0, 1],
-            "pressure": float(np.trace(sig)) / integ.d,
+            "pressure": float(sig.trace()) / integ.d,
             "packing_fraction": integ.packing_fraction(),
             "kappa": st.kappa,
             "n_contacts": integ.n_contacts(),

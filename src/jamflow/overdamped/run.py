@@ -229,12 +229,14 @@ def run_flow(
         integ.step(_horizon(integ, stop))
         steps += 1
         st = integ.state
-        if st.step % record_every == 0 or _done(integ, stop):
+        done = _done(integ, stop)
+        if st.step % record_every == 0 or done:
             recorder.record(integ)
             recorded_step = st.step
             if progress is not None:
-                progress(fraction_done(st.strain if stop.strain is not None else st.time / drive.time_unit,
-                                       recorder.columns["packing_fraction"], stop))
+                # a run at its target is done, within whatever round-off the target test allows
+                progress(1.0 if done else fraction_done(st.strain if stop.strain is not None else st.time / drive.time_unit,
+                                                        recorder.columns["packing_fraction"], stop))
         if n_snapshots and target:
             position = st.strain if stop.strain is not None else st.time / drive.time_unit
             while recorder.next_snapshot < n_snapshots and position >= (recorder.next_snapshot + 1) * target / n_snapshots * (1 - 1e-12):
