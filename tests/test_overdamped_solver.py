@@ -217,6 +217,38 @@ def test_extrapolated_warm_starts_and_memoised_borders_match_direct_solves(rng, 
     assert len(cache.bordered) == 1
 
 
+def test_cg_from_a_start_far_larger_than_the_solution_still_meets_its_tolerance(rng):
+    """A warm start 1e6 times the forces: the residual CG updates drifts from b - N x by round-off
+    of the start's size (~1e-10 of the solution), so convergence is confirmed on the true
+    residual; the forces still match a direct solve to 1e-10."""
+    n, d = 30, 2
+    x, box, pairs, images = _random_network(rng, n, d, n_contacts=n + 3)
+    kw = _drive_kwargs("shear", n, d, rng)
+    cache = FactorCache()
+    solve_network(x, box.matrix, pairs, images, check_pivots=False, cache=cache, time=0.0, **kw)
+    cache.remember(cache.codes, [1e6 * rng.normal(size=len(pairs))], 0.5)
+    x1 = x + 1e-4 * rng.normal(size=x.shape)
+    fast = solve_network(x1, box.matrix, pairs, images, check_pivots=False, cache=cache, time=1.0, **kw)
+    assert cache.n_cg == 1, "the CG path was not taken"
+    assert _rel(fast.force, solve_network(x1, box.matrix, pairs, images, **kw).force) < FORCE_REL
+
+
+def test_warm_start_extrapolation_lowers_its_degree_rather_than_amplify(rng):
+    """Four solves of a smooth solution, two of them 1e-9 apart (a collision right after a step):
+    the cubic through them would multiply the solutions by ~1e9; the warm start lowers its degree
+    until its weights sum to at most WARM_WEIGHT_LIMIT and stays close to the solution."""
+    from jamflow.overdamped.solver import WARM_WEIGHT_LIMIT
+
+    codes = np.array([2, 5, 9])
+    a, b = rng.normal(size=(2, 3))
+    cache = FactorCache()
+    for t in (0.0, 1.0, 1.0 + 1e-9, 2.0):
+        cache.remember(codes, [a + b * t + 1e-6 * rng.normal(size=3)], t)
+    x0 = cache.warm_starts(codes, 1, 3.0)[0]
+    assert np.max(np.abs(x0)) <= WARM_WEIGHT_LIMIT * np.max(np.abs(a + 2.0 * b)) + 1e-5
+    assert _rel(x0, a + 3.0 * b) < 1e-4
+
+
 @pytest.mark.parametrize("eps", [None, 1e-3])
 def test_symmetric_factor_keeps_only_l_and_solves_as_superlu_does(rng, eps):
     """The factorisation the solver caches (SymmetricMode, diagonal pivots) has no row pivoting, so
@@ -282,6 +314,10 @@ def test_warm_starts_extrapolate_polynomials_of_their_order_exactly(rng):
     assert np.array_equal(cache.warm_starts(codes, 1, 1.0)[0], f(1.0))
     moved = np.array([3, 9, 20])
     assert np.array_equal(cache.warm_starts(moved, 1, 1.7)[0], np.array([f(1.0)[0], 0.0, f(1.0)[3]]))
+    # a second solve at the newest time (the state changed, e.g. by a drift correction) replaces it
+    cache.remember(codes, [f(1.0) + c], 1.0)
+    assert len(cache.recent) == cache.warm_order + 1
+    assert np.array_equal(cache.warm_starts(codes, 1, 1.0)[0], f(1.0) + c)
 
 
 @pytest.mark.parametrize("d", [2, 3])
