@@ -294,19 +294,23 @@ def test_bordered_preconditioner_with_several_added_and_removed_pairs(rng, mode)
 
 
 def test_warm_starts_extrapolate_polynomials_of_their_order_exactly(rng):
-    """Solutions that are a quadratic in time are extrapolated exactly from three remembered solves
-    (a linear one from two); a changed network gets the last solution on its kept pairs, zero on new
-    ones; a solve at a remembered time gets that solution."""
+    """Solutions that are a cubic in time are extrapolated exactly from four remembered solves (the
+    default order), a quadratic from three, a linear one from two; a changed network gets the last
+    solution on its kept pairs, zero on new ones; a solve at a remembered time gets that solution."""
     codes = np.array([3, 7, 11, 20])
-    a, b, c = rng.normal(size=(3, 4))
+    a, b, c, e = rng.normal(size=(4, 4))
 
     def f(t):
-        return a + b * t + c * t * t
+        return a + b * t + c * t * t + e * t ** 3
 
     cache = FactorCache()
-    for t in (0.0, 0.4, 1.0):
+    for t in (0.0, 0.4, 0.7, 1.0):
         cache.remember(codes, [f(t)], t)
-    assert _rel(cache.warm_starts(codes, 1, 1.7)[0], f(1.7)) < 1e-13
+    assert _rel(cache.warm_starts(codes, 1, 1.3)[0], f(1.3)) < 1e-12
+    quad = FactorCache(warm_order=2)
+    for t in (0.0, 0.4, 1.0):
+        quad.remember(codes, [f(t) - e * t ** 3], t)
+    assert _rel(quad.warm_starts(codes, 1, 1.7)[0], f(1.7) - e * 1.7 ** 3) < 1e-13
     lin = FactorCache(warm_order=1)
     for t in (0.4, 1.0):
         lin.remember(codes, [a + b * t], t)
