@@ -95,6 +95,37 @@ def test_midpoint_step_keeps_contacts_forces_and_no_overlaps_after_every_step(de
     assert any(e[4] == -1 for e in integ.state.events)
 
 
+def test_fixed_pressure_forces_meet_the_solver_tolerance_where_their_two_parts_cancel(dense32):
+    """Fixed-pressure shear, p = 40: f = a + kappa b, and near jamming a and b cancel by up to
+    ~300x. CG solves them on to the tolerance relative to f, so at every step the forces equal a
+    direct solve to 1e-10 of the largest (8e-10 with a and b only solved to their own size)."""
+    from jamflow.overdamped import network
+
+    gains = []
+    split = network._pressure_forces
+
+    def watched(sols, r, load):
+        out = split(sols, r, load)
+        gains.append(out[2])
+        return out
+
+    integ = _integrator(dense32, Drive("shear_fixed_pressure", pressure=40.0), FAST)
+    worst = 0.0
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(network, "_pressure_forces", watched)
+        while integ.state.strain < 0.1:
+            integ.step()
+            st = integ.state
+            f = integ.solution.force
+            if f.size and integ.solution.velocity.size:
+                pairs, images = st.nl.pairs[st.contact], st.nl.images[st.contact]
+                direct = network.solve_network(st.x, st.h, pairs, images, integ.base_gradient,
+                                               pressure=integ.pressure_internal, rate=integ.drive.rate)
+                worst = max(worst, float(np.max(np.abs(direct.force - f)) / np.max(np.abs(direct.force))))
+    assert max(gains) > 100.0  # the run met strong cancellation
+    assert worst < 1e-10
+
+
 def test_midpoint_contacts_only_open_so_no_pair_leaves_the_network_overlapping(dense32):
     # moved with the raw half-step velocities, contacts drift by O(dt^3) of either sign and a
     # contact leaving the network could overlap its partner (-9.4e-9 in this run); projected

@@ -104,6 +104,20 @@ def _pair_vectors(x, h, pairs, images):  # pragma: no cover - numba
     return out
 
 
+def _pressure_forces(sols, r, load):
+    """``(kappa, f, gain)`` of fixed-pressure shear from ``N a = -S V_aff / xi0`` and ``N b = rate r / xi0``.
+
+    ``kappa`` makes the contact virial ``f . r`` equal ``load = p Omega d`` (Eq. 25);
+    ``f = a + kappa b``; ``gain = max(|a|, |kappa b|) / |f|`` is the factor by which
+    errors of a and b grow in f through cancellation.
+    """
+    a, b = sols
+    kappa = float((load - a @ r) / (b @ r))
+    f = a + kappa * b
+    size = max(float(np.max(np.abs(a))), abs(kappa) * float(np.max(np.abs(b))))
+    return kappa, f, size / max(float(np.max(np.abs(f))), np.finfo(np.float64).tiny)
+
+
 def pair_normals(R: NDArray[np.float64]) -> NDArray[np.float64]:
     """Unit vectors ``n_ij = r_ij / |r_ij|`` of separations R, shape (P, d) (the rows of S)."""
     return R / np.linalg.norm(R, axis=1)[:, None]
@@ -380,18 +394,17 @@ def solve_network(
     pairs = np.ascontiguousarray(pairs, dtype=np.int64)
     if external is not None:
         rhs -= _s_apply(pairs, unit, np.ascontiguousarray(ext, dtype=np.float64).ravel())
-    rhs_list = [rhs] if pressure is None else [rhs, rate * r / xi0]
-    sols = solve_contact_system(pairs, unit, n, rhs_list, cond_limit, check_pivots, cache, time, rtol=rtol)
     if pressure is None:
-        f = sols[0]
+        f = solve_contact_system(pairs, unit, n, [rhs], cond_limit, check_pivots, cache, time, rtol=rtol)[0]
         E = np.array(gradient, dtype=np.float64)
         kappa = np.nan
     else:
-        # E = gradient - kappa * rate * I:  f = a + kappa * b with N b = rate r / xi0
-        a, b = sols
-        omega = box_volume(h)
-        kappa = float((pressure * omega * d - a @ r) / (b @ r))
-        f = a + kappa * b
+        # E = gradient - kappa * rate * I:  f = a + kappa * b with N b = rate r / xi0; where a
+        # and b cancel in f, CG solves them to its tolerance relative to f (``gain``)
+        load = pressure * box_volume(h) * d
+        sols = solve_contact_system(pairs, unit, n, [rhs, rate * r / xi0], cond_limit, check_pivots, cache, time,
+                                    rtol=rtol, gain=lambda ab: _pressure_forces(ab, r, load)[2])
+        kappa, f, _ = _pressure_forces(sols, r, load)
         E = np.array(gradient, dtype=np.float64) - kappa * rate * np.eye(d)
     U = _st_apply(pairs, unit, f, n)
     if external is not None:
