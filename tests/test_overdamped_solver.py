@@ -177,13 +177,11 @@ def _s_operator(rng, eps):
 def test_compiled_triangular_solve_matches_a_dense_solve(rng, eps):
     """The cached factor's compiled substitution solves N x = b as a dense solve does (random and
     nearly singular N, one and several right-hand sides)."""
-    import scipy.sparse.linalg as spla
-
     from jamflow.overdamped.network import TriangularFactor
 
     S = _s_operator(rng, eps)
     N = (S @ S.T).tocsc()
-    fac = TriangularFactor(spla.splu(N, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0))
+    fac = TriangularFactor(N)
     B = rng.normal(size=(N.shape[0], 3))
     dense = np.linalg.solve(N.toarray(), B)
     cond = np.linalg.cond(N.toarray())
@@ -271,20 +269,36 @@ def test_warm_start_extrapolation_lowers_its_degree_rather_than_amplify(rng):
 
 
 @pytest.mark.parametrize("eps", [None, 1e-3])
-def test_symmetric_factor_keeps_only_l_and_solves_as_superlu_does(rng, eps):
-    """The factorisation the solver caches (SymmetricMode, diagonal pivots) has no row pivoting, so
-    U = diag(U) L^T and only L is kept; its solves agree with SuperLU's own solve with L and U
-    (random N and N near a self-stress, cond ~ 1e6) to the backward-stable bound."""
-    from jamflow.overdamped.solver import TriangularFactor, _factorize
+def test_ldlt_factor_reproduces_n_and_solves_as_superlu_does(rng, eps):
+    """The cached factor P^T N P = (I + L) D (I + L)^T rebuilds N to round-off, its pivots D lie
+    between N's smallest eigenvalue and largest diagonal entry with product det N, and its solves
+    agree with SuperLU's LU solve (random N and N near a self-stress, cond ~ 1e6) to the
+    backward-stable bound."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    from jamflow.overdamped.solver import _factorize
 
     S = _s_operator(rng, eps)
-    lu = _factorize(S, cond_limit=1e13, check_pivots=False)
-    fac = TriangularFactor(lu)
-    assert fac.symmetric and fac.args[3].size == 0
+    fac = _factorize(S, cond_limit=1e13)
+    Lp, Li, Lx, d, perm = fac.args
+    m = len(d)
+    L = sp.csc_matrix((Lx, Li, Lp), shape=(m, m)).toarray()
+    assert np.all(np.tril(L, -1) == L)  # strictly lower
     N = (S @ S.T).toarray()
+    P = np.zeros((m, m))
+    P[perm, np.arange(m)] = 1.0
+    rebuilt = P @ (np.eye(m) + L) @ np.diag(d) @ (np.eye(m) + L).T @ P.T
+    assert _rel(rebuilt, N) < 1e-13
+    # LDL^T pivots of a positive definite N: between its smallest eigenvalue and largest diagonal
+    # entry, with product det N
+    eig = np.linalg.eigvalsh(N)
+    assert d.min() >= eig[0] * (1 - 1e-6) and d.max() <= N.diagonal().max() * (1 + 1e-12)
+    assert np.sum(np.log(d)) == pytest.approx(np.sum(np.log(eig)), rel=1e-8)
+    lu = spla.splu(sp.csc_matrix(N))
     bound = 1e3 * np.linalg.cond(N) * np.finfo(float).eps
     for _ in range(3):
-        b = rng.normal(size=N.shape[0])
+        b = rng.normal(size=m)
         assert _rel(fac.solve(b), lu.solve(b)) < bound
         assert _rel(fac.solve(b), np.linalg.solve(N, b)) < bound
 

@@ -355,8 +355,9 @@ def solve_network(
     cond_limit : float
         Pivot ratio of N beyond which the network counts as singular.
     check_pivots : bool
-        Check the pivots (else only an exactly singular factor or a solution whose
-        residual exceeds ``1e-8`` relative is reported singular).
+        Near potential jamming: solve by a fresh factorisation, whose pivot ratio decides
+        singularity. Without it the cached CG path may be taken, and a direct solve is
+        checked by its pivots and its residual (``1e-8`` relative).
     cache : FactorCache, optional
         Reuse of an earlier factorisation as a CG preconditioner, on the same network
         or on one at most ``cache.max_changes`` pairs away (bordered preconditioner);
