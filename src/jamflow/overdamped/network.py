@@ -222,9 +222,10 @@ def _max_row_norm(a):  # pragma: no cover - numba
 def box_volume(h: NDArray[np.float64]) -> float:
     """Volume ``|det h|`` of the box with lattice matrix h, shape (d, d) [lambda^d].
 
-    Any lattice matrix (a drive's gradient need not keep it triangular). Compiled:
-    the recorder and the fixed-pressure solve ask at every step, where
-    ``np.linalg.det`` costs more than the stress sum over all contacts.
+    The dynamics keep h upper triangular (:func:`advance_box`), where this is the
+    product of the diagonal, as :attr:`jamflow.box.Box.volume`; the elimination holds
+    for any h. Compiled: the recorder and the fixed-pressure solve ask at every step,
+    where ``np.linalg.det`` costs more than the stress sum over all contacts.
     """
     return _abs_det(np.ascontiguousarray(h, dtype=np.float64))
 
