@@ -18,7 +18,16 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["Box"]
+__all__ = ["Box", "lattice_volume"]
+
+
+def lattice_volume(h: NDArray[np.float64]) -> float:
+    """Volume of the box with upper-triangular lattice matrix h, shape (d, d) [length^d].
+
+    ``det h``, the product of the diagonal (the form every box here takes; :class:`Box`
+    rejects others). For code that carries h as a bare array along a trajectory.
+    """
+    return float(np.prod(np.diagonal(h)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -83,7 +92,7 @@ class Box:
     @property
     def volume(self) -> float:
         """Box volume [length^d]."""
-        return float(np.prod(np.diag(self.matrix)))
+        return lattice_volume(self.matrix)
 
     @property
     def is_orthogonal(self) -> bool:

@@ -27,7 +27,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 
-from ..box import Box
+from ..box import Box, lattice_volume
 from ..packing import sphere_volume
 from ..tolerances import CONTACT_DRIFT_TOL, REWIRE_REL_TOL
 from .collisions import NeighborList, build_neighbor_list, images_of, next_collision
@@ -38,7 +38,6 @@ from .network import (
     advance_box,
     advance_positions,
     affine_rates,
-    box_volume,
     has_negative,
     max_relative_error,
     max_relative_rate,
@@ -563,10 +562,10 @@ class Integrator:
         return self.particle_volume / self.volume()
 
     def volume(self) -> float:
-        """Box volume ``|det h|`` [lambda^d] (memoised on the box array, which is replaced, never modified)."""
+        """Box volume ``det h`` [lambda^d] (memoised on the box array, which is replaced, never modified)."""
         h = self.state.h
         if self._volume_of is not h:
-            self._volume_of, self._volume = h, box_volume(h)
+            self._volume_of, self._volume = h, lattice_volume(h)
         return self._volume
 
     def n_contacts(self) -> int:

@@ -27,6 +27,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from ..box import lattice_volume
 from .solver import (
     COND_LIMIT,
     FactorCache,
@@ -48,7 +49,6 @@ __all__ = [
     "advance_box",
     "advance_positions",
     "affine_rates",
-    "box_volume",
     "has_negative",
     "max_relative_error",
     "max_relative_rate",
@@ -219,41 +219,6 @@ def _max_row_norm(a):  # pragma: no cover - numba
     return np.sqrt(top)
 
 
-def box_volume(h: NDArray[np.float64]) -> float:
-    """Volume ``|det h|`` of the box with lattice matrix h, shape (d, d) [lambda^d].
-
-    The dynamics keep h upper triangular (:func:`advance_box`), where this is the
-    product of the diagonal, as :attr:`jamflow.box.Box.volume`; the elimination holds
-    for any h. Compiled: the recorder and the fixed-pressure solve ask at every step,
-    where ``np.linalg.det`` costs more than the stress sum over all contacts.
-    """
-    return _abs_det(np.ascontiguousarray(h, dtype=np.float64))
-
-
-@numba.njit(cache=True)
-def _abs_det(h):  # pragma: no cover - numba
-    """``|det h|`` by Gaussian elimination with partial pivoting."""
-    a = h.copy()
-    d = a.shape[0]
-    det = 1.0
-    for k in range(d):
-        p = k
-        for i in range(k + 1, d):
-            if abs(a[i, k]) > abs(a[p, k]):
-                p = i
-        if a[p, k] == 0.0:
-            return 0.0
-        if p != k:
-            for j in range(d):
-                a[k, j], a[p, j] = a[p, j], a[k, j]
-        det *= a[k, k]
-        for i in range(k + 1, d):
-            m = a[i, k] / a[k, k]
-            for j in range(k, d):
-                a[i, j] -= m * a[k, j]
-    return abs(det)
-
-
 @functools.lru_cache(maxsize=64)
 def _spectral_norm(data: bytes, d: int) -> float:
     return float(np.linalg.norm(np.frombuffer(data).reshape(d, d), 2))
@@ -403,7 +368,7 @@ def solve_network(
     else:
         # E = gradient - kappa * rate * I:  f = a + kappa * b with N b = rate r / xi0; where a
         # and b cancel in f, CG solves them to its tolerance relative to f (``gain``)
-        load = pressure * box_volume(h) * d
+        load = pressure * lattice_volume(h) * d
         sols = solve_contact_system(pairs, unit, n, [rhs, rate * r / xi0], cond_limit, check_pivots, cache, time,
                                     rtol=rtol, gain=lambda ab: _pressure_forces(ab, r, load)[2])
         kappa, f, _ = _pressure_forces(sols, r, load)
