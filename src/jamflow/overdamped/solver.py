@@ -529,20 +529,14 @@ def _pcg(pairs, unit, n, lu, border, b, x0, rtol, max_iter):  # pragma: no cover
     against 20 % without the last step).
     """
     x = x0.copy()
-    r = b - _n_apply(pairs, unit, n, x)
-    z = _precondition(lu, border, r)
-    p = z.copy()
-    rz = np.dot(r, z)
+    r, z, p, rz = _residual(pairs, unit, n, lu, border, b, x)
     start = _max_abs(x0)
     for it in range(max_iter + 1):
         if _max_abs(z) <= rtol * _max_abs(x):
             if not 100.0 * EPS * start > rtol * _max_abs(x):
                 return _last_step(pairs, unit, n, x, p, rz), it
             start = 0.0
-            r = b - _n_apply(pairs, unit, n, x)
-            z = _precondition(lu, border, r)
-            p = z.copy()
-            rz = np.dot(r, z)
+            r, z, p, rz = _residual(pairs, unit, n, lu, border, b, x)
             if _max_abs(z) <= rtol * _max_abs(x):
                 return _last_step(pairs, unit, n, x, p, rz), it
         if it == max_iter or not rz > 0.0:
@@ -559,6 +553,14 @@ def _pcg(pairs, unit, n, lu, border, b, x0, rtol, max_iter):  # pragma: no cover
         p = z + (rz_new / rz) * p
         rz = rz_new
     return x, -1
+
+
+@numba.njit(cache=True)
+def _residual(pairs, unit, n, lu, border, b, x):  # pragma: no cover - numba
+    """CG's state at x: residual ``b - N x``, preconditioned residual z, direction z, ``r . z``."""
+    r = b - _n_apply(pairs, unit, n, x)
+    z = _precondition(lu, border, r)
+    return r, z, z.copy(), np.dot(r, z)
 
 
 @numba.njit(cache=True)
@@ -667,6 +669,19 @@ def _factorize(S: sp.csr_matrix, cond_limit: float) -> TriangularFactor:
     return factor
 
 
+def _cg_each(pairs, unit, n, cache, border, rhs_list, starts, rtol):
+    """CG on the cached factor for every right-hand side from its start, or None if one does
+    not converge within ``cache.max_iter`` (``cache.iterations``: the last solve's)."""
+    sols = []
+    for b, x0 in zip(rhs_list, starts):
+        x, it = _pcg(pairs, unit, n, cache.lu.args, border, b, x0, rtol, cache.max_iter)
+        if it < 0:
+            return None
+        cache.iterations = it
+        sols.append(x)
+    return sols
+
+
 def solve_contact_system(
     pairs: NDArray[np.int64],
     unit: NDArray[np.float64],
@@ -722,24 +737,11 @@ def solve_contact_system(
         if border is not None:
             starts = (cache.warm_starts(codes, len(rhs_list), time) if warm
                       else [np.zeros(len(codes)) for _ in rhs_list])
-            sols = []
-            for b, x0 in zip(rhs_list, starts):
-                xk, it = _pcg(pairs, unit, n, cache.lu.args, border, b, x0,
-                              cache.rtol if rtol is None else rtol, cache.max_iter)
-                if it < 0:
-                    sols = None
-                    break
-                cache.iterations = it
-                sols.append(xk)
+            tol = cache.rtol if rtol is None else rtol
+            sols = _cg_each(pairs, unit, n, cache, border, rhs_list, starts, tol)
             factor = gain(sols) if sols is not None and gain is not None else 1.0
             if factor > 1.0:
-                tight = (cache.rtol if rtol is None else rtol) / factor
-                for k, b in enumerate(rhs_list):
-                    xk, it = _pcg(pairs, unit, n, cache.lu.args, border, b, sols[k], tight, cache.max_iter)
-                    if it < 0:
-                        sols = None
-                        break
-                    sols[k] = xk
+                sols = _cg_each(pairs, unit, n, cache, border, rhs_list, sols, tol / factor)
             if sols is not None:
                 cache.n_cg += 1
                 cache.n_bordered += not same
