@@ -662,7 +662,7 @@ def _factorize(S: sp.csr_matrix, cond_limit: float) -> TriangularFactor:
     every factorisation is checked (SuperLU's U had to be extracted for it, and only
     solves near potential jamming were).
     """
-    factor = TriangularFactor((S @ S.T).tocsc())
+    factor = TriangularFactor(S @ S.T)  # reads the upper triangle only, so no CSC copy of all of N
     piv = np.abs(factor.pivots)
     if piv.size and piv.min() < piv.max() / cond_limit:
         raise SingularNetworkError(f"N = S S^T nearly singular (pivot ratio {piv.min() / piv.max():.3g})")
