@@ -160,9 +160,10 @@ def test_pair_closing_a_self_stress_is_not_solved_by_the_bordered_path():
     assert cache.n_bordered == 0 and cache.n_factor == 1
 
 
-def _s_operator(rng, eps):
-    """S of a random 40-disc network (``eps`` None) or of the bent ring near a self-stress."""
-    from jamflow.overdamped.network import pair_vectors, s_matrix
+def _contact_network(rng, eps):
+    """Pairs, unit vectors and particle count of a random 40-disc network (``eps`` None) or of
+    the bent ring near a self-stress."""
+    from jamflow.overdamped.network import pair_vectors
 
     if eps is None:
         x, box, pairs, images = _random_network(rng, 40, 2, n_contacts=45)
@@ -170,7 +171,14 @@ def _s_operator(rng, eps):
     else:
         x, h, pairs, images = _bent_ring(eps)
     R = pair_vectors(x, h, pairs, images)
-    return s_matrix(pairs, R / np.linalg.norm(R, axis=1)[:, None], len(x))
+    return pairs, R / np.linalg.norm(R, axis=1)[:, None], len(x)
+
+
+def _s_operator(rng, eps):
+    """S of :func:`_contact_network`."""
+    from jamflow.overdamped.network import s_matrix
+
+    return s_matrix(*_contact_network(rng, eps))
 
 
 @pytest.mark.parametrize("eps", [None, 1e-3])
@@ -181,7 +189,7 @@ def test_compiled_triangular_solve_matches_a_dense_solve(rng, eps):
 
     S = _s_operator(rng, eps)
     N = (S @ S.T).tocsc()
-    fac = TriangularFactor(N)
+    fac = TriangularFactor.of_matrix(N)
     B = rng.normal(size=(N.shape[0], 3))
     dense = np.linalg.solve(N.toarray(), B)
     cond = np.linalg.cond(N.toarray())
@@ -277,10 +285,12 @@ def test_ldlt_factor_reproduces_n_and_solves_as_superlu_does(rng, eps):
     import scipy.sparse as sp
     import scipy.sparse.linalg as spla
 
+    from jamflow.overdamped.network import s_matrix
     from jamflow.overdamped.solver import _factorize
 
-    S = _s_operator(rng, eps)
-    fac = _factorize(S, cond_limit=1e13)
+    pairs, unit, n = _contact_network(rng, eps)
+    S = s_matrix(pairs, unit, n)
+    fac, _ = _factorize(pairs, unit, n, pairs[:, 0] * n + pairs[:, 1], cond_limit=1e13)
     Lp, Li, Lx, d, perm = fac.args
     m = len(d)
     L = sp.csc_matrix((Lx, Li, Lp), shape=(m, m)).toarray()
@@ -303,10 +313,107 @@ def test_ldlt_factor_reproduces_n_and_solves_as_superlu_does(rng, eps):
         assert _rel(fac.solve(b), np.linalg.solve(N, b)) < bound
 
 
+@pytest.mark.parametrize("eps", [None, 1e-3])
+def test_compiled_ldlt_equals_qdldl_under_the_same_ordering(rng, eps):
+    """Two implementations of one factorisation: the compiled up-looking LDL^T under QDLDL's AMD
+    ordering gives QDLDL's L and D to round-off (random N and N near a self-stress)."""
+    from jamflow.overdamped.ldl import TriangularFactor
+
+    pairs, unit, n = _contact_network(rng, eps)
+    ref = TriangularFactor.of_network(pairs, unit, n)
+    ours = TriangularFactor.of_network(pairs, unit, n, order=ref.args[4])
+    assert np.array_equal(ours.args[0], ref.args[0]) and np.array_equal(ours.args[4], ref.args[4])
+    m = len(pairs)
+    as_dense = [_dense_l(f.args, m) for f in (ref, ours)]
+    assert _rel(as_dense[1], as_dense[0]) < 1e-13
+    assert _rel(ours.pivots, ref.pivots) < 1e-13
+
+
+def _dense_l(args, m):
+    """L of a factor's arrays as a dense matrix."""
+    import scipy.sparse as sp
+
+    Lp, Li, Lx = args[:3]
+    return sp.csc_matrix((Lx, Li, Lp), shape=(m, m)).toarray()
+
+
+def test_a_carried_ordering_factorises_a_changed_network_exactly(rng):
+    """The AMD ordering of a network carried to one with three pairs removed and five added: the
+    kept pairs are eliminated in their order there and the added ones last; the factor under it
+    solves the changed network's N as a dense solve does, and a fill limit below its entries
+    refuses it."""
+    from jamflow.overdamped.ldl import CarriedOrder, TriangularFactor
+    from jamflow.overdamped.network import pair_vectors, s_matrix
+
+    x, box, pairs, images = _random_network(rng, 40, 2, n_contacts=53)
+    R = pair_vectors(x, box.matrix, pairs, images)
+    unit = R / np.linalg.norm(R, axis=1)[:, None]
+    n = len(x)
+    codes = pairs[:, 0] * n + pairs[:, 1]
+    base = np.arange(45)
+    changed = np.concatenate([base[3:], np.arange(45, 53)[:5]])
+    carried = CarriedOrder.of(codes[base], TriangularFactor.of_network(pairs[base], unit[base], n))
+    order = carried.order(codes[changed])
+    assert np.array_equal(np.sort(order), np.arange(len(changed)))
+    kept_rank = carried.rank[changed[order][:-5]]
+    assert np.all(np.diff(kept_rank) > 0), "kept pairs leave their carried order"
+    assert np.array_equal(changed[order][-5:], changed[-5:]), "added pairs are not eliminated last"
+    fac = TriangularFactor.of_network(pairs[changed], unit[changed], n, order=order)
+    S = s_matrix(pairs[changed], unit[changed], n)
+    N = (S @ S.T).toarray()
+    b = rng.normal(size=len(changed))
+    bound = 1e3 * np.linalg.cond(N) * np.finfo(float).eps
+    assert _rel(fac.solve(b), np.linalg.solve(N, b)) < bound
+    assert TriangularFactor.of_network(pairs[changed], unit[changed], n, order=order, max_fill=fac.fill - 1) is None
+
+
+def test_a_self_stress_under_a_carried_ordering_is_reported():
+    """The pair that closes the collinear ring, factorised under the open chain's carried
+    ordering (appended last), leaves a round-off pivot: reported as singular."""
+    from jamflow.overdamped.ldl import CarriedOrder, TriangularFactor
+    from jamflow.overdamped.network import pair_vectors
+    from jamflow.overdamped.solver import _factorize
+
+    x, h, pairs, images = _bent_ring(0.0)
+    R = pair_vectors(x, h, pairs, images)
+    unit = R / np.linalg.norm(R, axis=1)[:, None]
+    n = len(x)
+    codes = pairs[:, 0] * n + pairs[:, 1]
+    carried = CarriedOrder.of(codes[:3], TriangularFactor.of_network(pairs[:3], unit[:3], n))
+    with pytest.raises(SingularNetworkError):
+        _factorize(pairs, unit, n, codes, 1e13, carried)
+
+
+@pytest.mark.parametrize("mode", ["shear", "fixed_pressure"])
+def test_the_cache_carries_its_ordering_and_forgets_it_on_reset(rng, mode):
+    """Refactorising at every change (``max_changes`` 0), the cache factorises a changed network
+    under the ordering carried from the first one, with the direct solve's forces to 1e-10; a
+    reset forgets the ordering, so that a run resumed there computes a fresh one as the
+    uninterrupted run did."""
+    n, d, length = 400, 2, 20.0
+    x = rng.uniform(0, length, size=(n, d))
+    box = Box.cubic(d, length)
+    nl = build_neighbor_list(x, box, np.full(n, 0.5), skin=1.0)
+    pick = rng.choice(len(nl.pairs), size=n // 2 + 2, replace=False)  # sparse: no self-stress
+    base, new = np.sort(pick[:-2]), np.sort(pick[2:])
+    kw = _drive_kwargs(mode, n, d, rng)
+    cache = FactorCache(max_changes=0)
+    solve_network(x, box.matrix, nl.pairs[base], nl.images[base], check_pivots=False, cache=cache, **kw)
+    carried = cache.order
+    assert np.array_equal(carried.codes, cache.codes)
+    x1 = x + 1e-3 * rng.normal(size=x.shape)
+    fast = solve_network(x1, box.matrix, nl.pairs[new], nl.images[new], check_pivots=False, cache=cache, **kw)
+    assert cache.n_factor == 2 and cache.order is carried, "the changed network was not factorised under the carried ordering"
+    direct = solve_network(x1, box.matrix, nl.pairs[new], nl.images[new], **kw)
+    assert _rel(fast.force, direct.force) < FORCE_REL
+    cache.reset()
+    assert cache.order is None
+
+
 @pytest.mark.parametrize("mode", ["shear", "fixed_pressure"])
 def test_bordered_preconditioner_with_several_added_and_removed_pairs(rng, mode):
-    """Three pairs added and three removed (within ``max_changes``): the bordered CG still gives the
-    direct solve's forces to 1e-10; one more change than ``max_changes`` is refactorised."""
+    """Three pairs added and three removed (within ``max_changes`` = 8): the bordered CG still gives
+    the direct solve's forces to 1e-10; one more change than ``max_changes`` is refactorised."""
     n, d = 30, 2
     x = rng.uniform(0, 5.0, size=(n, d))
     box = Box.cubic(d, 5.0)
@@ -316,7 +423,7 @@ def test_bordered_preconditioner_with_several_added_and_removed_pairs(rng, mode)
     new = np.sort(np.concatenate([base[3:], spare]))
     kw = _drive_kwargs(mode, n, d, rng)
     x1 = x + 1e-3 * rng.normal(size=x.shape)
-    cache = FactorCache()
+    cache = FactorCache(max_changes=8)
     solve_network(x, box.matrix, nl.pairs[base], nl.images[base], check_pivots=False, cache=cache, **kw)
     fast = solve_network(x1, box.matrix, nl.pairs[new], nl.images[new], check_pivots=False, cache=cache, **kw)
     assert (cache.n_factor, cache.n_bordered) == (1, 1), "the bordered CG path was not taken"

@@ -39,8 +39,8 @@ from .solver import (
     solve_contact_system,
 )
 
-# FactorCache, SingularNetworkError, TriangularFactor and s_matrix live in .solver and are
-# part of this module's API (solve_network takes and raises them)
+# FactorCache and s_matrix live in .solver, SingularNetworkError and TriangularFactor in .ldl;
+# they are part of this module's API (solve_network takes and raises them)
 __all__ = [
     "FactorCache",
     "SingularNetworkError",

@@ -1,10 +1,10 @@
 """Solving ``N x = b`` on a contact network, ``N = S S^T`` (Lerner, Düring & Wyart, Eq. 11).
 
-The operator S (Eq. 2) and its products, the sparse LDL^T factor of N with an explicit
-singularity check, and what makes the repeated solves of an event-driven run cheap:
-the factor of the last factorised network kept as a conjugate-gradient preconditioner
-between events (:class:`FactorCache`; the paper solves Eq. 11 by CG), solved by
-compiled substitution (:class:`TriangularFactor`), and bordered preconditioners for
+The operator S (Eq. 2) and its products, the singularity check on the sparse LDL^T
+factor of N (:mod:`.ldl`), and what makes the repeated solves of an event-driven run
+cheap: the factor of the last factorised network kept as a conjugate-gradient
+preconditioner between events (:class:`FactorCache`; the paper solves Eq. 11 by CG),
+its fill-reducing ordering carried to the next factorisation, and bordered preconditioners for
 networks a few pairs away from the factorised one (:class:`Border`,
 :class:`BorderSolves`). :func:`solve_contact_system` chooses between CG and a fresh
 factorisation; :func:`jamflow.overdamped.network.solve_network` builds the right-hand
@@ -20,12 +20,20 @@ from typing import Any, NamedTuple
 
 import numba
 import numpy as np
-import qdldl
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from ..network import ContactSet, contact_jacobian
 from ..network._graph_kernels import incidence
+from .ldl import (
+    CARRY_FILL,
+    CarriedOrder,
+    SingularNetworkError,
+    TriangularFactor,
+    _pair_coupling,
+    _triangular_solve,
+    locate,
+)
 
 __all__ = [
     "COND_LIMIT",
@@ -51,10 +59,6 @@ WARM_WEIGHT_LIMIT: float = 50.0
 
 #: Machine epsilon of float64 (the round-off unit of the CG residual updates).
 EPS: float = float(np.finfo(np.float64).eps)
-
-
-class SingularNetworkError(RuntimeError):
-    """``N = S S^T`` is singular: the network carries a self-stress (potentially jammed)."""
 
 
 def s_matrix(pairs: NDArray[np.int64], unit: NDArray[np.float64], n: int) -> sp.csr_matrix:
@@ -125,12 +129,18 @@ class FactorCache:
     max_changes : int
         A network that differs from the factorised one by at most this many added plus
         removed pairs (the candidates of the rewiring after a collision) is solved by CG
-        with a bordered preconditioner built from the cached factor (:func:`_bordered`).
+        with a bordered preconditioner built from the cached factor (:func:`_bordered`);
+        beyond, it is factorised. Under a carried ordering a factorisation costs about a
+        third of one with a fresh AMD ordering, and 4 gave the shortest runs at N = 1024
+        (8 before the ordering was carried).
     key : bytes or None
         Identity of the factorised network (its pairs).
     codes : ndarray of int64 or None
         Pair codes ``i N + j`` of the factorised network, in its order.
     lu : TriangularFactor or None
+    order : CarriedOrder or None
+        The fill-reducing ordering carried from one factorisation to the next
+        (:class:`~jamflow.overdamped.ldl.CarriedOrder`).
     solves : BorderSolves or None
         The solves with ``lu`` that the bordered preconditioners share.
     recent : list of (codes, time, solutions)
@@ -157,10 +167,11 @@ class FactorCache:
 
     rtol: float = 1e-11
     max_iter: int = 8
-    max_changes: int = 8
+    max_changes: int = 4
     key: bytes | None = None
     codes: NDArray[np.int64] | None = None
     lu: Any = None
+    order: CarriedOrder | None = None
     solves: Any = None
     recent: list = field(default_factory=list)
     warm_order: int = 3
@@ -190,6 +201,7 @@ class FactorCache:
     def reset(self) -> None:
         """Forget the factorisation (the next solve factorises from scratch)."""
         self.key, self.codes, self.lu, self.solves, self.recent, self.bordered = None, None, None, None, [], {}
+        self.order = None
 
     def remember(self, codes: NDArray[np.int64], solutions: list[NDArray[np.float64]], time: float | None) -> None:
         """Keep the solutions of a solve for the next warm starts (a second solve of the
@@ -215,7 +227,7 @@ class FactorCache:
             return [np.zeros(m) for _ in range(count)]
         last_codes, _, last = self.recent[0]
         if last_codes is not codes and not np.array_equal(last_codes, codes):
-            pos = _locate(last_codes, codes)
+            pos = locate(last_codes, codes)
             out = []
             for g in last[:count]:
                 x0 = np.zeros(m)
@@ -256,16 +268,6 @@ def _lagrange_weights(times: list[float], time: float) -> list[float]:
 
 def _network_key(pairs: NDArray[np.int64], n: int) -> bytes:
     return np.int64(n).tobytes() + np.ascontiguousarray(pairs, dtype=np.int64).tobytes()
-
-
-def _locate(codes_from: NDArray[np.int64], codes_to: NDArray[np.int64]) -> NDArray[np.int64]:
-    """Position in ``codes_from`` of every entry of ``codes_to`` (-1 where absent)."""
-    if len(codes_from) == 0:
-        return np.full(len(codes_to), -1, dtype=np.int64)
-    order = np.argsort(codes_from, kind="stable")
-    srt = codes_from[order]
-    loc = np.minimum(np.searchsorted(srt, codes_to), len(srt) - 1)
-    return np.where(srt[loc] == codes_to, order[loc], -1)
 
 
 class Border(NamedTuple):
@@ -332,10 +334,16 @@ class BorderSolves:
     unit : ndarray, shape (m, d)
     n : int
         Number of particles.
+
+    Attributes
+    ----------
+    plain : Border
+        The trivial border (the factorised network itself).
     """
 
     def __init__(self, lu: TriangularFactor, pairs: NDArray[np.int64], unit: NDArray[np.float64], n: int) -> None:
         self.lu, self.pairs, self.unit = lu, pairs, unit
+        self.plain = _plain_border(len(pairs))
         self.ptr, self.incident = incidence(pairs, n)
         self.removed: dict[int, NDArray[np.float64]] = {}
         self.added: dict[int, tuple[int, int, NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]] = {}
@@ -355,24 +363,6 @@ class BorderSolves:
             g = _coupling(i, j, u, self.pairs, self.unit, self.ptr, self.incident)
             self.added[code] = (i, j, u, g, self.lu.solve(g))
         return self.added[code]
-
-
-@numba.njit(cache=True)
-def _pair_coupling(i, j, u, a, b, v):  # pragma: no cover - numba
-    """``S_p . S_c`` of pairs p = (i, j) and c = (a, b) with unit vectors u, v (Eq. 2: -u at i, +u at j)."""
-    uv = 0.0
-    for k in range(u.shape[0]):
-        uv += u[k] * v[k]
-    s = 0.0
-    if i == a:
-        s += uv
-    if i == b:
-        s -= uv
-    if j == a:
-        s -= uv
-    if j == b:
-        s += uv
-    return s
 
 
 @numba.njit(cache=True)
@@ -403,7 +393,7 @@ def _bordered(solves, old_codes, codes, pairs, unit, cond_limit, max_changes):
     -------
     Border or None
     """
-    pos = _locate(old_codes, codes)
+    pos = locate(old_codes, codes)
     C = np.flatnonzero(pos >= 0)
     P = np.flatnonzero(pos < 0)
     kept = np.zeros(len(old_codes), dtype=bool)
@@ -573,100 +563,30 @@ def _last_step(pairs, unit, n, x, p, rz):  # pragma: no cover - numba
     return x
 
 
-@numba.njit(cache=True)
-def _triangular_solve(Lp, Li, Lx, d, perm, b):  # pragma: no cover - numba
-    """``x`` with ``N x = b`` from ``P^T N P = (I + L) D (I + L)^T`` (L strictly lower, CSC).
-
-    ``perm`` is P as an index array: ``(P^T b)[k] = b[perm[k]]``.
-    """
-    n = b.shape[0]
-    y = np.empty(n)
-    for k in range(n):
-        y[k] = b[perm[k]]
-    for j in range(n):
-        yj = y[j]
-        for p in range(Lp[j], Lp[j + 1]):
-            y[Li[p]] -= Lx[p] * yj
-    for j in range(n - 1, -1, -1):
-        s = y[j] / d[j]
-        for p in range(Lp[j], Lp[j + 1]):
-            s -= Lx[p] * y[Li[p]]
-        y[j] = s
-    x = np.empty(n)
-    for k in range(n):
-        x[perm[k]] = y[k]
-    return x
-
-
-class TriangularFactor:
-    """The LDL^T factorisation of a symmetric N, solved by compiled substitution.
-
-    QDLDL (the OSQP project's LDL^T, with an AMD fill-reducing ordering) factorises
-    ``P^T N P = (I + L) D (I + L)^T`` without pivoting: N = S S^T is symmetric positive
-    (semi)definite, so the diagonal pivots D are those of Cholesky squared and a
-    self-stress shows as a pivot that is round-off. At N = 1024 it factorises a
-    contact network's N in 1.3 ms against SuperLU's 1.9 ms, and gives D without
-    further work. Its own ``solve`` is not used: the cached factor is applied inside
-    compiled CG, by :func:`_triangular_solve` on the same factors.
-
-    Parameters
-    ----------
-    N : scipy.sparse matrix, shape (m, m)
-        Symmetric; only its upper triangle is read.
-
-    Attributes
-    ----------
-    args : tuple
-        ``(Lp, Li, Lx, d, perm)``: L as CSC arrays, the pivots D and the ordering P, as
-        the compiled solvers take them.
-    pivots : ndarray, shape (m,)
-        D, in elimination order.
-    plain : Border
-        The trivial border (the factorised network itself).
-
-    Raises
-    ------
-    SingularNetworkError
-        A pivot is exactly zero (QDLDL stops there).
-    """
-
-    def __init__(self, N: sp.spmatrix) -> None:
-        try:
-            L, d, perm = qdldl.Solver(sp.triu(N, format="csc")).factors()
-        except RuntimeError as exc:  # "not quasi-definite": a zero pivot
-            raise SingularNetworkError(f"N = S S^T singular ({exc})") from exc
-        L = sp.csc_matrix(L)
-        self.args = (L.indptr.astype(np.int64), L.indices.astype(np.int64), np.asarray(L.data, dtype=np.float64),
-                     np.asarray(d, dtype=np.float64), np.asarray(perm, dtype=np.int64))
-        self.pivots = self.args[3]
-        self.shape = N.shape
-        self.plain = _plain_border(N.shape[0])
-
-    def solve(self, b: NDArray[np.float64]) -> NDArray[np.float64]:
-        """``N^-1 b`` for b of shape (n,) or (n, k)."""
-        b = np.asarray(b, dtype=np.float64)
-        if b.ndim == 1:
-            return _triangular_solve(*self.args, np.ascontiguousarray(b))
-        out = np.empty(b.shape)
-        for k in range(b.shape[1]):
-            out[:, k] = _triangular_solve(*self.args, np.ascontiguousarray(b[:, k]))
-        return out
-
-
-def _factorize(S: sp.csr_matrix, cond_limit: float) -> TriangularFactor:
-    """LDL^T factorisation of N = S S^T with an explicit singularity check.
+def _factorize(pairs: NDArray[np.int64], unit: NDArray[np.float64], n: int, codes: NDArray[np.int64],
+               cond_limit: float, carried: CarriedOrder | None = None) -> tuple[TriangularFactor, CarriedOrder]:
+    """LDL^T factorisation of N = S S^T with an explicit singularity check, and the
+    ordering to carry to the next one.
 
     A self-stress makes N exactly singular in exact arithmetic; in floating point its
     smallest pivot is round-off. A ratio of the smallest to the largest |D_kk| below
     ``1 / cond_limit`` is treated as singular. The pivots come with the factor, so
-    every factorisation is checked (SuperLU's U had to be extracted for it, and only
-    solves near potential jamming were).
+    every factorisation is checked.
+
+    With ``carried`` (the AMD ordering of an earlier network) the factor is built under
+    that ordering while L has at most ``CARRY_FILL`` times its entries there; otherwise
+    under a fresh AMD ordering, which is returned to be carried.
     """
-    factor = TriangularFactor(S @ S.T)  # reads the upper triangle only, so no CSC copy of all of N
+    factor = None
+    if carried is not None:
+        factor = TriangularFactor.of_network(pairs, unit, n, carried.order(codes), max_fill=CARRY_FILL * carried.fill)
+    if factor is None:
+        factor = TriangularFactor.of_network(pairs, unit, n)
+        carried = CarriedOrder.of(codes, factor)
     piv = np.abs(factor.pivots)
     if piv.size and piv.min() < piv.max() / cond_limit:
         raise SingularNetworkError(f"N = S S^T nearly singular (pivot ratio {piv.min() / piv.max():.3g})")
-    return factor
+    return factor, carried
 
 
 def _cg_each(pairs, unit, n, cache, border, rhs_list, starts, rtol):
@@ -728,7 +648,7 @@ def solve_contact_system(
     if cache is not None and not check_pivots and cache.lu is not None:
         same = cache.key == key
         if same:
-            border = cache.lu.plain
+            border = cache.solves.plain
         elif key in cache.bordered:
             border = cache.bordered[key]
         else:
@@ -746,16 +666,15 @@ def solve_contact_system(
                 cache.n_cg += 1
                 cache.n_bordered += not same
     if sols is None:
-        S = s_matrix(pairs, unit, n)
-        lu = _factorize(S, cond_limit)
+        lu, order = _factorize(pairs, unit, n, codes, cond_limit, cache.order if cache is not None else None)
         sols = [lu.solve(b) for b in rhs_list]
         if not check_pivots:
             f, rhs = sols[0], rhs_list[0]
-            res = np.linalg.norm(S @ (S.T @ f) - rhs)
+            res = np.linalg.norm(_n_apply(pairs, unit, n, f) - rhs)
             if not np.all(np.isfinite(f)) or res > 1e-8 * max(np.linalg.norm(rhs), 1e-300):
                 raise SingularNetworkError(f"N = S S^T solve inaccurate (relative residual {res / max(np.linalg.norm(rhs), 1e-300):.3g})")
         if cache is not None:
-            cache.key, cache.codes, cache.lu, cache.iterations = key, codes, lu, 0
+            cache.key, cache.codes, cache.lu, cache.order, cache.iterations = key, codes, lu, order, 0
             cache.solves = BorderSolves(cache.lu, pairs, unit, n)
             cache.bordered = {}
             cache.n_factor += 1
