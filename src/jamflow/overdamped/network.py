@@ -276,12 +276,16 @@ class Solution:
         Velocity-gradient tensor E of the affine flow (box: ``dh/dt = E h``).
     kappa : float
         Compression-to-shear rate ratio of fixed-pressure shear (Eq. 25); NaN otherwise.
+    virial : ndarray, shape (d, d), or None
+        Contact virial ``sum_c f_c r_c n_c n_c^T`` at the separations solved at (the
+        stress tensor times the volume, :func:`stress_tensor`); None where not computed.
     """
 
     force: NDArray[np.float64]
     velocity: NDArray[np.float64]
     gradient: NDArray[np.float64]
     kappa: float
+    virial: NDArray[np.float64] | None = None
 
 
 def solve_network(
@@ -373,11 +377,29 @@ def solve_network(
                                     rtol=rtol, gain=lambda ab: _pressure_forces(ab, r, load)[2])
         kappa, f, _ = _pressure_forces(sols, r, load)
         E = np.array(gradient, dtype=np.float64) - kappa * rate * np.eye(d)
-    U = _st_apply(pairs, unit, f, n)
+    U, virial = _velocities_and_virial(pairs, unit, r, f, n)
     if external is not None:
         U += ext.ravel()
     U *= xi0
-    return Solution(f, U.reshape(n, d), E, kappa)
+    return Solution(f, U.reshape(n, d), E, kappa, virial)
+
+
+@numba.njit(cache=True)
+def _velocities_and_virial(pairs, unit, r, f, n):  # pragma: no cover - numba
+    """``S^T f`` (flat, shape (N d,)) and the contact virial ``sum_c f_c r_c n_c n_c^T``, shape (d, d)."""
+    nc, d = unit.shape
+    out = np.zeros(n * d)
+    virial = np.zeros((d, d))
+    for c in range(nc):
+        i = pairs[c, 0] * d
+        j = pairs[c, 1] * d
+        w = f[c] * r[c]
+        for a in range(d):
+            out[i + a] -= unit[c, a] * f[c]
+            out[j + a] += unit[c, a] * f[c]
+            for b in range(d):
+                virial[a, b] += w * unit[c, a] * unit[c, b]
+    return out, virial
 
 
 def tangent_velocities(
