@@ -10,8 +10,8 @@ by a few pairs from the last one, so the AMD ordering of an earlier network, wit
 pairs added since appended at the end (:class:`CarriedOrder`), orders the next one
 almost as well: the factor is then built here, in compiled code, in about a third of
 the time. QDLDL's numeric factorisation is the same up-looking algorithm as
-:func:`_numeric` (T. A. Davis, *Direct Methods for Sparse Linear Systems*, Sec. 4.4 and
-4.7), but its Python interface takes no ordering.
+:func:`_numeric` (T. A. Davis, *Direct Methods for Sparse Linear Systems*, SIAM 2006,
+ch. 4), but its Python interface takes no ordering.
 """
 
 from __future__ import annotations
@@ -221,7 +221,8 @@ class TriangularFactor:
         ``(m, m)``.
     """
 
-    def __init__(self, Lp, Li, Lx, d, perm) -> None:
+    def __init__(self, Lp: NDArray[np.int64], Li: NDArray[np.int64], Lx: NDArray[np.float64],
+                 d: NDArray[np.float64], perm: NDArray[np.int64]) -> None:
         self.args = (np.asarray(Lp, dtype=np.int64), np.asarray(Li, dtype=np.int64),
                      np.asarray(Lx, dtype=np.float64), np.asarray(d, dtype=np.float64),
                      np.asarray(perm, dtype=np.int64))
