@@ -210,6 +210,15 @@ class TriangularFactor:
     of contact pairs, with AMD or a given ordering). The cached factor is applied inside
     compiled CG by :func:`_triangular_solve` on ``args``.
 
+    Parameters
+    ----------
+    Lp, Li, Lx : ndarray
+        L, strictly lower triangular, shape (m, m), as CSC arrays.
+    d : ndarray, shape (m,)
+        The pivots D.
+    perm : ndarray of int64, shape (m,)
+        The ordering P: row and column k of ``P^T N P`` are those of pair ``perm[k]``.
+
     Attributes
     ----------
     args : tuple
