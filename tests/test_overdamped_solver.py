@@ -394,7 +394,7 @@ def test_the_cache_carries_its_ordering_and_forgets_it_on_reset(rng, mode):
     x = rng.uniform(0, length, size=(n, d))
     box = Box.cubic(d, length)
     nl = build_neighbor_list(x, box, np.full(n, 0.5), skin=1.0)
-    pick = rng.choice(len(nl.pairs), size=n // 2 + 2, replace=False)  # sparse: no self-stress
+    pick = rng.choice(len(nl.pairs), size=n // 2 + 2, replace=False)  # half a pair per disc: no self-stress here
     base, new = np.sort(pick[:-2]), np.sort(pick[2:])
     kw = _drive_kwargs(mode, n, d, rng)
     cache = FactorCache(max_changes=0)
