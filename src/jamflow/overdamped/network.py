@@ -377,29 +377,24 @@ def solve_network(
                                     rtol=rtol, gain=lambda ab: _pressure_forces(ab, r, load)[2])
         kappa, f, _ = _pressure_forces(sols, r, load)
         E = np.array(gradient, dtype=np.float64) - kappa * rate * np.eye(d)
-    U, virial = _velocities_and_virial(pairs, unit, r, f, n)
+    U = _st_apply(pairs, unit, f, n)
     if external is not None:
         U += ext.ravel()
     U *= xi0
-    return Solution(f, U.reshape(n, d), E, kappa, virial)
+    return Solution(f, U.reshape(n, d), E, kappa, _virial(unit, r, f))
 
 
 @numba.njit(cache=True)
-def _velocities_and_virial(pairs, unit, r, f, n):  # pragma: no cover - numba
-    """``S^T f`` (flat, shape (N d,)) and the contact virial ``sum_c f_c r_c n_c n_c^T``, shape (d, d)."""
+def _virial(unit, r, f):  # pragma: no cover - numba
+    """Contact virial ``sum_c f_c r_c n_c n_c^T`` of unit vectors, lengths and forces, shape (d, d)."""
     nc, d = unit.shape
-    out = np.zeros(n * d)
     virial = np.zeros((d, d))
     for c in range(nc):
-        i = pairs[c, 0] * d
-        j = pairs[c, 1] * d
         w = f[c] * r[c]
         for a in range(d):
-            out[i + a] -= unit[c, a] * f[c]
-            out[j + a] += unit[c, a] * f[c]
             for b in range(d):
                 virial[a, b] += w * unit[c, a] * unit[c, b]
-    return out, virial
+    return virial
 
 
 def tangent_velocities(
