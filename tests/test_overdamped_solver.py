@@ -367,6 +367,26 @@ def test_a_carried_ordering_factorises_a_changed_network_exactly(rng):
     assert TriangularFactor.of_network(pairs[changed], unit[changed], n, order=order, max_fill=fac.fill - 1) is None
 
 
+def test_locate_merges_increasing_codes_and_sorts_others_to_the_same_positions(rng):
+    """Positions of pair codes in another network's codes: the linear merge (both increasing, as
+    networks cut from a neighbour list are) and the sorted search (any order) agree with a
+    search entry by entry, -1 for codes absent (pairs added), including codes beyond both ends."""
+    from jamflow.overdamped.ldl import _ascending, locate
+
+    old = np.unique(rng.integers(5, 10_000, 300))
+    kept = old[rng.random(len(old)) < 0.9]
+    new = np.unique(np.concatenate([kept, rng.integers(0, 10_020, 12), [0, 10_019]]))
+    expected = np.array([np.flatnonzero(old == c)[0] if np.any(old == c) else -1 for c in new])
+    assert _ascending(old) and _ascending(new) and np.any(expected < 0) and np.sum(expected >= 0) > 200
+    assert np.array_equal(locate(old, new), expected)
+    shuffled = rng.permutation(len(old))
+    assert not _ascending(old[shuffled])
+    back = np.full(len(new), -1)
+    back[expected >= 0] = np.argsort(shuffled)[expected[expected >= 0]]
+    assert np.array_equal(locate(old[shuffled], new), back)
+    assert np.array_equal(locate(old[:0], new), np.full(len(new), -1))
+
+
 def test_a_self_stress_under_a_carried_ordering_is_reported():
     """The pair that closes the collinear ring, factorised under the open chain's carried
     ordering (appended last), leaves a round-off pivot: reported as singular."""

@@ -183,20 +183,55 @@ def _triangular_solve(Lp, Li, Lx, d, perm, b):  # pragma: no cover - numba
         for p in range(Lp[j], Lp[j + 1]):
             y[Li[p]] -= Lx[p] * yj
     for j in range(n - 1, -1, -1):
-        s = y[j] / d[j]
-        for p in range(Lp[j], Lp[j + 1]):
-            s -= Lx[p] * y[Li[p]]
-        y[j] = s
+        # two partial sums: the back substitution is a chain of dependent subtractions
+        s0, s1 = y[j] / d[j], 0.0
+        p, end = Lp[j], Lp[j + 1]
+        while p + 1 < end:
+            s0 -= Lx[p] * y[Li[p]]
+            s1 -= Lx[p + 1] * y[Li[p + 1]]
+            p += 2
+        if p < end:
+            s0 -= Lx[p] * y[Li[p]]
+        y[j] = s0 + s1
     x = np.empty(n)
     for k in range(n):
         x[perm[k]] = y[k]
     return x
 
 
+@numba.njit(cache=True)
+def _ascending(codes):  # pragma: no cover - numba
+    """Whether ``codes`` strictly increase."""
+    for k in range(1, len(codes)):
+        if codes[k] <= codes[k - 1]:
+            return False
+    return True
+
+
+@numba.njit(cache=True)
+def _merge_positions(codes_from, codes_to):  # pragma: no cover - numba
+    """:func:`locate` of two strictly increasing code arrays, by one merge pass."""
+    out = np.full(len(codes_to), -1, dtype=np.int64)
+    i = 0
+    for k in range(len(codes_to)):
+        c = codes_to[k]
+        while i < len(codes_from) and codes_from[i] < c:
+            i += 1
+        if i < len(codes_from) and codes_from[i] == c:
+            out[k] = i
+    return out
+
+
 def locate(codes_from: NDArray[np.int64], codes_to: NDArray[np.int64]) -> NDArray[np.int64]:
-    """Position in ``codes_from`` of every entry of ``codes_to`` (-1 where absent)."""
+    """Position in ``codes_from`` of every entry of ``codes_to`` (-1 where absent).
+
+    Pair codes of networks cut from a neighbour list increase along them; such pairs
+    of arrays are merged in linear time, others searched after a sort.
+    """
     if len(codes_from) == 0:
         return np.full(len(codes_to), -1, dtype=np.int64)
+    if _ascending(codes_from) and _ascending(codes_to):
+        return _merge_positions(codes_from, codes_to)
     order = np.argsort(codes_from, kind="stable")
     srt = codes_from[order]
     loc = np.minimum(np.searchsorted(srt, codes_to), len(srt) - 1)
