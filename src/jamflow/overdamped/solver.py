@@ -402,27 +402,53 @@ def _bordered(solves, old_codes, codes, pairs, unit, cond_limit, max_changes):
     if len(P) + len(Q) > max_changes or len(C) == 0:
         return None
     m = len(old_codes)
-    pos_c = pos[C]
-    W, WQQ_inv = np.zeros((m, 0)), np.zeros((0, 0))
+    W = np.zeros((m, 0))
     if len(Q):
         W = np.column_stack([solves.removal(q) for q in Q])
-        WQQ_inv = np.linalg.inv(W[Q])
-    border = Border(m, pos_c, C, Q, W, WQQ_inv, P, np.zeros((len(C), 0)), np.zeros((len(C), 0)), np.zeros((0, 0)))
-    if len(P) == 0:
-        return border
-    added = [solves.addition(int(codes[k]), int(pairs[k, 0]), int(pairs[k, 1]), unit[k]) for k in P]
-    G = np.column_stack([a[3] for a in added])
-    Y = np.column_stack([a[4] for a in added])
-    if len(Q):
-        # M^-1 of the couplings with the removed pairs' rows cut, then M_CC^-1 by capacitance
-        Y = Y - W @ G[Q]
-        Y = Y - W @ (WQQ_inv @ Y[Q])
-    GCP, B = np.ascontiguousarray(G[pos_c]), np.ascontiguousarray(Y[pos_c])
-    GPP = np.array([[_pair_coupling(a[0], a[1], a[2], b[0], b[1], b[2]) for b in added] for a in added])
-    T = GPP - GCP.T @ B
-    if np.any(np.diag(T) <= np.diag(GPP) / cond_limit):
-        return None
-    return border._replace(NCP=GCP, B=B, T_inv=np.linalg.inv(T))
+    d = unit.shape[1]
+    ends, units = np.zeros((len(P), 2), dtype=np.int64), np.zeros((len(P), d))
+    G, Y = np.zeros((m, len(P))), np.zeros((m, len(P)))
+    for e, k in enumerate(P):
+        ends[e, 0], ends[e, 1], units[e], G[:, e], Y[:, e] = solves.addition(
+            int(codes[k]), int(pairs[k, 0]), int(pairs[k, 1]), unit[k])
+    ok, WQQ_inv, NCP, B, T_inv = _border_blocks(W, Q, G, Y, pos[C], ends, units, float(cond_limit))
+    return Border(m, pos[C], C, Q, W, WQQ_inv, P, NCP, B, T_inv) if ok else None
+
+
+@numba.njit(cache=True)
+def _border_blocks(W, Q, G, Y, pos_c, ends, units, cond_limit):  # pragma: no cover - numba
+    """The dense blocks of a :class:`Border`, ``(ok, WQQ_inv, NCP, B, T_inv)``; ok is False where
+    the Schur complement of an added pair falls below ``diag(G_PP) / cond_limit``.
+
+    W: ``M^-1 e_Q`` (m, |Q|); G, Y: couplings g_p of the added pairs and ``M^-1 g_p`` (m, |P|);
+    ends, units: the added pairs' particles and unit vectors.
+    """
+    nq, npp, nc = len(Q), G.shape[1], len(pos_c)
+    WQQ_inv = np.zeros((nq, nq))
+    if nq:
+        WQQ = np.empty((nq, nq))
+        for a in range(nq):
+            for b in range(nq):
+                WQQ[a, b] = W[Q[a], b]
+        WQQ_inv = np.linalg.inv(WQQ)
+        if npp:
+            # M^-1 of the couplings with the removed pairs' rows cut, then M_CC^-1 by capacitance
+            Y = Y - W @ np.ascontiguousarray(G[Q])
+            Y = Y - W @ (WQQ_inv @ np.ascontiguousarray(Y[Q]))
+    NCP, B = np.empty((nc, npp)), np.empty((nc, npp))
+    for k in range(nc):
+        for e in range(npp):
+            NCP[k, e] = G[pos_c[k], e]
+            B[k, e] = Y[pos_c[k], e]
+    if npp == 0:
+        return True, WQQ_inv, NCP, B, np.zeros((0, 0))
+    T = NCP.T @ B
+    for e in range(npp):
+        for f in range(npp):
+            T[e, f] = _pair_coupling(ends[e, 0], ends[e, 1], units[e], ends[f, 0], ends[f, 1], units[f]) - T[e, f]
+        if T[e, e] <= _pair_coupling(ends[e, 0], ends[e, 1], units[e], ends[e, 0], ends[e, 1], units[e]) / cond_limit:
+            return False, WQQ_inv, NCP, B, T
+    return True, WQQ_inv, NCP, B, np.linalg.inv(T)
 
 
 @numba.njit(cache=True)
