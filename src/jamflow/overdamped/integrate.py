@@ -315,11 +315,11 @@ class Integrator:
         return sol
 
     def count(self, mask: NDArray[np.bool_]):
-        """Constrained subset of the sub-network ``mask`` (memoised on the last mask)."""
-        key = (mask.tobytes(), self._nl_version)
-        if self._count_key != key:
-            self._count_key = key
-            self._count = constrained_subset(self.n, self.d, self.state.nl.pairs[mask])
+        """Constrained subset of the sub-network ``mask`` (memoised with its pairs)."""
+        pairs, _ = self._pairs(mask)
+        if self._count_key is not self._pairs_key:
+            self._count_key = self._pairs_key
+            self._count = constrained_subset(self.n, self.d, pairs)
         return self._count
 
     def _drive_rates(self, pairs: NDArray[np.int64], images: NDArray[np.int64]) -> NDArray[np.float64]:

@@ -350,7 +350,6 @@ def solve_network(
     """
     n, d = x.shape
     nc = len(pairs)
-    ext = np.zeros((n, d)) if external is None else external
     if nc == 0:
         E = np.array(gradient, dtype=np.float64)
         kappa = np.nan
@@ -358,13 +357,14 @@ def solve_network(
             # without contacts no pressure can be carried and Eq. 25 is undefined: the
             # gas is sheared at fixed volume (kappa = 0) until the first collision
             kappa = 0.0
-        return Solution(np.zeros(0), xi0 * ext.copy(), E, kappa)
+        velocity = np.zeros((n, d)) if external is None else xi0 * np.array(external, dtype=np.float64)
+        return Solution(np.zeros(0), velocity, E, kappa)
     R = pair_vectors(x, h, pairs, images) if separations is None else separations
     r, unit, rhs = _normals_and_drive(np.ascontiguousarray(R, dtype=np.float64),
                                       np.ascontiguousarray(gradient, dtype=np.float64), float(xi0))
     pairs = np.ascontiguousarray(pairs, dtype=np.int64)
     if external is not None:
-        rhs -= _s_apply(pairs, unit, np.ascontiguousarray(ext, dtype=np.float64).ravel())
+        rhs -= _s_apply(pairs, unit, np.ascontiguousarray(external, dtype=np.float64).ravel())
     if pressure is None:
         f = solve_contact_system(pairs, unit, n, [rhs], cond_limit, check_pivots, cache, time, rtol=rtol)[0]
         E = np.array(gradient, dtype=np.float64)
@@ -379,7 +379,7 @@ def solve_network(
         E = np.array(gradient, dtype=np.float64) - kappa * rate * np.eye(d)
     U = _st_apply(pairs, unit, f, n)
     if external is not None:
-        U += ext.ravel()
+        U += np.ravel(external)
     U *= xi0
     return Solution(f, U.reshape(n, d), E, kappa, _virial(unit, r, f))
 
