@@ -28,18 +28,19 @@ def incidence(pairs, n):  # pragma: no cover - numba
     ptr : ndarray of int64, shape (n + 1,)
     incident : ndarray of int64, shape (2 n_c,)
     """
+    # indices read from the arrays index as unsigned: numba tests signed ones for wraparound
     ptr = np.zeros(n + 1, dtype=np.int64)
     for c in range(pairs.shape[0]):
-        ptr[pairs[c, 0] + 1] += 1
-        ptr[pairs[c, 1] + 1] += 1
+        ptr[np.uint64(pairs[c, 0] + 1)] += 1
+        ptr[np.uint64(pairs[c, 1] + 1)] += 1
     for k in range(n):
         ptr[k + 1] += ptr[k]
     fill = ptr[:-1].copy()
     incident = np.empty(2 * pairs.shape[0], dtype=np.int64)
     for c in range(pairs.shape[0]):
         for e in range(2):
-            k = pairs[c, e]
-            incident[fill[k]] = c
+            k = np.uint64(pairs[c, e])
+            incident[np.uint64(fill[k])] = c
             fill[k] += 1
     return ptr, incident
 

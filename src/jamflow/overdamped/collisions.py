@@ -39,8 +39,8 @@ def _next_collision(x, h, pairs, images, sigma, skip, U, E, tmax):  # pragma: no
     for k in range(n_pairs):
         if skip[k]:
             continue
-        i = pairs[k, 0]
-        j = pairs[k, 1]
+        i = np.uint64(pairs[k, 0])  # unsigned: no wraparound test per access
+        j = np.uint64(pairs[k, 1])
         for a in range(d):
             s = x[j, a] - x[i, a]
             for b in range(d):

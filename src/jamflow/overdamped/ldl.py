@@ -153,8 +153,8 @@ def _numeric(Ap, Ai, Ax, parent, counts):  # pragma: no cover - numba
         for t in range(top - 1, -1, -1):
             c = pattern[t]
             yc = y[c]
-            for q in range(Lp[c], next_free[c]):
-                y[Li[q]] -= Lx[q] * yc
+            for q in range(np.uint64(Lp[c]), np.uint64(next_free[c])):  # unsigned: no wraparound tests
+                y[np.uint64(Li[q])] -= Lx[q] * yc
             q = next_free[c]
             Li[q] = k
             Lx[q] = yc * Dinv[c]
@@ -172,30 +172,33 @@ def _numeric(Ap, Ai, Ax, parent, counts):  # pragma: no cover - numba
 def _triangular_solve(Lp, Li, Lx, d, perm, b):  # pragma: no cover - numba
     """``x`` with ``N x = b`` from ``P^T N P = (I + L) D (I + L)^T`` (L strictly lower, CSC).
 
-    ``perm`` is P as an index array: ``(P^T b)[k] = b[perm[k]]``.
+    ``perm`` is P as an index array: ``(P^T b)[k] = b[perm[k]]``. Indices read from the
+    arrays index as unsigned integers: numba tests every signed index for wraparound,
+    which made these loops almost twice as slow.
     """
     n = b.shape[0]
+    one, two = np.uint64(1), np.uint64(2)
     y = np.empty(n)
     for k in range(n):
-        y[k] = b[perm[k]]
+        y[k] = b[np.uint64(perm[k])]
     for j in range(n):
         yj = y[j]
-        for p in range(Lp[j], Lp[j + 1]):
-            y[Li[p]] -= Lx[p] * yj
+        for p in range(np.uint64(Lp[j]), np.uint64(Lp[j + 1])):
+            y[np.uint64(Li[p])] -= Lx[p] * yj
     for j in range(n - 1, -1, -1):
         # two partial sums: the back substitution is a chain of dependent subtractions
         s0, s1 = y[j] / d[j], 0.0
-        p, end = Lp[j], Lp[j + 1]
-        while p + 1 < end:
-            s0 -= Lx[p] * y[Li[p]]
-            s1 -= Lx[p + 1] * y[Li[p + 1]]
-            p += 2
+        p, end = np.uint64(Lp[j]), np.uint64(Lp[j + 1])
+        while p + one < end:
+            s0 -= Lx[p] * y[np.uint64(Li[p])]
+            s1 -= Lx[p + one] * y[np.uint64(Li[p + one])]
+            p += two
         if p < end:
-            s0 -= Lx[p] * y[Li[p]]
+            s0 -= Lx[p] * y[np.uint64(Li[p])]
         y[j] = s0 + s1
     x = np.empty(n)
     for k in range(n):
-        x[perm[k]] = y[k]
+        x[np.uint64(perm[k])] = y[k]
     return x
 
 

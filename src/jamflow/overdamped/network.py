@@ -95,7 +95,7 @@ def _pair_vectors(x, h, pairs, images):  # pragma: no cover - numba
     d = x.shape[1]
     out = np.empty((npairs, d))
     for c in range(npairs):
-        i, j = pairs[c, 0], pairs[c, 1]
+        i, j = np.uint64(pairs[c, 0]), np.uint64(pairs[c, 1])  # unsigned: no wraparound test per access
         for k in range(d):
             shift = 0.0
             for m in range(d):
@@ -447,7 +447,7 @@ def _pair_rates(R, pairs, U, E):  # pragma: no cover - numba
     nc, d = R.shape
     out = np.empty(nc)
     for c in range(nc):
-        i, j = pairs[c, 0], pairs[c, 1]
+        i, j = np.uint64(pairs[c, 0]), np.uint64(pairs[c, 1])  # unsigned: no wraparound test per access
         s = 0.0
         rr = 0.0
         for k in range(d):
@@ -478,7 +478,7 @@ def _max_relative_rate(R, pairs, U, E, sigma):  # pragma: no cover - numba
     nc, d = R.shape
     top = 0.0
     for c in range(nc):
-        i, j = pairs[c, 0], pairs[c, 1]
+        i, j = np.uint64(pairs[c, 0]), np.uint64(pairs[c, 1])  # unsigned: no wraparound test per access
         ww = 0.0
         for k in range(d):
             w = U[j, k] - U[i, k]

@@ -82,11 +82,11 @@ def _s_apply(pairs, unit, v):  # pragma: no cover - numba
     nc, d = unit.shape
     out = np.empty(nc)
     for c in range(nc):
-        i = pairs[c, 0] * d
-        j = pairs[c, 1] * d
+        i = np.uint64(pairs[c, 0] * d)  # unsigned: no wraparound test per access (see ldl._triangular_solve)
+        j = np.uint64(pairs[c, 1] * d)
         s = 0.0
         for a in range(d):
-            s += unit[c, a] * (v[j + a] - v[i + a])
+            s += unit[c, a] * (v[j + np.uint64(a)] - v[i + np.uint64(a)])
         out[c] = s
     return out
 
@@ -97,11 +97,11 @@ def _st_apply(pairs, unit, f, n):  # pragma: no cover - numba
     nc, d = unit.shape
     out = np.zeros(n * d)
     for c in range(nc):
-        i = pairs[c, 0] * d
-        j = pairs[c, 1] * d
+        i = np.uint64(pairs[c, 0] * d)  # unsigned: no wraparound test per access
+        j = np.uint64(pairs[c, 1] * d)
         for a in range(d):
-            out[i + a] -= unit[c, a] * f[c]
-            out[j + a] += unit[c, a] * f[c]
+            out[i + np.uint64(a)] -= unit[c, a] * f[c]
+            out[j + np.uint64(a)] += unit[c, a] * f[c]
     return out
 
 
@@ -458,14 +458,14 @@ def _solve_cc(lu, border, g):  # pragma: no cover - numba
     pos_c, Q, W, WQQ_inv = border.pos_c, border.removed, border.W, border.WQQ_inv
     G = np.zeros(border.size)
     for k in range(len(pos_c)):
-        G[pos_c[k]] = g[k]
+        G[np.uint64(pos_c[k])] = g[k]  # unsigned: no wraparound test per access
     y = _triangular_solve(Lp, Li, Lx, d, perm, G)
     nq = len(Q)
     if nq:
         t = np.zeros(nq)
         for a in range(nq):
             for b in range(nq):
-                t[a] += WQQ_inv[a, b] * y[Q[b]]
+                t[a] += WQQ_inv[a, b] * y[np.uint64(Q[b])]
         for i in range(border.size):
             s = 0.0
             for a in range(nq):
@@ -473,7 +473,7 @@ def _solve_cc(lu, border, g):  # pragma: no cover - numba
             y[i] -= s
     out = np.empty(len(pos_c))
     for k in range(len(pos_c)):
-        out[k] = y[pos_c[k]]
+        out[k] = y[np.uint64(pos_c[k])]
     return out
 
 
@@ -483,18 +483,18 @@ def _precondition(lu, border, g):  # pragma: no cover - numba
     C, P = border.kept, border.added
     gc = np.empty(len(C))
     for k in range(len(C)):
-        gc[k] = g[C[k]]
+        gc[k] = g[np.uint64(C[k])]  # unsigned: no wraparound test per access
     a = _solve_cc(lu, border, gc)
     out = np.empty(len(g))
     npp = len(P)
     if npp == 0:
         for k in range(len(C)):
-            out[C[k]] = a[k]
+            out[np.uint64(C[k])] = a[k]
         return out
     NCP, B, T_inv = border.NCP, border.B, border.T_inv
     u = np.empty(npp)
     for e in range(npp):
-        s = g[P[e]]
+        s = g[np.uint64(P[e])]
         for k in range(len(C)):
             s -= NCP[k, e] * a[k]
         u[e] = s
@@ -502,12 +502,12 @@ def _precondition(lu, border, g):  # pragma: no cover - numba
     for e in range(npp):
         for f in range(npp):
             xp[e] += T_inv[e, f] * u[f]
-        out[P[e]] = xp[e]
+        out[np.uint64(P[e])] = xp[e]
     for k in range(len(C)):
         s = a[k]
         for e in range(npp):
             s -= B[k, e] * xp[e]
-        out[C[k]] = s
+        out[np.uint64(C[k])] = s
     return out
 
 
