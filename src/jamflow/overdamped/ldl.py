@@ -76,11 +76,11 @@ def _upper(pairs, unit, ptr, incident, position):  # pragma: no cover - numba
     seen = np.full(m, -1, dtype=np.int64)
     nz = 0
     for col in range(m):
-        a = order[col]
+        a = np.uint64(order[col])  # unsigned indices: no wraparound tests
         for e in range(2):
-            p = pairs[a, e]
-            for q in range(ptr[p], ptr[p + 1]):
-                c = incident[q]
+            p = np.uint64(pairs[a, e])
+            for q in range(np.uint64(ptr[p]), np.uint64(ptr[p + np.uint64(1)])):
+                c = np.uint64(incident[q])
                 row = position[c]
                 if row <= col and seen[c] != col:  # a pair sharing both particles is met twice
                     seen[c] = col
@@ -101,14 +101,14 @@ def _elimination_tree(Ap, Ai):  # pragma: no cover - numba
     parent = np.full(m, -1, dtype=np.int64)
     for j in range(m):
         visited[j] = j
-        for p in range(Ap[j], Ap[j + 1]):
-            i = Ai[p]
+        for p in range(np.uint64(Ap[j]), np.uint64(Ap[j + 1])):  # unsigned indices: no wraparound tests
+            i = np.uint64(Ai[p])
             while visited[i] != j:  # walk up from row i to the column j, counting L[j, .]
                 if parent[i] == -1:
                     parent[i] = j
                 counts[i] += 1
                 visited[i] = j
-                i = parent[i]
+                i = np.uint64(parent[i])
     return parent, counts
 
 
@@ -132,30 +132,30 @@ def _numeric(Ap, Ai, Ax, parent, counts):  # pragma: no cover - numba
     next_free = Lp[:m].copy()
     for k in range(m):
         top = 0
-        for p in range(Ap[k], Ap[k + 1]):
+        for p in range(np.uint64(Ap[k]), np.uint64(Ap[k + 1])):  # unsigned indices: no wraparound tests
             i = Ai[p]
             if i == k:
                 D[k] = Ax[p]
                 continue
-            y[i] = Ax[p]
-            if marked[i]:
+            y[np.uint64(i)] = Ax[p]
+            if marked[np.uint64(i)]:
                 continue
             depth = 0
-            while i != -1 and i < k and not marked[i]:  # path up the tree to a marked node
-                marked[i] = True
+            while i != -1 and i < k and not marked[np.uint64(i)]:  # path up the tree to a marked node
+                marked[np.uint64(i)] = True
                 stack[depth] = i
                 depth += 1
-                i = parent[i]
+                i = parent[np.uint64(i)]
             while depth:  # the pattern in topological order
                 depth -= 1
                 pattern[top] = stack[depth]
                 top += 1
         for t in range(top - 1, -1, -1):
-            c = pattern[t]
+            c = np.uint64(pattern[t])
             yc = y[c]
-            for q in range(np.uint64(Lp[c]), np.uint64(next_free[c])):  # unsigned: no wraparound tests
+            for q in range(np.uint64(Lp[c]), np.uint64(next_free[c])):
                 y[np.uint64(Li[q])] -= Lx[q] * yc
-            q = next_free[c]
+            q = np.uint64(next_free[c])
             Li[q] = k
             Lx[q] = yc * Dinv[c]
             D[k] -= yc * Lx[q]
