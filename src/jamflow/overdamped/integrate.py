@@ -271,7 +271,10 @@ class Integrator:
         key = (mask.tobytes(), self._nl_version, id(self.state.nl))
         if self._pairs_key != key:
             self._pairs_key = key
-            self._pairs_value = (self.state.nl.pairs[mask], self.state.nl.images[mask])
+            # np.take of the positions: numpy's boolean and fancy indexing of (P, 2) and (P, d)
+            # rows took 20 us each at N = 1024, take 2 us
+            idx = np.flatnonzero(mask)
+            self._pairs_value = (np.take(self.state.nl.pairs, idx, axis=0), np.take(self.state.nl.images, idx, axis=0))
             for a in self._pairs_value:
                 a.flags.writeable = False  # read-only: the solver's cache knows the network by identity
             self._sigma_value = None
@@ -351,7 +354,7 @@ class Integrator:
 
     def rates(self, sol: Solution, idx: NDArray[np.int64]) -> NDArray[np.float64]:
         """Pair rates dr/dt (Eq. 26) of listed pairs ``idx``."""
-        pairs, images = self.state.nl.pairs[idx], self.state.nl.images[idx]
+        pairs, images = np.take(self.state.nl.pairs, idx, axis=0), np.take(self.state.nl.images, idx, axis=0)
         R = pair_vectors(self.state.x, self.state.h, pairs, images)
         return pair_velocities(R, pairs, sol)
 
