@@ -396,8 +396,9 @@ def _bordered(solves, old_codes, codes, pairs, unit, cond_limit, max_changes):
     pos = locate(old_codes, codes)
     C = np.flatnonzero(pos >= 0)
     P = np.flatnonzero(pos < 0)
+    pos_c = pos[C]
     kept = np.zeros(len(old_codes), dtype=bool)
-    kept[pos[C]] = True
+    kept[pos_c] = True
     Q = np.flatnonzero(~kept)
     if len(P) + len(Q) > max_changes or len(C) == 0:
         return None
@@ -411,8 +412,8 @@ def _bordered(solves, old_codes, codes, pairs, unit, cond_limit, max_changes):
     for e, k in enumerate(P):
         ends[e, 0], ends[e, 1], units[e], G[:, e], Y[:, e] = solves.addition(
             int(codes[k]), int(pairs[k, 0]), int(pairs[k, 1]), unit[k])
-    ok, WQQ_inv, NCP, B, T_inv = _border_blocks(W, Q, G, Y, pos[C], ends, units, float(cond_limit))
-    return Border(m, pos[C], C, Q, W, WQQ_inv, P, NCP, B, T_inv) if ok else None
+    ok, WQQ_inv, NCP, B, T_inv = _border_blocks(W, Q, G, Y, pos_c, ends, units, float(cond_limit))
+    return Border(m, pos_c, C, Q, W, WQQ_inv, P, NCP, B, T_inv) if ok else None
 
 
 @numba.njit(cache=True)
