@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as sla
 
 import jamflow.calippso as cal
 from jamflow.analysis.contacts import force_balance_residual, summarize
@@ -131,6 +133,86 @@ def test_network_with_a_contact_swapped_for_a_gap_is_rejected(start, lp_chain, m
     assert a["finish"] == "lp" and a["newton_attempts"] == len(planted)
     assert a["newton_rejections"] == len(planted)
     _assert_same_packing(res, lp_chain)
+
+
+def _dense_newton_forces(chain, step, lp, container, packing):
+    """The network's forces after full Newton by dense algebra, independent of the
+    finish's sparse LU, chord steps and refinement: ``None`` when Newton leaves the
+    neighbourhood (a move above ``NEWTON_MAX_MOVE``) or does not converge."""
+    d, n = packing.d, packing.n
+    rows = cal._network_rows(step, lp)
+    cols = cal._square_columns(~step.rattler, chain.anchor if container.has_translation else -1, d)
+    if len(rows) != len(cols):
+        return None
+    x, D = chain.x.copy(), chain.D.copy()
+    for _ in range(30):
+        geo = cal._row_geometry(rows, x, D, container.box)
+        B = cal._matrix(rows, geo, n, d, float(D.mean()))[:, cols].toarray()
+        if np.abs(geo.rhs).max() < cal.NEWTON_GAP_TOL:
+            e_g = np.zeros(len(cols))
+            e_g[-1] = 1.0
+            return np.linalg.solve(B.T, e_g)
+        z = np.linalg.solve(B, geo.rhs)
+        u = np.zeros(n * d)
+        u[cols[:-1]] = z[:-1]
+        u = u.reshape(n, d)
+        if np.linalg.norm(u, axis=1).max() > 2 * cal.NEWTON_MAX_MOVE or z[-1] <= -1.0:
+            return None
+        x = container.wrap(x + u * float(D.mean()))
+        D = D * np.sqrt(1.0 + z[-1])
+    return None
+
+
+@pytest.mark.parametrize("n, dispersity, seed", [(64, "mono", 2), (128, "poly", 4)], ids=["3d-mono-64", "3d-poly-128"])
+def test_early_rejection_agrees_with_full_newton(n, dispersity, seed, monkeypatch):
+    """An attempt rejected before any step (a network force not positive at the LP's
+    configuration) is one that full Newton by dense algebra refuses too, and a
+    certified finish has the dense forces (to 1e-8 of the largest). These starts
+    try several wrong networks before the right one."""
+    start = random_packing(n, 3, 0.3, dispersity, seed=seed)
+    verdicts = []
+    finish = cal._newton_finish
+
+    def both(chain, step, lp, opt, container, packing):
+        out = finish(chain, step, lp, opt, container, packing)
+        verdicts.append((out, _dense_newton_forces(chain, step, lp, container, packing)))
+        return out
+
+    monkeypatch.setattr(cal, "_newton_finish", both)
+    calippso(start, finish="newton")
+    early = [mu for (attempt, *_), mu in verdicts if attempt.steps == 0 and "LP's configuration" in attempt.reason]
+    assert early, "no attempt was rejected before a Newton step"
+    for mu in early:
+        assert mu is None or mu.min() <= cal.CONTACT_DUAL_REL_TOL * mu.max()
+    certified = [(out, mu) for out, mu in verdicts if out[0].certified]
+    assert len(certified) == 1
+    (_, _, D, net), mu = certified[0]
+    # the finish's duals (forces times contact distances, paper Eq. 11) against the dense ones
+    sig = 0.5 * (D[net.contacts[:, 0]] + D[net.contacts[:, 1]])
+    mu_finish = np.concatenate([net.f_pair * sig, net.f_wall * 0.5 * D[net.wall_particles]])
+    assert mu.min() > cal.CONTACT_DUAL_REL_TOL * mu.max()
+    assert np.abs(mu_finish - mu).max() <= FORCE_RTOL * mu.max()
+
+
+def test_transposed_solve_refines_on_a_nearby_lu_and_refactorises_a_far_one(monkeypatch):
+    """The certificate's forces: ``B^T y = b`` from the LU of a nearby matrix (chord
+    steps away) by refinement, to a componentwise backward error of round-off and the
+    dense solution; from the LU of a far matrix by a fresh factorisation."""
+    rng = np.random.default_rng(5)
+    n = 300
+    B = (sp.random(n, n, density=0.02, random_state=rng) + 4.0 * sp.eye(n)).tocsc()
+    b = rng.standard_normal(n)
+    exact = np.linalg.solve(B.toarray().T, b)
+    factorisations = []
+    splu = sla.splu
+    monkeypatch.setattr(sla, "splu", lambda *a, **k: factorisations.append(1) or splu(*a, **k))
+    for other, fresh in ((B + 1e-7 * sp.random(n, n, density=0.02, random_state=rng), 0), (B + 3.0 * sp.eye(n), 1)):
+        factorisations.clear()
+        y = cal._transposed_solve(splu(other.tocsc()), B, b)
+        assert len(factorisations) == fresh
+        np.testing.assert_allclose(y, exact, rtol=1e-11, atol=0)
+        backward = np.abs(b - B.T @ y) / (abs(B.T) @ np.abs(y) + np.abs(b))
+        assert backward.max() <= cal.NEWTON_FORCE_RESIDUAL
 
 
 def test_unknown_finish_is_refused(start):

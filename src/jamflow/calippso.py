@@ -107,14 +107,17 @@ In the tail the chain fine-tunes positions of a network that no longer changes. 
 :data:`NEWTON_FROM` whose network is isostatic, the square system "every backbone
 contact touches, one inflation factor" (the network rows of the LP as equalities over
 the stable particles' coordinates and ``g``; the LP's basis matrix) is solved by
-Newton's method with a sparse LU (:func:`_newton_finish`). The result is kept only
-under a certificate that it is the LP chain's limit: the forces of the transposed
-system are all positive, no pair overlaps beyond :data:`~jamflow.tolerances.OVERLAP_TOL`
-and the geometric network has the same backbone; then ``s = 0, Gamma = 1`` solves the
-next LP. Otherwise the chain goes on with LPs. Rattlers are not part of the system;
-those the finish's growth pressed into a neighbour are pushed off it first
-(:func:`_free_rattlers`). The finish is one history entry with
-solver ``newton``; attributes ``finish``, ``n_lps``, ``newton_attempts``,
+Newton's method with a sparse LU, kept over chord steps while they converge fast
+(:func:`_newton_finish`). A network whose forces at the LP's configuration are not all
+positive is rejected before any step (the next LP, started from its basis, would not
+be dual feasible). The result is kept only under a certificate that it is the LP
+chain's limit: the forces of the transposed system at the finished configuration are
+all positive, no pair overlaps beyond :data:`~jamflow.tolerances.OVERLAP_TOL` and the
+geometric network has the same backbone; then ``s = 0, Gamma = 1`` solves the next
+LP. Otherwise the chain goes on with LPs. Rattlers are not part of the system; those
+the finish's growth pressed into a neighbour are pushed off it first
+(:func:`_free_rattlers`). The finish is one history entry with solver ``newton``;
+attributes ``finish``, ``n_lps``, ``newton_attempts``,
 ``newton_rejections``, ``newton_last_rejection`` and ``newton_time`` [s, all
 attempts] say what happened.
 
@@ -318,17 +321,38 @@ MAX_STALL_RECOVERIES: int = 3
 #: (:func:`_newton_finish`); a rejected finish leaves the chain to the LPs. ``lp``: the
 #: pure LP chain of the paper.
 FINISHES: tuple[str, ...] = ("newton", "lp")
-#: ``lp`` by default: the finish saves LPs (d = 3, 4, 5 LS examples: 1, 2, 2) but its
-#: rejected attempts cost 15-23 % of the run on d = 4 and 5 (docs/calippso-scaling.md),
-#: so no net time saving is established yet.
+#: ``lp`` by default: the finish saves LPs (d = 3, 4, 5 LS examples: 1, 2, 2), but the
+#: LPs it saves are the cheapest of the chain and its attempts (one sparse LU each)
+#: cost about as much: the whole command was not faster on any of the three examples
+#: (docs/calippso-scaling.md).
 DEFAULT_FINISH: str = "lp"
 
 #: Newton finish: tried from this ``sqrt(Gamma*) - 1`` down (the hybrid solver's tail).
 NEWTON_FROM: float = 1e-5
 
-#: Newton finish: largest number of steps (it converges quadratically: from
-#: ``sqrt(Gamma*) - 1 ~ 1e-7`` three steps reach round-off).
+#: Newton finish: largest number of steps (from ``sqrt(Gamma*) - 1 ~ 1e-7`` one to
+#: three steps on one LU reach round-off).
 NEWTON_MAX_STEPS: int = 8
+
+#: Newton finish: the LU of the network's matrix is kept for the next step while each
+#: step shrinks the largest move at least by this factor (chord steps, one pair of
+#: triangular solves each; Newton proper shrinks it quadratically); a step that shrinks
+#: it less refactorises at the current configuration.
+NEWTON_CONTRACTION: float = 0.1
+
+#: Newton finish: besides the chain's convergence test, the last step must leave every
+#: network contact touching to this relative tolerance, ``|r^2 - sigma^2| / sigma^2``
+#: (chord steps converge linearly, so a small last move alone does not say that): above
+#: the round-off of squared distances in boxes up to ~100 diameters (~4e-14).
+NEWTON_GAP_TOL: float = 1e-13
+
+#: Newton finish: the certificate's forces solve the finished network's transposed
+#: system by iterative refinement on the last LU; accepted once each residual
+#: component is at most this fraction of its scale ``(|B^T| |mu| + |e_g|)_k`` (a
+#: componentwise backward error near round-off), after at most NEWTON_REFINEMENTS
+#: corrections (else a fresh LU).
+NEWTON_FORCE_RESIDUAL: float = 1e-14
+NEWTON_REFINEMENTS: int = 4
 
 #: Newton finish: a step moving a stable particle by more than this [mean diameters]
 #: (the tightest default bound) means the network is not the one of a nearby jammed
@@ -1125,6 +1149,42 @@ def _square_columns(stable: NDArray[np.bool_], anchor: int, d: int) -> NDArray[n
     return np.append(cols, d * len(stable))
 
 
+def _positive(mu: NDArray[np.float64]) -> bool:
+    """Whether every network force is above ``CONTACT_DUAL_REL_TOL`` of the largest."""
+    return bool(mu.min() > CONTACT_DUAL_REL_TOL * mu.max())
+
+
+def _n_not_positive(mu: NDArray[np.float64]) -> int:
+    return int(np.sum(mu <= CONTACT_DUAL_REL_TOL * mu.max()))
+
+
+def _transposed_solve(lu: sla.SuperLU, B: sp.csc_matrix, b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``B^T y = b`` by iterative refinement on ``lu``, the LU of a nearby matrix (the
+    Newton finish's last factorisation, a few chord steps from ``B``).
+
+    Refinement stops once every residual component is at most
+    :data:`NEWTON_FORCE_RESIDUAL` of its own scale ``(|B^T| |y| + |b|)_k`` (the
+    componentwise backward error of Oettli and Prager: each particle's balance to
+    round-off of its own forces, not of the largest); when :data:`NEWTON_REFINEMENTS`
+    corrections do not get there, ``B`` is factorised afresh.
+    """
+    BT = B.T.tocsr()
+    absBT = abs(BT)
+
+    def small(y: NDArray[np.float64], r: NDArray[np.float64]) -> bool:
+        return bool(np.all(np.abs(r) <= NEWTON_FORCE_RESIDUAL * (absBT @ np.abs(y) + np.abs(b))))
+
+    y = lu.solve(b, trans="T")
+    for _ in range(NEWTON_REFINEMENTS):
+        r = b - BT @ y
+        if small(y, r):
+            return y
+        y = y + lu.solve(r, trans="T")
+    if small(y, b - BT @ y):
+        return y
+    return sla.splu(B, permc_spec="COLAMD").solve(b, trans="T")
+
+
 def _newton_finish(chain: _Chain, step: _Step, lp: _LPSetup, opt: _Options, container: _Container,
                    packing: Packing) -> tuple[_NewtonAttempt, NDArray[np.float64], NDArray[np.float64], _Network | None]:
     """Solve the isostatic network's square system by Newton's method and certify it.
@@ -1134,17 +1194,27 @@ def _newton_finish(chain: _Chain, step: _Step, lp: _LPSetup, opt: _Options, cont
     of the LP's network touches after the update ``r <- r + s``, ``sigma <- sqrt(Gamma)
     sigma``. Linearised, they are the network rows of the jamming LP as equalities, so
     each Newton step solves ``B z = rhs`` with ``B`` the LP's basis matrix (sparse LU,
-    COLAMD ordering) and updates like an LP of the chain. Steps stop when one satisfies
-    the chain's convergence test (``sqrt(Gamma) - 1 < tol_gamma``, ``max |s| <
-    tol_s``), within :data:`NEWTON_MAX_STEPS` steps each moving no particle by more
-    than :data:`NEWTON_MAX_MOVE`.
+    COLAMD ordering) and updates like an LP of the chain. The LU is kept while each
+    step shrinks the largest move by :data:`NEWTON_CONTRACTION` (chord steps: one
+    triangular solve each) and refactorised at the current configuration otherwise.
+    Steps stop when one satisfies the chain's convergence test (``sqrt(Gamma) - 1 <
+    tol_gamma``, ``max |s| < tol_s``), within :data:`NEWTON_MAX_STEPS` steps each
+    moving no particle by more than :data:`NEWTON_MAX_MOVE`.
+
+    Before any step, the network's forces at the LP's configuration, ``B^-T e_g``,
+    must all be positive: a negative one means that the next LP, started from this
+    network's basis, is not dual feasible and pivots that contact out, so the network
+    is not the chain's last one. This early rejection spares the steps of most
+    rejected attempts; a wrong one only leaves the chain to its LPs.
 
     Certificate that the result is the LP chain's limit: the forces
-    ``mu = B^-T e_g`` (paper Eqs. 9, 11: the dual basic solution of the LP at ``s = 0``)
-    are all above ``CONTACT_DUAL_REL_TOL`` of the largest, and no pair overlaps by more
-    than ``OVERLAP_TOL``; then ``s = 0, Gamma = 1`` is optimal for the next LP (primal
-    feasible, dual feasible, complementary). The geometric network must also have the
-    network's backbone and rattlers (else the final checks would switch to it).
+    ``mu = B^-T e_g`` at the finished configuration (paper Eqs. 9, 11: the dual basic
+    solution of the LP at ``s = 0``; by iterative refinement on the kept LU, see
+    :func:`_transposed_solve`) are all above ``CONTACT_DUAL_REL_TOL`` of the largest,
+    and no pair overlaps by more than ``OVERLAP_TOL``; then ``s = 0, Gamma = 1`` is
+    optimal for the next LP (primal feasible, dual feasible, complementary). The
+    geometric network must also have the network's backbone and rattlers (else the
+    final checks would switch to it).
 
     Returns the attempt, the finished positions and diameters, and the network (None
     when not certified; then positions and diameters are the chain's, unchanged).
@@ -1159,15 +1229,31 @@ def _newton_finish(chain: _Chain, step: _Step, lp: _LPSetup, opt: _Options, cont
     def reject(reason: str, steps: int):
         return _NewtonAttempt(False, reason, steps, time.perf_counter() - t0), chain.x, chain.D, None
 
+    def matrix(geo: _RowGeometry, unit: float) -> sp.csc_matrix:
+        return _matrix(rows, geo, n, d, unit)[:, cols].tocsc()
+
     if len(rows) != len(cols):
         return reject(f"network has {len(rows)} backbone rows for {len(cols)} unknowns", 0)
+    e_g = np.zeros(len(cols))
+    e_g[-1] = 1.0
+    geo = _row_geometry(rows, x, D, container.box)
+    unit = float(D.mean())  # of the factorised matrix: z is in these units
+    try:
+        lu = sla.splu(matrix(geo, unit), permc_spec="COLAMD")
+    except RuntimeError as exc:  # exactly singular basis
+        return reject(f"singular network matrix ({exc})", 0)
+    mu = lu.solve(e_g, trans="T")
+    if not _positive(mu):
+        return reject(f"{_n_not_positive(mu)} network force(s) not positive at the LP's configuration", 0)
+    last_move = move = np.inf
     for k in range(1, NEWTON_MAX_STEPS + 1):
-        unit = float(D.mean())
-        geo = _row_geometry(rows, x, D, container.box)
-        try:
-            lu = sla.splu(_matrix(rows, geo, n, d, unit)[:, cols].tocsc(), permc_spec="COLAMD")
-        except RuntimeError as exc:  # exactly singular basis
-            return reject(f"singular network matrix ({exc})", k)
+        if move > NEWTON_CONTRACTION * last_move:
+            unit = float(D.mean())
+            try:
+                lu = sla.splu(matrix(geo, unit), permc_spec="COLAMD")
+            except RuntimeError as exc:
+                return reject(f"singular network matrix ({exc})", k)
+        last_move = move
         z = lu.solve(geo.rhs)
         u = np.zeros(n * d)
         u[cols[:-1]] = z[:-1]
@@ -1179,20 +1265,18 @@ def _newton_finish(chain: _Chain, step: _Step, lp: _LPSetup, opt: _Options, cont
             return reject(f"Newton step {k} moves a particle by {move:.3g} mean diameters", k)
         x = container.wrap(x + u * unit)
         D = D * np.sqrt(1.0 + g)
-        if g / (1.0 + np.sqrt(1.0 + g)) < opt.tol_gamma and move < opt.tol_s:
+        geo = _row_geometry(rows, x, D, container.box)
+        if (g / (1.0 + np.sqrt(1.0 + g)) < opt.tol_gamma and move < opt.tol_s
+                and np.abs(geo.rhs).max() <= NEWTON_GAP_TOL):
             break
     else:
         return reject(f"Newton did not converge in {NEWTON_MAX_STEPS} steps", NEWTON_MAX_STEPS)
     # certificate: forces from the transposed system at the finished configuration
     # (rattlers are not in it: they are freed only once the forces pass, which spares
-    # the all-pairs sweeps to the many rejected attempts)
-    geo = _row_geometry(rows, x, D, container.box)
-    B = _matrix(rows, geo, n, d, float(D.mean()))[:, cols].tocsc()
-    e_g = np.zeros(len(cols))
-    e_g[-1] = 1.0
-    mu = sla.splu(B, permc_spec="COLAMD").solve(e_g, trans="T")
-    if not mu.min() > CONTACT_DUAL_REL_TOL * mu.max():
-        return reject(f"{int(np.sum(mu <= CONTACT_DUAL_REL_TOL * mu.max()))} network force(s) not positive", k)
+    # the all-pairs sweeps to the rejected attempts)
+    mu = _transposed_solve(lu, matrix(geo, float(D.mean())), e_g)
+    if not _positive(mu):
+        return reject(f"{_n_not_positive(mu)} network force(s) not positive", k)
     x = _free_rattlers(x, D, step.rattler, container, packing)
     p = container.packing(packing, x, D)
     ov = container.max_overlap(p)
