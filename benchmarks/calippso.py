@@ -66,8 +66,8 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import highspy
+import matplotlib.pyplot as plt
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
@@ -80,7 +80,14 @@ from jamflow.box import Box
 from jamflow.calippso import CONTACT_DUAL_REL_TOL, SOLVER_TOL, JammingLP, jamming_lp
 from jamflow.highs import new_highs
 from jamflow.initial import random_packing
-from jamflow.io import new_dataset_attrs, read_dat, read_dataset, read_packing, write_dataset, write_packing
+from jamflow.io import (
+    new_dataset_attrs,
+    read_dat,
+    read_dataset,
+    read_packing,
+    write_dataset,
+    write_packing,
+)
 from jamflow.ls import compress
 from jamflow.packing import Packing, max_overlap
 from jamflow.rigidity import rigidity_matrix
@@ -441,55 +448,76 @@ def part_factor(quick: bool) -> xr.Dataset:
         "Factorisation of the final CALiPPSO simplex basis (near starts, d = 3)", {"quick": quick}, **exps))
 
 
+def _plot_scaling(ax, ds: xr.Dataset, found: dict[str, xr.Dataset]) -> None:
+    for s, m in (("random", "o"), ("near", "s")):
+        sel = ds.sel(start=s)
+        ax.loglog(ds["N"], sel["time"], m + "-", label=f"{s}: total")
+        ax.loglog(ds["N"], sel["t_lp"], m + "--", label=f"{s}: median LP")
+    if "large" in found:
+        ax.loglog(found["large"]["N"], found["large"]["time"], "s", color="C1", mfc="none", label="near: large N")
+    ax.set_xlabel("N"); ax.set_ylabel("time [s]"); ax.legend(fontsize=7); ax.set_title("d = 3 scaling")
+
+
+def _plot_ls(ax, ds: xr.Dataset, found: dict[str, xr.Dataset]) -> None:
+    ax.bar(ds["d"] - 0.2, ds["time"], 0.4, label="measured")
+    ax.bar(ds["d"] + 0.2, ds["target_time"], 0.4, label="target")
+    ax.set_xticks(ds["d"].values)
+    ax.set_xlabel("dimension d"); ax.set_ylabel("time to jam [s]"); ax.legend(fontsize=7)
+    ax.set_title("authors' LS examples")
+
+
+def _plot_solvers(ax, ds: xr.Dataset, found: dict[str, xr.Dataset]) -> None:
+    ax.bar([str(s) for s in ds["solver"].values], ds["time"])
+    ax.set_xlabel("HiGHS strategy"); ax.set_ylabel("time to jam [s]"); ax.set_title("solver strategies")
+
+
+def _plot_tolerances(ax, ds: xr.Dataset, found: dict[str, xr.Dataset]) -> None:
+    ax.loglog(ds["time"], ds["overlap"], "o", label="max overlap")
+    ax.loglog(ds["time"], ds["fb"], "s", label="force-balance residual")
+    for k in range(ds.sizes["setting"]):
+        ax.annotate(f"{float(ds.tol_s[k]):g}/{float(ds.tol_gamma[k]):g}/{float(ds.solver_tol[k]):g}",
+                    (float(ds["time"][k]), float(ds["fb"][k])), fontsize=6)
+    ax.set_xlabel("time to jam [s]"); ax.set_ylabel("relative overlap, residual [1]"); ax.legend(fontsize=7)
+    ax.set_title("tol_s / tol_gamma / solver_tol")
+
+
+def _plot_factor(ax, ds: xr.Dataset, found: dict[str, xr.Dataset]) -> None:
+    ax.loglog(ds["N"], ds["highs"], "o-", label="HiGHS factorisation [s]")
+    ax.loglog(ds["N"], ds["superlu"], "s-", label="SuperLU COLAMD [s]")
+    ax.loglog(ds["N"], ds["superlu_nd"], "D-", label="SuperLU METIS ND [s]")
+    ax.loglog(ds["N"], ds["fill"] / ds["nnz"], "^--", label="SuperLU fill nnz(L+U)/nnz")
+    ax.set_xlabel("N"); ax.set_ylabel("time [s], fill ratio [1]"); ax.legend(fontsize=7)
+    ax.set_title("warm LP: basis factorisation")
+
+
+def _plot_finish(ax, ds: xr.Dataset, found: dict[str, xr.Dataset]) -> None:
+    pos = np.arange(ds.sizes["case"])
+    for k, finish in enumerate(("lp", "newton")):
+        ax.bar(pos + (k - 0.5) * 0.4, ds["time"].sel(finish=finish), 0.4, label=f"--finish {finish}")
+        for x, (t, lps) in enumerate(zip(ds["time"].sel(finish=finish).values, ds["lps"].sel(finish=finish).values)):
+            ax.annotate(f"{lps:.0f} LPs", (x + (k - 0.5) * 0.4, t), ha="center", fontsize=6)
+    ax.set_xticks(pos, [str(c).replace("ls_", "") for c in ds["case"].values], fontsize=6)
+    ax.set_xlabel("start (authors' LS examples, N = 1024, and tilings)"); ax.set_ylabel("time to jam [s]")
+    ax.legend(fontsize=7); ax.set_title("Newton finish vs LP chain")
+
+
+#: one panel per part that has a plot, drawn when its netCDF is in ``OUT``
+PLOTS = {"scaling": _plot_scaling, "ls": _plot_ls, "solvers": _plot_solvers, "tolerances": _plot_tolerances,
+         "factor": _plot_factor, "finish": _plot_finish}
+
+
 def plot() -> None:
     found = {p: xr.open_dataset(OUT / f"calippso_{p}.nc") for p in PARTS if (OUT / f"calippso_{p}.nc").exists()}
-    fig, ax = plt.subplots(1, 6, figsize=(26, 4))
-    if "scaling" in found:
-        ds = found["scaling"]
-        for s, m in (("random", "o"), ("near", "s")):
-            sel = ds.sel(start=s)
-            ax[0].loglog(ds["N"], sel["time"], m + "-", label=f"{s}: total")
-            ax[0].loglog(ds["N"], sel["t_lp"], m + "--", label=f"{s}: median LP")
-        if "large" in found:
-            ax[0].loglog(found["large"]["N"], found["large"]["time"], "s", color="C1", mfc="none", label="near: large N")
-        ax[0].set_xlabel("N"); ax[0].set_ylabel("time [s]"); ax[0].legend(fontsize=7); ax[0].set_title("d = 3 scaling")
-    if "ls" in found:
-        ds = found["ls"]
-        ax[1].bar(ds["d"] - 0.2, ds["time"], 0.4, label="measured")
-        ax[1].bar(ds["d"] + 0.2, ds["target_time"], 0.4, label="target")
-        ax[1].set_xlabel("d"); ax[1].set_ylabel("time [s]"); ax[1].legend(fontsize=7); ax[1].set_title("authors' LS examples")
-    if "solvers" in found:
-        ds = found["solvers"]
-        ax[2].bar([str(s) for s in ds["solver"].values], ds["time"]); ax[2].set_ylabel("time to jam [s]")
-        ax[2].set_title("solver strategies")
-    if "tolerances" in found:
-        ds = found["tolerances"]
-        ax[3].loglog(ds["time"], ds["overlap"], "o", label="max overlap")
-        ax[3].loglog(ds["time"], ds["fb"], "s", label="force-balance residual")
-        for k in range(ds.sizes["setting"]):
-            ax[3].annotate(f"{float(ds.tol_s[k]):g}/{float(ds.tol_gamma[k]):g}/{float(ds.solver_tol[k]):g}",
-                           (float(ds["time"][k]), float(ds["fb"][k])), fontsize=6)
-        ax[3].set_xlabel("time [s]"); ax[3].legend(fontsize=7); ax[3].set_title("tol_s / tol_gamma / solver_tol")
-    if "factor" in found:
-        ds = found["factor"]
-        ax[4].loglog(ds["N"], ds["highs"], "o-", label="HiGHS factorisation [s]")
-        ax[4].loglog(ds["N"], ds["superlu"], "s-", label="SuperLU COLAMD [s]")
-        ax[4].loglog(ds["N"], ds["superlu_nd"], "D-", label="SuperLU METIS ND [s]")
-        ax[4].loglog(ds["N"], ds["fill"] / ds["nnz"], "^--", label="SuperLU fill nnz(L+U)/nnz")
-        ax[4].set_xlabel("N"); ax[4].legend(fontsize=7); ax[4].set_title("warm LP: basis factorisation")
-    if "finish" in found:
-        ds = found["finish"]
-        pos = np.arange(ds.sizes["case"])
-        for k, finish in enumerate(("lp", "newton")):
-            ax[5].bar(pos + (k - 0.5) * 0.4, ds["time"].sel(finish=finish), 0.4, label=f"--finish {finish}")
-            for x, (t, lps) in enumerate(zip(ds["time"].sel(finish=finish).values, ds["lps"].sel(finish=finish).values)):
-                ax[5].annotate(f"{lps:.0f} LPs", (x + (k - 0.5) * 0.4, t), ha="center", fontsize=6)
-        ax[5].set_xticks(pos, [str(c).replace("ls_", "") for c in ds["case"].values], fontsize=6)
-        ax[5].set_xlabel("start (authors' LS examples, N = 1024, and tilings)"); ax[5].set_ylabel("time to jam [s]")
-        ax[5].legend(fontsize=7); ax[5].set_title("Newton finish vs LP chain")
+    drawn = [p for p in PLOTS if p in found]
+    if not drawn:
+        print(f"no part with a plot in {OUT}")
+        return
+    fig, axes = plt.subplots(1, len(drawn), figsize=(4.4 * len(drawn), 4), squeeze=False)
+    for ax, part in zip(axes[0], drawn):
+        PLOTS[part](ax, found[part], found)
     fig.tight_layout()
     fig.savefig(OUT / "calippso.png", dpi=120)
-    print(f"wrote {OUT / 'calippso.png'} from parts {', '.join(found)}")
+    print(f"wrote {OUT / 'calippso.png'} from parts {', '.join(drawn)}")
 
 
 def main() -> None:
