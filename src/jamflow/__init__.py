@@ -15,10 +15,22 @@ numba kernels, HiGHS and matplotlib load only with the stage that needs them.
 from __future__ import annotations
 
 import importlib
+import warnings
+from pathlib import Path
 from typing import Any
 
+from ._kernel_cache import refresh as _refresh_kernel_caches
 from .box import Box
 from .packing import Packing
+
+# before any kernel module loads: numba's caches must not outlive a change of a kernel
+# they inline from another module (see jamflow._kernel_cache)
+try:
+    _refresh_kernel_caches(Path(__file__).resolve().parent)
+except OSError as _exc:
+    warnings.warn(f"jamflow could not clear numba's kernel caches after a change of kernel code ({_exc}); "
+                  f"clear them by hand: find {Path(__file__).resolve().parent} -name '*.nb[ci]' -delete",
+                  stacklevel=2)
 
 #: Public name -> module (relative to this package) that defines it.
 _LAZY: dict[str, str] = {

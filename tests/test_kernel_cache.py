@@ -1,0 +1,80 @@
+"""numba's kernel caches follow changes of the kernels they inline (jamflow._kernel_cache)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+from jamflow._kernel_cache import STAMP_NAME, refresh
+
+
+def _caches(root: Path) -> list[Path]:
+    return sorted(p for pattern in ("*.nbi", "*.nbc") for p in root.rglob(f"__pycache__/{pattern}"))
+
+
+def _plant_caches(root: Path) -> None:
+    for sub in (root, root / "sub"):
+        (sub / "__pycache__").mkdir(parents=True, exist_ok=True)
+        for name in ("k.f-1.py311.nbi", "k.f-1.py311.0.nbc"):
+            (sub / "__pycache__" / name).write_bytes(b"compiled")
+
+
+def test_refresh_deletes_caches_only_when_a_numba_module_changes(tmp_path):
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "kernels.py").write_text("import numba\n")
+    (tmp_path / "sub" / "more.py").write_text("from numba import njit\n")
+    (tmp_path / "plain.py").write_text("x = 1\n")
+    _plant_caches(tmp_path)
+    assert refresh(tmp_path) and _caches(tmp_path) == []  # no stamp yet: nothing is known
+    assert (tmp_path / "__pycache__" / STAMP_NAME).exists()
+    _plant_caches(tmp_path)
+    assert not refresh(tmp_path) and len(_caches(tmp_path)) == 4
+    (tmp_path / "plain.py").write_text("x = 2\n")  # no kernels there
+    assert not refresh(tmp_path) and len(_caches(tmp_path)) == 4
+    (tmp_path / "sub" / "more.py").write_text("from numba import njit  # edited\n")
+    assert refresh(tmp_path) and _caches(tmp_path) == []
+    _plant_caches(tmp_path)
+    assert not refresh(tmp_path) and len(_caches(tmp_path)) == 4
+
+
+def _package(root: Path, name: str, stamped: bool) -> Path:
+    """``g = 2 f`` with ``f`` in another module, both cached by numba; ``stamped``
+    packages call :func:`refresh` on import as jamflow does."""
+    pkg = root / name
+    pkg.mkdir()
+    init = "from pathlib import Path\nfrom jamflow._kernel_cache import refresh\nrefresh(Path(__file__).parent)\n"
+    (pkg / "__init__.py").write_text(init if stamped else "")
+    (pkg / "f.py").write_text("from numba import njit\n\n@njit(cache=True)\ndef f(x):\n    return x + 1\n")
+    (pkg / "g.py").write_text(textwrap.dedent("""\
+        from numba import njit
+        from .f import f
+
+        @njit(cache=True)
+        def g(x):
+            return 2 * f(x)
+        """))
+    return pkg
+
+
+def _g_of_1(root: Path, name: str) -> int:
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(root), *sys.path]))
+    out = subprocess.run([sys.executable, "-c", f"from {name}.g import g; print(g(1))"], env=env,
+                         capture_output=True, text=True, check=True)
+    return int(out.stdout.strip())
+
+
+def test_an_edit_of_an_inlined_kernel_reaches_its_callers(tmp_path):
+    """Without the stamp, numba keeps ``g``'s cache with the old ``f`` inlined (the
+    hazard); with it, ``g`` is recompiled with the new ``f``."""
+    results = {}
+    for name, stamped in (("stale_pkg", False), ("stamped_pkg", True)):
+        pkg = _package(tmp_path, name, stamped)
+        assert _g_of_1(tmp_path, name) == 4
+        assert _caches(pkg), "numba wrote no cache"
+        (pkg / "f.py").write_text((pkg / "f.py").read_text().replace("x + 1", "x + 2"))
+        results[name] = _g_of_1(tmp_path, name)
+    assert results["stale_pkg"] == 4, "numba now invalidates callers' caches itself: the premise of this test changed"
+    assert results["stamped_pkg"] == 6
