@@ -138,7 +138,8 @@ def test_network_with_a_contact_swapped_for_a_gap_is_rejected(start, lp_chain, m
 def _dense_newton_forces(chain, step, lp, container, packing):
     """The network's forces after full Newton by dense algebra, independent of the
     finish's sparse LU, chord steps and refinement: ``None`` when Newton leaves the
-    neighbourhood (a move above ``NEWTON_MAX_MOVE``) or does not converge."""
+    neighbourhood (a move above twice ``NEWTON_MAX_MOVE``, looser than the finish) or
+    does not converge in 30 steps."""
     d, n = packing.d, packing.n
     rows = cal._network_rows(step, lp)
     cols = cal._square_columns(~step.rattler, chain.anchor if container.has_translation else -1, d)

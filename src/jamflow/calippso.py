@@ -1196,7 +1196,7 @@ def _newton_finish(chain: _Chain, step: _Step, lp: _LPSetup, opt: _Options, cont
     each Newton step solves ``B z = rhs`` with ``B`` the LP's basis matrix (sparse LU,
     COLAMD ordering) and updates like an LP of the chain. The LU is kept while each
     step shrinks the largest move by :data:`NEWTON_CONTRACTION` (chord steps: one
-    triangular solve each) and refactorised at the current configuration otherwise.
+    pair of triangular solves each) and refactorised at the current configuration otherwise.
     Steps stop when one satisfies the chain's convergence test (``sqrt(Gamma) - 1 <
     tol_gamma``, ``max |s| < tol_s``), within :data:`NEWTON_MAX_STEPS` steps each
     moving no particle by more than :data:`NEWTON_MAX_MOVE`.
