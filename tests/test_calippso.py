@@ -313,6 +313,33 @@ def test_jamming_lp_is_the_first_lp_of_the_chain():
     assert max_overlap(moved)[1] <= OVERLAP_TOL
 
 
+def test_unscaled_warm_simplex_lps_end_in_the_packing_of_scaled_ones(monkeypatch):
+    """The warm simplex LPs run without HiGHS's scaling (``WARM_SIMPLEX_SCALE``): on the
+    LS example the chain takes as many LPs as with HiGHS's equilibration, its warm LPs
+    pivot, and it ends in the same packing: same contacts (Q = 1), forces to 1e-8 in
+    norm, phi_J to 1e-12. Both results pass every check of a jammed packing."""
+    start = read_dat(ls_dat(3))
+    assert cal.WARM_SIMPLEX_SCALE != cal._HIGHS_SCALE
+    unscaled = calippso(start)
+    monkeypatch.setattr(cal, "WARM_SIMPLEX_SCALE", cal._HIGHS_SCALE)
+    scaled = calippso(start)
+    for res in (unscaled, scaled):
+        _check_jammed(res, start)
+        warm = res.history["warm_start"].values.astype(bool)
+        assert warm.any() and res.history["simplex_iterations"].values[warm].sum() > 0
+    assert unscaled.iterations == scaled.iterations
+    # the premise: the two chains solved their warm LPs differently (99 pivots in all
+    # unscaled against 121 scaled with highspy 1.16)
+    pivots = [int(r.history["simplex_iterations"].values.sum()) for r in (unscaled, scaled)]
+    assert pivots[0] != pivots[1]
+    q, common, n_unscaled, n_scaled = contact_overlap(unscaled.packing, scaled.packing)
+    assert q == 1.0 and n_unscaled == n_scaled
+    force = {tuple(c): f for c, f in zip(scaled.packing.contacts.tolist(), scaled.packing.force)}
+    f_ref = np.array([force[tuple(c)] for c in unscaled.packing.contacts.tolist()])
+    assert np.linalg.norm(unscaled.packing.force - f_ref) <= 1e-8 * np.linalg.norm(f_ref)
+    assert unscaled.packing.packing_fraction == pytest.approx(scaled.packing.packing_fraction, rel=1e-12)
+
+
 def test_a_near_start_takes_the_near_cutoff_and_jams_to_the_packing_of_the_far_settings(monkeypatch):
     """The LS example is a near-jamming start (median nearest gap ~1e-6), a random start
     is not; the near start's first LP uses ``cutoff_near`` (fewer rows) and its
