@@ -8,6 +8,8 @@ import sys
 import textwrap
 from pathlib import Path
 
+import pytest
+
 from jamflow._kernel_cache import STAMP_NAME, refresh
 
 
@@ -22,7 +24,8 @@ def _plant_caches(root: Path) -> None:
             (sub / "__pycache__" / name).write_bytes(b"compiled")
 
 
-def test_refresh_deletes_caches_only_when_a_numba_module_changes(tmp_path):
+def test_refresh_deletes_caches_only_when_a_numba_module_changes(tmp_path, monkeypatch):
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)  # the caches beside the sources
     (tmp_path / "sub").mkdir()
     (tmp_path / "kernels.py").write_text("import numba\n")
     (tmp_path / "sub" / "more.py").write_text("from numba import njit\n")
@@ -59,22 +62,31 @@ def _package(root: Path, name: str, stamped: bool) -> Path:
     return pkg
 
 
-def _g_of_1(root: Path, name: str) -> int:
+def _g_of_1(root: Path, name: str, user_cache: Path | None) -> int:
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(root), *sys.path]))
+    env.pop("NUMBA_CACHE_DIR", None)
+    if user_cache is not None:
+        env["NUMBA_CACHE_DIR"] = str(user_cache)
     out = subprocess.run([sys.executable, "-c", f"from {name}.g import g; print(g(1))"], env=env,
                          capture_output=True, text=True, check=True)
     return int(out.stdout.strip())
 
 
-def test_an_edit_of_an_inlined_kernel_reaches_its_callers(tmp_path):
+@pytest.mark.parametrize("user_cache", [False, True], ids=["in_tree", "NUMBA_CACHE_DIR"])
+def test_an_edit_of_an_inlined_kernel_reaches_its_callers(tmp_path, user_cache):
     """Without the stamp, numba keeps ``g``'s cache with the old ``f`` inlined (the
-    hazard); with it, ``g`` is recompiled with the new ``f``."""
+    hazard); with it, ``g`` is recompiled with the new ``f``; both with the caches
+    beside the sources and under ``NUMBA_CACHE_DIR``."""
+    cache = tmp_path / "numba-cache" if user_cache else None
     results = {}
     for name, stamped in (("stale_pkg", False), ("stamped_pkg", True)):
         pkg = _package(tmp_path, name, stamped)
-        assert _g_of_1(tmp_path, name) == 4
-        assert _caches(pkg), "numba wrote no cache"
+        assert _g_of_1(tmp_path, name, cache) == 4
+        written = sorted(cache.rglob("*.nb[ci]")) if user_cache else _caches(pkg)
+        assert written, "numba wrote no cache"
+        if user_cache:
+            assert not _caches(pkg)
         (pkg / "f.py").write_text((pkg / "f.py").read_text().replace("x + 1", "x + 2"))
-        results[name] = _g_of_1(tmp_path, name)
+        results[name] = _g_of_1(tmp_path, name, cache)
     assert results["stale_pkg"] == 4, "numba now invalidates callers' caches itself: the premise of this test changed"
     assert results["stamped_pkg"] == 6

@@ -15,6 +15,7 @@ numba kernels, HiGHS and matplotlib load only with the stage that needs them.
 from __future__ import annotations
 
 import importlib
+import os
 import warnings
 from pathlib import Path
 from typing import Any
@@ -25,12 +26,13 @@ from .packing import Packing
 
 # before any kernel module loads: numba's caches must not outlive a change of a kernel
 # they inline from another module (see jamflow._kernel_cache)
+# (the package's absolute, unresolved path: numba names its NUMBA_CACHE_DIR entries by it)
 try:
-    _refresh_kernel_caches(Path(__file__).resolve().parent)
+    _refresh_kernel_caches(Path(os.path.abspath(__file__)).parent)
 except OSError as _exc:
     warnings.warn(f"jamflow could not clear numba's kernel caches after a change of kernel code ({_exc}); "
-                  f"clear them by hand: find {Path(__file__).resolve().parent} -name '*.nb[ci]' -delete",
-                  stacklevel=2)
+                  f"clear them by hand: find {os.environ.get('NUMBA_CACHE_DIR') or Path(__file__).parent} "
+                  "-name '*.nb[ci]' -delete", stacklevel=2)
 
 #: Public name -> module (relative to this package) that defines it.
 _LAZY: dict[str, str] = {

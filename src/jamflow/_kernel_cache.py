@@ -12,9 +12,15 @@ uses numba and deletes all of them when the hash changes, so the next use compil
 afresh. It runs on ``import jamflow``, before any kernel module loads, and costs a few
 milliseconds (reading the ~15 kernel modules).
 
-Limits: caches that numba writes elsewhere (``NUMBA_CACHE_DIR`` set, or a package
-directory that is not writable) are not stamped. A regular (non-editable) install
-rewrites every source file, so numba's own per-file check invalidates all of them.
+With ``NUMBA_CACHE_DIR`` set numba keeps every cache there instead, one directory
+per source directory (``<name>_<sha1 of its absolute path>``, numba's
+``_CacheLocator.get_suitable_cache_subpath``); the stamp then lives in that directory
+too and covers those caches.
+
+Limit: without ``NUMBA_CACHE_DIR`` a package directory that is not writable is not
+stamped (numba then caches in a user-wide directory). A regular (non-editable)
+install rewrites every source file, so numba's own per-file check invalidates all of
+them.
 """
 
 from __future__ import annotations
@@ -24,7 +30,7 @@ import os
 import tempfile
 from pathlib import Path
 
-#: stamp file, in the package's top ``__pycache__``
+#: stamp file, in the package's top ``__pycache__`` (see :func:`stamp_path`)
 STAMP_NAME = "numba-kernels.stamp"
 
 
@@ -41,25 +47,59 @@ def kernel_sources_hash(package_dir: Path) -> str:
     return h.hexdigest()
 
 
-def refresh(package_dir: Path) -> bool:
-    """Delete numba's in-tree caches under ``package_dir`` when its kernel sources
-    changed since the last stamp (or there is no stamp yet); returns whether it did.
+def _writable(directory: Path) -> bool:
+    """Whether ``directory`` can be written, or created in its nearest existing parent."""
+    while not directory.exists() and directory != directory.parent:
+        directory = directory.parent
+    return os.access(directory, os.W_OK)
 
-    Nothing happens when the package directory is not writable (numba then caches
-    elsewhere, see the module docstring)."""
-    if not os.access(package_dir, os.W_OK):
+
+def _sha1(path: Path) -> str:
+    """numba's name for a source directory under ``NUMBA_CACHE_DIR`` hashes its absolute path."""
+    return hashlib.sha1(os.path.abspath(path).encode()).hexdigest()
+
+
+def cache_dirs(package_dir: Path) -> list[Path]:
+    """Where numba caches the kernels of every directory under ``package_dir``:
+    ``__pycache__`` beside the sources, or under ``NUMBA_CACHE_DIR`` when it is set."""
+    sources = [package_dir, *sorted(p for p in package_dir.rglob("*") if p.is_dir() and p.name != "__pycache__")]
+    user = os.environ.get("NUMBA_CACHE_DIR")
+    if user:
+        return [Path(user) / f"{src.name}_{_sha1(src)}" for src in sources]
+    return [src / "__pycache__" for src in sources]
+
+
+def stamp_path(package_dir: Path) -> Path:
+    """The stamp of ``package_dir``'s caches: in its top ``__pycache__``, or in
+    ``NUMBA_CACHE_DIR`` (named by the package's path) when that is set."""
+    user = os.environ.get("NUMBA_CACHE_DIR")
+    if user:
+        return Path(user) / f"{package_dir.name}_{_sha1(package_dir)}.{STAMP_NAME}"
+    return package_dir / "__pycache__" / STAMP_NAME
+
+
+def refresh(package_dir: Path) -> bool:
+    """Delete numba's caches of ``package_dir`` (:func:`cache_dirs`) when its kernel
+    sources changed since the last stamp (or there is no stamp yet); returns whether
+    it did.
+
+    Nothing happens when the stamp's directory cannot be written (a read-only
+    package without ``NUMBA_CACHE_DIR``: numba then caches elsewhere, see the module
+    docstring)."""
+    stamp = stamp_path(package_dir)
+    if not _writable(stamp.parent):
         return False
     digest = kernel_sources_hash(package_dir)
-    stamp = package_dir / "__pycache__" / STAMP_NAME
     try:
         if stamp.read_text() == digest:
             return False
     except OSError:
         pass
-    for pattern in ("*.nbi", "*.nbc"):
-        for cached in package_dir.rglob(f"__pycache__/{pattern}"):
-            cached.unlink(missing_ok=True)
-    stamp.parent.mkdir(exist_ok=True)
+    for cache in cache_dirs(package_dir):
+        for pattern in ("*.nbi", "*.nbc"):
+            for cached in cache.glob(pattern):
+                cached.unlink(missing_ok=True)
+    stamp.parent.mkdir(parents=True, exist_ok=True)
     # written atomically: a concurrent import reads the old stamp or the new one
     fd, tmp = tempfile.mkstemp(dir=stamp.parent, prefix=STAMP_NAME)
     with os.fdopen(fd, "w") as f:
