@@ -43,6 +43,11 @@ Parts (d = 3 monodisperse unless stated):
     and the d = 3 one tiled 2x1x1 (N = 2048) and 2x2x1 (N = 4096; near-jamming starts
     without an LS run, but the tiling's symmetry can make the packing degenerate); LPs, time, the Newton attempts and whether both give the same contacts
     (Q) and forces (largest difference over the largest force).
+``scale``
+    The warm simplex LPs unscaled (``WARM_SIMPLEX_SCALE``, the default) against HiGHS's
+    equilibration, in-process, one after the other: the LS examples and six 3D
+    N = 1024 near starts (and N = 2048 with ``--max-scale 2048``); LPs, pivots, LP time
+    and whether both end in the same packing (Q, largest force difference, phi_J).
 ``relax``
     LP counts with and without the Sec. IV relaxation c = 0.5 (random starts).
 ``tolerances``
@@ -74,6 +79,7 @@ import scipy.sparse.linalg as sla
 import xarray as xr
 from numpy.typing import NDArray
 
+import jamflow.calippso as cal
 from jamflow.analysis.contacts import force_balance_residual, summarize
 from jamflow.analysis.overlap import contact_overlap
 from jamflow.box import Box
@@ -96,7 +102,7 @@ OUT = Path(__file__).resolve().parent / "output"
 #: the CALiPPSO authors' LS examples, vendored with the tests (MIT, licence in its README.md)
 LS = Path(__file__).resolve().parents[1] / "tests" / "data" / "calippso-ls"
 
-PARTS = ("scaling", "ls", "preset", "finish", "solvers", "lp", "relax", "tolerances", "large", "factor")
+PARTS = ("scaling", "ls", "preset", "finish", "scale", "solvers", "lp", "relax", "tolerances", "large", "factor")
 #: the former ``fast`` preset of ``jamflow calippso`` (dropped: not faster, part ``preset``)
 FORMER_FAST = ("--tol-s", "1e-6", "--tol-gamma", "1e-9")
 #: LS pressure of the near-jamming starts: the paper's Sec. IV value. (At 1e6 the
@@ -263,6 +269,48 @@ def part_finish(quick: bool, max_n: int) -> xr.Dataset:
         parts.append(ds.expand_dims(case=[case]))
     return xr.concat(parts, "case").assign_attrs(new_dataset_attrs(
         "CALiPPSO: Newton finish against the pure LP chain (the authors' LS examples and tilings)", {"quick": quick}))
+
+
+def part_scale(quick: bool, max_n: int) -> xr.Dataset:
+    starts = {"ls_d3": ls_example(3)}
+    if not quick:
+        starts.update({"ls_d4": ls_example(4), "ls_d5": ls_example(5)})
+        starts.update({f"near_N1024_s{seed}": near_start(1024, seed) for seed in range(1, 7)})
+        if max_n >= 2048:
+            starts["near_N2048_s1"] = near_start(2048)
+    # HiGHS's own scaling is the module's private default for cold LPs
+    variants = {"scaled": cal._HIGHS_SCALE, "unscaled": cal.WARM_SIMPLEX_SCALE}
+    parts = []
+    for case, path in starts.items():
+        start = read_packing(path)
+        results, rows = {}, []
+        for name, scale in variants.items():
+            cal.WARM_SIMPLEX_SCALE = scale
+            t0 = time.perf_counter()
+            res = cal.calippso(start)
+            wall = time.perf_counter() - t0
+            h = res.history
+            results[name] = res.packing
+            rows.append(dict(time=wall, t_lps=float(h["lp_time"].sum()), lps=float(res.iterations),
+                             pivots=float(h["simplex_iterations"].sum()), phi=res.packing.packing_fraction))
+        cal.WARM_SIMPLEX_SCALE = variants["unscaled"]
+        a, b = results["scaled"], results["unscaled"]
+        q = contact_overlap(b, a)[0]
+        f_a = dict(zip(map(tuple, np.sort(a.contacts, axis=1).tolist()), a.force))
+        f_b = dict(zip(map(tuple, np.sort(b.contacts, axis=1).tolist()), b.force))
+        df = max(abs(f_b.get(k, 0.0) - v) for k, v in f_a.items()) / max(f_a.values())
+        print(f"   {case}: LPs {rows[0]['lps']:.0f} -> {rows[1]['lps']:.0f}, pivots {rows[0]['pivots']:.0f} -> "
+              f"{rows[1]['pivots']:.0f}, LP time {rows[0]['t_lps']:.2f} -> {rows[1]['t_lps']:.2f} s, "
+              f"Q = {q:.4f}, max |df| / max f = {df:.1e}, phi_J {rows[0]['phi']:.10f} -> {rows[1]['phi']:.10f}",
+              flush=True)
+        units = {"time": "s", "t_lps": "s"}
+        data = {k: (("scaling",), [r[k] for r in rows], {"units": units.get(k, "1")}) for k in rows[0]}
+        ds = xr.Dataset(data, coords={"scaling": list(variants)})
+        ds = ds.assign(contact_overlap=((), q, {"units": "1", "long_name": "Q of unscaled against scaled"}),
+                       force_difference=((), df, {"units": "1", "long_name": "max |f_unscaled - f_scaled| / max f"}))
+        parts.append(ds.expand_dims(case=[case]))
+    return xr.concat(parts, "case").assign_attrs(new_dataset_attrs(
+        "CALiPPSO: warm simplex LPs with and without HiGHS's scaling", {"quick": quick, "max_n": max_n}))
 
 
 def part_large(n: int, options: tuple[str, ...] = ()) -> xr.Dataset:
@@ -501,9 +549,23 @@ def _plot_finish(ax, ds: xr.Dataset, found: dict[str, xr.Dataset]) -> None:
     ax.legend(fontsize=7); ax.set_title("Newton finish vs LP chain")
 
 
+def _plot_scale(ax, ds: xr.Dataset, found: dict[str, xr.Dataset]) -> None:
+    pos = np.arange(ds.sizes["case"])
+    for k, scaling in enumerate(ds["scaling"].values):
+        t = ds["t_lps"].sel(scaling=scaling).values
+        ax.bar(pos + (k - 0.5) * 0.4, t, 0.4, label=f"warm LPs {scaling}")
+        for x, (y, pivots) in enumerate(zip(t, ds["pivots"].sel(scaling=scaling).values)):
+            ax.annotate(f"{pivots:.0f}", (x + (k - 0.5) * 0.4, y), ha="center", fontsize=5, rotation=90)
+    ax.set_yscale("log")
+    ax.set_xticks(pos, [str(c).replace("near_", "").replace("ls_", "") for c in ds["case"].values], fontsize=6,
+                  rotation=45)
+    ax.set_xlabel("start (LS examples; near starts N, seed)"); ax.set_ylabel("LP time of the chain [s]")
+    ax.legend(fontsize=7); ax.set_title("HiGHS scaling of warm LPs (numbers: pivots)")
+
+
 #: one panel per part that has a plot, drawn when its netCDF is in ``OUT``
 PLOTS = {"scaling": _plot_scaling, "ls": _plot_ls, "solvers": _plot_solvers, "tolerances": _plot_tolerances,
-         "factor": _plot_factor, "finish": _plot_finish}
+         "factor": _plot_factor, "finish": _plot_finish, "scale": _plot_scale}
 
 
 def plot() -> None:
@@ -531,11 +593,13 @@ def main() -> None:
     ap.add_argument("--large-options", default="",
                     help="extra jamflow calippso options of the 'large' part, e.g. \"--interior hipo --threads 2\"")
     ap.add_argument("--max-finish", type=int, default=4096, help="largest N of the 'finish' part (1024: the LS examples; 2048, 4096: tilings)")
+    ap.add_argument("--max-scale", type=int, default=1024, help="largest N of the 'scale' part (1024 or 2048)")
     args = ap.parse_args()
     OUT.mkdir(exist_ok=True)
     runners = {"scaling": lambda: part_scaling(args.quick, args.max_random), "ls": lambda: part_ls(args.quick),
                "preset": lambda: part_preset(args.quick),
                "finish": lambda: part_finish(args.quick, args.max_finish),
+               "scale": lambda: part_scale(args.quick, args.max_scale),
                "solvers": lambda: part_solvers(args.quick), "lp": lambda: part_lp(args.quick),
                "relax": lambda: part_relax(args.quick),
                "tolerances": lambda: part_tolerances(args.quick),
