@@ -446,12 +446,14 @@ def superlu(K: sp.csc_matrix, permc_spec: str) -> tuple[float, int]:
 
 def highs_factor_time(K: sp.csc_matrix) -> float:
     """Seconds of a HiGHS primal simplex run from the all-structural basis of ``K``
-    stopped by a zero pivot limit: setup plus the first factorisation of the basis."""
+    stopped by a zero pivot limit: setup plus the first factorisation of the basis,
+    with the chain's scaling of warm LPs (``WARM_SIMPLEX_SCALE``)."""
     free = np.full(K.shape[1], highspy.kHighsInf)
     lp = JammingLP(K, np.zeros(K.shape[0]), -free, free, np.empty((0, 2), np.int64)).to_highs()
     h = new_highs(1)
     for option, value in (("solver", "simplex"),
-                          ("simplex_strategy", 4), ("simplex_iteration_limit", 0)):
+                          ("simplex_strategy", 4), ("simplex_iteration_limit", 0),
+                          ("simplex_scale_strategy", cal.WARM_SIMPLEX_SCALE)):
         h.setOptionValue(option, value)
     h.passModel(lp)
     basis = highspy.HighsBasis()

@@ -25,8 +25,8 @@ from .box import Box
 from .packing import Packing
 
 # before any kernel module loads: numba's caches must not outlive a change of a kernel
-# they inline from another module (see jamflow._kernel_cache)
-# (the package's absolute, unresolved path: numba names its NUMBA_CACHE_DIR entries by it)
+# they inline from another module (see jamflow._kernel_cache); the package is named
+# by its absolute, unresolved path, as numba names its NUMBA_CACHE_DIR entries
 try:
     _refresh_kernel_caches(Path(os.path.abspath(__file__)).parent)
 except OSError as _exc:
