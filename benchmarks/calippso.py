@@ -77,6 +77,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 import xarray as xr
+from matplotlib.ticker import NullFormatter
 from numpy.typing import NDArray
 
 import jamflow.calippso as cal
@@ -505,7 +506,14 @@ def _plot_scaling(ax, ds: xr.Dataset, found: dict[str, xr.Dataset]) -> None:
         ax.loglog(ds["N"], sel["t_lp"], m + "--", label=f"{s}: median LP")
     if "large" in found:
         ax.loglog(found["large"]["N"], found["large"]["time"], "s", color="C1", mfc="none", label="near: large N")
+    _label_sizes(ax, ds["N"].values)
     ax.set_xlabel("N"); ax.set_ylabel("time [s]"); ax.legend(fontsize=7); ax.set_title("d = 3 scaling")
+
+
+def _label_sizes(ax, sizes) -> None:
+    """Tick labels at the system sizes only (log axes label minor ticks over each other)."""
+    ax.set_xticks(sizes, [str(int(n)) for n in sizes])
+    ax.xaxis.set_minor_formatter(NullFormatter())
 
 
 def _plot_ls(ax, ds: xr.Dataset, found: dict[str, xr.Dataset]) -> None:
@@ -536,6 +544,7 @@ def _plot_factor(ax, ds: xr.Dataset, found: dict[str, xr.Dataset]) -> None:
     ax.loglog(ds["N"], ds["superlu"], "s-", label="SuperLU COLAMD [s]")
     ax.loglog(ds["N"], ds["superlu_nd"], "D-", label="SuperLU METIS ND [s]")
     ax.loglog(ds["N"], ds["fill"] / ds["nnz"], "^--", label="SuperLU fill nnz(L+U)/nnz")
+    _label_sizes(ax, ds["N"].values)
     ax.set_xlabel("N"); ax.set_ylabel("time [s], fill ratio [1]"); ax.legend(fontsize=7)
     ax.set_title("warm LP: basis factorisation")
 
