@@ -237,6 +237,14 @@ def part_preset(quick: bool) -> xr.Dataset:
         "CALiPPSO: former fast preset against the paper's tolerances", {"quick": quick}))
 
 
+def force_difference(p: Packing, ref: Packing) -> float:
+    """Largest difference of a contact's force between ``p`` and ``ref`` over the
+    largest force of ``ref`` (a contact of ``ref`` absent from ``p`` counts with force 0)."""
+    f_ref = dict(zip(map(tuple, np.sort(ref.contacts, axis=1).tolist()), ref.force))
+    f_p = dict(zip(map(tuple, np.sort(p.contacts, axis=1).tolist()), p.force))
+    return max(abs(f_p.get(k, 0.0) - v) for k, v in f_ref.items()) / max(f_ref.values())
+
+
 def part_finish(quick: bool, max_n: int) -> xr.Dataset:
     starts = {"ls_d3": (1024, ls_example(3)), "ls_d4": (1024, ls_example(4)), "ls_d5": (1024, ls_example(5)),
               "ls_d3_tiled2x1x1": (2048, tiled_ls_example((2, 1, 1))),
@@ -254,10 +262,8 @@ def part_finish(quick: bool, max_n: int) -> xr.Dataset:
                        lps=float(ds.attrs["n_lps"]))
             rows.append(row)
         lp, nw = (read_packing(OUT / f"calippso_out_finish_{case}_{f}.nc") for f in ("lp", "newton"))
-        f_lp = dict(zip(map(tuple, np.sort(lp.contacts, axis=1).tolist()), lp.force))
-        f_nw = dict(zip(map(tuple, np.sort(nw.contacts, axis=1).tolist()), nw.force))
         q = contact_overlap(nw, lp)[0]
-        df = max(abs(f_nw.get(k, 0.0) - v) for k, v in f_lp.items()) / max(f_lp.values())
+        df = force_difference(nw, lp)
         print(f"   {case}: Q = {q:.6f}, max |df| / max f = {df:.2e}, LPs {rows[0]['lps']:.0f} -> {rows[1]['lps']:.0f}, "
               f"time {rows[0]['time']:.1f} -> {rows[1]['time']:.1f} s (x{rows[0]['time'] / rows[1]['time']:.2f})",
               flush=True)
@@ -287,19 +293,19 @@ def part_scale(quick: bool, max_n: int) -> xr.Dataset:
         results, rows = {}, []
         for name, scale in variants.items():
             cal.WARM_SIMPLEX_SCALE = scale
-            t0 = time.perf_counter()
-            res = cal.calippso(start)
-            wall = time.perf_counter() - t0
+            try:
+                t0 = time.perf_counter()
+                res = cal.calippso(start)
+                wall = time.perf_counter() - t0
+            finally:
+                cal.WARM_SIMPLEX_SCALE = variants["unscaled"]
             h = res.history
             results[name] = res.packing
             rows.append(dict(time=wall, t_lps=float(h["lp_time"].sum()), lps=float(res.iterations),
                              pivots=float(h["simplex_iterations"].sum()), phi=res.packing.packing_fraction))
-        cal.WARM_SIMPLEX_SCALE = variants["unscaled"]
         a, b = results["scaled"], results["unscaled"]
         q = contact_overlap(b, a)[0]
-        f_a = dict(zip(map(tuple, np.sort(a.contacts, axis=1).tolist()), a.force))
-        f_b = dict(zip(map(tuple, np.sort(b.contacts, axis=1).tolist()), b.force))
-        df = max(abs(f_b.get(k, 0.0) - v) for k, v in f_a.items()) / max(f_a.values())
+        df = force_difference(b, a)
         print(f"   {case}: LPs {rows[0]['lps']:.0f} -> {rows[1]['lps']:.0f}, pivots {rows[0]['pivots']:.0f} -> "
               f"{rows[1]['pivots']:.0f}, LP time {rows[0]['t_lps']:.2f} -> {rows[1]['t_lps']:.2f} s, "
               f"Q = {q:.4f}, max |df| / max f = {df:.1e}, phi_J {rows[0]['phi']:.10f} -> {rows[1]['phi']:.10f}",
