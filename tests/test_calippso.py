@@ -313,6 +313,19 @@ def test_jamming_lp_is_the_first_lp_of_the_chain():
     assert max_overlap(moved)[1] <= OVERLAP_TOL
 
 
+def _assert_same_packing(p: Packing, ref: Packing) -> None:
+    """Two chains from one start ended in the same packing: the same contacts (Q = 1,
+    as many), phi_J to 1e-12 and, since both stop within tol_s = 1e-9 of the jammed
+    packing, force vectors equal to 1e-8 in norm (a small force alone can differ by
+    ~1e-7 of itself)."""
+    q, common, n_p, n_ref = contact_overlap(p, ref)
+    assert q == 1.0 and n_p == n_ref
+    force = {tuple(c): f for c, f in zip(ref.contacts.tolist(), ref.force)}
+    f_ref = np.array([force[tuple(c)] for c in p.contacts.tolist()])
+    assert np.linalg.norm(p.force - f_ref) <= 1e-8 * np.linalg.norm(f_ref)
+    assert p.packing_fraction == pytest.approx(ref.packing_fraction, rel=1e-12)
+
+
 def test_unscaled_warm_simplex_lps_end_in_the_packing_of_scaled_ones(monkeypatch):
     """The warm simplex LPs run without HiGHS's scaling (``WARM_SIMPLEX_SCALE``): on the
     LS example the chain takes as many LPs as with HiGHS's equilibration, its warm LPs
@@ -332,12 +345,7 @@ def test_unscaled_warm_simplex_lps_end_in_the_packing_of_scaled_ones(monkeypatch
     # unscaled against 121 scaled with highspy 1.16)
     pivots = [int(r.history["simplex_iterations"].values.sum()) for r in (unscaled, scaled)]
     assert pivots[0] != pivots[1]
-    q, common, n_unscaled, n_scaled = contact_overlap(unscaled.packing, scaled.packing)
-    assert q == 1.0 and n_unscaled == n_scaled
-    force = {tuple(c): f for c, f in zip(scaled.packing.contacts.tolist(), scaled.packing.force)}
-    f_ref = np.array([force[tuple(c)] for c in unscaled.packing.contacts.tolist()])
-    assert np.linalg.norm(unscaled.packing.force - f_ref) <= 1e-8 * np.linalg.norm(f_ref)
-    assert unscaled.packing.packing_fraction == pytest.approx(scaled.packing.packing_fraction, rel=1e-12)
+    _assert_same_packing(unscaled.packing, scaled.packing)
 
 
 def test_a_near_start_takes_the_near_cutoff_and_jams_to_the_packing_of_the_far_settings(monkeypatch):
@@ -357,11 +365,4 @@ def test_a_near_start_takes_the_near_cutoff_and_jams_to_the_packing_of_the_far_s
     assert float(near.history["cutoff"].values[0]) == cal.DEFAULT_CUTOFF_NEAR
     assert float(ref.history["cutoff"].values[0]) == cal.DEFAULT_CUTOFF
     assert near.history["n_constraints"].values[0] < 0.7 * ref.history["n_constraints"].values[0]
-    q, common, n_near, n_ref = contact_overlap(near.packing, ref.packing)
-    assert q == 1.0 and n_near == n_ref
-    # both chains stop within tol_s = 1e-9 of the jammed packing: the force vectors agree
-    # to 1e-8 in norm (a small force alone can differ by ~1e-7 of itself)
-    force = {tuple(c): f for c, f in zip(ref.packing.contacts.tolist(), ref.packing.force)}
-    f_ref = np.array([force[tuple(c)] for c in near.packing.contacts.tolist()])
-    assert np.linalg.norm(near.packing.force - f_ref) <= 1e-8 * np.linalg.norm(f_ref)
-    assert near.packing.packing_fraction == pytest.approx(ref.packing.packing_fraction, rel=1e-12)
+    _assert_same_packing(near.packing, ref.packing)
