@@ -5,10 +5,13 @@ Every timed run is the whole ``jamflow calippso IN OUT`` command in a child proc
 Parts (d = 3 monodisperse unless stated):
 
 ``scaling``
-    Time to jam, number of LPs and median LP time against N = 256 ... 4096 from a
-    random start (RSA at phi0 = 0.3) and from a near-jamming start (an LS compression,
+    Time to jam, number of LPs and median LP time against N = 256 ... 4096 from
+    random starts (RSA at phi0 = 0.3) and from near-jamming starts (an LS compression,
     fast stage kappa0 = 5e-3 to p = 500 then kappa = 1e-3, to p = ``NEAR_PRESSURE``),
-    with least-squares exponents next to the paper's (total ~ N^3, t_LP ~ N^2.34,
+    ``--seeds`` starts of each kind per N (the LP count of a chain moves with the
+    vertex each LP ends at, so one seed per N can put the exponent anywhere), with
+    least-squares exponents over every (N, seed) and their standard errors, over all
+    N and over N >= 1024, next to the paper's (total ~ N^3, t_LP ~ N^2.34,
     n ~ N^1.04).
 ``ls``
     The LS examples of the CALiPPSO authors (N = 1024, d = 3, 4, 5) against the
@@ -56,7 +59,10 @@ Parts (d = 3 monodisperse unless stated):
 
 Each part writes ``benchmarks/output/calippso_<part>.nc``; ``calippso.png`` plots
 every part found. Starts are cached as ``benchmarks/output/calippso_start_*.nc``.
-Run: ``python benchmarks/calippso.py [--quick] [--parts PART ...]``.
+Run: ``python benchmarks/calippso.py [--quick] [--parts PART ...]``. ``--jobs 2`` runs the
+whole commands of ``scaling`` two at a time, each a child process with one HiGHS
+thread: LP counts and results do not depend on it, times include the other run's
+memory traffic (the fourth measurement of ``docs/calippso-scaling.md`` ran so).
 """
 
 from __future__ import annotations
@@ -66,6 +72,7 @@ import os
 import subprocess
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import matplotlib
@@ -76,6 +83,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
+import scipy.stats
 import xarray as xr
 from matplotlib.ticker import NullFormatter
 from numpy.typing import NDArray
@@ -115,6 +123,8 @@ NEAR_PRESSURE = 1e7
 LS_TARGETS = {3: 5.0, 4: 15.0, 5: 40.0}
 PAPER_EXPONENTS = {"time": 3.0, "t_lp": 2.34, "lps": 1.04}
 METRICS = ("time", "peak_memory", "lps", "t_lp", "phi", "overlap", "fb", "iso")
+#: units of the METRICS that have one (the others are counts or ratios)
+UNITS = {"time": "s", "peak_memory": "B", "t_lp": "s"}
 
 
 def command(start: Path, tag: str, *options: str) -> dict[str, float]:
@@ -179,33 +189,69 @@ def tiled_ls_example(reps: tuple[int, int, int]) -> Path:
 
 
 def table(rows: list[dict[str, float]], dim: str, coords, attrs: dict) -> xr.Dataset:
-    units = {"time": "s", "peak_memory": "B", "t_lp": "s"}
-    data = {m: ((dim,), np.array([r[m] for r in rows], float), {"units": units.get(m, "1")}) for m in METRICS}
+    data = {m: ((dim,), np.array([r[m] for r in rows], float), {"units": UNITS.get(m, "1")}) for m in METRICS}
     return xr.Dataset(data, coords={dim: coords}, attrs=attrs)
 
 
 def fit(n, y) -> float:
-    ok = np.isfinite(y)
-    return float(np.polyfit(np.log(n[ok]), np.log(y[ok]), 1)[0]) if ok.sum() >= 2 else np.nan
+    """Least-squares exponent of ``y ~ n^a`` over the finite points."""
+    return fit_with_error(n, y)[0]
 
 
-def part_scaling(quick: bool, max_random: int) -> xr.Dataset:
+def fit_with_error(n, y) -> tuple[float, float]:
+    """Least-squares exponent of ``y ~ n^a`` over the finite points (repeated n allowed)
+    and its standard error (NaN with fewer than three points or fewer than two n)."""
+    n, y = np.ravel(n).astype(float), np.ravel(y).astype(float)
+    ok = np.isfinite(y) & (y > 0)
+    if len(np.unique(n[ok])) < 2:
+        return np.nan, np.nan
+    r = scipy.stats.linregress(np.log(n[ok]), np.log(y[ok]))
+    return float(r.slope), float(r.stderr) if ok.sum() >= 3 else np.nan
+
+
+def median_over_seeds(values: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Median over the last axis (seeds) of the finite values; NaN where there are none."""
+    return np.array([np.median(v[np.isfinite(v)]) if np.isfinite(v).any() else np.nan for v in values])
+
+
+def part_scaling(quick: bool, max_random: int, seeds: int, jobs: int) -> xr.Dataset:
     sizes = np.array([128, 256] if quick else [256, 512, 1024, 2048, 4096])
-    parts = []
-    for kind, start in (("random", random_start), ("near", near_start)):
-        rows = []
-        for n in sizes:
-            if kind == "random" and n > max_random:
-                rows.append(dict.fromkeys(METRICS, np.nan))
-                continue
-            print(f"N = {n}, {kind} start", flush=True)
-            rows.append(command(start(int(n)), f"{kind}_N{n}"))
-        ds = table(rows, "N", sizes, {})
-        parts.append(ds.expand_dims(start=[kind]))
-    ds = xr.concat(parts, "start")
-    exps = {f"exponent_{s}_{k}": fit(sizes, ds[k].sel(start=s).values) for s in ("random", "near") for k in PAPER_EXPONENTS}
-    print("fitted exponents:", {k: round(v, 2) for k, v in exps.items()}, "paper:", PAPER_EXPONENTS, flush=True)
-    ds.attrs.update(new_dataset_attrs("CALiPPSO scaling with N", {"quick": quick, "near_pressure": NEAR_PRESSURE},
+    kinds = {"random": random_start, "near": near_start}
+    seed_list = list(range(1, seeds + 1))
+    tasks = [(kind, int(n), seed) for kind in kinds for n in sizes for seed in seed_list
+             if not (kind == "random" and n > max_random)]
+    starts = {t: kinds[t[0]](t[1], t[2]) for t in tasks}  # LS compressions run here, one at a time
+
+    def run(task: tuple[str, int, int]) -> dict[str, float]:
+        kind, n, seed = task
+        print(f"N = {n}, {kind} start, seed {seed}", flush=True)
+        return command(starts[task], f"{kind}_N{n}_s{seed}")
+
+    with ThreadPoolExecutor(max_workers=jobs) as pool:
+        done = dict(zip(tasks, pool.map(run, tasks)))
+    missing = dict.fromkeys(METRICS, np.nan)
+    data = {m: (("start", "N", "seed"), np.array([[[done.get((kind, int(n), seed), missing)[m] for seed in seed_list]
+                                                   for n in sizes] for kind in kinds]),
+                {"units": UNITS.get(m, "1")}) for m in METRICS}
+    ds = xr.Dataset(data, coords={"start": list(kinds), "N": sizes, "seed": seed_list})
+    exps = {}
+    grid = np.broadcast_to(sizes[:, None], (len(sizes), len(seed_list)))
+    for kind in kinds:
+        for k in PAPER_EXPONENTS:
+            y = ds[k].sel(start=kind).values
+            for suffix, keep in (("", sizes > 0), ("_from_1024", sizes >= 1024)):
+                a, err = fit_with_error(grid[keep], y[keep])
+                exps[f"exponent_{kind}_{k}{suffix}"], exps[f"exponent_{kind}_{k}{suffix}_err"] = a, err
+        times, lps = (median_over_seeds(ds[k].sel(start=kind).values) for k in ("time", "lps"))
+        print(f"{kind} starts, medians over {seeds} seed(s): "
+              + ", ".join(f"N = {n}: {t:.2f} s, {l:.0f} LPs" for n, t, l in zip(sizes, times, lps) if np.isfinite(t)),
+              flush=True)
+        print(f"{kind} starts, fitted exponents (all N | N >= 1024), paper in brackets: "
+              + "; ".join(f"{k} {exps[f'exponent_{kind}_{k}']:.2f} ± {exps[f'exponent_{kind}_{k}_err']:.2f} | "
+                          f"{exps[f'exponent_{kind}_{k}_from_1024']:.2f} ± {exps[f'exponent_{kind}_{k}_from_1024_err']:.2f}"
+                          f" ({PAPER_EXPONENTS[k]:g})" for k in PAPER_EXPONENTS), flush=True)
+    ds.attrs.update(new_dataset_attrs("CALiPPSO scaling with N",
+                                      {"quick": quick, "near_pressure": NEAR_PRESSURE, "seeds": seeds, "jobs": jobs},
                                       **exps, **{f"paper_exponent_{k}": v for k, v in PAPER_EXPONENTS.items()}))
     return ds
 
@@ -480,9 +526,9 @@ def part_factor(quick: bool) -> xr.Dataset:
     sizes = [128, 256] if quick else [256, 512, 1024, 2048, 4096]
     rows = []
     for n in sizes:
-        out = OUT / f"calippso_out_near_N{n}.nc"
+        out = OUT / f"calippso_out_near_N{n}_s1.nc"
         if not out.exists():
-            command(near_start(n), f"near_N{n}")
+            command(near_start(n), f"near_N{n}_s1")
         q = read_packing(out)
         K = basis_kernel(q)
         # best of FACTOR_REPEATS: the first call of each library includes its set-up
@@ -506,14 +552,17 @@ def part_factor(quick: bool) -> xr.Dataset:
 
 
 def _plot_scaling(ax, ds: xr.Dataset, found: dict[str, xr.Dataset]) -> None:
-    for s, m in (("random", "o"), ("near", "s")):
+    n = ds["N"].values
+    for (s, m), color in zip((("random", "o"), ("near", "s")), ("C0", "C1")):
         sel = ds.sel(start=s)
-        ax.loglog(ds["N"], sel["time"], m + "-", label=f"{s}: total")
-        ax.loglog(ds["N"], sel["t_lp"], m + "--", label=f"{s}: median LP")
+        for k, style, what in (("time", "-", "total"), ("t_lp", "--", "median LP")):
+            values = sel[k].values
+            ax.loglog(np.repeat(n, values.shape[1]), values.ravel(), m, color=color, ms=3, alpha=0.4)
+            ax.loglog(n, median_over_seeds(values), m + style, color=color, label=f"{s}: {what} (median of seeds)")
     if "large" in found:
         ax.loglog(found["large"]["N"], found["large"]["time"], "s", color="C1", mfc="none", label="near: large N")
     _label_sizes(ax, ds["N"].values)
-    ax.set_xlabel("N"); ax.set_ylabel("time [s]"); ax.legend(fontsize=7); ax.set_title("d = 3 scaling")
+    ax.set_xlabel("particles N"); ax.set_ylabel("time [s]"); ax.legend(fontsize=7); ax.set_title("d = 3 scaling")
 
 
 def _label_sizes(ax, sizes) -> None:
@@ -605,6 +654,8 @@ def main() -> None:
     ap.add_argument("--parts", nargs="+", choices=PARTS, default=[p for p in PARTS],
                     help="parts to run (default all; 'large' takes tens of minutes)")
     ap.add_argument("--large-n", type=int, default=16384, help="N of the 'large' part (default 16384)")
+    ap.add_argument("--seeds", type=int, default=3, help="starts of each kind and N in 'scaling' (seeds 1 .. SEEDS; default 3)")
+    ap.add_argument("--jobs", type=int, default=1, help="whole commands of 'scaling' run at once (default 1)")
     ap.add_argument("--max-random", type=int, default=4096,
                     help="largest N of the random starts in 'scaling' (3D N = 1024 takes ~200 LPs, ~6 min)")
     ap.add_argument("--large-options", default="",
@@ -612,8 +663,10 @@ def main() -> None:
     ap.add_argument("--max-finish", type=int, default=4096, help="largest N of the 'finish' part (1024: the LS examples; 2048, 4096: tilings)")
     ap.add_argument("--max-scale", type=int, default=1024, help="largest N of the 'scale' part (1024 or 2048)")
     args = ap.parse_args()
+    if args.seeds < 1 or args.jobs < 1:
+        ap.error("--seeds and --jobs must be at least 1")
     OUT.mkdir(exist_ok=True)
-    runners = {"scaling": lambda: part_scaling(args.quick, args.max_random), "ls": lambda: part_ls(args.quick),
+    runners = {"scaling": lambda: part_scaling(args.quick, args.max_random, args.seeds, args.jobs), "ls": lambda: part_ls(args.quick),
                "preset": lambda: part_preset(args.quick),
                "finish": lambda: part_finish(args.quick, args.max_finish),
                "scale": lambda: part_scale(args.quick, args.max_scale),
