@@ -200,7 +200,8 @@ def fit(n, y) -> float:
 
 def fit_with_error(n, y) -> tuple[float, float]:
     """Least-squares exponent of ``y ~ n^a`` over the finite points (repeated n allowed)
-    and its standard error (NaN with fewer than three points or fewer than two n)."""
+    and its standard error; the error is NaN with fewer than three points, both are NaN
+    with fewer than two distinct n."""
     n, y = np.ravel(n).astype(float), np.ravel(y).astype(float)
     ok = np.isfinite(y) & (y > 0)
     if len(np.unique(n[ok])) < 2:
@@ -666,7 +667,8 @@ def main() -> None:
     if args.seeds < 1 or args.jobs < 1:
         ap.error("--seeds and --jobs must be at least 1")
     OUT.mkdir(exist_ok=True)
-    runners = {"scaling": lambda: part_scaling(args.quick, args.max_random, args.seeds, args.jobs), "ls": lambda: part_ls(args.quick),
+    runners = {"scaling": lambda: part_scaling(args.quick, args.max_random, args.seeds, args.jobs),
+               "ls": lambda: part_ls(args.quick),
                "preset": lambda: part_preset(args.quick),
                "finish": lambda: part_finish(args.quick, args.max_finish),
                "scale": lambda: part_scale(args.quick, args.max_scale),

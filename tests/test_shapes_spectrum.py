@@ -249,7 +249,7 @@ def test_fourth_derivative_steps_around_a_contact_opening_next_to_the_mode(tmp_p
     # (the jump lies between s = -2.5e-7 and -1.25e-7); its residual at the round-off
     # of f (~3e-16) shows that no jump falls inside. A central difference with a step
     # 16x smaller, the former reference here, is itself off by ~10 % from round-off
-    # (eps ||M|| / h^2 ~ 1 at h = 6e-8): 10.6, 13.2 and 24 at h = 6e-8, 3e-8, 1.6e-8.
+    # (a few eps ||M|| / h^2 ~ 1 at h = 6e-8): 10.6, 13.2 and 24 at h = 6e-8, 3e-8, 1.6e-8.
     s = np.linspace(-1e-7, 2e-6, 43)
     coef, residual, *_ = np.polyfit(s / h, [f(x) for x in s], 3, full=True)
     assert np.sqrt(residual[0] / s.size) < 1e-14
