@@ -123,8 +123,8 @@ NEAR_PRESSURE = 1e7
 LS_TARGETS = {3: 5.0, 4: 15.0, 5: 40.0}
 PAPER_EXPONENTS = {"time": 3.0, "t_lp": 2.34, "lps": 1.04}
 METRICS = ("time", "peak_memory", "lps", "t_lp", "phi", "overlap", "fb", "iso")
-#: units of the METRICS that have one (the others are counts or ratios)
-UNITS = {"time": "s", "peak_memory": "B", "t_lp": "s"}
+#: units of the quantities the parts store that have one (the others are counts or ratios)
+UNITS = {"time": "s", "peak_memory": "B", "t_lp": "s", "t_lps": "s"}
 
 
 def command(start: Path, tag: str, *options: str) -> dict[str, float]:
@@ -357,8 +357,7 @@ def part_scale(quick: bool, max_n: int) -> xr.Dataset:
               f"{rows[1]['pivots']:.0f}, LP time {rows[0]['t_lps']:.2f} -> {rows[1]['t_lps']:.2f} s, "
               f"Q = {q:.4f}, max |df| / max f = {df:.1e}, phi_J {rows[0]['phi']:.10f} -> {rows[1]['phi']:.10f}",
               flush=True)
-        units = {"time": "s", "t_lps": "s"}
-        data = {k: (("scaling",), [r[k] for r in rows], {"units": units.get(k, "1")}) for k in rows[0]}
+        data = {k: (("scaling",), [r[k] for r in rows], {"units": UNITS.get(k, "1")}) for k in rows[0]}
         ds = xr.Dataset(data, coords={"scaling": list(variants)})
         ds = ds.assign(contact_overlap=((), q, {"units": "1", "long_name": "Q of unscaled against scaled"}),
                        force_difference=((), df, {"units": "1", "long_name": "max |f_unscaled - f_scaled| / max f"}))
@@ -601,7 +600,7 @@ def _plot_factor(ax, ds: xr.Dataset, found: dict[str, xr.Dataset]) -> None:
     ax.loglog(ds["N"], ds["superlu_nd"], "D-", label="SuperLU METIS ND [s]")
     ax.loglog(ds["N"], ds["fill"] / ds["nnz"], "^--", label="SuperLU fill nnz(L+U)/nnz")
     _label_sizes(ax, ds["N"].values)
-    ax.set_xlabel("N"); ax.set_ylabel("time [s], fill ratio [1]"); ax.legend(fontsize=7)
+    ax.set_xlabel("particles N"); ax.set_ylabel("time [s], fill ratio [1]"); ax.legend(fontsize=7)
     ax.set_title("warm LP: basis factorisation")
 
 

@@ -318,7 +318,7 @@ def _assert_same_packing(p: Packing, ref: Packing) -> None:
     as many), phi_J to 1e-12 and, since both stop within tol_s = 1e-9 of the jammed
     packing, force vectors equal to 1e-8 in norm (a small force alone can differ by
     ~1e-7 of itself)."""
-    q, common, n_p, n_ref = contact_overlap(p, ref)
+    q, _, n_p, n_ref = contact_overlap(p, ref)
     assert q == 1.0 and n_p == n_ref
     force = {tuple(c): f for c, f in zip(ref.contacts.tolist(), ref.force)}
     f_ref = np.array([force[tuple(c)] for c in p.contacts.tolist()])
