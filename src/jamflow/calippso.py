@@ -285,6 +285,17 @@ _HIGHS_SCALE: int = 2
 #: (89 s), a limit of 1 per row none and 305 LPs (47 s).
 WARM_PIVOTS_PER_ROW: float = 1.0
 
+#: Engines of the warm simplex LPs: ``highs`` (HiGHS's primal simplex) or ``jamflow``
+#: (:mod:`jamflow.simplex`, a bounded simplex whose basis LU has a nested-dissection
+#: ordering: at N = 4096 it factorises a contact network's basis several times faster
+#: than HiGHS's Markowitz LU, and prices by a sketch of steepest edge; measurements in
+#: ``docs/notes/warm-simplex.md``). ``auto`` takes ``jamflow`` from
+#: :data:`WARM_ENGINE_MIN_N` particles on. A warm LP on which ``jamflow`` reports
+#: trouble is solved by HiGHS from the same basis, and counted (``warm_fallbacks``).
+WARM_ENGINES: tuple[str, ...] = ("auto", "highs", "jamflow")
+DEFAULT_WARM_ENGINE: str = "auto"
+WARM_ENGINE_MIN_N: int = 2048
+
 #: HiGHS interior point methods for the interior point LPs: ``ipx`` (HiGHS's default,
 #: in every highspy wheel) and ``hipo`` (nested-dissection factorisation; needs the
 #: ``hipo`` extra, ``highspy[extras]``, which exists only for highspy <= 1.15.1).
@@ -431,6 +442,8 @@ class IterationRecord:
     simplex_iterations: int = 0  # simplex pivots, crossover pivots included
     ipm_iterations: int = 0
     newton_steps: int = 0  # Newton steps of a certified finish (its own record, solver "newton")
+    engine: str = "highs"  # engine of the LP (WARM_ENGINES; interior point LPs are HiGHS's)
+    warm_fallback: str = ""  # the trouble jamflow's warm simplex reported before HiGHS solved the LP
 
 
 @dataclass(frozen=True)
@@ -747,6 +760,32 @@ class _Solution:
     method: str
     simplex_iterations: int
     ipm_iterations: int
+    engine: str = "highs"  # which engine produced the answer (see WARM_ENGINES)
+    fallback: str = ""  # jamflow's trouble on this LP, which HiGHS then solved
+
+
+@dataclass
+class _Basis:
+    """A simplex basis, as HiGHS returned it (not alien: ``setBasis`` does not
+    factorise it) or as HiGHS status codes; each form is made from the other when asked."""
+
+    highs: highspy.HighsBasis | None = None
+    col: NDArray[np.int8] | None = None
+    row: NDArray[np.int8] | None = None
+
+    def statuses(self) -> tuple[NDArray[np.int8], NDArray[np.int8]]:
+        if self.col is None:
+            self.col = np.array([int(v) for v in self.highs.col_status], dtype=np.int8)
+            self.row = np.array([int(v) for v in self.highs.row_status], dtype=np.int8)
+        return self.col, self.row
+
+    def for_highs(self) -> highspy.HighsBasis:
+        if self.highs is None:
+            self.highs = highspy.HighsBasis()
+            self.highs.col_status = [highspy.HighsBasisStatus(int(v)) for v in self.col]
+            self.highs.row_status = [highspy.HighsBasisStatus(int(v)) for v in self.row]
+            self.highs.valid = True
+        return self.highs
 
 
 class _Solver:
@@ -757,8 +796,11 @@ class _Solver:
     pay costs about one interior point solve more.
     """
 
-    def __init__(self, threads: int = 1, tol: float = SOLVER_TOL, interior: str = DEFAULT_INTERIOR) -> None:
+    def __init__(self, threads: int = 1, tol: float = SOLVER_TOL, interior: str = DEFAULT_INTERIOR,
+                 warm_engine: str = "highs") -> None:
         self.h = new_highs(threads)
+        self.tol = tol
+        self.warm_engine = warm_engine
         if interior not in INTERIOR_POINTS:
             raise ValueError(f"unknown interior point {interior!r}; choose one of {', '.join(INTERIOR_POINTS)}")
         if self.h.setOptionValue("solver", interior) != highspy.HighsStatus.kOk:
@@ -768,7 +810,7 @@ class _Solver:
         for option in ("primal_feasibility_tolerance", "dual_feasibility_tolerance", "ipm_optimality_tolerance"):
             if self.h.setOptionValue(option, tol) != highspy.HighsStatus.kOk:
                 raise ValueError(f"HiGHS refused {option} = {tol:g}")
-        self.basis = None
+        self.basis: _Basis | None = None
         self.basis_rows: _Rows | None = None
         #: hybrid: a simplex LP without a basis to carry is solved by interior point
         self.cold_simplex_as_ipm = False
@@ -777,14 +819,20 @@ class _Solver:
 
     def solve(self, A: sp.csc_matrix, rhs, col_lower, col_upper, method: str, rows: _Rows) -> _Solution:
         """Solve the LP ``min -g`` s.t. ``A z <= rhs``, ``col_lower <= z <= col_upper``."""
-        lp = _highs_lp(A, rhs, col_lower, col_upper)
         cold = method == "dual"
         method = "simplex" if cold else method
-        basis = self._carried_basis(rows, A.shape[1]) if method == "simplex" and not cold else None
-        warm = basis is not None
+        carried = self._carried_basis(rows, A.shape[1]) if method == "simplex" and not cold else None
+        warm = carried is not None
+        fallback = ""
+        if warm and self.warm_engine == "jamflow":
+            sol = self._solve_jamflow(A, rhs, col_lower, col_upper, carried, rows)
+            if sol.col is not None:
+                return sol
+            fallback = sol.status
+        lp = _highs_lp(A, rhs, col_lower, col_upper)
         if method == "simplex" and not warm and not cold and self.cold_simplex_as_ipm:
             method = "ipm"
-        status, elapsed = self._run(lp, method, basis)
+        status, elapsed = self._run(lp, method, carried.for_highs() if warm else None)
         pivots, ipm_its = self._iterations()
         if warm and status == highspy.HighsModelStatus.kIterationLimit:
             warm = False
@@ -801,12 +849,33 @@ class _Solver:
                        and int(h.getInfo().primal_solution_status) == 2)
         if status != highspy.HighsModelStatus.kOptimal and not interior_ok:
             self.basis = None
-            return _Solution(name, elapsed, None, None, warm, method, pivots, ipm_its)
+            return _Solution(name, elapsed, None, None, warm, method, pivots, ipm_its, fallback=fallback)
         sol = h.getSolution()
-        self.basis = h.getBasis() if method != "ipm-nox" else None
+        self.basis = _Basis(highs=h.getBasis()) if method != "ipm-nox" else None
         self.basis_rows = rows
         return _Solution(name, elapsed, np.asarray(sol.col_value), -np.asarray(sol.row_dual), warm, method,
-                         pivots, ipm_its)
+                         pivots, ipm_its, fallback=fallback)
+
+    def _solve_jamflow(self, A: sp.csc_matrix, rhs, col_lower, col_upper, carried: _Basis,
+                       rows: _Rows) -> _Solution:
+        """The warm LP by :mod:`jamflow.simplex` from the carried basis, at HiGHS's
+        tolerances and pivot limit; on trouble the solution has no columns and its status
+        names the trouble."""
+        from . import simplex  # loads numba: only chains that use the engine pay for it
+
+        cost = np.zeros(A.shape[1])
+        cost[-1] = -1.0
+        col, row = carried.statuses()
+        res = simplex.solve(A, rhs, col_lower, col_upper, cost, col, row,
+                            simplex.Tolerances(primal=self.tol, dual=self.tol),
+                            max_pivots=max(int(WARM_PIVOTS_PER_ROW * A.shape[0]), 1))
+        seconds = res.stats.seconds["total"]
+        if not res.optimal:
+            return _Solution(res.status, seconds, None, None, True, "simplex", res.stats.pivots, 0, "jamflow")
+        self.basis = _Basis(col=res.col_status, row=res.row_status)
+        self.basis_rows = rows
+        return _Solution("Optimal", seconds, res.col_value, -res.row_dual, True, "simplex", res.stats.pivots, 0,
+                         "jamflow")
 
     def _iterations(self) -> tuple[int, int]:
         """Simplex pivots (crossover included) and interior point iterations of the last run."""
@@ -814,7 +883,7 @@ class _Solver:
         return (max(int(info.simplex_iteration_count), 0) + max(int(info.crossover_iteration_count), 0),
                 max(int(info.ipm_iteration_count), 0))
 
-    def _carried_basis(self, rows: _Rows, n_cols: int):
+    def _carried_basis(self, rows: _Rows, n_cols: int) -> _Basis | None:
         """The last basis carried over to ``rows``: rows kept by pair keep their status,
         new rows enter with a basic slack (inactive); None when there is no basis or
         the carried one does not have one basic variable per row."""
@@ -822,26 +891,20 @@ class _Solver:
             return None
         if rows is self.basis_rows:
             return self.basis
-        col = self.basis.col_status
+        col, old_status = self.basis.statuses()
         if len(col) != n_cols:
             return None
         n = len(rows.x_build)
         old_keys = self.basis_rows.keys(n)
-        old_status = np.array([int(v) for v in self.basis.row_status], dtype=np.int64)
         order = np.argsort(old_keys)
         new_keys = rows.keys(n)
         pos = np.clip(np.searchsorted(old_keys, new_keys, sorter=order), 0, max(len(old_keys) - 1, 0))
         found = old_keys[order[pos]] == new_keys if len(old_keys) else np.zeros(len(new_keys), bool)
         basic = int(highspy.HighsBasisStatus.kBasic)
-        status = np.where(found, old_status[order[pos]], basic)
-        n_basic = int(np.sum(status == basic)) + sum(1 for v in col if v == highspy.HighsBasisStatus.kBasic)
-        if n_basic != len(rows):
+        status = np.where(found, old_status[order[pos]], basic).astype(np.int8)
+        if int(np.sum(status == basic)) + int(np.sum(col == basic)) != len(rows):
             return None
-        carried = highspy.HighsBasis()
-        carried.col_status = list(col)
-        carried.row_status = [highspy.HighsBasisStatus(int(v)) for v in status]
-        carried.valid = True
-        return carried
+        return _Basis(col=col, row=status)
 
     def _run(self, lp: highspy.HighsLp, method: str, basis):
         h = self.h
@@ -1400,6 +1463,7 @@ def calippso(
     threads: int = 1,
     finish: str = DEFAULT_FINISH,
     interior: str = DEFAULT_INTERIOR,
+    warm_engine: str = DEFAULT_WARM_ENGINE,
     progress: Callable[[IterationRecord], None] | None = None,
 ) -> CalippsoResult:
     """Jam ``packing`` by CALiPPSO (Algorithm 1), see the module docstring.
@@ -1445,6 +1509,8 @@ def calippso(
         How the chain ends, see :data:`FINISHES`.
     interior : {"ipx", "hipo"}
         HiGHS interior point method of the interior point LPs, see :data:`INTERIOR_POINTS`.
+    warm_engine : {"auto", "highs", "jamflow"}
+        Engine of the warm simplex LPs, see :data:`WARM_ENGINES`.
     progress : callable, optional
         Called with each :class:`IterationRecord`.
 
@@ -1471,7 +1537,10 @@ def calippso(
     opt = _Options(tol_s, tol_gamma, solver, cutoff, cutoff_near, bound, relax, require_isostatic, finish)
     chain = _Chain(x=packing.position.copy() if walls else packing.box.wrap(packing.position),
                    D=packing.diameter.copy())
-    solver_obj = _Solver(threads, solver_tol, interior)
+    if warm_engine not in WARM_ENGINES:
+        raise ValueError(f"unknown warm engine {warm_engine!r}; choose one of {', '.join(WARM_ENGINES)}")
+    engine = warm_engine if warm_engine != "auto" else ("jamflow" if n >= WARM_ENGINE_MIN_N else "highs")
+    solver_obj = _Solver(threads, solver_tol, interior, engine)
     solver_obj.cold_simplex_as_ipm = solver == "hybrid"  # a cold simplex is slower than ipm
     chain.near_start = _near_start(chain.x, chain.D, container)
     if chain.near_start:
@@ -1482,7 +1551,7 @@ def calippso(
         lp = _set_up_lp(chain, container, opt, d, n)
         sol = solver_obj.solve(lp.A, lp.geo.rhs, lp.col_lower, lp.col_upper, lp.method, lp.rows)  # line 8
         counts = dict(warm_start=sol.warm, simplex_iterations=sol.simplex_iterations,
-                      ipm_iterations=sol.ipm_iterations)
+                      ipm_iterations=sol.ipm_iterations, engine=sol.engine, warm_fallback=sol.fallback)
         if sol.col is None:
             _record(chain, progress, IterationRecord(
                 it, np.nan, np.nan, np.nan, len(lp.rows), 0, 0, False, sol.status, sol.seconds, sol.method,
@@ -1529,7 +1598,7 @@ def calippso(
     if not converged and require_isostatic:
         raise RuntimeError(_diagnose(f"converged LP failed the final checks: {network.why}", chain.records))
     return _result(packing, chain.x, chain.D, container, network, chain, history, converged, total, dict(
-        finish=finish, interior=interior, tol_s=tol_s, tol_gamma=tol_gamma, solver=solver, solver_tol=solver_tol, cutoff=cutoff, cutoff_near=cutoff_near, bound=[list(b) for b in bound],
+        finish=finish, interior=interior, warm_engine=warm_engine, tol_s=tol_s, tol_gamma=tol_gamma, solver=solver, solver_tol=solver_tol, cutoff=cutoff, cutoff_near=cutoff_near, bound=[list(b) for b in bound],
         relax=relax, walls=walls, max_iterations=max_iterations, threads=threads))
 
 
@@ -1784,6 +1853,10 @@ def _history(records: list[IterationRecord]) -> xr.Dataset:
     data["warm_start"] = (("iteration",), col("warm_start").astype(np.int8), {"units": "1", "long_name": "simplex warm-started from the previous basis (1 = yes)"})
     data["lp_status"] = (("iteration",), col("lp_status").astype(str), {"long_name": "HiGHS model status"})
     data["solver"] = (("iteration",), col("solver").astype(str), {"long_name": "HiGHS method of the LP"})
+    data["engine"] = (("iteration",), col("engine").astype(str), {"long_name": "engine of the LP: highs, or jamflow "
+                                                                              "(jamflow.simplex, warm simplex LPs)"})
+    data["warm_fallback"] = (("iteration",), col("warm_fallback").astype(str), {
+        "long_name": "trouble jamflow.simplex reported on this warm LP before HiGHS solved it ('' = none)"})
     return xr.Dataset(data, coords={"iteration": np.arange(1, len(records) + 1)})
 
 
@@ -1844,6 +1917,9 @@ def _result(packing, x, D, container: _Container, net: _Network, chain: _Chain, 
         total_time=total,
         peak_memory=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024.0,
         lp_time_total=float(np.nansum(history["lp_time"].values)),
+        warm_lps_jamflow=sum(r.engine == "jamflow" for r in records),
+        warm_fallbacks=sum(bool(r.warm_fallback) for r in records),
+        warm_fallback_reasons=", ".join(sorted({r.warm_fallback for r in records if r.warm_fallback})) or "none",
     )
     if container.walls:
         attrs["walls"] = "hard walls on every face of the orthogonal box [0, L_mu]; wall contacts in wall_contact_*"

@@ -15,11 +15,14 @@ from ..calippso import (
     DEFAULT_SOLVER,
     DEFAULT_TOL_GAMMA,
     DEFAULT_TOL_S,
+    DEFAULT_WARM_ENGINE,
     FINISHES,
     INTERIOR_POINTS,
     NEAR_START_GAP,
     SOLVER_TOL,
     SOLVERS,
+    WARM_ENGINE_MIN_N,
+    WARM_ENGINES,
     calippso,
     result_to_dataset,
 )
@@ -66,6 +69,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--interior", choices=INTERIOR_POINTS, default=DEFAULT_INTERIOR,
                    help="HiGHS interior point method of the interior point LPs; hipo needs "
                         f"pip install 'jamflow[hipo]' (default {DEFAULT_INTERIOR})")
+    p.add_argument("--warm-engine", choices=WARM_ENGINES, default=DEFAULT_WARM_ENGINE,
+                   help="engine of the warm simplex LPs: highs, or jamflow (a simplex on a nested-dissection "
+                        "sparse LU; HiGHS solves any LP it reports trouble on); auto takes jamflow from "
+                        f"N = {WARM_ENGINE_MIN_N} on (default {DEFAULT_WARM_ENGINE})")
     p.add_argument("--finish", choices=FINISHES, default=DEFAULT_FINISH,
                    help="newton: once the network is isostatic in the chain's tail, solve its square system by "
                         "Newton and keep it only if certified (positive forces, no overlap, same geometric "
@@ -81,6 +88,9 @@ def _calippso(args: argparse.Namespace) -> int:
         kwargs["bound"] = ((5e-4, args.bound[0]), (1e-5, args.bound[1]))
     with tqdm(desc="calippso", unit=" LP", disable=args.quiet) as bar:
         def progress(rec) -> None:
+            if rec.warm_fallback:
+                bar.write(f"LP {rec.iteration}: jamflow.simplex reported {rec.warm_fallback!r}; HiGHS solved it "
+                          "from the same basis")
             bar.update(1)
             bar.set_postfix(sqrtG_1=f"{rec.sqrt_gamma_minus_1:.2e}", s=f"{rec.max_displacement_stable:.2e}",
                             Nc=rec.n_contacts)
@@ -88,7 +98,7 @@ def _calippso(args: argparse.Namespace) -> int:
         result = calippso(
             packing, tol_s=args.tol_s, tol_gamma=args.tol_gamma, solver=args.solver, solver_tol=args.solver_tol, cutoff=args.cutoff,
             cutoff_near=args.cutoff_near, relax=args.relax, walls=args.walls,
-            max_iterations=args.max_iterations, threads=args.threads, finish=args.finish, interior=args.interior, progress=progress, **kwargs,
+            max_iterations=args.max_iterations, threads=args.threads, finish=args.finish, interior=args.interior, warm_engine=args.warm_engine, progress=progress, **kwargs,
         )
     write_dataset(result_to_dataset(result, stage_parameters(args, "packing", "out")), args.out)
     a = result.packing.attrs
@@ -97,6 +107,8 @@ def _calippso(args: argparse.Namespace) -> int:
         ("phi_J", f"{a['phi_J']:.10f}"),
         ("LPs", f"{a['n_lps']} (converged {bool(result.converged)}; "
                 f"{'near-jamming start: near cutoff, interior point LPs without presolve' if a['near_start'] else 'far start'})"),
+        ("warm LPs", (f"{a['warm_lps_jamflow']} by jamflow.simplex, {a['warm_fallbacks']} of its attempts re-solved "
+                      f"by HiGHS after trouble ({a['warm_fallback_reasons']})")),
         ("finish", f"{a['finish']} ({a['newton_attempts']} Newton attempt(s) in {a['newton_time']:.2f} s, "
                    f"{a['newton_rejections']} rejected, last because: {a['newton_last_rejection']})"),
         ("contacts N_c", f"{a['n_contacts']} (isostatic count d(N_s-1)+1 = {a['isostatic_count']}: {counting})"),

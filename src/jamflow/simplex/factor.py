@@ -27,8 +27,8 @@ from numpy.typing import NDArray
 from . import _kernels as k
 
 #: Column orderings of the working-set matrix: ``metis``, a nested dissection of the
-#: column graph of ``W^T W`` without its dense columns (``pymetis``), or SuperLU's
-#: ``colamd``.
+#: column graph of ``W^T W`` without its dense columns (``pymetis``; COLAMD when it is
+#: not installed), or SuperLU's ``colamd``.
 ORDERINGS: tuple[str, ...] = ("metis", "colamd")
 
 #: A column of ``W`` with more entries than this fraction of its rows (the column of
@@ -48,6 +48,15 @@ MIN_ETAS, MAX_ETAS = 16, 400
 #: SuperLU's threshold partial pivoting: a diagonal entry is kept as pivot when at
 #: least this fraction of the largest in its column (1.0: plain partial pivoting).
 DIAG_PIVOT_THRESHOLD: float = 0.1
+
+
+def _have_pymetis() -> bool:
+    """Whether ``pymetis`` (the METIS ordering) is installed; without it COLAMD orders."""
+    try:
+        import pymetis  # noqa: F401
+    except ImportError:
+        return False
+    return True
 
 
 class SingularWorkingSet(RuntimeError):
@@ -91,7 +100,7 @@ class Factor:
         if ordering not in ORDERINGS:
             raise ValueError(f"unknown ordering {ordering!r}; choose one of {', '.join(ORDERINGS)}")
         self.n = n
-        self.ordering = ordering
+        self.ordering = ordering if ordering != "metis" or _have_pymetis() else "colamd"
         self.max_etas = max_etas
         self.limit = max_etas or MIN_ETAS
         self.eta_slot = np.zeros(0, dtype=np.int64)

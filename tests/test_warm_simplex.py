@@ -1,0 +1,203 @@
+"""jamflow.simplex, the warm simplex of CALiPPSO's LPs, against HiGHS.
+
+``tests/data/calippso_warm_lps.npz`` holds three warm LPs captured from 3D near-start
+chains (LS to p = 1e7 from RSA at phi = 0.3, ``benchmarks/calippso.py``'s
+``near_start``; ``benchmarks/warm_lp.py capture``): N = 256 seed 2 LP 1 (HiGHS: 45
+pivots), N = 512 seed 2 LP 1 (51) and LP 15 (139, after its rows were rebuilt), each
+with the basis the chain carried to it. ``tests/data/calippso_near_start_n256.nc`` is
+the N = 256 seed 2 start.
+
+The physics the chain reads from an LP are Gamma* = 1 + g, the active set (rows with a
+dual above ``CONTACT_DUAL_REL_TOL`` of the largest: the contacts) and the duals (the
+forces), so those are compared with HiGHS's answer from the same basis.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import highspy
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import jamflow.calippso as cal
+from jamflow import simplex
+from jamflow.calippso import CONTACT_DUAL_REL_TOL, SOLVER_TOL, calippso, jamming_lp
+from jamflow.io import read_packing
+from jamflow.lattices import lattice_packing
+
+DATA = Path(__file__).parent / "data"
+TOL = simplex.Tolerances(primal=SOLVER_TOL, dual=SOLVER_TOL)
+LPS = ("n256_a", "n512_a", "n512_b")
+
+
+def _lp(name: str) -> dict:
+    z = np.load(DATA / "calippso_warm_lps.npz")
+    get = {k: z[f"{name}_{k}"] for k in ("indptr", "indices", "data", "shape", "rhs", "col_lower", "col_upper",
+                                         "col_status", "row_status")}
+    A = sp.csc_matrix((get["data"], get["indices"], get["indptr"]), shape=tuple(get["shape"]))
+    return dict(A=A, rhs=get["rhs"], lower=get["col_lower"], upper=get["col_upper"],
+                col_status=get["col_status"].astype(np.int64), row_status=get["row_status"].astype(np.int64))
+
+
+def _cost(n: int) -> np.ndarray:
+    c = np.zeros(n)
+    c[-1] = -1.0  # min -g
+    return c
+
+
+def _ours(lp: dict, **options) -> simplex.Result:
+    return simplex.solve(lp["A"], lp["rhs"], lp["lower"], lp["upper"], _cost(lp["A"].shape[1]), lp["col_status"],
+                         lp["row_status"], TOL, **options)
+
+
+def _highs(lp: dict, warm: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """HiGHS's columns and row duals: the primal simplex from the carried basis, set up as
+    the chain's warm LPs (unscaled, the chain's tolerances), or cold."""
+    h = highspy.Highs()
+    h.setOptionValue("output_flag", False)
+    h.setOptionValue("threads", 1)
+    for option in ("primal_feasibility_tolerance", "dual_feasibility_tolerance"):
+        h.setOptionValue(option, SOLVER_TOL)
+    h.setOptionValue("solver", "simplex")
+    h.setOptionValue("simplex_strategy", 4)
+    h.setOptionValue("simplex_scale_strategy", cal.WARM_SIMPLEX_SCALE)
+    h.passModel(cal._highs_lp(lp["A"], lp["rhs"], lp["lower"], lp["upper"]))
+    if warm:
+        basis = highspy.HighsBasis()
+        basis.col_status = [highspy.HighsBasisStatus(int(v)) for v in lp["col_status"]]
+        basis.row_status = [highspy.HighsBasisStatus(int(v)) for v in lp["row_status"]]
+        basis.valid = True
+        h.setBasis(basis)
+    h.run()
+    assert h.getModelStatus() == highspy.HighsModelStatus.kOptimal
+    sol = h.getSolution()
+    return np.asarray(sol.col_value), np.asarray(sol.row_dual)
+
+
+def _kkt(lp: dict, col: np.ndarray, row_dual: np.ndarray) -> None:
+    """Optimality of an answer on its own, to the chain's tolerances: rows and bounds
+    hold, the duals of ``min -g`` are non-negative forces on tight rows only and balance
+    every column off its bounds (``A^T mu = e_g``, paper Eq. 9 for the column of g)."""
+    A, mu = lp["A"], -row_dual
+    assert np.max(A @ col - lp["rhs"]) <= SOLVER_TOL
+    assert np.all(col >= lp["lower"] - SOLVER_TOL) and np.all(col <= lp["upper"] + SOLVER_TOL)
+    assert mu.min() >= -SOLVER_TOL
+    slack = lp["rhs"] - A @ col
+    assert np.max(mu * slack) <= 1e-14  # complementarity
+    e_g = np.zeros(A.shape[1])
+    e_g[-1] = 1.0
+    off = (col > lp["lower"] + SOLVER_TOL) & (col < lp["upper"] - SOLVER_TOL)
+    assert np.max(np.abs((A.T @ mu - e_g)[off])) <= 1e-12
+
+
+def _agree(lp: dict, ours: simplex.Result, col_h: np.ndarray, dual_h: np.ndarray) -> None:
+    """Gamma* to 1e-12 relative, the same active set, duals to 1e-9 of the largest."""
+    assert ours.optimal
+    g, g_h = ours.col_value[-1], col_h[-1]
+    assert abs(g - g_h) <= 1e-12 * (1.0 + g_h)
+    mu, mu_h = -ours.row_dual, -dual_h
+    assert np.array_equal(mu > CONTACT_DUAL_REL_TOL * mu.max(), mu_h > CONTACT_DUAL_REL_TOL * mu_h.max())
+    assert np.max(np.abs(mu - mu_h)) <= 1e-9 * mu_h.max()
+    _kkt(lp, ours.col_value, ours.row_dual)
+
+
+@pytest.mark.parametrize("name", LPS)
+def test_warm_lps_end_where_highs_ends_from_the_same_basis(name):
+    lp = _lp(name)
+    ours = _ours(lp)
+    _agree(lp, ours, *_highs(lp))
+    assert ours.stats.pivots > 0  # the carried basis is not optimal
+    # the final basis names n constraints: M basic variables in all
+    assert int(np.sum(ours.row_status == 1) + np.sum(ours.col_status == 1)) == lp["A"].shape[0]
+
+
+def test_many_refactorisations_and_either_pricing_give_the_same_answer():
+    lp = _lp("n512_a")
+    col_h, dual_h = _highs(lp)
+    often = _ours(lp, max_etas=2)
+    assert often.stats.factorisations >= 5 and often.stats.pivots >= 10
+    _agree(lp, often, col_h, dual_h)
+    _agree(lp, _ours(lp, pricing="devex"), col_h, dual_h)
+    _agree(lp, _ours(lp, ordering="colamd"), col_h, dual_h)
+
+
+def test_a_degenerate_crystal_lp_from_a_cold_basis():
+    # every nearest-neighbour row of an FCC crystal at contact has a zero right-hand
+    # side: each vertex is degenerate, and the crystal is jammed (Gamma* = 1)
+    lp_ = jamming_lp(lattice_packing("fcc", 2))
+    M, n = lp_.A.shape
+    lp = dict(A=lp_.A, rhs=lp_.rhs, lower=lp_.col_lower, upper=lp_.col_upper,
+              col_status=np.zeros(n, np.int64), row_status=np.ones(M, np.int64))  # all rows slack
+    assert np.sum(np.abs(lp["rhs"]) < 1e-12) > n  # more tight rows than a vertex needs
+    for perturbation in (simplex.warm.PERTURBATION, 0.0):
+        ours = _ours(lp, perturbation=perturbation)
+        assert ours.optimal
+        col_h, _ = _highs(lp, warm=False)
+        assert abs(ours.col_value[-1] - col_h[-1]) <= 1e-12 and abs(ours.col_value[-1]) <= 1e-12
+        _kkt(lp, ours.col_value, ours.row_dual)
+
+
+def _tiny(rows, rhs, lower, upper, col_status, row_status) -> dict:
+    return dict(A=sp.csc_matrix(np.array(rows, float)), rhs=np.array(rhs, float), lower=np.array(lower, float),
+                upper=np.array(upper, float), col_status=np.array(col_status), row_status=np.array(row_status))
+
+
+@pytest.mark.parametrize(("lp", "status"), [
+    # x <= -1 and x >= 1
+    (_tiny([[1.0], [-1.0]], [-1.0, -1.0], [-np.inf], [np.inf], [1], [2, 1]), "infeasible"),
+    # min -x with x >= 0 only
+    (_tiny([[-1.0]], [0.0], [-np.inf], [np.inf], [1], [2]), "unbounded"),
+    # the same row twice in the working set
+    (_tiny([[1.0, 1.0], [1.0, 1.0]], [1.0, 1.0], [-np.inf] * 2, [np.inf] * 2, [1, 1], [2, 2]), "singular"),
+    # a working set of the wrong size
+    (_tiny([[1.0, 1.0]], [1.0], [-np.inf] * 2, [np.inf] * 2, [1, 1], [2]), "singular"),
+])
+def test_trouble_is_reported_not_answered(lp, status):
+    res = simplex.solve(lp["A"], lp["rhs"], lp["lower"], lp["upper"], _cost(lp["A"].shape[1]), lp["col_status"],
+                        lp["row_status"], TOL)
+    assert res.status == status and not res.optimal
+
+
+def test_a_pivot_limit_is_trouble():
+    assert _ours(_lp("n512_a"), max_pivots=3).status == "iteration limit"
+
+
+def _same_packing(a, b) -> None:
+    pa, pb = a.packing, b.packing
+    key = lambda p: {tuple(c): f for c, f in zip(np.sort(p.contacts, axis=1).tolist(), p.force)}  # noqa: E731
+    fa, fb = key(pa), key(pb)
+    assert fa.keys() == fb.keys()
+    f_max = max(fb.values())
+    assert max(abs(fa[c] - fb[c]) for c in fb) <= 1e-9 * f_max
+    assert abs(pa.attrs["phi_J"] - pb.attrs["phi_J"]) <= 1e-12
+
+
+def test_a_chain_with_the_jamflow_engine_ends_in_the_packing_of_highs():
+    start = read_packing(DATA / "calippso_near_start_n256.nc")
+    highs = calippso(start, warm_engine="highs")
+    ours = calippso(start, warm_engine="jamflow")
+    engines = ours.history["engine"].values[ours.history["warm_start"].values.astype(bool)]
+    assert len(engines) > 0 and np.all(engines == "jamflow")
+    assert ours.packing.attrs["warm_fallbacks"] == 0 and ours.converged
+    _same_packing(ours, highs)
+
+
+def test_trouble_in_the_chain_falls_back_to_highs_and_is_counted(monkeypatch):
+    start = read_packing(DATA / "calippso_near_start_n256.nc")
+    highs = calippso(start, warm_engine="highs")
+    solve = simplex.solve
+
+    def troubled(*args, **kwargs):
+        res = solve(*args, **kwargs)
+        return simplex.Result("unstable pivot", res.col_value, res.row_dual, res.col_dual, res.col_status,
+                              res.row_status, res.stats)
+
+    monkeypatch.setattr(simplex, "solve", troubled)
+    ours = calippso(start, warm_engine="jamflow")
+    warm = ours.history["warm_start"].values.astype(bool)
+    assert warm.any() and np.all(ours.history["warm_fallback"].values[warm] == "unstable pivot")
+    assert ours.packing.attrs["warm_fallbacks"] == warm.sum()
+    assert ours.packing.attrs["warm_lps_jamflow"] == 0
+    _same_packing(ours, highs)
