@@ -286,6 +286,51 @@ def plot(ds: xr.Dataset) -> None:
     print(f"wrote {OUT / 'warm_lp.png'}")
 
 
+#: ``sweep``: the variants of jamflow.simplex's measured choices, each against the default
+VARIANTS: dict[str, dict] = {
+    "default": {},
+    "devex": {"pricing": "devex"},
+    "colamd": {"ordering": "colamd"},
+    "no_perturbation": {"perturbation": 0.0},
+    "perturbation_1e-7": {"perturbation": 1e-7},
+    "etas_50": {"max_etas": 50},
+    "etas_400": {"max_etas": 400},
+    "sketch_8": {"sketch_rows": 8},
+    "sketch_32": {"sketch_rows": 32},
+}
+
+
+def sweep(tags: list[str], every: int, variants: list[str]) -> xr.Dataset:
+    """Every ``every``-th captured LP of ``tags`` by each variant of :data:`VARIANTS`
+    (the order rotating from LP to LP): pivots and CPU time."""
+    from jamflow.simplex import pricing
+
+    rows, names = [], []
+    for tag in tags:
+        for count, path in enumerate(captured(tag)[::every]):
+            w = load(path)
+            order = variants[count % len(variants):] + variants[:count % len(variants)]
+            out = {}
+            for v in order:
+                options = dict(VARIANTS[v])
+                pricing.SKETCH_ROWS = options.pop("sketch_rows", 16)
+                _, cpu, r = ours_solve(w, **options)
+                out[v] = (cpu, r.stats.pivots, float(r.optimal))
+            pricing.SKETCH_ROWS = 16
+            rows.append(out)
+            names.append(f"{tag}/{path.stem}")
+            print(names[-1], " ".join(f"{v} {out[v][0]:.2f}s/{out[v][1]}" for v in variants), flush=True)
+    data = {}
+    for k, (field, unit) in enumerate((("cpu", "s"), ("pivots", "1"), ("optimal", "1"))):
+        data[field] = (("lp", "variant"), np.array([[r[v][k] for v in variants] for r in rows]), {"units": unit})
+    ds = xr.Dataset(data, coords={"lp": names, "variant": variants},
+                    attrs=new_dataset_attrs("jamflow.simplex variants on captured CALiPPSO warm LPs", {"tags": tags}))
+    for v in variants:
+        print(f"{v}: CPU {ds['cpu'].sel(variant=v).sum().item():.1f} s, pivots {ds['pivots'].sel(variant=v).sum().item():.0f}, "
+              f"optimal {ds['optimal'].sel(variant=v).sum().item():.0f} of {len(names)}", flush=True)
+    return ds
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="step", required=True)
@@ -300,7 +345,14 @@ def main() -> None:
     cmp.add_argument("--ordering", default="metis")
     cmp.add_argument("--pricing", default="sketch_full")
     cmp.add_argument("--output", default="warm_lp.nc")
+    swp = sub.add_parser("sweep", help="variants of jamflow.simplex's choices on a sample of captured LPs")
+    swp.add_argument("--tags", nargs="+", required=True)
+    swp.add_argument("--every", type=int, default=1, help="take every k-th captured LP")
+    swp.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+    swp.add_argument("--output", default="warm_lp_sweep.nc")
     args = ap.parse_args()
+    if args.step == "sweep":
+        write_dataset(sweep(args.tags, args.every, args.variants), OUT / args.output)
     if args.step == "compare":
         tags = args.tags or sorted(p.name for p in CAPTURE.iterdir() if p.is_dir())
         ds = compare(tags, args.max_lps, {"ordering": args.ordering, "pricing": args.pricing})
