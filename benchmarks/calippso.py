@@ -51,6 +51,11 @@ Parts (d = 3 monodisperse unless stated):
     equilibration, in-process, one after the other: the LS examples and six 3D
     N = 1024 near starts (and N = 2048 with ``--max-scale 2048``); LPs, pivots, LP time
     and whether both end in the same packing (Q, largest force difference, phi_J).
+``engine``
+    Whole chains with the warm LPs by HiGHS and by jamflow.simplex (``--warm-engine
+    highs`` / ``jamflow``), one after the other: the LS examples and ``--seeds`` near
+    starts per N of ``--engine-cases``; time, LPs, pivots, fallbacks, whether both end
+    in the same packing (Q, forces, phi_J), and ``jamflow certify`` of every output.
 ``relax``
     LP counts with and without the Sec. IV relaxation c = 0.5 (random starts).
 ``tolerances``
@@ -111,7 +116,8 @@ OUT = Path(__file__).resolve().parent / "output"
 #: the CALiPPSO authors' LS examples, vendored with the tests (MIT, licence in its README.md)
 LS = Path(__file__).resolve().parents[1] / "tests" / "data" / "calippso-ls"
 
-PARTS = ("scaling", "ls", "preset", "finish", "scale", "solvers", "lp", "relax", "tolerances", "large", "factor")
+PARTS = ("scaling", "ls", "preset", "finish", "scale", "engine", "solvers", "lp", "relax", "tolerances", "large",
+         "factor")
 #: the former ``fast`` preset of ``jamflow calippso`` (dropped: not faster, part ``preset``)
 FORMER_FAST = ("--tol-s", "1e-6", "--tol-gamma", "1e-9")
 #: LS pressure of the near-jamming starts: the paper's Sec. IV value. (At 1e6 the
@@ -364,6 +370,61 @@ def part_scale(quick: bool, max_n: int) -> xr.Dataset:
         parts.append(ds.expand_dims(case=[case]))
     return xr.concat(parts, "case").assign_attrs(new_dataset_attrs(
         "CALiPPSO: warm simplex LPs with and without HiGHS's scaling", {"quick": quick, "max_n": max_n}))
+
+
+def certified(out: Path) -> str:
+    """``jamflow certify``'s classification of a CALiPPSO output (collective jamming)."""
+    cert = out.with_name(out.stem + "_certificate.nc")
+    subprocess.run([sys.executable, "-m", "jamflow", "certify", str(out), str(cert), "--quiet"], check=True)
+    return str(read_dataset(cert).attrs["classification"])
+
+
+def part_engine(quick: bool, cases: list[str], seeds: int) -> xr.Dataset:
+    """Whole chains with the warm LPs by HiGHS and by jamflow.simplex (``--warm-engine``),
+    the two commands one after the other, their order alternating between starts: time,
+    LPs, pivots, jamflow's fallbacks to HiGHS, and whether they end in the same packing
+    (Q, largest force difference over the largest force, phi_J); every output is also
+    checked (isostatic, overlap, force balance) and certified by ``jamflow certify``."""
+    starts = {"ls_d3": ls_example(3)} if quick or "ls" in cases else {}
+    if not quick:
+        if "ls" in cases:
+            starts.update({"ls_d4": ls_example(4), "ls_d5": ls_example(5)})
+        for n in sorted(int(c) for c in cases if c != "ls"):
+            starts.update({f"near_N{n}_s{seed}": near_start(n, seed) for seed in range(1, seeds + 1)})
+    engines = ("highs", "jamflow")
+    parts = []
+    for k, (case, start) in enumerate(starts.items()):
+        rows = {}
+        for engine in (engines if k % 2 == 0 else engines[::-1]):
+            print(f"{case}: --warm-engine {engine}", flush=True)
+            row = command(start, f"engine_{case}_{engine}", "--warm-engine", engine)
+            out = OUT / f"calippso_out_engine_{case}_{engine}.nc"
+            ds = read_dataset(out)
+            row.update(pivots=float(ds["simplex_iterations"].sum()), fallbacks=float(ds.attrs["warm_fallbacks"]),
+                       warm_jamflow=float(ds.attrs["warm_lps_jamflow"]), lps=float(ds.attrs["n_lps"]),
+                       t_lps=float(ds.attrs["lp_time_total"]))
+            row["certified"] = certified(out)
+            rows[engine] = row
+        a, b = (read_packing(OUT / f"calippso_out_engine_{case}_{e}.nc") for e in engines)
+        q, df = contact_overlap(b, a)[0], force_difference(b, a)
+        dphi = b.packing_fraction - a.packing_fraction
+        print(f"   {case}: Q = {q:.6f}, max |df| / max f = {df:.1e}, phi_J {a.packing_fraction:.10f} -> "
+              f"{b.packing_fraction:.10f}, LPs {rows['highs']['lps']:.0f} -> {rows['jamflow']['lps']:.0f}, "
+              f"time {rows['highs']['time']:.1f} -> {rows['jamflow']['time']:.1f} s, fallbacks "
+              f"{rows['jamflow']['fallbacks']:.0f}, certified {rows['highs']['certified']} / "
+              f"{rows['jamflow']['certified']}", flush=True)
+        numeric = [m for m in rows["highs"] if m != "certified"]
+        data = {m: (("engine",), [rows[e][m] for e in engines], {"units": UNITS.get(m, "1")}) for m in numeric}
+        data["certified"] = (("engine",), [rows[e]["certified"] for e in engines])
+        ds = xr.Dataset(data, coords={"engine": list(engines)})
+        ds = ds.assign(contact_overlap=((), q, {"units": "1", "long_name": "Q of jamflow's packing against HiGHS's"}),
+                       force_difference=((), df, {"units": "1", "long_name": "max |f_jamflow - f_highs| / max f"}),
+                       phi_difference=((), dphi, {"units": "1", "long_name": "phi_J(jamflow) - phi_J(highs)"}),
+                       n=((), a.n, {"units": "1", "long_name": "number of spheres"}))
+        parts.append(ds.expand_dims(case=[case]))
+    return xr.concat(parts, "case").assign_attrs(new_dataset_attrs(
+        "CALiPPSO: warm LPs by HiGHS against jamflow.simplex, whole chains", {"quick": quick, "cases": cases,
+                                                                             "seeds": seeds}))
 
 
 def part_large(n: int, options: tuple[str, ...] = ()) -> xr.Dataset:
@@ -662,6 +723,10 @@ def main() -> None:
                     help="extra jamflow calippso options of the 'large' part, e.g. \"--interior hipo --threads 2\"")
     ap.add_argument("--max-finish", type=int, default=4096, help="largest N of the 'finish' part (1024: the LS examples; 2048, 4096: tilings)")
     ap.add_argument("--max-scale", type=int, default=1024, help="largest N of the 'scale' part (1024 or 2048)")
+    ap.add_argument("--suffix", default="", help="appended to the parts' output names (runs side by side)")
+    ap.add_argument("--engine-cases", nargs="+", default=["ls", "1024", "2048"],
+                    choices=["ls", "1024", "2048", "4096", "8192"],
+                    help="starts of the 'engine' part: the LS examples and/or near starts of these N")
     args = ap.parse_args()
     if args.seeds < 1 or args.jobs < 1:
         ap.error("--seeds and --jobs must be at least 1")
@@ -671,13 +736,14 @@ def main() -> None:
                "preset": lambda: part_preset(args.quick),
                "finish": lambda: part_finish(args.quick, args.max_finish),
                "scale": lambda: part_scale(args.quick, args.max_scale),
+               "engine": lambda: part_engine(args.quick, args.engine_cases, args.seeds),
                "solvers": lambda: part_solvers(args.quick), "lp": lambda: part_lp(args.quick),
                "relax": lambda: part_relax(args.quick),
                "tolerances": lambda: part_tolerances(args.quick),
                "large": lambda: part_large(1024 if args.quick else args.large_n, tuple(args.large_options.split())),
                "factor": lambda: part_factor(args.quick)}
     for part in args.parts:
-        write_dataset(runners[part](), OUT / f"calippso_{part}.nc")
+        write_dataset(runners[part](), OUT / f"calippso_{part}{args.suffix}.nc")
     plot()
 
 

@@ -222,12 +222,12 @@ def particles(tag: str) -> int:
     return int(found.group(1)) if found else 1024
 
 
-def compare(tags: list[str], max_lps: int, options: dict) -> xr.Dataset:
-    """HiGHS and :mod:`jamflow.simplex` on the captured LPs of ``tags``, alternating which
-    runs first."""
+def compare(tags: list[str], max_lps: int, every: int, options: dict) -> xr.Dataset:
+    """HiGHS and :mod:`jamflow.simplex` on the first ``max_lps`` captured LPs of ``tags``
+    (every ``every``-th), alternating which runs first."""
     rows, names = [], []
     for tag in tags:
-        for count, path in enumerate(captured(tag)[:max_lps]):
+        for count, path in enumerate(captured(tag)[:max_lps:every]):
             w = load(path)
             runs = {}
             for which in (("highs", "ours") if count % 2 == 0 else ("ours", "highs")):
@@ -286,6 +286,40 @@ def plot(ds: xr.Dataset) -> None:
     print(f"wrote {OUT / 'warm_lp.png'}")
 
 
+def carried(tags: list[str]) -> xr.Dataset:
+    """What the carried basis of each captured LP keeps: rows and bounds its vertex
+    violates by more than ``SOLVER_TOL`` (primal infeasibilities), members of its working
+    set whose multiplier has the wrong sign by more than ``SOLVER_TOL`` (dual
+    infeasibilities), and how many members HiGHS's optimal working set replaces."""
+    from jamflow.simplex import _kernels
+    from jamflow.simplex.state import State, Tolerances
+
+    rows, names = [], []
+    for tag in tags:
+        for path in captured(tag):
+            w = load(path)
+            cost = np.zeros(w.A.shape[1])
+            cost[-1] = -1.0
+            st = State(w.A, w.rhs, w.col_lower, w.col_upper, cost, Tolerances(), None, "metis")
+            st.set_working_set(w.col_status, w.row_status)
+            st.refactor()
+            infeas = np.empty(st.n)
+            _kernels.dual_infeasibility(st.y, st.side, infeas)
+            primal = int(np.sum((st.row_slot < 0) & (st.s < -SOLVER_TOL))
+                         + np.sum((st.col_slot < 0) & ((st.z < st.lower - SOLVER_TOL) | (st.z > st.upper + SOLVER_TOL))))
+            m = w.A.shape[0]
+            before = set(np.flatnonzero(w.row_status != 1)) | set(m + np.flatnonzero(w.col_status != 1))
+            after = set(np.flatnonzero(w.opt_row_status != 1)) | set(m + np.flatnonzero(w.opt_col_status != 1))
+            rows.append((particles(tag), primal, int(np.sum(infeas > SOLVER_TOL)), len(before - after), w.pivots))
+            names.append(f"{tag}/{path.stem}")
+            print(names[-1], "primal infeasible", primal, "dual infeasible", rows[-1][2], "replaced", rows[-1][3],
+                  "HiGHS pivots", w.pivots, flush=True)
+    fields = ("N", "primal_infeasible", "dual_infeasible", "replaced", "highs_pivots")
+    data = {f: (("lp",), np.array([r[k] for r in rows], float), {"units": "1"}) for k, f in enumerate(fields)}
+    return xr.Dataset(data, coords={"lp": names}, attrs=new_dataset_attrs(
+        "CALiPPSO warm LPs: feasibility of the carried basis", {"tags": tags}))
+
+
 #: ``sweep``: the variants of jamflow.simplex's measured choices, each against the default
 VARIANTS: dict[str, dict] = {
     "default": {},
@@ -342,20 +376,26 @@ def main() -> None:
     cmp = sub.add_parser("compare", help="HiGHS against jamflow.simplex on the captured LPs")
     cmp.add_argument("--tags", nargs="+", default=None, help="captured chains (default: all)")
     cmp.add_argument("--max-lps", type=int, default=10**6, help="LPs per chain")
+    cmp.add_argument("--every", type=int, default=1, help="take every k-th captured LP")
     cmp.add_argument("--ordering", default="metis")
-    cmp.add_argument("--pricing", default="sketch_full")
+    cmp.add_argument("--pricing", default="sketch")
     cmp.add_argument("--output", default="warm_lp.nc")
     swp = sub.add_parser("sweep", help="variants of jamflow.simplex's choices on a sample of captured LPs")
     swp.add_argument("--tags", nargs="+", required=True)
     swp.add_argument("--every", type=int, default=1, help="take every k-th captured LP")
     swp.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
     swp.add_argument("--output", default="warm_lp_sweep.nc")
+    car = sub.add_parser("carried", help="feasibility of the carried bases of the captured LPs")
+    car.add_argument("--tags", nargs="+", required=True)
+    car.add_argument("--output", default="warm_lp_carried.nc")
     args = ap.parse_args()
+    if args.step == "carried":
+        write_dataset(carried(args.tags), OUT / args.output)
     if args.step == "sweep":
         write_dataset(sweep(args.tags, args.every, args.variants), OUT / args.output)
     if args.step == "compare":
         tags = args.tags or sorted(p.name for p in CAPTURE.iterdir() if p.is_dir())
-        ds = compare(tags, args.max_lps, {"ordering": args.ordering, "pricing": args.pricing})
+        ds = compare(tags, args.max_lps, args.every, {"ordering": args.ordering, "pricing": args.pricing})
         write_dataset(ds, OUT / args.output)
         plot(ds)
     if args.step == "capture":

@@ -201,3 +201,11 @@ def test_trouble_in_the_chain_falls_back_to_highs_and_is_counted(monkeypatch):
     assert ours.packing.attrs["warm_fallbacks"] == warm.sum()
     assert ours.packing.attrs["warm_lps_jamflow"] == 0
     _same_packing(ours, highs)
+
+
+def test_the_engine_option_is_checked_and_auto_follows_the_lp_size():
+    start = read_packing(DATA / "calippso_near_start_n256.nc")
+    with pytest.raises(ValueError, match="warm engine"):
+        calippso(start, warm_engine="gurobi")
+    assert cal._check_choices(SOLVER_TOL, "lp", "auto", cal.WARM_ENGINE_MIN_COLUMNS) == "jamflow"
+    assert cal._check_choices(SOLVER_TOL, "lp", "auto", cal.WARM_ENGINE_MIN_COLUMNS - 1) == "highs"

@@ -289,12 +289,15 @@ WARM_PIVOTS_PER_ROW: float = 1.0
 #: (:mod:`jamflow.simplex`, a bounded simplex whose basis LU has a nested-dissection
 #: ordering: at N = 4096 it factorises a contact network's basis several times faster
 #: than HiGHS's Markowitz LU, and prices by a sketch of steepest edge; measurements in
-#: ``docs/notes/warm-simplex.md``). ``auto`` takes ``jamflow`` from
-#: :data:`WARM_ENGINE_MIN_N` particles on. A warm LP on which ``jamflow`` reports
+#: ``docs/notes/warm-simplex.md``). ``auto`` takes ``jamflow`` for LPs of at least
+#: :data:`WARM_ENGINE_MIN_COLUMNS` columns. A warm LP on which ``jamflow`` reports
 #: trouble is solved by HiGHS from the same basis, and counted (``warm_fallbacks``).
 WARM_ENGINES: tuple[str, ...] = ("auto", "highs", "jamflow")
 DEFAULT_WARM_ENGINE: str = "auto"
-WARM_ENGINE_MIN_N: int = 2048
+#: ``auto``: jamflow.simplex from ``d N`` = 4096 on. The same warm LPs from the same
+#: basis, CPU time HiGHS / jamflow: d = 3, N = 1024 0.5-1.1 (jamflow slower on the
+#: median LP), N = 2048 1.1-1.4, N = 4096 2.7; d = 4 and 5, N = 1024 1.6 and 1.7.
+WARM_ENGINE_MIN_COLUMNS: int = 4096
 
 #: HiGHS interior point methods for the interior point LPs: ``ipx`` (HiGHS's default,
 #: in every highspy wheel) and ``hipo`` (nested-dissection factorisation; needs the
@@ -1527,19 +1530,13 @@ def calippso(
         the recoveries.
     """
     _check_options(packing, tol_s, tol_gamma, solver, min(cutoff, cutoff_near), bound, relax, walls, max_iterations)
-    if not (MIN_SOLVER_TOL <= solver_tol <= MAX_SOLVER_TOL):
-        raise ValueError(f"solver_tol must lie in [{MIN_SOLVER_TOL:g}, {MAX_SOLVER_TOL:g}], got {solver_tol}")
+    engine = _check_choices(solver_tol, finish, warm_engine, packing.d * packing.n)
     t_start = time.perf_counter()
     d, n = packing.d, packing.n
     container = _Container(packing.box, walls)
-    if finish not in FINISHES:
-        raise ValueError(f"unknown finish {finish!r}; choose one of {', '.join(FINISHES)}")
     opt = _Options(tol_s, tol_gamma, solver, cutoff, cutoff_near, bound, relax, require_isostatic, finish)
     chain = _Chain(x=packing.position.copy() if walls else packing.box.wrap(packing.position),
                    D=packing.diameter.copy())
-    if warm_engine not in WARM_ENGINES:
-        raise ValueError(f"unknown warm engine {warm_engine!r}; choose one of {', '.join(WARM_ENGINES)}")
-    engine = warm_engine if warm_engine != "auto" else ("jamflow" if n >= WARM_ENGINE_MIN_N else "highs")
     solver_obj = _Solver(threads, solver_tol, interior, engine)
     solver_obj.cold_simplex_as_ipm = solver == "hybrid"  # a cold simplex is slower than ipm
     chain.near_start = _near_start(chain.x, chain.D, container)
@@ -1600,6 +1597,20 @@ def calippso(
     return _result(packing, chain.x, chain.D, container, network, chain, history, converged, total, dict(
         finish=finish, interior=interior, warm_engine=warm_engine, tol_s=tol_s, tol_gamma=tol_gamma, solver=solver, solver_tol=solver_tol, cutoff=cutoff, cutoff_near=cutoff_near, bound=[list(b) for b in bound],
         relax=relax, walls=walls, max_iterations=max_iterations, threads=threads))
+
+
+def _check_choices(solver_tol: float, finish: str, warm_engine: str, columns: int) -> str:
+    """Checks three options of :func:`calippso`; returns the engine of the warm LPs
+    (``auto`` resolved by the LP's column count ``d N``, :data:`WARM_ENGINE_MIN_COLUMNS`)."""
+    if not (MIN_SOLVER_TOL <= solver_tol <= MAX_SOLVER_TOL):
+        raise ValueError(f"solver_tol must lie in [{MIN_SOLVER_TOL:g}, {MAX_SOLVER_TOL:g}], got {solver_tol}")
+    if finish not in FINISHES:
+        raise ValueError(f"unknown finish {finish!r}; choose one of {', '.join(FINISHES)}")
+    if warm_engine not in WARM_ENGINES:
+        raise ValueError(f"unknown warm engine {warm_engine!r}; choose one of {', '.join(WARM_ENGINES)}")
+    if warm_engine == "auto":
+        return "jamflow" if columns >= WARM_ENGINE_MIN_COLUMNS else "highs"
+    return warm_engine
 
 
 def _stalled(records: list[IterationRecord], start: int) -> bool:

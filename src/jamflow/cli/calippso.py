@@ -21,7 +21,7 @@ from ..calippso import (
     NEAR_START_GAP,
     SOLVER_TOL,
     SOLVERS,
-    WARM_ENGINE_MIN_N,
+    WARM_ENGINE_MIN_COLUMNS,
     WARM_ENGINES,
     calippso,
     result_to_dataset,
@@ -72,7 +72,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--warm-engine", choices=WARM_ENGINES, default=DEFAULT_WARM_ENGINE,
                    help="engine of the warm simplex LPs: highs, or jamflow (a simplex on a nested-dissection "
                         "sparse LU; HiGHS solves any LP it reports trouble on); auto takes jamflow from "
-                        f"N = {WARM_ENGINE_MIN_N} on (default {DEFAULT_WARM_ENGINE})")
+                        f"d N = {WARM_ENGINE_MIN_COLUMNS} on (default {DEFAULT_WARM_ENGINE})")
     p.add_argument("--finish", choices=FINISHES, default=DEFAULT_FINISH,
                    help="newton: once the network is isostatic in the chain's tail, solve its square system by "
                         "Newton and keep it only if certified (positive forces, no overlap, same geometric "
