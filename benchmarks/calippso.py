@@ -88,24 +88,30 @@ import xarray as xr
 from matplotlib.ticker import NullFormatter
 from numpy.typing import NDArray
 
-import jamflow.calippso as cal
-from jamflow.analysis.contacts import force_balance_residual, summarize
+import jamflow.protocols.calippso as cal
+from jamflow.analysis.contacts import summarize
 from jamflow.analysis.overlap import contact_overlap
 from jamflow.box import Box
-from jamflow.calippso import CONTACT_DUAL_REL_TOL, SOLVER_TOL, JammingLP, jamming_lp
 from jamflow.highs import new_highs
-from jamflow.initial import random_packing
 from jamflow.io import (
     new_dataset_attrs,
-    read_dat,
     read_dataset,
     read_packing,
     write_dataset,
     write_packing,
 )
-from jamflow.ls import compress
-from jamflow.packing import Packing, max_overlap
-from jamflow.rigidity import rigidity_matrix
+from jamflow.io.formats import read_dat
+from jamflow.network.rigidity import rigidity_matrix
+from jamflow.network.spheres import force_balance_residual
+from jamflow.protocols.calippso import (
+    CONTACT_DUAL_REL_TOL,
+    SOLVER_TOL,
+    JammingLP,
+    jamming_lp,
+)
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.ls import compress
+from jamflow.state.packing import Packing, max_overlap
 
 OUT = Path(__file__).resolve().parent / "output"
 #: the CALiPPSO authors' LS examples, vendored with the tests (MIT, licence in its README.md)

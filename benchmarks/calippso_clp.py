@@ -36,9 +36,9 @@ import numpy as np
 import scipy.sparse as sp
 import xarray as xr
 
-import jamflow.calippso as calippso_module
-from jamflow.calippso import SOLVER_TOL, calippso
+import jamflow.protocols.calippso as calippso_module
 from jamflow.io import new_dataset_attrs, read_packing, write_dataset
+from jamflow.protocols.calippso import SOLVER_TOL, calippso
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from calippso import OUT, fit, near_start  # noqa: E402

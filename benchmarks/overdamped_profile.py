@@ -24,10 +24,10 @@ import time
 import numpy as np
 
 from jamflow.io import read_packing
-from jamflow.overdamped import integrate, network, recorder, solver
-from jamflow.overdamped.driving import Drive
-from jamflow.overdamped.integrate import FlowOptions
-from jamflow.overdamped.run import Stop, run_flow
+from jamflow.protocols.overdamped import integrate, network, recorder, solver
+from jamflow.protocols.overdamped.driving import Drive
+from jamflow.protocols.overdamped.integrate import FlowOptions
+from jamflow.protocols.overdamped.run import Stop, run_flow
 
 
 def main() -> None:

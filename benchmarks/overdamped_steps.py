@@ -23,9 +23,9 @@ import time
 import numpy as np
 
 from jamflow.io import read_packing
-from jamflow.overdamped.driving import Drive
-from jamflow.overdamped.integrate import FlowOptions
-from jamflow.overdamped.run import Stop, run_flow
+from jamflow.protocols.overdamped.driving import Drive
+from jamflow.protocols.overdamped.integrate import FlowOptions
+from jamflow.protocols.overdamped.run import Stop, run_flow
 from jamflow.tradeoff import FLOW_PHI, _flow_compare, flow_start
 
 

@@ -21,12 +21,18 @@ import numpy as np
 
 
 def run(path: str) -> None:
+    from api_paths import find
+
     import jamflow
-    from jamflow.initial import random_packing
-    from jamflow.soft import conjugate_gradient, fire, minimize_enthalpy, steepest_descent
-    from jamflow.soft.hessian import elastic_moduli
-    from jamflow.soft.jamming import jam_to_pressure
-    from jamflow.soft.shear import aqs_shear
+
+    steepest_descent = find("steepest_descent", "jamflow.models.spheres.fast", "jamflow.soft")
+    elastic_moduli = find("elastic_moduli", "jamflow.models.spheres.hessian", "jamflow.soft.hessian")
+    conjugate_gradient = find("conjugate_gradient", "jamflow.models.spheres.model", "jamflow.soft")
+    fire = find("fire", "jamflow.models.spheres.model", "jamflow.soft")
+    minimize_enthalpy = find("minimize_enthalpy", "jamflow.models.spheres.model", "jamflow.soft")
+    random_packing = find("random_packing", "jamflow.protocols.initial", "jamflow.initial")
+    aqs_shear = find("aqs_shear", "jamflow.protocols.quasistatic", "jamflow.soft.shear")
+    jam_to_pressure = find("jam_to_pressure", "jamflow.protocols.soft_jam", "jamflow.soft.jamming")
 
     print("jamflow from", jamflow.__file__)
     out: dict[str, np.ndarray] = {}

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
+from ls_data import ls_dat
 
 from jamflow.analysis.gaps import (
     MEAN_FIELD_GAP_EXPONENT,
@@ -14,9 +14,9 @@ from jamflow.analysis.gaps import (
     non_contact_gaps,
 )
 from jamflow.box import Box
-from jamflow.io import read_dat, read_dataset
-from jamflow.packing import Packing, near_pairs
-from ls_data import ls_dat
+from jamflow.io import read_dataset
+from jamflow.io.formats import read_dat
+from jamflow.state.packing import Packing, near_pairs
 
 
 def power_law_gaps(rng: np.random.Generator, gamma: float, lo: float, hi: float, size: int) -> np.ndarray:

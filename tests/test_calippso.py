@@ -1,8 +1,8 @@
-"""CALiPPSO: jamming by a chain of LPs (jamflow.calippso).
+"""CALiPPSO: jamming by a chain of LPs (jamflow.protocols.calippso).
 
 Every jammed packing is checked with independent tools: isostaticity with
 jamflow.analysis.contacts, force balance with force_balance_residual, overlaps over
-all pairs with jamflow.packing.max_overlap, contacts from duals against contacts
+all pairs with jamflow.state.packing.max_overlap, contacts from duals against contacts
 from gaps, and the duality identity sum_c f_c sigma_c = 1 (paper Eq. 9).
 """
 
@@ -13,21 +13,27 @@ import numpy as np
 import pytest
 from ls_data import ls_dat
 
-import jamflow.calippso as cal
-from jamflow.analysis.contacts import (
+import jamflow.protocols.calippso as cal
+from jamflow.analysis.contacts import summarize
+from jamflow.analysis.overlap import contact_overlap
+from jamflow.box import Box
+from jamflow.cli import main
+from jamflow.io import read_dataset, read_packing, write_packing
+from jamflow.io.formats import read_dat
+from jamflow.network import isostatic_count
+from jamflow.network.spheres import (
     contacts_from_gaps,
     find_rattlers,
     force_balance_residual,
-    isostatic_count,
-    summarize,
 )
-from jamflow.analysis.overlap import contact_overlap
-from jamflow.box import Box
-from jamflow.calippso import WARM_PIVOTS_PER_ROW, IterationRecord, calippso, jamming_lp
-from jamflow.cli import main
-from jamflow.initial import random_packing
-from jamflow.io import read_dat, read_dataset, read_packing, write_packing
-from jamflow.packing import Packing, max_overlap, near_pairs
+from jamflow.protocols.calippso import (
+    WARM_PIVOTS_PER_ROW,
+    IterationRecord,
+    calippso,
+    jamming_lp,
+)
+from jamflow.protocols.initial import random_packing
+from jamflow.state.packing import Packing, max_overlap, near_pairs
 from jamflow.tolerances import FORCE_BALANCE_TOL, OVERLAP_TOL
 
 #: two independent contact definitions agree: pairs closer than this relative gap
@@ -168,7 +174,7 @@ def test_2d_monodisperse_reported():
     stable = ~find_rattlers(p.n, 2, geo)
     n_c_geo = int((stable[geo[:, 0]] & stable[geo[:, 1]]).sum())
     assert (a["n_contacts_geometric"], a["n_stable_geometric"]) == (n_c_geo, int(stable.sum()))
-    geo_hyper = n_c_geo > isostatic_count(2, int(stable.sum()))
+    geo_hyper = n_c_geo > isostatic_count(int(stable.sum()), 2, global_dofs=2)
     # every dual contact touches; the dual network is isostatic, or the packing is
     # hyperstatic (App. A count, or a degenerate crystal whose geometric network is)
     assert a["dual_not_geometric"] == 0

@@ -14,13 +14,14 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
-import jamflow.calippso as cal
-from jamflow.analysis.contacts import force_balance_residual, summarize
+import jamflow.protocols.calippso as cal
+from jamflow.analysis.contacts import summarize
 from jamflow.analysis.overlap import contact_overlap
 from jamflow.box import Box
-from jamflow.calippso import calippso
-from jamflow.initial import random_packing
-from jamflow.packing import Packing, max_overlap
+from jamflow.network.spheres import force_balance_residual
+from jamflow.protocols.calippso import calippso
+from jamflow.protocols.initial import random_packing
+from jamflow.state.packing import Packing, max_overlap
 from jamflow.tolerances import FORCE_BALANCE_TOL, OVERLAP_TOL
 
 #: forces of the finish against the LP chain's, relative to the largest force (issue 19)

@@ -7,7 +7,6 @@ from math import pi
 import numpy as np
 import pytest
 
-from jamflow.bodies import Links
 from jamflow.box import Box
 from jamflow.chains.builders import (
     BOND_ANGLE_RANGE,
@@ -21,10 +20,11 @@ from jamflow.chains.builders import (
     rigid_cluster_links,
 )
 from jamflow.cli import main
-from jamflow.initial import random_packing
 from jamflow.io import read_packing, write_packing
-from jamflow.packing import Packing
-from jamflow.soft.jamming import jam_to_pressure
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.soft_jam import jam_to_pressure
+from jamflow.state.bodies import Links
+from jamflow.state.packing import Packing
 
 
 def _floppy_modes(links: Links, x: np.ndarray, box: Box, members: np.ndarray) -> int:

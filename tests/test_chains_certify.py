@@ -9,11 +9,12 @@ from jamflow.chains.builders import linked_packing
 from jamflow.chains.certify import certify_linked
 from jamflow.chains.jamming import jam_linked
 from jamflow.cli import main
-from jamflow.initial import random_packing
 from jamflow.io import read_dataset, write_packing
-from jamflow.soft.jamming import JammingSettings, jam_to_pressure
-from jamflow.soft.potential import overlapping_pairs
-from jamflow.strict_jamming import certify
+from jamflow.minimize.onset import JammingSettings
+from jamflow.models.spheres.potential import overlapping_pairs
+from jamflow.protocols.certify import certify
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.soft_jam import jam_to_pressure
 
 
 @pytest.mark.parametrize("seed", [3, 4])

@@ -11,7 +11,6 @@ from scipy.integrate import quad
 from shapely.geometry import Point
 from shapely.ops import unary_union
 
-from jamflow.bodies import Links
 from jamflow.chains.builders import linked_packing
 from jamflow.chains.clusters import count_clusters
 from jamflow.chains.dimers import (
@@ -22,9 +21,10 @@ from jamflow.chains.dimers import (
 from jamflow.chains.hessian import constrained_hessian
 from jamflow.chains.jamming import jam_linked
 from jamflow.cli import main
-from jamflow.models import LinkedSpheresModel
-from jamflow.packing import lens_volume, linked_volume, sphere_volume
-from jamflow.soft.jamming import JammingSettings
+from jamflow.minimize.onset import JammingSettings
+from jamflow.models.links import LinkedSpheresModel
+from jamflow.state.bodies import Links
+from jamflow.state.packing import lens_volume, linked_volume, sphere_volume
 
 #: Segments per quarter circle of the shapely reference: its polygon perimeter and area
 #: are below the circle's by ~(pi / 2 / 4096)^2 / 6 ~ 2.5e-8 relative.

@@ -12,11 +12,11 @@ from jamflow.chains.hessian import (
     pair_second_derivatives,
 )
 from jamflow.chains.jamming import jam_linked
-from jamflow.chains.shear import ShearStabilizedModel
-from jamflow.models import LinkedSpheresModel
-from jamflow.soft.hessian import hessian
-from jamflow.soft.jamming import JammingSettings
-from jamflow.soft.potential import HARMONIC, overlapping_pairs
+from jamflow.minimize.onset import JammingSettings
+from jamflow.models.links import LinkedSpheresModel
+from jamflow.models.spheres.hessian import hessian
+from jamflow.models.spheres.potential import HARMONIC, overlapping_pairs
+from jamflow.models.strain import ShearStabilizedModel
 
 
 @pytest.fixture(scope="module", params=[False, True], ids=["fixed-box", "shear-stabilized"])

@@ -7,17 +7,20 @@ import json
 import numpy as np
 import pytest
 
-from jamflow.analysis.contacts import find_rattlers, isostatic_count
-from jamflow.bodies import Links
 from jamflow.chains.builders import linked_packing
 from jamflow.chains.clusters import count_clusters
 from jamflow.chains.jamming import jam_linked
 from jamflow.cli import main
 from jamflow.io import read_packing, write_packing
-from jamflow.models import LinkedSpheresModel, SphereModel
-from jamflow.models.base import ModelEvaluation
-from jamflow.soft.jamming import JammingSettings
-from jamflow.soft.minimize import minimize_fire, minimize_sd
+from jamflow.minimize.descent import minimize_sd
+from jamflow.minimize.fire import minimize_fire
+from jamflow.minimize.model import ModelEvaluation
+from jamflow.minimize.onset import JammingSettings
+from jamflow.models.links import LinkedSpheresModel
+from jamflow.models.spheres.model import SphereModel
+from jamflow.network import isostatic_count
+from jamflow.network.spheres import find_rattlers
+from jamflow.state.bodies import Links
 from jamflow.tolerances import LINK_LENGTH_RTOL
 
 
@@ -127,7 +130,7 @@ def test_without_links_the_linked_model_is_the_sphere_model():
     count = count_clusters(60, 2, None, c)
     rattler = find_rattlers(60, 2, c)
     assert np.array_equal(count.rattler, rattler)
-    assert count.isostatic_count == isostatic_count(2, int((~rattler).sum()))
+    assert count.isostatic_count == isostatic_count(int((~rattler).sum()), 2, global_dofs=2)
 
 
 def test_danglers_and_rattling_clusters():

@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from jamflow.bodies import Links
 from jamflow.chains.builders import linked_packing
 from jamflow.chains.clusters import count_clusters
 from jamflow.chains.jamming import jam_linked
-from jamflow.chains.shear import ShearStabilizedModel
-from jamflow.models import SphereModel
-from jamflow.soft.jamming import JammingSettings
+from jamflow.minimize.onset import JammingSettings
+from jamflow.models.spheres.model import SphereModel
+from jamflow.models.strain import ShearStabilizedModel
+from jamflow.state.bodies import Links
 from jamflow.tolerances import LINK_LENGTH_RTOL
 
 

@@ -12,8 +12,9 @@ import pytest
 
 from jamflow.box import Box
 from jamflow.cli import build_parser, main
-from jamflow.io import read_dat, read_dataset, read_packing, write_packing
-from jamflow.packing import Packing
+from jamflow.io import read_dataset, read_packing, write_packing
+from jamflow.io.formats import read_dat
+from jamflow.state.packing import Packing
 
 CHECK_KEYS = {
     "N", "d", "phi", "n_contacts", "n_rattlers", "n_stable", "isostatic",

@@ -1,4 +1,4 @@
-"""Lubachevsky–Stillinger compression (jamflow.ls): exact events, conservation laws,
+"""Lubachevsky–Stillinger compression (jamflow.protocols.ls): exact events, conservation laws,
 equation of state against Carnahan–Starling and Eq. 15, targets, inputs."""
 
 from __future__ import annotations
@@ -8,13 +8,13 @@ import math
 import numpy as np
 import pytest
 
-from jamflow import _ls_kernels as kern
-from jamflow.box import Box
 from jamflow.analysis.eos import carnahan_starling, fit_jamming_density
 from jamflow.analysis.structure import CRYSTAL_FRACTION_THRESHOLD, crystal_fraction
-from jamflow.initial import random_packing
-from jamflow.ls import _State, compress
-from jamflow.packing import Packing, max_overlap
+from jamflow.box import Box
+from jamflow.protocols import _ls_kernels as kern
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.ls import _State, compress
+from jamflow.state.packing import Packing, max_overlap
 from jamflow.tolerances import OVERLAP_TOL
 
 
@@ -296,7 +296,7 @@ def test_real_ls_configurations_stay_without_overlap(calippso_ls_file):
     # the CALiPPSO authors' LS packings (N = 1024, d = 3, 4, 5, relative gaps down to
     # ~1e-11): hard-sphere dynamics at fixed diameters keeps energy, momentum and
     # non-overlap, and measures a pressure in the glass regime (p >> 1) in both windows
-    from jamflow.io import read_dat
+    from jamflow.io.formats import read_dat
 
     pk = read_dat(calippso_ls_file)
     res = compress(pk, 0.0, max_collisions=20 * pk.n, fast_growth_rate=None, seed=0)

@@ -1,4 +1,4 @@
-"""Verlet neighbour lists of the LS kernel (jamflow._ls_kernels, jamflow.ls): the same
+"""Verlet neighbour lists of the LS kernel (jamflow.protocols._ls_kernels, jamflow.protocols.ls): the same
 dynamics as the cell scan, the no-missed-pair guarantee, conservation over many
 rebuilds, and no overlaps up to jamming in d = 4, 5."""
 
@@ -9,10 +9,10 @@ import math
 import numpy as np
 import pytest
 
-from jamflow import _ls_kernels as kern
-from jamflow.initial import random_packing
-from jamflow.ls import _State, compress
-from jamflow.packing import max_overlap
+from jamflow.protocols import _ls_kernels as kern
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.ls import _State, compress
+from jamflow.state.packing import max_overlap
 from jamflow.tolerances import OVERLAP_TOL
 
 

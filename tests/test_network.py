@@ -6,9 +6,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from jamflow.bodies import Links
 from jamflow.box import Box
-from jamflow.initial import random_packing
 from jamflow.network import (
     ContactSet,
     contact_jacobian,
@@ -22,7 +20,9 @@ from jamflow.network import (
     sphere_contacts,
     strain_basis,
 )
-from jamflow.soft.jamming import jam_to_pressure
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.soft_jam import jam_to_pressure
+from jamflow.state.bodies import Links
 
 #: central finite-difference step [length, rad, strain]; truncation error ~ STEP^2
 STEP = 1e-6

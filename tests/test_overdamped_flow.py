@@ -14,15 +14,16 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from jamflow.analysis.contacts import force_balance_residual, summarize
+from jamflow.analysis.contacts import summarize
 from jamflow.box import Box
-from jamflow.initial import random_packing
-from jamflow.neighbors import pairs_within_brute_force
-from jamflow.overdamped.driving import Drive, SelfPropulsion
-from jamflow.overdamped.integrate import FlowOptions, Integrator
-from jamflow.overdamped.network import pair_vectors, pair_velocities
-from jamflow.overdamped.run import Stop, length_unit, run_flow
-from jamflow.packing import Packing
+from jamflow.neighbors.pairs import pairs_within_brute_force
+from jamflow.network.spheres import force_balance_residual
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.overdamped.driving import Drive, SelfPropulsion
+from jamflow.protocols.overdamped.integrate import FlowOptions, Integrator
+from jamflow.protocols.overdamped.network import pair_vectors, pair_velocities
+from jamflow.protocols.overdamped.run import Stop, length_unit, run_flow
+from jamflow.state.packing import Packing
 
 FAST = FlowOptions(dt_max=1e-2, step_drift=1e-7, drift_tol=1e-6, correct_every=20)
 
@@ -87,7 +88,7 @@ def test_reported_stress_is_that_of_the_current_separations_and_forces(dense32, 
     """The stress reported at every step (from the solve's virial where the state is the one
     solved at) equals the contact stress of the current separations and forces to 1e-13, across
     collisions, rewirings, drift corrections and list rebuilds, at fixed volume and pressure."""
-    from jamflow.overdamped.network import stress_tensor
+    from jamflow.protocols.overdamped.network import stress_tensor
 
     drive = Drive("shear") if pressure is None else Drive("shear_fixed_pressure", pressure=pressure)
     integ = _integrator(dense32, drive, FAST)
@@ -119,7 +120,7 @@ def test_fixed_pressure_forces_meet_the_solver_tolerance_where_their_two_parts_c
     """Fixed-pressure shear, p = 40: f = a + kappa b, and near jamming a and b cancel by up to
     ~300x. CG solves them on to the tolerance relative to f, so at every step the forces equal a
     direct solve to 1e-10 of the largest (8e-10 with a and b only solved to their own size)."""
-    from jamflow.overdamped import network
+    from jamflow.protocols.overdamped import network
 
     gains = []
     split = network._pressure_forces

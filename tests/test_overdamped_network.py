@@ -15,18 +15,18 @@ import numpy as np
 import pytest
 
 from jamflow.box import Box
-from jamflow.overdamped.collisions import build_neighbor_list, next_collision
-from jamflow.overdamped.driving import Drive
-from jamflow.overdamped.integrate import FlowOptions, Integrator
-from jamflow.overdamped.jamming import constrained_subset, self_stress
-from jamflow.overdamped.network import (
+from jamflow.protocols.overdamped.collisions import build_neighbor_list, next_collision
+from jamflow.protocols.overdamped.driving import Drive
+from jamflow.protocols.overdamped.integrate import FlowOptions, Integrator
+from jamflow.protocols.overdamped.jamming import constrained_subset, self_stress
+from jamflow.protocols.overdamped.network import (
     affine_rates,
     pair_vectors,
     pair_velocities,
-    s_matrix,
     solve_network,
 )
-from jamflow.overdamped.rewiring import admissible, rewire
+from jamflow.protocols.overdamped.rewiring import admissible, rewire
+from jamflow.protocols.overdamped.solver import s_matrix
 
 
 def _random_network(rng, n=10, d=2, length=5.0, n_contacts=12):

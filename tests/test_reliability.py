@@ -8,14 +8,19 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
-import pytest
-
 import numpy as np
+import pytest
+from test_cli_packings import _run
 
 from jamflow.cli import build_parser
-from jamflow.io import DATASET_KINDS, dataset_kind, file_kind, read_dataset, write_packing
-from jamflow.initial import random_packing
-from test_cli_packings import _run
+from jamflow.io import (
+    DATASET_KINDS,
+    dataset_kind,
+    file_kind,
+    read_dataset,
+    write_packing,
+)
+from jamflow.protocols.initial import random_packing
 
 
 def _one_line_error(err: str, *names: object) -> None:
@@ -185,7 +190,7 @@ def test_ls_with_too_few_discs_to_jam_stops_at_half_the_box(capsys, tmp_path, n)
 
 def test_ls_phi_target_beyond_jamming_stops_as_jammed(capsys, tmp_path):
     from jamflow.io import read_packing
-    from jamflow.packing import max_overlap
+    from jamflow.state.packing import max_overlap
 
     start, out = tmp_path / "s.nc", tmp_path / "o.nc"
     assert _run(capsys, "init", start, "--d", "3", "--n", "32", "--phi", "0.2", "--seed", "1")[0] == 0

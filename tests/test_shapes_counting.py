@@ -12,12 +12,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from jamflow.bodies import ShapeTable
 from jamflow.box import Box
 from jamflow.models.shapes import ShapeModel
 from jamflow.network import contact_jacobian
-from jamflow.packing import Packing
 from jamflow.shapes.counting import count_constraints, shape_contacts
+from jamflow.state.bodies import ShapeTable
+from jamflow.state.packing import Packing
 
 LINES = ShapeTable.from_shapes([dict(kind="circulo_line", vertices=[(-0.5, 0.0), (0.5, 0.0)], radius=0.2)])
 ELLIPSES = ShapeTable.from_shapes([dict(kind="ellipse", semi_axes=(0.8, 0.35)), dict(kind="ellipse", semi_axes=(0.5, 0.45))])

@@ -14,10 +14,15 @@ import pytest
 
 from jamflow.cli import main
 from jamflow.io import read_packing
+from jamflow.minimize.onset import JammingSettings
 from jamflow.models.shapes import ShapeModel
-from jamflow.shapes import bidisperse_shapes, jam_shapes, random_shape_packing, unit_shape
-from jamflow.soft.jamming import JammingSettings
-from jamflow.bodies import ShapeTable
+from jamflow.shapes import (
+    bidisperse_shapes,
+    jam_shapes,
+    random_shape_packing,
+    unit_shape,
+)
+from jamflow.state.bodies import ShapeTable
 
 
 @pytest.mark.parametrize("kind, alpha, a_minus_1, rel", [

@@ -23,14 +23,14 @@ import xarray as xr
 
 from jamflow.cli import main
 from jamflow.io import read_packing
-from jamflow.shapes.counting import count_constraints, shape_model
+from jamflow.minimize.fire import minimize_fire
+from jamflow.shapes.counting import count_constraints, shape_model_of
 from jamflow.shapes.jamming import shape_packing
 from jamflow.shapes.spectrum import (
     FOURTH_DERIVATIVE_MIN_STEP,
     fourth_derivative_along,
     spectrum,
 )
-from jamflow.soft.minimize import minimize_fire
 
 DATA = Path(__file__).parent / "data" / "shapes_circulo_line_a1.1_n16_p1e-6.nc"
 
@@ -52,7 +52,7 @@ def test_hessian_is_derivative_of_gradient_on_a_packing(packing):
     contact opens or closes inside the difference stencil (U'' jumps by k there);
     round-off of the central difference is then eps |q| |H| / h ~ 1e-6.
     """
-    model, q = shape_model(packing)
+    model, q = shape_model_of(packing)
     hess = model.hessian(q)
     rng = np.random.default_rng(0)
     v = rng.normal(size=q.size)
@@ -70,7 +70,7 @@ def test_zero_modes_are_the_translations(packing, spec):
     c, rattler, slider, _ = count_constraints(packing, "twice")
     assert c.n_rattlers == 0 and c.n_sliders == 0
     assert spec.n_zero == 2
-    model, q = shape_model(packing)
+    model, q = shape_model_of(packing)
     lam, vec = np.linalg.eigh(model.hessian(q).toarray())
     zero = vec[:, spec.region == 0]
     for axis in range(2):
@@ -92,7 +92,7 @@ def test_contacts_equal_isostatic_count_minus_quartic_modes(packing, spec):
 
 
 def test_quartic_eigenvalues_scale_with_pressure_fourth_derivatives_do_not(packing, spec):
-    model, q = shape_model(packing)
+    model, q = shape_model_of(packing)
     conf = model.positions(q)
     # compress slightly: the pressure grows by a factor ~3 (bulk modulus ~0.5 k)
     squeezed, start = model.rescaled(1.0 - 2e-6, conf)
@@ -158,7 +158,7 @@ def test_disk_limit_of_ellipses():
     spec = spectrum(p, fourth=False)
     assert spec.n_quartic == n_prime == c.isostatic_count - c.n_contacts
     assert spec.n_zero == 2 + 3 * c.n_rattlers
-    model, q = shape_model(p)
+    model, q = shape_model_of(p)
     lam, vec = np.linalg.eigh(model.hessian(q).toarray())
     zero = vec[:, spec.region == 0]
     expected = []
@@ -233,7 +233,7 @@ def test_fourth_derivative_steps_around_a_contact_opening_next_to_the_mode(tmp_p
     assert ds.attrs["n_unresolved_fourth_derivative"] == 0
     assert ds.attrs["n_contacts_twice"] == ds.attrs["isostatic_minus_quartic"]
     p = read_packing(src, None)
-    model, q = shape_model(p)
+    model, q = shape_model_of(p)
     lam, vec = np.linalg.eigh(model.hessian(q).toarray())
     k = int(np.flatnonzero(ds.region.values == 1)[0])
     v = vec[:, k]

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from jamflow.io import read_dataset, read_packing
-from jamflow.packing import Packing
+from jamflow.protocols.soft_jam import jam_to_pressure
 from jamflow.shapes.analysis import contact_angle_dataset, contact_angles
 from jamflow.shapes.counting import count_constraints
 from jamflow.shapes.survey import survey_dataset, survey_row
-from jamflow.soft.jamming import jam_to_pressure
+from jamflow.state.packing import Packing
 
 DATA = Path(__file__).parent / "data"
 NEAR_DISKS = DATA / "shapes_ellipse_alpha1.001_n16_p1e-7.nc"  # A - 1 = 3.7e-7, P0 = 1e-7
@@ -98,7 +98,11 @@ def test_shape_survey_and_contact_angles_commands(tmp_path):
 
 
 def test_reuleaux_rows_are_counted_from_their_contact_points():
-    from jamflow.shapes.generation import bidisperse_shapes, random_shape_packing, unit_shape
+    from jamflow.shapes.generation import (
+        bidisperse_shapes,
+        random_shape_packing,
+        unit_shape,
+    )
 
     p = random_shape_packing(bidisperse_shapes(unit_shape("reuleaux", None, None, None)), 8, 0.3, 1)
     row = survey_row(p)

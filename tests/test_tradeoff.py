@@ -11,7 +11,7 @@ import xarray as xr
 from jamflow.box import Box
 from jamflow.cli import main
 from jamflow.io import read_dataset
-from jamflow.packing import Packing
+from jamflow.state.packing import Packing
 from jamflow.tradeoff import STAGES, _flow_compare, pareto_front, recommend
 
 
@@ -64,9 +64,9 @@ def test_unknown_stage_is_refused(tmp_path, capsys):
 def test_shapes_stage_errors_and_grid():
     # phi_J error relative to the reference, N_1 error in modes, force from the packing's
     # max_force_sq; the grid always holds soft-jam's default tolerance at every P0
-    from jamflow.bodies import ShapeTable
     from jamflow.box import Box
-    from jamflow.packing import Packing
+    from jamflow.state.bodies import ShapeTable
+    from jamflow.state.packing import Packing
     from jamflow.tolerances import SOFT_FORCE_TOL
     from jamflow.tradeoff import _shapes_compare
 

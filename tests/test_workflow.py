@@ -17,11 +17,11 @@ import pytest
 import xarray as xr
 import yaml
 
-from jamflow.analysis.contacts import contacts_from_gaps, find_rattlers
-from jamflow.io import read_packing
-from jamflow.tolerances import CONTACT_GAP_TOL
 from jamflow.analysis.overlap import contact_overlap
-from jamflow.packing import Packing
+from jamflow.io import read_packing
+from jamflow.network.spheres import contacts_from_gaps, find_rattlers
+from jamflow.state.packing import Packing
+from jamflow.tolerances import CONTACT_GAP_TOL
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -93,8 +93,8 @@ def test_malformed_config_fails_at_start_naming_the_key(tmp_path, patch, key):
 
 
 def test_scene_schema_enums_come_from_the_package():
-    from jamflow.calippso import SOLVERS
     from jamflow.presets import PRESET_NAMES
+    from jamflow.protocols.calippso import SOLVERS
 
     schema = yaml.safe_load((REPO / "workflow" / "schemas" / "config.schema.yaml").read_text())
     props = schema["properties"]

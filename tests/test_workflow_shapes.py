@@ -5,10 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import yaml
+from test_workflow import _planned_jobs, _snakemake, _workdir
 
 from jamflow.io import read_dataset, read_packing
-
-from test_workflow import _planned_jobs, _snakemake, _workdir
 
 #: sixteen circulo-lines and disks at high P0 (fewer bodies: the neighbour cutoff must fit the box) at a high P0 (jams in seconds), with disks, modes and angles
 TINY = {

@@ -23,10 +23,10 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Polygon
 from matplotlib.ticker import NullFormatter
 
-from .analysis.contacts import contact_network, find_rattlers
 from .analysis.forces import THETA_EXTENDED, THETA_LOCALISED
 from .analysis.gaps import MEAN_FIELD_GAP_EXPONENT
-from .packing import Packing
+from .network.spheres import contact_network, find_rattlers
+from .state.packing import Packing
 from .tolerances import CONTACT_GAP_TOL
 
 __all__ = [

@@ -31,8 +31,8 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-from .analysis.contacts import isostatic_count
 from .io import read_dataset
+from .network import isostatic_count
 
 __all__ = ["COLUMNS", "load_scene", "scene_results_dir"]
 
@@ -189,7 +189,8 @@ def _network_counts(ds: xr.Dataset) -> dict[str, Any]:
         i, j = ds["contact_i"].values, ds["contact_j"].values
         n_c = int(np.sum(~(rattler[i] | rattler[j])))
         n_r = int(rattler.sum())
-        iso = isostatic_count(int(a["d"]), int((~rattler).sum()))
+        d = int(a["d"])
+        iso = isostatic_count(int((~rattler).sum()), d, global_dofs=d)
     else:
         return {"n_contacts": np.nan, "isostatic_count": np.nan, "isostatic": np.nan, "n_rattlers": np.nan}
     return {"n_contacts": n_c, "isostatic_count": iso, "isostatic": int(n_c == iso), "n_rattlers": n_r}

@@ -23,8 +23,9 @@ from numpy.typing import NDArray
 from scipy.special import sph_harm_y
 
 from ..io import new_dataset_attrs
-from ..neighbors import pairs_within
-from ..packing import Packing, sphere_volume
+from ..neighbors.pairs import pairs_within
+from ..stages import require
+from ..state.packing import Packing, sphere_volume
 
 __all__ = [
     "TWF_DOT_THRESHOLD",
@@ -234,6 +235,7 @@ def structure_dataset(packing: Packing, r_max: float = 3.0, bins: int = 150, par
     ``psi6_local_mean`` (2D); ``Q6_global``, ``q6_local_mean``,
     ``crystal_fraction`` (3D); ``crystallinity`` says which was computed.
     """
+    require("rdf", packing.body_kind)
     r, g, edges = radial_distribution(packing, r_max, bins)
     one = {"units": "1"}
     data_vars: dict = {

@@ -1,6 +1,6 @@
 """Builders of linked packings: rigid clusters, chains, cementing, link files (chains paper Sec. II A, F).
 
-Links are fixed centre-to-centre distances (:class:`~jamflow.bodies.Links`). A bond
+Links are fixed centre-to-centre distances (:class:`~jamflow.state.bodies.Links`). A bond
 angle at sphere ``b`` between bonds ``a-b`` and ``b-c`` is frozen by the link ``a-c``
 (paper Fig. 1). The builders here make
 
@@ -35,9 +35,9 @@ from math import pi
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..bodies import Links
 from ..box import Box
-from ..packing import Packing, linked_volume
+from ..state.bodies import Links
+from ..state.packing import Packing, linked_volume
 from ..tolerances import LINK_RANK_RTOL, OVERLAP_TOL
 from .dimers import (
     DIMER_DIAMETER_RATIO,
@@ -155,7 +155,7 @@ def _independent(i: NDArray[np.int64], j: NDArray[np.int64], vec: NDArray[np.flo
 
     The gradient of link ``(i, j)`` is ``-u`` on ``i`` and ``+u`` on ``j``,
     ``u = vec / |vec|`` (with ``strain``, also its strain column ``sym(u vec^T)`` of
-    :mod:`jamflow.chains.shear`, unscaled); it is kept when its component orthogonal
+    :mod:`jamflow.models.strain`, unscaled); it is kept when its component orthogonal
     to the kept ones (Gram–Schmidt, applied twice for stability) has a norm above
     :data:`~jamflow.tolerances.LINK_RANK_RTOL` times its own.
     """
@@ -163,7 +163,7 @@ def _independent(i: NDArray[np.int64], j: NDArray[np.int64], vec: NDArray[np.flo
     u = vec / np.linalg.norm(vec, axis=1)[:, None]
     m = d * (d + 1) // 2 if strain else 0
     if strain:
-        from .shear import strain_components
+        from ..models.strain import strain_components
 
         columns = strain_components(u[:, :, None] * vec[:, None, :], 1.0)
     basis = np.zeros((0, n * d + m))
@@ -338,7 +338,7 @@ def read_link_file(path: str, position: ArrayLike, box: Box) -> tuple[NDArray[np
 
     A missing length is the pair's current minimum-image distance. Returns
     ``(pairs (L, 2), lengths (L,))``; indices and lengths are validated by
-    :func:`remove_degenerate_links` / :class:`~jamflow.bodies.Links`.
+    :func:`remove_degenerate_links` / :class:`~jamflow.state.bodies.Links`.
     """
     x = np.asarray(position, dtype=np.float64)
     pairs, lengths = [], []
@@ -477,7 +477,7 @@ def linked_packing(
         ``dimer``: M = 2.
     phi : float, optional
         Packing fraction (the union of each cluster's spheres,
-        :func:`~jamflow.packing.linked_volume`); default :data:`DILUTE_PHI` without
+        :func:`~jamflow.state.packing.linked_volume`); default :data:`DILUTE_PHI` without
         overlaps (0.2 in 2D, 0.1 in 3D), else :data:`OVERLAP_PHI` (slightly above the
         sphere jamming densities, so the jamming bisection decompresses).
     bond_angle : float, optional

@@ -1,6 +1,6 @@
 """Collective and strict jamming of linked packings by randomized LPs (chains paper Sec. V, Eqs. 40-42).
 
-The LP of :mod:`jamflow.strict_jamming` (its ``MotionLP``: maximise ``b . y`` subject
+The LP of :mod:`jamflow.protocols.certify` (its ``MotionLP``: maximise ``b . y`` subject
 to ``A y >= 0``, ``|y_k| <= 1``, HiGHS) is run on the constrained extended rigidity
 matrix ``A = R_E = R0 B^T`` (:func:`jamflow.chains.hessian.extended_rigidity`): ``y``
 are the true degrees of freedom ``y_t`` (motions that keep every link, and with strain
@@ -29,9 +29,8 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from ..packing import Packing
-from ..soft.potential import HARMONIC, PowerLawPotential
-from ..strict_jamming import (
+from ..models.spheres.potential import HARMONIC, PowerLawPotential
+from ..protocols.certify import (
     DEFAULT_LOADS,
     DEFAULT_MAX_CLUSTER_FRACTION,
     DEFAULT_SOLVER,
@@ -39,6 +38,7 @@ from ..strict_jamming import (
     moving_clusters,
     random_loads,
 )
+from ..state.packing import Packing
 from ..tolerances import CERTIFY_MOTION_TOL
 from .clusters import count_clusters
 from .hessian import _geometry, extended_rigidity
@@ -80,7 +80,7 @@ def _subpacking(packing: Packing, keep: NDArray[np.bool_]) -> tuple[Packing, NDA
     links = packing.links
     if links is not None:
         both = keep[links.i] & keep[links.j]
-        from ..bodies import Links
+        from ..state.bodies import Links
 
         links = Links(new[links.i[both]], new[links.j[both]], links.length[both])
     sub = Packing(packing.position[idx], packing.diameter[idx], packing.box, links=links)

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..bodies import Links
+from ..state.bodies import Links
 
 __all__ = ["ClusterCount", "count_clusters", "isostatic_cluster_count"]
 

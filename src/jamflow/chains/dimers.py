@@ -30,7 +30,7 @@ from math import acos, pi
 
 import numpy as np
 
-from ..packing import lens_volume
+from ..state.packing import lens_volume
 from .clusters import ClusterCount
 
 __all__ = [
@@ -73,7 +73,7 @@ def dimer_perimeter_area(r1: float, r2: float, separation: float) -> tuple[float
 
     The boundary is the two circles outside their lens: arcs of ``2 (pi - theta_k)``
     with ``cos theta_1 = (l^2 + r1^2 - r2^2) / (2 l r1)``; the area is the two disks
-    minus their lens (:func:`~jamflow.packing.lens_volume`).
+    minus their lens (:func:`~jamflow.state.packing.lens_volume`).
 
     Returns
     -------

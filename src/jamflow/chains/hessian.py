@@ -1,6 +1,6 @@
 """Constrained Hessian and extended rigidity matrix of linked packings (chains paper Sec. IV).
 
-Coordinates are those of :class:`~jamflow.chains.shear.ShearStabilizedModel` at zero
+Coordinates are those of :class:`~jamflow.models.strain.ShearStabilizedModel` at zero
 strain: centres ``x`` (N d) and the scaled strain components ``e`` (m =
 d (d + 1) / 2); the positions-only variant drops ``e``. For any pair function
 ``phi(|r|)`` with ``r = F R`` (``F = 1 + eps``, ``R`` the pair vector at zero strain)
@@ -12,7 +12,7 @@ the second derivatives at ``eps = 0`` are (Eqs. 24-26)
 - ``d2 phi / dF_cd dF_ef = k_ce R_d R_f``;
 
 and the strain part is mapped to ``e`` by the linear chain rule of
-:func:`~jamflow.chains.shear.strain_components` (``F`` is linear in ``e``, so no
+:func:`~jamflow.models.strain.strain_components` (``F`` is linear in ``e``, so no
 further term). The extended Hessian ``H0`` (Eq. 27) sums the contact potential over
 overlapping pairs that are not linked.
 
@@ -45,10 +45,10 @@ import numpy as np
 import scipy.linalg as sla
 from numpy.typing import NDArray
 
-from ..bodies import Links
-from ..packing import Packing
-from ..soft.potential import HARMONIC, PowerLawPotential, overlapping_pairs
-from .shear import _upper, strain_components
+from ..models.spheres.potential import HARMONIC, PowerLawPotential, overlapping_pairs
+from ..models.strain import _upper, strain_components
+from ..state.bodies import Links
+from ..state.packing import Packing
 
 __all__ = [
     "ZERO_MODE_RTOL",
@@ -68,7 +68,7 @@ ZERO_MODE_RTOL: float = 1e-10
 
 
 def _strain_jacobian(d: int, scale: float) -> NDArray[np.float64]:
-    """``dF / de``, shape (d * d, m): ``F`` is linear in ``e`` (:func:`~jamflow.chains.shear.strain_matrix`)."""
+    """``dF / de``, shape (d * d, m): ``F`` is linear in ``e`` (:func:`~jamflow.models.strain.strain_matrix`)."""
     a, b, weight = _upper(d)
     J = np.zeros((d * d, a.size))
     J[a * d + b, np.arange(a.size)] = 1.0 / (scale * weight)

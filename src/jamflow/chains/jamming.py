@@ -1,7 +1,7 @@
 """Critically jammed linked packings: the jamming bisection of any model, applied to linked spheres.
 
 Protocol (chains paper Sec. III, with the project's bisection to ``P0`` of
-:mod:`jamflow.soft.jamming`): lengths are rescaled so the mean diameter is 1 (link
+:mod:`jamflow.minimize.onset`): lengths are rescaled so the mean diameter is 1 (link
 lengths with them); the box is scaled isotropically about the centres, each step
 followed by fixed-box FIRE with constraint projection and Newton re-affixing
 (:class:`~jamflow.models.links.LinkedSpheresModel`), compressing below ``P0`` and
@@ -31,20 +31,21 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..bodies import Links
 from ..box import Box
-from ..models.base import EnergyModel
+from ..minimize.fire import FireParameters, MinimizeResult, minimize_fire
+from ..minimize.model import EnergyModel
+from ..minimize.onset import JammingSettings, jam_model_to_pressure
 from ..models.links import LinkedSpheresModel
-from ..packing import Packing, linked_volume
-from ..soft.jamming import JammingResult, JammingSettings, jam_model_to_pressure
-from ..soft.minimize import FireParameters, MinimizeResult, minimize_fire
-from ..soft.potential import HARMONIC, PowerLawPotential, overlapping_pairs
+from ..models.spheres.potential import HARMONIC, PowerLawPotential, overlapping_pairs
+from ..models.strain import ShearStabilizedModel
+from ..protocols.soft_jam import JammingResult
+from ..state.bodies import Links
+from ..state.packing import Packing, linked_volume
 from ..tolerances import LINK_LENGTH_RTOL
 from .builders import check_linked_start
 from .clusters import count_clusters
 from .dimers import dimer_report
 from .entanglement import check_untangled
-from .shear import ShearStabilizedModel
 
 __all__ = ["DEFAULT_PROTOCOL", "ENERGY_FLOOR", "PROTOCOLS", "jam_linked", "linked_soft_packing", "scale_to_energy"]
 
@@ -121,7 +122,7 @@ def jam_linked(
     pressure : float or None
         ``P0`` [epsilon / <D>^d], > 0, of the bisection; None with ``protocol="energy"``.
     settings : JammingSettings, optional
-        Default :class:`~jamflow.soft.jamming.JammingSettings`; ``force_tol`` bounds the largest projected force per sphere; ``box_dof`` must
+        Default :class:`~jamflow.minimize.onset.JammingSettings`; ``force_tol`` bounds the largest projected force per sphere; ``box_dof`` must
         be ``"isotropic"`` (a fixed-shape box).
     protocol : {"bisection", "energy"}
         :data:`PROTOCOLS`; ``"energy"`` runs :func:`scale_to_energy` (uses

@@ -14,9 +14,10 @@ import sys
 import typing
 from collections.abc import Sequence
 
-from ..io import check_output_paths
+from ..io import check_output_paths, file_body_kind
 from ..presets import preset_options
 from ..provenance import jamflow_version
+from ..stages import STAGES, refusal
 from .common import path_arguments
 
 #: Topic modules of this package that contribute subcommands.
@@ -79,6 +80,23 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+def check_bodies(command: str, inputs: Sequence[str]) -> None:
+    """Refuse, before any work, an input packing whose bodies ``command`` cannot handle (:mod:`jamflow.stages`).
+
+    Raises
+    ------
+    ValueError
+        One line: the file, what the command takes and what to run instead.
+    """
+    if not STAGES[command].reads_packings:
+        return
+    for path in inputs:
+        kind = file_body_kind(path)
+        why = None if kind is None else refusal(command, kind)
+        if why:
+            raise ValueError(f"{path}: {why}")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``jamflow`` console script."""
     words = sys.argv[1:] if argv is None else list(argv)
@@ -93,6 +111,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         reads, writes, packings = args.path_roles
         check_output_paths(path_arguments(args, reads), path_arguments(args, writes),
                            getattr(args, "in_place", False), path_arguments(args, packings))
+        check_bodies(args.command, path_arguments(args, reads))
         return int(args.handler(args) or 0)
     except (ValueError, FileNotFoundError, RuntimeError, OSError) as exc:
         print(f"jamflow {args.command}: error: {exc}", file=sys.stderr)

@@ -16,11 +16,11 @@ from ..analysis.forces import THETA_EXTENDED, THETA_LOCALISED, force_distributio
 from ..analysis.gaps import MEAN_FIELD_GAP_EXPONENT, gap_distribution
 from ..analysis.overlap import overlap_dataset, overlap_series
 from ..analysis.structure import structure_dataset
-from ..io import read_dat, read_dataset, read_packing, write_dataset
-from ..packing import Packing
+from ..io import read_dataset, read_packing, write_dataset
+from ..io.formats import read_dat
+from ..state.packing import Packing
 from .common import add_command, add_quiet, print_summary, stage_parameters
 from .packings import add_overlap_option, overlap_tol
-
 
 #: ``jamflow plot`` kinds and what each takes as input (matplotlib is imported only when plotting).
 PLOT_KINDS: dict[str, str] = {

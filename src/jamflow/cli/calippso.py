@@ -6,7 +6,8 @@ import argparse
 
 from tqdm import tqdm
 
-from ..calippso import (
+from ..io import read_packing, write_dataset
+from ..protocols.calippso import (
     DEFAULT_CUTOFF,
     DEFAULT_CUTOFF_NEAR,
     DEFAULT_FINISH,
@@ -23,7 +24,6 @@ from ..calippso import (
     calippso,
     result_to_dataset,
 )
-from ..io import read_packing, write_dataset
 from .common import add_command, add_preset, add_quiet, print_summary, stage_parameters
 
 

@@ -7,14 +7,21 @@ import argparse
 from tqdm import tqdm
 
 from ..io import read_packing, write_dataset
-from ..strict_jamming import (
+from ..protocols.certify import (
     DEFAULT_LOADS,
     DEFAULT_MAX_CLUSTER_FRACTION,
     DEFAULT_SOLVER,
     certificate_to_dataset,
     certify,
 )
-from .common import add_command, add_preset, add_quiet, print_summary, seed, stage_parameters
+from .common import (
+    add_command,
+    add_preset,
+    add_quiet,
+    print_summary,
+    seed,
+    stage_parameters,
+)
 from .packings import add_overlap_option, overlap_tol
 
 

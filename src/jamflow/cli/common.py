@@ -92,7 +92,7 @@ def print_summary(args: argparse.Namespace, what: str, rows: Iterable[tuple[str,
 
 
 def packing_rows(packing: Any) -> list[tuple[str, Any]]:
-    """Summary rows of a :class:`~jamflow.packing.Packing`: N, d, phi, pressure, contacts, rattlers."""
+    """Summary rows of a :class:`~jamflow.state.packing.Packing`: N, d, phi, pressure, contacts, rattlers."""
     rows: list[tuple[str, Any]] = [("N, d", f"{packing.n}, {packing.d}"),
                                    ("packing fraction", f"{packing.packing_fraction:.10f}")]
     if packing.pressure is not None:

@@ -9,15 +9,23 @@ from pathlib import Path
 import numpy as np
 
 from ..io import read_packing, write_dataset, write_packing
-from ..overdamped.driving import Drive, SelfPropulsion
-from ..overdamped.integrate import FlowOptions
-from ..overdamped.run import Stop, dilute_start, run_flow
-from ..overdamped.starts import decompressed
-from ..packing import LENGTH_UNITS, near_pairs
+from ..protocols.overdamped.driving import Drive, SelfPropulsion
+from ..protocols.overdamped.integrate import FlowOptions
+from ..protocols.overdamped.run import Stop, dilute_start, run_flow
+from ..protocols.overdamped.starts import decompressed
+from ..state.packing import LENGTH_UNITS, near_pairs
 from ..tolerances import OVERLAP_TOL
-from .common import add_command, add_preset, add_quiet, packing_rows, positive, print_summary, seed, stage_parameters
+from .common import (
+    add_command,
+    add_preset,
+    add_quiet,
+    packing_rows,
+    positive,
+    print_summary,
+    seed,
+    stage_parameters,
+)
 from .packings import add_overlap_option, overlap_tol
-
 
 #: path arguments of the flow runs (the checkpoint is written, and must not be an input)
 FLOW_READS = ("input", "composite")
@@ -50,7 +58,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     _common_options(p)
 
     p = add_command(sub, "decompress", _decompress, "dense flow start: a jammed packing decompressed to a packing fraction",
-                    "Shrinks every diameter by (phi / phi_J)^(1/d) about fixed centres (jamflow.overdamped.starts): "
+                    "Shrinks every diameter by (phi / phi_J)^(1/d) about fixed centres (jamflow.protocols.overdamped.starts): "
                     "an LS + CALiPPSO (or soft-jammed) packing becomes a start at any phi below its own in one "
                     "step, instead of minutes of event-driven compression. It is a marginally stable state with "
                     "every gap opened by the same relative amount, not a liquid at that phi: discard the initial "

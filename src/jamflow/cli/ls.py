@@ -8,8 +8,21 @@ from pathlib import Path
 from tqdm import tqdm
 
 from ..io import read_packing, write_dataset, write_packing
-from ..ls import DEFAULT_BETA, DEFAULT_FAST_GROWTH_RATE, DEFAULT_FAST_UNTIL, MAX_PRESSURE, compress
-from .common import add_command, add_preset, add_quiet, print_summary, seed, stage_parameters
+from ..protocols.ls import (
+    DEFAULT_BETA,
+    DEFAULT_FAST_GROWTH_RATE,
+    DEFAULT_FAST_UNTIL,
+    MAX_PRESSURE,
+    compress,
+)
+from .common import (
+    add_command,
+    add_preset,
+    add_quiet,
+    print_summary,
+    seed,
+    stage_parameters,
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -54,7 +67,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_preset(p)
 
 
-#: stop reasons of :func:`jamflow.ls.compress` that make the remaining targets impossible
+#: stop reasons of :func:`jamflow.protocols.ls.compress` that make the remaining targets impossible
 IMPOSSIBLE = {
     "max_pressure": "jammed before the target (p reached --max-pressure {max_pressure:g})",
     "box_width": "a contact distance reached half the box width: N = {n} is too few spheres to jam "

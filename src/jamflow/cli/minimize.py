@@ -9,14 +9,15 @@ import numpy as np
 from ..chains.entanglement import check_untangled
 from ..chains.jamming import linked_soft_packing
 from ..io import read_packing, write_packing
-from ..models import EnergyModel, LinkedSpheresModel, SphereModel
+from ..minimize import METHODS, minimize
+from ..minimize.model import EnergyModel
+from ..models import model_for
+from ..models.links import LinkedSpheresModel
 from ..models.shapes import ShapeModel
-from ..packing import Packing
-from ..shapes.counting import shape_model
+from ..models.spheres.potential import PowerLawPotential
+from ..protocols.soft_jam import soft_packing
 from ..shapes.jamming import shape_packing
-from ..soft.jamming import soft_packing
-from ..soft.minimize import METHODS, minimize
-from ..soft.potential import PowerLawPotential
+from ..state.packing import Packing
 from ..tolerances import MINIMIZE_FORCE_TOL
 from .common import add_command, add_quiet, print_summary, stage_parameters
 
@@ -78,14 +79,6 @@ def _minimize(args: argparse.Namespace) -> int:
 
 
 def _model(args: argparse.Namespace, packing: Packing) -> tuple[EnergyModel, np.ndarray]:
-    """The energy model of a packing and its start: soft, linked or shaped bodies."""
-    if packing.shapes is not None:
-        if args.exponent != 2.0:
-            raise ValueError(f"--exponent {args.exponent:g}: shaped bodies interact by the linear spring (Eq. 1) only")
-        model, q = shape_model(packing)
-        return model, model.positions(q)
-    potential = PowerLawPotential(exponent=args.exponent)
-    if packing.links is not None and len(packing.links):
-        return LinkedSpheresModel(packing.box, packing.diameter, packing.links, packing.position,
-                                  potential), packing.position
-    return SphereModel(packing.box, packing.diameter, potential), packing.position
+    """The energy model of a packing (:func:`jamflow.models.model_for`) and its start."""
+    model, q = model_for(packing, PowerLawPotential(exponent=args.exponent))
+    return model, model.positions(q)

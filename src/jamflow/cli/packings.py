@@ -9,22 +9,15 @@ import math
 import numpy as np
 from tqdm import tqdm
 
-from ..analysis.contacts import contact_network, summarize
+from ..analysis.contacts import summarize
 from ..chains.clusters import count_clusters
 from ..chains.dimers import dimer_report
-from ..initial import random_packing
-from ..io import (
-    gsd_types,
-    read_dat,
-    read_dataset,
-    read_packing,
-    size_classes,
-    write_gsd,
-    write_packing,
-    write_xyz,
-)
-from ..overdamped.run import snapshot_packings
-from ..packing import Packing
+from ..io import read_dataset, read_packing, write_packing
+from ..io.formats import gsd_types, read_dat, size_classes, write_gsd, write_xyz
+from ..network.spheres import contact_network
+from ..protocols.initial import random_packing
+from ..protocols.overdamped.run import snapshot_packings
+from ..state.packing import Packing
 from ..tolerances import OVERLAP_TOL
 from .common import (
     add_command,

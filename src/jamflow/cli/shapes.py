@@ -6,13 +6,24 @@ import argparse
 import sys
 
 import numpy as np
-
 import xarray as xr
 
 from ..io import new_dataset_attrs, read_packing, write_dataset, write_packing
-from ..shapes.generation import (SHAPE_CHOICES, bidisperse_shapes, random_polygon_shapes, random_shape_packing,
-                                 unit_shape)
-from .common import add_command, add_quiet, packing_rows, print_summary, seed, stage_parameters
+from ..shapes.generation import (
+    SHAPE_CHOICES,
+    bidisperse_shapes,
+    random_polygon_shapes,
+    random_shape_packing,
+    unit_shape,
+)
+from .common import (
+    add_command,
+    add_quiet,
+    packing_rows,
+    print_summary,
+    seed,
+    stage_parameters,
+)
 
 #: Default packing fraction of the random start: random sequential addition of
 #: elongated bodies (up to aspect ratio ~5) still finds free places quickly.

@@ -14,11 +14,17 @@ from ..chains.compliance import compliance
 from ..chains.hessian import constrained_hessian
 from ..chains.jamming import DEFAULT_PROTOCOL, PROTOCOLS, jam_linked
 from ..io import new_dataset_attrs, read_packing, write_dataset, write_packing
-from ..packing import LENGTH_UNITS, Packing, length_unit
-from ..soft.hessian import backbone_pairs, elastic_moduli, hessian, lowest_modes
-from ..soft.jamming import FORCE_TOL_VANDERWERF, JammingSettings, jam_to_pressure
-from ..soft.potential import PowerLawPotential
-from ..soft.shear import LERNER_DELTA_R, aqs_shear, lerner_sd_shear
+from ..minimize.onset import FORCE_TOL_VANDERWERF, JammingSettings
+from ..models.spheres.hessian import (
+    backbone_pairs,
+    elastic_moduli,
+    hessian,
+    lowest_modes,
+)
+from ..models.spheres.potential import PowerLawPotential
+from ..protocols.quasistatic import LERNER_DELTA_R, aqs_shear, lerner_sd_shear
+from ..protocols.soft_jam import jam_to_pressure
+from ..state.packing import LENGTH_UNITS, Packing, length_unit
 from ..tolerances import MINIMIZE_FORCE_TOL
 from .common import (
     add_command,

@@ -35,12 +35,19 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..models.shapes import POINT_TERM_FAMILIES, ShapeModel
-from ..models.shapes import _kernels
-from ..network import ContactSet, contact_jacobian, find_sliders, isostatic_count, prune_rattlers, rigidity_counting
-from ..packing import Packing
+from ..models import model_for
+from ..models.shapes import POINT_TERM_FAMILIES, ShapeModel, _kernels
+from ..network import (
+    ContactSet,
+    contact_jacobian,
+    find_sliders,
+    isostatic_count,
+    prune_rattlers,
+    rigidity_counting,
+)
+from ..state.packing import Packing
 
-__all__ = ["COUNTED_FAMILIES", "PARALLEL_MODES", "ShapeCounting", "count_constraints", "shape_contacts", "shape_model"]
+__all__ = ["COUNTED_FAMILIES", "PARALLEL_MODES", "ShapeCounting", "count_constraints", "shape_contacts", "shape_model_of"]
 
 #: How a parallel or nearly parallel circulo contact is counted (Fig. 6).
 PARALLEL_MODES = ("once", "twice")
@@ -49,13 +56,11 @@ PARALLEL_MODES = ("once", "twice")
 COUNTED_FAMILIES = ("circulo", "ellipse", "reuleaux", "dumbbell")
 
 
-def shape_model(packing: Packing) -> tuple[ShapeModel, NDArray[np.float64]]:
-    """The energy model of a shape packing and its degree-of-freedom vector."""
-    if packing.shapes is None:
-        raise ValueError("not a shape packing (no shape table)")
-    model = ShapeModel(packing.box, packing.shapes, packing.shape_index,
-                       k=float(packing.attrs.get("spring_constant", 1.0)), mass=float(packing.attrs.get("mass", 1.0)))
-    return model, model.dofs(np.column_stack([packing.position, packing.orientation]))
+def shape_model_of(packing: Packing) -> tuple[ShapeModel, NDArray[np.float64]]:
+    """:func:`jamflow.models.model_for` of a packing that must hold shaped bodies."""
+    if packing.body_kind != "shapes":
+        raise ValueError(f"not a shape packing (it holds {packing.body_kind})")
+    return model_for(packing)
 
 
 def shape_contacts(model: ShapeModel, q: NDArray[np.float64], parallel: str = "once") -> ContactSet:
@@ -155,7 +160,7 @@ def count_constraints(packing: Packing, parallel: str = "once") -> tuple[ShapeCo
         The counts, the rattler and slider masks, and the contact set (all contacts,
         rattlers' included).
     """
-    model, q = shape_model(packing)
+    model, q = shape_model_of(packing)
     cs = shape_contacts(model, q, parallel)
     n = packing.n
     rattler = prune_rattlers(cs, n, dofs_per_body=2)

@@ -27,11 +27,10 @@ from math import pi, sqrt
 
 import numpy as np
 
-from ..bodies import SHAPE_GEOMETRY_RTOL, ShapeTable, _polygon_area_centroid
 from ..box import Box
-from ..models.shapes import ShapeModel
-from ..models.shapes import _kernels
-from ..packing import Packing
+from ..models.shapes import ShapeModel, _kernels
+from ..state.bodies import SHAPE_GEOMETRY_RTOL, ShapeTable, _polygon_area_centroid
+from ..state.packing import Packing
 
 __all__ = ["AREA_RATIO", "SHAPE_CHOICES", "SIZE_RATIO", "bidisperse_shapes", "random_circulo_polygon",
            "random_polygon_shapes", "random_shape_packing", "unit_shape"]
@@ -252,7 +251,7 @@ def random_circulo_polygon(sides: int, asphericity: float, rng: np.random.Genera
        (closed form, :func:`_radius_for_asphericity`).
 
     The vertices are returned relative to the polygon's area centroid (the
-    :class:`~jamflow.bodies.ShapeTable` convention); any scale.
+    :class:`~jamflow.state.bodies.ShapeTable` convention); any scale.
 
     Raises
     ------

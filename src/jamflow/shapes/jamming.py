@@ -1,6 +1,6 @@
 """Jamming onset of shaped bodies at pressure ``P0``, with rotations.
 
-The protocol of :mod:`jamflow.soft.jamming` on :class:`~jamflow.models.shapes.ShapeModel`
+The protocol of :mod:`jamflow.minimize.onset` on :class:`~jamflow.models.shapes.ShapeModel`
 (VanderWerf et al. Sec. II): isotropic compress/decompress bisection, each step a
 fixed-box FIRE minimisation over centres and orientations (orientations with their
 moments of inertia), halving the step in packing fraction on every reversal, until
@@ -15,9 +15,10 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..minimize.onset import JammingSettings, jam_model_to_pressure
 from ..models.shapes import ShapeModel
-from ..packing import Packing
-from ..soft.jamming import JammingResult, JammingSettings, jam_model_to_pressure
+from ..protocols.soft_jam import JammingResult
+from ..state.packing import Packing
 
 __all__ = ["jam_shapes", "shape_packing"]
 

@@ -38,9 +38,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..models.base import pressure_of
-from ..packing import Packing
-from .counting import count_constraints, shape_model
+from ..minimize.model import pressure_of
+from ..state.packing import Packing
+from .counting import count_constraints, shape_model_of
 
 __all__ = ["ZERO_EIGENVALUE_RTOL", "QUARTIC_PRESSURE_RATIO", "REGION_GAP_MIN_RATIO", "SPECTRUM_FORCE_RATIO", "FOURTH_DERIVATIVE_STEP",
            "FOURTH_AGREEMENT_RTOL", "fourth_derivative_step", "fourth_derivative_along", "Spectrum", "spectrum"]
@@ -195,7 +195,7 @@ def _auto_cutoff(lam: NDArray[np.float64], lambda_0: float, pressure: float) -> 
 
 def spectrum(packing: Packing, lambda_c: float | None = None, fourth: bool = True) -> Spectrum:
     """Full spectrum of the dynamical matrix with regions and quartic modes (module doc)."""
-    model, q = shape_model(packing)
+    model, q = shape_model_of(packing)
     hess = model.hessian(q).toarray()
     lam, vec = np.linalg.eigh(hess)
     n = model.n

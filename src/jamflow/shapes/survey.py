@@ -17,7 +17,7 @@ import numpy as np
 import xarray as xr
 
 from ..network import isostatic_count, prune_rattlers, rigidity_counting
-from ..packing import Packing
+from ..state.packing import Packing
 from .counting import count_constraints
 
 __all__ = ["DISK_FAMILY", "shape_label", "survey_dataset", "survey_row"]

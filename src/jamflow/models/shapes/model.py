@@ -1,7 +1,7 @@
 """Soft 2D shaped bodies (VanderWerf et al., Eq. 1) as an energy model with rotations.
 
 Degrees of freedom ``q`` (shape ``(3N,)``): centres ``(N, 2)`` row-major, then one
-orientation per body [rad] (the order of :mod:`jamflow.models.base`). A
+orientation per body [rad] (the order of :mod:`jamflow.minimize.model`). A
 *configuration* is the ``(N, 3)`` array of rows ``(x, y, theta)``: it is what
 :meth:`ShapeModel.dofs` takes and :meth:`ShapeModel.positions` returns, so that
 the generic minimisers and the bisection to ``P0`` (which hand ``positions(q)`` back
@@ -30,10 +30,10 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
-from ...bodies import ShapeTable
 from ...box import Box
-from ...soft.potential import DEFAULT_SKIN, NeighborList
-from ..base import ModelEvaluation
+from ...minimize.model import ModelEvaluation, WithoutFastPaths
+from ...neighbors.verlet import DEFAULT_SKIN, NeighborList
+from ...state.bodies import ShapeTable
 from . import _kernels
 
 __all__ = ["POINT_TERM_FAMILIES", "SHAPE_FAMILIES", "ShapeModel", "shape_family"]
@@ -91,7 +91,7 @@ def _shape_parameters(shapes: ShapeTable, family: str) -> NDArray[np.float64]:
     return out
 
 
-class ShapeModel:
+class ShapeModel(WithoutFastPaths):
     """Soft shaped bodies in 2D with translations and rotations (see the module doc).
 
     Parameters

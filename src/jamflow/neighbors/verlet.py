@@ -1,0 +1,127 @@
+"""The one Verlet list: pairs within their contact distance plus a skin, with periodic images.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..box import Box
+from . import _verlet_kernels
+from .pairs import verlet_pairs
+
+__all__ = ["SPHERE_SKIN", "SMALL_BOX_SKIN_SHARE", "DEFAULT_SKIN", "NeighborList"]
+
+
+#: Verlet skin of sphere lists as a fraction of the mean diameter, by dimension (d > 3
+#: takes the d = 3 value): pairs closer than ``sigma_ij + skin`` are listed, and the
+#: list is rebuilt when displacements use up the skin. The skin changes no result (a
+#: listed pair beyond contact adds nothing, and FIRE's state survives a rebuild), only
+#: the split of time between pair loops and rebuilds. Measured with FIRE, CPU time
+#: (docs/energy-models.md, "Neighbour rebuilds, third pass"): in 3D N = 4096 0.3 cuts
+#: the rebuild share from 6.9 % to 2.5 % at an unchanged time per evaluation; in 2D a
+#: larger skin helps N = 1024 (-4 %) but costs N = 16384 8-10 % per evaluation.
+SPHERE_SKIN: dict[int, float] = {2: 0.15, 3: 0.3}
+
+
+#: In a box too small for the skin (``max D + skin`` at or above half the smallest
+#: width, e.g. a few shear-stabilised spheres compressed into a flattened box) a build
+#: uses this share of the room ``min(widths) / 2 - max D`` instead: the list stays a
+#: minimum-image list, and since the skin changes no result, nothing else changes.
+SMALL_BOX_SKIN_SHARE: float = 0.5
+
+
+#: Verlet skin of the bounding-diameter lists of non-spherical models, as a fraction
+#: of the mean bounding diameter (their pair kernels cost more per listed pair).
+DEFAULT_SKIN: float = 0.15
+
+
+class NeighborList:
+    """Verlet list with a skin, in periodic and sheared boxes, built with ``verlet_pairs``.
+
+    Stores each pair ``i < j`` with ``r < sigma_ij + skin`` at build time together with
+    its periodic image as integer lattice coordinates ``n``, so the pair vector at any
+    later time is ``x_j - x_i + h n`` for the current box ``h`` (positions are kept
+    unwrapped between builds). The list stays valid while
+    ``u1 + u2 + ||A - 1|| (D_max + skin) < skin``, with ``u1 >= u2`` the two largest
+    non-affine displacements since the build and ``A = h h_build^-1`` the box
+    deformation (:func:`jamflow.neighbors._verlet_kernels._needs_rebuild`).
+
+    Parameters
+    ----------
+    diameter : array_like, shape (N,)
+        Diameters [length].
+    skin : float, optional
+        Skin [length]; default :data:`SPHERE_SKIN` of the dimension of the first build
+        times the mean diameter. A build in a box too small for it uses
+        :data:`SMALL_BOX_SKIN_SHARE` of the room left; ``skin`` and ``reach`` are those
+        of the last build.
+    """
+
+    def __init__(self, diameter: ArrayLike, skin: float | None = None) -> None:
+        self.diameter = np.asarray(diameter, dtype=np.float64)
+        self.requested_skin = np.nan if skin is None else float(skin)
+        if skin is not None and not self.requested_skin > 0.0:
+            raise ValueError(f"skin must be positive, got {self.requested_skin}")
+        self.skin = self.requested_skin
+        self.reach = float(self.diameter.max()) + self.skin
+        self.builds = 0
+        self.i = self.j = np.empty(0, np.int64)
+        self.image = np.empty((0, 0))
+        self.sigma = np.empty(0)
+        self.x_build = np.empty((0, 0))
+        self.h_build = np.empty((0, 0))
+
+    def build(self, x: NDArray[np.float64], box: Box) -> None:
+        """(Re)build the list for positions ``x`` (N, d) in ``box``."""
+        skin = self.requested_skin
+        if np.isnan(skin):
+            skin = SPHERE_SKIN.get(box.d, SPHERE_SKIN[3]) * float(self.diameter.mean())
+        room = 0.5 * float(np.min(box.widths)) - float(self.diameter.max())
+        if 0.0 < room <= skin:
+            skin = SMALL_BOX_SKIN_SHARE * room
+        self.skin = skin
+        self.reach = float(self.diameter.max()) + skin
+        self.adopt(*verlet_pairs(x, box, self.diameter, self.skin), x, box)
+
+    def adopt(self, i: NDArray[np.int64], j: NDArray[np.int64], image: NDArray[np.float64], x: NDArray[np.float64],
+              box: Box, builds: int = 1) -> None:
+        """Take a list built elsewhere with this skin (e.g. inside a compiled FIRE loop) at ``x`` in ``box``.
+
+        ``i, j`` (P,) and ``image`` (P, d) as :func:`jamflow.neighbors.pairs.verlet_pairs`
+        returns them; ``builds`` counts the lists made since this object's last one.
+        """
+        self.i, self.j, self.image = i, j, image
+        self.sigma = 0.5 * (self.diameter[self.i] + self.diameter[self.j])
+        self.x_build = np.array(x, dtype=np.float64)
+        self.h_build = np.array(box.matrix)
+        self.builds += builds
+
+    def offsets(self, box: Box) -> NDArray[np.float64]:
+        """Image offsets ``h n`` of every listed pair for ``box``, shape (P, d) [length]."""
+        return self.image @ box.matrix.T
+
+    def affine_reference(self, box: Box) -> tuple[NDArray[np.float64], float]:
+        """Build-time positions mapped affinely into ``box``, and the deformation slack.
+
+        Returns ``(x_build A^T, ||A - 1||_2 (D_max + skin))`` with ``A = h h_build^-1``.
+        """
+        if np.array_equal(box.matrix, self.h_build):
+            # the box of the build (every fixed-box run): A = 1 exactly, no inverse or SVD
+            return self.x_build, 0.0
+        deform = box.matrix @ np.linalg.inv(self.h_build)
+        slack = float(np.linalg.norm(deform - np.eye(box.d), 2)) * self.reach
+        return self.x_build @ deform.T, slack
+
+    def stale(self, x: NDArray[np.float64], box: Box) -> bool:
+        """Whether the list may miss a pair (never built, or skin used up)."""
+        if self.x_build.shape != np.shape(x):
+            return True
+        affine, slack = self.affine_reference(box)
+        return bool(_verlet_kernels._needs_rebuild(np.asarray(x, dtype=np.float64), affine, 1.0, 1.0, self.reach,
+                                            self.skin, slack))
+
+    def update(self, x: NDArray[np.float64], box: Box) -> None:
+        """Rebuild only when :meth:`stale`."""
+        if self.stale(x, box):
+            self.build(x, box)
