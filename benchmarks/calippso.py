@@ -62,7 +62,7 @@ every part found. Starts are cached as ``benchmarks/output/calippso_start_*.nc``
 Run: ``python benchmarks/calippso.py [--quick] [--parts PART ...]``. ``--jobs 2`` runs the
 whole commands of ``scaling`` two at a time, each a child process with one HiGHS
 thread: LP counts and results do not depend on it, times include the other run's
-memory traffic (the fourth measurement of ``docs/calippso-scaling.md`` ran so).
+memory traffic (the fourth measurement of ``docs/notes/calippso-scaling.md`` ran so).
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """CALiPPSO's warm LPs by HiGHS and by COIN-OR CLP: is another simplex the way to large N?
 
 The warm LPs of a near-jamming start cost the LU factorisation of the simplex basis
-(``docs/calippso-scaling.md``). This benchmark asks whether CLP, the other open-source
+(``docs/notes/calippso-scaling.md``). This benchmark asks whether CLP, the other open-source
 simplex on PyPI with a warm-basis interface (``cylp``; OR-Tools' GLOP takes no
 starting basis through its Python solver wrapper), factorises or pivots these bases
 better. For each near start (LS to p = 1e7, cached by ``benchmarks/calippso.py``) the

@@ -6,7 +6,7 @@ caches) and prints (1) the cProfile table by own time and by cumulative time, (2
 network solve and the choice between CG and a factorisation (the CG itself is compiled),
 (3) with ``--timers`` instead of both, real time per function from timing wrappers (no
 profiler, so compiled kernels and short Python calls keep their weights) and the CG
-iterations per solve. Used for docs/overdamped-profile.md.
+iterations per solve. Used for docs/notes/overdamped-profile.md.
 
 Usage: python benchmarks/overdamped_profile.py START.nc [--steps 300] [--record-every 1] [--no-lines] [--timers]
 """

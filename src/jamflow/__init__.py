@@ -1,4 +1,4 @@
-"""jamflow: jammed packings of frictionless hard spheres, driven, certified and analysed.
+"""jamflow: jammed packings of frictionless particles: hard and soft spheres, linked spheres, 2D shapes.
 
 The public API, importable from the package itself::
 

@@ -281,8 +281,8 @@ def stage_options(section, **flags):
 # Requests per job: threads, mem_mb [MB] and runtime [min] from the scene (N, d), the
 # stage and its protocol options, so that a scheduler gets honest requests and a long
 # LS or CALiPPSO job is not killed at a flat default. Expected CPU times are fitted to
-# runs on the 2-core development machine (README "Resources per job" gives the runs and
-# numbers; CALiPPSO from docs/calippso-scaling.md); a job asks for RUNTIME_SAFETY times
+# runs on the 2-core development machine (docs/notes/resources.md gives the runs and
+# numbers; CALiPPSO from docs/notes/calippso-scaling.md); a job asks for RUNTIME_SAFETY times
 # its expectation, at least RUNTIME_FLOOR_MIN, and a retry (profile `retries`) asks for
 # `attempt` times both runtime and memory.
 RUNTIME_SAFETY = 5
@@ -297,7 +297,7 @@ LS_SECONDS_PER_SPHERE = {2: 1e-3, 3: 2e-3, 4: 8e-3, 5: 3e-2}
 #: network), an assumption, not a fit: compression of N = 100 2D discs from phi = 0.5 to
 #: 0.83 took 75 CPU-s; shear of N = 1024 2D discs per unit strain 358 CPU-s at fixed
 #: volume (phi = 0.83) and 1017 CPU-s at fixed pressure p = 100 (the flow-curve scene;
-#: docs/overdamped-profile.md, round 3), N = 100 at phi = 0.82 26 CPU-s (N^1.1 between
+#: docs/notes/overdamped-profile.md, round 3), N = 100 at phi = 0.82 26 CPU-s (N^1.1 between
 #: the two sizes, so N^2 errs on the long side)
 COMPRESS_SECONDS = 75
 SHEAR_SECONDS_PER_STRAIN = 1017
@@ -341,7 +341,7 @@ def _lp_size(n, d):
 
 
 def expected_cpu_seconds(stage, wildcards):
-    """Expected CPU time [s] of one job of ``stage`` in this scene (see README)."""
+    """Expected CPU time [s] of one job of ``stage`` in this scene (see docs/slurm.md)."""
     n, d = scene_size()
     if stage == "ls":
         kappa = float(wildcards.kappa)

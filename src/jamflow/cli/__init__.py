@@ -70,7 +70,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """
     parser = _Parser(
         prog="jamflow",
-        description="Jammed packings of frictionless hard spheres: generate, drive, certify, analyse.",
+        description="Jammed packings of frictionless particles: hard and soft spheres, linked spheres, 2D shapes. "
+                    "Generate, drive, certify, analyse.",
     )
     parser.add_argument("--version", action="version", version=f"jamflow {jamflow_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")

@@ -270,7 +270,7 @@ _HIGHS_PRESOLVE: str = "choose"
 #: LS examples and of six 3D N = 1024 and one N = 2048 near starts took the same LPs
 #: and ended in the same packings (Q = 1, forces to 1e-10) with 0-40 % fewer pivots
 #: and up to 33 % less LP time; a captured N = 4096 warm LP took 673 against 1144
-#: pivots, 10-12 s against 20-21 s (``docs/calippso-scaling.md``). Cold LPs keep
+#: pivots, 10-12 s against 20-21 s (``docs/notes/calippso-scaling.md``). Cold LPs keep
 #: HiGHS's equilibration (``_HIGHS_SCALE``): the cold dual simplex of ``solver =
 #: "simplex"`` on an N = 1024 near start took 65012 pivots unscaled against 27651.
 WARM_SIMPLEX_SCALE: int = 0
@@ -341,7 +341,7 @@ FINISHES: tuple[str, ...] = ("newton", "lp")
 #: ``lp`` by default: the finish saves LPs (d = 3, 4, 5 LS examples: 1, 2, 2), but the
 #: LPs it saves are the cheapest of the chain and its attempts (one sparse LU each)
 #: cost about as much: the whole command was not faster on any of the three examples
-#: (docs/calippso-scaling.md).
+#: (docs/notes/calippso-scaling.md).
 DEFAULT_FINISH: str = "lp"
 
 #: Newton finish: tried from this ``sqrt(Gamma*) - 1`` down (the hybrid solver's tail).
