@@ -25,7 +25,7 @@ import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 from scipy.optimize import linprog, nnls
 
-from ..highs import new_highs
+from ..highs import colwise_lp, new_highs
 from ..tolerances import RIGID_PIVOT_RTOL, SELF_STRESS_POSITIVE_RTOL
 
 __all__ = ["RigidNetwork", "jacobian_rank", "positive_self_stress", "rigid_network", "self_stresses", "strain_motion"]
@@ -276,15 +276,7 @@ def _max_lp(cost, A, row_lower, row_upper, col_lower, col_upper) -> NDArray[np.f
     (dense ``A``; dual simplex, one thread), or None when not solved to optimality."""
     csc = sp.csc_matrix(A)
     csc.sort_indices()
-    lp = highspy.HighsLp()
-    lp.num_col_, lp.num_row_ = csc.shape[1], csc.shape[0]
-    lp.col_cost_ = -np.asarray(cost, dtype=np.float64)
-    lp.col_lower_, lp.col_upper_ = np.asarray(col_lower, np.float64), np.asarray(col_upper, np.float64)
-    lp.row_lower_, lp.row_upper_ = np.asarray(row_lower, np.float64), np.asarray(row_upper, np.float64)
-    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
-    lp.a_matrix_.start_ = csc.indptr.astype(np.int32)
-    lp.a_matrix_.index_ = csc.indices.astype(np.int32)
-    lp.a_matrix_.value_ = csc.data.astype(np.float64)
+    lp = colwise_lp(csc, -np.asarray(cost, dtype=np.float64), col_lower, col_upper, row_lower, row_upper)
     h = new_highs()
     h.setOptionValue("solver", "simplex")
     h.passModel(lp)
