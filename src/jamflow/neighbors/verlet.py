@@ -30,11 +30,11 @@ __all__ = ["SPHERE_SKIN", "SMALL_BOX_SKIN_SHARE", "DEFAULT_SKIN", "NeighborList"
 SPHERE_SKIN: dict[int, float] = {2: 0.15, 3: 0.3}
 
 
-#: Largest share of the room ``min(widths) / 2 - max D`` a build gives the skin (the
-#: default ``room_share`` of :class:`NeighborList`): in a box too small for the
-#: requested skin (e.g. a few shear-stabilised spheres compressed into a flattened box)
-#: the list stays a minimum-image list, and since the skin changes no minimiser's
-#: result, nothing else changes.
+#: In a box too small for the requested skin (``max D + skin`` at or above half the
+#: smallest width, e.g. a few shear-stabilised spheres compressed into a flattened box)
+#: a build of a list without ``room_share`` uses this share of the room
+#: ``min(widths) / 2 - max D`` instead: the list stays a minimum-image list, and since
+#: the skin changes no minimiser's result, nothing else changes.
 SMALL_BOX_SKIN_SHARE: float = 0.5
 
 
@@ -62,10 +62,11 @@ class NeighborList:
     skin : float, optional
         Requested skin [length]; default :data:`SPHERE_SKIN` of the dimension of each
         build times the mean diameter.
-    room_share : float
-        A build gives the skin at most this share of the room ``min(widths) / 2 -
-        max D`` (:data:`SMALL_BOX_SKIN_SHARE`), so that ``reach`` stays below half the
-        smallest box width.
+    room_share : float, optional
+        If given, every build caps the skin at this share of the room
+        ``min(widths) / 2 - max D`` (the event-driven integrator, whose skin is part of
+        its trajectory). Otherwise the requested skin is kept whenever it fits below the
+        room, and a box too small for it gets :data:`SMALL_BOX_SKIN_SHARE` of the room.
 
     Attributes
     ----------
@@ -87,15 +88,14 @@ class NeighborList:
         Lists made so far.
     """
 
-    def __init__(self, diameter: ArrayLike, skin: float | None = None,
-                 room_share: float = SMALL_BOX_SKIN_SHARE) -> None:
+    def __init__(self, diameter: ArrayLike, skin: float | None = None, room_share: float | None = None) -> None:
         self.diameter = np.asarray(diameter, dtype=np.float64)
         self.requested_skin = np.nan if skin is None else float(skin)
         if skin is not None and not self.requested_skin > 0.0:
             raise ValueError(f"skin must be positive, got {self.requested_skin}")
-        if not 0.0 < room_share < 1.0:
+        if room_share is not None and not 0.0 < room_share < 1.0:
             raise ValueError(f"room_share must lie in (0, 1), got {room_share}")
-        self.room_share = float(room_share)
+        self.room_share = room_share
         self.skin = self.requested_skin
         self.reach = float(self.diameter.max()) + self.skin
         self.builds = 0
@@ -119,7 +119,11 @@ class NeighborList:
             skin = SPHERE_SKIN.get(box.d, SPHERE_SKIN[3]) * float(self.diameter.mean())
         d_max = float(self.diameter.max())
         room = 0.5 * float(np.min(box.widths)) - d_max
-        reach = d_max + min(skin, self.room_share * room)
+        if self.room_share is not None:
+            skin = min(skin, self.room_share * room)
+        elif skin >= room:
+            skin = SMALL_BOX_SKIN_SHARE * room
+        reach = d_max + skin
         if not reach > d_max:
             raise ValueError(f"box too small for the largest particles: max diameter {d_max:.6g} leaves no skin "
                              f"below half the smallest box width ({0.5 * float(np.min(box.widths)):.6g})")

@@ -61,7 +61,8 @@ class SphereFire:
             self.nlist = model.nlist
         else:
             skin = model.nlist.requested_skin
-            self.nlist = NeighborList(model.diameter[self.order], None if np.isnan(skin) else skin)
+            self.nlist = NeighborList(model.diameter[self.order], None if np.isnan(skin) else skin,
+                                      model.nlist.room_share)
             x = x[self.order]
         self.builds0 = self.nlist.builds
         unit = model.time_unit
