@@ -165,24 +165,7 @@ def cell_pairs_into(x, L, cutoff, diameter, skin, buffers):
         buffers = pair_buffers(n, d)
     wrapped, ws, Ds, per_particle, per_cell, found, out, image = buffers
     verlet = diameter.shape[0] > 0
-    ncell = np.empty(d, dtype=np.int64)
-    span = np.empty(d, dtype=np.int64)
-    n_stencil = 1
-    n_cells = 1
-    for k in range(d):
-        ncell[k] = max(int(L[k] // cutoff), 1)
-        n_cells *= ncell[k]
-    if n_cells > 2 * n + 8:
-        # sparse systems (small cutoff, high d): wider cells, about two particles per cell,
-        # so the cell tables stay O(N)
-        widen = (n_cells / (2.0 * n + 8.0)) ** (1.0 / d)
-        n_cells = 1
-        for k in range(d):
-            ncell[k] = max(int(ncell[k] / widen), 1)
-            n_cells *= ncell[k]
-    for k in range(d):
-        span[k] = 3 if ncell[k] >= 3 else ncell[k]
-        n_stencil *= span[k]
+    ncell, span, n_cells, n_stencil = _grid(L, cutoff, n)
     for i in range(n):
         for k in range(d):
             v = x[i, k] - L[k] * np.floor(x[i, k] / L[k])
@@ -212,46 +195,17 @@ def cell_pairs_into(x, L, cutoff, diameter, skin, buffers):
     # cells and stencil offsets counted like odometers (last axis fastest); the
     # neighbour cell and the image shift of its members (-+L across the boundary along
     # axes with at least 3 cells; fewer cells along an axis round instead) follow
-    # without integer divisions. Each cell pair is visited once: with 3 cells or more
-    # along every axis by the forward half of the stencil (offsets lexicographically
-    # >= 0; the pair (c, c + o) is met from c with o > 0, never from c + o with -o),
-    # else by keeping, of the distinct and symmetric stencil cells, those with a larger
-    # id (pairs within a cell once). The forward half skips the 4 (2D) or 13 (3D)
-    # offsets the id test would compute and drop: about 10 % of a build
+    # without integer divisions
     own = np.zeros(d, dtype=np.int64)
     step = np.zeros(d, dtype=np.int64)
-    if shifted:
-        n_fwd = (n_stencil - 1) // 2 + 1
-        fwd = np.empty((n_fwd, d), dtype=np.int64)
-        for t in range(n_fwd):
-            tt = t + (n_stencil - 1) // 2
-            for k in range(d - 1, -1, -1):
-                fwd[t, k] = tt % 3 - 1
-                tt //= 3
-    else:
-        n_fwd = n_stencil
-        fwd = np.empty((0, d), dtype=np.int64)
-    # with 3 cells or more along every axis, the forward stencil of a cell whose last-axis
-    # index is not on the boundary is a few runs of consecutive cells (last axis fastest):
-    # the cell and its successor (prefix 0), and for every forward prefix of the other
-    # axes the 3 cells around it. Their members are contiguous, so each run is one scan:
-    # 2 in 2D and 5 in 3D instead of 5 and 14 cell visits. Every cell's runs (or, on the
-    # boundary, its stencil cells) are collected first and swept by one loop below
     last = d - 1
-    n_pre = 0
-    pre = np.empty((0, last), dtype=np.int64)
-    if shifted:
-        n_pre = (3**last - 1) // 2
-        pre = np.empty((n_pre, last), dtype=np.int64)
-        for t in range(n_pre):
-            tt = t + n_pre + 1
-            for k in range(last - 1, -1, -1):
-                pre[t, k] = tt % 3 - 1
-                tt //= 3
+    n_fwd, fwd, n_pre, pre = _forward_stencil(d, n_stencil, shifted)
     run_first = np.empty(n_fwd, dtype=np.int64)
     run_end = np.empty(n_fwd, dtype=np.int64)
     run_own = np.empty(n_fwd, dtype=np.bool_)
     run_shift = np.empty((n_fwd, d))
+    # every cell's runs (or, on the boundary, its stencil cells) are collected first and
+    # swept by one loop
     for ci in range(n_cells):
         n_runs = 0
         if shifted and 1 <= own[last] <= ncell[last] - 2:
@@ -331,7 +285,89 @@ def cell_pairs_into(x, L, cutoff, diameter, skin, buffers):
                         if _keep(r2, p, q, Ds, skin, cut2, verlet):
                             pa[m], pb[m] = p, q
                             m += 1
-    # lexicographic order: counting sort by i, then each row's few partners by insertion
+    out, image = _sorted_pairs(x, L, members, pa, pb, m, per_particle, out, image, capacity)
+    return out[0, :m], out[1, :m], image[:m], (wrapped, ws, Ds, per_particle, per_cell, found, out, image)
+
+
+@njit(cache=True)
+def _grid(L, cutoff, n):
+    """Cells of the search: ``(ncell, span, n_cells, n_stencil)``.
+
+    Cells at least ``cutoff`` wide along every axis (``ncell``, int64 (d,)), widened in
+    sparse systems to about two particles per cell; ``span`` (int64 (d,)) the distinct
+    stencil cells along each axis (3, or fewer when the axis has fewer cells).
+    """
+    d = L.shape[0]
+    ncell = np.empty(d, dtype=np.int64)
+    span = np.empty(d, dtype=np.int64)
+    n_stencil = 1
+    n_cells = 1
+    for k in range(d):
+        ncell[k] = max(int(L[k] // cutoff), 1)
+        n_cells *= ncell[k]
+    if n_cells > 2 * n + 8:
+        # sparse systems (small cutoff, high d): wider cells, about two particles per cell,
+        # so the cell tables stay O(N)
+        widen = (n_cells / (2.0 * n + 8.0)) ** (1.0 / d)
+        n_cells = 1
+        for k in range(d):
+            ncell[k] = max(int(ncell[k] / widen), 1)
+            n_cells *= ncell[k]
+    for k in range(d):
+        span[k] = 3 if ncell[k] >= 3 else ncell[k]
+        n_stencil *= span[k]
+    return ncell, span, n_cells, n_stencil
+
+
+@njit(cache=True)
+def _forward_stencil(d, n_stencil, shifted):
+    """The forward half of the stencil and its runs: ``(n_fwd, fwd, n_pre, pre)``.
+
+    Each cell pair is visited once: with 3 cells or more along every axis (``shifted``)
+    by the forward half of the stencil, ``fwd`` (n_fwd, d) (offsets lexicographically
+    >= 0; the pair (c, c + o) is met from c with o > 0, never from c + o with -o), else
+    by keeping, of the distinct and symmetric stencil cells, those with a larger id
+    (pairs within a cell once; ``n_fwd = n_stencil``, ``fwd`` empty). The forward half
+    skips the 4 (2D) or 13 (3D) offsets the id test would compute and drop: about 10 %
+    of a build.
+
+    With 3 cells or more along every axis, the forward stencil of a cell whose last-axis
+    index is not on the boundary is a few runs of consecutive cells (last axis fastest):
+    the cell and its successor (prefix 0), and for every forward prefix ``pre``
+    (n_pre, d - 1) of the other axes the 3 cells around it. Their members are
+    contiguous, so each run is one scan: 2 in 2D and 5 in 3D instead of 5 and 14 cell
+    visits.
+    """
+    last = d - 1
+    if not shifted:
+        return n_stencil, np.empty((0, d), dtype=np.int64), 0, np.empty((0, last), dtype=np.int64)
+    n_fwd = (n_stencil - 1) // 2 + 1
+    fwd = np.empty((n_fwd, d), dtype=np.int64)
+    for t in range(n_fwd):
+        tt = t + (n_stencil - 1) // 2
+        for k in range(d - 1, -1, -1):
+            fwd[t, k] = tt % 3 - 1
+            tt //= 3
+    n_pre = (3**last - 1) // 2
+    pre = np.empty((n_pre, last), dtype=np.int64)
+    for t in range(n_pre):
+        tt = t + n_pre + 1
+        for k in range(last - 1, -1, -1):
+            pre[t, k] = tt % 3 - 1
+            tt //= 3
+    return n_fwd, fwd, n_pre, pre
+
+
+@njit(cache=True)
+def _sorted_pairs(x, L, members, pa, pb, m, per_particle, out, image, capacity):
+    """The ``m`` found pairs (cell-order indices ``pa, pb``) as particle pairs ``i < j`` in
+    lexicographic order, with their images: counting sort by i, then each row's few
+    partners by insertion.
+
+    Written into ``out`` (2, >= m) and ``image`` (>= m, d), regrown to ``capacity`` when
+    too small; returns ``(out, image)``.
+    """
+    n, d = x.shape
     row, slot = per_particle[2], per_particle[3]
     row[:] = 0
     for e in range(m):
@@ -361,4 +397,4 @@ def cell_pairs_into(x, L, cutoff, diameter, skin, buffers):
         for k in range(d):
             raw = x[out_j[p], k] - x[out_i[p], k]
             image[p, k] = -int(np.floor(raw / L[k] + 0.5))
-    return out_i[:m], out_j[:m], image[:m], (wrapped, ws, Ds, per_particle, per_cell, found, out, image)
+    return out, image
