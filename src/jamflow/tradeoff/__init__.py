@@ -429,9 +429,9 @@ def _calippso_compare(out, ref) -> dict[str, float]:
         "phi_J_error": rel_phi,
         "one_minus_Q": one_minus_q,
         "n_lp": float(out.iterations),
-        "max_overlap": float(diag["max_overlap"]),
-        "force_balance_residual": float(diag["force_balance_residual"]),
-        "not_isostatic": float(not diag["isostatic"]),
+        "max_overlap": float(diag.max_overlap),
+        "force_balance_residual": float(diag.force_balance_residual),
+        "not_isostatic": float(not diag.isostatic),
     }
 
 
