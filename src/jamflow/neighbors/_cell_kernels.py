@@ -7,8 +7,8 @@ LS lists, :mod:`jamflow.protocols._ls_kernels`), and the pair search. Kept apart
 
 A search can reuse the work arrays of the previous one (:func:`pair_buffers`,
 :func:`cell_pairs_into`): a list rebuilt every hundred steps inside a compiled loop
-otherwise pays for its fresh memory, whose first touch page-faults (about 350 minor
-faults and a quarter of a build at 2D N = 16384 on the reference machine).
+otherwise pays for its fresh memory, whose first touch page-faults
+(measured: docs/notes/energy-models.md#constants-of-the-neighbour-search).
 """
 
 from __future__ import annotations
@@ -165,6 +165,54 @@ def cell_pairs_into(x, L, cutoff, diameter, skin, buffers):
         buffers = pair_buffers(n, d)
     wrapped, ws, Ds, per_particle, per_cell, found, out, image = buffers
     verlet = diameter.shape[0] > 0
+    ncell, span, n_cells, n_stencil = _grid(L, cutoff, n, d)
+    start, members, per_cell = _in_cell_order(x, L, ncell, n_cells, diameter, verlet, wrapped, ws, Ds,
+                                              per_particle, per_cell)
+    cut2 = cutoff * cutoff
+    # half-stencil sweep in cell order over the contiguous cell-ordered positions
+    # (no per-candidate j > i test); pairs are then sorted by (i, j) below
+    capacity = found.shape[1]
+    pa, pb = found[0], found[1]
+    m = 0
+    # with at least 3 cells along every axis all images are stencil shifts (no rounding)
+    shifted = True
+    for k in range(d):
+        shifted &= span[k] == 3
+    centre = np.empty(d)
+    own = np.zeros(d, dtype=np.int64)
+    step = np.zeros(d, dtype=np.int64)
+    fwd, n_fwd, pre, n_pre = _forward_stencil(shifted, n_stencil, d)
+    run_first = np.empty(n_fwd, dtype=np.int64)
+    run_end = np.empty(n_fwd, dtype=np.int64)
+    run_own = np.empty(n_fwd, dtype=np.bool_)
+    run_shift = np.empty((n_fwd, d))
+    runs = (run_first, run_end, run_own, run_shift)
+    for ci in range(n_cells):
+        n_runs = _cell_runs(ci, own, step, shifted, span, ncell, L, start, fwd, n_fwd, pre, n_pre, runs)
+        _tick(own, ncell)
+        need = 0
+        for t in range(n_runs):
+            need += run_end[t] - run_first[t]
+        need *= start[ci + 1] - start[ci]
+        if m + need > capacity:
+            # grown outside the candidate loop: arrays reassigned inside it
+            # would be reference-counted on every candidate
+            capacity = 2 * capacity + need
+            grown = np.empty((2, capacity), dtype=np.int64)
+            grown[:, :m] = found[:, :m]
+            found = grown
+            pa, pb = found[0], found[1]
+        m = _sweep_runs(ci, n_runs, runs, start, ws, Ds, L, span, shifted, skin, cut2, verlet, centre, pa, pb, m)
+    out, image = _sorted_pairs(x, L, members, pa, pb, m, per_particle, out, image, capacity)
+    out_i, out_j = out[0], out[1]
+    return out_i[:m], out_j[:m], image[:m], (wrapped, ws, Ds, per_particle, per_cell, found, out, image)
+
+
+@njit(inline="always")
+def _grid(L, cutoff, n, d):
+    """Cells per axis (at least ``cutoff`` wide, widened to about two particles per cell
+    when sparse), their number, the stencil span per axis (3, or fewer cells) and the
+    number of stencil cells."""
     ncell = np.empty(d, dtype=np.int64)
     span = np.empty(d, dtype=np.int64)
     n_stencil = 1
@@ -183,6 +231,17 @@ def cell_pairs_into(x, L, cutoff, diameter, skin, buffers):
     for k in range(d):
         span[k] = 3 if ncell[k] >= 3 else ncell[k]
         n_stencil *= span[k]
+    return ncell, span, n_cells, n_stencil
+
+
+@njit(inline="always")
+def _in_cell_order(x, L, ncell, n_cells, diameter, verlet, wrapped, ws, Ds, per_particle, per_cell):
+    """Positions wrapped into ``[0, L)``, the particles sorted by cell, and the positions
+    (and diameters) copied in cell order so that a cell's members are contiguous.
+
+    Returns the cell starts, the members in cell order and ``per_cell`` (regrown if needed).
+    """
+    n, d = x.shape
     for i in range(n):
         for k in range(d):
             v = x[i, k] - L[k] * np.floor(x[i, k] / L[k])
@@ -192,34 +251,29 @@ def cell_pairs_into(x, L, cutoff, diameter, skin, buffers):
     if per_cell.shape[1] < n_cells + 1:
         per_cell = np.empty((2, n_cells + 1), dtype=np.int64)
     start, members = _sort_by_cell_into(cell, n_cells, per_cell[0], per_cell[1], per_particle[1])
-    # positions and diameters in cell order, so a cell's members are contiguous
     for q in range(n):
         for k in range(d):
             ws[q, k] = wrapped[members[q], k]
         if verlet:
             Ds[q] = diameter[members[q]]
-    cut2 = cutoff * cutoff
-    # half-stencil sweep in cell order over the contiguous cell-ordered positions
-    # (no per-candidate j > i test); pairs are then sorted by (i, j) below
-    capacity = found.shape[1]
-    pa, pb = found[0], found[1]
-    m = 0
-    # with at least 3 cells along every axis all images are stencil shifts (no rounding)
-    shifted = True
-    for k in range(d):
-        shifted &= span[k] == 3
-    centre = np.empty(d)
-    # cells and stencil offsets counted like odometers (last axis fastest); the
-    # neighbour cell and the image shift of its members (-+L across the boundary along
-    # axes with at least 3 cells; fewer cells along an axis round instead) follow
-    # without integer divisions. Each cell pair is visited once: with 3 cells or more
-    # along every axis by the forward half of the stencil (offsets lexicographically
-    # >= 0; the pair (c, c + o) is met from c with o > 0, never from c + o with -o),
-    # else by keeping, of the distinct and symmetric stencil cells, those with a larger
-    # id (pairs within a cell once). The forward half skips the 4 (2D) or 13 (3D)
-    # offsets the id test would compute and drop: about 10 % of a build
-    own = np.zeros(d, dtype=np.int64)
-    step = np.zeros(d, dtype=np.int64)
+    return start, members, per_cell
+
+
+@njit(inline="always")
+def _forward_stencil(shifted, n_stencil, d):
+    """The forward half of the stencil and the prefixes of its runs.
+
+    With 3 cells or more along every axis (``shifted``), each cell pair is visited once
+    by the forward half of the stencil (offsets lexicographically >= 0; the pair
+    ``(c, c + o)`` is met from ``c`` with ``o > 0``, never from ``c + o`` with ``-o``);
+    the forward stencil of a cell off the boundary of the last axis is a few runs of
+    consecutive cells (last axis fastest): the cell and its successor (prefix 0), and
+    for every forward prefix of the other axes the 3 cells around it. Their members are
+    contiguous, so each run is one scan: 2 in 2D and 5 in 3D instead of 5 and 14 cell
+    visits. Otherwise every stencil cell is visited (``n_fwd = n_stencil``).
+
+    Returns ``fwd`` (n_fwd, d) offsets, ``n_fwd``, ``pre`` (n_pre, d - 1) prefixes and ``n_pre``.
+    """
     if shifted:
         n_fwd = (n_stencil - 1) // 2 + 1
         fwd = np.empty((n_fwd, d), dtype=np.int64)
@@ -231,12 +285,6 @@ def cell_pairs_into(x, L, cutoff, diameter, skin, buffers):
     else:
         n_fwd = n_stencil
         fwd = np.empty((0, d), dtype=np.int64)
-    # with 3 cells or more along every axis, the forward stencil of a cell whose last-axis
-    # index is not on the boundary is a few runs of consecutive cells (last axis fastest):
-    # the cell and its successor (prefix 0), and for every forward prefix of the other
-    # axes the 3 cells around it. Their members are contiguous, so each run is one scan:
-    # 2 in 2D and 5 in 3D instead of 5 and 14 cell visits. Every cell's runs (or, on the
-    # boundary, its stencil cells) are collected first and swept by one loop below
     last = d - 1
     n_pre = 0
     pre = np.empty((0, last), dtype=np.int64)
@@ -248,90 +296,106 @@ def cell_pairs_into(x, L, cutoff, diameter, skin, buffers):
             for k in range(last - 1, -1, -1):
                 pre[t, k] = tt % 3 - 1
                 tt //= 3
-    run_first = np.empty(n_fwd, dtype=np.int64)
-    run_end = np.empty(n_fwd, dtype=np.int64)
-    run_own = np.empty(n_fwd, dtype=np.bool_)
-    run_shift = np.empty((n_fwd, d))
-    for ci in range(n_cells):
-        n_runs = 0
-        if shifted and 1 <= own[last] <= ncell[last] - 2:
-            run_first[0], run_end[0], run_own[0] = start[ci], start[ci + 2], True
-            run_shift[0, :] = 0.0
-            n_runs = 1
-            for t in range(n_pre):
-                cid = 0
-                for k in range(last):
-                    c, run_shift[n_runs, k] = _periodic_cell(own[k] + pre[t, k], ncell[k], L[k])
-                    cid = cid * ncell[k] + c
-                cid = cid * ncell[last] + own[last] - 1
-                run_first[n_runs], run_end[n_runs], run_own[n_runs] = start[cid], start[cid + 3], False
-                run_shift[n_runs, last] = 0.0
-                n_runs += 1
-        else:
-            step[:] = 0
-            for t in range(n_fwd):
-                cid = 0
-                for k in range(d):
-                    if span[k] == 3:
-                        c, run_shift[n_runs, k] = _periodic_cell(own[k] + (fwd[t, k] if shifted else step[k] - 1),
-                                                                 ncell[k], L[k])
-                    else:
-                        c, run_shift[n_runs, k] = step[k], 0.0
-                    cid = cid * ncell[k] + c
-                if not shifted:
-                    _tick(step, span)
-                    if cid < ci:
-                        continue
-                run_first[n_runs], run_end[n_runs], run_own[n_runs] = start[cid], start[cid + 1], cid == ci
-                n_runs += 1
-        _tick(own, ncell)
-        need = 0
-        for t in range(n_runs):
-            need += run_end[t] - run_first[t]
-        need *= start[ci + 1] - start[ci]
-        if m + need > capacity:
-            # grown outside the candidate loop: arrays reassigned inside it
-            # would be reference-counted on every candidate
-            capacity = 2 * capacity + need
-            grown = np.empty((2, capacity), dtype=np.int64)
-            grown[:, :m] = found[:, :m]
-            found = grown
-            pa, pb = found[0], found[1]
-        for t in range(n_runs):
-            end = run_end[t]
-            for p in range(start[ci], start[ci + 1]):
-                # particle p seen from the run's image
-                for k in range(d):
-                    centre[k] = ws[p, k] - run_shift[t, k]
-                first = p + 1 if run_own[t] else run_first[t]
-                # d = 2 and 3 with the dimension a constant: the runtime loop over k
-                # measured 1.5x slower
-                if shifted and d == 2:
-                    c0, c1 = centre[0], centre[1]
-                    for q in range(first, end):
-                        dx, dy = ws[q, 0] - c0, ws[q, 1] - c1
-                        if _keep(dx * dx + dy * dy, p, q, Ds, skin, cut2, verlet):
-                            pa[m], pb[m] = p, q
-                            m += 1
-                elif shifted and d == 3:
-                    c0, c1, c2 = centre[0], centre[1], centre[2]
-                    for q in range(first, end):
-                        dx, dy, dz = ws[q, 0] - c0, ws[q, 1] - c1, ws[q, 2] - c2
-                        if _keep(dx * dx + dy * dy + dz * dz, p, q, Ds, skin, cut2, verlet):
-                            pa[m], pb[m] = p, q
-                            m += 1
+    return fwd, n_fwd, pre, n_pre
+
+
+@njit(inline="always")
+def _cell_runs(ci, own, step, shifted, span, ncell, L, start, fwd, n_fwd, pre, n_pre, runs):
+    """The runs of cell ``ci`` (multi-index ``own``): ranges of cell-ordered particles to
+    pair with its members, with the image shift of each and whether it is ``ci`` itself.
+
+    Cells and stencil offsets are counted like odometers (last axis fastest); the
+    neighbour cell and the image shift of its members (-+L across the boundary along
+    axes with at least 3 cells; fewer cells along an axis round instead) follow without
+    integer divisions. Without ``shifted`` the distinct, symmetric stencil cells with a
+    larger id are kept (pairs within a cell once). Returns the number of runs.
+    """
+    run_first, run_end, run_own, run_shift = runs
+    d = own.shape[0]
+    last = d - 1
+    n_runs = 0
+    if shifted and 1 <= own[last] <= ncell[last] - 2:
+        run_first[0], run_end[0], run_own[0] = start[ci], start[ci + 2], True
+        run_shift[0, :] = 0.0
+        n_runs = 1
+        for t in range(n_pre):
+            cid = 0
+            for k in range(last):
+                c, run_shift[n_runs, k] = _periodic_cell(own[k] + pre[t, k], ncell[k], L[k])
+                cid = cid * ncell[k] + c
+            cid = cid * ncell[last] + own[last] - 1
+            run_first[n_runs], run_end[n_runs], run_own[n_runs] = start[cid], start[cid + 3], False
+            run_shift[n_runs, last] = 0.0
+            n_runs += 1
+    else:
+        step[:] = 0
+        for t in range(n_fwd):
+            cid = 0
+            for k in range(d):
+                if span[k] == 3:
+                    c, run_shift[n_runs, k] = _periodic_cell(own[k] + (fwd[t, k] if shifted else step[k] - 1),
+                                                             ncell[k], L[k])
                 else:
-                    for q in range(first, end):
-                        r2 = 0.0
-                        for k in range(d):
-                            dx = ws[q, k] - centre[k]
-                            if span[k] < 3:
-                                dx -= L[k] * np.round(dx / L[k])
-                            r2 += dx * dx
-                        if _keep(r2, p, q, Ds, skin, cut2, verlet):
-                            pa[m], pb[m] = p, q
-                            m += 1
-    # lexicographic order: counting sort by i, then each row's few partners by insertion
+                    c, run_shift[n_runs, k] = step[k], 0.0
+                cid = cid * ncell[k] + c
+            if not shifted:
+                _tick(step, span)
+                if cid < ci:
+                    continue
+            run_first[n_runs], run_end[n_runs], run_own[n_runs] = start[cid], start[cid + 1], cid == ci
+            n_runs += 1
+    return n_runs
+
+
+@njit(inline="always")
+def _sweep_runs(ci, n_runs, runs, start, ws, Ds, L, span, shifted, skin, cut2, verlet, centre, pa, pb, m):
+    """The listed pairs between the members of cell ``ci`` and its runs, appended to
+    ``pa, pb`` (cell-ordered indices) from position ``m``; returns the new count."""
+    run_first, run_end, run_own, run_shift = runs
+    d = centre.shape[0]
+    for t in range(n_runs):
+        end = run_end[t]
+        for p in range(start[ci], start[ci + 1]):
+            # particle p seen from the run's image
+            for k in range(d):
+                centre[k] = ws[p, k] - run_shift[t, k]
+            first = p + 1 if run_own[t] else run_first[t]
+            # d = 2 and 3 with the dimension a constant: the runtime loop over k is slower
+            # (measured: docs/notes/energy-models.md#constants-of-the-neighbour-search)
+            if shifted and d == 2:
+                c0, c1 = centre[0], centre[1]
+                for q in range(first, end):
+                    dx, dy = ws[q, 0] - c0, ws[q, 1] - c1
+                    if _keep(dx * dx + dy * dy, p, q, Ds, skin, cut2, verlet):
+                        pa[m], pb[m] = p, q
+                        m += 1
+            elif shifted and d == 3:
+                c0, c1, c2 = centre[0], centre[1], centre[2]
+                for q in range(first, end):
+                    dx, dy, dz = ws[q, 0] - c0, ws[q, 1] - c1, ws[q, 2] - c2
+                    if _keep(dx * dx + dy * dy + dz * dz, p, q, Ds, skin, cut2, verlet):
+                        pa[m], pb[m] = p, q
+                        m += 1
+            else:
+                for q in range(first, end):
+                    r2 = 0.0
+                    for k in range(d):
+                        dx = ws[q, k] - centre[k]
+                        if span[k] < 3:
+                            dx -= L[k] * np.round(dx / L[k])
+                        r2 += dx * dx
+                    if _keep(r2, p, q, Ds, skin, cut2, verlet):
+                        pa[m], pb[m] = p, q
+                        m += 1
+    return m
+
+
+@njit(inline="always")
+def _sorted_pairs(x, L, members, pa, pb, m, per_particle, out, image, capacity):
+    """The ``m`` found pairs as particle indices ``i < j`` in lexicographic order (a
+    counting sort by ``i``, then each row's few partners by insertion) in ``out`` (2, P),
+    and their periodic images in ``image`` (P, d); both regrown to ``capacity`` if needed."""
+    n, d = x.shape
     row, slot = per_particle[2], per_particle[3]
     row[:] = 0
     for e in range(m):
@@ -361,4 +425,4 @@ def cell_pairs_into(x, L, cutoff, diameter, skin, buffers):
         for k in range(d):
             raw = x[out_j[p], k] - x[out_i[p], k]
             image[p, k] = -int(np.floor(raw / L[k] + 0.5))
-    return out_i[:m], out_j[:m], image[:m], (wrapped, ws, Ds, per_particle, per_cell, found, out, image)
+    return out, image
