@@ -28,7 +28,13 @@ from .options import (
     _Options,
 )
 from .record import CalippsoResult, IterationRecord, _diagnose, _result
-from .recovery import _check_stall, _final_recovery, _recover, _schedule_next
+from .recovery import (
+    FINAL_RECOVERY_METHODS,
+    _check_stall,
+    _final_recovery,
+    _recover,
+    _schedule_next,
+)
 from .solver import NEAR_START_PRESOLVE, _Solution, _Solver
 from .state import _Chain, _LPSetup, _record, _Step
 from .steps import _growth, _read_solution, _set_up_lp, _small, _update
@@ -168,7 +174,7 @@ def _run_chain(chain: _Chain, lp_solver: _Solver, container: _Container, opt: _O
         if _small(step, opt) and np.isinf(lp.bound):  # line 15, certified by an unbounded LP
             network = _dual_network(step, lp, chain.x, container, d, n)
             converged, network.why = _final_checks(packing, chain.x, chain.D, container, network)
-            if converged or not opt.require_isostatic or chain.final_attempts >= 2:
+            if converged or not opt.require_isostatic or chain.final_attempts >= len(FINAL_RECOVERY_METHODS):
                 return network, converged
             _final_recovery(chain)
             continue
