@@ -243,7 +243,7 @@ def certify(
     self_stress_test: bool = True,
     progress: Any = None,
 ) -> JammingCertificate:
-    """Classify a packing in the jamming hierarchy (see module docstring).
+    """Classify a packing in the jamming hierarchy (see :mod:`jamflow.protocols.certify`).
 
     Parameters
     ----------
