@@ -18,8 +18,8 @@ from numpy.typing import ArrayLike
 
 __all__ = ["new_highs", "colwise_lp", "DEFAULT_THREADS"]
 
-#: HiGHS threads when a stage does not ask for more: its LPs gained nothing from a
-#: second thread on 2 cores (README, "Resources per job"), and one thread is reproducible.
+#: HiGHS threads when a stage does not ask for more: one thread is reproducible, and a
+#: second one gained nothing (measured: docs/notes/resources.md).
 DEFAULT_THREADS: int = 1
 
 _scheduler_threads: int | None = None

@@ -433,12 +433,11 @@ def _distances(pairs: NDArray[np.int64], x: NDArray[np.float64], box: Box) -> ND
     return np.linalg.norm(box.minimum_image(x[pairs[:, 1]] - x[pairs[:, 0]]), axis=1)
 
 
-#: Default packing fraction of the start without overlaps, per d. Random sequential
-#: placement of chains of M = 3, 4, 6 spheres, K = 8 to 64 clusters, 8 seeds each: in 2D
-#: every draw places at 0.2; in 3D 0.2 fails (3 to 8 of 8 draws fail for M >= 4, 1 of 8
-#: for 32 and 64 trimers), 0.15 fails once (64 chains of 6) and 0.1 never (also 32
-#: chains of 8). The bisection's compression steps of ``delta_phi`` make overlaps too
-#: small for a link to pass through a sphere.
+#: Default packing fraction of the start without overlaps, per d: the densest at which
+#: every random sequential placement of the chains tried succeeded
+#: (measured: docs/notes/chains.md#dilute-placement-how-dense-a-start-places). The
+#: bisection's compression steps of ``delta_phi`` make overlaps too small for a link to
+#: pass through a sphere.
 DILUTE_PHI: dict[int, float] = {2: 0.2, 3: 0.1}
 #: Packing fraction of the paper's start with overlaps (Sec. III), per d: just above the
 #: sphere jamming densities, so the bisection decompresses.
@@ -464,7 +463,7 @@ def linked_packing(
     clusters are placed without overlaps at the dilute :data:`DILUTE_PHI` and the jamming bisection compresses them.
     This departs from the paper (Sec. III starts above jamming with overlaps, ``no_overlap=False``): where soft
     spheres overlap, a link can pass through a sphere or another link during the minimisation, and the clusters end
-    entangled (refused by :mod:`jamflow.chains.entanglement`) from a third of such starts (docs/chains.md).
+    entangled (refused by :mod:`jamflow.chains.entanglement`) from a third of such starts (docs/notes/chains.md).
 
     Parameters
     ----------

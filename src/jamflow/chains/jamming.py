@@ -21,7 +21,7 @@ Two protocols (``protocol=``):
   predicts, until ``0 < U / N <= energy_tol``.
 
 Default chosen by measurement (``benchmarks/chains.py --protocols``, same starts,
-side by side; numbers in docs/chains.md): see :data:`DEFAULT_PROTOCOL`.
+side by side; numbers in docs/notes/chains.md): see :data:`DEFAULT_PROTOCOL`.
 """
 
 from __future__ import annotations
@@ -52,11 +52,9 @@ __all__ = ["DEFAULT_PROTOCOL", "ENERGY_FLOOR", "PROTOCOLS", "jam_linked", "linke
 #: Jamming protocols of :func:`jam_linked`.
 PROTOCOLS = ("bisection", "energy")
 
-#: The default protocol. Measured (docs/chains.md; 2D trimers N = 60, shear-stabilised, 3
-#: starts): the energy steps took 0.5-0.7 of the bisection's time in 5 of 6 runs but end
-#: at 0.48-0.87 of the equivalent pressure and, for one start, 0.014 lower in phi_J (a
-#: different path). The bisection ends at a stated pressure (to pressure_rtol), which
-#: contact numbers and moduli depend on, so it stays the default.
+#: The default protocol: the bisection ends at a stated pressure (to pressure_rtol), which
+#: contact numbers and moduli depend on; the energy steps are faster but end at an
+#: uncontrolled pressure (measured: docs/notes/chains.md#bisection-against-the-energy-steps).
 DEFAULT_PROTOCOL = "bisection"
 
 #: A minimum whose energy per sphere is below ``ENERGY_FLOOR * energy_tol`` counts as

@@ -74,7 +74,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     start.add_argument("--overlap", dest="no_overlap", action="store_false",
                        help="the paper's Sec. III start above jamming with overlaps: links can pass through each "
                             "other during soft-jam and a third of such starts end entangled, which soft-jam refuses "
-                            "(docs/chains.md)")
+                            "(docs/notes/chains.md)")
     p.add_argument("--seed", type=seed, required=True, help="random seed")
     add_quiet(p)
 

@@ -65,7 +65,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--jam-protocol", choices=PROTOCOLS, default=DEFAULT_PROTOCOL,
                    help=f"linked packings: bisection to --pressure, or the chains paper's decompression by the "
                         f"energy scaling of phi - phi_J down to --energy-tol (default {DEFAULT_PROTOCOL}; "
-                        f"docs/chains.md has the measurement)")
+                        f"docs/notes/chains.md has the measurement)")
     p.add_argument("--energy-tol", type=float, default=None,
                    help="energy per sphere [epsilon] at which --jam-protocol energy stops, e.g. 1e-12")
     add_quiet(p)

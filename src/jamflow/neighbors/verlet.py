@@ -23,10 +23,8 @@ __all__ = ["SPHERE_SKIN", "SMALL_BOX_SKIN_SHARE", "DEFAULT_SKIN", "NeighborList"
 #: takes the d = 3 value): pairs closer than ``sigma_ij + skin`` are listed, and the
 #: list is rebuilt when displacements use up the skin. The skin changes no result (a
 #: listed pair beyond contact adds nothing, and FIRE's state survives a rebuild), only
-#: the split of time between pair loops and rebuilds. Measured with FIRE, CPU time
-#: (docs/energy-models.md, "Neighbour rebuilds, third pass"): in 3D N = 4096 0.3 cuts
-#: the rebuild share from 6.9 % to 2.5 % at an unchanged time per evaluation; in 2D a
-#: larger skin helps N = 1024 (-4 %) but costs N = 16384 8-10 % per evaluation.
+#: the split of time between pair loops and rebuilds
+#: (measured: docs/notes/energy-models.md#constants-of-the-neighbour-search).
 SPHERE_SKIN: dict[int, float] = {2: 0.15, 3: 0.3}
 
 

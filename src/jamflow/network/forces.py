@@ -45,9 +45,8 @@ MIN_NORM: str = "min_norm_balanced"
 _QP_TOL: float = 1e-10
 
 #: Dual Newton: Tikhonov term of the normal matrix (its entries are O(1) per contact)
-#: and the largest number of steps (a piecewise quadratic: steps grow with the number
-#: of contacts left without force; measured 1 step for crystals, 3-4 for 2D
-#: monodisperse N = 64 packings with 6-22 such contacts, 83 for N = 1024 with 256).
+#: and the largest number of steps, which grow with the contacts left without force
+#: (measured: docs/notes/network-constants.md#dual-newton-of-the-minimum-norm-forces-jamflownetworkforces).
 _NEWTON_REG: float = 1e-12
 _NEWTON_MAX_ITER: int = 200
 

@@ -259,7 +259,7 @@ def strain_motion(rigid: RigidNetwork, J: sp.spmatrix, E: sp.spmatrix,
     zero = np.zeros(N.shape[1])
     # objective lambda_0 . c (> 0 at every opening motion since lambda_0 > 0): it equals
     # lambda_0^T E e on the feasible set, so the simplex moves e, not every c to its
-    # bound as sum(c) would (soft 3D N = 4096: 15.5 s against 79 s)
+    # bound as sum(c) would (measured: docs/notes/network-constants.md)
     x = _max_lp(np.r_[rigid.self_stress, np.zeros(k)], np.hstack([N.T, -NE]), zero, zero,
                 np.r_[np.zeros(nc), -np.ones(k)], np.ones(nc + k))
     if x is None:

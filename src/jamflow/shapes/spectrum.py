@@ -52,20 +52,18 @@ ZERO_EIGENVALUE_RTOL: float = 1e-13
 
 #: Region-1 (quartic) eigenvalues are stress terms and vanish with the pressure: a gap
 #: opens region 1 only when its lower edge is at most this many times the pressure
-#: [k units]. Measured ``lambda / P``: at most 1.1 (circulo-lines, A = 1.03 and 1.1,
-#: P = 1e-7, 1e-6) and 0.004 (ellipses, alpha = 1.001), while region 2 does not scale
-#: with P (lowest 7e-4 .. 2e-2 on the same packings).
+#: [k units]; region 2 does not scale with P
+#: (measured: docs/notes/shapes.md#constants-of-the-spectrum-jamflowshapesspectrum).
 QUARTIC_PRESSURE_RATIO: float = 1e3
 
 #: A gap that separates regions 1 and 2 spans at least this factor in ``lambda``
-#: (measured: 1.1e4, 990 and 5e7 on the packings above).
+#: (measured: docs/notes/shapes.md#constants-of-the-spectrum-jamflowshapesspectrum).
 REGION_GAP_MIN_RATIO: float = 10.0
 
 #: The spectrum's region 1 is trusted only when the largest generalised force of the
 #: packing is at most this fraction of its pressure: quartic eigenvalues are ~P, and
-#: residual forces shift them. Measured on 32 circulo-lines (A = 1.1, tradeoff stage
-#: ``shapes``): max F / P = 9.3e-3 (force_tol 1e-10, P0 = 1e-8) miscounted N_1 by one;
-#: 5e-4 (1e-10, 1e-7) and 7.5e-5 (1e-12, 1e-8) counted it right.
+#: residual forces shift them
+#: (measured: docs/notes/shapes.md#constants-of-the-spectrum-jamflowshapesspectrum).
 SPECTRUM_FORCE_RATIO: float = 1e-3
 
 #: Largest step [length, or rad] of the second difference of ``v^T M v`` along a quartic
@@ -74,9 +72,8 @@ FOURTH_DERIVATIVE_STEP: float = 1e-3
 
 #: The step is also at most this fraction of ``sqrt(delta_min)``, ``delta_min`` the
 #: smallest pair overlap: along a quartic mode contact distances change at second order,
-#: ``~ h^2``, so a step ``h^2 << delta_min`` opens no contact. With the fixed 1e-3 the
-#: steps at P0 = 1e-7 (overlaps ~1e-7) broke contacts and gave fourth derivatives 1e3-1e5
-#: times those of the same packing at P0 = 1e-6.
+#: ``~ h^2``, so a step ``h^2 << delta_min`` opens no contact
+#: (measured: docs/notes/shapes.md#constants-of-the-spectrum-jamflowshapesspectrum).
 FOURTH_STEP_OVERLAP_FRACTION: float = 0.1
 
 #: Smallest step: round-off ``eps ||M|| / h^2`` stays below ~1e-3 of ``||M||`` (a pair
@@ -85,11 +82,9 @@ FOURTH_DERIVATIVE_MIN_STEP: float = 1e-6
 
 
 #: Two second differences of ``v^T M v`` (steps ``h`` and ``h / 2``) agree when they
-#: differ by at most this fraction of the larger magnitude. Smooth data agree far better:
-#: truncation is ``~ h U^(5) / U^(4)`` one-sided (1e-3 measured at ``h = 1e-6``) and
-#: round-off ``~ 4 eps ||M|| / (h / 2)^2`` (~1e-3 of the smallest measured fourth
-#: derivative, 0.1, at the smallest step); a jump of ``M`` between samples changes the
-#: estimate by orders of magnitude (8e5 against 9.7 on the vendored A = 1.3 packing).
+#: differ by at most this fraction of the larger magnitude: smooth data agree far better,
+#: a jump of ``M`` between samples changes the estimate by orders of magnitude
+#: (measured: docs/notes/shapes.md#constants-of-the-spectrum-jamflowshapesspectrum).
 FOURTH_AGREEMENT_RTOL: float = 0.05
 
 

@@ -274,8 +274,8 @@ class Integrator:
     # ------------------------------------------------------------- network algebra
     def _listed(self, idx: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
         """Pairs (k, 2) and images (k, d) of the listed pairs at positions ``idx``."""
-        # np.take: numpy's fancy and boolean indexing of (P, 2) and (P, d) rows took 20 us
-        # each at N = 1024, take 2 us
+        # np.take: ten times faster than fancy indexing of these rows
+        # (measured: docs/notes/overdamped-constants.md)
         nl = self.state.nl
         return np.take(nl.pairs, idx, axis=0), np.take(nl.image, idx, axis=0)
 
