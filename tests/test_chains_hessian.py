@@ -101,26 +101,36 @@ def test_zero_modes_are_the_global_translations_and_self_stress(jammed):
     assert np.max(np.abs(f @ RE)) <= 1e-8
 
 
-def test_rigidity_and_link_columns_agree_with_the_network_core(jammed):
-    """R0 and Gamma's link columns equal jamflow.network's Jacobians (independent code) after the
-    change of strain coordinates: network s (E_aa, then E_ab + E_ba) -> ours e_aa = q_s s_aa,
-    e_ab = sqrt(2) q_s s_ab."""
-    from jamflow.chains.hessian import _geometry, gamma_matrix
-    from jamflow.network import contact_jacobian, link_jacobian, sphere_contacts
+def test_rigidity_link_columns_and_gradient_are_the_papers_first_derivatives(jammed):
+    """R0, Gamma and dU/dq come from the network core's Jacobian; they equal the paper's
+    Eqs. 15-16 (links), 17 (volume) and 35-36 (contacts) written out here in the model's strain
+    coordinates (e_aa = q_s eps_aa, e_ab = sqrt(2) q_s eps_ab), and the gradient equals the
+    energy model's, to round-off."""
+    from jamflow.chains.hessian import _geometry, energy_gradient, gamma_matrix
+    from jamflow.models.strain import strain_components
 
-    _, p = jammed
+    stabilized, p = jammed
     geo = _geometry(p, HARMONIC)
+    n, d = p.n, 2
+
+    def rows(i, j, dx):
+        u = dx / np.linalg.norm(dx, axis=1)[:, None]
+        R = np.zeros((len(i), n * d + 3))
+        Rx = R[:, : n * d].reshape(len(i), n, d)
+        Rx[np.arange(len(i)), j] = u
+        Rx[np.arange(len(i)), i] -= u
+        # d |F R| / d e at F = 1: u_a R_b through the chain rule of the symmetric strain
+        R[:, n * d:] = strain_components(u[:, :, None] * dx[:, None, :], geo.strain_scale)
+        return R
+
     _, R0, _, _ = extended_rigidity(p, strain=True)
-    nd = 2 * p.n
-    # our strain columns in upper-triangle order (0,0), (0,1), (1,1); the network's (0,0), (1,1), (0,1)
-    order, factor = [0, 2, 1], geo.strain_scale * np.array([1.0, 1.0, np.sqrt(2.0)])
-
-    def to_network(A):
-        return np.hstack([A[:, :nd], A[:, nd:][:, order] * factor])
-
-    pairs = np.stack([geo.pairs.i, geo.pairs.j], axis=1)
-    J = contact_jacobian(sphere_contacts(p.position, p.box, pairs), p.n, 2, strain="symmetric").toarray()
-    np.testing.assert_allclose(to_network(R0), J, atol=1e-12)
-    G = gamma_matrix(geo, strain=True, volume=False)
-    L = link_jacobian(p.links, p.position, p.box, strain="symmetric").toarray()
-    np.testing.assert_allclose(to_network(G.T), L, atol=1e-12)
+    want = rows(geo.pairs.i, geo.pairs.j, geo.pairs.dx)
+    np.testing.assert_allclose(R0, want, rtol=0, atol=1e-15 * np.abs(want).max())
+    G = gamma_matrix(geo, strain=True, volume=True)
+    links = rows(p.links.i, p.links.j, p.box.minimum_image(p.position[p.links.j] - p.position[p.links.i]))
+    volume = np.r_[np.zeros(n * d), strain_components(np.eye(d), geo.strain_scale)]
+    np.testing.assert_allclose(G, np.column_stack([links.T, volume]), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(gamma_matrix(geo, strain=False), links[:, : n * d].T, rtol=0, atol=1e-15)
+    model = ShearStabilizedModel(p.box, p.diameter, p.links, p.position)
+    raw = model.evaluate(model.dofs(p.position)).gradient
+    np.testing.assert_allclose(energy_gradient(geo, strain=True), raw, rtol=0, atol=1e-13 * np.abs(raw).max())
