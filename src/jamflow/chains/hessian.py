@@ -338,7 +338,7 @@ def _volume_curvature(d: int, scale: float) -> NDArray[np.float64]:
 
 
 def extended_rigidity(packing: Packing, strain: bool = True, potential: PowerLawPotential = HARMONIC,
-                      translations: bool = False
+                      translations: bool = False, exclude: NDArray[np.float64] | None = None
                       ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Constrained extended rigidity matrix ``R_E = R0 B^T`` (Eqs. 35-39) and the states of self stress.
 
@@ -346,6 +346,10 @@ def extended_rigidity(packing: Packing, strain: bool = True, potential: PowerLaw
     ----------
     translations : bool
         Also remove the ``d`` uniform translations from the basis (the LP of Sec. V).
+    exclude : ndarray, shape (N d, k), optional
+        Further motions of the centres removed from the basis (no strain part): the free
+        motions of clusters (:attr:`jamflow.network.BodyCount.free_motions`), which move
+        no contact.
 
     Returns
     -------
@@ -367,6 +371,8 @@ def extended_rigidity(packing: Packing, strain: bool = True, potential: PowerLaw
         T = np.zeros((n * d + m, d))
         T[: n * d] = np.tile(np.eye(d), (n, 1))
         G = np.hstack([G, T])
+    if exclude is not None and exclude.shape[1]:
+        G = np.hstack([G, np.vstack([exclude, np.zeros((m, exclude.shape[1]))])])
     B = tangent_basis(G)
     RE = R0 @ B.T
     U, s, _ = np.linalg.svd(RE, full_matrices=True)

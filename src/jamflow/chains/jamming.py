@@ -38,12 +38,12 @@ from ..minimize.onset import JammingSettings, jam_model_to_pressure
 from ..models.links import LinkedSpheresModel
 from ..models.spheres.potential import HARMONIC, PowerLawPotential, overlapping_pairs
 from ..models.strain import ShearStabilizedModel
+from ..network import count_bodies
 from ..protocols.soft_jam import JammingResult
 from ..state.bodies import Links
 from ..state.packing import Packing, linked_volume
 from ..tolerances import LINK_LENGTH_RTOL
 from .builders import check_linked_start
-from .clusters import count_clusters
 from .dimers import dimer_report
 from .entanglement import check_untangled
 
@@ -75,8 +75,8 @@ def linked_soft_packing(packing: Packing, model: LinkedSpheresModel, res: Minimi
                         attrs: dict, parameters: dict, shear_stabilized: bool = False) -> Packing:
     """A minimised linked packing: contacts are the overlapping pairs that are not linked.
 
-    Rattlers are the danglers and rattling clusters of
-    :func:`~jamflow.chains.clusters.count_clusters`; their counts, the clusters'
+    Rattlers are the danglers and the clusters that rattle whole, by the counting of
+    :func:`jamflow.network.count_bodies`; their counts, the clusters'
     isostatic count (for dimers also rotators and ``<z>``, :func:`~jamflow.chains.dimers.dimer_report`), the largest relative link-length error and the stress
     anisotropy ``stress_deviation = max_ab |W_ab - P' delta_ab| / P'`` (``W`` the
     total virial of pairs and link tensions, ``P' = tr W / d``) go into the attributes.
@@ -86,7 +86,7 @@ def linked_soft_packing(packing: Packing, model: LinkedSpheresModel, res: Minimi
     pairs, _, f = overlapping_pairs(x, box, model.diameter, model.potential)
     linked = model.links.contains(pairs.i, pairs.j)
     contacts = np.stack([pairs.i, pairs.j], axis=1)[~linked]
-    count = count_clusters(len(x), box.d, model.links, contacts, shear_stabilized)
+    count = count_bodies(contacts, len(x), box.d, model.links, x, box, shear_stabilized=shear_stabilized)
     err = np.abs(model.links.length_errors(x, box))
     # total virial (pairs and link tensions) of the final configuration in its box
     W = LinkedSpheresModel(box, model.diameter, model.links, x, model.potential).evaluate(x.ravel()).virial

@@ -217,9 +217,17 @@ def certify_linked_packing(args: argparse.Namespace, packing) -> int:
         attrs=new_dataset_attrs("jamflow chain jamming certificate", stage_parameters(args, "packing", "out"),
                                 classification=cert.classification, motion_stage=cert.motion_stage,
                                 n_lp=cert.n_lp, strict_tested=int(args.strict), d=packing.d, N=packing.n,
-                                n_links=len(packing.links)),
+                                n_links=len(packing.links), n_clusters_removed_by_lp=int(cert.lp_removed.sum()),
+                                **{k: v for k, v in cert.count.as_dict().items()
+                                   if k in ("n_rattling_clusters", "n_clusters_removed", "n_danglers", "free_dofs")}),
     )
     write_dataset(ds, args.out)
-    print_summary(args, args.out, [("classification", cert.classification),
-                                   ("rattlers", int(cert.rattler.sum())), ("LPs", cert.n_lp)])
+    c = cert.count.as_dict()
+    print_summary(args, args.out, [
+        ("classification", cert.classification),
+        ("contacts", "overlapping pairs that are not linked"),
+        ("rattlers", f"{int(cert.rattler.sum())} spheres ({c['n_rattling_clusters']} rattling clusters by counting: "
+                     f"{c['n_clusters_removed']} removed whole, {c['n_danglers']} danglers with {c['free_dofs']} "
+                     f"free motions; {int(cert.lp_removed.sum())} clusters removed by the LPs)"),
+        ("LPs", cert.n_lp)])
     return 0

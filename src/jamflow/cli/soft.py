@@ -168,7 +168,8 @@ def _soft_jam_linked(args: argparse.Namespace, packing: Packing) -> int:
         ("links", f"{len(out.links)} (max relative length error {a['max_link_error']:.3g})"),
         ("contacts N_c (backbone)", f"{a['n_contacts']} (cluster isostatic count {a['isostatic_count']}, "
                                     f"excess {a['n_contacts'] - a['isostatic_count']})"),
-        ("rattlers", f"{a['n_rattlers']} ({a['n_rattling_clusters']} rattling clusters, {a['n_danglers']} danglers)"),
+        ("rattlers", f"{a['n_rattlers']} ({a['n_rattling_clusters']} rattling clusters: {a['n_clusters_removed']} "
+                     f"removed whole, {a['n_danglers']} danglers with {a['free_dofs']} free motions)"),
         ("max |P F|", f"{a['max_force_sq'] ** 0.5:.3g} epsilon / mean diameter"),
         ("FIRE steps", result.steps),
     ])
