@@ -134,3 +134,38 @@ def test_rigidity_link_columns_and_gradient_are_the_papers_first_derivatives(jam
     model = ShearStabilizedModel(p.box, p.diameter, p.links, p.position)
     raw = model.evaluate(model.dofs(p.position)).gradient
     np.testing.assert_allclose(energy_gradient(geo, strain=True), raw, rtol=0, atol=1e-13 * np.abs(raw).max())
+
+
+def test_modes_keep_the_constraints_and_are_the_second_derivative_along_them(jammed, tmp_path):
+    """linked_modes (jamflow modes): every mode mapped back by B^T keeps every link (and the volume)
+    to first order, |Gamma^T y| <= 1e-12, and U'' along a mode on the manifold is its eigenvalue."""
+    from jamflow.chains.hessian import _geometry, gamma_matrix
+    from jamflow.chains.modes import linked_modes
+    from jamflow.cli import main
+    from jamflow.io import read_dataset, write_packing
+
+    strain, p = jammed
+    modes = linked_modes(p, strain=strain)
+    G = gamma_matrix(_geometry(p, HARMONIC), strain)
+    assert np.max(np.abs(G.T @ modes.vectors)) <= 1e-12
+    np.testing.assert_allclose(modes.vectors.T @ modes.vectors, np.eye(modes.vectors.shape[1]), atol=1e-12)
+    assert modes.n_zero == 2 == modes.n_label("translation")
+    kind = ShearStabilizedModel if strain else LinkedSpheresModel
+    model = kind(p.box, p.diameter, p.links, p.position)
+    q0 = model.dofs(p.position)
+    h = 1e-5  # as in test_constrained_hessian_is_the_second_derivative_on_the_manifold
+    for k in (2, 3, modes.eigenvalues.size // 2, modes.eigenvalues.size - 1):
+        y = modes.vectors[:, k]
+        num = (_manifold_energy(model, q0, y, h) - 2 * _manifold_energy(model, q0, y, 0.0)
+               + _manifold_energy(model, q0, y, -h)) / h**2
+        assert num == pytest.approx(modes.eigenvalues[k], rel=1e-4)
+    # the command stores them, with strain components when the strain is a degree of freedom
+    write_packing(p, tmp_path / "p.nc")
+    assert main(["modes", str(tmp_path / "p.nc"), str(tmp_path / "m.nc"), "--quiet"]) == 0
+    ds = read_dataset(tmp_path / "m.nc", "linked-modes")
+    np.testing.assert_allclose(ds["eigenvalue"].values, modes.eigenvalues, rtol=1e-12, atol=1e-15)
+    assert ds.attrs["max_constraint_violation"] <= 1e-12 and ds.attrs["n_translation"] == 2
+    assert ds.attrs["hessian_strain"] == int(strain)
+    assert (np.abs(ds["mode_strain"].values).max() > 0) == strain
+    assert main(["plot", "mode", str(tmp_path / "p.nc"), str(tmp_path / "m.nc"), str(tmp_path / "m.png"),
+                 "--quiet"]) == 0
