@@ -1,6 +1,7 @@
 """A jammed packing of rigid trimers with one trimer that touches only through one sphere and swings about it.
 
-tests/data/bodies/swinging_trimer_2d.nc (make.sh): 12 trimers in 2D at a fixed box, P0 = 1e-6.
+tests/data/bodies/swinging_trimer_2d.nc (make.sh): 12 trimers in 2D at a fixed box, P0 = 1e-6;
+swinging_trimer_2d_shear.nc: the same shear-stabilised (another seed).
 The paper counts the swinging trimer as a rattling cluster (Sec. II F); its force-bearing sphere
 stays in the backbone as a sphere of two degrees of freedom. Before the counting by rank, jamflow
 called this packing hypostatic (34 contacts against 35) and not jammed.
@@ -22,6 +23,7 @@ from jamflow.io import read_dataset, read_packing
 from jamflow.network import count_bodies
 
 PATH = Path(__file__).parent / "data" / "bodies" / "swinging_trimer_2d.nc"
+SHEAR = PATH.with_name("swinging_trimer_2d_shear.nc")
 
 
 @pytest.fixture(scope="module")
@@ -105,3 +107,18 @@ def test_zero_modes_are_the_translations_and_the_swing(packing, count):
     swing = count.free_motions.toarray()[:, 0]
     assert abs(modes.vectors[:, k] @ swing) == pytest.approx(1.0, rel=1e-10)
     assert np.all(modes.eigenvalues[modes.label == 0] > 0.0)
+
+
+def test_shear_stabilised_swinging_trimer_is_strictly_jammed(tmp_path):
+    """Shear-stabilised (strain at fixed volume): isostatic with the strain, 36 = 35 - 2 + 1 + 2, and
+    strictly jammed (before: 33 against 34 with the trimer removed whole, and not jammed)."""
+    p = read_packing(SHEAR, None)
+    count = count_bodies(p.contacts, p.n, 2, p.links, p.position, p.box, shear_stabilized=True)
+    assert count.free_dofs.sum() == 1 and count.dangler.sum() == 2 and not count.removed.any()
+    assert count.n_contacts == count.isostatic_count == 36
+    assert main(["certify", str(SHEAR), str(tmp_path / "c.nc"), "--strict", "--quiet"]) == 0
+    ds = read_dataset(tmp_path / "c.nc", "chain-certificate")
+    assert ds.attrs["classification"] == "strictly_jammed"
+    np.testing.assert_array_equal(ds["chain_rattler"].values.astype(bool), count.dangler)
+    modes = linked_modes(p)
+    assert modes.strain and modes.n_zero == 3 and modes.n_label("free_motion") == 1 and modes.unexplained == 0

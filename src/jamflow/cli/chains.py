@@ -14,6 +14,8 @@ from ..chains.builders import (
     CLUSTER_KINDS,
     DILUTE_PHI,
     OVERLAP_PHI,
+    SIZE_CLASSES,
+    Sizes,
     cement_links,
     cement_pairs,
     check_linked_start,
@@ -55,6 +57,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--chain-length", type=int, default=3, help="spheres per chain M (default 3)")
     p.add_argument("--free-angles", action="store_true",
                    help="bonds only (flexible); default: every bond angle frozen by an angle link")
+    semi = p.add_mutually_exclusive_group()
+    semi.add_argument("--frozen-fraction", type=float, default=None,
+                      help="chain: semi-flexible, each bond angle frozen with this probability (seeded)")
+    semi.add_argument("--frozen-every", type=int, default=None,
+                      help="chain: semi-flexible, the bond angle at every k-th sphere frozen (k = 1: all)")
     p.add_argument("--bond-angle", type=float, default=None,
                    help="every bond angle [degrees]; default uniform in [60, 150] degrees")
     p.add_argument("--diameter-ratio", type=float, default=DIMER_DIAMETER_RATIO,
@@ -64,6 +71,16 @@ def register(sub: argparse._SubParsersAction) -> None:
                         f"the paper's A - 1 = 0.349)")
     p.add_argument("--size-ratio", type=float, default=DIMER_SIZE_RATIO,
                    help=f"dimer: length of large over small dimers (default {DIMER_SIZE_RATIO})")
+    p.add_argument("--dispersity", choices=["mono", "bi", "poly", "lognormal"], default="mono",
+                   help="chains and trimers: size mixture as `jamflow init` (default mono: unit spheres; equal "
+                        "spheres partly crystallise in 2D)")
+    p.add_argument("--ratio", type=float, default=1.4, help="bidisperse size ratio large / small (default 1.4)")
+    p.add_argument("--fraction", type=float, default=0.5,
+                   help="bidisperse number fraction of small clusters (or spheres) (default 0.5)")
+    p.add_argument("--width", type=float, default=0.1, help="poly / lognormal relative width (default 0.1)")
+    p.add_argument("--sizes-per", choices=SIZE_CLASSES, default="cluster",
+                   help="one size class per cluster (a scaled copy, default) or per sphere (bonds are the "
+                        "contact distances)")
     p.add_argument("--phi", type=float, default=None,
                    help=f"packing fraction of the union of each cluster's spheres (default without overlaps {DILUTE_PHI[2]} in 2D, {DILUTE_PHI[3]} in 3D; "
                         f"with --overlap "
@@ -121,13 +138,24 @@ def _link_rows(packing) -> list[tuple[str, object]]:
 
 def _init_chains(args: argparse.Namespace) -> int:
     angle = None if args.bond_angle is None else radians(args.bond_angle)
+    sizes = Sizes(args.dispersity, args.ratio, args.fraction, args.width, args.sizes_per)
     packing, messages = linked_packing(args.d, args.clusters, args.cluster, np.random.default_rng(args.seed),
                                        args.chain_length, args.free_angles, args.phi, angle,
-                                       args.no_overlap, args.diameter_ratio, args.size_ratio, args.separation)
+                                       args.no_overlap, args.diameter_ratio, args.size_ratio, args.separation,
+                                       sizes=None if args.cluster == "dimer" and args.dispersity == "mono" else sizes,
+                                       frozen_fraction=args.frozen_fraction, frozen_every=args.frozen_every)
     _messages(messages)
     packing = packing.evolve(seed=args.seed)
     write_packing(packing, args.out, stage_parameters(args, "out"))
     shape = [("dimer asphericity A", f"{packing.attrs['asphericity']:.6f}")] if "asphericity" in packing.attrs else []
+    if "frozen_angle_rule" in packing.attrs:
+        shape.append(("frozen bond angles", f"{packing.attrs['n_frozen_angles']} of "
+                                            f"{args.clusters * (packing.attrs['chain_length'] - 2)} "
+                                            f"({packing.attrs['frozen_angle_rule']})"))
+    if packing.attrs.get("dispersity", "mono") != "mono":
+        D = packing.diameter
+        shape.append(("diameters", f"{args.dispersity} per {args.sizes_per}: {D.min():.4g} .. {D.max():.4g} "
+                                   f"(mean {D.mean():.4g})"))
     print_summary(args, args.out, [*_link_rows(packing), *shape, ("degenerate links removed", len(messages))])
     return 0
 

@@ -10,6 +10,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..analysis.contacts import summarize
+from ..analysis.structure import crystal_fraction, hexatic_order
 from ..chains.dimers import dimer_report
 from ..io import read_dataset, read_packing, write_packing
 from ..io.formats import gsd_types, read_dat, size_classes, write_gsd, write_xyz
@@ -186,6 +187,10 @@ def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
         stabilized = bool(packing.attrs.get("shear_stabilized", 0))
         count = count_bodies(contacts, packing.n, packing.d, packing.links, packing.position, packing.box,
                              shear_stabilized=stabilized)
+        if packing.d == 2:
+            psi = hexatic_order(packing)
+            report.update(psi6_local_mean=float(np.abs(psi).mean()), psi6_global=float(np.abs(psi.mean())),
+                          crystal_fraction=crystal_fraction(packing))
         report.update({**count.as_dict(), "contact_source": source, "shear_stabilized": stabilized, **dimer_report(count, packing.d)})
     if packing.shapes is not None:
         kinds, counts = np.unique(packing.shapes.kind[packing.shape_index], return_counts=True)
@@ -211,6 +216,10 @@ def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
                  ("isostatic", f"{str(report['isostatic']).lower()}  (N_c = {report['n_contacts']}, "
                                f"sum (f_c - m_c) - d + 1{' + d(d+1)/2 - 1' if stabilized else ''} = "
                                f"{report['isostatic_count']}: {report['rigidity_counting']})")]
+        if "psi6_local_mean" in report:
+            rows.append(("hexatic order |psi6|", f"local mean {report['psi6_local_mean']:.4f}, global "
+                                                 f"{report['psi6_global']:.4f}, crystal-like fraction "
+                                                 f"{report['crystal_fraction']:.4f} (sphere centres)"))
         if "n_dimers" in report:
             rows += [("dimers", f"{report['n_dimers']} ({report['n_rotators']} rotators, "
                                 f"{report['n_rattling_dimers']} rattling)"),

@@ -18,4 +18,8 @@ jamflow soft-jam "$tmp/e0.nc" shapes_soft.nc --pressure 1e-3 --quiet
 jamflow init-chains "$tmp/t0.nc" --d 2 --clusters 12 --cluster trimer --seed 19 --quiet
 jamflow soft-jam "$tmp/t0.nc" swinging_trimer_2d.nc --pressure 1e-6 --pressure-rtol 1e-3 --force-tol 1e-13 \
     --delta-phi 1e-2 --quiet
+# the same, shear-stabilised: seed 5 is the first of seeds 1-5 that gives a swinging trimer
+jamflow init-chains "$tmp/t1.nc" --d 2 --clusters 12 --cluster trimer --seed 5 --quiet
+jamflow soft-jam "$tmp/t1.nc" swinging_trimer_2d_shear.nc --pressure 1e-6 --pressure-rtol 1e-3 --force-tol 1e-13 \
+    --delta-phi 1e-2 --shear-stabilize --quiet
 rm -r "$tmp"
