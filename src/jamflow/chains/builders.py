@@ -582,14 +582,7 @@ def linked_packing(
         raise ValueError(f"a chain needs at least 2 spheres, got --chain-length {m}")
     if clusters < 1:
         raise ValueError(f"need at least one cluster, got {clusters}")
-    if frozen_fraction is not None or frozen_every is not None:
-        if kind != "chain" or free_angles or (frozen_fraction is not None and frozen_every is not None):
-            raise ValueError("semi-flexible chains (a fraction or every k-th bond angle frozen) are --cluster chain "
-                             "without --free-angles, with one of --frozen-fraction and --frozen-every")
-        if frozen_fraction is not None and not 0.0 <= frozen_fraction <= 1.0:
-            raise ValueError(f"--frozen-fraction must lie in [0, 1], got {frozen_fraction}")
-        if frozen_every is not None and frozen_every < 1:
-            raise ValueError(f"--frozen-every must be at least 1, got {frozen_every}")
+    _check_semi_flexible(kind, free_angles, frozen_fraction, frozen_every)
     phi = (DILUTE_PHI[d] if no_overlap else OVERLAP_PHI[d]) if phi is None else phi
     if not 0.0 < phi < 1.5:
         raise ValueError(f"packing fraction must lie in (0, 1.5), got {phi}")
@@ -621,17 +614,8 @@ def linked_packing(
     lengths: list[float] = []
     for c in range(clusters):
         if kind == "chain":
-            own = D[c * m:(c + 1) * m]
-            p = np.array(pairs, np.int64).reshape(-1, 2)
-            segments = (x[p[:, 0]], box.minimum_image(x[p[:, 1]] - x[p[:, 0]]))
             frozen = frozen_angles(m, free_angles, frozen_fraction, frozen_every, rng)
-            chain = grow_chain(m, 0.5 * (own[:-1] + own[1:]), own, bond_angle, BOND_ANGLE_RANGE, x[:c * m],
-                               D[:c * m], segments, box, frozen, no_overlap, rng)
-            if chain is None:
-                raise ValueError(f"could not grow chain {c} of {m} spheres without overlaps or crossing links within "
-                                 f"half the box width ({0.5 * side:.4g}): lower --phi or use more, shorter chains")
-            x[c * m:(c + 1) * m] = box.wrap(chain)
-            p, r = chain_links(m, c * m, chain, free_angles, frozen)
+            p, r = _grow(c, m, x, D, pairs, box, bond_angle, frozen, no_overlap, rng)
             pairs += p
             lengths += r
             continue
@@ -672,6 +656,36 @@ def linked_packing(
     packing = Packing(x, D, box, protocol=f"init-chains({kind})", links=links, attrs=attrs)
     check_linked_start(packing)
     return packing, messages
+
+
+def _check_semi_flexible(kind: str, free_angles: bool, fraction: float | None, every: int | None) -> None:
+    """Refuse semi-flexible options that do not describe a chain's frozen angles."""
+    if fraction is None and every is None:
+        return
+    if kind != "chain" or free_angles or (fraction is not None and every is not None):
+        raise ValueError("semi-flexible chains (a fraction or every k-th bond angle frozen) are --cluster chain "
+                         "without --free-angles, with one of --frozen-fraction and --frozen-every")
+    if fraction is not None and not 0.0 <= fraction <= 1.0:
+        raise ValueError(f"--frozen-fraction must lie in [0, 1], got {fraction}")
+    if every is not None and every < 1:
+        raise ValueError(f"--frozen-every must be at least 1, got {every}")
+
+
+def _grow(c: int, m: int, x: NDArray[np.float64], D: NDArray[np.float64], pairs: list, box: Box,
+          bond_angle: float | None, frozen: NDArray[np.bool_], no_overlap: bool,
+          rng: np.random.Generator) -> tuple[list, list]:
+    """Grow chain ``c`` beside the placed spheres ``x[:c m]`` (:mod:`.growth`), write it into ``x``; its links."""
+    own = D[c * m:(c + 1) * m]
+    p = np.array(pairs, np.int64).reshape(-1, 2)
+    segments = (x[p[:, 0]], box.minimum_image(x[p[:, 1]] - x[p[:, 0]]))
+    chain = grow_chain(m, 0.5 * (own[:-1] + own[1:]), own, bond_angle, BOND_ANGLE_RANGE, x[:c * m], D[:c * m],
+                       segments, box, frozen, no_overlap, rng)
+    if chain is None:
+        raise ValueError(f"could not grow chain {c} of {m} spheres without overlaps or crossing links within half "
+                         f"the box width ({0.5 * float(np.min(box.widths)):.4g}): lower --phi or use more, "
+                         f"shorter chains")
+    x[c * m:(c + 1) * m] = box.wrap(chain)
+    return chain_links(m, c * m, chain, False, frozen)
 
 
 def _crosses(pairs: list, lengths: list, x: NDArray[np.float64], box: Box, first_new: int) -> bool:
