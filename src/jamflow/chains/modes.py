@@ -26,15 +26,17 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import xarray as xr
 from numpy.typing import NDArray
 
 from ..models.spheres.potential import HARMONIC, PowerLawPotential
 from ..models.strain import strain_matrix
 from ..network import BodyCount, count_bodies
 from ..state.packing import Packing
-from .hessian import ZERO_MODE_RTOL, _geometry, constrained_hessian
+from .hessian import HARMONIC as _HARMONIC
+from .hessian import ZERO_MODE_RTOL, _geometry, constrained_hessian, gamma_matrix
 
-__all__ = ["MODE_LABELS", "LinkedModes", "linked_modes"]
+__all__ = ["MODE_LABELS", "LinkedModes", "linked_modes", "modes_dataset"]
 
 #: Names of the mode labels (index = code stored in ``LinkedModes.label``).
 MODE_LABELS: tuple[str, ...] = ("vibration", "translation", "rattling_cluster", "free_motion", "floppy")
@@ -153,3 +155,41 @@ def linked_modes(packing: Packing, potential: PowerLawPotential = HARMONIC, stra
     vectors_t[:, idx] = zero_basis[:, : idx.size]
     label[idx] = np.r_[labels, np.full(floppy.shape[1], MODE_LABELS.index("floppy"))][: idx.size]
     return LinkedModes(w, B.T @ vectors_t, label, B, count, strain, geo.strain_scale, unexplained)
+
+
+def modes_dataset(modes: LinkedModes, packing: Packing) -> xr.Dataset:
+    """The ``linked-modes`` dataset of ``jamflow modes`` (provenance attributes added by the caller).
+
+    Variables ``eigenvalue(mode)``, ``mode_label(mode)`` (CF flags of
+    :data:`MODE_LABELS`), ``mode_displacement(mode, particle, spatial)`` and
+    ``mode_strain(mode, strain_component)`` (``eps_ab``, zero without strain);
+    attributes the label counts and ``max_constraint_violation = max |Gamma^T y|`` over
+    the modes (every link and the volume kept to first order).
+    """
+    n, d = packing.n, packing.d
+    violation = float(np.max(np.abs(gamma_matrix(_geometry(packing, _HARMONIC), modes.strain).T @ modes.vectors),
+                             initial=0.0))
+    a, b = np.triu_indices(d)
+    mode = ("mode",)
+    counts = {f"n_{name}": modes.n_label(name) for name in MODE_LABELS}
+    return xr.Dataset(
+        data_vars={
+            "eigenvalue": (mode, modes.eigenvalues, {"units": "1", "long_name": "constrained-Hessian eigenvalue "
+                                                     "(ascending)", "comment": "epsilon / length^2 (unit mass)"}),
+            "mode_label": (mode, modes.label, {"units": "1", "long_name": "what the mode is",
+                                               "flag_values": np.arange(len(MODE_LABELS), dtype=np.int8),
+                                               "flag_meanings": " ".join(MODE_LABELS)}),
+            "mode_displacement": (mode + ("particle", "spatial"), modes.displacement(n, d),
+                                  {"units": "1", "long_name": "centre displacement of the unit mode",
+                                   "comment": "length unit of the packing; modes are unit vectors in centres and "
+                                              "the scaled strain q_s eps"}),
+            "mode_strain": (mode + ("strain_component",), modes.strain_tensor(d)[:, a, b],
+                            {"units": "1", "long_name": "strain eps_ab of the unit mode (zero without strain)"}),
+        },
+        coords={"strain_component": [f"{'xyz'[i]}{'xyz'[j]}" for i, j in zip(a, b)]},
+        attrs={"N": n, "d": d, "n_links": 0 if packing.links is None else len(packing.links),
+               "hessian_strain": int(modes.strain), "strain_scale": modes.strain_scale, "n_zero": modes.n_zero,
+               "unexplained": modes.unexplained, "max_constraint_violation": violation,
+               "pressure": float(packing.pressure or np.nan), "length_unit": packing.attrs.get("length_unit", ""),
+               **counts},
+    )

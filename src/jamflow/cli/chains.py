@@ -264,54 +264,27 @@ def certify_linked_packing(args: argparse.Namespace, packing) -> int:
 def linked_modes_command(args: argparse.Namespace, packing) -> int:
     """``jamflow modes`` of a linked packing: constrained-Hessian modes mapped to centres and strain, zero
     modes named (:mod:`jamflow.chains.modes`)."""
-    from ..chains.hessian import HARMONIC, _geometry, gamma_matrix
-    from ..chains.modes import MODE_LABELS, linked_modes
+    from ..chains.modes import linked_modes, modes_dataset
 
     if args.lambda_c is not None:
         raise ValueError("--lambda-c is for shape packings (quartic modes); a linked packing's modes are not split")
     strain = None if args.strain == "auto" else args.strain == "yes"
     modes = linked_modes(packing, strain=strain)
-    n, d = packing.n, packing.d
-    # every mode keeps every link (and the volume) to first order: Gamma^T y = 0
-    violation = float(np.max(np.abs(gamma_matrix(_geometry(packing, HARMONIC), modes.strain).T @ modes.vectors),
-                             initial=0.0))
-    mode = ("mode",)
-    names = [f"{'xyz'[a]}{'xyz'[b]}" for a, b in zip(*np.triu_indices(d))]
-    eps = modes.strain_tensor(d)
-    a, b = np.triu_indices(d)
-    counts = {f"n_{name}": modes.n_label(name) for name in MODE_LABELS}
-    ds = xr.Dataset(
-        data_vars={
-            "eigenvalue": (mode, modes.eigenvalues, {"units": "1", "long_name": "constrained-Hessian eigenvalue (ascending)",
-                                                     "comment": "epsilon / length^2 (unit mass)"}),
-            "mode_label": (mode, modes.label, {"units": "1", "long_name": "what the mode is",
-                                               "flag_values": np.arange(len(MODE_LABELS), dtype=np.int8),
-                                               "flag_meanings": " ".join(MODE_LABELS)}),
-            "mode_displacement": (mode + ("particle", "spatial"), modes.displacement(n, d),
-                                  {"units": "1", "long_name": "centre displacement of the unit mode",
-                                   "comment": "length unit of the packing; modes are unit vectors in centres and "
-                                              "the scaled strain q_s eps"}),
-            "mode_strain": (mode + ("strain_component",), eps[:, a, b],
-                            {"units": "1", "long_name": "strain eps_ab of the unit mode (zero without strain)"}),
-        },
-        coords={"strain_component": names},
-        attrs=new_dataset_attrs("jamflow linked-packing normal modes", stage_parameters(args, "input", "out"),
-                                N=n, d=d, n_links=len(packing.links), hessian_strain=int(modes.strain),
-                                strain_scale=modes.strain_scale, n_zero=modes.n_zero, unexplained=modes.unexplained,
-                                max_constraint_violation=violation, pressure=float(packing.pressure or np.nan),
-                                length_unit=packing.attrs.get("length_unit", ""), **counts),
-    )
+    ds = modes_dataset(modes, packing)
+    ds.attrs.update(new_dataset_attrs("jamflow linked-packing normal modes", stage_parameters(args, "input", "out")))
     write_dataset(ds, args.out)
-    if modes.unexplained or counts["n_floppy"]:
-        print(f"jamflow modes: warning: {args.input}: {counts['n_floppy']} floppy zero mode(s) no counting explains, "
+    a = ds.attrs
+    if modes.unexplained or a["n_floppy"]:
+        print(f"jamflow modes: warning: {args.input}: {a['n_floppy']} floppy zero mode(s) no counting explains, "
               f"{modes.unexplained} counted motion(s) that are not zero modes: certify the packing", file=sys.stderr)
     nonzero = modes.eigenvalues[modes.label == 0]
     print_summary(args, args.out, [
-        ("N, modes", f"{n}, {modes.eigenvalues.size} ({'with strain at fixed volume' if modes.strain else 'fixed box'})"),
-        ("zero modes", f"{modes.n_zero}: {counts['n_translation']} translations, {counts['n_rattling_cluster']} of "
-                       f"rattling clusters, {counts['n_free_motion']} free motions (swings, danglers, rotators), "
-                       f"{counts['n_floppy']} floppy"),
+        ("N, modes", f"{packing.n}, {modes.eigenvalues.size} "
+                     f"({'with strain at fixed volume' if modes.strain else 'fixed box'})"),
+        ("zero modes", f"{modes.n_zero}: {a['n_translation']} translations, {a['n_rattling_cluster']} of rattling "
+                       f"clusters, {a['n_free_motion']} free motions (swings, danglers, rotators), "
+                       f"{a['n_floppy']} floppy"),
         ("lowest vibration", f"{nonzero.min():.4g} epsilon / length^2" if nonzero.size else "none"),
-        ("max |Gamma^T mode|", f"{violation:.2e} (links and volume kept to first order)"),
+        ("max |Gamma^T mode|", f"{a['max_constraint_violation']:.2e} (links and volume kept to first order)"),
     ])
     return 0
