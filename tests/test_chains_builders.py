@@ -291,3 +291,16 @@ def test_mixed_sizes_of_chains(per):
     assert p.packing_fraction <= 0.2 * (1 + 1e-12)
     with pytest.raises(ValueError, match="dimers are bidisperse"):
         linked_packing(2, 4, "dimer", np.random.default_rng(1), sizes=sizes)
+
+
+def test_check_of_a_dilute_start_is_not_isostatic(tmp_path, capsys):
+    """0 contacts: every cluster rattles, there is no backbone, and that is not isostatic."""
+    import json
+
+    assert main(["init-chains", str(tmp_path / "s.nc"), "--d", "2", "--clusters", "10", "--cluster", "trimer",
+                 "--seed", "1", "--quiet"]) == 0
+    assert main(["check", str(tmp_path / "s.nc"), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["n_contacts"] == 0 and report["isostatic_count"] == 0
+    assert report["isostatic"] is False and report["rigidity_counting"] == "no backbone"
+    assert report["n_rattling_clusters"] == report["n_clusters_removed"] == 10

@@ -33,7 +33,6 @@ from ..models.spheres.potential import HARMONIC, PowerLawPotential
 from ..models.strain import strain_matrix
 from ..network import BodyCount, count_bodies
 from ..state.packing import Packing
-from .hessian import HARMONIC as _HARMONIC
 from .hessian import ZERO_MODE_RTOL, _geometry, constrained_hessian, gamma_matrix
 
 __all__ = ["MODE_LABELS", "LinkedModes", "linked_modes", "modes_dataset"]
@@ -167,7 +166,7 @@ def modes_dataset(modes: LinkedModes, packing: Packing) -> xr.Dataset:
     the modes (every link and the volume kept to first order).
     """
     n, d = packing.n, packing.d
-    violation = float(np.max(np.abs(gamma_matrix(_geometry(packing, _HARMONIC), modes.strain).T @ modes.vectors),
+    violation = float(np.max(np.abs(gamma_matrix(_geometry(packing, HARMONIC), modes.strain).T @ modes.vectors),
                              initial=0.0))
     a, b = np.triu_indices(d)
     mode = ("mode",)
