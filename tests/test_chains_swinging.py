@@ -122,3 +122,47 @@ def test_shear_stabilised_swinging_trimer_is_strictly_jammed(tmp_path):
     np.testing.assert_array_equal(ds["chain_rattler"].values.astype(bool), count.dangler)
     modes = linked_modes(p)
     assert modes.strain and modes.n_zero == 3 and modes.n_label("free_motion") == 1 and modes.unexplained == 0
+
+
+def _rank_verdict(p, count, strain: bool) -> tuple[int, int, bool]:
+    """(columns n_t, rank, positive self stress) of R_E on the backbone without translations and free motions."""
+    import scipy.sparse as sp
+
+    from jamflow.chains.hessian import ZERO_MODE_RTOL
+    from jamflow.network import positive_self_stress
+
+    sub, idx = _subpacking(p, ~count.removed[count.cluster])
+    rows = (p.d * idx[:, None] + np.arange(p.d)).ravel()
+    free = count.free_motions.tocsr()[rows].toarray()
+    free = free[:, np.linalg.norm(free, axis=0) > 0.5]
+    RE, _, _, _ = extended_rigidity(sub, strain=strain, translations=True, exclude=free)
+    s = np.linalg.svd(RE, compute_uv=False)
+    rank = int(np.sum(s > ZERO_MODE_RTOL * s.max()))
+    return RE.shape[1], rank, positive_self_stress(sp.csr_matrix(RE), method="lp") is not None
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("d, clusters", [(2, 12), (3, 20)])
+@pytest.mark.parametrize("stabilized", [False, True], ids=["fixed-box", "shear-stabilized"])
+@pytest.mark.parametrize("seed", [1, 2])
+def test_counting_and_certify_agree_with_the_rank_of_the_rigidity_matrix(d, clusters, stabilized, seed):
+    """Trimers jammed at P0 = 1e-6: the count's N_iso is the true degrees of freedom plus one (n_t + 1, by
+    rank), no floppy motion is left, and certify's verdict is the Roth-Whiteley one (full rank and a
+    positive self stress), collectively with positions only and strictly with the strain."""
+    from jamflow.chains.builders import linked_packing
+    from jamflow.chains.jamming import jam_linked
+    from jamflow.minimize.onset import JammingSettings
+
+    start, _ = linked_packing(d, clusters, "trimer", np.random.default_rng(seed))
+    settings = JammingSettings(force_tol=1e-13, pressure_rtol=1e-3, delta_phi=1e-2)
+    p = jam_linked(start, 1e-6, settings=settings, shear_stabilize=stabilized).packing
+    count = count_bodies(p.contacts, p.n, d, p.links, p.position, p.box, shear_stabilized=stabilized)
+    n_t, rank, positive = _rank_verdict(p, count, strain=stabilized)
+    assert rank == n_t and count.isostatic_count == n_t + 1 and count.n_contacts >= count.isostatic_count
+    cert = certify_linked(p, strict=True)
+    collective = _rank_verdict(p, count, strain=False)
+    strict = _rank_verdict(p, count, strain=True)
+    rigid = [c[0] == c[1] and c[2] for c in (collective, strict)]
+    want = "strictly_jammed" if all(rigid) else "collectively_jammed" if rigid[0] else "not_jammed"
+    assert cert.classification == want
+    assert cert.classification == ("strictly_jammed" if stabilized else "collectively_jammed")
