@@ -32,8 +32,8 @@ GROWTH_TRIES: int = 50
 #: Spheres removed from the chain's end when a sphere finds no place.
 GROWTH_BACKTRACK: int = 3
 #: Restarts of a chain from a new first sphere before placement gives up (each restart
-#: allows ``50 m`` backtracks).
-GROWTH_RESTARTS: int = 200
+#: allows ``10 m`` backtracks), so an impossible request fails in minutes, not hours.
+GROWTH_RESTARTS: int = 20
 
 
 def _turn(u: NDArray[np.float64], angle: float, sense: float, rng: np.random.Generator) -> NDArray[np.float64]:
@@ -138,7 +138,7 @@ def grow_chain(m: int, bonds: NDArray[np.float64], diameter: NDArray[np.float64]
         chain[0] = box.to_cartesian(rng.random(d))
         if not _fits(chain[0], 0, chain, diameter, placed, placed_d, segments, box, frozen, no_overlap, image):
             continue
-        k, direction, budget = 1, [np.zeros(d)] * m, 50 * m
+        k, direction, budget = 1, [np.zeros(d)] * m, 10 * m
         while 0 < k < m and budget > 0:
             for _ in range(GROWTH_TRIES):
                 if k == 1:
