@@ -6,6 +6,8 @@ is not written); here every kind is drawn on small synthetic inputs and saved.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import xarray as xr
@@ -22,7 +24,10 @@ from jamflow.analysis.gaps import gap_histogram
 from jamflow.analysis.overlap import overlap_series
 from jamflow.analysis.structure import structure_dataset
 from jamflow.chains.averages import moduli_against_links
+from jamflow.chains.figures import plot_mode
+from jamflow.chains.modes import linked_modes, modes_dataset
 from jamflow.cli.analysis import PLOT_KINDS
+from jamflow.io import read_packing
 from jamflow.shapes import figures as shape_figures
 from jamflow.shapes.survey import survey_dataset
 
@@ -84,6 +89,7 @@ def _figures(rng) -> dict[str, Figure]:
                           coords={"label": ("setting", ["a", "b", "ref"])},
                           attrs={"primary_error": "err", "stage": "synthetic"})
     gaps, forces = _gaps(rng), _forces(rng)
+    swing = read_packing(Path(__file__).parent / "data" / "bodies" / "swinging_trimer_2d.nc", None)
     cemented = [xr.Dataset({f"{m}_{b}": ((), v) for m in ("bulk", "shear") for b, v in
                             (("voigt", 2.0 + k + rng.random()), ("reuss", 1.0 + k + rng.random()))},
                            attrs={"N": 64, "n_cemented": 8 * k, "d": 3, "n_unstable": 0}) for k in range(3) for _ in range(2)]
@@ -101,6 +107,7 @@ def _figures(rng) -> dict[str, Figure]:
         "jamming-table": plots.plot_jamming_table(table),
         "eos": plots.plot_eos(eos),
         "chains-moduli": plots.plot_chains_moduli(moduli_against_links(cemented)),
+        "mode": plot_mode(swing, modes_dataset(linked_modes(swing), swing)),
         "fit-windows (forces)": plots.plot_fit_windows(forces),
         **_shape_figures(rng),
     }

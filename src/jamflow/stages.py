@@ -111,9 +111,8 @@ STAGES: dict[str, Stage] = {s.command: s for s in (
     _stage("moduli", "Hessian, lowest modes and elastic moduli", {"spheres", "linked"},
            shapes="shapes: `jamflow modes`",
            walls="moduli need a periodic box"),
-    _stage("modes", "dynamical-matrix spectrum and quartic modes of a shape packing", {"shapes"},
-           spheres="spheres: `jamflow moduli`", linked="linked spheres: `jamflow moduli`",
-           walls="spheres: `jamflow moduli`"),
+    _stage("modes", "normal modes: quartic modes of shapes, constrained-Hessian modes of linked spheres",
+           {"shapes", "linked"}, spheres="spheres: `jamflow moduli`", walls="spheres: `jamflow moduli`"),
     # analyses over packings
     _stage("gaps", "gap distribution p(h) and the exponent gamma", _SPHERES,
            linked="gaps between spheres count linked pairs as contacts; not defined for linked spheres",

@@ -119,3 +119,12 @@ ENTANGLED_OVERLAP: float = 0.1
 #: :data:`ENTANGLED_OVERLAP`): a factor ten above the largest ratio of jammed packings and
 #: below that of entangled ones (measured: docs/notes/chains.md#entanglement-thresholds).
 ENTANGLED_FORCE_RATIO: float = 100.0
+
+#: Rattling clusters (:mod:`jamflow.network.bodies`): a singular value of a cluster's
+#: orthonormal motion basis restricted to its contact-bearing spheres below this counts
+#: as zero, i.e. as a free motion that moves no contact-bearing sphere (a swinging
+#: trimer, a dangler, a rotator). A free motion leaves a singular value at round-off
+#: (~1e-16); a held motion moves the contact-bearing spheres by a fraction of its norm
+#: set by the geometry (sines of bond angles, which the link-degeneracy test keeps above
+#: :data:`LINK_RANK_RTOL`), so the same 1e-8 separates the two.
+BODY_FREE_RTOL: float = 1e-8

@@ -43,6 +43,7 @@ PLOT_KINDS: dict[str, str] = {
     "spectra": "one or more `jamflow modes` outputs (sorted eigenvalues, VanderWerf et al. Fig. 7)",
     "quartic-pressure": "`jamflow modes` outputs at several P0 (region-1 eigenvalues and fourth derivatives, "
                         "VanderWerf et al. Figs. 10-11)",
+    "mode": "a linked packing and its `jamflow modes` output: one mode as arrows (--mode)",
 }
 #: the dataset kinds (jamflow.io.DATASET_KINDS) each figure kind reads
 PLOT_INPUT_KINDS: dict[str, tuple[str, ...]] = {
@@ -64,6 +65,7 @@ PLOT_INPUT_KINDS: dict[str, tuple[str, ...]] = {
     "contact-angles": ("contact-angles",),
     "spectra": ("modes",),
     "quartic-pressure": ("modes",),
+    "mode": ("packing", "linked-modes"),
 }
 
 
@@ -174,6 +176,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.png", help="inputs, then the output figure")
     p.add_argument("--labels", nargs="+", default=None, help="legend label per input")
     p.add_argument("--slab-axis", type=int, default=2, help="packing, d >= 3: axis normal to the drawn slab (default 2)")
+    p.add_argument("--mode", type=int, default=None,
+                   help="mode: index of the mode (ascending eigenvalue; default the lowest vibration)")
     add_overlap_option(p)
     add_quiet(p)
 
@@ -371,6 +375,12 @@ def _plot(args: argparse.Namespace) -> int:
         raise ValueError(f"plot {args.kind} takes one input, got {len(inputs)}")
     if args.kind == "packing":
         fig = plots.plot_packing(_with_shape_rattlers(_load_packing(inputs[0], overlap_tol(args))), args.slab_axis)
+    elif args.kind == "mode":
+        from ..chains.figures import plot_mode
+
+        if len(inputs) != 2:
+            raise ValueError(f"plot mode takes a packing and its `jamflow modes` output, got {len(inputs)} inputs")
+        fig = plot_mode(read_packing(inputs[0], None), read_dataset(inputs[1], "linked-modes"), args.mode)
     else:
         data = [read_dataset(p, PLOT_INPUT_KINDS[args.kind]) for p in inputs]
         if args.kind in single:

@@ -14,6 +14,7 @@ from ..protocols.certify import (
     certificate_to_dataset,
     certify,
 )
+from ..state.packing import OverlapError, Packing
 from .common import (
     add_command,
     add_preset,
@@ -62,11 +63,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _certify(args: argparse.Namespace) -> int:
     if args.exact and args.gap_tol is None:
         raise ValueError("--exact needs --gap-tol (explicit contacts are always exact)")
-    packing = read_packing(args.packing, overlap_tol(args))
+    packing = read_packing(args.packing, None)
     if packing.links is not None and len(packing.links):
         from .chains import certify_linked_packing
 
+        # the linked certificate's contacts are the overlapping pairs (soft-jam's contacts)
         return certify_linked_packing(args, packing)
+    _check_overlaps(args, packing)
     with tqdm(desc="certify LPs", unit="LP", disable=args.quiet) as bar:
         cert = certify(
             packing,
@@ -85,3 +88,12 @@ def _certify(args: argparse.Namespace) -> int:
                                    ("rattlers", int(cert.rattler.sum())), ("LPs", len(cert.lp)),
                                    ("self-stress decisions", cert.self_stress_decisions)])
     return 0
+
+
+def _check_overlaps(args: argparse.Namespace, packing: Packing) -> None:
+    """Refuse overlaps beyond the tolerance, saying how to certify a soft packing on its own contacts."""
+    try:
+        packing.validate(overlap_tol(args))
+    except OverlapError as exc:
+        soft = " (written by soft-jam)" if packing.protocol.split(">")[-1].startswith("soft") else ""
+        raise OverlapError(f"{exc}: a soft packing{soft} is certified on its stored contacts with --soft") from None

@@ -14,6 +14,8 @@ from ..chains.builders import (
     CLUSTER_KINDS,
     DILUTE_PHI,
     OVERLAP_PHI,
+    SIZE_CLASSES,
+    Sizes,
     cement_links,
     cement_pairs,
     check_linked_start,
@@ -55,6 +57,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--chain-length", type=int, default=3, help="spheres per chain M (default 3)")
     p.add_argument("--free-angles", action="store_true",
                    help="bonds only (flexible); default: every bond angle frozen by an angle link")
+    semi = p.add_mutually_exclusive_group()
+    semi.add_argument("--frozen-fraction", type=float, default=None,
+                      help="chain: semi-flexible, each bond angle frozen with this probability (seeded)")
+    semi.add_argument("--frozen-every", type=int, default=None,
+                      help="chain: semi-flexible, the bond angle at every k-th sphere frozen (k = 1: all)")
     p.add_argument("--bond-angle", type=float, default=None,
                    help="every bond angle [degrees]; default uniform in [60, 150] degrees")
     p.add_argument("--diameter-ratio", type=float, default=DIMER_DIAMETER_RATIO,
@@ -64,6 +71,16 @@ def register(sub: argparse._SubParsersAction) -> None:
                         f"the paper's A - 1 = 0.349)")
     p.add_argument("--size-ratio", type=float, default=DIMER_SIZE_RATIO,
                    help=f"dimer: length of large over small dimers (default {DIMER_SIZE_RATIO})")
+    p.add_argument("--dispersity", choices=["mono", "bi", "poly", "lognormal"], default="mono",
+                   help="chains and trimers: size mixture as `jamflow init` (default mono: unit spheres; equal "
+                        "spheres partly crystallise in 2D)")
+    p.add_argument("--ratio", type=float, default=1.4, help="bidisperse size ratio large / small (default 1.4)")
+    p.add_argument("--fraction", type=float, default=0.5,
+                   help="bidisperse number fraction of small clusters (or spheres) (default 0.5)")
+    p.add_argument("--width", type=float, default=0.1, help="poly / lognormal relative width (default 0.1)")
+    p.add_argument("--sizes-per", choices=SIZE_CLASSES, default="cluster",
+                   help="one size class per cluster (a scaled copy, default) or per sphere (bonds are the "
+                        "contact distances)")
     p.add_argument("--phi", type=float, default=None,
                    help=f"packing fraction of the union of each cluster's spheres (default without overlaps {DILUTE_PHI[2]} in 2D, {DILUTE_PHI[3]} in 3D; "
                         f"with --overlap "
@@ -121,13 +138,24 @@ def _link_rows(packing) -> list[tuple[str, object]]:
 
 def _init_chains(args: argparse.Namespace) -> int:
     angle = None if args.bond_angle is None else radians(args.bond_angle)
+    sizes = Sizes(args.dispersity, args.ratio, args.fraction, args.width, args.sizes_per)
     packing, messages = linked_packing(args.d, args.clusters, args.cluster, np.random.default_rng(args.seed),
                                        args.chain_length, args.free_angles, args.phi, angle,
-                                       args.no_overlap, args.diameter_ratio, args.size_ratio, args.separation)
+                                       args.no_overlap, args.diameter_ratio, args.size_ratio, args.separation,
+                                       sizes=None if args.cluster == "dimer" and args.dispersity == "mono" else sizes,
+                                       frozen_fraction=args.frozen_fraction, frozen_every=args.frozen_every)
     _messages(messages)
     packing = packing.evolve(seed=args.seed)
     write_packing(packing, args.out, stage_parameters(args, "out"))
     shape = [("dimer asphericity A", f"{packing.attrs['asphericity']:.6f}")] if "asphericity" in packing.attrs else []
+    if "frozen_angle_rule" in packing.attrs:
+        shape.append(("frozen bond angles", f"{packing.attrs['n_frozen_angles']} of "
+                                            f"{args.clusters * (packing.attrs['chain_length'] - 2)} "
+                                            f"({packing.attrs['frozen_angle_rule']})"))
+    if packing.attrs.get("dispersity", "mono") != "mono":
+        D = packing.diameter
+        shape.append(("diameters", f"{args.dispersity} per {args.sizes_per}: {D.min():.4g} .. {D.max():.4g} "
+                                   f"(mean {D.mean():.4g})"))
     print_summary(args, args.out, [*_link_rows(packing), *shape, ("degenerate links removed", len(messages))])
     return 0
 
@@ -217,9 +245,46 @@ def certify_linked_packing(args: argparse.Namespace, packing) -> int:
         attrs=new_dataset_attrs("jamflow chain jamming certificate", stage_parameters(args, "packing", "out"),
                                 classification=cert.classification, motion_stage=cert.motion_stage,
                                 n_lp=cert.n_lp, strict_tested=int(args.strict), d=packing.d, N=packing.n,
-                                n_links=len(packing.links)),
+                                n_links=len(packing.links), n_clusters_removed_by_lp=int(cert.lp_removed.sum()),
+                                **{k: v for k, v in cert.count.as_dict().items()
+                                   if k in ("n_rattling_clusters", "n_clusters_removed", "n_danglers", "free_dofs")}),
     )
     write_dataset(ds, args.out)
-    print_summary(args, args.out, [("classification", cert.classification),
-                                   ("rattlers", int(cert.rattler.sum())), ("LPs", cert.n_lp)])
+    c = cert.count.as_dict()
+    print_summary(args, args.out, [
+        ("classification", cert.classification),
+        ("contacts", "overlapping pairs that are not linked"),
+        ("rattlers", f"{int(cert.rattler.sum())} spheres ({c['n_rattling_clusters']} rattling clusters by counting: "
+                     f"{c['n_clusters_removed']} removed whole, {c['n_danglers']} danglers with {c['free_dofs']} "
+                     f"free motions; {int(cert.lp_removed.sum())} clusters removed by the LPs)"),
+        ("LPs", cert.n_lp)])
+    return 0
+
+
+def linked_modes_command(args: argparse.Namespace, packing) -> int:
+    """``jamflow modes`` of a linked packing: constrained-Hessian modes mapped to centres and strain, zero
+    modes named (:mod:`jamflow.chains.modes`)."""
+    from ..chains.modes import linked_modes, modes_dataset
+
+    if args.lambda_c is not None:
+        raise ValueError("--lambda-c is for shape packings (quartic modes); a linked packing's modes are not split")
+    strain = None if args.strain == "auto" else args.strain == "yes"
+    modes = linked_modes(packing, strain=strain)
+    ds = modes_dataset(modes, packing)
+    ds.attrs.update(new_dataset_attrs("jamflow linked-packing normal modes", stage_parameters(args, "input", "out")))
+    write_dataset(ds, args.out)
+    a = ds.attrs
+    if modes.unexplained or a["n_floppy"]:
+        print(f"jamflow modes: warning: {args.input}: {a['n_floppy']} floppy zero mode(s) no counting explains, "
+              f"{modes.unexplained} counted motion(s) that are not zero modes: certify the packing", file=sys.stderr)
+    nonzero = modes.eigenvalues[modes.label == 0]
+    print_summary(args, args.out, [
+        ("N, modes", f"{packing.n}, {modes.eigenvalues.size} "
+                     f"({'with strain at fixed volume' if modes.strain else 'fixed box'})"),
+        ("zero modes", f"{modes.n_zero}: {a['n_translation']} translations, {a['n_rattling_cluster']} of rattling "
+                       f"clusters, {a['n_free_motion']} free motions (swings, danglers, rotators), "
+                       f"{a['n_floppy']} floppy"),
+        ("lowest vibration", f"{nonzero.min():.4g} epsilon / length^2" if nonzero.size else "none"),
+        ("max |Gamma^T mode|", f"{a['max_constraint_violation']:.2e} (links and volume kept to first order)"),
+    ])
     return 0

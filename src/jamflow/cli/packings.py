@@ -10,10 +10,11 @@ import numpy as np
 from tqdm import tqdm
 
 from ..analysis.contacts import summarize
-from ..chains.clusters import count_clusters
+from ..analysis.structure import crystal_fraction, hexatic_order
 from ..chains.dimers import dimer_report
 from ..io import read_dataset, read_packing, write_packing
 from ..io.formats import gsd_types, read_dat, size_classes, write_gsd, write_xyz
+from ..network import count_bodies
 from ..network.spheres import contact_network
 from ..protocols.initial import random_packing
 from ..protocols.overdamped.run import snapshot_packings
@@ -164,8 +165,8 @@ def _export_xyz(args: argparse.Namespace) -> int:
 def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
     """What check can say of links and shapes: how well links hold, and the counting of each body model.
 
-    Linked spheres get the cluster count of :func:`jamflow.chains.clusters.count_clusters`
-    (stated in ``docs/chains.md``) over the packing's stored contacts (or, with
+    Linked spheres get the cluster count of :func:`jamflow.network.count_bodies`
+    (convention in :mod:`jamflow.network.bodies`) over the packing's stored contacts (or, with
     ``--gap-tol`` or none stored, pairs within the gap tolerance), never linked pairs;
     packings of dimers add rotators and ``<z>`` (:func:`jamflow.chains.dimers.dimer_report`).
     Shape packings of a family with an energy model get the counting of
@@ -184,9 +185,13 @@ def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
         contacts = contact_network(packing, args.gap_tol)
         contacts = contacts[~packing.links.contains(contacts[:, 0], contacts[:, 1])]
         stabilized = bool(packing.attrs.get("shear_stabilized", 0))
-        count = count_clusters(packing.n, packing.d, packing.links, contacts, stabilized)
-        report.update({**count.as_dict(), "isostatic": count.n_contacts == count.isostatic_count,
-                       "contact_source": source, "shear_stabilized": stabilized, **dimer_report(count, packing.d)})
+        count = count_bodies(contacts, packing.n, packing.d, packing.links, packing.position, packing.box,
+                             shear_stabilized=stabilized)
+        if packing.d == 2:
+            psi = hexatic_order(packing)
+            report.update(psi6_local_mean=float(np.abs(psi).mean()), psi6_global=float(np.abs(psi.mean())),
+                          crystal_fraction=crystal_fraction(packing))
+        report.update({**count.as_dict(), "contact_source": source, "shear_stabilized": stabilized, **dimer_report(count, packing.d)})
     if packing.shapes is not None:
         kinds, counts = np.unique(packing.shapes.kind[packing.shape_index], return_counts=True)
         report["shapes"] = {str(k): int(c) for k, c in zip(kinds, counts)}
@@ -205,11 +210,16 @@ def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
                  ("max link-length error", f"{report['max_link_error']:.3e} (relative)")]
     if links_counted:
         rows += [("contacts (backbone)", f"{report['n_contacts']}  [{report['contact_source']}]"),
-                 ("rattlers", f"{report['n_rattlers']} ({report['n_rattling_clusters']} rattling clusters, "
-                              f"{report['n_danglers']} danglers)"),
+                 ("rattlers", f"{report['n_rattlers']} ({report['n_rattling_clusters']} rattling clusters: "
+                              f"{report['n_clusters_removed']} removed whole, {report['n_danglers']} danglers "
+                              f"with {report['free_dofs']} free motions)"),
                  ("isostatic", f"{str(report['isostatic']).lower()}  (N_c = {report['n_contacts']}, "
-                               f"sum f_c - d + 1{' + d(d+1)/2 - 1' if stabilized else ''} = "
+                               f"sum (f_c - m_c) - d + 1{' + d(d+1)/2 - 1' if stabilized else ''} = "
                                f"{report['isostatic_count']}: {report['rigidity_counting']})")]
+        if "psi6_local_mean" in report:
+            rows.append(("hexatic order |psi6|", f"local mean {report['psi6_local_mean']:.4f}, global "
+                                                 f"{report['psi6_global']:.4f}, crystal-like fraction "
+                                                 f"{report['crystal_fraction']:.4f} (sphere centres)"))
         if "n_dimers" in report:
             rows += [("dimers", f"{report['n_dimers']} ({report['n_rotators']} rotators, "
                                 f"{report['n_rattling_dimers']} rattling)"),

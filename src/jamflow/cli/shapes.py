@@ -65,14 +65,19 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p = add_command(sub, "modes", _modes,
                     "dynamical-matrix spectrum of a shape packing: regions 0-3, quartic modes N_1 and their "
-                    "fourth derivatives, and the check N_c = N_c^0 - N_1 (VanderWerf et al. Sec. III B)",
+                    "fourth derivatives, and the check N_c = N_c^0 - N_1 (VanderWerf et al. Sec. III B); of a "
+                    "linked packing: constrained-Hessian eigenvalues and eigenvectors with the zero modes named "
+                    "(chains paper Sec. IV A)",
                     reads=("input",), writes=("out",))
-    p.add_argument("input", help="input netCDF shape packing at force balance (soft-jam)")
+    p.add_argument("input", help="input netCDF shape or linked packing at force balance (soft-jam)")
     p.add_argument("out", help="output netCDF spectrum (dim mode)")
     p.add_argument("--lambda-c", type=float, default=None,
                    help="cutoff between regions 1 and 2 [k]; default: the widest gap of log(lambda) in the "
                         "lower half of the nonzero spectrum that spans a decade and starts at most "
                         "1e3 P (region 1 empty without one)")
+    p.add_argument("--strain", choices=["auto", "yes", "no"], default="auto",
+                   help="linked packings: include the strain at fixed volume (default auto: when the packing is "
+                        "shear-stabilised; a fixed-box packing is not in equilibrium in the strain)")
     add_quiet(p)
 
 
@@ -134,8 +139,14 @@ def _modes(args: argparse.Namespace) -> int:
     from ..shapes.spectrum import SPECTRUM_FORCE_RATIO, quartic_check, spectrum
 
     packing = read_packing(args.input, None)
+    if packing.links is not None and len(packing.links) and packing.shapes is None:
+        from .chains import linked_modes_command
+
+        return linked_modes_command(args, packing)
     if packing.shapes is None:
         raise ValueError(f"{args.input}: not a shape packing (modes needs shapes and orientations)")
+    if args.strain != "auto":
+        raise ValueError("--strain is for linked packings; shape packings have no strain degrees of freedom here")
     spec = spectrum(packing, args.lambda_c)
     if not spec.balanced:
         print(f"jamflow modes: warning: {args.input}: largest generalised force {spec.max_force:.3g} exceeds "

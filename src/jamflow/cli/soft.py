@@ -57,7 +57,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--exponent", type=float, default=2.0, help="potential exponent w (2 harmonic, 2.5 Hertz)")
     p.add_argument("--box-dof", choices=["isotropic", "full"], default="isotropic",
                    help="final enthalpy minimisation over an isotropic box scale (default) or the whole box "
-                        "(stress tensor -P0 1, the box may tilt)")
+                        "(stress tensor -P0 1, the box may tilt); linked packings: full adds an enthalpy "
+                        "minimisation with the whole box free after the shear-stabilised bisection")
     p.add_argument("--max-steps", type=int, default=20_000_000, help="FIRE step budget of the whole protocol")
     p.add_argument("--shear-stabilize", action="store_true",
                    help="strain degrees of freedom at fixed volume in every minimisation (chains paper Sec. II D): "
@@ -133,9 +134,6 @@ def _soft_jam_linked(args: argparse.Namespace, packing: Packing) -> int:
     if args.seed is not None:
         raise ValueError("--seed draws random sphere centres, which would tear the links: start linked packings "
                          "from jamflow init-chains with its own --seed")
-    if args.box_dof != "isotropic":
-        raise ValueError("--box-dof full is for spheres without --shear-stabilize; linked packings are jammed in a "
-                         "fixed-shape box or with --shear-stabilize")
     bar = tqdm(desc="soft-jam", unit=" bisection", disable=args.quiet)
 
     def progress(info: dict) -> None:
@@ -147,7 +145,8 @@ def _soft_jam_linked(args: argparse.Namespace, packing: Packing) -> int:
         raise ValueError("--jam-protocol energy needs --energy-tol (energy per sphere at which it stops)")
     if energy and args.pressure is not None:
         raise ValueError("--pressure is the bisection's target; --jam-protocol energy stops at --energy-tol instead")
-    settings = JammingSettings(args.force_tol, args.pressure_rtol, args.delta_phi, max_steps=args.max_steps)
+    settings = JammingSettings(args.force_tol, args.pressure_rtol, args.delta_phi, max_steps=args.max_steps,
+                               box_dof=args.box_dof)
     result = jam_linked(packing, args.pressure, PowerLawPotential(exponent=args.exponent), settings, progress,
                         args.shear_stabilize, args.jam_protocol, args.energy_tol)
     bar.close()
@@ -164,11 +163,14 @@ def _soft_jam_linked(args: argparse.Namespace, packing: Packing) -> int:
         ("pressure", f"{out.pressure:.6g} ("
                      + (f"energy per sphere {a['energy'] / out.n:.3g} <= {args.energy_tol:g}" if energy
                         else f"target {args.pressure:g}") + ") epsilon / mean diameter^d"),
-        ("shear-stabilised", f"{'yes' if args.shear_stabilize else 'no'} (max |sigma_ab - P delta_ab| / P = {stress:.3g})"),
+        ("shear-stabilised", ("at fixed pressure, the whole box free (enthalpy)" if args.box_dof == "full" else
+                              "at fixed volume" if args.shear_stabilize else "no")
+         + f" (max |sigma_ab - P delta_ab| / P = {stress:.3g})"),
         ("links", f"{len(out.links)} (max relative length error {a['max_link_error']:.3g})"),
         ("contacts N_c (backbone)", f"{a['n_contacts']} (cluster isostatic count {a['isostatic_count']}, "
                                     f"excess {a['n_contacts'] - a['isostatic_count']})"),
-        ("rattlers", f"{a['n_rattlers']} ({a['n_rattling_clusters']} rattling clusters, {a['n_danglers']} danglers)"),
+        ("rattlers", f"{a['n_rattlers']} ({a['n_rattling_clusters']} rattling clusters: {a['n_clusters_removed']} "
+                     f"removed whole, {a['n_danglers']} danglers with {a['free_dofs']} free motions)"),
         ("max |P F|", f"{a['max_force_sq'] ** 0.5:.3g} epsilon / mean diameter"),
         ("FIRE steps", result.steps),
     ])

@@ -72,6 +72,8 @@ DATASET_KINDS: dict[str, tuple[frozenset[str], str]] = {
                      "phi_J and <z> against asphericity (jamflow shape-survey)"),
     "modes": (frozenset({"eigenvalue", "region", "rotational_weight"}),
               "a dynamical-matrix spectrum of a shape packing (jamflow modes)"),
+    "linked-modes": (frozenset({"eigenvalue", "mode_label", "mode_displacement"}),
+                     "normal modes of a linked packing (jamflow modes on links)"),
     "tradeoff": (frozenset({"time", "on_front", "is_reference"}), "a speed/accuracy sweep (jamflow tradeoff)"),
     "checkpoint": (frozenset({"x", "h", "radius", "nl_pairs"}), "a flow checkpoint (--checkpoint)"),
     "snapshots": (frozenset({"snapshot_position", "snapshot_box"}), "flow snapshots (--snapshots)"),

@@ -10,10 +10,14 @@ this package (``docs/network.md``):
   vectors), :func:`link_jacobian`, :func:`strain_basis`;
 - :mod:`.counting`: :func:`prune_rattlers`, :func:`find_sliders`,
   :func:`isostatic_count`, :func:`rigidity_counting`;
+- :mod:`.bodies`: :func:`count_bodies` (free motions, rattling clusters, danglers and the
+  isostatic count of clusters of linked spheres, by rank; spheres reduce to
+  :func:`prune_rattlers`), :class:`BodyCount`, :func:`body_isostatic_count`;
 - :mod:`.self_stress`: :func:`self_stresses`, :func:`positive_self_stress`,
   :func:`jacobian_rank`, :func:`rigid_network` and :func:`strain_motion` (Roth-Whiteley).
 """
 
+from .bodies import BodyCount, body_isostatic_count, count_bodies
 from .contacts import ContactSet, sphere_contacts
 from .counting import find_sliders, isostatic_count, prune_rattlers, rigidity_counting
 from .jacobian import contact_jacobian, link_jacobian, n_strain, pair_rows, strain_basis
@@ -27,9 +31,12 @@ from .self_stress import (
 )
 
 __all__ = [
+    "BodyCount",
     "ContactSet",
     "RigidNetwork",
+    "body_isostatic_count",
     "contact_jacobian",
+    "count_bodies",
     "find_sliders",
     "isostatic_count",
     "jacobian_rank",

@@ -16,6 +16,11 @@ Spheres in a periodic box: ``d (N_s - 1) + 1`` (2D: ``2 N_s - 1``); spheres
 between walls: ``d N_s + 1``; rotating 2D bodies: ``3 N_s - 1`` (van der Werf et
 al., Fig. 3 and Eq. 3). Contacts are counted once per pair. An empty backbone has
 count 0.
+
+Clusters of linked spheres (bodies with a motion space of their own, free motions
+and rattling clusters decided by rank; chains paper Sec. II F) are counted by
+:func:`jamflow.network.bodies.count_bodies`, whose module docstring states that
+convention; for free spheres it is :func:`prune_rattlers` and this count.
 """
 
 from __future__ import annotations
