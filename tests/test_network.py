@@ -211,6 +211,28 @@ def test_slider_is_the_body_whose_normals_leave_one_translation_free() -> None:
     assert not find_sliders(contact_jacobian(tilted, 4), tilted, 4, 2)[0]
 
 
+@pytest.mark.parametrize("tilt, slides", [(1e-12, True), (1e-8, True), (1e-4, False)])
+def test_slider_by_rank_within_the_zero_mode_floor(tilt, slides) -> None:
+    """A normal tilted by ``tilt`` leaves the slide a stiffness ``~ k tilt^2``: below the
+    spectrum's zero-mode floor (~1e-12 k, SLIDER_RTOL = 1e-6 on the singular values) the
+    body slides; a numerically exact rank test (rtol 1e-10) missed tilts of 1e-8. The
+    lever arms give the rotation column; with them the body's own block has rank 2 and its
+    kernel is the slide (no rotation), whatever the arms."""
+    from jamflow.tolerances import SLIDER_RTOL
+
+    normal = np.array([[np.sin(tilt), np.cos(tilt)], [0.0, 1.0], [0.0, -1.0]])
+    arm = np.array([[0.3, 0.2], [-0.4, 0.2], [0.1, -0.2]])
+    sep = np.array([[0.0, 1.0], [0.0, 1.0], [0.0, -1.0]])
+    cs = ContactSet([0, 0, 0], [1, 2, 3], normal, sep, arm, arm - sep)
+    J = contact_jacobian(cs, 4, 2, rotations=True)
+    assert find_sliders(J, cs, 4, 2)[0] == slides
+    s = np.linalg.svd(normal, compute_uv=False)
+    assert (s[-1] <= SLIDER_RTOL * s[0]) == slides
+    # a body with fewer contacts than d keeps a free translation by construction
+    one = ContactSet([0], [1], normal[1:2], sep[1:2], arm[1:2], arm[1:2] - sep[1:2])
+    assert find_sliders(contact_jacobian(one, 2, 2, rotations=True), one, 2, 2)[0]
+
+
 def test_isostatic_count_conventions() -> None:
     for d in (2, 3, 4):
         for n in (1, 2, 17):

@@ -124,3 +124,13 @@ ENTANGLED_OVERLAP: float = 0.1
 #: P0 = 1e-4); the entangled 2D trimer packing of chains-fig2 had 800-2200 (contact forces
 #: balanced by link tensions, not by the pressure). 100 leaves a factor ten either side.
 ENTANGLED_FORCE_RATIO: float = 100.0
+
+#: Sliders (:func:`jamflow.network.find_sliders`): a body's translation ``t`` is free
+#: when the matrix of its contacts' unit normals has its smallest singular value
+#: ``sqrt(sum_c (n_c . t)^2)`` at most this fraction of the largest. The stiffness
+#: along ``t``, ``k sum_c (n_c . t)^2``, is then at most 1e-12 of the body's stiffest
+#: translation: the dynamical matrix's zero-mode floor (1e-13 of its largest
+#: eigenvalue, ~10 k) in the shapes' spectrum. Measured on 64 circulo-lines
+#: (A = 1.1, P0 = 1e-9, three seeds): 1e-17 ... 1e-16 for every sliding body, 0.28 and
+#: above for every other (docs/notes/shapes.md, "Sliders").
+SLIDER_RTOL: float = 1e-6
