@@ -174,6 +174,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.png", help="inputs, then the output figure")
     p.add_argument("--labels", nargs="+", default=None, help="legend label per input")
     p.add_argument("--slab-axis", type=int, default=2, help="packing, d >= 3: axis normal to the drawn slab (default 2)")
+    p.add_argument("--convention", choices=("paper", "once", "twice", "spectral"), default="paper",
+                   help="z-asphericity: contacts of <z> (Eq. 3): each family's paper definition (default; Fig. 8: "
+                        "N_c = N_c^0 - N_1 for circulo shapes, contacts for the rest), parallel circulo contacts "
+                        "once or twice (Fig. 6), or N_c^0 - N_1 for all")
     add_overlap_option(p)
     add_quiet(p)
 
@@ -363,7 +367,7 @@ def _plot(args: argparse.Namespace) -> int:
               "pareto": plots.pareto, "jamming-table": plots.plot_jamming_table,
               "chains-moduli": plots.plot_chains_moduli,
               "phi-asphericity": lambda ds: shape_figures.plot_survey(ds, "phi_J"),
-              "z-asphericity": lambda ds: shape_figures.plot_survey(ds, "z")}
+              "z-asphericity": lambda ds: shape_figures.plot_survey(ds, "z", args.convention)}
     labelled = {"gaps": plots.plot_gaps, "rdf": plots.plot_rdf, "stress-strain": plots.plot_stress_strain,
                 "eos": plots.plot_eos, "contact-angles": shape_figures.plot_contact_angles,
                 "spectra": shape_figures.plot_spectra}

@@ -57,11 +57,20 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "point, pooled over packings, contacts between non-rattlers", "jammed shape packings")
     p.add_argument("--bins", type=int, default=18, help="bins on [0, pi/2] (default 18, 5 degrees each)")
     add_quiet(p)
-    add_quiet(_pooled_command(sub, "shape-survey", _shape_survey,
-                              "phi_J and <z> (Eq. 3) against asphericity over jammed packings of shapes and disks "
-                              "(VanderWerf et al. Figs. 5, 8): one row per packing, mean and standard error per "
-                              "shape family and asphericity",
-                              "jammed 2D packings (shapes from soft-jam, or bidisperse disks)"))
+    p = add_command(sub, "shape-survey", _shape_survey,
+                    "phi_J and <z> against asphericity over jammed packings of shapes and disks (VanderWerf et al. "
+                    "Figs. 5, 6, 8): one row per packing with contacts counted once, twice and (--spectral) as "
+                    "N_c^0 - N_1, mean and standard error per shape family and asphericity",
+                    reads=("paths[:-1]",), writes=("paths[-1]",))
+    p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc",
+                   help="jammed 2D packings (shapes from soft-jam, or bidisperse disks), then the output")
+    p.add_argument("--spectral", action="store_true",
+                   help="also count contacts as N_c = N_c^0 - N_1 from each packing's dynamical-matrix spectrum "
+                        "(Fig. 8's definition for circulo shapes; one dense eigensolve of 3N x 3N per packing)")
+    p.add_argument("--lambda-c", type=float, default=None,
+                   help="with --spectral: cutoff between regions 1 and 2 [k] (default: the widest admissible gap, "
+                        "as jamflow modes)")
+    add_quiet(p)
 
     p = add_command(sub, "modes", _modes,
                     "dynamical-matrix spectrum of a shape packing: regions 0-3, quartic modes N_1 and their "
@@ -111,31 +120,51 @@ def _contact_angles(args: argparse.Namespace) -> int:
 
 
 def _shape_survey(args: argparse.Namespace) -> int:
-    from ..shapes.survey import survey_dataset, survey_row
+    from ..shapes.survey import CONVENTIONS, check_jammed, survey_dataset, survey_row
 
     inputs, out = args.paths[:-1], args.paths[-1]
     if not inputs:
         raise ValueError("shape-survey needs at least one input packing before the output")
-    rows = [survey_row(read_packing(p, None), args.parallel_contacts) for p in inputs]
+    if args.lambda_c is not None and not args.spectral:
+        raise ValueError("--lambda-c sets the spectral count: give --spectral with it")
+    packings = [read_packing(p, None) for p in inputs]
+    for path, packing in zip(inputs, packings, strict=True):
+        check_jammed(packing, path)
+    rows = [survey_row(p, args.spectral, args.lambda_c, path) for path, p in zip(inputs, packings, strict=True)]
+    for path, row in zip(inputs, rows, strict=True):
+        if not row["jammed"]:
+            print(f"jamflow shape-survey: warning: {path}: {row['status']}; left out of the means", file=sys.stderr)
     ds = survey_dataset(rows, inputs)
     ds.attrs.update(new_dataset_attrs("jamflow phi_J and <z> against asphericity",
-                                      stage_parameters(args, "paths"), n_packings=len(rows)))
+                                      stage_parameters(args, "paths"), n_packings=len(rows),
+                                      spectral=int(args.spectral)))
     write_dataset(ds, out)
-    print_summary(args, out, [
-        (f"{f} A-1={a - 1:.3g}", f"phi_J {pm:.5f} ± {ps:.5f}, <z> {zm:.4f} ± {zs:.4f} ({n} packings, N = {nn})")
-        for f, a, pm, ps, zm, zs, n, nn in zip(ds.group_family.values, ds.group_asphericity.values,
-                                               ds.phi_J_mean.values, ds.phi_J_sem.values, ds.z_mean.values,
-                                               ds.z_sem.values, ds.n_packings.values, ds.group_N.values, strict=True)
-    ])
+    shown = [k for k, c in enumerate(CONVENTIONS) if args.spectral or c != "spectral"]
+    rows_out = []
+    for g in range(ds.sizes["group"]):
+        z = ds.z_eq3_mean.values[g]
+        zs = ds.z_eq3_sem.values[g]
+        zc = ds.z_contacts_mean.values[g]
+        head = f"{ds.group_family.values[g]} A-1={ds.group_asphericity.values[g] - 1:.3g}"
+        rows_out.append((head, f"phi_J {ds.phi_J_mean.values[g]:.5f} ± {ds.phi_J_sem.values[g]:.5f} "
+                               f"({ds.n_packings.values[g]} jammed, {ds.n_excluded.values[g]} left out, "
+                               f"N = {ds.group_N.values[g]})"))
+        rows_out.append(("  <z> Eq. 3 " + "/".join(CONVENTIONS[k] for k in shown),
+                         " / ".join(f"{z[k]:.4f} ± {zs[k]:.4f}" for k in shown)))
+        rows_out.append(("  z = 2 N_c / N' " + "/".join(CONVENTIONS[k] for k in shown),
+                         " / ".join(f"{zc[k]:.4f}" for k in shown)))
+    print_summary(args, out, rows_out)
     return 0
 
 
 def _modes(args: argparse.Namespace) -> int:
     from ..shapes.spectrum import SPECTRUM_FORCE_RATIO, quartic_check, spectrum
+    from ..shapes.survey import check_jammed, packing_asphericity, shape_label
 
     packing = read_packing(args.input, None)
     if packing.shapes is None:
         raise ValueError(f"{args.input}: not a shape packing (modes needs shapes and orientations)")
+    check_jammed(packing, args.input)
     spec = spectrum(packing, args.lambda_c)
     if not spec.balanced:
         print(f"jamflow modes: warning: {args.input}: largest generalised force {spec.max_force:.3g} exceeds "
@@ -156,7 +185,8 @@ def _modes(args: argparse.Namespace) -> int:
                                    "comment": "k, s the amplitude along the unit eigenvector"}),
         },
         attrs=new_dataset_attrs("jamflow shape-packing spectrum", stage_parameters(args, "input", "out"),
-                                N=packing.n, n_quartic=spec.n_quartic, n_zero=spec.n_zero, lambda_c=spec.lambda_c,
+                                N=packing.n, family=shape_label(packing), asphericity=packing_asphericity(packing),
+                                n_quartic=spec.n_quartic, n_zero=spec.n_zero, lambda_c=spec.lambda_c,
                                 lambda_0=spec.lambda_0, pressure=float(packing.pressure or np.nan),
                                 max_generalized_force=spec.max_force, force_balanced_for_spectrum=int(spec.balanced),
                                 n_nonpositive_fourth_derivative=int(np.sum(spec.fourth_derivative[spec.region == 1] <= 0.0)),
@@ -171,15 +201,18 @@ def _modes(args: argparse.Namespace) -> int:
               file=sys.stderr)
     if np.any(np.isnan(d4)):
         print(f"jamflow modes: warning: {args.input}: {int(np.sum(np.isnan(d4)))} region-1 mode(s) without a fourth "
-              "derivative (NaN): the contact network changes on both sides within the step, so no second "
-              "difference of v^T M v is smooth", file=sys.stderr)
+              "derivative (NaN): no second difference of v^T M v that keeps the contact network agrees between "
+              "two steps", file=sys.stderr)
     print_summary(args, args.out, [
         ("N, modes", f"{packing.n}, {spec.eigenvalue.size}"),
         ("zero modes (region 0)", f"{spec.n_zero} (|lambda| <= {spec.lambda_0:.3g})"),
         ("quartic modes N_1 (region 1)", f"{spec.n_quartic} (lambda < lambda_c = {spec.lambda_c:.4g})"),
         ("regions 2, 3", f"{int(np.sum(spec.region == 2))}, {int(np.sum(spec.region == 3))}"),
         ("N_c once, twice", f"{check['n_contacts_once']}, {check['n_contacts_twice']}"),
-        ("N_c^0 - N_1", f"{check['isostatic_minus_quartic']} (N_c^0 = {check['isostatic_count']})"),
+        ("rattlers, sliders (twice)", f"{check['n_rattlers']}, {check['n_sliders']}"),
+        ("N_c^0 - N_1", f"{check['isostatic_minus_quartic']} (N_c^0 = {check['isostatic_count']}; N_c twice "
+                        + ("equals it)" if check["isostatic_minus_quartic"] == check["n_contacts_twice"] else
+                           f"differs by {check['n_contacts_twice'] - check['isostatic_minus_quartic']:+d})")),
         ("d^4U/ds^4 on region 1", "none" if not d4.size else f"{d4.min():.4g} .. {d4.max():.4g}"),
     ])
     return 0

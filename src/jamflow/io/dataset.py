@@ -68,7 +68,7 @@ DATASET_KINDS: dict[str, tuple[frozenset[str], str]] = {
     "chains-moduli-table": (frozenset({"bulk_weighted", "shear_weighted", "n_packings"}),
                             "moduli of cemented packings against n_l / N (jamflow chains-moduli)"),
     "contact-angles": (frozenset({"P_psi", "psi"}), "a contact-angle distribution P(psi) (jamflow contact-angles)"),
-    "shape-survey": (frozenset({"phi_J_mean", "z_mean", "group_asphericity"}),
+    "shape-survey": (frozenset({"phi_J_mean", "z_eq3_mean", "group_asphericity"}),
                      "phi_J and <z> against asphericity (jamflow shape-survey)"),
     "modes": (frozenset({"eigenvalue", "region", "rotational_weight"}),
               "a dynamical-matrix spectrum of a shape packing (jamflow modes)"),
