@@ -43,6 +43,8 @@ PLOT_KINDS: dict[str, str] = {
     "spectra": "one or more `jamflow modes` outputs (sorted eigenvalues, VanderWerf et al. Fig. 7)",
     "quartic-pressure": "`jamflow modes` outputs at several P0 (region-1 eigenvalues and fourth derivatives, "
                         "VanderWerf et al. Figs. 10-11)",
+    "feasible-region": "one `jamflow feasible-region` output (the caged circulo-line, its feasible region and "
+                       "their volume and surface against dR, VanderWerf et al. Figs. 12-13)",
 }
 #: the dataset kinds (jamflow.io.DATASET_KINDS) each figure kind reads
 PLOT_INPUT_KINDS: dict[str, tuple[str, ...]] = {
@@ -64,6 +66,7 @@ PLOT_INPUT_KINDS: dict[str, tuple[str, ...]] = {
     "contact-angles": ("contact-angles",),
     "spectra": ("modes",),
     "quartic-pressure": ("modes",),
+    "feasible-region": ("feasible-region",),
 }
 
 
@@ -367,7 +370,8 @@ def _plot(args: argparse.Namespace) -> int:
               "pareto": plots.pareto, "jamming-table": plots.plot_jamming_table,
               "chains-moduli": plots.plot_chains_moduli,
               "phi-asphericity": lambda ds: shape_figures.plot_survey(ds, "phi_J"),
-              "z-asphericity": lambda ds: shape_figures.plot_survey(ds, "z", args.convention)}
+              "z-asphericity": lambda ds: shape_figures.plot_survey(ds, "z", args.convention),
+              "feasible-region": shape_figures.plot_feasible_region}
     labelled = {"gaps": plots.plot_gaps, "rdf": plots.plot_rdf, "stress-strain": plots.plot_stress_strain,
                 "eos": plots.plot_eos, "contact-angles": shape_figures.plot_contact_angles,
                 "spectra": shape_figures.plot_spectra}

@@ -41,6 +41,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="length over width (ellipse a/b; circulo-line (l + 2R)/2R; dumbbell (2|v| + 2R)/2R)")
     p.add_argument("--asphericity", type=float, default=None,
                    help="target asphericity A = p^2 / (4 pi a) > 1 (met exactly by bisection on the shape parameter)")
+    p.add_argument("--shaft-length", type=float, default=None,
+                   help="dumbbell: the paper's shaft length X, the lobe-centre distance in lobe radii (Fig. 4: 2.4 "
+                        "isostatic, 4 hypostatic; Table I's alpha - 1, X = 2 gives A - 1 = 0.514); the same as "
+                        "--aspect-ratio 1 + X/2")
     p.add_argument("--sides", type=int, default=None, help="circulo-polygon: number of sides n >= 3 (regular polygon)")
     p.add_argument("--random", action="store_true",
                    help="circulo-polygon: a random polygon per body at --asphericity (VanderWerf et al. App. B, "
@@ -70,6 +74,27 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--lambda-c", type=float, default=None,
                    help="with --spectral: cutoff between regions 1 and 2 [k] (default: the widest admissible gap, "
                         "as jamflow modes)")
+    add_quiet(p)
+
+    p = add_command(sub, "constraint-curvature", _constraint_curvature,
+                    "principal curvatures of the contact constraints of circulo-line packings per contact type "
+                    "(VanderWerf et al. Sec. III C, Table II): mean and RMS deviation in units of the box side",
+                    reads=("paths[:-1]",), writes=("paths[-1]",))
+    p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc", help="jammed circulo-line packings, then the output")
+    add_quiet(p)
+
+    p = add_command(sub, "feasible-region", _feasible_region,
+                    "volume and surface of the feasible region of one circulo-line caged by three fixed points "
+                    "against the decrease of its radius (VanderWerf et al. Figs. 12-13)", writes=("out",))
+    p.add_argument("out", help="output netCDF (dim shrink)")
+    p.add_argument("--half-length", type=float, default=0.2,
+                   help="core half-length over the radius R (default 0.2: A - 1 = 0.013; three points hold lines "
+                        "up to about 0.25 R at --beta 45)")
+    p.add_argument("--beta", type=float, default=45.0, help="angle of the cap points below the axis [degree] (default 45)")
+    p.add_argument("--shrinks", type=float, nargs="+", default=[1e-7, 1e-6, 1e-5, 1e-4, 1e-3],
+                   help="radius decreases dR / R (default 1e-7 ... 1e-3)")
+    p.add_argument("--samples", type=int, default=400_000, help="Monte Carlo samples per dR (default 400000)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the Monte Carlo samples (default 0)")
     add_quiet(p)
 
     p = add_command(sub, "modes", _modes,
@@ -157,6 +182,49 @@ def _shape_survey(args: argparse.Namespace) -> int:
     return 0
 
 
+def _constraint_curvature(args: argparse.Namespace) -> int:
+    from ..shapes.curvature import curvature_dataset
+
+    inputs, out = args.paths[:-1], args.paths[-1]
+    if not inputs:
+        raise ValueError("constraint-curvature needs at least one input packing before the output")
+    ds = curvature_dataset([read_packing(p, None) for p in inputs], inputs)
+    ds.attrs.update(new_dataset_attrs("jamflow constraint curvatures", stage_parameters(args, "paths")))
+    write_dataset(ds, out)
+    print_summary(args, out, [
+        (str(ds.contact_type.values[c]), f"kappa_1 {ds.kappa1_mean.values[c]:+.4g} ± {ds.kappa1_rms.values[c]:.2g}, "
+                                         f"kappa_2 {ds.kappa2_mean.values[c]:+.4g} ± {ds.kappa2_rms.values[c]:.2g} "
+                                         f"[1/L] ({int(ds.n_contacts.values[:, c].sum())} rows)")
+        for c in range(ds.sizes["contact_type"])
+    ] + [("packings, N, A", f"{ds.attrs['n_packings']}, {ds.attrs['N']}, {ds.attrs['asphericity']:.6g}")])
+    return 0
+
+
+def _feasible_region(args: argparse.Namespace) -> int:
+    from ..shapes.feasible import cage_stability, feasible_scaling
+
+    if args.samples < 1000:
+        raise ValueError(f"--samples must be at least 1000, got {args.samples}")
+    beta = np.radians(args.beta)
+    stability = cage_stability(args.half_length, beta)
+    if not stability < 0.0:
+        raise ValueError(f"three points do not hold a line of half-length {args.half_length} R at beta = {args.beta} "
+                         f"degrees (stress-weighted gap curvature along the free rotation {stability:+.3g} >= 0): "
+                         "its feasible region is unbounded; shorten the line or change --beta")
+    ds = feasible_scaling(np.array(args.shrinks), args.half_length, beta, args.samples, args.seed)
+    ds.attrs.update(new_dataset_attrs("jamflow feasible region", stage_parameters(args, "out"),
+                                      cage_stability=stability))
+    write_dataset(ds, args.out)
+    print_summary(args, args.out, [
+        (f"dR / R = {d:.1e}", f"V {v:.4g} ± {ve:.1g}, S {s_:.4g} ± {se:.1g}")
+        for d, v, ve, s_, se in zip(ds.shrink.values, ds.volume.values, ds.volume_err.values, ds.surface.values,
+                                    ds.surface_err.values, strict=True)
+    ] + [("exponents V, S", f"{ds.attrs['volume_exponent']:.4f}, {ds.attrs['surface_exponent']:.4f} "
+                            "(expected 5/2, 3/2)"),
+         ("stress-weighted curvature along the free rotation", f"{stability:+.4g} (< 0: held at quartic order)")])
+    return 0
+
+
 def _modes(args: argparse.Namespace) -> int:
     from ..shapes.spectrum import SPECTRUM_FORCE_RATIO, quartic_check, spectrum
     from ..shapes.survey import check_jammed, packing_asphericity, shape_label
@@ -225,7 +293,8 @@ def _init_shapes(args: argparse.Namespace) -> int:
             raise ValueError("--random needs --shape circulo-polygon with --sides and --asphericity (no --aspect-ratio)")
         table = random_polygon_shapes(args.n, args.sides, args.asphericity, args.seed)
     else:
-        table = bidisperse_shapes(unit_shape(args.shape, args.aspect_ratio, args.asphericity, args.sides))
+        table = bidisperse_shapes(unit_shape(args.shape, args.aspect_ratio, args.asphericity, args.sides,
+                                             args.shaft_length))
     packing = random_shape_packing(table, args.n, args.phi, args.seed)
     params = stage_parameters(args, "out")
     packing = packing.evolve(parameters=params)

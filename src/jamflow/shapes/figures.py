@@ -16,7 +16,8 @@ from matplotlib.ticker import NullFormatter
 
 from .survey import DISK_FAMILY
 
-__all__ = ["Z_CONVENTIONS", "plot_contact_angles", "plot_quartic_pressure", "plot_spectra", "plot_survey"]
+__all__ = ["Z_CONVENTIONS", "plot_contact_angles", "plot_feasible_region", "plot_quartic_pressure", "plot_spectra",
+           "plot_survey"]
 
 _DL = "(dimensionless)"
 _MARKERS = {"ellipse": "o", "circulo_line": "s", "reuleaux": "^", "circulo_polygon_3": "v",
@@ -191,4 +192,49 @@ def plot_quartic_pressure(datasets: Sequence[xr.Dataset]) -> Figure:
     right.set_title(f"{negative} non-positive, {unresolved} unresolved (NaN)", fontsize=8)
     n = sorted({int(ds.attrs["N"]) for ds in datasets})
     fig.suptitle(f"quartic modes, N = {', '.join(map(str, n))}, {len(datasets)} packings", fontsize=9)
+    return fig
+
+
+def plot_feasible_region(ds: xr.Dataset) -> Figure:
+    """Figs. 12-13 of one ``jamflow feasible-region`` output: the caged circulo-line (12b), its
+    feasible region at the smallest ``dR`` projected on the quartic and the softer stiff
+    eigen-direction (12a), and volume and surface against ``dR / R`` with the fitted
+    exponents and slope-5/2 and 3/2 guides (13)."""
+    fig = Figure(layout="constrained", figsize=(13.0, 4.2))
+    cage, region, scaling = fig.subplots(1, 3)
+    a = ds.attrs
+    half, pts = float(a["half_length"]), ds["points"].values
+    t = np.linspace(0.0, 2.0 * np.pi, 256)
+    outline = np.concatenate([np.column_stack([half + np.cos(t[:128] - 0.5 * np.pi), np.sin(t[:128] - 0.5 * np.pi)]),
+                              np.column_stack([-half + np.cos(t[:128] + 0.5 * np.pi), np.sin(t[:128] + 0.5 * np.pi)])])
+    cage.fill(*outline.T, color="tab:blue", alpha=0.3)
+    cage.plot([-half, half], [0.0, 0.0], "k-", lw=1.0)
+    cage.plot(pts[0, 0], pts[0, 1], "o", mfc="white", mec="k", ms=8, label="shaft contact (convex)")
+    cage.plot(pts[1:, 0], pts[1:, 1], "ko", ms=8, label="end-cap contacts (concave)")
+    cage.set_aspect("equal")
+    cage.set_xlabel("x / R (dimensionless)")
+    cage.set_ylabel("y / R (dimensionless)")
+    cage.set_title(f"Fig. 12b: half-length {half:g} R, cap points {np.degrees(float(a['beta'])):.0f} deg below", fontsize=8)
+    cage.legend(fontsize=7, loc="lower center")
+    u = ds["feasible_sample"].values
+    region.plot(u[:, 2], u[:, 1], ",", color="tab:blue", alpha=0.5)
+    region.ticklabel_format(style="sci", scilimits=(-2, 2))
+    region.set_xlabel("quartic eigen-direction lambda_3 (x / R, y / R, theta [rad]) (dimensionless)")
+    region.set_ylabel("stiff eigen-direction lambda_2 (dimensionless)")
+    region.set_title(f"Fig. 12a: feasible configurations at dR / R = {float(ds.shrink.values[0]):.0e} "
+                     f"({u.shape[0]} samples)", fontsize=8)
+    dr = ds["shrink"].values
+    for name, marker, slope, key in (("volume", "s", 2.5, "volume_exponent"), ("surface", "o", 1.5, "surface_exponent")):
+        y = ds[name].values
+        scaling.errorbar(dr, y, yerr=ds[f"{name}_err"].values, fmt=marker, capsize=2,
+                         label=f"{name} V (fit exponent {a[key]:.3f})" if name == "volume" else
+                         f"{name} S (fit exponent {a[key]:.3f})")
+        scaling.plot(dr, y[0] * (dr / dr[0]) ** slope, "k--" if slope == 2.5 else "k:", lw=0.8,
+                     label=f"slope {slope:g}")
+    scaling.set_xscale("log")
+    scaling.set_yscale("log")
+    scaling.set_xlabel("radius decrease dR / R (dimensionless)")
+    scaling.set_ylabel("volume, surface of the feasible region (dimensionless)")
+    scaling.set_title(f"Fig. 13: Monte Carlo, {a['samples']} samples per point", fontsize=8)
+    scaling.legend(fontsize=7)
     return fig
