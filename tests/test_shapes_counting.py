@@ -4,7 +4,8 @@ Physics checked: the contact Jacobian rows built from the shape contacts are the
 gradients of the gaps (pair force = -k delta J_row); a parallel contact counts once
 or twice as asked, also exactly aligned; a periodic stack of parallel circulo-lines is
 all sliders when parallel contacts count twice (one free translation each: along the
-axis) and all rattlers when they count once; one short line in a brick wall is the one
+axis), also when they count once (two antiparallel contacts pinch a line: a slider, not a
+rattler); one short line in a brick wall is the one
 slider, and the dynamical matrix's one extra zero mode is its slide; Eq. 3 and the
 3N - 1 - N_s count.
 """
@@ -96,8 +97,10 @@ def test_stack_of_parallel_lines_is_all_sliders_when_counted_twice():
     assert c.isostatic_count == 3 * n - 1 - n
     assert c.z_eq3 == pytest.approx(2.0 * (2 * n + 1) / (n - n / 3.0), rel=1e-15)
     assert c.z_contacts == pytest.approx(2.0 * 2 * n / n, rel=1e-15)
+    # counted once, each line has one contact above and one below, antiparallel: pinched, held
+    # along y and free along its axis, a slider (not a rattler)
     once, rattler, slider, _ = count_constraints(_stack(n), "once")
-    assert once.n_rattlers == n and once.n_contacts == 0 and not slider.any()
+    assert once.n_rattlers == 0 and once.n_contacts == n and once.n_sliders == n and slider.all()
 
 
 def _brick(slider_row: int | None = 2, overlap: float = 1e-8) -> Packing:

@@ -279,3 +279,23 @@ def test_fourth_derivative_along_picks_the_smooth_side(left, right, expected):
         assert np.isnan(d4)
     else:
         assert d4 == pytest.approx(expected, rel=1e-6)
+
+@pytest.mark.parametrize("name", ["shapes_ellipse_alpha1.001_n16_p1e-7.nc"])
+def test_fourth_derivatives_of_near_disk_quartic_modes_are_finite_positive_and_step_independent(name):
+    """Near disks the quartic modes are rotations with d^4U/ds^4 ~ k (alpha - 1)^2 (1e-6 here):
+    a second difference with f(0) taken as the eigenvalue, or at the step that merely opens no
+    contact, drowns in round-off (~eps ||M|| / h^2; the former code gave NaN for most modes).
+    Every region-1 mode gets a finite positive value, the same to 1e-3 when the first step is
+    4 times larger."""
+    from jamflow.shapes.spectrum import contact_signature, fourth_derivative_step
+
+    p = read_packing(Path(__file__).parent / "data" / name, None)
+    spec = spectrum(p)
+    d4 = spec.fourth_derivative[spec.region == 1]
+    assert spec.n_quartic >= 10 and np.all(np.isfinite(d4)) and np.all(d4 > 0.0)
+    model, q = shape_model_of(p)
+    lam, vec = np.linalg.eigh(model.hessian(q).toarray())
+    h = fourth_derivative_step(float(np.sqrt(2.0 * model.pair_table(q)["energy"].min())))
+    for k in np.flatnonzero(spec.region == 1):
+        wide = fourth_derivative_along(model, q, vec[:, k], 4.0 * h, lambda x: contact_signature(model, x))
+        assert wide == pytest.approx(spec.fourth_derivative[k], rel=1e-3)

@@ -1,4 +1,5 @@
-"""Counting on a contact network: rattlers by pruning, sliders by rank, the isostatic count.
+"""Counting on a contact network: rattlers by pruning (by count, or by what contacts hold), sliders by rank,
+the isostatic count.
 
 Isostatic count convention
 --------------------------
@@ -27,7 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..tolerances import SLIDER_RTOL
 from .contacts import ContactSet
 
-__all__ = ["find_sliders", "isostatic_count", "prune_rattlers", "rigidity_counting"]
+__all__ = ["find_sliders", "isostatic_count", "prune_rattlers", "prune_unheld", "rigidity_counting"]
 
 
 def _pairs(contacts: ContactSet | ArrayLike) -> NDArray[np.int64]:
@@ -100,6 +101,58 @@ def prune_rattlers(
         alive &= ~(rattler[pairs[:, 0]] | rattler[pairs[:, 1]])
 
 
+def prune_unheld(contacts: ContactSet, n_bodies: int, *, rtol: float = SLIDER_RTOL) -> NDArray[np.bool_]:
+    """Rattlers by what their contacts can hold: :func:`prune_rattlers`' rule (fewer than
+    ``d + 1`` contacts, removed repeatedly) except for a body *pinched* between two contacts
+    whose normals are antiparallel.
+
+    Two repulsive contacts balance a body only along one line: force balance needs
+    ``n_1 = -n_2``, and then the lines of action coincide (torque balance) in a balanced
+    packing. Such a body carries force and holds its two neighbours apart like a strut; it
+    is free only to slide across the line, one degree of freedom, which
+    :func:`find_sliders` finds (a slider, Eq. 3 of VanderWerf et al.: "a single
+    unconstrained translational degree of freedom"; a rattler has all its degrees of
+    freedom unconstrained). Counted as a rattler it would take its two contacts and all its
+    degrees of freedom: the same net constraint for rotating 2D bodies (3 against 2) but one
+    constraint too few for bodies that do not rotate (2 against 2, while the strut holds
+    one). Measured on non-rotating circulo-lines: every packing with a pinched body came out
+    hypostatic by exactly its number of pinched bodies with the contact-count rule, while its
+    dynamical matrix had no floppy mode (docs/notes/shapes.md).
+
+    Parameters
+    ----------
+    contacts : ContactSet
+        Every contact point of the bodies (normals needed).
+    n_bodies : int
+    rtol : float
+        Antiparallel within ``|n_1 + n_2| <= rtol`` (the rank test of :func:`find_sliders`).
+
+    Returns
+    -------
+    ndarray of bool, shape (n_bodies,)
+        True for rattlers.
+    """
+    pairs, normal = contacts.pairs, contacts.normal
+    d = normal.shape[1] if len(normal) else 2
+    rattler = np.zeros(n_bodies, dtype=bool)
+    while True:
+        alive = ~(rattler[pairs[:, 0]] | rattler[pairs[:, 1]])
+        z = np.bincount(pairs[alive].ravel(), minlength=n_bodies)
+        weak = np.flatnonzero((~rattler) & (z < d + 1))
+        new = []
+        for b in weak:
+            if z[b] == 2:
+                rows = np.flatnonzero(alive & ((pairs[:, 0] == b) | (pairs[:, 1] == b)))
+                # the normal pointing into b from each contact
+                into = np.where((pairs[rows, 1] == b)[:, None], normal[rows], -normal[rows])
+                if np.linalg.norm(into[0] + into[1]) <= rtol:
+                    continue
+            new.append(b)
+        if not new:
+            return rattler
+        rattler[new] = True
+
+
 def find_sliders(jacobian: sp.spmatrix, contacts: ContactSet | ArrayLike, n_bodies: int, d: int, *,
                  rattler: NDArray[np.bool_] | None = None, rtol: float = SLIDER_RTOL) -> NDArray[np.bool_]:
     """Sliders: backbone bodies whose contacts leave a translation free, found by rank.
@@ -116,14 +169,14 @@ def find_sliders(jacobian: sp.spmatrix, contacts: ContactSet | ArrayLike, n_bodi
     holds at quartic order -- a quartic mode of the dynamical matrix (region 1), not
     a slider and not a rattler.
 
-    Convention (VanderWerf et al. 2018, Eq. 3 and Fig. 3): rattlers, bodies with
-    fewer than ``d + 1 = 3`` contacts, are removed first (:func:`prune_rattlers`)
-    and take all their degrees of freedom and contacts with them; a slider keeps
-    its contacts and removes one degree of freedom, so the isostatic count of
-    rotating 2D bodies is ``N_c^0 = 3 N' - 1 - N_s`` (:func:`isostatic_count`) and
-    ``<z> = 2 (N_c + 1) / (N - N_r - N_s / 3)``; non-rotating bodies (Fig. 3a):
-    ``2 N' - 1 - N_s``. A 2D body with contacts keeps at most one free translation;
-    in ``d >= 3`` a flagged body may keep up to ``d - 1``.
+    Convention (VanderWerf et al. 2018, Eq. 3 and Fig. 3): rattlers, bodies with all
+    degrees of freedom unconstrained (fewer than ``d + 1 = 3`` contacts, except two
+    antiparallel ones, :func:`prune_unheld`), are removed first and take all their degrees
+    of freedom and contacts with them; a slider keeps its contacts and removes one degree
+    of freedom, so the isostatic count of rotating 2D bodies is ``N_c^0 = 3 N' - 1 - N_s``
+    (:func:`isostatic_count`) and ``<z> = 2 (N_c + 1) / (N - N_r - N_s / 3)``;
+    non-rotating bodies (Fig. 3a): ``2 N' - 1 - N_s``. A 2D body with contacts keeps at
+    most one free translation; in ``d >= 3`` a flagged body may keep up to ``d - 1``.
 
     Parameters
     ----------

@@ -12,16 +12,14 @@
   ``"twice"``, one per term; the arc-arc and vertex-arc terms exclude each other, so
   two terms in one pair need two vertices in one overlap, which jammed packings at
   small ``P0`` do not show).
-- **Rattlers** (free translation and rotation): bodies with fewer than three
-  contacts, removed repeatedly (:func:`jamflow.network.prune_rattlers` with two
-  translational degrees of freedom per body). Three contacts are the fewest that
+- **Rattlers** (every degree of freedom unconstrained, Eq. 3): bodies with fewer than
+  three contacts, removed repeatedly, except a body pinched between two antiparallel
+  contacts (:func:`jamflow.network.prune_unheld`). Three contacts are the fewest that
   balance a 2D force with repulsive normal forces; torque balance does not add a
   fourth, because hypostatic packings hold bodies with three contacts through
   quartic modes (their normals meet in a point), so the rotating-body rule
-  ``d + 2`` of isostatic counting would call stable bodies rattlers. A body pinched
-  between two contacts on one line (two force-bearing contacts, free to slide) is a
-  rattler by this rule: it takes three degrees of freedom and two contacts out of
-  the count, one net constraint, as a slider would.
+  ``d + 2`` of isostatic counting would call stable bodies rattlers. A pinched body
+  carries force along its line and slides across it: a slider.
 - **Sliders** (one free translation, Fig. 3): :func:`jamflow.network.find_sliders`,
   by rank: the normals of *every* contact point of the body (:func:`contact_points`:
   both end-middle terms of a parallel contact, whatever ``parallel`` says) leave a
@@ -52,7 +50,7 @@ from ..network import (
     contact_jacobian,
     find_sliders,
     isostatic_count,
-    prune_rattlers,
+    prune_unheld,
     rigidity_counting,
 )
 from ..state.packing import Packing
@@ -268,7 +266,7 @@ def count_constraints(packing: Packing, parallel: str = "once") -> tuple[ShapeCo
     cs = shape_contacts(model, q, parallel)
     n = packing.n
     f = dofs_per_body(packing)
-    rattler = prune_rattlers(cs, n, dofs_per_body=2)
+    rattler = prune_unheld(cs, n)
     points = contact_points(model, q)
     slider = find_sliders(contact_jacobian(points, n, 2), points, n, 2, rattler=rattler)
     live = ~(rattler[cs.i] | rattler[cs.j])

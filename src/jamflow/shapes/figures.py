@@ -184,7 +184,11 @@ def plot_quartic_pressure(datasets: Sequence[xr.Dataset]) -> Figure:
         ax.set_xlabel("pressure P0 [k]")
     left.set_yscale("log")
     magnitude = np.abs(np.array(fourth))
-    right.set_yscale("symlog", linthresh=0.1 * float(magnitude[magnitude > 0].min()) if np.any(magnitude > 0) else 1.0)
+    if np.any(magnitude > 0):
+        # symmetric about 0, so that a negative fourth derivative would sit as far below as a positive one above
+        top = 3.0 * float(magnitude.max())
+        right.set_yscale("symlog", linthresh=0.3 * float(magnitude[magnitude > 0].min()), linscale=1.0)
+        right.set_ylim(-top, top)
     right.axhline(0.0, color="grey", lw=0.8)
     left.set_ylabel("region-1 eigenvalue lambda [k]")
     right.set_ylabel("d^4 U / ds^4 along region-1 modes [k] (symmetric log)")
