@@ -291,7 +291,8 @@ def spectrum(packing: Packing, lambda_c: float | None = None, fourth: bool = Tru
             d4[k] = fourth_derivative_along(model, q, v, h, lambda x: contact_signature(model, x))
     return Spectrum(lam, region.astype(np.int64), rot, d4, lambda_0, float(lambda_c),
                     int(np.count_nonzero(region == 1)), int(np.count_nonzero(region == 0)), pressure,
-                    float(model.max_force(ev.gradient)))
+                    # frozen orientations carry unbalanced torques by design: only the forces count
+                    float(model.max_force(model.project(ev.gradient, q))))
 
 
 def quartic_check(packing: Packing, spec: Spectrum) -> dict:
