@@ -50,13 +50,18 @@ def _modes(rng, pressure: float) -> xr.Dataset:
     d4 = np.where(region == 1, rng.random(48), np.nan)
     return xr.Dataset({"eigenvalue": ("mode", lam), "region": ("mode", region), "fourth_derivative": ("mode", d4),
                        "rotational_weight": ("mode", rng.random(48))},
-                      attrs={"pressure": pressure, "n_quartic": 4, "lambda_c": 1e-3, "N": 16,
-                             "isostatic_count": 47, "n_contacts_twice": 43})
+                      attrs={"pressure": pressure, "n_quartic": 4, "lambda_c": 1e-3, "lambda_0": 1e-14, "N": 16,
+                             "isostatic_count": 47, "n_contacts_twice": 43, "family": "circulo_line",
+                             "asphericity": 1.1})
 
 
 def _shape_figures(rng) -> dict[str, Figure]:
-    rows = [dict(family=f, asphericity=a, N=16, phi_J=0.85 + 0.01 * rng.random(), pressure=1e-6, n_contacts=40,
-                 n_rattlers=1, n_sliders=0, z=4.5 + rng.random(), isostatic_count=44, counting="hypostatic")
+    def counts():
+        return dict(n_contacts=40, n_rattlers=1, n_sliders=0, isostatic_count=44, z_contacts=4.4 + rng.random(),
+                    z_eq3=4.5 + rng.random())
+
+    rows = [dict(family=f, asphericity=a, N=16, phi_J=0.85 + 0.01 * rng.random(), pressure=1e-6, jammed=1,
+                 status="jammed", n_quartic=4, counts={c: counts() for c in ("once", "twice", "spectral")})
             for f, a in [("disk", 1.0), ("ellipse", 1.01), ("ellipse", 1.01), ("circulo_line", 1.1)]]
     survey = survey_dataset(rows, ["a", "b", "c", "d"])
     angles = xr.Dataset({"P_psi": ("bin", 2 / np.pi * np.ones(9)), "P_psi_err": ("bin", 0.1 * np.ones(9))},

@@ -128,3 +128,12 @@ ENTANGLED_FORCE_RATIO: float = 100.0
 #: set by the geometry (sines of bond angles, which the link-degeneracy test keeps above
 #: :data:`LINK_RANK_RTOL`), so the same 1e-8 separates the two.
 BODY_FREE_RTOL: float = 1e-8
+#: Sliders (:func:`jamflow.network.find_sliders`): a body's translation ``t`` is free
+#: when the matrix of its contacts' unit normals has its smallest singular value
+#: ``sqrt(sum_c (n_c . t)^2)`` at most this fraction of the largest. The stiffness
+#: along ``t``, ``k sum_c (n_c . t)^2``, is then at most 1e-12 of the body's stiffest
+#: translation: the dynamical matrix's zero-mode floor (1e-13 of its largest
+#: eigenvalue, ~10 k) in the shapes' spectrum. Measured on 64 circulo-lines
+#: (A = 1.1, P0 = 1e-9, three seeds): 1e-17 ... 1e-16 for every sliding body, 0.28 and
+#: above for every other (docs/notes/shapes.md, "Sliders").
+SLIDER_RTOL: float = 1e-6

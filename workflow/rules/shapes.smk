@@ -110,11 +110,11 @@ rule shape_survey:
     resources:
         **job_resources("analysis"),
     params:
-        parallel=SHAPES.get("parallel_contacts"),
+        spectral="--spectral" if SHAPES.get("spectral_count", True) else "",
     conda:
         "../envs/jamflow.yaml"
     shell:
-        "jamflow shape-survey {input} {output} --parallel-contacts {params.parallel} > {log} 2>&1"
+        "jamflow shape-survey {input} {output} {params.spectral} > {log} 2>&1"
 
 
 rule contact_angles:

@@ -37,7 +37,8 @@ COMMAND_MODULE: dict[str, str] = {
     "certify": "certify", "tradeoff": "tradeoff", "ls": "ls", "calippso": "calippso", "summary": "summary",
     "minimize": "minimize",
     **dict.fromkeys(("init-chains", "link", "chains-moduli"), "chains"),
-    **dict.fromkeys(("init-shapes", "contact-angles", "shape-survey", "modes"), "shapes"),
+    **dict.fromkeys(("init-shapes", "contact-angles", "shape-survey", "modes", "constraint-curvature",
+                     "feasible-region"), "shapes"),
 }
 
 

@@ -44,6 +44,8 @@ PLOT_KINDS: dict[str, str] = {
     "quartic-pressure": "`jamflow modes` outputs at several P0 (region-1 eigenvalues and fourth derivatives, "
                         "VanderWerf et al. Figs. 10-11)",
     "mode": "a linked packing and its `jamflow modes` output: one mode as arrows (--mode)",
+    "feasible-region": "one `jamflow feasible-region` output (the caged circulo-line, its feasible region and "
+                       "their volume and surface against dR, VanderWerf et al. Figs. 12-13)",
 }
 #: the dataset kinds (jamflow.io.DATASET_KINDS) each figure kind reads
 PLOT_INPUT_KINDS: dict[str, tuple[str, ...]] = {
@@ -66,6 +68,7 @@ PLOT_INPUT_KINDS: dict[str, tuple[str, ...]] = {
     "spectra": ("modes",),
     "quartic-pressure": ("modes",),
     "mode": ("packing", "linked-modes"),
+    "feasible-region": ("feasible-region",),
 }
 
 
@@ -178,6 +181,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--slab-axis", type=int, default=2, help="packing, d >= 3: axis normal to the drawn slab (default 2)")
     p.add_argument("--mode", type=int, default=None,
                    help="mode: index of the mode (ascending eigenvalue; default the lowest vibration)")
+    p.add_argument("--convention", choices=("paper", "once", "twice", "spectral"), default="paper",
+                   help="z-asphericity: contacts of <z> (Eq. 3): each family's paper definition (default; Fig. 8: "
+                        "N_c = N_c^0 - N_1 for circulo shapes, contacts for the rest), parallel circulo contacts "
+                        "once or twice (Fig. 6), or N_c^0 - N_1 for all")
     add_overlap_option(p)
     add_quiet(p)
 
@@ -367,7 +374,8 @@ def _plot(args: argparse.Namespace) -> int:
               "pareto": plots.pareto, "jamming-table": plots.plot_jamming_table,
               "chains-moduli": plots.plot_chains_moduli,
               "phi-asphericity": lambda ds: shape_figures.plot_survey(ds, "phi_J"),
-              "z-asphericity": lambda ds: shape_figures.plot_survey(ds, "z")}
+              "z-asphericity": lambda ds: shape_figures.plot_survey(ds, "z", args.convention),
+              "feasible-region": shape_figures.plot_feasible_region}
     labelled = {"gaps": plots.plot_gaps, "rdf": plots.plot_rdf, "stress-strain": plots.plot_stress_strain,
                 "eos": plots.plot_eos, "contact-angles": shape_figures.plot_contact_angles,
                 "spectra": shape_figures.plot_spectra}

@@ -229,7 +229,9 @@ def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
     if shapes_counted:
         rows += [("contacts (non-rattlers)", f"{report['n_contacts']} (parallel contacts counted {report['parallel']})"),
                  ("rattlers, sliders", f"{report['n_rattlers']}, {report['n_sliders']}"),
-                 ("coordination <z> (Eq. 3)", f"{report['z']:.6f}"),
+                 ("z = 2 N_c / N'", f"{report['z_contacts']:.6f} (contacts per backbone body)"),
+                 ("<z> Eq. 3 = 2 (N_c + 1) / (N - N_r - N_s / f)",
+                  f"{report['z_eq3']:.6f} (isostatic: {2 * report['dofs_per_body']}; f = {report['dofs_per_body']})"),
                  ("isostatic count 3N' - 1 - N_s", f"{report['isostatic_count']} ({report['counting']})")]
     elif "shapes" in report:
         rows.append(("contacts, rattlers", "not counted for linked shapes"))
@@ -266,7 +268,9 @@ def _check(args: argparse.Namespace) -> int:
         ("rattlers", s.n_rattlers), ("non-rattlers", s.n_stable),
         ("isostatic", f"{str(s.isostatic).lower()}  (N_c = {s.n_contacts}, d(N_s-1)+1 = {s.isostatic_count}: "
                       f"{s.counting})"),
-        ("coordination z", f"{s.z:.6f}"),
+        ("z = 2 N_c / N'", f"{s.z:.6f} (contacts per non-rattler)"),
+        *([("<z> Eq. 3 (VanderWerf) = 2 (N_c + 1) / N'", f"{2.0 * (s.n_contacts + 1) / s.n_stable:.6f} (isostatic: 4)")]
+          if s.d == 2 and s.n_stable else []),
         ("max overlap", f"{s.max_overlap:.3e} (relative to the mean diameter: {s.max_overlap_rel:.3e})"),
         ("max force-balance residual", "no forces" if s.force_balance_residual is None
          else f"{s.force_balance_residual:.3e} (relative to mean force)"),

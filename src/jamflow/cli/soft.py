@@ -69,6 +69,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         f"docs/notes/chains.md has the measurement)")
     p.add_argument("--energy-tol", type=float, default=None,
                    help="energy per sphere [epsilon] at which --jam-protocol energy stops, e.g. 1e-12")
+    p.add_argument("--frozen-orientations", action="store_true",
+                   help="shaped bodies: jam with every orientation fixed (VanderWerf et al. Fig. 3a, non-rotating "
+                        "circulo-lines); counted with 2 degrees of freedom per body")
     add_quiet(p)
     add_preset(p)
 
@@ -186,6 +189,8 @@ def _soft_jam(args: argparse.Namespace) -> int:
         raise ValueError("--pressure is required (the target pressure P0)")
     if packing.shapes is not None:
         return _soft_jam_shapes(args, packing)
+    if args.frozen_orientations:
+        raise ValueError("--frozen-orientations is for shaped bodies (spheres have no orientation)")
     if linked:
         return _soft_jam_linked(args, packing)
     if args.seed is not None:
@@ -239,15 +244,19 @@ def _soft_jam_shapes(args: argparse.Namespace, packing: Packing) -> int:
 
     settings = JammingSettings(force_tol=args.force_tol, pressure_rtol=args.pressure_rtol,
                                delta_phi=args.delta_phi, max_steps=args.max_steps)
-    result = jam_shapes(packing, args.pressure, settings, progress)
+    result = jam_shapes(packing, args.pressure, settings, progress, rotations=not args.frozen_orientations)
     bar.close()
     if not result.converged:
         raise RuntimeError(f"FIRE did not reach force_tol {args.force_tol:g} within {args.max_steps} steps")
     out = result.packing
     write_packing(out, args.out, stage_parameters(args, "input", "out"))
+    side = out.attrs["paper_length_unit"]
     print_summary(args, args.out, [
         ("phi_J", f"{out.packing_fraction:.10f}"),
-        ("pressure", f"{out.pressure:.6g} (target {args.pressure:g}) k"),
+        ("pressure", f"{out.pressure:.6g} k (target {args.pressure:g}); in the paper's units (box side L = 1) "
+                     f"also {out.pressure:.6g} k: P / k does not depend on the length unit in 2D"),
+        ("box side L (the paper's length unit)", f"{side:.8g} mean area-equivalent diameters"),
+        ("orientations", "frozen (Fig. 3a)" if args.frozen_orientations else "free"),
         ("interacting pairs", len(out.contacts)),
         ("max |F|", f"{out.attrs['max_force_sq'] ** 0.5:.3g} k length"),
         ("max |torque|", f"{out.attrs['max_torque_sq'] ** 0.5:.3g} k length^2"),
