@@ -17,11 +17,12 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-from .box import Box
-from .state.packing import Packing
-
-#: Public name -> module (relative to this package) that defines it.
+#: Public name -> module (relative to this package) that defines it. Even the state
+#: classes load on first use: ``jamflow.cli`` starts without numpy and xarray, so that
+#: Ctrl-C during a command's start-up is caught by its one-line handler.
 _LAZY: dict[str, str] = {
+    "Box": ".box",
+    "Packing": ".state.packing",
     # stages: Packing -> Packing / result / Dataset
     "random_packing": ".protocols.initial",
     "ls_compress": ".protocols.ls",
@@ -61,7 +62,7 @@ _LAZY: dict[str, str] = {
 #: submodule's (importing a submodule binds its name as an attribute of its package).
 _RENAMED: dict[str, str] = {"ls_compress": "compress", "calippso_jam": "calippso"}
 
-__all__ = ["Box", "Packing", *_LAZY]
+__all__ = list(_LAZY)
 
 
 def __getattr__(name: str) -> Any:

@@ -2,23 +2,57 @@
 
 Each topic module in this package exposes ``register(subparsers)``, adding its
 subcommands; a subcommand's handler takes the parsed arguments and returns an exit
-code. Errors from bad input reach the user as one line on stderr and exit code 1.
+code. Every failure reaches the user as one line on stderr, without a traceback:
+
+====  =====================================================================
+code  meaning
+====  =====================================================================
+0     done (the outputs are written)
+1     refused or failed: bad input file or value, impossible target, disk full
+2     usage: an option missing, unknown or out of its range (:mod:`jamflow.cli.types`)
+130   interrupted by Ctrl-C (SIGINT); 143 by SIGTERM; no partial output is left
+141   stdout closed early (``jamflow check x.nc | head -1``); quiet
+====  =====================================================================
+
+Nothing heavy is imported before :func:`main` runs, so that Ctrl-C during start-up
+(imports, numba compilation) is one line too.
 """
 
 from __future__ import annotations
 
+import os
+import signal
+import sys
+
+
+def _interrupted_while_starting(signum: int, frame: object) -> None:
+    sys.stderr.write("jamflow: interrupted (Ctrl-C) while starting; nothing written\n")
+    os._exit(130)
+
+
+def _started_as_command() -> bool:
+    """Whether this process is the ``jamflow`` console script or ``python -m jamflow``."""
+    entry = sys.modules.get("__main__")
+    spec = getattr(entry, "__spec__", None)
+    name = os.path.basename(getattr(entry, "__file__", None) or "")
+    return (spec is not None and spec.name == "jamflow.__main__") or name.split(".")[0].split("-")[0] == "jamflow"
+
+
+if _started_as_command() and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+    # until main() runs (it restores Ctrl-C as KeyboardInterrupt), Ctrl-C ends the start-up in one line
+    signal.signal(signal.SIGINT, _interrupted_while_starting)
+
 import argparse
 import importlib
 import re
-import sys
 import typing
 from collections.abc import Sequence
 
-from ..io import check_output_paths, file_body_kind
 from ..presets import preset_options
 from ..provenance import jamflow_version
 from ..stages import STAGES, refusal
 from .common import path_arguments
+from .types import UsageError
 
 #: Topic modules of this package that contribute subcommands.
 COMMAND_MODULES: tuple[str, ...] = ("packings", "analysis", "soft", "flow", "certify", "tradeoff", "ls", "calippso",
@@ -89,6 +123,8 @@ def check_bodies(command: str, inputs: Sequence[str]) -> None:
     ValueError
         One line: the file, what the command takes and what to run instead.
     """
+    from ..io import file_body_kind
+
     if not STAGES[command].reads_packings:
         return
     for path in inputs:
@@ -98,22 +134,95 @@ def check_bodies(command: str, inputs: Sequence[str]) -> None:
             raise ValueError(f"{path}: {why}")
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``jamflow`` console script."""
-    words = sys.argv[1:] if argv is None else list(argv)
-    parser = build_parser(words[0] if words else None)
+class _Terminated(Exception):
+    """SIGTERM (a job killed by its scheduler): unwinds like Ctrl-C, so temporaries are removed."""
+
+
+def _on_sigterm(signum: int, frame: typing.Any) -> typing.NoReturn:
+    raise _Terminated
+
+
+def _one_line(exc: BaseException) -> str:
+    """An exception's message on one line (an OSError's own words, without ``[Errno n]``)."""
+    if isinstance(exc, OSError) and exc.strerror and exc.filename is None:
+        text = exc.strerror
+    else:
+        text = str(exc) or type(exc).__name__
+    return "; ".join(part.strip() for part in text.splitlines() if part.strip())
+
+
+def _run(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:
+    """Parse, check paths and bodies before any work, run the handler, say what was replaced."""
+    from ..io import check_output_paths
+
     args = parser.parse_args(argv)
+    preset = getattr(args, "preset", "default")
+    if preset != "default":
+        # a preset changes the defaults; options given explicitly still win
+        parser.subcommands[args.command].set_defaults(**preset_options(args.command, preset))
+        args = parser.parse_args(argv)
+    reads, writes, packings = args.path_roles
+    outputs = path_arguments(args, writes)
+    kinds = {path: kinds for role, kinds in args.output_kinds.items() for path in path_arguments(args, (role,))}
+    replaced = check_output_paths(path_arguments(args, reads), outputs, getattr(args, "in_place", False),
+                                  path_arguments(args, packings), kinds)
+    check_bodies(args.command, path_arguments(args, reads))
+    code = int(args.handler(args) or 0)
+    if code == 0:
+        for line in replaced:
+            if "flow checkpoint" not in line:  # a checkpoint is resumed, not replaced
+                print(f"jamflow {args.command}: replaced {line}", file=sys.stderr)
+    return code
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``jamflow`` console script (exit codes: module docstring)."""
+    words = sys.argv[1:] if argv is None else [str(a) for a in argv]
+    name = f"jamflow {words[0]}" if words and words[0] in COMMAND_MODULE else "jamflow"
+    handlers = _install_signal_handlers()
     try:
-        preset = getattr(args, "preset", "default")
-        if preset != "default":
-            # a preset changes the defaults; options given explicitly still win
-            parser.subcommands[args.command].set_defaults(**preset_options(args.command, preset))
-            args = parser.parse_args(argv)
-        reads, writes, packings = args.path_roles
-        check_output_paths(path_arguments(args, reads), path_arguments(args, writes),
-                           getattr(args, "in_place", False), path_arguments(args, packings))
-        check_bodies(args.command, path_arguments(args, reads))
-        return int(args.handler(args) or 0)
-    except (ValueError, FileNotFoundError, RuntimeError, OSError) as exc:
-        print(f"jamflow {args.command}: error: {exc}", file=sys.stderr)
+        return _run(build_parser(words[0] if words else None), argv)
+    except UsageError as exc:
+        print(f"{name}: error: {_one_line(exc)} (see {name} --help)", file=sys.stderr)
+        return 2
+    except BrokenPipeError:
+        # the reader of stdout has gone (| head): nothing more to say, and no traceback at exit
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
+    except (KeyboardInterrupt, _Terminated, Exception) as exc:
+        signal_exit = _signal_exit(exc)
+        if signal_exit is not None:
+            print(f"{name}: {signal_exit[1]}; no partial output is left", file=sys.stderr)
+            return signal_exit[0]
+        if not isinstance(exc, (ValueError, FileNotFoundError, RuntimeError, OSError)):
+            raise  # a bug: its traceback is the report
+        print(f"{name}: error: {_one_line(exc)}", file=sys.stderr)
         return 1
+    finally:
+        for signum, handler in handlers.items():
+            signal.signal(signum, handler)
+
+
+def _install_signal_handlers() -> dict[int, typing.Any]:
+    """Ctrl-C as KeyboardInterrupt, SIGTERM as :class:`_Terminated` (main thread only); the previous handlers."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    previous = {signal.SIGTERM: signal.signal(signal.SIGTERM, _on_sigterm)}
+    if signal.getsignal(signal.SIGINT) is _interrupted_while_starting:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    return previous
+
+
+def _signal_exit(exc: BaseException) -> tuple[int, str] | None:
+    """Exit code and words of a signal anywhere in ``exc``'s chain (compiled numba code wraps Ctrl-C in a SystemError)."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        if isinstance(exc, KeyboardInterrupt):
+            return 130, "interrupted (Ctrl-C)"
+        if isinstance(exc, _Terminated):
+            return 143, "terminated (SIGTERM)"
+        exc = exc.__cause__ or exc.__context__
+    return None

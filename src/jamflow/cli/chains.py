@@ -35,8 +35,17 @@ from .common import (
     add_quiet,
     packing_rows,
     print_summary,
-    seed,
+    split_paths,
     stage_parameters,
+)
+from .types import (
+    count,
+    integer,
+    packing_fraction,
+    path_with_suffix,
+    positive,
+    real,
+    seed,
 )
 
 
@@ -45,26 +54,27 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "random start of chains or rigid trimers of unit spheres, or of bidisperse asymmetric dimers "
                     "(links, no overlaps unless --overlap; no crossing links in 2D)", writes=("out",),
                     packings=("out",))
-    p.add_argument("out", help="output netCDF packing with links")
-    p.add_argument("--d", type=int, required=True, help="dimension (2 or 3)")
-    p.add_argument("--clusters", type=int, required=True, help="number of clusters K (N = K M spheres)")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF packing with links")
+    p.add_argument("--d", type=integer(2, 3), required=True, help="dimension (2 or 3)")
+    p.add_argument("--clusters", type=count, required=True, help="number of clusters K (N = K M spheres)")
     p.add_argument("--cluster", choices=CLUSTER_KINDS, required=True,
                    help="trimer: three spheres with the bond angle frozen (rigid); chain: --chain-length spheres; "
                         "dimer: a small and a large monomer at a fixed distance (van der Werf et al. Fig. 3b), "
                         "half of the dimers scaled by --size-ratio")
-    p.add_argument("--chain-length", type=int, default=3, help="spheres per chain M (default 3)")
+    p.add_argument("--chain-length", type=integer(2), default=3, help="spheres per chain M (default 3)")
     p.add_argument("--free-angles", action="store_true",
                    help="bonds only (flexible); default: every bond angle frozen by an angle link")
-    p.add_argument("--bond-angle", type=float, default=None,
+    p.add_argument("--bond-angle", type=real(0.0, 180.0, lo_open=True, need="an angle in (0, 180] degrees"),
+                   default=None,
                    help="every bond angle [degrees]; default uniform in [60, 150] degrees")
-    p.add_argument("--diameter-ratio", type=float, default=DIMER_DIAMETER_RATIO,
+    p.add_argument("--diameter-ratio", type=positive, default=DIMER_DIAMETER_RATIO,
                    help=f"dimer: large over small monomer diameter (default {DIMER_DIAMETER_RATIO})")
-    p.add_argument("--separation", type=float, default=DIMER_SEPARATION,
+    p.add_argument("--separation", type=positive, default=DIMER_SEPARATION,
                    help=f"dimer: monomer centre distance in small-monomer diameters (default {DIMER_SEPARATION}, "
                         f"the paper's A - 1 = 0.349)")
-    p.add_argument("--size-ratio", type=float, default=DIMER_SIZE_RATIO,
+    p.add_argument("--size-ratio", type=positive, default=DIMER_SIZE_RATIO,
                    help=f"dimer: length of large over small dimers (default {DIMER_SIZE_RATIO})")
-    p.add_argument("--phi", type=float, default=None,
+    p.add_argument("--phi", type=packing_fraction, default=None,
                    help=f"packing fraction of the union of each cluster's spheres (default without overlaps {DILUTE_PHI[2]} in 2D, {DILUTE_PHI[3]} in 3D; "
                         f"with --overlap "
                         f"{OVERLAP_PHI[2]} in 2D, {OVERLAP_PHI[3]} in 3D)")
@@ -82,9 +92,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "add links to a packing: cement K random contacts (freezing the bond angles they create) "
                     "or read a link file", reads=("input", "file"), writes=("out",), packings=("out",))
     p.add_argument("input", help="input netCDF packing (with contacts for --cement)")
-    p.add_argument("out", help="output netCDF packing with links")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF packing with links")
     group = p.add_mutually_exclusive_group(required=True)
-    group.add_argument("--cement", type=int, default=None, help="number of random contacts turned into links")
+    group.add_argument("--cement", type=count, default=None, help="number of random contacts turned into links")
     group.add_argument("--file", default=None,
                        help="text file of links, one 'i j [length]' per line (length: current distance if omitted)")
     p.add_argument("--seed", type=seed, default=None, help="random seed of --cement")
@@ -99,7 +109,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "Groups `jamflow moduli` outputs of packings made by `jamflow link --cement` by n_l / N and "
                     "averages each group's Hill moduli weighted by their Reuss-Voigt spread, with the weighted "
                     "standard error; infinite moduli are counted, not averaged (jamflow.chains.averages).",
-                    reads=("paths[:-1]",), writes=("paths[-1]",))
+                    reads=("paths[:-1]",), writes=("paths[-1]",),
+                    makes={"paths[-1]": ("chains-moduli-table",)})
     p.add_argument("paths", nargs="+", metavar="MODULI.nc ... OUT.nc", help="moduli datasets, then the output")
     add_quiet(p)
 
@@ -172,8 +183,9 @@ def _link(args: argparse.Namespace) -> int:
 
 
 def _chains_moduli(args: argparse.Namespace) -> int:
-    datasets = [read_dataset(path, "chain-moduli") for path in args.paths[:-1]]
-    for path, ds in zip(args.paths[:-1], datasets):
+    inputs, out = split_paths(args.paths, "moduli dataset")
+    datasets = [read_dataset(path, "chain-moduli") for path in inputs]
+    for path, ds in zip(inputs, datasets):
         if "n_cemented" not in ds.attrs:
             raise ValueError(f"{path} has no n_cemented attribute (moduli of a packing made by jamflow link --cement)")
         if "n_unstable" not in ds.attrs:
@@ -183,7 +195,7 @@ def _chains_moduli(args: argparse.Namespace) -> int:
                                     stage_parameters(args, "paths"), d=int(datasets[0].attrs["d"]),
                                     method=("Reuss-Voigt weighted average (chains paper Fig. 5): Hill values "
                                             "weighted by 1 / ((V - R)^2 / 12), scatter standard error"))
-    write_dataset(table, args.paths[-1])
+    write_dataset(table, out)
     rows = []
     for k in range(table.sizes["links_per_sphere"]):
         t = table.isel(links_per_sphere=k)
@@ -193,7 +205,7 @@ def _chains_moduli(args: argparse.Namespace) -> int:
         label = f"n_l / N = {float(t.links_per_sphere):.4g} ({int(t.n_packings)} packings"
         label += f", {int(t.n_unstable)} unstable, not averaged)" if int(t.n_unstable) else ")"
         rows.append((label, value))
-    print_summary(args, args.paths[-1], rows)
+    print_summary(args, out, rows)
     return 0
 
 

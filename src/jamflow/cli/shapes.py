@@ -21,9 +21,10 @@ from .common import (
     add_quiet,
     packing_rows,
     print_summary,
-    seed,
+    split_paths,
     stage_parameters,
 )
+from .types import count, integer, packing_fraction, path_with_suffix, positive, seed
 
 #: Default packing fraction of the random start: random sequential addition of
 #: elongated bodies (up to aspect ratio ~5) still finds free places quickly.
@@ -35,18 +36,18 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "random bidisperse packing of 2D shaped bodies (VanderWerf et al.): areas 1.4^2 apart, "
                     "equal masses, mean area-equivalent diameter 1, no overlap",
                     writes=("out",), packings=("out",))
-    p.add_argument("out", help="output netCDF packing")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF packing")
     p.add_argument("--shape", choices=SHAPE_CHOICES, required=True, help="shape family")
-    p.add_argument("--aspect-ratio", type=float, default=None,
+    p.add_argument("--aspect-ratio", type=positive, default=None,
                    help="length over width (ellipse a/b; circulo-line (l + 2R)/2R; dumbbell (2|v| + 2R)/2R)")
-    p.add_argument("--asphericity", type=float, default=None,
+    p.add_argument("--asphericity", type=positive, default=None,
                    help="target asphericity A = p^2 / (4 pi a) > 1 (met exactly by bisection on the shape parameter)")
-    p.add_argument("--sides", type=int, default=None, help="circulo-polygon: number of sides n >= 3 (regular polygon)")
+    p.add_argument("--sides", type=integer(3), default=None, help="circulo-polygon: number of sides n >= 3 (regular polygon)")
     p.add_argument("--random", action="store_true",
                    help="circulo-polygon: a random polygon per body at --asphericity (VanderWerf et al. App. B, "
                         "kept convex; the shapes draw from --seed)")
-    p.add_argument("--n", type=int, required=True, help="number of bodies (even: half small, half large)")
-    p.add_argument("--phi", type=float, default=INIT_SHAPES_PHI,
+    p.add_argument("--n", type=count, required=True, help="number of bodies (even: half small, half large)")
+    p.add_argument("--phi", type=packing_fraction, default=INIT_SHAPES_PHI,
                    help=f"packing fraction of the random start (default {INIT_SHAPES_PHI})")
     p.add_argument("--seed", type=seed, required=True, help="random seed")
     add_quiet(p)
@@ -55,7 +56,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "contact-angle distribution P(psi) of elongated bodies (VanderWerf et al. Fig. 14): psi "
                         "is the angle between a body's long axis and the vector from its centre to a contact "
                         "point, pooled over packings, contacts between non-rattlers", "jammed shape packings")
-    p.add_argument("--bins", type=int, default=18, help="bins on [0, pi/2] (default 18, 5 degrees each)")
+    p.add_argument("--bins", type=count, default=18, help="bins on [0, pi/2] (default 18, 5 degrees each)")
     add_quiet(p)
     add_quiet(_pooled_command(sub, "shape-survey", _shape_survey,
                               "phi_J and <z> (Eq. 3) against asphericity over jammed packings of shapes and disks "
@@ -66,10 +67,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "modes", _modes,
                     "dynamical-matrix spectrum of a shape packing: regions 0-3, quartic modes N_1 and their "
                     "fourth derivatives, and the check N_c = N_c^0 - N_1 (VanderWerf et al. Sec. III B)",
-                    reads=("input",), writes=("out",))
+                    reads=("input",), writes=("out",), makes={"out": ("modes",)})
     p.add_argument("input", help="input netCDF shape packing at force balance (soft-jam)")
-    p.add_argument("out", help="output netCDF spectrum (dim mode)")
-    p.add_argument("--lambda-c", type=float, default=None,
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF spectrum (dim mode)")
+    p.add_argument("--lambda-c", type=positive, default=None,
                    help="cutoff between regions 1 and 2 [k]; default: the widest gap of log(lambda) in the "
                         "lower half of the nonzero spectrum that spans a decade and starts at most "
                         "1e3 P (region 1 empty without one)")
@@ -81,7 +82,7 @@ def _pooled_command(sub: argparse._SubParsersAction, name: str, handler, help: s
     """A command reading packings ``IN ... OUT`` with ``--parallel-contacts`` (Fig. 6)."""
     from ..shapes.counting import PARALLEL_MODES
 
-    p = add_command(sub, name, handler, help, reads=("paths[:-1]",), writes=("paths[-1]",))
+    p = add_command(sub, name, handler, help, reads=("paths[:-1]",), writes=("paths[-1]",), makes={"paths[-1]": (name,)})
     p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc", help=f"{inputs}, then the output")
     p.add_argument("--parallel-contacts", choices=PARALLEL_MODES, default="once",
                    help="a parallel circulo contact counts once or twice (Fig. 6; default once)")
@@ -91,11 +92,7 @@ def _pooled_command(sub: argparse._SubParsersAction, name: str, handler, help: s
 def _contact_angles(args: argparse.Namespace) -> int:
     from ..shapes.analysis import contact_angle_dataset
 
-    inputs, out = args.paths[:-1], args.paths[-1]
-    if not inputs:
-        raise ValueError("contact-angles needs at least one input packing before the output")
-    if args.bins < 1:
-        raise ValueError(f"--bins must be at least 1, got {args.bins}")
+    inputs, out = split_paths(args.paths, "shape packing")
     ds = contact_angle_dataset([read_packing(p, None) for p in inputs], args.parallel_contacts, args.bins)
     ds.attrs.update(new_dataset_attrs("jamflow contact-angle distribution", stage_parameters(args, "paths")))
     write_dataset(ds, out)
@@ -113,9 +110,7 @@ def _contact_angles(args: argparse.Namespace) -> int:
 def _shape_survey(args: argparse.Namespace) -> int:
     from ..shapes.survey import survey_dataset, survey_row
 
-    inputs, out = args.paths[:-1], args.paths[-1]
-    if not inputs:
-        raise ValueError("shape-survey needs at least one input packing before the output")
+    inputs, out = split_paths(args.paths, "shape packing")
     rows = [survey_row(read_packing(p, None), args.parallel_contacts) for p in inputs]
     ds = survey_dataset(rows, inputs)
     ds.attrs.update(new_dataset_attrs("jamflow phi_J and <z> against asphericity",
