@@ -10,7 +10,7 @@ code  meaning
 0     done (the outputs are written)
 1     refused or failed: bad input file or value, impossible target, disk full
 2     usage: an option missing, unknown or out of its range (:mod:`jamflow.cli.types`)
-130   interrupted by Ctrl-C (SIGINT); 143 by SIGTERM; no partial output is left
+130   interrupted by Ctrl-C (SIGINT); no partial output is left
 141   stdout closed early (``jamflow check x.nc | head -1``); quiet
 ====  =====================================================================
 
@@ -134,14 +134,6 @@ def check_bodies(command: str, inputs: Sequence[str]) -> None:
             raise ValueError(f"{path}: {why}")
 
 
-class _Terminated(Exception):
-    """SIGTERM (a job killed by its scheduler): unwinds like Ctrl-C, so temporaries are removed."""
-
-
-def _on_sigterm(signum: int, frame: typing.Any) -> typing.NoReturn:
-    raise _Terminated
-
-
 def _one_line(exc: BaseException) -> str:
     """An exception's message on one line (an OSError's own words, without ``[Errno n]``)."""
     if isinstance(exc, OSError) and exc.strerror and exc.filename is None:
@@ -179,7 +171,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``jamflow`` console script (exit codes: module docstring)."""
     words = sys.argv[1:] if argv is None else [str(a) for a in argv]
     name = f"jamflow {words[0]}" if words and words[0] in COMMAND_MODULE else "jamflow"
-    handlers = _install_signal_handlers()
+    _restore_ctrl_c()
     try:
         return _run(build_parser(words[0] if words else None), argv)
     except UsageError as exc:
@@ -189,40 +181,28 @@ def main(argv: Sequence[str] | None = None) -> int:
         # the reader of stdout has gone (| head): nothing more to say, and no traceback at exit
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
-    except (KeyboardInterrupt, _Terminated, Exception) as exc:
-        signal_exit = _signal_exit(exc)
-        if signal_exit is not None:
-            print(f"{name}: {signal_exit[1]}; no partial output is left", file=sys.stderr)
-            return signal_exit[0]
+    except (KeyboardInterrupt, Exception) as exc:
+        if _interrupted(exc):
+            print(f"{name}: interrupted (Ctrl-C); no partial output is left", file=sys.stderr)
+            return 130
         if not isinstance(exc, (ValueError, FileNotFoundError, RuntimeError, OSError)):
             raise  # a bug: its traceback is the report
         print(f"{name}: error: {_one_line(exc)}", file=sys.stderr)
         return 1
-    finally:
-        for signum, handler in handlers.items():
-            signal.signal(signum, handler)
 
 
-def _install_signal_handlers() -> dict[int, typing.Any]:
-    """Ctrl-C as KeyboardInterrupt, SIGTERM as :class:`_Terminated` (main thread only); the previous handlers."""
-    import threading
-
-    if threading.current_thread() is not threading.main_thread():
-        return {}
-    previous = {signal.SIGTERM: signal.signal(signal.SIGTERM, _on_sigterm)}
+def _restore_ctrl_c() -> None:
+    """Ctrl-C raises KeyboardInterrupt again once :func:`main` runs (the start-up handler exits at once)."""
     if signal.getsignal(signal.SIGINT) is _interrupted_while_starting:
         signal.signal(signal.SIGINT, signal.default_int_handler)
-    return previous
 
 
-def _signal_exit(exc: BaseException) -> tuple[int, str] | None:
-    """Exit code and words of a signal anywhere in ``exc``'s chain (compiled numba code wraps Ctrl-C in a SystemError)."""
+def _interrupted(exc: BaseException | None) -> bool:
+    """Whether Ctrl-C is anywhere in ``exc``'s chain (compiled numba code wraps it in a SystemError)."""
     seen = set()
     while exc is not None and id(exc) not in seen:
-        seen.add(id(exc))
         if isinstance(exc, KeyboardInterrupt):
-            return 130, "interrupted (Ctrl-C)"
-        if isinstance(exc, _Terminated):
-            return 143, "terminated (SIGTERM)"
+            return True
+        seen.add(id(exc))
         exc = exc.__cause__ or exc.__context__
-    return None
+    return False

@@ -330,7 +330,10 @@ def _rdf(args: argparse.Namespace) -> int:
     write_dataset(ds, args.out)
     crystal = [(k, f"{ds.attrs[k]:.4g}") for k in ("psi6_global", "psi6_local_mean", "Q6_global", "q6_local_mean",
                                                     "crystal_fraction") if k in ds.attrs]
-    print_summary(args, args.out, [("g(r)", f"{ds.sizes['r']} bins up to r = {args.r_max:g} mean diameters"),
+    if ds.attrs["r_max_clipped"]:
+        print(f"jamflow rdf: note: r_max {args.r_max:g} clipped to {ds.attrs['r_max']:.6g} mean diameters, below half "
+              f"the smallest box width of {args.packing} ({ds.sizes['r']} of {args.bins} bins)", file=sys.stderr)
+    print_summary(args, args.out, [("g(r)", f"{ds.sizes['r']} bins up to r = {ds.attrs['r_max']:.6g} mean diameters"),
                                    ("packing fraction", f"{ds.attrs['packing_fraction']:.10f}"), *crystal])
     return 0
 

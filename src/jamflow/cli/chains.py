@@ -30,6 +30,7 @@ from ..io import (
     write_dataset,
     write_packing,
 )
+from ..resources import check_fits
 from .common import (
     add_command,
     add_quiet,
@@ -131,6 +132,8 @@ def _link_rows(packing) -> list[tuple[str, object]]:
 
 
 def _init_chains(args: argparse.Namespace) -> int:
+    per_cluster = {"trimer": 3, "dimer": 2}.get(args.cluster, args.chain_length)
+    check_fits("init-chains", args.clusters * per_cluster, args.d, "spheres")
     angle = None if args.bond_angle is None else radians(args.bond_angle)
     packing, messages = linked_packing(args.d, args.clusters, args.cluster, np.random.default_rng(args.seed),
                                        args.chain_length, args.free_angles, args.phi, angle,

@@ -17,6 +17,7 @@ from ..io.formats import gsd_types, read_dat, size_classes, write_gsd, write_xyz
 from ..network.spheres import contact_network
 from ..protocols.initial import random_packing
 from ..protocols.overdamped.run import snapshot_packings
+from ..resources import check_fits
 from ..state.packing import Packing
 from ..tolerances import OVERLAP_TOL
 from .common import (
@@ -115,6 +116,7 @@ def overlap_tol(args: argparse.Namespace) -> float | None:
 
 
 def _init(args: argparse.Namespace) -> int:
+    check_fits("init", args.n, args.d, "spheres")
     # delay: no bar for quick runs, nor before a one-line error on bad input
     with tqdm(total=args.n, desc="init (RSA)", unit="sphere", disable=args.quiet, delay=1.0) as bar:
         p = random_packing(args.n, args.d, args.phi, args.dispersity, args.seed,

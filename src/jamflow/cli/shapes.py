@@ -9,6 +9,7 @@ import numpy as np
 import xarray as xr
 
 from ..io import new_dataset_attrs, read_packing, write_dataset, write_packing
+from ..resources import check_fits
 from ..shapes.generation import (
     SHAPE_CHOICES,
     bidisperse_shapes,
@@ -181,6 +182,7 @@ def _modes(args: argparse.Namespace) -> int:
 
 
 def _init_shapes(args: argparse.Namespace) -> int:
+    check_fits("init-shapes", args.n, 2, "bodies")
     if args.random:
         if args.shape != "circulo-polygon" or args.aspect_ratio is not None or args.asphericity is None \
                 or args.sides is None:
