@@ -15,7 +15,7 @@ from pathlib import Path
 __all__ = ["INTERPRETER_BYTES", "check_fits", "machine_memory", "stage_memory", "stage_seconds"]
 
 #: Resident memory of a jamflow process before its arrays [bytes]: Python, numpy, scipy,
-#: xarray, netCDF4 and numba (measured 0.21 GB for ``jamflow init`` of 1000 spheres).
+#: xarray, netCDF4 and the kernel compiler (measured 0.21 GB for ``jamflow init`` of 1000 spheres).
 INTERPRETER_BYTES: float = 0.3e9
 
 #: Bytes per particle and per (coordinate + 1) of the random starts [bytes]: four times the

@@ -15,7 +15,7 @@ code  meaning
 ====  =====================================================================
 
 Nothing heavy is imported before :func:`main` runs, so that Ctrl-C during start-up
-(imports, numba compilation) is one line too.
+(imports, compiling the kernels) is one line too.
 """
 
 from __future__ import annotations
@@ -198,7 +198,7 @@ def _restore_ctrl_c() -> None:
 
 
 def _interrupted(exc: BaseException | None) -> bool:
-    """Whether Ctrl-C is anywhere in ``exc``'s chain (compiled numba code wraps it in a SystemError)."""
+    """Whether Ctrl-C is anywhere in ``exc``'s chain (a compiled kernel wraps it in a SystemError)."""
     seen = set()
     while exc is not None and id(exc) not in seen:
         if isinstance(exc, KeyboardInterrupt):

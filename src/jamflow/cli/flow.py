@@ -12,7 +12,7 @@ from ..io import read_packing, write_dataset, write_packing
 from ..protocols.overdamped.driving import Drive, SelfPropulsion
 from ..protocols.overdamped.integrate import FlowOptions
 from ..protocols.overdamped.run import Stop, dilute_start, run_flow
-from ..protocols.overdamped.starts import decompressed
+from ..protocols.overdamped.starts import decompressed, jammed_start
 from ..state.packing import LENGTH_UNITS, near_pairs
 from ..tolerances import OVERLAP_TOL
 from .common import (
@@ -174,8 +174,8 @@ def _run(args: argparse.Namespace, drive: Drive, stop: Stop, packing) -> int:
     finally:
         if bar is not None:
             bar.close()
-    target = stop.packing_fraction
-    if target is not None and res.jammed and res.final.packing_fraction < target * (1 - 1e-12):
+    short = _jammed_short(res, drive, stop)
+    if short:
         # jammed before the target: the outputs hold a state the target never describes
         out = str(Path(args.out).with_suffix(".reached.nc"))
         write_dataset(res.series, out)
@@ -185,8 +185,7 @@ def _run(args: argparse.Namespace, drive: Drive, stop: Stop, packing) -> int:
             write_packing(res.final, written[-1], params)
         if args.checkpoint and Path(args.checkpoint).exists():
             Path(args.checkpoint).unlink()
-        raise RuntimeError(f"jammed at phi = {res.final.packing_fraction:.8f} before the target phi {target:g}; "
-                           f"reached state written to {', '.join(written)}")
+        raise RuntimeError(f"{short}; reached state written to {', '.join(written)}")
     write_dataset(res.series, args.out)
     if args.final:
         write_packing(res.final, args.final, params)
@@ -207,6 +206,20 @@ def _run(args: argparse.Namespace, drive: Drive, stop: Stop, packing) -> int:
     return 0
 
 
+def _jammed_short(res, drive: Drive, stop: Stop) -> str | None:
+    """Why a run that ended jammed missed its target (a packing fraction, or a fixed-volume strain), or None."""
+    if not res.jammed:
+        return None
+    phi = res.final.packing_fraction
+    if stop.packing_fraction is not None and phi < stop.packing_fraction * (1 - 1e-12):
+        return f"jammed at phi = {phi:.8f} before the target phi {stop.packing_fraction:g}"
+    strain = float(res.series.strain[-1])
+    if drive.mode == "shear" and stop.strain is not None and strain < stop.strain * (1 - 1e-12):
+        return (f"jammed at strain {strain:.6g} before the target strain {stop.strain:g}: hard spheres at fixed "
+                "volume cannot flow past this state (shear at fixed pressure, --pressure P)")
+    return None
+
+
 def _shear(args: argparse.Namespace) -> int:
     packing = read_packing(args.input, overlap_tol(args))
     warning = dilute_start(packing)
@@ -214,6 +227,9 @@ def _shear(args: argparse.Namespace) -> int:
         print(f"jamflow shear: warning: {warning}", file=sys.stderr)
     mode = "shear" if args.pressure is None else "shear_fixed_pressure"
     drive = Drive(mode, rate=args.rate, xi0=args.xi0, pressure=args.pressure, permanent=_permanent(args))
+    jammed = jammed_start(packing, drive)
+    if jammed:
+        raise ValueError(f"{args.input}: {jammed}")
     return _run(args, drive, Stop(strain=args.strain, max_steps=args.max_steps), packing)
 
 
