@@ -3,7 +3,9 @@
 The commands that make packings (``init``, ``init-shapes``, ``init-chains``) call
 :func:`check_fits` before drawing a single number, so ``jamflow init --n 1000000000``
 is refused in one line instead of allocating for minutes; the workflow's plan-time
-checks call the same function for a scene's ``system.n``. The per-particle numbers are
+checks call the same function for a scene's ``system.n``. Time series whose length is
+known in advance (``aqs``, ``sd-shear``: strain / step records) and flow snapshots are
+checked with :func:`series_memory` and :func:`check_memory`. The per-particle numbers are
 measured (``docs/notes/resources.md``, "Memory of the starts").
 """
 
@@ -12,7 +14,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-__all__ = ["INTERPRETER_BYTES", "check_fits", "machine_memory", "stage_memory", "stage_seconds"]
+__all__ = ["INTERPRETER_BYTES", "RECORD_BYTES", "check_fits", "check_memory", "machine_memory", "series_memory",
+           "stage_memory", "stage_seconds"]
 
 #: Resident memory of a jamflow process before its arrays [bytes]: Python, numpy, scipy,
 #: xarray, netCDF4 and the kernel compiler (measured 0.21 GB for ``jamflow init`` of 1000 spheres).
@@ -26,6 +29,11 @@ _START_BYTES_PER_ENTRY: float = 64.0
 #: CPU seconds per particle of the random starts, rounded up from the slowest measured
 #: (docs/notes/resources.md, "Memory and time of the starts"): an order of magnitude.
 _START_SECONDS: dict[str, float] = {"init": 2.5e-3, "init-shapes": 1e-3, "init-chains": 1.5e-3}
+
+
+#: Bytes of one record of a time series (a dozen float64 columns, the events between
+#: records, the Python lists they are gathered in), rounded up.
+RECORD_BYTES: float = 1000.0
 
 
 def machine_memory() -> int:
@@ -75,11 +83,21 @@ def check_fits(stage: str, n: int, d: int, what: str = "particles") -> None:
     what : str
         What ``n`` counts, for the message.
     """
-    need, have = stage_memory(stage, n, d), machine_memory()
+    check_memory(f"{stage} of N = {n:.4g} {what} in d = {d}", stage_memory(stage, n, d),
+                 f"(and it would take about {_duration(stage_seconds(stage, n, d))}): use fewer particles")
+
+
+def check_memory(what: str, need: float, advice: str = "") -> None:
+    """Refuse (``ValueError``, one line) ``what`` when its ``need`` [bytes] exceeds :func:`machine_memory`."""
+    have = machine_memory()
     if need > have:
-        raise ValueError(f"{stage} of N = {n:.4g} {what} in d = {d} needs about {_bytes(need)} of memory and this "
-                         f"machine has {_bytes(have)} (and it would take about {_duration(stage_seconds(stage, n, d))}): "
-                         "use fewer particles")
+        raise ValueError(f"{what} needs about {_bytes(need)} of memory and this machine has {_bytes(have)}"
+                         + (f" {advice}" if advice else ""))
+
+
+def series_memory(n_records: float, n: int = 0, d: int = 0, snapshots: float = 0) -> float:
+    """Memory [bytes] of a time series of ``n_records`` records and ``snapshots`` packings of ``n`` particles in ``d``."""
+    return INTERPRETER_BYTES + RECORD_BYTES * float(n_records) + _START_BYTES_PER_ENTRY * (d + 1) * n * float(snapshots)
 
 
 def _bytes(b: float) -> str:

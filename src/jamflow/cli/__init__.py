@@ -14,37 +14,19 @@ code  meaning
 141   stdout closed early (``jamflow check x.nc | head -1``); quiet
 ====  =====================================================================
 
-Nothing heavy is imported before :func:`main` runs, so that Ctrl-C during start-up
-(imports, compiling the kernels) is one line too.
+Ctrl-C during start-up is one line too: until :func:`main` runs, the handler that
+``jamflow/__init__.py`` installs for the command line ends the process; inside it the
+imports of the command's modules and the compilation of kernels are covered.
 """
 
 from __future__ import annotations
 
-import os
-import signal
-import sys
-
-
-def _interrupted_while_starting(signum: int, frame: object) -> None:
-    sys.stderr.write("jamflow: interrupted (Ctrl-C) while starting; nothing written\n")
-    os._exit(130)
-
-
-def _started_as_command() -> bool:
-    """Whether this process is the ``jamflow`` console script or ``python -m jamflow``."""
-    entry = sys.modules.get("__main__")
-    spec = getattr(entry, "__spec__", None)
-    name = os.path.basename(getattr(entry, "__file__", None) or "")
-    return (spec is not None and spec.name == "jamflow.__main__") or name.split(".")[0].split("-")[0] == "jamflow"
-
-
-if _started_as_command() and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
-    # until main() runs (it restores Ctrl-C as KeyboardInterrupt), Ctrl-C ends the start-up in one line
-    signal.signal(signal.SIGINT, _interrupted_while_starting)
-
 import argparse
 import importlib
+import os
 import re
+import signal
+import sys
 import typing
 from collections.abc import Sequence
 
@@ -193,6 +175,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _restore_ctrl_c() -> None:
     """Ctrl-C raises KeyboardInterrupt again once :func:`main` runs (the start-up handler exits at once)."""
+    from .. import _interrupted_while_starting
+
     if signal.getsignal(signal.SIGINT) is _interrupted_while_starting:
         signal.signal(signal.SIGINT, signal.default_int_handler)
 

@@ -23,12 +23,14 @@ from ..state.packing import Packing
 from .common import add_command, add_quiet, print_summary, split_paths, stage_parameters
 from .packings import add_overlap_option, overlap_tol
 from .types import (
-    count,
+    MAX_BINS,
+    bins,
     integer,
     non_negative,
     non_negative_int,
     path_with_suffix,
     positive,
+    resamples,
     seed,
 )
 
@@ -89,7 +91,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc", help="input packings (.nc or .dat), then the output")
     p.add_argument("--max-gap", type=positive, default=0.1, help="largest gap binned (default 0.1)")
     p.add_argument("--min-gap", type=positive, default=1e-13, help="smallest gap binned (default 1e-13)")
-    p.add_argument("--bins-per-decade", type=count, default=5, help="logarithmic bins per decade (default 5)")
+    p.add_argument("--bins-per-decade", type=bins, default=5, help="logarithmic bins per decade (default 5)")
     p.add_argument("--fit-min", type=positive, default=1e-5, help="lower end of the scaling range (default 1e-5)")
     p.add_argument("--fit-max", type=positive, default=1e-2, help="upper end of the scaling range (default 1e-2)")
     p.add_argument("--gap-tol", type=non_negative, default=None,
@@ -105,9 +107,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                     reads=("paths[:-1]",), writes=("paths[-1]",), makes={"paths[-1]": ("forces",)})
     p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc", help="packings with forces, then the output")
     p.add_argument("--f-max", type=positive, default=6.0, help="upper end of the bins, in mean forces (default 6)")
-    p.add_argument("--linear-bins", type=count, default=60, help="linear bins on [0, f_max] (default 60)")
+    p.add_argument("--linear-bins", type=bins, default=60, help="linear bins on [0, f_max] (default 60)")
     p.add_argument("--log-min", type=positive, default=1e-6, help="lower end of the log bins (default 1e-6)")
-    p.add_argument("--bins-per-decade", type=count, default=5, help="log bins per decade (default 5)")
+    p.add_argument("--bins-per-decade", type=bins, default=5, help="log bins per decade (default 5)")
     p.add_argument("--fit-min", type=positive, default=1e-3,
                    help="lower end of the small-force scaling range (default 1e-3)")
     p.add_argument("--fit-max", type=positive, default=1e-1,
@@ -161,7 +163,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--r-max", type=positive, default=3.0,
                    help="largest r in mean diameters (default 3; clipped, with a note, to below half the smallest "
                         "box width)")
-    p.add_argument("--bins", type=count, default=150, help="number of r bins (default 150)")
+    p.add_argument("--bins", type=bins, default=150, help="number of r bins (default 150)")
     add_overlap_option(p)
     add_quiet(p)
 
@@ -173,7 +175,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--strain-min", type=non_negative, default=None,
                    help="start of the steady-state window (default: mid run)")
     p.add_argument("--strain-max", type=non_negative, default=None, help="end of the steady-state window (default: end)")
-    p.add_argument("--blocks", type=integer(2), default=10, help="blocks of the error estimate (default 10)")
+    p.add_argument("--blocks", type=integer(2, MAX_BINS), default=10, help="blocks of the error estimate (default 10)")
     add_quiet(p)
 
     p = add_command(sub, "flow-curve", _flow_curve,
@@ -197,7 +199,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _add_fit_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--bootstrap", type=integer(2), default=200,
+    p.add_argument("--bootstrap", type=resamples, default=200,
                    help="bootstrap resamples (packings, then samples within packings) of the statistical error "
                         "(default 200)")
     p.add_argument("--seed", type=seed, default=0, help="seed of the bootstrap (default 0)")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 
 from tqdm import tqdm
 
@@ -25,7 +26,7 @@ from ..protocols.calippso import (
     result_to_dataset,
 )
 from .common import add_command, add_preset, add_quiet, print_summary, stage_parameters
-from .types import count, path_with_suffix, positive, real
+from .types import count, integer, path_with_suffix, positive, real
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -63,7 +64,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--walls", action="store_true", help="hard walls on the box faces instead of periodic boundaries")
     p.add_argument("--max-iterations", type=count, default=DEFAULT_MAX_ITERATIONS,
                    help=f"largest number of LPs (default {DEFAULT_MAX_ITERATIONS})")
-    p.add_argument("--threads", type=count, default=1, help="HiGHS threads (default 1)")
+    p.add_argument("--threads", type=integer(1, os.cpu_count() or 1), default=1, help="HiGHS threads (default 1)")
     p.add_argument("--interior", choices=INTERIOR_POINTS, default=DEFAULT_INTERIOR,
                    help="HiGHS interior point method of the interior point LPs; hipo needs "
                         f"pip install 'jamflow[hipo]' (default {DEFAULT_INTERIOR})")

@@ -22,7 +22,11 @@ from .common import (
     stage_parameters,
 )
 from .packings import add_overlap_option, overlap_tol
-from .types import count, non_negative, path_with_suffix, probability, seed
+from .types import integer, non_negative, path_with_suffix, probability, seed
+
+#: Most random loads per LP kind: each load is two LPs, and a certificate that 1000 loads
+#: have not decided is not decided by more.
+MAX_LOADS = 1000
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -43,7 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "default: the packing's own contacts as exact contacts")
     p.add_argument("--exact", action="store_true",
                    help="with --gap-tol: treat the pairs as exact contacts (zero right-hand side)")
-    p.add_argument("--loads", type=count, default=DEFAULT_LOADS,
+    p.add_argument("--loads", type=integer(1, MAX_LOADS), default=DEFAULT_LOADS,
                    help=f"random loads per LP kind, each with both signs (default {DEFAULT_LOADS})")
     p.add_argument("--seed", type=seed, default=0, help="seed of the random loads (default 0)")
     p.add_argument("--max-cluster-fraction", type=probability, default=DEFAULT_MAX_CLUSTER_FRACTION,

@@ -25,7 +25,15 @@ from .common import (
     split_paths,
     stage_parameters,
 )
-from .types import count, integer, packing_fraction, path_with_suffix, positive, seed
+from .types import (
+    bins,
+    count,
+    integer,
+    packing_fraction,
+    path_with_suffix,
+    positive,
+    seed,
+)
 
 #: Default packing fraction of the random start: random sequential addition of
 #: elongated bodies (up to aspect ratio ~5) still finds free places quickly.
@@ -43,7 +51,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="length over width (ellipse a/b; circulo-line (l + 2R)/2R; dumbbell (2|v| + 2R)/2R)")
     p.add_argument("--asphericity", type=positive, default=None,
                    help="target asphericity A = p^2 / (4 pi a) > 1 (met exactly by bisection on the shape parameter)")
-    p.add_argument("--sides", type=integer(3), default=None, help="circulo-polygon: number of sides n >= 3 (regular polygon)")
+    p.add_argument("--sides", type=integer(3, 1000), default=None, help="circulo-polygon: number of sides n >= 3 (regular polygon)")
     p.add_argument("--random", action="store_true",
                    help="circulo-polygon: a random polygon per body at --asphericity (VanderWerf et al. App. B, "
                         "kept convex; the shapes draw from --seed)")
@@ -57,7 +65,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "contact-angle distribution P(psi) of elongated bodies (VanderWerf et al. Fig. 14): psi "
                         "is the angle between a body's long axis and the vector from its centre to a contact "
                         "point, pooled over packings, contacts between non-rattlers", "jammed shape packings")
-    p.add_argument("--bins", type=count, default=18, help="bins on [0, pi/2] (default 18, 5 degrees each)")
+    p.add_argument("--bins", type=bins, default=18, help="bins on [0, pi/2] (default 18, 5 degrees each)")
     add_quiet(p)
     add_quiet(_pooled_command(sub, "shape-survey", _shape_survey,
                               "phi_J and <z> (Eq. 3) against asphericity over jammed packings of shapes and disks "

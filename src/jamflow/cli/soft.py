@@ -22,8 +22,10 @@ from ..models.spheres.hessian import (
     lowest_modes,
 )
 from ..models.spheres.potential import PowerLawPotential
+from ..protocols.overdamped.run import dilute_start
 from ..protocols.quasistatic import LERNER_DELTA_R, aqs_shear, lerner_sd_shear
 from ..protocols.soft_jam import jam_to_pressure
+from ..resources import check_memory, series_memory
 from ..state.packing import LENGTH_UNITS, Packing, length_unit
 from ..tolerances import MINIMIZE_FORCE_TOL
 from .common import (
@@ -260,14 +262,22 @@ def _soft_jam_shapes(args: argparse.Namespace, packing: Packing) -> int:
     return 0
 
 
+def _strain_steps(args: argparse.Namespace) -> int:
+    """Strain steps of ``--strain`` in ``--step``; refused when their time series would not fit in memory."""
+    n = int(np.ceil(args.strain / args.step - 1e-9))
+    check_memory(f"{args.command} of {n:.4g} strain steps", series_memory(n + 1),
+                 "(give a larger --step or a smaller --strain)")
+    return n
+
+
 def _aqs(args: argparse.Namespace) -> int:
+    n = _strain_steps(args)
     packing = read_packing(args.input, None)
     pressure = args.pressure
     if args.fixed_pressure and pressure is None:
         if packing.pressure is None or not packing.pressure > 0:
             raise ValueError("--fixed-pressure needs a positive pressure attribute in the input or --pressure")
         pressure = packing.pressure
-    n = int(np.ceil(args.strain / args.step - 1e-9))
     bar = tqdm(total=n, desc="aqs", disable=args.quiet)
     ds, final = aqs_shear(
         packing, args.strain, args.step, PowerLawPotential(exponent=args.exponent), args.force_tol,
@@ -282,9 +292,12 @@ def _aqs(args: argparse.Namespace) -> int:
 
 
 def _sd_shear(args: argparse.Namespace) -> int:
+    n = _strain_steps(args)
     packing = read_packing(args.input, None)
+    warning = dilute_start(packing)
+    if warning:
+        print(f"jamflow sd-shear: warning: {warning}", file=sys.stderr)
     packing = packing.in_units(length_unit(packing.diameter, args.unit))
-    n = int(np.ceil(args.strain / args.step - 1e-9))
     bar = tqdm(total=n + 1, desc="sd-shear", disable=args.quiet)
     ds = lerner_sd_shear(packing, args.strain, args.step, args.dt, args.grad_tol, args.delta_r,
                          max_steps=args.max_steps, progress=lambda _: bar.update(1))
@@ -362,7 +375,11 @@ def _moduli(args: argparse.Namespace) -> int:
     m = elastic_moduli(packing.position, packing.box, packing.diameter, potential)
     pairs, rattler = backbone_pairs(packing.position, packing.box, packing.diameter, potential)
     H = hessian(packing.position, packing.box, packing.diameter, potential, pairs)
-    eigenvalues, _ = lowest_modes(H, packing.d, args.modes, keep=~rattler)
+    available = max(0, packing.d * int((~rattler).sum()) - packing.d)
+    if args.modes > available:
+        print(f"jamflow moduli: note: --modes {args.modes}: the {int((~rattler).sum())} non-rattlers have "
+              f"{available} non-translational modes; computing those", file=sys.stderr)
+    eigenvalues, _ = lowest_modes(H, packing.d, min(args.modes, available), keep=~rattler)
     unit = "epsilon / length^d"
     scalars = {name: ((), value, {"units": "1", "long_name": name.replace("_", " ") + " modulus", "comment": unit})
                for name, value in (("bulk", m.bulk), ("shear", m.shear),

@@ -9,7 +9,8 @@ run until killed or give numbers from nonsense.
 Real numbers: :func:`finite`, :func:`positive`, :func:`non_negative`,
 :func:`probability` ([0, 1]), :func:`packing_fraction` ((0, 1)), or any interval from
 :func:`real`. Integers: :func:`count` (>= 1), :func:`non_negative_int`, :func:`seed`
-([0, 2**64)), or any range from :func:`integer`. Output paths: :func:`path_with_suffix`.
+([0, 2**64)), :func:`bins`, :func:`resamples`, or any range from :func:`integer`. Output
+paths: :func:`path_with_suffix`.
 """
 
 from __future__ import annotations
@@ -20,8 +21,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-__all__ = ["ArgumentType", "UsageError", "count", "finite", "integer", "is_argument_type", "non_negative", "non_negative_int",
-           "packing_fraction", "path_with_suffix", "positive", "probability", "real", "require_suffix", "seed"]
+__all__ = ["ArgumentType", "MAX_BINS", "MAX_RESAMPLES", "UsageError", "bins", "count", "finite", "integer", "is_argument_type", "non_negative", "non_negative_int",
+           "packing_fraction", "path_with_suffix", "positive", "probability", "real", "require_suffix", "resamples",
+           "seed"]
 
 #: Seeds are unsigned 64-bit integers: numpy's generators take any, but the netCDF
 #: attribute that records them holds at most an unsigned 64-bit one.
@@ -124,6 +126,18 @@ count = integer(1, need="an integer >= 1")
 non_negative_int = integer(0, need="an integer >= 0")
 #: A random seed: an integer in [0, 2**64).
 seed = integer(0, SEED_LIMIT - 1, need="an integer in [0, 2**64)")
+
+#: Most bins of a histogram (or blocks of a block average): more than there are particles in
+#: any packing jamflow makes leaves almost every bin empty, and 10**12 would not fit in memory.
+MAX_BINS: int = 10**6
+#: Most bootstrap resamples: the relative error of a bootstrap standard error is about
+#: 1 / sqrt(2 n), 0.2 % at 10**5; more only costs time.
+MAX_RESAMPLES: int = 10**5
+
+#: A number of histogram bins.
+bins = integer(1, MAX_BINS, need=f"a number of bins in [1, {MAX_BINS}]")
+#: A number of bootstrap resamples (a standard error needs two).
+resamples = integer(2, MAX_RESAMPLES, need=f"a number of resamples in [2, {MAX_RESAMPLES}]")
 
 
 def require_suffix(path: str, suffixes: tuple[str, ...]) -> str:
