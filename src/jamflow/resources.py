@@ -6,7 +6,7 @@ is refused in one line instead of allocating for minutes; the workflow's plan-ti
 checks call the same function for a scene's ``system.n``. Time series whose length is
 known in advance (``aqs``, ``sd-shear``: strain / step records) and flow snapshots are
 checked with :func:`series_memory` and :func:`check_memory`. The per-particle numbers are
-measured (``docs/notes/resources.md``, "Memory of the starts").
+measured (``docs/notes/resources.md``, "Memory and time of the starts").
 """
 
 from __future__ import annotations

@@ -243,6 +243,9 @@ def write_dataset(ds: xr.Dataset, path: str | os.PathLike) -> Path:
         _existing_output(path, (kind,))
     path.parent.mkdir(parents=True, exist_ok=True)
     ds = ds.copy()
+    for key, value in ds.attrs.items():
+        if isinstance(value, int) and not isinstance(value, bool) and not -(2**63) <= value < 2**64:
+            raise ValueError(f"attribute {key} = {value} does not fit a 64-bit netCDF integer (seeds are < 2**64)")
     ds.attrs = {k: _netcdf_attr(v) for k, v in ds.attrs.items()}
     for var in ds.variables.values():
         var.attrs = {k: _netcdf_attr(v) for k, v in var.attrs.items()}
