@@ -26,10 +26,10 @@ def _interrupted_while_starting(signum: int, frame: object) -> None:
 
 def _started_as_command() -> bool:
     """Whether this process is the ``jamflow`` console script or ``python -m jamflow``."""
-    entry = sys.modules.get("__main__")
-    spec = getattr(entry, "__spec__", None)
-    name = os.path.basename(getattr(entry, "__file__", None) or "")
-    return (spec is not None and spec.name == "jamflow.__main__") or name.split(".")[0].split("-")[0] == "jamflow"
+    argv = getattr(sys, "orig_argv", sys.argv)
+    if "-m" in argv[:-1] and argv[argv.index("-m") + 1] == "jamflow":
+        return True
+    return os.path.basename(sys.argv[0] if sys.argv else "") == "jamflow"
 
 
 if _started_as_command() and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
@@ -40,12 +40,11 @@ if _started_as_command() and signal.getsignal(signal.SIGINT) is signal.default_i
 import importlib
 from typing import Any
 
-#: Public name -> module (relative to this package) that defines it. Even the state
-#: classes load on first use: ``jamflow.cli`` starts without numpy and xarray, so that
-#: Ctrl-C during a command's start-up is caught by its one-line handler.
+from .box import Box
+from .state.packing import Packing
+
+#: Public name -> module (relative to this package) that defines it.
 _LAZY: dict[str, str] = {
-    "Box": ".box",
-    "Packing": ".state.packing",
     # stages: Packing -> Packing / result / Dataset
     "random_packing": ".protocols.initial",
     "ls_compress": ".protocols.ls",
@@ -85,7 +84,7 @@ _LAZY: dict[str, str] = {
 #: submodule's (importing a submodule binds its name as an attribute of its package).
 _RENAMED: dict[str, str] = {"ls_compress": "compress", "calippso_jam": "calippso"}
 
-__all__ = list(_LAZY)
+__all__ = ["Box", "Packing", *_LAZY]
 
 
 def __getattr__(name: str) -> Any:

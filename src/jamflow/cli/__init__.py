@@ -30,6 +30,7 @@ import sys
 import typing
 from collections.abc import Sequence
 
+from ..io import check_output_paths, file_body_kind
 from ..presets import preset_options
 from ..provenance import jamflow_version
 from ..stages import STAGES, refusal
@@ -105,8 +106,6 @@ def check_bodies(command: str, inputs: Sequence[str]) -> None:
     ValueError
         One line: the file, what the command takes and what to run instead.
     """
-    from ..io import file_body_kind
-
     if not STAGES[command].reads_packings:
         return
     for path in inputs:
@@ -127,8 +126,6 @@ def _one_line(exc: BaseException) -> str:
 
 def _run(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:
     """Parse, check paths and bodies before any work, run the handler, say what was replaced."""
-    from ..io import check_output_paths
-
     args = parser.parse_args(argv)
     preset = getattr(args, "preset", "default")
     if preset != "default":
