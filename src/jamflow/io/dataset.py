@@ -34,6 +34,7 @@ __all__ = [
     "read_packing",
     "new_dataset_attrs",
     "write_table",
+    "atomic_file",
 ]
 
 
@@ -349,6 +350,20 @@ def write_table(table: pd.DataFrame, path: str | os.PathLike) -> Path:
     else:
         raise ValueError(f"{path}: a table is written as .csv or .json")
     return _atomic_text(path, text)
+
+
+@contextmanager
+def atomic_file(path: str | os.PathLike) -> Iterator[Path]:
+    """A hidden temporary path beside ``path`` to write to, renamed onto ``path`` on success.
+
+    For writers that take a file name (figures): an exception or Ctrl-C leaves the
+    previous file (or none) and no temporary; a full disk is named as such.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with _atomic(path) as (fd, tmp):
+        os.close(fd)
+        yield Path(tmp)
 
 
 def _atomic_text(path: Path, text: str) -> Path:
