@@ -25,6 +25,7 @@ from matplotlib.ticker import NullFormatter
 
 from .analysis.forces import THETA_EXTENDED, THETA_LOCALISED
 from .analysis.gaps import MEAN_FIELD_GAP_EXPONENT
+from .io import atomic_file
 from .network import count_bodies
 from .network.spheres import contact_network, find_rattlers
 from .state.packing import Packing
@@ -86,10 +87,10 @@ def save_figure(fig: Figure, path: str | os.PathLike, dpi: int = 150) -> tuple[P
     if problems:
         raise ValueError(f"figure {path} not saved: " + "; ".join(problems))
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     png, pdf = path.with_suffix(".png"), path.with_suffix(".pdf")
-    fig.savefig(png, dpi=dpi, bbox_inches="tight")
-    fig.savefig(pdf, bbox_inches="tight")
+    for target, options in ((png, {"dpi": dpi}), (pdf, {})):
+        with atomic_file(target) as tmp:  # an interrupted save leaves no half-written figure
+            fig.savefig(tmp, format=target.suffix[1:], bbox_inches="tight", **options)
     return png, pdf
 
 

@@ -15,7 +15,9 @@ reads them and returns one row per packing and per flow run:
 - flow runs: the last record of the time series (strain, time, phi, pressure, shear
   stress, contacts) and, when a flow summary exists, the steady-state friction.
 
-Every number is read from the datasets' own attributes or variables; nothing is
+Every file is read as the kind of dataset its folder says (a flow series where a packing
+should be is an error naming the file, not a row of blanks). Every number is read from
+the datasets' own attributes or variables; nothing is
 recomputed except the backbone counts of a packing that has contacts and rattler flags
 but no count attributes (soft packings), which are counted from those variables.
 """
@@ -151,7 +153,7 @@ def _attr(attrs: dict[str, Any], key: str, default: Any = np.nan) -> Any:
 
 
 def _packing_row(root: Path, path: Path) -> dict[str, Any]:
-    ds = read_dataset(path)
+    ds = read_dataset(path, "packing")
     a = ds.attrs
     stage, variant = _split_name(path.stem)
     is_p_target = _attr(a, "target_kind", "") == "p"
@@ -172,7 +174,7 @@ def _packing_row(root: Path, path: Path) -> dict[str, Any]:
     row["classification"] = ""
     certificate = root / "analysis" / path.parent.name / f"certify{variant}.nc"
     if certificate.is_file():
-        cert = read_dataset(certificate).attrs
+        cert = read_dataset(certificate, ("certificate", "chain-certificate")).attrs
         # a sample's certificate is of one stage's packing (the chain's last), named by its protocol
         if cert.get("packing_protocol") == row["protocol"]:
             row["classification"] = cert["classification"]
@@ -212,7 +214,7 @@ def _attach_scene_analyses(root: Path, rows: list[dict[str, Any]]) -> None:
             prefix, variant = _split_name(path.stem)
             if prefix not in (kind, f"ls-{kind}"):
                 continue
-            a = read_dataset(path).attrs
+            a = read_dataset(path, kind).attrs
             values = (float(a["fit_exponent"]), float(a["fit_exponent_err"]))
             for row in rows:
                 if row["stage"] == stage_of(prefix) and row["_variant"] == variant:
@@ -227,7 +229,7 @@ def _is_series(path: Path) -> bool:
 
 
 def _run_row(root: Path, path: Path) -> dict[str, Any]:
-    ds = read_dataset(path)
+    ds = read_dataset(path, ("flow", "aqs"))
     a = ds.attrs
     row: dict[str, Any] = {
         "kind": "run", "sample": path.parent.name, "stage": path.stem,
@@ -241,5 +243,5 @@ def _run_row(root: Path, path: Path) -> dict[str, Any]:
         row[column] = float(ds[name].values[-1]) if name in ds.variables and ds[name].size else np.nan
     summary = root / "analysis" / path.parent.name / f"{path.stem}_summary.nc"
     if summary.is_file():
-        row["friction"] = float(read_dataset(summary).attrs["friction_ratio_of_means"])
+        row["friction"] = float(read_dataset(summary, "flow-summary").attrs["friction_ratio_of_means"])
     return row

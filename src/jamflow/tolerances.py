@@ -20,6 +20,13 @@ OVERLAP_TOL: float = 1e-8
 #: without a dual in the jammed d = 3 LS example is at 1.4e-7.
 CONTACT_GAP_TOL: float = 1e-8
 
+#: Histograms of distances (g(r)): a value within this relative distance of a bin edge
+#: counts in the bin above the edge. Contacts sit on their contact distance to
+#: :data:`CONTACT_GAP_TOL` (and round-off ~1e-15), so a contact distance on an edge (the
+#: small-large contacts of a 1:1.4 mixture at r = 1 mean diameter) never straddles it
+#: under a rigid shift or a relabelling; the same holds for lattice distances of crystals.
+BIN_EDGE_RTOL: float = CONTACT_GAP_TOL
+
 #: Position tolerance in fractional coordinates when checking that particles lie
 #: inside the primary cell (absorbs round-off of wrapping).
 INSIDE_BOX_TOL: float = 1e-12

@@ -20,10 +20,14 @@ from .common import (
     add_preset,
     add_quiet,
     print_summary,
-    seed,
     stage_parameters,
 )
 from .packings import add_overlap_option, overlap_tol
+from .types import integer, non_negative, path_with_suffix, probability, seed
+
+#: Most random loads per LP kind: each load is two LPs, and a certificate that 1000 loads
+#: have not decided is not decided by more.
+MAX_LOADS = 1000
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -34,20 +38,20 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "rattlers are removed, then random loads of both signs probe for unjamming "
                     "motions at fixed box (collective) and, with --strict, with a volume-preserving "
                     "box strain. Writes a dataset with attribute 'classification'.",
-        reads=("packing",), writes=("out",),
+        reads=("packing",), writes=("out",), makes={"out": ("certificate", "chain-certificate")},
     )
     p.add_argument("packing", help="input netCDF packing")
-    p.add_argument("out", help="output netCDF certificate")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF certificate")
     p.add_argument("--strict", action="store_true", help="also test strict jamming (box may deform at fixed volume)")
-    p.add_argument("--gap-tol", type=float, default=None,
+    p.add_argument("--gap-tol", type=non_negative, default=None,
                    help="pairs with relative gap <= T are contacts, with gap-aware constraints; "
                         "default: the packing's own contacts as exact contacts")
     p.add_argument("--exact", action="store_true",
                    help="with --gap-tol: treat the pairs as exact contacts (zero right-hand side)")
-    p.add_argument("--loads", type=int, default=DEFAULT_LOADS,
+    p.add_argument("--loads", type=integer(1, MAX_LOADS), default=DEFAULT_LOADS,
                    help=f"random loads per LP kind, each with both signs (default {DEFAULT_LOADS})")
     p.add_argument("--seed", type=seed, default=0, help="seed of the random loads (default 0)")
-    p.add_argument("--max-cluster-fraction", type=float, default=DEFAULT_MAX_CLUSTER_FRACTION,
+    p.add_argument("--max-cluster-fraction", type=probability, default=DEFAULT_MAX_CLUSTER_FRACTION,
                    help="largest non-wrapping moving group removed as a rattling cluster, as a fraction "
                         f"of the backbone (default {DEFAULT_MAX_CLUSTER_FRACTION})")
     p.add_argument("--solver", choices=["ipm", "simplex", "choose"], default=DEFAULT_SOLVER,

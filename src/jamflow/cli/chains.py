@@ -32,13 +32,25 @@ from ..io import (
     write_dataset,
     write_packing,
 )
+from ..resources import check_fits
 from .common import (
     add_command,
     add_quiet,
     packing_rows,
     print_summary,
-    seed,
+    split_paths,
     stage_parameters,
+)
+from .types import (
+    count,
+    integer,
+    non_negative,
+    packing_fraction,
+    path_with_suffix,
+    positive,
+    probability,
+    real,
+    seed,
 )
 
 
@@ -47,41 +59,43 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "random start of chains or rigid trimers of unit spheres, or of bidisperse asymmetric dimers "
                     "(links, no overlaps unless --overlap; no crossing links in 2D)", writes=("out",),
                     packings=("out",))
-    p.add_argument("out", help="output netCDF packing with links")
-    p.add_argument("--d", type=int, required=True, help="dimension (2 or 3)")
-    p.add_argument("--clusters", type=int, required=True, help="number of clusters K (N = K M spheres)")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF packing with links")
+    p.add_argument("--d", type=integer(2, 3), required=True, help="dimension (2 or 3)")
+    p.add_argument("--clusters", type=count, required=True, help="number of clusters K (N = K M spheres)")
     p.add_argument("--cluster", choices=CLUSTER_KINDS, required=True,
                    help="trimer: three spheres with the bond angle frozen (rigid); chain: --chain-length spheres; "
                         "dimer: a small and a large monomer at a fixed distance (van der Werf et al. Fig. 3b), "
                         "half of the dimers scaled by --size-ratio")
-    p.add_argument("--chain-length", type=int, default=3, help="spheres per chain M (default 3)")
+    p.add_argument("--chain-length", type=integer(2), default=3, help="spheres per chain M (default 3)")
     p.add_argument("--free-angles", action="store_true",
                    help="bonds only (flexible); default: every bond angle frozen by an angle link")
     semi = p.add_mutually_exclusive_group()
-    semi.add_argument("--frozen-fraction", type=float, default=None,
+    semi.add_argument("--frozen-fraction", type=probability, default=None,
                       help="chain: semi-flexible, each bond angle frozen with this probability (seeded)")
-    semi.add_argument("--frozen-every", type=int, default=None,
+    semi.add_argument("--frozen-every", type=count, default=None,
                       help="chain: semi-flexible, the bond angle at every k-th sphere frozen (k = 1: all)")
-    p.add_argument("--bond-angle", type=float, default=None,
+    p.add_argument("--bond-angle", type=real(0.0, 180.0, lo_open=True, need="an angle in (0, 180] degrees"),
+                   default=None,
                    help="every bond angle [degrees]; default uniform in [60, 150] degrees")
-    p.add_argument("--diameter-ratio", type=float, default=DIMER_DIAMETER_RATIO,
+    p.add_argument("--diameter-ratio", type=positive, default=DIMER_DIAMETER_RATIO,
                    help=f"dimer: large over small monomer diameter (default {DIMER_DIAMETER_RATIO})")
-    p.add_argument("--separation", type=float, default=DIMER_SEPARATION,
+    p.add_argument("--separation", type=positive, default=DIMER_SEPARATION,
                    help=f"dimer: monomer centre distance in small-monomer diameters (default {DIMER_SEPARATION}, "
                         f"the paper's A - 1 = 0.349)")
-    p.add_argument("--size-ratio", type=float, default=DIMER_SIZE_RATIO,
+    p.add_argument("--size-ratio", type=positive, default=DIMER_SIZE_RATIO,
                    help=f"dimer: length of large over small dimers (default {DIMER_SIZE_RATIO})")
     p.add_argument("--dispersity", choices=["mono", "bi", "poly", "lognormal"], default="mono",
                    help="chains and trimers: size mixture as `jamflow init` (default mono: unit spheres; equal "
                         "spheres partly crystallise in 2D)")
-    p.add_argument("--ratio", type=float, default=1.4, help="bidisperse size ratio large / small (default 1.4)")
-    p.add_argument("--fraction", type=float, default=0.5,
+    p.add_argument("--ratio", type=real(1.0, lo_open=True, need="a size ratio > 1"), default=1.4,
+                   help="bidisperse size ratio large / small (default 1.4)")
+    p.add_argument("--fraction", type=probability, default=0.5,
                    help="bidisperse number fraction of small clusters (or spheres) (default 0.5)")
-    p.add_argument("--width", type=float, default=0.1, help="poly / lognormal relative width (default 0.1)")
+    p.add_argument("--width", type=non_negative, default=0.1, help="poly / lognormal relative width (default 0.1)")
     p.add_argument("--sizes-per", choices=SIZE_CLASSES, default="cluster",
                    help="one size class per cluster (a scaled copy, default) or per sphere (bonds are the "
                         "contact distances)")
-    p.add_argument("--phi", type=float, default=None,
+    p.add_argument("--phi", type=packing_fraction, default=None,
                    help=f"packing fraction of the union of each cluster's spheres (default without overlaps {DILUTE_PHI[2]} in 2D, {DILUTE_PHI[3]} in 3D; "
                         f"with --overlap "
                         f"{OVERLAP_PHI[2]} in 2D, {OVERLAP_PHI[3]} in 3D)")
@@ -99,9 +113,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "add links to a packing: cement K random contacts (freezing the bond angles they create) "
                     "or read a link file", reads=("input", "file"), writes=("out",), packings=("out",))
     p.add_argument("input", help="input netCDF packing (with contacts for --cement)")
-    p.add_argument("out", help="output netCDF packing with links")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF packing with links")
     group = p.add_mutually_exclusive_group(required=True)
-    group.add_argument("--cement", type=int, default=None, help="number of random contacts turned into links")
+    group.add_argument("--cement", type=count, default=None, help="number of random contacts turned into links")
     group.add_argument("--file", default=None,
                        help="text file of links, one 'i j [length]' per line (length: current distance if omitted)")
     p.add_argument("--seed", type=seed, default=None, help="random seed of --cement")
@@ -116,7 +130,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "Groups `jamflow moduli` outputs of packings made by `jamflow link --cement` by n_l / N and "
                     "averages each group's Hill moduli weighted by their Reuss-Voigt spread, with the weighted "
                     "standard error; infinite moduli are counted, not averaged (jamflow.chains.averages).",
-                    reads=("paths[:-1]",), writes=("paths[-1]",))
+                    reads=("paths[:-1]",), writes=("paths[-1]",),
+                    makes={"paths[-1]": ("chains-moduli-table",)})
     p.add_argument("paths", nargs="+", metavar="MODULI.nc ... OUT.nc", help="moduli datasets, then the output")
     add_quiet(p)
 
@@ -137,6 +152,8 @@ def _link_rows(packing) -> list[tuple[str, object]]:
 
 
 def _init_chains(args: argparse.Namespace) -> int:
+    per_cluster = {"trimer": 3, "dimer": 2}.get(args.cluster, args.chain_length)
+    check_fits("init-chains", args.clusters * per_cluster, args.d, "spheres")
     angle = None if args.bond_angle is None else radians(args.bond_angle)
     sizes = Sizes(args.dispersity, args.ratio, args.fraction, args.width, args.sizes_per)
     packing, messages = linked_packing(args.d, args.clusters, args.cluster, np.random.default_rng(args.seed),
@@ -200,8 +217,9 @@ def _link(args: argparse.Namespace) -> int:
 
 
 def _chains_moduli(args: argparse.Namespace) -> int:
-    datasets = [read_dataset(path, "chain-moduli") for path in args.paths[:-1]]
-    for path, ds in zip(args.paths[:-1], datasets):
+    inputs, out = split_paths(args.paths, "moduli dataset")
+    datasets = [read_dataset(path, "chain-moduli") for path in inputs]
+    for path, ds in zip(inputs, datasets):
         if "n_cemented" not in ds.attrs:
             raise ValueError(f"{path} has no n_cemented attribute (moduli of a packing made by jamflow link --cement)")
         if "n_unstable" not in ds.attrs:
@@ -211,7 +229,7 @@ def _chains_moduli(args: argparse.Namespace) -> int:
                                     stage_parameters(args, "paths"), d=int(datasets[0].attrs["d"]),
                                     method=("Reuss-Voigt weighted average (chains paper Fig. 5): Hill values "
                                             "weighted by 1 / ((V - R)^2 / 12), scatter standard error"))
-    write_dataset(table, args.paths[-1])
+    write_dataset(table, out)
     rows = []
     for k in range(table.sizes["links_per_sphere"]):
         t = table.isel(links_per_sphere=k)
@@ -221,7 +239,7 @@ def _chains_moduli(args: argparse.Namespace) -> int:
         label = f"n_l / N = {float(t.links_per_sphere):.4g} ({int(t.n_packings)} packings"
         label += f", {int(t.n_unstable)} unstable, not averaged)" if int(t.n_unstable) else ")"
         rows.append((label, value))
-    print_summary(args, args.paths[-1], rows)
+    print_summary(args, out, rows)
     return 0
 
 

@@ -18,6 +18,7 @@ from ..network import count_bodies
 from ..network.spheres import contact_network
 from ..protocols.initial import random_packing
 from ..protocols.overdamped.run import snapshot_packings
+from ..resources import check_fits
 from ..state.packing import Packing
 from ..tolerances import OVERLAP_TOL
 from .common import (
@@ -26,22 +27,32 @@ from .common import (
     format_rows,
     packing_rows,
     print_summary,
-    seed,
     stage_parameters,
+)
+from .types import (
+    count,
+    integer,
+    non_negative,
+    packing_fraction,
+    path_with_suffix,
+    positive,
+    probability,
+    seed,
 )
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "init", _init, "random non-overlapping packing at a packing fraction", writes=("out",), packings=("out",))
-    p.add_argument("out", help="output netCDF")
-    p.add_argument("--d", type=int, required=True, help="dimension (>= 2)")
-    p.add_argument("--n", type=int, required=True, help="number of particles")
-    p.add_argument("--phi", type=float, required=True, help="packing fraction")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF")
+    p.add_argument("--d", type=integer(2), required=True, help="dimension (>= 2)")
+    p.add_argument("--n", type=count, required=True, help="number of particles")
+    p.add_argument("--phi", type=packing_fraction, required=True, help="packing fraction")
     p.add_argument("--dispersity", choices=["mono", "bi", "poly", "lognormal"], default="mono")
-    p.add_argument("--ratio", type=float, default=1.4, help="bidisperse size ratio (default 1.4)")
-    p.add_argument("--fraction", type=float, default=0.5, help="bidisperse number fraction of small spheres (default 0.5)")
-    p.add_argument("--width", type=float, default=0.1, help="polydisperse relative width (default 0.1)")
-    p.add_argument("--species-spread", type=float, default=0.0,
+    p.add_argument("--ratio", type=positive, default=1.4, help="bidisperse size ratio (default 1.4)")
+    p.add_argument("--fraction", type=probability, default=0.5,
+                   help="bidisperse number fraction of small spheres (default 0.5)")
+    p.add_argument("--width", type=non_negative, default=0.1, help="polydisperse relative width (default 0.1)")
+    p.add_argument("--species-spread", type=non_negative, default=0.0,
                    help="bidisperse: relative standard deviation within each species (default 0)")
     p.add_argument("--seed", type=seed, required=True, help="random seed")
     p.add_argument("--walls", action="store_true",
@@ -51,7 +62,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "import-dat", _import_dat, "read a CALiPPSO .dat configuration",
                     reads=("dat",), writes=("out",), packings=("out",))
     p.add_argument("dat", help="input .dat file (d, N, diameter, positions)")
-    p.add_argument("out", help="output netCDF")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF")
     add_overlap_option(p)
     add_quiet(p)
 
@@ -68,9 +79,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "links needs .gsd), orientations as quaternions, one particle type per shape with its "
                     "type_shapes entry, the other columns as log/particles/<name>; GSD stores positions in "
                     "single precision.",
-                    reads=("packing",), writes=("out",))
+                    reads=("packing",), writes=("out",), makes={"out": ()})
     p.add_argument("packing", help="input netCDF packing or flow snapshot file")
-    p.add_argument("out", help="output .xyz (extended XYZ) or .gsd (HOOMD GSD with links as bonds)")
+    p.add_argument("out", type=path_with_suffix(".xyz", ".gsd"),
+                   help="output .xyz (extended XYZ) or .gsd (HOOMD GSD with links as bonds)")
     p.add_argument("--pos-2d", action="store_true",
                    help="2D: write x and y only (pos:R:2), which OVITO reads as a 2D system; ASE cannot read it")
     add_overlap_option(p)
@@ -79,7 +91,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "check", _check, "contacts, rattlers, isostaticity, overlaps, force balance",
                     reads=("packing",))
     p.add_argument("packing", help="input netCDF packing")
-    p.add_argument("--gap-tol", type=float, default=None,
+    p.add_argument("--gap-tol", type=non_negative, default=None,
                    help="relative gap counted as contact; default: the packing's own contacts, "
                         "else jamflow.tolerances.CONTACT_GAP_TOL")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -94,7 +106,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def add_overlap_option(p: argparse.ArgumentParser, default: float | None = OVERLAP_TOL) -> None:
     """``--overlap-tol`` / ``--soft`` for commands that read a packing."""
-    p.add_argument("--overlap-tol", type=float, default=default,
+    p.add_argument("--overlap-tol", type=non_negative, default=default,
                    help=f"largest accepted relative overlap when reading (default {default})")
     p.add_argument("--soft", action="store_true", help="accept overlaps (soft packings)")
 
@@ -105,6 +117,7 @@ def overlap_tol(args: argparse.Namespace) -> float | None:
 
 
 def _init(args: argparse.Namespace) -> int:
+    check_fits("init", args.n, args.d, "spheres")
     # delay: no bar for quick runs, nor before a one-line error on bad input
     with tqdm(total=args.n, desc="init (RSA)", unit="sphere", disable=args.quiet, delay=1.0) as bar:
         p = random_packing(args.n, args.d, args.phi, args.dispersity, args.seed,

@@ -9,6 +9,7 @@ import numpy as np
 import xarray as xr
 
 from ..io import new_dataset_attrs, read_packing, write_dataset, write_packing
+from ..resources import check_fits
 from ..shapes.generation import (
     SHAPE_CHOICES,
     bidisperse_shapes,
@@ -21,9 +22,23 @@ from .common import (
     add_quiet,
     packing_rows,
     print_summary,
-    seed,
+    split_paths,
     stage_parameters,
 )
+from .types import (
+    bins,
+    count,
+    integer,
+    packing_fraction,
+    path_with_suffix,
+    positive,
+    real,
+    seed,
+)
+
+#: Most Monte Carlo samples per radius decrease of ``feasible-region``: the draw holds
+#: (samples, 3) float64 coordinates and a few temporaries of that size, about 1 GB at 1e7.
+MAX_SAMPLES: int = 10_000_000
 
 #: Default packing fraction of the random start: random sequential addition of
 #: elongated bodies (up to aspect ratio ~5) still finds free places quickly.
@@ -35,22 +50,22 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "random bidisperse packing of 2D shaped bodies (VanderWerf et al.): areas 1.4^2 apart, "
                     "equal masses, mean area-equivalent diameter 1, no overlap",
                     writes=("out",), packings=("out",))
-    p.add_argument("out", help="output netCDF packing")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF packing")
     p.add_argument("--shape", choices=SHAPE_CHOICES, required=True, help="shape family")
-    p.add_argument("--aspect-ratio", type=float, default=None,
+    p.add_argument("--aspect-ratio", type=positive, default=None,
                    help="length over width (ellipse a/b; circulo-line (l + 2R)/2R; dumbbell (2|v| + 2R)/2R)")
-    p.add_argument("--asphericity", type=float, default=None,
+    p.add_argument("--asphericity", type=positive, default=None,
                    help="target asphericity A = p^2 / (4 pi a) > 1 (met exactly by bisection on the shape parameter)")
-    p.add_argument("--shaft-length", type=float, default=None,
+    p.add_argument("--shaft-length", type=positive, default=None,
                    help="dumbbell: the paper's shaft length X, the lobe-centre distance in lobe radii (Fig. 4: 2.4 "
                         "isostatic, 4 hypostatic; Table I's alpha - 1, X = 2 gives A - 1 = 0.514); the same as "
                         "--aspect-ratio 1 + X/2")
-    p.add_argument("--sides", type=int, default=None, help="circulo-polygon: number of sides n >= 3 (regular polygon)")
+    p.add_argument("--sides", type=integer(3, 1000), default=None, help="circulo-polygon: number of sides n >= 3 (regular polygon)")
     p.add_argument("--random", action="store_true",
                    help="circulo-polygon: a random polygon per body at --asphericity (VanderWerf et al. App. B, "
                         "kept convex; the shapes draw from --seed)")
-    p.add_argument("--n", type=int, required=True, help="number of bodies (even: half small, half large)")
-    p.add_argument("--phi", type=float, default=INIT_SHAPES_PHI,
+    p.add_argument("--n", type=count, required=True, help="number of bodies (even: half small, half large)")
+    p.add_argument("--phi", type=packing_fraction, default=INIT_SHAPES_PHI,
                    help=f"packing fraction of the random start (default {INIT_SHAPES_PHI})")
     p.add_argument("--seed", type=seed, required=True, help="random seed")
     add_quiet(p)
@@ -59,7 +74,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "contact-angle distribution P(psi) of elongated bodies (VanderWerf et al. Fig. 14): psi "
                         "is the angle between a body's long axis and the vector from its centre to a contact "
                         "point, pooled over packings, contacts between non-rattlers", "jammed shape packings")
-    p.add_argument("--bins", type=int, default=18, help="bins on [0, pi/2] (default 18, 5 degrees each)")
+    p.add_argument("--bins", type=bins, default=18, help="bins on [0, pi/2] (default 18, 5 degrees each)")
     add_quiet(p)
     p = add_command(sub, "shape-survey", _shape_survey,
                     "phi_J and <z> against asphericity over jammed packings of shapes and disks (VanderWerf et al. "
@@ -71,7 +86,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--spectral", action="store_true",
                    help="also count contacts as N_c = N_c^0 - N_1 from each packing's dynamical-matrix spectrum "
                         "(Fig. 8's definition for circulo shapes; one dense eigensolve of 3N x 3N per packing)")
-    p.add_argument("--lambda-c", type=float, default=None,
+    p.add_argument("--lambda-c", type=positive, default=None,
                    help="with --spectral: cutoff between regions 1 and 2 [k] (default: the widest admissible gap, "
                         "as jamflow modes)")
     add_quiet(p)
@@ -87,13 +102,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "volume and surface of the feasible region of one circulo-line caged by three fixed points "
                     "against the decrease of its radius (VanderWerf et al. Figs. 12-13)", writes=("out",))
     p.add_argument("out", help="output netCDF (dim shrink)")
-    p.add_argument("--half-length", type=float, default=0.2,
+    p.add_argument("--half-length", type=positive, default=0.2,
                    help="core half-length over the radius R (default 0.2: A - 1 = 0.013; three points hold lines "
                         "up to about 0.25 R at --beta 45)")
-    p.add_argument("--beta", type=float, default=45.0, help="angle of the cap points below the axis [degree] (default 45)")
-    p.add_argument("--shrinks", type=float, nargs="+", default=[1e-7, 1e-6, 1e-5, 1e-4, 1e-3],
+    p.add_argument("--beta", type=real(0.0, 90.0, lo_open=True, hi_open=True, need="an angle in (0, 90) degrees"), default=45.0, help="angle of the cap points below the axis [degree] (default 45)")
+    p.add_argument("--shrinks", type=real(0.0, 1.0, lo_open=True, hi_open=True, need="a radius decrease dR / R in (0, 1)"), nargs="+", default=[1e-7, 1e-6, 1e-5, 1e-4, 1e-3],
                    help="radius decreases dR / R (default 1e-7 ... 1e-3)")
-    p.add_argument("--samples", type=int, default=400_000, help="Monte Carlo samples per dR (default 400000)")
+    p.add_argument("--samples", type=integer(1, MAX_SAMPLES, need=f"a number of samples in [1, {MAX_SAMPLES}]"), default=400_000, help="Monte Carlo samples per dR (default 400000)")
     p.add_argument("--seed", type=seed, default=0, help="seed of the Monte Carlo samples (default 0)")
     add_quiet(p)
 
@@ -102,10 +117,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "fourth derivatives, and the check N_c = N_c^0 - N_1 (VanderWerf et al. Sec. III B); of a "
                     "linked packing: constrained-Hessian eigenvalues and eigenvectors with the zero modes named "
                     "(chains paper Sec. IV A)",
-                    reads=("input",), writes=("out",))
+                    reads=("input",), writes=("out",), makes={"out": ("modes", "linked-modes")})
     p.add_argument("input", help="input netCDF shape or linked packing at force balance (soft-jam)")
-    p.add_argument("out", help="output netCDF spectrum (dim mode)")
-    p.add_argument("--lambda-c", type=float, default=None,
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF spectrum (dim mode)")
+    p.add_argument("--lambda-c", type=positive, default=None,
                    help="cutoff between regions 1 and 2 [k]; default: the widest gap of log(lambda) in the "
                         "lower half of the nonzero spectrum that spans a decade and starts at most "
                         "1e3 P (region 1 empty without one)")
@@ -120,7 +135,7 @@ def _pooled_command(sub: argparse._SubParsersAction, name: str, handler, help: s
     """A command reading packings ``IN ... OUT`` with ``--parallel-contacts`` (Fig. 6)."""
     from ..shapes.counting import PARALLEL_MODES
 
-    p = add_command(sub, name, handler, help, reads=("paths[:-1]",), writes=("paths[-1]",))
+    p = add_command(sub, name, handler, help, reads=("paths[:-1]",), writes=("paths[-1]",), makes={"paths[-1]": (name,)})
     p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc", help=f"{inputs}, then the output")
     p.add_argument("--parallel-contacts", choices=PARALLEL_MODES, default="once",
                    help="a parallel circulo contact counts once or twice (Fig. 6; default once)")
@@ -130,11 +145,7 @@ def _pooled_command(sub: argparse._SubParsersAction, name: str, handler, help: s
 def _contact_angles(args: argparse.Namespace) -> int:
     from ..shapes.analysis import contact_angle_dataset
 
-    inputs, out = args.paths[:-1], args.paths[-1]
-    if not inputs:
-        raise ValueError("contact-angles needs at least one input packing before the output")
-    if args.bins < 1:
-        raise ValueError(f"--bins must be at least 1, got {args.bins}")
+    inputs, out = split_paths(args.paths, "shape packing")
     ds = contact_angle_dataset([read_packing(p, None) for p in inputs], args.parallel_contacts, args.bins)
     ds.attrs.update(new_dataset_attrs("jamflow contact-angle distribution", stage_parameters(args, "paths")))
     write_dataset(ds, out)
@@ -152,9 +163,7 @@ def _contact_angles(args: argparse.Namespace) -> int:
 def _shape_survey(args: argparse.Namespace) -> int:
     from ..shapes.survey import CONVENTIONS, check_jammed, survey_dataset, survey_row
 
-    inputs, out = args.paths[:-1], args.paths[-1]
-    if not inputs:
-        raise ValueError("shape-survey needs at least one input packing before the output")
+    inputs, out = split_paths(args.paths, "shape packing")
     if args.lambda_c is not None and not args.spectral:
         raise ValueError("--lambda-c sets the spectral count: give --spectral with it")
     packings = [read_packing(p, None) for p in inputs]
@@ -298,6 +307,7 @@ def _modes(args: argparse.Namespace) -> int:
 
 
 def _init_shapes(args: argparse.Namespace) -> int:
+    check_fits("init-shapes", args.n, 2, "bodies")
     if args.random:
         if args.shape != "circulo-polygon" or args.aspect_ratio is not None or args.asphericity is None \
                 or args.sides is None:

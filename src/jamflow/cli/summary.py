@@ -10,6 +10,7 @@ import pandas as pd
 from ..io import write_table
 from ..summary import load_scene
 from .common import add_command, add_quiet
+from .types import path_with_suffix
 
 #: Columns printed (those with at least one value); --json / --csv write every column.
 PRINTED = ("kind", "sample", "stage", "kappa", "p_target", "N", "d", "phi", "phi_J", "pressure", "n_contacts",
@@ -27,11 +28,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "numbers (phi, phi_J, pressure, backbone contacts, isostatic count, rattlers, LPs, certificate, "
                     "the scene's gap exponent gamma and force exponent theta with their errors). The same table "
                     "from Python: jamflow.load_scene(PATH).",
-        reads=("path",), writes=("json", "csv"),
+        reads=("path",), writes=("json", "csv"), makes={"json": (), "csv": ()},
     )
     p.add_argument("path", help="a scene's results folder (results/<scene>) or its scene YAML")
-    p.add_argument("--json", default=None, metavar="OUT.json", help="also write every column as JSON records")
-    p.add_argument("--csv", default=None, metavar="OUT.csv", help="also write every column as CSV")
+    p.add_argument("--json", type=path_with_suffix(".json"), default=None, metavar="OUT.json", help="also write every column as JSON records")
+    p.add_argument("--csv", type=path_with_suffix(".csv"), default=None, metavar="OUT.csv", help="also write every column as CSV")
     add_quiet(p)
 
 

@@ -5,6 +5,7 @@ This is the only library package that touches files.
 
 from .dataset import (
     DATASET_KINDS,
+    atomic_file,
     check_output_paths,
     dataset_kind,
     file_body_kind,
@@ -20,6 +21,7 @@ from .formats import gsd_types, read_dat, size_classes, write_dat, write_gsd, wr
 
 __all__ = [
     "DATASET_KINDS",
+    "atomic_file",
     "check_output_paths",
     "dataset_kind",
     "file_body_kind",
