@@ -1,4 +1,5 @@
-"""Subcommand ``summary``: one table of a whole scene (a row per packing or flow run)."""
+"""Subcommands ``summary`` (one table of a whole scene, a row per packing or flow run) and ``pool``
+(one netCDF of a study along its kept scan dimensions)."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import math
 
 import pandas as pd
 
-from ..io import write_table
+from ..io import parse_point, pool_datasets, write_dataset, write_table
 from ..summary import load_scene
 from .common import add_command, add_quiet
 
@@ -33,6 +34,30 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", default=None, metavar="OUT.json", help="also write every column as JSON records")
     p.add_argument("--csv", default=None, metavar="OUT.csv", help="also write every column as CSV")
     add_quiet(p)
+    p = add_command(
+        sub, "pool", _pool, "one netCDF of a study: its datasets along the scan dimensions they keep",
+        description="Concatenates datasets along a dimension 'point' with one coordinate per scan dimension "
+                    "(from --points, one per input: key=value,key=value or 'base'); numeric attributes that differ "
+                    "between the inputs become variables attr_<name>(point). The workflow pools every study "
+                    "this way (jamflow.io.pool).",
+        reads=("paths[:-1]",), writes=("paths[-1]",),
+    )
+    p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc", help="datasets, then the output")
+    p.add_argument("--points", nargs="+", required=True, help="the scan point of each input, same order")
+    p.add_argument("--study", required=True, help="name of the study")
+    add_quiet(p)
+
+
+def _pool(args: argparse.Namespace) -> int:
+    inputs, out = args.paths[:-1], args.paths[-1]
+    if not inputs:
+        raise ValueError("pool: give at least one input and the output")
+    ds = pool_datasets(inputs, [parse_point(p) for p in args.points], args.study)
+    write_dataset(ds, out)
+    if not args.quiet:
+        dims = ", ".join(str(k) for k in ds.coords if ds[k].dims == ("point",))
+        print(f"pool: {args.study}: {len(inputs)} datasets along point ({dims or 'no scan dimension'}) -> {out}")
+    return 0
 
 
 def _format(column: str, value: object) -> str:
