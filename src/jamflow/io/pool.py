@@ -42,8 +42,10 @@ def parse_point(text: str) -> dict[str, float | str]:
 
 
 def _numeric_attrs(ds: xr.Dataset) -> dict[str, float]:
+    # point_<key> attributes repeat the scan point, which the coordinates already hold
     return {k: float(v) for k, v in ds.attrs.items()
-            if isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)}
+            if isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+            and not k.startswith("point_")}
 
 
 def pool_datasets(paths: Sequence[str | os.PathLike], points: Sequence[Mapping[str, float | str]],
