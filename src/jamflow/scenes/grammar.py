@@ -35,7 +35,7 @@ BODY_SOURCES: dict[str, str] = {"spheres": "init", "linked": "init-chains", "sha
 TOP_KEYS = ("scene", "scale", "preset", "bodies", "seeds", "chain", "analyses", "studies", "figures", "zip",
             "scales", "resources", "tradeoff")
 #: Keys a chain step, an analysis or a study may carry beside its command's options.
-STEP_KEYS = ("name", "draws")
+STEP_KEYS = ("name", "draws", "sequence")
 ANALYSIS_KEYS = ("name", "of")
 STUDY_KEYS = ("name", "of", "over", "analysis")
 #: Keys of the resources block: limits a plan must respect.
@@ -133,8 +133,9 @@ def _entries(value: Any, key: str) -> list[tuple[str, dict[str, Any]]]:
     return out
 
 
-def _find(entries: list[Any], name: str, kinds: bool = False) -> list[dict[str, Any]]:
-    """The option mappings of the entries of a list named ``name`` (``*``: all)."""
+def _find(entries: list[Any], name: str) -> list[dict[str, Any]]:
+    """The option mappings of the entries of a list named ``name``: its command or kind, its
+    ``name``, a body block's ``kind-family`` (``shapes-ellipse``), its index, or ``*`` for all."""
     found = []
     for k, item in enumerate(entries):
         if isinstance(item, str):
@@ -142,7 +143,8 @@ def _find(entries: list[Any], name: str, kinds: bool = False) -> list[dict[str, 
         (command, options), = item.items()
         if options is None:
             options = item[command] = {}
-        if name in ("*", str(k), command, options.get("name")):
+        family = options.get("family", options.get("builder"))
+        if name in ("*", str(k), command, options.get("name"), f"{command}-{family}"):
             found.append(options)
     return found
 
@@ -280,6 +282,11 @@ def _chain(value: Any) -> list[Entry]:
                         f"numbers ({', '.join(c for c, s in STAGES.items() if s.seeded and s.role == 'step')})")
         entry = Entry(name, command, options, extra, key)
         _check_options(entry, STEP_KEYS, scans=True)
+        sequence = extra.get("sequence")
+        if sequence is not None and not isinstance(options.get(sequence), list):
+            raise _fail(f"{key}.sequence", f"names the option whose listed values run one after the other, each "
+                        f"from the packing of the one before; {sequence!r} is not a listed option of {command}"
+                        f"{did_you_mean(sequence, [k for k, v in options.items() if isinstance(v, list)])}")
         out.append(entry)
     return out
 

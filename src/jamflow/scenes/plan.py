@@ -109,6 +109,7 @@ class Packing:
     soft: bool
     n: int
     d: int
+    unit: tuple = ()
     series: str | None = None
     analyses: dict[str, str] = field(default_factory=dict)
 
@@ -276,22 +277,43 @@ class _Builder:
         full = {"body": body.name, "sample": sample, "seed": seed, **point}
         self.plan.add(spec, Job(spec.name, {"where": where}, [out], inputs, argv, full, cpu, mem, unit=unit))
         kind = "walls" if values.get("walls") is True else stage.makes
-        frontier = [Packing(out, "source", body.command, point, body.name, sample, seed, where, kind, False, n, d)]
+        frontier = [Packing(out, "source", body.command, point, body.name, sample, seed, where, kind, False, n, d,
+                            unit)]
         self.plan.packings += frontier
         for step in self.scene.chain:
             frontier = [p for before in frontier for p in self.step(step, before, unit)]
             self.plan.packings += frontier
 
     def step(self, step: Entry, before: Packing, unit: tuple) -> list[Packing]:
+        """The packings of one step from one packing: one per scan point (a ``sequence`` runs its values
+        one after the other, each from the packing of the value before)."""
+        sequence = step.extra.get("sequence")
+        if sequence is None:
+            return self.points(step, before, unit, _axes(step, self.scene.zips, f"chain.{step.name}"))
+        rest = Entry(step.name, step.command, {k: v for k, v in step.options.items() if k != sequence},
+                     step.extra, step.key)
+        made = []
+        for scanned in _assignments(_axes(rest, self.scene.zips, f"chain.{step.name}")):
+            start = before
+            for value in step.options[sequence]:
+                (packing,) = self.points(step, start, unit, [[{**scanned, sequence: value}]], before.point)
+                made.append(packing)
+                start = packing
+        return made
+
+    def points(self, step: Entry, before: Packing, unit: tuple, axes: list[list[dict[str, Any]]],
+               base_point: dict[str, Any] | None = None) -> list[Packing]:
         stage = step.stage
         fan = next((o.name for o in stage.options if o.fan_out), None)
         made: list[Packing] = []
-        for scanned in _assignments(_axes(step, self.scene.zips, f"chain.{step.name}")):
+        for scanned in _assignments(axes):
             values = {**step.options, **scanned}
-            point = {**before.point, **self.named(step, scanned)}
+            point = {**(before.point if base_point is None else base_point), **self.named(step, scanned)}
             kind = stage.makes or before.kind
             soft = before.soft if stage.soft_out is None else stage.soft_out
             cpu, mem = self.cost(step.command, before.n, before.d, values, before.command, step.key)
+            if step.command == "link":
+                _check_cement(step, values, before)
             argv = option_argv(step, values, before.n)
             if stage.seeded:
                 argv += ["--seed", str(before.seed if step.command == "ls" else _seed(before.seed, step.name, point))]
@@ -321,7 +343,7 @@ class _Builder:
                 for v, out in zip(values[fan], outs):
                     where = f"{before.body}/{pre}{name}={format_value(v)}/{before.sample}"
                     made.append(Packing(out, step.name, step.command, {**point, name: v}, before.body,
-                                        before.sample, before.seed, where, kind, soft, before.n, before.d))
+                                        before.sample, before.seed, where, kind, soft, before.n, before.d, unit))
                 continue
             where = f"{before.body}/{format_point(point)}/{before.sample}"
             out = f"{self.plan.results}/{where}/{step.name}.nc"
@@ -338,15 +360,16 @@ class _Builder:
             self.plan.add(spec, Job(spec.name, {"where": where}, outputs, [before.path],
                                     [step.command, before.path, *argv], full, cpu, mem, threads=threads, unit=unit))
             made.append(Packing(out, step.name, step.command, point, before.body, before.sample, before.seed, where,
-                                kind, soft, before.n, before.d, series=series))
+                                kind, soft, before.n, before.d, unit, series=series))
         return made
 
     def analyses(self) -> None:
         last = self.scene.chain[-1].name if self.scene.chain else "source"
         for a in self.scene.analyses:
             of = a.extra.get("of", last)
-            for p in [p for p in self.plan.packings if p.step == of]:
-                self.analysis(a, p)
+            for p in self.plan.packings:
+                if p.step == of:
+                    self.analysis(a, p)
 
     def analysis(self, a: Entry, p: Packing) -> None:
         stage = a.stage
@@ -370,10 +393,8 @@ class _Builder:
         spec = RuleSpec(rule, [f"{self.plan.results}/{{where}}/{p.step}.{a.name}.{suffix}"],
                         f"{self.plan.results}/logs/{a.name}-{p.step}/{{where}}.log")
         full = {"body": p.body, "sample": p.sample, "seed": p.seed, **p.point}
-        unit = (p.body, p.where.split("/")[1], p.sample)
-        unit = next((j.unit for j in self.plan.jobs.values() if p.path in j.outputs), unit)
         self.plan.add(spec, Job(rule, {"where": p.where}, [out], [source], argv, full, cpu, mem,
-                                stdout=stage.form == "json", unit=unit))
+                                stdout=stage.form == "json", unit=p.unit))
         p.analyses[a.name] = out
 
     def rdf_r_max(self, a: Entry, p: Packing) -> float:
@@ -392,6 +413,19 @@ class _Builder:
         if note not in self.plan.notes:
             self.plan.notes.append(note)
         return clipped
+
+
+def _check_cement(step: Entry, values: dict[str, Any], before: Packing) -> None:
+    """Cementing more links than a jammed packing has contacts is impossible: a jammed packing of
+    N spheres in d dimensions has about the isostatic d N contacts (z = 2d), fewer without its rattlers."""
+    for name in ("cement", "cement_per_sphere"):
+        if name not in values:
+            continue
+        count = values[name] * (before.n if name == "cement_per_sphere" else 1)
+        if count > before.d * before.n:
+            raise SceneError(f"{step.key}.{name}: {values[name]:g} cements {round(count)} contacts, but a jammed "
+                             f"packing of N = {before.n} spheres in {before.d}D has about d N = {before.d * before.n}"
+                             f" (z = 2d), fewer without its rattlers")
 
 
 def _rule(name: str) -> str:

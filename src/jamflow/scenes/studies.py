@@ -187,15 +187,15 @@ def _windows(command: str) -> Figure:
 
 
 def _packing(plan: Plan, figure: Entry) -> list[tuple[str, list[str], list[str]]]:
+    """One packing figure per body point (first sample): the last packing of the step ``of``."""
     of = figure.options.get("of", _last(plan))
-    made = []
-    for body in plan.scene.bodies:
-        chosen = [p for p in plan.packings if p.step == of and p.body == body.name
-                  and p.sample == f"seed{plan.scene.seeds[0]}"]
-        if chosen:
-            p = chosen[-1]
-            made.append((body.name, [p.path], ["packing", p.path, "OUT", *(["--soft"] if p.soft else [])]))
-    return made
+    first = f"seed{plan.scene.seeds[0]}"
+    chosen: dict[str, Packing] = {}
+    for p in plan.packings:
+        if p.step == of and p.sample == first:
+            chosen[f"{p.unit[0]}_{p.unit[1]}".replace(",", "_")] = p
+    return [(tag, [p.path], ["packing", p.path, "OUT", *(["--soft"] if p.soft else [])])
+            for tag, p in chosen.items()]
 
 
 def _eos_figure(plan: Plan, figure: Entry) -> list[tuple[str, list[str], list[str]]]:
