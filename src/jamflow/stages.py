@@ -392,9 +392,8 @@ STAGES: dict[str, Stage] = {s.command: s for s in (
            role="analysis", form="analysis", reads_soft=True, options=(
                _o("r_max", "float", "largest r [mean diameters], below half the box", gt=0),
                _o("bins", "int", "r bins", ge=1))),
-    _stage("shape-survey", "phi_J and <z> per shape family and asphericity", {"shapes"},
-           spheres="spheres: `jamflow check`", linked="linked spheres: `jamflow check`",
-           walls="spheres: `jamflow check`",
+    _stage("shape-survey", "phi_J and <z> per shape family and asphericity (disks as the A = 1 limit)",
+           {"shapes", "spheres"}, linked="linked spheres: `jamflow check`", walls="spheres: `jamflow check`",
            role="study", form="pool", pools="packings", options=(
                _o("parallel_contacts", "choice", "a parallel circulo contact counts once or twice",
                   choices=("once", "twice")),)),

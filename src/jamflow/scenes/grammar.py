@@ -222,6 +222,8 @@ def _check_options(entry: Entry, own_keys: tuple[str, ...], scans: bool) -> None
                         f"{', '.join(names + list(own_keys)) or 'none'}){did_you_mean(key, names + list(own_keys))}")
         option = stage.option(key)
         values = value if isinstance(value, list) else [value]
+        if option.fan_out:
+            entry.options[key] = values
         if isinstance(value, list):
             if not value:
                 raise _fail(f"{entry.key}.{key}", "an empty list scans nothing")

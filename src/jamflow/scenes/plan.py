@@ -143,13 +143,16 @@ class Plan:
         return [j for (r, _), j in self.jobs.items() if r == rule]
 
 
-def _axes(entry: Entry, zips: list[list[str]], prefix: str) -> list[list[dict[str, Any]]]:
-    """Scan axes of an entry: each a list of assignments (zipped keys share one axis)."""
+def _axes(entry: Entry, zips: list[list[str]], section: str) -> list[list[dict[str, Any]]]:
+    """Scan axes of an entry: each a list of assignments (zipped keys share one axis).
+
+    A zip group names keys as ``<section>.<entry>.<option>`` (``bodies.spheres.n``, ``chain.ls.growth_rate``)."""
+    prefixes = {entry.key, f"{section}.{entry.name}"}
     lists = {k: v for k, v in entry.options.items() if isinstance(v, list) and not entry.stage.option(k).fan_out}
     axes: list[list[dict[str, Any]]] = []
     done: set[str] = set()
     for group in zips:
-        keys = [g.split(".")[-1] for g in group if g.rsplit(".", 1)[0] in prefix]
+        keys = [g.split(".")[-1] for g in group if g.rsplit(".", 1)[0] in prefixes]
         mine = [k for k in keys if k in lists]
         if not mine:
             continue
@@ -289,11 +292,11 @@ class _Builder:
         one after the other, each from the packing of the value before)."""
         sequence = step.extra.get("sequence")
         if sequence is None:
-            return self.points(step, before, unit, _axes(step, self.scene.zips, f"chain.{step.name}"))
+            return self.points(step, before, unit, _axes(step, self.scene.zips, "chain"))
         rest = Entry(step.name, step.command, {k: v for k, v in step.options.items() if k != sequence},
                      step.extra, step.key)
         made = []
-        for scanned in _assignments(_axes(rest, self.scene.zips, f"chain.{step.name}")):
+        for scanned in _assignments(_axes(rest, self.scene.zips, "chain")):
             start = before
             for value in step.options[sequence]:
                 (packing,) = self.points(step, start, unit, [[{**scanned, sequence: value}]], before.point)

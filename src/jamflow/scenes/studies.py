@@ -90,8 +90,9 @@ def add_studies(plan: Plan) -> None:
                 argv.append("--soft")
             if s.stage.preset:
                 argv += ["--preset", plan.scene.preset]
-            extra = _eos(plan, s, members)
-            plan.add(spec, Job(spec.name, {"group": group}, [out], inputs + extra, argv,
+            eos = _eos(plan, s, members)
+            argv += ["--eos", *eos] if eos else []
+            plan.add(spec, Job(spec.name, {"group": group}, [out], inputs + eos, argv,
                                {"study": s.name, **kept}, LIGHT_SECONDS, LIGHT_MB))
             plan.study_groups[s.name].append((kept, out, members))
         outs = [out for _, out, _ in plan.study_groups[s.name]]
@@ -132,7 +133,7 @@ def _eos(plan: Plan, s: Entry, members: list) -> list[str]:
         if key not in plan.eos:
             raise SceneError(f"{s.key}: its overlap series must keep every LS dimension (sample, growth rate)")
         files.append(plan.eos[key])
-    return ["--eos", *files]
+    return files
 
 
 def _groups(plan: Plan, command: str, figure: Entry, of: str | None = None) -> list[tuple[dict[str, Any], str]]:
