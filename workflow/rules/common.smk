@@ -53,8 +53,14 @@ def job_group(rule):
     return lambda wildcards: PLAN.job(rule, wildcards).group
 
 
-def benchmark_of(rule):
-    return PLAN.rules[rule].log.replace("/logs/", "/benchmarks/", 1).removesuffix(".log") + ".tsv"
+def rule_outputs(spec):
+    """The rule's outputs; a figure's PNG goes into `snakemake --report` with its caption (workflow/report/)."""
+    if not spec.name.startswith("figure_"):
+        return spec.outputs
+    figure = spec.name.removeprefix("figure_").replace("_", "-")
+    caption = {"gaps-windows": "fit-windows", "forces-windows": "fit-windows"}.get(figure, figure)
+    png = report(spec.outputs[0], caption=f"../report/{caption}.rst", category="Figures")
+    return [png, *spec.outputs[1:]]
 
 
 localrules:

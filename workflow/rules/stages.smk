@@ -13,11 +13,11 @@ for _spec in PLAN.rules.values():
         input:
             job_inputs(_spec.name),
         output:
-            _spec.outputs,
+            rule_outputs(_spec),
         log:
             _spec.log,
         benchmark:
-            benchmark_of(_spec.name)
+            _spec.benchmark
         threads: job_threads(_spec.name)
         resources:
             **job_resources(_spec.name),

@@ -66,6 +66,11 @@ class RuleSpec:
     log: str
     local: bool = False
 
+    @property
+    def benchmark(self) -> str:
+        """Benchmark file template: the log's, under ``benchmarks/``, as TSV."""
+        return self.log.replace("/logs/", "/benchmarks/", 1).removesuffix(".log") + ".tsv"
+
 
 @dataclass
 class Job:
@@ -383,7 +388,8 @@ class _Builder:
         if source is None:
             raise SceneError(f"{a.key}.of: {a.command} reads a flow run; {p.step} writes none")
         suffix = "json" if stage.form == "json" else "nc"
-        out = f"{self.plan.results}/{p.where}/{p.step}.{a.name}.{suffix}"
+        stem = p.path.rsplit("/", 1)[1].removesuffix(".nc")
+        out = f"{self.plan.results}/{p.where}/{stem}.{a.name}.{suffix}"
         argv = [a.command, source] + ([] if stage.form == "json" else [out]) + option_argv(a, values, p.n)
         if stage.form == "json":
             argv.append("--json")
@@ -393,7 +399,7 @@ class _Builder:
             argv.append("--soft")
         cpu, mem = self.cost(a.command, p.n, p.d, {**values, "strain": values.get("strain", 1.0)}, p.command, a.key)
         rule = _rule(f"{a.name}-{p.step}")
-        spec = RuleSpec(rule, [f"{self.plan.results}/{{where}}/{p.step}.{a.name}.{suffix}"],
+        spec = RuleSpec(rule, [f"{self.plan.results}/{{where}}/{stem}.{a.name}.{suffix}"],
                         f"{self.plan.results}/logs/{a.name}-{p.step}/{{where}}.log")
         full = {"body": p.body, "sample": p.sample, "seed": p.seed, **p.point}
         self.plan.add(spec, Job(rule, {"where": p.where}, [out], [source], argv, full, cpu, mem,
@@ -458,7 +464,8 @@ def plan_scene(scene: Scene, results: str = "results") -> Plan:
     """Every job of a checked scene (:func:`jamflow.scenes.read_scene`)."""
     from .studies import add_figures, add_studies, add_tradeoff
 
-    plan = Plan(scene, f"{results}/{scene.name}")
+    # a paper-scale run writes beside the laptop one, never over it
+    plan = Plan(scene, f"{results}/{scene.name}" + ("" if scene.scale == "laptop" else f"-{scene.scale}"))
     builder = _Builder(plan)
     builder.run()
     builder.analyses()
