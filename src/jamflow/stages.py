@@ -420,6 +420,7 @@ STAGES: dict[str, Stage] = {s.command: s for s in (
     _stage("pool", "one netCDF of a study: its datasets along the scan dimensions they keep"),
     _stage("plot", "figures (PNG + PDF)"),
     _stage("summary", "one table of a whole scene"),
+    _stage("reproduce", "the reproduced-figures page: paper numbers beside each paper scene's"),
     _stage("tradeoff", "speed against accuracy of a stage's knobs"),
 )}
 

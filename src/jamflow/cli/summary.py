@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 
 import pandas as pd
 
@@ -46,6 +47,26 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--points", nargs="+", required=True, help="the scan point of each input, same order")
     p.add_argument("--study", required=True, help="name of the study")
     add_quiet(p)
+    p = add_command(
+        sub, "reproduce", _reproduce, "the reproduced-figures page: each paper scene's figure and numbers beside the paper's",
+        description="Reads results/<scene> (laptop scale) and results/<scene>-paper (paper scale) of every paper "
+                    "scene, copies the laptop figures beside OUT and writes one table per scene: quantity | paper | "
+                    "laptop scale | paper scale (jamflow.reproduce).",
+        writes=("out",),
+    )
+    p.add_argument("out", help="the markdown page, e.g. docs/reproduced.md")
+    p.add_argument("--results", default="results", help="the results folder (default results)")
+    add_quiet(p)
+
+
+def _reproduce(args: argparse.Namespace) -> int:
+    from ..reproduce import SCENES, reproduced_page
+
+    out = reproduced_page(args.results, args.out)
+    if not args.quiet:
+        ran = sum((Path(args.results) / page.scene).is_dir() for page in SCENES)
+        print(f"reproduce: {ran} of {len(SCENES)} paper scenes have laptop-scale outputs under {args.results} -> {out}")
+    return 0
 
 
 def _pool(args: argparse.Namespace) -> int:
