@@ -248,3 +248,16 @@ def test_every_shipped_scene_reads_and_plans_at_both_scales():
                 continue
             plan = plan_scene(read_scene({**scene, "scale": scale}))
             assert plan.targets, (path.name, scale)
+
+
+def test_the_grammar_s_enums_come_from_the_package():
+    from jamflow.presets import PRESET_NAMES
+    from jamflow.protocols.calippso import SOLVERS
+    from jamflow.scenes.grammar import PRESETS, TRADEOFF_STAGES
+    from jamflow.tradeoff import STAGES as SWEPT
+
+    assert STAGES["calippso"].option("solver").choices == tuple(SOLVERS)
+    assert PRESETS == tuple(PRESET_NAMES) and TRADEOFF_STAGES == tuple(SWEPT)
+    schema = yaml.safe_load((REPO / "workflow" / "schemas" / "config.schema.yaml").read_text())
+    assert schema["properties"]["preset"]["enum"] == list(PRESET_NAMES)
+    assert schema["properties"]["tradeoff"]["properties"]["stages"]["items"]["enum"] == list(SWEPT)
