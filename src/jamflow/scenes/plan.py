@@ -246,8 +246,8 @@ class _Builder:
         self.limit_mb = self.scene.resources.get("max_mem_mb", resources.machine_memory_mb())
 
     def cost(self, command: str, n: int, d: int, values: dict[str, Any], before: str | None,
-             key: str) -> tuple[float, float]:
-        cpu, mem = resources.estimate(command, n, d, values, before)
+             key: str, kind: str = "spheres") -> tuple[float, float]:
+        cpu, mem = resources.estimate(command, n, d, values, before, kind)
         if mem > self.limit_mb:
             raise SceneError(f"{key}: N = {n} in {d}D needs ~{mem / 1e3:.1f} GB in {command}, more than the "
                              f"{self.limit_mb / 1e3:.1f} GB a job may have (resources.max_mem_mb; this machine's "
@@ -319,7 +319,7 @@ class _Builder:
             point = {**(before.point if base_point is None else base_point), **self.named(step, scanned)}
             kind = stage.makes or before.kind
             soft = before.soft if stage.soft_out is None else stage.soft_out
-            cpu, mem = self.cost(step.command, before.n, before.d, values, before.command, step.key)
+            cpu, mem = self.cost(step.command, before.n, before.d, values, before.command, step.key, before.kind)
             if step.command == "link":
                 _check_cement(step, values, before)
             argv = option_argv(step, values, before.n)
@@ -397,7 +397,8 @@ class _Builder:
             argv += ["--preset", self.scene.preset]
         if p.soft and stage.reads_soft:
             argv.append("--soft")
-        cpu, mem = self.cost(a.command, p.n, p.d, {**values, "strain": values.get("strain", 1.0)}, p.command, a.key)
+        cpu, mem = self.cost(a.command, p.n, p.d, {**values, "strain": values.get("strain", 1.0)}, p.command, a.key,
+                             p.kind)
         rule = _rule(f"{a.name}-{p.step}")
         spec = RuleSpec(rule, [f"{self.plan.results}/{{where}}/{stem}.{a.name}.{suffix}"],
                         f"{self.plan.results}/logs/{a.name}-{p.step}/{{where}}.log")

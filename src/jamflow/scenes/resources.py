@@ -51,6 +51,11 @@ COST: dict[str, Cost] = {
                                        "needs 44x more LPs (216 s against 4.9 s at N = 1024)"),
     "certify": Cost(1683.0, 4096, 3.0, "3D N = 4096 from soft jamming: 1683 s, the collective LP by dual simplex"),
     "soft-jam": Cost(1325.0, 4096, 2.0, "FIRE to P0 = 1e-8: 2D N = 1024 in 30 s, 3D N = 4096 in 1325 s; (d/3)^2"),
+    "soft-jam:shapes": Cost(60.0, 32, 2.0, "2D shapes to P0 = 1e-5..1e-7: ~1 CPU-min per N = 32 circulo-line "
+                                           "packing (vanderwerf-fig10-11), 2-4 min wall per N = 16 ellipse packing "
+                                           "on loaded cores (vanderwerf-fig5); the N^2 is assumed"),
+    "soft-jam:linked": Cost(20.0, 150, 2.0, "projected FIRE bisection: 50 3D trimers (N = 150) in 33 s wall loaded "
+                                            "(chains-fig2), 32 dimers in 17 s (vanderwerf-fig3b); the N^2 is assumed"),
     "minimize": Cost(300.0, 4096, 2.0, "a fixed-box FIRE minimisation: a quarter of soft-jam's bisection"),
     "compress": Cost(75.0, 100, 2.0, "N = 100 2D discs from phi = 0.5 to 0.83: 75 s; N^2 is an assumption"),
     "shear": Cost(1017.0, 1024, 2.0, "per unit strain: N = 1024 2D discs at p = 100, 1017 s (fixed volume "
@@ -74,7 +79,8 @@ def _lp_size(n: int, d: int) -> float:
     return n * LP_DIMENSION_FACTOR.get(d, 3.5 ** ((d - 3) / 2))
 
 
-def estimate(command: str, n: int, d: int, options: Mapping[str, Any], before: str | None) -> tuple[float, float]:
+def estimate(command: str, n: int, d: int, options: Mapping[str, Any], before: str | None,
+             kind: str = "spheres") -> tuple[float, float]:
     """Expected CPU seconds and memory [MB] of one job.
 
     Parameters
@@ -87,8 +93,11 @@ def estimate(command: str, n: int, d: int, options: Mapping[str, Any], before: s
         The job's options as the scene gives them (one value each; ``p_target`` a list).
     before : str or None
         The command whose packing it reads (a CALiPPSO run from ``init`` is a random start).
+    kind : str
+        Body kind of the packing (:data:`jamflow.stages.BODY_KINDS`): a ``command:kind`` row
+        of :data:`COST` takes precedence over the command's.
     """
-    cost = COST.get(command)
+    cost = COST.get(f"{command}:{kind}", COST.get(command))
     if command == "ls":
         kappa = float(options["growth_rate"])
         fast = options.get("fast_growth_rate", 5e-3)
@@ -104,7 +113,7 @@ def estimate(command: str, n: int, d: int, options: Mapping[str, Any], before: s
             seconds *= float(options["strain"])
         if command == "sd-shear":
             seconds *= float(options["strain"]) / float(options.get("step", 1e-4))
-        if command in ("soft-jam", "minimize"):
+        if command in ("soft-jam", "minimize") and kind == "spheres":
             seconds *= (d / 3) ** 2
     else:
         # init, import, check, analyses, studies and figures: a few seconds
