@@ -288,57 +288,58 @@ def _sacct_jobs(env: dict[str, str]) -> dict[str, dict[str, str]]:
 
 
 @pytest.mark.slow
-def test_a_survey_of_200_packings_runs_on_slurm_in_groups_and_matches_a_local_run(tmp_path, slurm_cluster):
-    """200 packings: the SLURM profile submits their cluster groups (jamflow.scenes
-    bundles whole samples to about resources.group_minutes), at most a tenth as many
-    submissions as packings, and every output equals a local run's."""
+def test_a_survey_of_200_packings_runs_on_slurm_in_groups_and_matches_a_local_run(tmp_path, slurm_cluster,
+                                                                                   monkeypatch):
+    """200 packings: the SLURM profile submits their cluster groups (jamflow.scenes bundles whole
+    samples to about resources.group_minutes), at most a tenth as many submissions as packings,
+    and every output equals a local run of the same planned commands (in this process, which
+    spares 200 interpreter start-ups on a shared 2-core host)."""
     try:
         import snakemake_executor_plugin_slurm  # noqa: F401
     except ImportError:
         pytest.fail("the SLURM executor plugin is missing: pip install -e '.[slurm]'")
+    from jamflow.cli import main
+    from jamflow.provenance import SCAN_POINT_ENV
+    from jamflow.scenes import plan_scene, read_scene
+
     env = slurm_cluster
-    outputs = {}
     before = set(_sacct_jobs(env))
-    for mode in ("local", "slurm"):
-        (tmp_path / mode).mkdir()
-        work = _workdir(tmp_path / mode)
-        scene = _write(work, SLURM_SCENE)
-        started = time.perf_counter()
-        if mode == "local":
-            res = _snakemake(work, "--workflow-profile", "workflow/profiles/default", "--configfile", str(scene),
-                             timeout=3600)
-        else:
-            # `timeout -s INT`: SIGINT lets snakemake cancel its SLURM jobs; plain SIGTERM does not stop it
-            res = subprocess.run(
-                ["timeout", "-s", "INT", "-k", "10", "3600", sys.executable, "-m", "snakemake",
-                 "--workflow-profile", "workflow/profiles/slurm", "--configfile", str(scene),
-                 "--default-resources", "slurm_account=jamflow", "slurm_partition=debug",
-                 "--slurm-init-seconds-before-status-checks", "2", "--latency-wait", "5"],
-                cwd=work, capture_output=True, text=True, env=env,
-            )
-        assert res.returncode == 0, res.stderr[-6000:]
-        print(f"{mode} run: {time.perf_counter() - started:.0f} s wall")
-        outputs[mode] = work / "results" / SLURM_SCENE["scene"]
+    work = _workdir(tmp_path / "slurm")
+    scene = _write(work, SLURM_SCENE)
+    started = time.perf_counter()
+    # `timeout -s INT`: SIGINT lets snakemake cancel its SLURM jobs; plain SIGTERM does not stop it
+    res = subprocess.run(
+        ["timeout", "-s", "INT", "-k", "10", "3600", sys.executable, "-m", "snakemake",
+         "--workflow-profile", "workflow/profiles/slurm", "--configfile", str(scene),
+         "--default-resources", "slurm_account=jamflow", "slurm_partition=debug",
+         "--slurm-init-seconds-before-status-checks", "2", "--latency-wait", "5"],
+        cwd=work, capture_output=True, text=True, env=env,
+    )
+    assert res.returncode == 0, res.stderr[-6000:]
+    print(f"slurm run: {time.perf_counter() - started:.0f} s wall")
     jobs = {k: v for k, v in _sacct_jobs(env).items() if k not in before}
     n_packings = 200
+    print(f"{len(jobs)} SLURM jobs for {n_packings} packings")
     assert 1 <= len(jobs) <= n_packings // 10, len(jobs)
     for job in jobs.values():
         assert job["State"] == "COMPLETED" and job["ExitCode"] == "0:0", job
         assert job["Account"] == "jamflow" and job["Partition"] == "debug", job
-    local = sorted(p.relative_to(outputs["local"]) for p in outputs["local"].glob("spheres/*/*/*.*")
-                   if p.suffix in (".nc", ".json"))
-    slurm = sorted(p.relative_to(outputs["slurm"]) for p in outputs["slurm"].glob("spheres/*/*/*.*")
-                   if p.suffix in (".nc", ".json"))
-    assert local == slurm and len(local) == n_packings
-    for rel in local:
-        if rel.suffix == ".json":
-            assert json.loads((outputs["local"] / rel).read_text()) == json.loads((outputs["slurm"] / rel).read_text())
-            continue
-        a, b = xr.load_dataset(outputs["local"] / rel), xr.load_dataset(outputs["slurm"] / rel)
+    local = tmp_path / "local"
+    local.mkdir()
+    monkeypatch.chdir(local)
+    plan = plan_scene(read_scene(SLURM_SCENE))
+    assert len(plan.jobs) == n_packings
+    for job in plan.jobs.values():
+        monkeypatch.setenv(SCAN_POINT_ENV, json.dumps(job.point, sort_keys=True))
+        assert main([*job.argv, "--quiet"]) == 0
+    made = sorted(p.relative_to(local) for p in local.glob("results/slurm-survey/spheres/*/*/*.nc"))
+    assert made == sorted(p.relative_to(work) for p in work.glob("results/slurm-survey/spheres/*/*/*.nc"))
+    assert len(made) == n_packings
+    for rel in made:
+        a, b = xr.load_dataset(local / rel), xr.load_dataset(work / rel)
         assert set(a.data_vars) == set(b.data_vars) and a.attrs["scan_point"] == b.attrs["scan_point"]
         for name in a.data_vars:
             np.testing.assert_array_equal(a[name].values, b[name].values, err_msg=f"{rel}:{name}")
-
 
 
 def _assert_report_has_every_figure(report: Path, pngs: list[Path], work: Path) -> None:
