@@ -145,7 +145,7 @@ def test_a_zipped_scan_pairs_its_lists():
     scene = {"scene": "z", "bodies": {"spheres": {"d": [2, 3], "n": [16, 32], "phi": 0.3}}, "seeds": [1],
              "zip": [["bodies.spheres.d", "bodies.spheres.n"]]}
     plan = plan_scene(read_scene(scene))
-    assert {(j.point["d"], j.point["n"]) for j in plan.jobs.values()} == {(2, 16), (3, 32)}
+    assert {(j.point["d"], j.point["n"]) for j in plan.jobs.values() if j.rule == "init"} == {(2, 16), (3, 32)}
     bad = {**scene, "bodies": {"spheres": {"d": [2, 3], "n": [16, 32, 64], "phi": 0.3}}}
     assert "zip" in _error(bad)
 
@@ -226,9 +226,15 @@ def test_cluster_groups_bundle_whole_samples_to_about_the_stated_cpu_time():
              "seeds": {"count": 100}, "chain": [{"soft-jam": {"pressure": 1e-2}}], "analyses": ["check"],
              "resources": {"group_minutes": 30}}
     plan = plan_scene(read_scene(scene))
-    grouped = [j for j in plan.jobs.values() if j.group]
+    grouped = [j for j in plan.jobs.values() if j.group and j.rule != "bundle"]
     groups = {j.group for j in grouped}
     assert len(grouped) == 600 and len(groups) <= 60
+    # one bundle job per group reads every sample's last output: the group is one connected component
+    bundles = {j.group: j for j in plan.jobs.values() if j.rule == "bundle"}
+    assert set(bundles) == groups
+    for g, job in bundles.items():
+        checks = {j.outputs[0] for j in grouped if j.group == g and j.rule == "check_soft_jam"}
+        assert set(job.inputs) == checks
     # a sample's jobs stay together
     by_unit: dict = {}
     for j in grouped:

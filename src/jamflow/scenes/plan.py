@@ -88,9 +88,14 @@ class Job:
     stdout: bool = False
     unit: tuple | None = None
     group: str | None = None
+    listing: bool = False
 
     def command(self, log: str) -> str:
-        """The shell command: ``jamflow ...`` with the scan point in the environment, output to ``log``."""
+        """The shell command: ``jamflow ...`` with the scan point in the environment, output to ``log``
+        (a group's ``bundle`` job lists its inputs instead)."""
+        if self.listing:
+            files = " ".join(shlex.quote(p) for p in self.inputs)
+            return f"printf '%s\\n' {files} > {shlex.quote(self.outputs[0])} 2> {shlex.quote(log)}"
         env = f"JAMFLOW_SCAN_POINT={shlex.quote(json.dumps(self.point, sort_keys=True, default=str))}"
         line = " ".join(shlex.quote(a) for a in ["jamflow", *self.argv])
         if self.stdout:
@@ -461,6 +466,26 @@ def group_units(plan: Plan) -> None:
             job.group = of_unit[job.unit]
 
 
+def join_groups(plan: Plan) -> None:
+    """One ``bundle`` job per cluster group that lists the group's last outputs.
+
+    Snakemake submits a group's *connected* jobs as one cluster job; the samples of a group
+    share no file, so this job, in the group and reading each sample's last outputs, joins
+    them into one component (one submission per group, not one per sample)."""
+    members: dict[str, list[Job]] = {}
+    for job in plan.jobs.values():
+        if job.group is not None:
+            members.setdefault(job.group, []).append(job)
+    spec = RuleSpec("bundle", [f"{plan.results}/bundles/{{group}}.txt"], f"{plan.results}/logs/bundles/{{group}}.log")
+    for group, jobs in members.items():
+        read = {path for job in jobs for path in job.inputs}
+        last = [path for job in jobs for path in job.outputs if path not in read]
+        out = f"{plan.results}/bundles/{group}.txt"
+        job = plan.add(spec, Job("bundle", {"group": group}, [out], last, [], {"group": group}, 1.0, 100.0))
+        job.group, job.listing = group, True
+        plan.targets.append(out)
+
+
 def plan_scene(scene: Scene, results: str = "results") -> Plan:
     """Every job of a checked scene (:func:`jamflow.scenes.read_scene`)."""
     from .studies import add_figures, add_studies, add_tradeoff
@@ -479,4 +504,5 @@ def plan_scene(scene: Scene, results: str = "results") -> Plan:
         plan.targets = [p.path for p in plan.packings if p.step == last]
     plan.targets = list(dict.fromkeys(analysed + plan.targets))
     group_units(plan)
+    join_groups(plan)
     return plan
