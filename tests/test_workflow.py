@@ -304,6 +304,7 @@ def test_a_survey_of_200_packings_runs_on_slurm_in_groups_and_matches_a_local_ru
 
     env = slurm_cluster
     before = set(_sacct_jobs(env))
+    (tmp_path / "slurm").mkdir()
     work = _workdir(tmp_path / "slurm")
     scene = _write(work, SLURM_SCENE)
     started = time.perf_counter()
