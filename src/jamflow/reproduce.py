@@ -232,12 +232,12 @@ SCENES: tuple[ScenePage, ...] = (
         Row("steady-state phi", "figure only (Fig. 7)", _flow("packing_fraction")))),
     ScenePage("flow-curve", "Flow curve: friction and phi against the viscous number", ("flow-curve",), (
         Row("mu(I), phi(I)", "figure only (Sec. V A)", _flow_curve),)),
-    ScenePage("chains-fig2", "Chains paper Fig. 2: jammed rigid trimers", (), (
+    ScenePage("chains-fig2", "Chains paper Fig. 2: jammed rigid trimers", ("packing",), (
         Row("contacts against the cluster isostatic count", "isostatic (Fig. 2)",
             _isostatic("linked-trimer/*/*/soft-jam.check.json")),)),
     ScenePage("chains-fig5", "Chains paper Fig. 5: moduli against added links", ("chains-moduli",), (
         Row("shear modulus G at the smallest and largest n_l / N", "figure only (Fig. 5)", _moduli),)),
-    ScenePage("vanderwerf-fig3b", "VanderWerf et al. Fig. 3b: asymmetric dimers", (), (
+    ScenePage("vanderwerf-fig3b", "VanderWerf et al. Fig. 3b: asymmetric dimers", ("packing",), (
         Row("N_c = 3N - 1 - N_rot", "isostatic (Fig. 3b, N_c = 3N - 4 with three rotators)",
             _isostatic("linked-dimer/*/*/soft-jam.check.json")),)),
     ScenePage("vanderwerf-fig5", "VanderWerf et al. Fig. 5: phi_J against A - 1", ("phi-asphericity",), (
@@ -252,7 +252,7 @@ SCENES: tuple[ScenePage, ...] = (
               ("quartic-pressure",), (
         Row("quartic-mode identity N_c = N_c^0 - N_1", "holds for every packing (Sec. III B)", _quartic),)),
     ScenePage("vanderwerf-fig14", "VanderWerf et al. Fig. 14: contact angles", ("contact-angles",), ()),
-    ScenePage("walls", "Jamming between hard walls", (), (
+    ScenePage("walls", "Jamming between hard walls", ("packing",), (
         Row("N_c = d N_s + 1 (wall contacts included)", "isostatic (CALiPPSO with walls)", _walls),)),
 )
 
@@ -289,12 +289,12 @@ def reproduced_page(results: str | Path, out: str | Path) -> Path:
         laptop, paper = results / page.scene, results / f"{page.scene}-paper"
         lines += [f"## {page.title} (`{page.scene}`)", ""]
         for fig in page.figures:
-            png = laptop / "figures" / f"{fig}.png"
-            if png.is_file():
-                target = figures / f"{page.scene}_{fig}.png"
+            pngs = sorted((laptop / "figures").glob(f"{fig}.png")) + sorted((laptop / "figures").glob(f"{fig}_*.png"))
+            for png in pngs:
+                target = figures / f"{page.scene}_{png.name.replace('=', '-').replace(',', '_')}"
                 shutil.copyfile(png, target)
-                lines += [f"![{page.scene}: {fig}]({figures.name}/{target.name})", ""]
-            else:
+                lines += [f"![{page.scene}: {png.stem}]({figures.name}/{target.name})", ""]
+            if not pngs:
                 lines += [f"Figure `{fig}`: {NOT_RUN} at laptop scale.", ""]
         if page.rows:
             lines += ["| quantity | paper | laptop scale | paper scale |", "|---|---|---|---|"]
