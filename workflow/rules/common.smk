@@ -1,5 +1,5 @@
-# The scene and its plan: the schema checks the top-level shape, jamflow.scenes checks the
-# rest against the stage table (jamflow.stages) and plans every job (paths, commands, costs).
+# The scene and its plan: jamflow.scenes checks it against the stage table (jamflow.stages)
+# and plans every job (paths, commands, costs); the schema states its top-level shape.
 # A scene that cannot run fails here, in one line naming the key, before any job.
 import sys
 from pathlib import Path
@@ -11,12 +11,12 @@ from jamflow.scenes import SceneError, cost_report, plan_scene, read_scene
 from jamflow.scenes.plan import WILDCARDS
 from jamflow.scenes.resources import request_mb, request_minutes
 
-validate(config, str(Path(workflow.basedir) / "workflow" / "schemas" / "config.schema.yaml"))
-
 try:
     PLAN = plan_scene(read_scene(dict(config)))
 except SceneError as error:
     raise WorkflowError(f"Error in scene: {error}") from None
+# the schema states the scene's top-level shape (read_scene has checked it, with suggestions)
+validate(config, str(Path(workflow.basedir) / "workflow" / "schemas" / "config.schema.yaml"))
 
 # each job's threads, memory and runtime per rule and the scene's expected core-hours
 print("\n".join(cost_report(PLAN)), file=sys.stderr)
