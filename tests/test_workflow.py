@@ -130,7 +130,7 @@ def test_a_tiny_scene_of_each_body_kind_runs_end_to_end(tmp_path, kind):
     work = _workdir(tmp_path)
     scene = {"scene": f"tiny-{kind}", "bodies": {kind: TINY[kind]}, "seeds": [3],
              "chain": [{"soft-jam": {"pressure": 1e-2}}], "analyses": ["check"], "figures": ["packing"]}
-    res = _snakemake(work, "-c2", "--configfile", str(_write(work, scene)), timeout=300)
+    res = _snakemake(work, "-c2", "--configfile", str(_write(work, scene)))
     assert res.returncode == 0, res.stderr[-4000:]
     body = {"spheres": "spheres", "linked": "linked-trimer", "shapes": "shapes-circulo-line"}[kind]
     folder = work / "results" / scene["scene"] / body / "base" / "seed3"
