@@ -498,11 +498,11 @@ def plan_scene(scene: Scene, results: str = "results") -> Plan:
     add_studies(plan)
     add_figures(plan)
     add_tradeoff(plan)
+    # every sample's final packings, their analyses, the studies and the figures
+    last = scene.chain[-1].name if scene.chain else "source"
+    final = [p.path for p in plan.packings if p.step == last]
     analysed = [out for p in plan.packings for out in p.analyses.values()]
-    if not plan.targets and not analysed:
-        last = scene.chain[-1].name if scene.chain else "source"
-        plan.targets = [p.path for p in plan.packings if p.step == last]
-    plan.targets = list(dict.fromkeys(analysed + plan.targets))
+    plan.targets = list(dict.fromkeys(final + analysed + plan.targets))
     group_units(plan)
     join_groups(plan)
     return plan
