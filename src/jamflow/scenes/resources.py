@@ -105,7 +105,7 @@ def estimate(command: str, n: int, d: int, options: Mapping[str, Any], before: s
         decades = max(math.log10(max(options["p_target"]) / slow_from), 0.0)
         seconds = LS_SECONDS_PER_SPHERE.get(d, 3e-2) * n * (1 + decades) * (1e-3 / kappa)
     elif command in ("calippso", "certify"):
-        start = CALIPPSO_RANDOM_START if command == "calippso" and before in ("init", "import-dat") else 1
+        start = CALIPPSO_RANDOM_START if command == "calippso" and before == "init" else 1
         seconds = cost.seconds * (_lp_size(n, d) / cost.n_ref) ** cost.exponent * start
     elif cost is not None:
         seconds = cost.seconds * (n / cost.n_ref) ** cost.exponent
