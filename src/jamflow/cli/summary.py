@@ -14,7 +14,7 @@ from ..summary import load_scene
 from .common import add_command, add_quiet
 
 #: Columns printed (those with at least one value); --json / --csv write every column.
-PRINTED = ("kind", "sample", "stage", "kappa", "p_target", "N", "d", "phi", "phi_J", "pressure", "n_contacts",
+PRINTED = ("kind", "body", "point", "sample", "stage", "kappa", "p_target", "N", "d", "phi", "phi_J", "pressure", "n_contacts",
            "isostatic_count", "n_rattlers", "n_lp", "classification", "gamma", "gamma_err", "theta", "theta_err",
            "strain", "shear_stress", "friction")
 #: Significant digits of printed floats: packing fractions in full, exponents and the rest short.
