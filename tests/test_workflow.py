@@ -117,6 +117,19 @@ def test_every_scene_plans_at_both_scales(tmp_path, path, scale):
     assert f"at {scale} scale" in res.stderr and "core-hours" in res.stderr
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("path", SCENES, ids=[p.stem for p in SCENES])
+def test_every_scene_runs_at_laptop_scale(tmp_path, path):
+    work = _workdir(tmp_path)
+    res = _snakemake(work, "--workflow-profile", "workflow/profiles/default", "--configfile",
+                     str(path.relative_to(REPO)), timeout=4 * 3600)
+    assert res.returncode == 0, res.stderr[-4000:]
+    scene = yaml.safe_load(path.read_text())["scene"]
+    assert (work / "results" / scene).is_dir()
+    assert "Nothing to be done" in _snakemake(work, "-n", "--configfile", str(path.relative_to(REPO))).stdout + \
+        _snakemake(work, "-n", "--configfile", str(path.relative_to(REPO))).stderr
+
+
 #: one tiny scene of each body kind: a random start, soft jamming at a high P0, the check
 TINY = {
     "spheres": {"d": 2, "n": 16, "phi": 0.3, "dispersity": "bi"},
