@@ -35,8 +35,14 @@ def test_a_scene_s_numbers_come_from_its_packings(tmp_path):
         _cli("calippso", start, start.with_name("calippso.nc"), "--walls", "--quiet")
     attrs = [read_dataset(root / f"seed{s}" / "calippso.nc").attrs for s in (1, 2)]
     iso = sum(int(a["n_contacts"]) == int(a["isostatic_count"]) for a in attrs)
+    # the scene as run here: its plan's outputs are these packings (a missing one would read "incomplete")
+    scenes = tmp_path / "scenes"
+    scenes.mkdir()
+    (scenes / "walls.yaml").write_text(
+        "scene: walls\nbodies: {spheres: {d: 2, n: 16, phi: 0.3, dispersity: bi, walls: true}}\n"
+        "seeds: [1, 2]\nchain: [{calippso: {walls: true}}]\n")
     out = tmp_path / "reproduced.md"
-    _cli("reproduce", out, "--results", tmp_path / "results", "--quiet")
+    _cli("reproduce", out, "--results", tmp_path / "results", "--scenes", scenes, "--quiet")
     row = next(line for line in out.read_text().splitlines() if line.startswith("| N_c = d N_s + 1"))
     laptop, paper = [c.strip() for c in row.strip("|").split("|")][2:]
     assert laptop.startswith(f"{iso} of 2 packings isostatic") and "(2 samples)" in laptop

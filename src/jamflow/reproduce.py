@@ -257,16 +257,28 @@ SCENES: tuple[ScenePage, ...] = (
 )
 
 
-def _cell(row: Row, root: Path) -> str:
+def _missing(scenes: Path, scene: str, scale: str, results: Path) -> tuple[int, int]:
+    """Targets of the scene at ``scale`` (its plan) that are missing under ``results``, and their number."""
+    import yaml
+
+    from .scenes import plan_scene, read_scene
+
+    config = yaml.safe_load((scenes / f"{scene}.yaml").read_text())
+    plan = plan_scene(read_scene({**config, "scale": scale}), str(results))
+    # a cluster group's bundle listing is bookkeeping, not an output of the scene
+    targets = [t for t in plan.targets if "/bundles/" not in t]
+    return sum(not Path(t).is_file() for t in targets), len(targets)
+
+
+def _cell(row: Row, root: Path, missing: tuple[int, int]) -> str:
     if not root.is_dir():
         return NOT_RUN
-    try:
-        return row.value(root)
-    except (FileNotFoundError, StopIteration):
-        return f"{NOT_RUN} (its outputs are incomplete)"
+    if missing[0]:
+        return f"incomplete ({missing[1] - missing[0]} of {missing[1]} outputs)"
+    return row.value(root)
 
 
-def reproduced_page(results: str | Path, out: str | Path) -> Path:
+def reproduced_page(results: str | Path, out: str | Path, scenes: str | Path = "config/scenes") -> Path:
     """Write the page (markdown) and copy each scene's laptop figures beside it.
 
     Parameters
@@ -275,15 +287,18 @@ def reproduced_page(results: str | Path, out: str | Path) -> Path:
         The results folder holding ``<scene>`` (laptop) and ``<scene>-paper`` (paper scale).
     out : path-like
         The markdown file; figures go to ``<out stem>/`` beside it.
+    scenes : path-like
+        The scene files: a scale whose planned outputs are not all there is reported incomplete.
     """
-    results, out = Path(results), Path(out)
+    results, out, scenes = Path(results), Path(out), Path(scenes)
     figures = out.parent / out.stem
     figures.mkdir(parents=True, exist_ok=True)
     lines = ["# Reproduced figures", "",
              "Every paper scene at laptop scale (`snakemake --configfile config/scenes/<scene>.yaml`) and, where run,",
              "at paper scale (`--config scale=paper`), beside the paper's numbers. Written by",
              f"`jamflow reproduce {out.as_posix()}` from the scenes' outputs; values are means ± standard errors",
-             f"over the samples stated. \"{NOT_RUN}\": the scene's outputs were not there when the page was written.",
+             f"over the samples stated. \"{NOT_RUN}\": the scene's outputs were not there when the page was written;",
+             "\"incomplete\": some of the outputs its plan names were missing.",
              ""]
     for page in SCENES:
         laptop, paper = results / page.scene, results / f"{page.scene}-paper"
@@ -298,7 +313,10 @@ def reproduced_page(results: str | Path, out: str | Path) -> Path:
                 lines += [f"Figure `{fig}`: {NOT_RUN} at laptop scale.", ""]
         if page.rows:
             lines += ["| quantity | paper | laptop scale | paper scale |", "|---|---|---|---|"]
-            lines += [f"| {r.quantity} | {r.paper} | {_cell(r, laptop)} | {_cell(r, paper)} |" for r in page.rows]
+            missing = {scale: _missing(scenes, page.scene, scale, results) if root.is_dir() else (0, 0)
+                       for scale, root in (("laptop", laptop), ("paper", paper))}
+            lines += [f"| {r.quantity} | {r.paper} | {_cell(r, laptop, missing['laptop'])} | "
+                      f"{_cell(r, paper, missing['paper'])} |" for r in page.rows]
             lines.append("")
     out.write_text("\n".join(lines))
     return out

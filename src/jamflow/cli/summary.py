@@ -56,13 +56,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("out", help="the markdown page, e.g. docs/reproduced.md")
     p.add_argument("--results", default="results", help="the results folder (default results)")
+    p.add_argument("--scenes", default="config/scenes", help="the scene files (default config/scenes)")
     add_quiet(p)
 
 
 def _reproduce(args: argparse.Namespace) -> int:
     from ..reproduce import SCENES, reproduced_page
 
-    out = reproduced_page(args.results, args.out)
+    out = reproduced_page(args.results, args.out, args.scenes)
     if not args.quiet:
         ran = sum((Path(args.results) / page.scene).is_dir() for page in SCENES)
         print(f"reproduce: {ran} of {len(SCENES)} paper scenes have laptop-scale outputs under {args.results} -> {out}")
