@@ -52,7 +52,7 @@ COMMAND_MODULE: dict[str, str] = {
     **dict.fromkeys(("soft-jam", "aqs", "sd-shear", "moduli"), "soft"),
     **dict.fromkeys(("shear", "compress", "decompress", "drive"), "flow"),
     "certify": "certify", "tradeoff": "tradeoff", "ls": "ls", "calippso": "calippso", "summary": "summary",
-    "minimize": "minimize",
+    "pool": "summary", "reproduce": "summary", "minimize": "minimize",
     **dict.fromkeys(("init-chains", "link", "chains-moduli"), "chains"),
     **dict.fromkeys(("init-shapes", "contact-angles", "shape-survey", "modes", "constraint-curvature",
                      "feasible-region"), "shapes"),

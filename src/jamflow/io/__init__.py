@@ -18,6 +18,7 @@ from .dataset import (
     write_table,
 )
 from .formats import gsd_types, read_dat, size_classes, write_dat, write_gsd, write_xyz
+from .pool import parse_point, pool_datasets
 
 __all__ = [
     "DATASET_KINDS",
@@ -28,6 +29,8 @@ __all__ = [
     "file_kind",
     "gsd_types",
     "new_dataset_attrs",
+    "parse_point",
+    "pool_datasets",
     "read_dat",
     "read_dataset",
     "read_packing",
