@@ -64,6 +64,9 @@ OTHER_TEMPLATES: dict[str, list[str]] = {
     "summary": ["{scene}"],
     "tradeoff": ["soft", "OUT.nc", "--quick"],
     "chains-moduli": ["{chain-moduli}", "OUT.nc"],
+    "feasible-region": ["OUT.nc", "--samples", "2000", "--shrinks", "1e-3", "1e-2"],
+    "pool": ["{gaps}", "OUT.nc", "--points", "base", "--study", "gaps"],
+    "reproduce": ["OUT.md", "--results", "{scene}"],
 }
 
 #: Budgets that keep a case short whatever value it is fed (a budget reached is a result).
@@ -96,7 +99,7 @@ def _template(command: str) -> list[str]:
 
 def _scene(folder: Path) -> Path:
     """A scene results folder with one packing."""
-    sample = folder / "scene" / "packings" / "seed1"
+    sample = folder / "scene" / "spheres" / "base" / "seed1"
     sample.mkdir(parents=True)
     shutil.copy(KINDS / "packing.nc", sample / "calippso.nc")
     return folder / "scene"
@@ -233,8 +236,9 @@ def test_an_output_with_the_wrong_suffix_is_a_usage_error(command, role, tmp_pat
 
 def _kind_cases():
     for command in sorted(build_parser().subcommands):
-        if command in ("init", "init-chains", "init-shapes", "tradeoff", "summary"):
-            continue  # no input dataset (summary reads a folder: test_reliability)
+        if command in ("init", "init-chains", "init-shapes", "tradeoff", "feasible-region", "summary", "reproduce",
+                       "pool"):
+            continue  # no input dataset; summary and reproduce read a folder, pool takes datasets of any kind
         marks = [pytest.mark.slow] if command in HEAVY else []
         yield pytest.param(command, marks=marks, id=command)
 

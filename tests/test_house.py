@@ -22,7 +22,7 @@ import jamflow
 
 SRC = Path(jamflow.__file__).resolve().parent
 
-GROUND = ("box", "tolerances", "presets", "provenance", "highs", "_kernel_cache", "_numba", "stages")
+GROUND = ("box", "tolerances", "presets", "provenance", "highs", "_kernel_cache", "_numba", "stages", "resources")
 
 #: floors from the ground up; a part imports only parts on floors below its own
 FLOORS: tuple[tuple[str, ...], ...] = (
@@ -36,7 +36,8 @@ FLOORS: tuple[tuple[str, ...], ...] = (
     ("protocols",),
     ("chains", "shapes"),
     ("analysis",),
-    ("plots", "summary", "tradeoff"),
+    ("scenes",),
+    ("plots", "summary", "tradeoff", "reproduce"),
     ("cli",),
     ("__main__",),
 )

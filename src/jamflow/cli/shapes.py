@@ -101,12 +101,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "feasible-region", _feasible_region,
                     "volume and surface of the feasible region of one circulo-line caged by three fixed points "
                     "against the decrease of its radius (VanderWerf et al. Figs. 12-13)", writes=("out",))
-    p.add_argument("out", help="output netCDF (dim shrink)")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF (dim shrink)")
     p.add_argument("--half-length", type=positive, default=0.2,
                    help="core half-length over the radius R (default 0.2: A - 1 = 0.013; three points hold lines "
                         "up to about 0.25 R at --beta 45)")
     p.add_argument("--beta", type=real(0.0, 90.0, lo_open=True, hi_open=True, need="an angle in (0, 90) degrees"), default=45.0, help="angle of the cap points below the axis [degree] (default 45)")
-    p.add_argument("--shrinks", type=real(0.0, 1.0, lo_open=True, hi_open=True, need="a radius decrease dR / R in (0, 1)"), nargs="+", default=[1e-7, 1e-6, 1e-5, 1e-4, 1e-3],
+    p.add_argument("--shrinks", type=real(0.0, 0.5, lo_open=True, hi_open=True, need="a radius decrease dR / R in (0, 0.5)"), nargs="+", default=[1e-7, 1e-6, 1e-5, 1e-4, 1e-3],
                    help="radius decreases dR / R (default 1e-7 ... 1e-3)")
     p.add_argument("--samples", type=integer(1, MAX_SAMPLES, need=f"a number of samples in [1, {MAX_SAMPLES}]"), default=400_000, help="Monte Carlo samples per dR (default 400000)")
     p.add_argument("--seed", type=seed, default=0, help="seed of the Monte Carlo samples (default 0)")
@@ -199,9 +199,7 @@ def _shape_survey(args: argparse.Namespace) -> int:
 def _constraint_curvature(args: argparse.Namespace) -> int:
     from ..shapes.curvature import curvature_dataset
 
-    inputs, out = args.paths[:-1], args.paths[-1]
-    if not inputs:
-        raise ValueError("constraint-curvature needs at least one input packing before the output")
+    inputs, out = split_paths(args.paths, "circulo-line packing")
     ds = curvature_dataset([read_packing(p, None) for p in inputs], inputs)
     ds.attrs.update(new_dataset_attrs("jamflow constraint curvatures", stage_parameters(args, "paths")))
     write_dataset(ds, out)

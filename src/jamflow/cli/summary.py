@@ -11,7 +11,7 @@ import pandas as pd
 
 from ..io import parse_point, pool_datasets, write_dataset, write_table
 from ..summary import load_scene
-from .common import add_command, add_quiet
+from .common import add_command, add_quiet, split_paths
 from .types import path_with_suffix
 
 #: Columns printed (those with at least one value); --json / --csv write every column.
@@ -55,7 +55,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "laptop scale | paper scale (jamflow.reproduce).",
         writes=("out",),
     )
-    p.add_argument("out", help="the markdown page, e.g. docs/reproduced.md")
+    p.add_argument("out", type=path_with_suffix(".md"), help="the markdown page, e.g. docs/reproduced.md")
     p.add_argument("--results", default="results", help="the results folder (default results)")
     p.add_argument("--scenes", default="config/scenes", help="the scene files (default config/scenes)")
     add_quiet(p)
@@ -72,9 +72,7 @@ def _reproduce(args: argparse.Namespace) -> int:
 
 
 def _pool(args: argparse.Namespace) -> int:
-    inputs, out = args.paths[:-1], args.paths[-1]
-    if not inputs:
-        raise ValueError("pool: give at least one input and the output")
+    inputs, out = split_paths(args.paths, "dataset")
     ds = pool_datasets(inputs, [parse_point(p) for p in args.points], args.study)
     write_dataset(ds, out)
     if not args.quiet:

@@ -187,6 +187,8 @@ def feasible_scaling(shrinks: NDArray[np.float64], half_length: float = 0.2, bet
     3/2, module doc). The feasible samples at the smallest ``dR`` are kept for Fig. 12a.
     """
     shrinks = np.sort(np.asarray(shrinks, dtype=np.float64))
+    if np.unique(shrinks).size < 2:
+        raise ValueError(f"the scaling exponents need at least two distinct radius decreases, got {shrinks.tolist()}")
     rows = [feasible_region(half_length, beta, s, samples, seed + k) for k, s in enumerate(shrinks)]
     vol = np.array([r["volume"] for r in rows])
     surf = np.array([r["surface"] for r in rows])

@@ -32,5 +32,8 @@ jamflow chains-moduli chain-moduli.nc chains-moduli-table.nc $q
 jamflow contact-angles "$bodies/shapes_soft.nc" contact-angles.nc $q
 jamflow shape-survey "$bodies/shapes_soft.nc" shape-survey.nc $q
 jamflow modes "$bodies/shapes_soft.nc" modes.nc $q
+jamflow modes "$bodies/linked_soft.nc" linked-modes.nc $q
+jamflow constraint-curvature ../shapes_circulo_line_a1.1_n16_p1e-6.nc constraint-curvature.nc $q
+jamflow feasible-region feasible-region.nc --samples 20000 --shrinks 1e-3 1e-2 $q
 jamflow tradeoff soft tradeoff.nc --quick $q
 rm -r "$tmp"
