@@ -28,8 +28,8 @@ from jamflow.analysis.overlap import contact_overlap
 from jamflow.analysis.structure import structure_dataset
 from jamflow.box import Box
 from jamflow.io import new_dataset_attrs, write_dataset
-from jamflow.neighbors import pairs_within_brute_force
-from jamflow.packing import Packing, near_pairs
+from jamflow.neighbors.pairs import pairs_within_brute_force
+from jamflow.state.packing import Packing, near_pairs
 
 OUTPUT = Path(__file__).resolve().parent / "output"
 MAX_GAP = 0.1

@@ -67,7 +67,7 @@ every part found. Starts are cached as ``benchmarks/output/calippso_start_*.nc``
 Run: ``python benchmarks/calippso.py [--quick] [--parts PART ...]``. ``--jobs 2`` runs the
 whole commands of ``scaling`` two at a time, each a child process with one HiGHS
 thread: LP counts and results do not depend on it, times include the other run's
-memory traffic (the fourth measurement of ``docs/calippso-scaling.md`` ran so).
+memory traffic (the fourth measurement of ``docs/notes/calippso-scaling.md`` ran so).
 """
 
 from __future__ import annotations
@@ -93,24 +93,31 @@ import xarray as xr
 from matplotlib.ticker import NullFormatter
 from numpy.typing import NDArray
 
-import jamflow.calippso as cal
-from jamflow.analysis.contacts import force_balance_residual, summarize
+import jamflow.protocols.calippso as cal
+import jamflow.protocols.calippso.solver as cal_solver
+from jamflow.analysis.contacts import summarize
 from jamflow.analysis.overlap import contact_overlap
 from jamflow.box import Box
-from jamflow.calippso import CONTACT_DUAL_REL_TOL, SOLVER_TOL, JammingLP, jamming_lp
 from jamflow.highs import new_highs
-from jamflow.initial import random_packing
 from jamflow.io import (
     new_dataset_attrs,
-    read_dat,
     read_dataset,
     read_packing,
     write_dataset,
     write_packing,
 )
-from jamflow.ls import compress
-from jamflow.packing import Packing, max_overlap
-from jamflow.rigidity import rigidity_matrix
+from jamflow.io.formats import read_dat
+from jamflow.network.rigidity import rigidity_matrix
+from jamflow.network.spheres import force_balance_residual
+from jamflow.protocols.calippso import (
+    CONTACT_DUAL_REL_TOL,
+    SOLVER_TOL,
+    JammingLP,
+    jamming_lp,
+)
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.ls import compress
+from jamflow.state.packing import Packing, max_overlap
 
 OUT = Path(__file__).resolve().parent / "output"
 #: the CALiPPSO authors' LS examples, vendored with the tests (MIT, licence in its README.md)
@@ -339,19 +346,19 @@ def part_scale(quick: bool, max_n: int) -> xr.Dataset:
         if max_n >= 2048:
             starts["near_N2048_s1"] = near_start(2048)
     # HiGHS's own scaling is the module's private default for cold LPs
-    variants = {"scaled": cal._HIGHS_SCALE, "unscaled": cal.WARM_SIMPLEX_SCALE}
+    variants = {"scaled": cal_solver._HIGHS_SCALE, "unscaled": cal_solver.WARM_SIMPLEX_SCALE}
     parts = []
     for case, path in starts.items():
         start = read_packing(path)
         results, rows = {}, []
         for name, scale in variants.items():
-            cal.WARM_SIMPLEX_SCALE = scale
+            cal_solver.WARM_SIMPLEX_SCALE = scale
             try:
                 t0 = time.perf_counter()
                 res = cal.calippso(start)
                 wall = time.perf_counter() - t0
             finally:
-                cal.WARM_SIMPLEX_SCALE = variants["unscaled"]
+                cal_solver.WARM_SIMPLEX_SCALE = variants["unscaled"]
             h = res.history
             results[name] = res.packing
             rows.append(dict(time=wall, t_lps=float(h["lp_time"].sum()), lps=float(res.iterations),
@@ -567,7 +574,7 @@ def highs_factor_time(K: sp.csc_matrix) -> float:
     h = new_highs(1)
     for option, value in (("solver", "simplex"),
                           ("simplex_strategy", 4), ("simplex_iteration_limit", 0),
-                          ("simplex_scale_strategy", cal.WARM_SIMPLEX_SCALE)):
+                          ("simplex_scale_strategy", cal_solver.WARM_SIMPLEX_SCALE)):
         h.setOptionValue(option, value)
     h.passModel(lp)
     basis = highspy.HighsBasis()

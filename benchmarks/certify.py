@@ -1,7 +1,7 @@
 """Jamming certificate: time against N, and random loads against false "jammed" answers.
 
 Part 1 (time). ``certify(strict=True, loads=1)`` (one load, both signs) on 3D packings of N = 1024 and 4096:
-soft-sphere packings jammed at P0 = 1e-5 (``jamflow.soft.jamming.jam_to_pressure``,
+soft-sphere packings jammed at P0 = 1e-5 (``jamflow.protocols.soft_jam.jam_to_pressure``,
 harmonic, monodisperse; generated once and cached in ``benchmarks/output``), and the
 LS snapshot of the CALiPPSO examples (N = 1024, d = 3; contacts = pairs with relative
 gap <= 3e-3 as exact contacts) replicated 2 x 2 x 1 for N = 4096. The interior-point
@@ -40,17 +40,12 @@ import numpy as np
 import xarray as xr
 
 from jamflow.box import Box
-from jamflow.initial import random_packing
-from jamflow.io import (
-    new_dataset_attrs,
-    read_dat,
-    read_packing,
-    write_dataset,
-    write_packing,
-)
-from jamflow.lattices import lattice_packing
-from jamflow.packing import Packing
-from jamflow.strict_jamming import certify
+from jamflow.io import new_dataset_attrs, read_packing, write_dataset, write_packing
+from jamflow.io.formats import read_dat
+from jamflow.protocols.certify import certify
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.lattices import lattice_packing
+from jamflow.state.packing import Packing
 
 OUT = Path(__file__).resolve().parent / "output"
 LS = Path(__file__).resolve().parents[1] / "tests" / "data" / "calippso-ls" / "Centers-after-LS--N-1024--d-3.dat"
@@ -61,7 +56,7 @@ def soft_packing(n: int) -> Packing:
     """Soft 3D packing at P0 = 1e-5, cached (the soft jamming itself is not timed)."""
     path = OUT / f"soft_3d_N{n}_P1e-5.nc"
     if not path.exists():
-        from jamflow.soft.jamming import jam_to_pressure
+        from jamflow.protocols.soft_jam import jam_to_pressure
 
         res = jam_to_pressure(random_packing(n, 3, 0.2, "mono", 11, 1.4, 0.5, 0.1), pressure=1e-5)
         write_packing(res.packing, path)
@@ -72,7 +67,7 @@ def soft_packing_2d() -> Packing:
     """Soft 2D bidisperse packing, N = 256 at P0 = 1e-5 (cached)."""
     path = OUT / "soft_2d_N256_P1e-5.nc"
     if not path.exists():
-        from jamflow.soft.jamming import jam_to_pressure
+        from jamflow.protocols.soft_jam import jam_to_pressure
 
         res = jam_to_pressure(random_packing(256, 2, 0.3, "bi", 1, 1.4, 0.5, 0.1), pressure=1e-5)
         write_packing(res.packing, path)

@@ -45,8 +45,8 @@ import xarray as xr
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from certify import OUT, replicate, soft_packing  # noqa: E402
 
-from jamflow.io import new_dataset_attrs, read_packing, write_dataset  # noqa: E402
-from jamflow.strict_jamming import certify  # noqa: E402
+from jamflow.io import new_dataset_attrs, read_packing, write_dataset
+from jamflow.protocols.certify import certify
 
 
 def packing_4096():

@@ -46,7 +46,8 @@ from jamflow.chains.compliance import compliance
 from jamflow.chains.hessian import constrained_hessian
 from jamflow.chains.jamming import jam_linked
 from jamflow.io import new_dataset_attrs, write_dataset
-from jamflow.soft.jamming import JammingSettings, jam_to_pressure
+from jamflow.minimize.onset import JammingSettings
+from jamflow.protocols.soft_jam import jam_to_pressure
 from jamflow.tolerances import LINK_LENGTH_RTOL
 
 OUT = Path(__file__).resolve().parent / "output"

@@ -28,10 +28,10 @@ def _load(path: Path, name: str):
 
 
 def main() -> None:
-    from jamflow.initial import random_packing
-    from jamflow.soft import _kernels, fire
-    from jamflow.soft.minimize import DEFAULT_FIRE, _fire_params
-    from jamflow.soft.potential import NeighborList
+    from jamflow.minimize.fire import DEFAULT_FIRE, _fire_params
+    from jamflow.models.spheres.model import _kernels, fire
+    from jamflow.neighbors.verlet import NeighborList
+    from jamflow.protocols.initial import random_packing
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--old", type=Path, required=True, help="old source tree (the directory holding jamflow/)")

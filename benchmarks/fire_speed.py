@@ -22,8 +22,8 @@ import numpy as np
 
 def main() -> None:
     import jamflow
-    from jamflow.initial import random_packing
-    from jamflow.soft import fire
+    from jamflow.models.spheres.model import fire
+    from jamflow.protocols.initial import random_packing
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=2000)

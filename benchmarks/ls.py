@@ -24,9 +24,9 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from jamflow.initial import random_packing
 from jamflow.io import new_dataset_attrs, write_dataset
-from jamflow.ls import compress
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.ls import compress
 
 OUTPUT = Path(__file__).resolve().parent / "output"
 TARGETS = (1e6, 1e12)

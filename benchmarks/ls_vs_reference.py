@@ -15,7 +15,7 @@ here). For each case this script, in one run:
    collisions and to read the packing fraction after every step; the two runs must print
    the same reduced pressure after every step (same seed, deterministic dynamics) or the
    script stops;
-3. runs ``jamflow.ls.compress`` from the same positions and diameters with the mapped
+3. runs ``jamflow.protocols.ls.compress`` from the same positions and diameters with the mapped
    growth rate, temperature and pressure window (below), single stage;
 4. records collisions, CPU time, collisions per CPU-second, the CPU time and collisions to
    each pressure target, p and phi there, and the ratios jamflow / reference.
@@ -95,8 +95,8 @@ import xarray as xr
 
 from jamflow.box import Box
 from jamflow.io import new_dataset_attrs, write_dataset
-from jamflow.ls import compress
-from jamflow.packing import Packing, max_overlap, near_pairs, sphere_volume
+from jamflow.protocols.ls import compress
+from jamflow.state.packing import Packing, max_overlap, near_pairs, sphere_volume
 
 OUT = Path(__file__).resolve().parent / "output"
 
@@ -313,7 +313,7 @@ def _final_overlap(case: Case, folder: Path) -> float:
 
 # --- running jamflow -----------------------------------------------------------------------
 def jamflow_side(start: Packing, case: Case, targets: tuple[float, ...], window: int) -> dict:
-    """jamflow.ls.compress with the mapped protocol (module docstring)."""
+    """jamflow.protocols.ls.compress with the mapped protocol (module docstring)."""
     kappa = CONTRACTION_RATE * float(case.diameters.mean())
     beta = 1.0 / REFERENCE_TEMPERATURE
     res = compress(start, kappa, list(targets), beta=beta, fast_growth_rate=None, seed=SEED,
@@ -330,7 +330,7 @@ def jamflow_side(start: Packing, case: Case, targets: tuple[float, ...], window:
 
 def warm_up(d: int) -> None:
     """Compile jamflow's numba kernels outside the timed runs."""
-    from jamflow.initial import random_packing
+    from jamflow.protocols.initial import random_packing
 
     compress(random_packing(64, d, 0.3, seed=0), 1e-3, [1e3], fast_growth_rate=None)
 

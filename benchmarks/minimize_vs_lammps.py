@@ -62,11 +62,12 @@ import numpy as np
 import xarray as xr
 
 from jamflow import plots
-from jamflow.initial import random_packing
 from jamflow.io import new_dataset_attrs, write_dataset
-from jamflow.soft import fire
-from jamflow.soft.minimize import DEFAULT_FIRE
-from jamflow.soft.potential import SPHERE_SKIN, evaluate
+from jamflow.minimize.fire import DEFAULT_FIRE
+from jamflow.models.spheres.model import fire
+from jamflow.models.spheres.potential import evaluate
+from jamflow.neighbors.verlet import SPHERE_SKIN
+from jamflow.protocols.initial import random_packing
 
 OUT = Path(__file__).resolve().parent / "output"
 #: (d, N, phi) of the Bodies issue (#16)

@@ -44,8 +44,8 @@ def worker(case: int, max_steps: int, seed: int) -> dict:
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from minimize_vs_lammps import start
 
-    from jamflow.soft import _kernels, fire
-    from jamflow.soft.potential import NeighborList
+    from jamflow.models.spheres.model import _kernels, fire
+    from jamflow.neighbors.verlet import NeighborList
 
     d, n, phi = CASES[case]
     x, box, D = start(d, n, phi, seed)
@@ -67,7 +67,7 @@ def worker(case: int, max_steps: int, seed: int) -> dict:
     kernel = 0.0
     if hasattr(_kernels, "_inline_list"):
         # the particles in the order the run used (sorted by cell in large systems)
-        minimize = sys.modules["jamflow.soft.minimize"]
+        minimize = sys.modules["jamflow.models.spheres.fast"]
         order = (minimize._cell_order(x, box, float(D.max())) if n >= getattr(minimize, "SPATIAL_SORT_MIN_N", np.inf)
                  else np.arange(n))
         medians = []

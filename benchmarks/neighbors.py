@@ -22,7 +22,7 @@ import xarray as xr
 
 from jamflow.box import Box
 from jamflow.io import new_dataset_attrs, write_dataset
-from jamflow.neighbors import pairs_within, pairs_within_brute_force
+from jamflow.neighbors.pairs import pairs_within, pairs_within_brute_force
 
 OUTPUT = Path(__file__).resolve().parent / "output"
 CUTOFF = 1.2

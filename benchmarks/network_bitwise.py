@@ -27,18 +27,24 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from api_paths import find
 
-from jamflow.analysis.contacts import summarize
-from jamflow.initial import random_packing
-from jamflow.io import read_dat, read_packing
-from jamflow.lattices import lattice_packing
-from jamflow.overdamped.driving import Drive
-from jamflow.overdamped.integrate import FlowOptions
-from jamflow.overdamped.jamming import constrained_subset, self_stress
-from jamflow.overdamped.network import s_matrix, solve_network
-from jamflow.overdamped.run import Stop, run_flow
-from jamflow.rigidity import positive_self_stress, rigidity_matrix
-from jamflow.strict_jamming import certify
+summarize = find("summarize", "jamflow.analysis.contacts")
+read_packing = find("read_packing", "jamflow.io")
+read_dat = find("read_dat", "jamflow.io")
+rigidity_matrix = find("rigidity_matrix", "jamflow.network.rigidity", "jamflow.rigidity")
+positive_self_stress = find("positive_self_stress", "jamflow.network.self_stress")
+certify = find("certify", "jamflow.protocols.certify", "jamflow.strict_jamming")
+random_packing = find("random_packing", "jamflow.protocols.initial", "jamflow.initial")
+lattice_packing = find("lattice_packing", "jamflow.protocols.lattices", "jamflow.lattices")
+Drive = find("Drive", "jamflow.protocols.overdamped.driving", "jamflow.overdamped.driving")
+FlowOptions = find("FlowOptions", "jamflow.protocols.overdamped.integrate", "jamflow.overdamped.integrate")
+constrained_subset = find("constrained_subset", "jamflow.protocols.overdamped.jamming", "jamflow.overdamped.jamming")
+self_stress = find("self_stress", "jamflow.protocols.overdamped.jamming", "jamflow.overdamped.jamming")
+solve_network = find("solve_network", "jamflow.protocols.overdamped.network", "jamflow.overdamped.network")
+Stop = find("Stop", "jamflow.protocols.overdamped.run", "jamflow.overdamped.run")
+run_flow = find("run_flow", "jamflow.protocols.overdamped.run", "jamflow.overdamped.run")
+s_matrix = find("s_matrix", "jamflow.protocols.overdamped.solver", "jamflow.overdamped.solver")
 
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data"
 

@@ -40,9 +40,9 @@ OUTPUT = HERE / "output"
 CHILD = r"""
 import json, sys, time
 from jamflow.io import read_packing
-from jamflow.overdamped.driving import Drive
-from jamflow.overdamped.integrate import FlowOptions
-from jamflow.overdamped.run import Stop, run_flow
+from jamflow.protocols.overdamped.driving import Drive
+from jamflow.protocols.overdamped.integrate import FlowOptions
+from jamflow.protocols.overdamped.run import Stop, run_flow
 path, steps, strain = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
 opts = FlowOptions(**json.loads(sys.argv[4]))
 p = read_packing(path)
@@ -116,8 +116,8 @@ def write_outputs(runs: list[tuple[dict, dict]], args: argparse.Namespace, start
 
     sys.path.insert(0, str(SRC))
     from jamflow.io import new_dataset_attrs, read_packing, write_dataset
-    from jamflow.overdamped.driving import Drive
-    from jamflow.overdamped.run import stress_unit
+    from jamflow.protocols.overdamped.driving import Drive
+    from jamflow.protocols.overdamped.run import stress_unit
 
     d = read_packing(start).d
 

@@ -6,7 +6,7 @@ caches) and prints (1) the cProfile table by own time and by cumulative time, (2
 network solve and the choice between CG and a factorisation (the CG itself is compiled),
 (3) with ``--timers`` instead of both, real time per function from timing wrappers (no
 profiler, so compiled kernels and short Python calls keep their weights) and the CG
-iterations per solve. Used for docs/overdamped-profile.md.
+iterations per solve. Used for docs/notes/overdamped-profile.md.
 
 Usage: python benchmarks/overdamped_profile.py START.nc [--steps 300] [--record-every 1] [--no-lines] [--timers]
 """
@@ -24,10 +24,10 @@ import time
 import numpy as np
 
 from jamflow.io import read_packing
-from jamflow.overdamped import integrate, network, recorder, solver
-from jamflow.overdamped.driving import Drive
-from jamflow.overdamped.integrate import FlowOptions
-from jamflow.overdamped.run import Stop, run_flow
+from jamflow.protocols.overdamped import integrate, network, recorder, solver
+from jamflow.protocols.overdamped.driving import Drive
+from jamflow.protocols.overdamped.integrate import FlowOptions
+from jamflow.protocols.overdamped.run import Stop, run_flow
 
 
 def main() -> None:

@@ -20,12 +20,12 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from jamflow.initial import random_packing
 from jamflow.io import new_dataset_attrs, write_dataset
-from jamflow.overdamped.driving import Drive
-from jamflow.overdamped.integrate import FlowOptions
-from jamflow.overdamped.run import Stop, run_flow
-from jamflow.packing import Packing
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.overdamped.driving import Drive
+from jamflow.protocols.overdamped.integrate import FlowOptions
+from jamflow.protocols.overdamped.run import Stop, run_flow
+from jamflow.state.packing import Packing
 
 OUT = Path(__file__).resolve().parent / "output"
 PREP = FlowOptions(dt_max=1e-2, step_drift=1e-6, drift_tol=1e-5)

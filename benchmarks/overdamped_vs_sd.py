@@ -3,7 +3,7 @@
 From one N = 100 bidisperse (1 : 1.4, 3 % polydisperse) 2D configuration brought to phi = 0.82 by
 the event-driven compression, shear by (a) the event-driven dynamics and (b) strain steps followed
 by steepest descent of the soft potential of Eq. 32 with stress from hard-sphere forces on the
-tentative network (``jamflow.soft.shear.lerner_sd_shear``). Prints the stress agreement and the
+tentative network (``jamflow.protocols.quasistatic.lerner_sd_shear``). Prints the stress agreement and the
 running times, writes ``benchmarks/output/overdamped_vs_sd.nc`` and ``.png``.
 
 With ``--sd-strain W`` (< ``--strain``) steepest descent runs only over the first W of strain and its
@@ -23,12 +23,12 @@ import numpy as np
 import xarray as xr
 
 from jamflow.box import Box
-from jamflow.initial import random_packing
 from jamflow.io import new_dataset_attrs, write_dataset
-from jamflow.overdamped.driving import Drive
-from jamflow.overdamped.integrate import FlowOptions
-from jamflow.overdamped.run import Stop, length_unit, run_flow
-from jamflow.packing import Packing
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.overdamped.driving import Drive
+from jamflow.protocols.overdamped.integrate import FlowOptions
+from jamflow.protocols.overdamped.run import Stop, length_unit, run_flow
+from jamflow.state.packing import Packing
 
 OUT = Path(__file__).resolve().parent / "output"
 
@@ -78,7 +78,7 @@ def main() -> None:
     ap.add_argument("--step-drift", type=float, default=FlowOptions().step_drift)
     args = ap.parse_args()
     sd_strain = args.strain if args.sd_strain is None else args.sd_strain
-    from jamflow.soft.shear import lerner_sd_shear
+    from jamflow.protocols.quasistatic import lerner_sd_shear
 
     start = prepare(args.n, args.phi, args.seed)
     t0 = time.perf_counter()

@@ -21,12 +21,12 @@ import xarray as xr
 from matplotlib.figure import Figure
 
 from jamflow.analysis.contacts import summarize
-from jamflow.calippso import calippso
-from jamflow.initial import random_packing
 from jamflow.io import new_dataset_attrs, write_dataset
-from jamflow.ls import compress
-from jamflow.packing import max_overlap
 from jamflow.plots import save_figure
+from jamflow.protocols.calippso import calippso
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.ls import compress
+from jamflow.state.packing import max_overlap
 
 OUT = Path(__file__).parent / "output"
 TARGETS = [1e12, 1e13, 1e14, 1e15, 1e16]

@@ -35,9 +35,12 @@ import xarray as xr
 from jamflow.chains.builders import linked_packing
 from jamflow.chains.hessian import constrained_hessian
 from jamflow.chains.jamming import jam_linked
-from jamflow.initial import random_packing
 from jamflow.io import new_dataset_attrs, write_dataset
+from jamflow.minimize.onset import JammingSettings
+from jamflow.models.spheres.potential import HARMONIC
 from jamflow.plots import save_figure
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.soft_jam import jam_to_pressure
 from jamflow.shapes import (
     bidisperse_shapes,
     jam_shapes,
@@ -46,8 +49,6 @@ from jamflow.shapes import (
 )
 from jamflow.shapes.counting import count_constraints
 from jamflow.shapes.spectrum import spectrum
-from jamflow.soft.jamming import JammingSettings, jam_to_pressure
-from jamflow.soft.potential import HARMONIC
 
 OUT = Path(__file__).resolve().parent / "output"
 FAMILIES = ("disk", "ellipse", "circulo-line", "dimer")
@@ -97,7 +98,7 @@ def main() -> None:
                 res = jam_shapes(start, args.pressure, settings)
                 jam_time[a, b], jam_cpu[a, b] = time.perf_counter() - t0, time.process_time() - c0
                 phi[a, b], steps[a, b] = res.packing.packing_fraction, res.steps
-                z[a, b] = count_constraints(res.packing, "twice")[0].z
+                z[a, b] = count_constraints(res.packing, "twice")[0].z_eq3
                 t0, c0 = time.perf_counter(), time.process_time()
                 n_quartic[a, b] = spectrum(res.packing, fourth=False).n_quartic
                 spec_time[a, b], spec_cpu[a, b] = time.perf_counter() - t0, time.process_time() - c0

@@ -26,9 +26,9 @@ import numpy as np
 import xarray as xr
 
 from jamflow.io import new_dataset_attrs, read_packing, write_dataset
+from jamflow.minimize import minimize
 from jamflow.plots import save_figure
-from jamflow.shapes.counting import shape_model
-from jamflow.soft.minimize import minimize
+from jamflow.shapes.counting import shape_model_of
 
 OUT = Path(__file__).resolve().parent / "output"
 DATA = Path(__file__).resolve().parent.parent / "tests" / "data"
@@ -54,7 +54,7 @@ def main() -> None:
     for a, name in enumerate(PACKINGS):
         base = read_packing(DATA / name, None)
         for b, dphi in enumerate(DPHI):
-            model, q = shape_model(compressed(base, dphi))
+            model, q = shape_model_of(compressed(base, dphi))
             start = model.positions(q)
             for method in METHODS:  # untimed: numba compiles the family's kernels on first use
                 minimize(model, start, method, FORCE_TOL, max_steps=5)

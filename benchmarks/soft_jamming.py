@@ -30,10 +30,12 @@ import numpy as np
 import xarray as xr
 
 from jamflow.analysis.contacts import summarize
-from jamflow.initial import random_packing
 from jamflow.io import new_dataset_attrs, write_dataset
-from jamflow.soft import FireParameters, fire
-from jamflow.soft.jamming import FORCE_TOL_VANDERWERF, jam_to_pressure
+from jamflow.minimize.fire import FireParameters
+from jamflow.minimize.onset import FORCE_TOL_VANDERWERF
+from jamflow.models.spheres.model import fire
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.soft_jam import jam_to_pressure
 
 OUT = Path(__file__).resolve().parent / "output"
 P0 = 1e-7

@@ -4,7 +4,7 @@ jamflow's own bounded simplex (:mod:`jamflow.simplex`) from the same carried bas
 Two steps, each one command:
 
 ``capture``
-    Runs ``jamflow.calippso.calippso`` on near starts (LS to p = 1e7, cached by
+    Runs ``jamflow.protocols.calippso.calippso`` on near starts (LS to p = 1e7, cached by
     ``benchmarks/calippso.py``: ``near_start``) and the authors' LS examples, and saves
     every warm simplex LP as HiGHS gets it, with what HiGHS made of it:
     ``OUT/warm_lps/<start>/lp_<k>.npz`` holds the matrix ``A`` (CSC arrays), ``rhs``,
@@ -42,10 +42,11 @@ import numpy as np
 import scipy.sparse as sp
 import xarray as xr
 
-import jamflow.calippso as calippso_module
+import jamflow.protocols.calippso.solver as cal_solver
 from jamflow import simplex
-from jamflow.calippso import CONTACT_DUAL_REL_TOL, SOLVER_TOL, calippso
 from jamflow.io import new_dataset_attrs, read_packing, write_dataset
+from jamflow.protocols.calippso import CONTACT_DUAL_REL_TOL, SOLVER_TOL, calippso
+from jamflow.protocols.calippso.lp import _highs_lp
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from calippso import OUT, ls_example, near_start
@@ -111,7 +112,7 @@ def capture(start: Path, tag: str, max_warm: int) -> int:
     ``CAPTURE/tag``. Returns how many were saved."""
     folder = CAPTURE / tag
     folder.mkdir(parents=True, exist_ok=True)
-    run = calippso_module._Solver._run
+    run = cal_solver._Solver._run
     count = [0]
 
     class Enough(Exception):
@@ -126,16 +127,16 @@ def capture(start: Path, tag: str, max_warm: int) -> int:
                 raise Enough
         return status, seconds
 
-    calippso_module._Solver._run = capturing_run
+    cal_solver._Solver._run = capturing_run
     t0 = time.perf_counter()
     try:
         res = calippso(read_packing(start))
-        print(f"{tag}: {res.n_iterations if hasattr(res, 'n_iterations') else ''} chain done in "
+        print(f"{tag}: chain of {res.iterations} LPs done in "
               f"{time.perf_counter() - t0:.1f} s, {count[0]} warm LPs", flush=True)
     except Enough:
         print(f"{tag}: stopped after {count[0]} warm LPs ({time.perf_counter() - t0:.1f} s)", flush=True)
     finally:
-        calippso_module._Solver._run = run
+        cal_solver._Solver._run = run
     return count[0]
 
 
@@ -147,15 +148,15 @@ def highs_solve(w: WarmLP) -> tuple[float, float, int, str, np.ndarray, np.ndarr
     """HiGHS's warm primal simplex from the carried basis, set up as the chain's
     ``_Solver._run`` does: wall and CPU time of ``setBasis`` + ``run`` [s] (``setBasis``
     factorises an alien basis), pivots, status, columns and row duals."""
-    solver = calippso_module._Solver()
+    solver = cal_solver._Solver()
     h = solver.h
-    lp = calippso_module._highs_lp(w.A, w.rhs, w.col_lower, w.col_upper)
+    lp = _highs_lp(w.A, w.rhs, w.col_lower, w.col_upper)
     h.clearSolver()
     h.setOptionValue("solver", "simplex")
     h.setOptionValue("simplex_strategy", 4)
-    h.setOptionValue("presolve", calippso_module._HIGHS_PRESOLVE)
-    h.setOptionValue("simplex_scale_strategy", calippso_module.WARM_SIMPLEX_SCALE)
-    h.setOptionValue("simplex_iteration_limit", max(int(calippso_module.WARM_PIVOTS_PER_ROW * lp.num_row_), 1))
+    h.setOptionValue("presolve", cal_solver._HIGHS_PRESOLVE)
+    h.setOptionValue("simplex_scale_strategy", cal_solver.WARM_SIMPLEX_SCALE)
+    h.setOptionValue("simplex_iteration_limit", max(int(cal_solver.WARM_PIVOTS_PER_ROW * lp.num_row_), 1))
     h.passModel(lp)
     basis = highspy.HighsBasis()
     basis.col_status = [highspy.HighsBasisStatus(int(v)) for v in w.col_status]

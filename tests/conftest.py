@@ -6,7 +6,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from ls_data import LS_DIMENSIONS, ls_dat
 
 

@@ -5,12 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import xarray as xr
+from test_plots import check_figure
 
 from jamflow import plots
-from jamflow.analysis.eos import carnahan_starling, fit_jamming_density, glass_pressure, jamming_table
+from jamflow.analysis.eos import (
+    carnahan_starling,
+    fit_jamming_density,
+    glass_pressure,
+    jamming_table,
+)
 from jamflow.io import read_dataset, write_dataset
-
-from test_plots import check_figure
 
 
 def eos_run(phi_j: float, d: int, rng, kappa: float, noise: float = 0.0) -> xr.Dataset:

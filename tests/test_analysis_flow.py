@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from jamflow.analysis.flow import block_average, contact_lifetimes, flow_curve, flow_summary, strain_average
+from jamflow.analysis.flow import (
+    block_average,
+    contact_lifetimes,
+    flow_curve,
+    flow_summary,
+    strain_average,
+)
 from jamflow.io import new_dataset_attrs, read_dataset, write_dataset
 
 
@@ -126,9 +132,9 @@ def test_flow_summary_cli_round_trip(tmp_path, rng):
 
 @pytest.mark.slow
 def test_summary_of_a_real_overdamped_shear_run():
-    from jamflow.initial import random_packing
-    from jamflow.overdamped.driving import Drive
-    from jamflow.overdamped.run import Stop, run_flow
+    from jamflow.protocols.initial import random_packing
+    from jamflow.protocols.overdamped.driving import Drive
+    from jamflow.protocols.overdamped.run import Stop, run_flow
 
     start = random_packing(32, 2, 0.5, "bi", 7, 1.4, 0.5, 0.1)
     res = run_flow(start, Drive(mode="shear_fixed_pressure", pressure=10.0), Stop(strain=1.0, max_steps=3000))

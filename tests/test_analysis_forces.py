@@ -5,10 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from jamflow.analysis.forces import THETA_EXTENDED, bucklers, force_distribution, normalised_forces
+from jamflow.analysis.forces import (
+    THETA_EXTENDED,
+    bucklers,
+    force_distribution,
+    normalised_forces,
+)
 from jamflow.box import Box
 from jamflow.io import read_dataset, write_packing
-from jamflow.packing import Packing, near_pairs
+from jamflow.state.packing import Packing, near_pairs
 
 
 def lattice(nx: int, ny: int) -> Packing:

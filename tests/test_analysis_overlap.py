@@ -8,7 +8,7 @@ import pytest
 from jamflow.analysis.overlap import contact_overlap, overlap_series
 from jamflow.box import Box
 from jamflow.io import read_dataset, write_packing
-from jamflow.packing import Packing, near_pairs
+from jamflow.state.packing import Packing, near_pairs
 
 
 def lattice_with_contacts(nx: int = 10, ny: int = 10) -> Packing:

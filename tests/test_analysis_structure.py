@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
+from ls_data import ls_dat
 
 from jamflow.analysis.structure import (
     crystal_like,
@@ -14,10 +14,9 @@ from jamflow.analysis.structure import (
     structure_dataset,
 )
 from jamflow.box import Box
-from jamflow.io import read_dat, read_dataset
-from jamflow.packing import Packing
-from ls_data import ls_dat
-
+from jamflow.io import read_dataset
+from jamflow.io.formats import read_dat
+from jamflow.state.packing import Packing
 
 
 def triangular(nx: int, ny: int, spacing: float = 1.0, shift: float = 0.1) -> Packing:

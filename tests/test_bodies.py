@@ -14,12 +14,13 @@ import numpy as np
 import pytest
 import shapely
 from shapely import affinity
-from shapely.geometry import LineString, Point, Polygon, box as shapely_box
+from shapely.geometry import LineString, Point, Polygon
+from shapely.geometry import box as shapely_box
 
-from jamflow.bodies import SHAPE_KINDS, Links, ShapeTable
 from jamflow.box import Box
 from jamflow.io import read_dataset, read_packing, write_dataset, write_packing
-from jamflow.packing import OverlapError, Packing
+from jamflow.state.bodies import SHAPE_KINDS, Links, ShapeTable
+from jamflow.state.packing import OverlapError, Packing
 
 
 def _regular(n: int, circumradius: float, phase: float = 0.3) -> np.ndarray:
@@ -336,7 +337,7 @@ def test_check_reports_how_well_links_hold_and_refuses_to_count_shape_contacts(t
 
     from jamflow.analysis.contacts import summarize
     from jamflow.cli import main
-    from jamflow.strict_jamming import certify
+    from jamflow.protocols.certify import certify
 
     p = _linked_packing()
     stretched = p.position.copy()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from jamflow.bodies import ShapeTable
+from jamflow.state.bodies import ShapeTable
 
 
 def _outline_gyration(v: np.ndarray) -> float:

@@ -12,13 +12,14 @@ import highspy
 import numpy as np
 import pytest
 
-from jamflow.analysis.contacts import force_balance_residual, summarize
-from jamflow.calippso import calippso
+from jamflow.analysis.contacts import summarize
 from jamflow.cli import main
 from jamflow.highs import new_highs
-from jamflow.initial import random_packing
 from jamflow.io import write_packing
-from jamflow.packing import max_overlap
+from jamflow.network.spheres import force_balance_residual
+from jamflow.protocols.calippso import calippso
+from jamflow.protocols.initial import random_packing
+from jamflow.state.packing import max_overlap
 from jamflow.tolerances import FORCE_BALANCE_TOL, OVERLAP_TOL
 
 

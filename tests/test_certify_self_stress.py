@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from jamflow.initial import random_packing
 from jamflow.network import contact_jacobian, rigid_network, sphere_contacts
-from jamflow.soft.jamming import jam_to_pressure
-from jamflow.strict_jamming import certify
+from jamflow.protocols.certify import certify
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.soft_jam import jam_to_pressure
 
 
 @pytest.fixture(scope="module", params=[(2, 64, "bi"), (3, 128, "mono")], ids=["2d-N64", "3d-N128"])

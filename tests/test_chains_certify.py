@@ -9,11 +9,12 @@ from jamflow.chains.builders import linked_packing
 from jamflow.chains.certify import certify_linked
 from jamflow.chains.jamming import jam_linked
 from jamflow.cli import main
-from jamflow.initial import random_packing
 from jamflow.io import read_dataset, write_packing
-from jamflow.soft.jamming import JammingSettings, jam_to_pressure
-from jamflow.soft.potential import overlapping_pairs
-from jamflow.strict_jamming import certify
+from jamflow.minimize.onset import JammingSettings
+from jamflow.models.spheres.potential import overlapping_pairs
+from jamflow.protocols.certify import certify
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.soft_jam import jam_to_pressure
 
 
 @pytest.mark.parametrize("seed", [3, 4])
@@ -57,3 +58,15 @@ def test_a_trimer_without_contacts_is_a_rattling_cluster(trimers):
     loose = loose.evolve(contacts=contacts[~loose.links.contains(contacts[:, 0], contacts[:, 1])])
     cert = certify_linked(loose, strict=False)
     assert cert.rattler[:3].all()
+
+
+def test_certify_of_an_overlapping_sphere_packing_says_soft(tmp_path, capsys):
+    """A soft-jam output overlaps: without --soft certify stops and names the option; with it, it runs."""
+    from pathlib import Path
+
+    src = Path(__file__).parent / "data" / "bodies" / "spheres_soft.nc"
+    assert main(["certify", str(src), str(tmp_path / "c.nc")]) == 1
+    err = capsys.readouterr().err
+    assert "overlap by more than" in err and "written by soft-jam" in err and "--soft" in err
+    assert not (tmp_path / "c.nc").exists()
+    assert main(["certify", str(src), str(tmp_path / "c.nc"), "--soft", "--quiet"]) == 0

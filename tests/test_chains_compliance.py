@@ -9,15 +9,16 @@ from jamflow.box import Box
 from jamflow.chains.builders import cement, linked_packing
 from jamflow.chains.compliance import compliance, strain_compliance, total_virial
 from jamflow.chains.jamming import jam_linked
-from jamflow.chains.shear import ShearStabilizedModel
 from jamflow.cli import main
-from jamflow.initial import random_packing
 from jamflow.io import read_dataset, write_packing
-from jamflow.models.base import ModelEvaluation
+from jamflow.minimize.fire import minimize_fire
+from jamflow.minimize.model import ModelEvaluation
+from jamflow.minimize.onset import JammingSettings
 from jamflow.models.links import LinkedSpheresModel
-from jamflow.soft.hessian import elastic_moduli
-from jamflow.soft.jamming import JammingSettings, jam_to_pressure
-from jamflow.soft.minimize import minimize_fire
+from jamflow.models.spheres.hessian import elastic_moduli
+from jamflow.models.strain import ShearStabilizedModel
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.soft_jam import jam_to_pressure
 
 
 @pytest.fixture(scope="module")

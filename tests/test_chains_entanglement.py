@@ -10,18 +10,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from jamflow.bodies import Links
 from jamflow.box import Box
 from jamflow.chains.builders import crossing_links, rigid_cluster_links
 from jamflow.chains.entanglement import EntanglementError, check_untangled
 from jamflow.chains.jamming import jam_linked
 from jamflow.cli import main
 from jamflow.io import write_packing
+from jamflow.minimize.fire import minimize_fire
+from jamflow.minimize.onset import JammingSettings
 from jamflow.models.links import LinkedSpheresModel
-from jamflow.packing import Packing
-from jamflow.soft.jamming import JammingSettings
-from jamflow.soft.minimize import minimize_fire
-from jamflow.soft.potential import overlapping_pairs
+from jamflow.models.spheres.potential import overlapping_pairs
+from jamflow.state.bodies import Links
+from jamflow.state.packing import Packing
 from jamflow.tolerances import ENTANGLED_OVERLAP
 
 

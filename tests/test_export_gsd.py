@@ -10,8 +10,9 @@ import pytest
 
 from jamflow.box import Box
 from jamflow.cli import main
-from jamflow.io import read_packing, size_classes, write_gsd, write_packing, write_xyz
-from jamflow.packing import Packing
+from jamflow.io import read_packing, write_packing
+from jamflow.io.formats import size_classes, write_gsd, write_xyz
+from jamflow.state.packing import Packing
 
 DATA = Path(__file__).parent / "data"
 CIRCULO = DATA / "shapes_circulo_line_a1.1_n16_p1e-6.nc"

@@ -10,11 +10,12 @@ import pytest
 import xarray as xr
 
 from jamflow.box import Box
-from jamflow.calippso import calippso
 from jamflow.cli import main
-from jamflow.initial import random_packing
-from jamflow.io import read_packing, size_classes, write_packing, write_xyz
-from jamflow.packing import Packing
+from jamflow.io import read_packing, write_packing
+from jamflow.io.formats import size_classes, write_xyz
+from jamflow.protocols.calippso import calippso
+from jamflow.protocols.initial import random_packing
+from jamflow.state.packing import Packing
 from jamflow.tolerances import FORCE_BALANCE_TOL
 
 

@@ -18,26 +18,24 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from jamflow.analysis.contacts import isostatic_count, summarize
+from jamflow.analysis.contacts import summarize
 from jamflow.box import Box
 from jamflow.cli import main
-from jamflow.initial import random_packing
 from jamflow.io import write_dataset, write_packing
-from jamflow.lattices import lattice_packing
-from jamflow.neighbors import pairs_within_brute_force
-from jamflow.overdamped.driving import Drive
-from jamflow.overdamped.integrate import FlowOptions, Integrator
-from jamflow.overdamped.network import (
-    SingularNetworkError,
-    pair_vectors,
-    s_matrix,
-    solve_network,
-)
-from jamflow.overdamped.run import Stop, run_flow
-from jamflow.packing import Packing
-from jamflow.soft.jamming import jam_to_pressure
-from jamflow.soft.shear import aqs_shear
-from jamflow.strict_jamming import certify
+from jamflow.neighbors.pairs import pairs_within_brute_force
+from jamflow.network import isostatic_count
+from jamflow.protocols.certify import certify
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.lattices import lattice_packing
+from jamflow.protocols.overdamped.driving import Drive
+from jamflow.protocols.overdamped.integrate import FlowOptions, Integrator
+from jamflow.protocols.overdamped.ldl import SingularNetworkError
+from jamflow.protocols.overdamped.network import pair_vectors, solve_network
+from jamflow.protocols.overdamped.run import Stop, run_flow
+from jamflow.protocols.overdamped.solver import s_matrix
+from jamflow.protocols.quasistatic import aqs_shear
+from jamflow.protocols.soft_jam import jam_to_pressure
+from jamflow.state.packing import Packing
 from jamflow.tolerances import SOFT_FORCE_TOL
 from jamflow.tradeoff import flow_start
 
@@ -68,7 +66,7 @@ def _check_jammed_isostatic(p: Packing) -> dict:
     assert cert.classification in JAMMED
     # the certified backbone is isostatic too (the LP may remove no further particle)
     nb = int((~cert.rattler).sum())
-    assert len(cert.backbone_contacts) == isostatic_count(p.d, nb)
+    assert len(cert.backbone_contacts) == isostatic_count(nb, p.d, global_dofs=p.d)
     return {"n_contacts": s.n_contacts, "n_rattlers": s.n_rattlers}
 
 

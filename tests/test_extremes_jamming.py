@@ -11,14 +11,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from jamflow.analysis.contacts import force_balance_residual, summarize
+from jamflow.analysis.contacts import summarize
 from jamflow.analysis.eos import fit_jamming_density
 from jamflow.analysis.structure import CRYSTAL_FRACTION_THRESHOLD, crystal_fraction
-from jamflow.calippso import calippso
-from jamflow.initial import random_packing
-from jamflow.ls import compress
-from jamflow.packing import max_overlap, near_pairs
-from jamflow.strict_jamming import certify
+from jamflow.network.spheres import force_balance_residual
+from jamflow.protocols.calippso import calippso
+from jamflow.protocols.certify import certify
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.ls import compress
+from jamflow.state.packing import max_overlap, near_pairs
 from jamflow.tolerances import FORCE_BALANCE_TOL, OVERLAP_TOL
 
 #: (d, N, dispersity, growth rate): the smallest N whose jammed diameters stay below a

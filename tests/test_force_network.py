@@ -1,15 +1,15 @@
-"""Minimum-norm balanced contact forces (jamflow.force_network)."""
+"""Minimum-norm balanced contact forces (jamflow.network.forces)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from jamflow.analysis.contacts import contacts_from_gaps
-from jamflow.calippso import calippso
-from jamflow.force_network import balance_matrix, min_norm_forces
-from jamflow.initial import random_packing
-from jamflow.rigidity import contact_geometry, rigidity_matrix
+from jamflow.network.forces import balance_matrix, min_norm_forces
+from jamflow.network.rigidity import contact_geometry, rigidity_matrix
+from jamflow.network.spheres import contacts_from_gaps
+from jamflow.protocols.calippso import calippso
+from jamflow.protocols.initial import random_packing
 
 
 def test_balance_matrix_is_the_transpose_of_the_rigidity_matrix():

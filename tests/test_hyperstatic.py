@@ -6,7 +6,7 @@ rattlers those of the geometric network, the forces non-negative and balanced, a
 ``check`` / ``certify`` must agree with the geometry. Independent references: the
 pairs' gaps (``contacts_from_gaps``), the crystal's symmetry (equal forces), the
 KKT conditions of the minimum-norm problem, and the Roth-Whiteley rank / positive
-self-stress test of rigidity (``jamflow.rigidity``).
+self-stress test of rigidity (``jamflow.network.rigidity``).
 
 ``tests/data/ls_2d_mono_n64_p1e6.nc`` is the issue's LS case, made by
 ``jamflow init m.nc --d 2 --n 64 --phi 0.5 --dispersity mono --seed 1`` and
@@ -23,21 +23,22 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
-from jamflow.analysis.contacts import (
+from jamflow.analysis.contacts import summarize
+from jamflow.cli import main
+from jamflow.io import read_dataset, read_packing, write_packing
+from jamflow.network import isostatic_count, jacobian_rank
+from jamflow.network.rigidity import rigidity_matrix
+from jamflow.network.self_stress import positive_self_stress
+from jamflow.network.spheres import (
     contacts_from_gaps,
     find_rattlers,
     force_balance_residual,
-    isostatic_count,
-    summarize,
 )
-from jamflow.calippso import calippso
-from jamflow.cli import main
-from jamflow.initial import random_packing
-from jamflow.io import read_dataset, read_packing, write_packing
-from jamflow.lattices import lattice_packing
-from jamflow.packing import near_pairs
-from jamflow.rigidity import positive_self_stress, rigidity_matrix, rigidity_rank
-from jamflow.strict_jamming import certify
+from jamflow.protocols.calippso import calippso
+from jamflow.protocols.certify import certify
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.lattices import lattice_packing
+from jamflow.state.packing import near_pairs
 from jamflow.tolerances import CONTACT_GAP_TOL, FORCE_BALANCE_TOL, OVERLAP_TOL
 
 LS_MONO = Path(__file__).parent / "data" / "ls_2d_mono_n64_p1e6.nc"
@@ -60,7 +61,7 @@ def _rigid_fixed_box(p) -> bool:
     idx = np.flatnonzero(~p.rattler)
     c = p.contacts[~(p.rattler[p.contacts[:, 0]] | p.rattler[p.contacts[:, 1]])]
     R = rigidity_matrix(p, c, particles=idx)
-    rank, _ = rigidity_rank(R)
+    rank, _ = jacobian_rank(R)
     return rank == p.d * (len(idx) - 1) and positive_self_stress(R) is not None
 
 
@@ -88,7 +89,7 @@ def test_crystal_keeps_all_3n_contacts_and_no_rattler(crystal):
     a = p.attrs
     assert (a["n_contacts"], a["n_stable"], a["n_rattlers"]) == (192, 64, 0)
     assert a["hyperstatic"] == 1 and a["isostatic"] == 0
-    assert a["isostatic_count"] == isostatic_count(2, 64) == 127
+    assert a["isostatic_count"] == isostatic_count(64, 2, global_dofs=2) == 127
     # the LP's vertex itself holds fewer contacts; the attrs say which forces are stored
     assert a["n_contacts_dual"] < 192
     assert a["force_assignment"] == "min_norm_balanced"
@@ -149,7 +150,7 @@ def test_mono_ls_stores_geometric_contacts(mono):
     np.testing.assert_array_equal(p.rattler, find_rattlers(p.n, 2, geo))
     assert p.attrs["n_rattlers_dual"] > p.attrs["n_rattlers"]
     n_c = summarize(p).n_contacts
-    assert n_c == p.attrs["n_contacts"] > isostatic_count(2, int((~p.rattler).sum()))
+    assert n_c == p.attrs["n_contacts"] > isostatic_count(int((~p.rattler).sum()), 2, global_dofs=2)
     assert p.attrs["force_assignment"] == "min_norm_balanced"
 
 
@@ -236,12 +237,12 @@ def test_walls_mono_stores_geometric_pair_and_wall_contacts():
 
 def test_failed_force_qp_falls_back_to_the_dual_vertex_and_says_so(monkeypatch):
     """Should the QP fail, the geometric contacts carry the vertex's (balanced) duals."""
-    import jamflow.calippso as cal
+    import jamflow.protocols.calippso.network as cal_network
 
     def fail(*args, **kwargs):
         raise RuntimeError("minimum-norm force QP not solved: HiGHS status 'Infeasible'")
 
-    monkeypatch.setattr(cal, "min_norm_forces", fail)
+    monkeypatch.setattr(cal_network, "min_norm_forces", fail)
     lattice = lattice_packing("triangular", (8, 4))
     res = calippso(lattice.evolve(contacts=None))
     p = res.packing

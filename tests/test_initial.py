@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from jamflow.box import Box
-from jamflow.initial import UnreachableError, draw_diameters, random_packing
+from jamflow.protocols.initial import UnreachableError, draw_diameters, random_packing
 
 #: Packing fractions comfortably below RSA saturation in each dimension.
 PHI = {2: 0.45, 3: 0.3, 4: 0.18, 5: 0.1}

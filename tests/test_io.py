@@ -20,15 +20,13 @@ import xarray as xr
 from jamflow.box import Box
 from jamflow.io import (
     new_dataset_attrs,
-    read_dat,
     read_dataset,
     read_packing,
-    write_dat,
     write_dataset,
     write_packing,
-    write_xyz,
 )
-from jamflow.packing import OverlapError, Packing
+from jamflow.io.formats import read_dat, write_dat, write_xyz
+from jamflow.state.packing import OverlapError, Packing
 
 #: Packing fractions stated by the data's README (computed by the CALiPPSO authors).
 README_PHI = {3: 0.64395, 4: 0.4675, 5: 0.3162}

@@ -90,3 +90,13 @@ def test_an_edit_of_an_inlined_kernel_reaches_its_callers(tmp_path, user_cache):
         results[name] = _g_of_1(tmp_path, name, cache)
     assert results["stale_pkg"] == 4, "numba now invalidates callers' caches itself: the premise of this test changed"
     assert results["stamped_pkg"] == 6
+
+
+def test_import_jamflow_leaves_numba_and_its_caches_alone_until_a_kernel_module_loads():
+    """``import jamflow`` does no work on the kernel caches; the first kernel module checks them."""
+    code = ("import sys, jamflow, jamflow._kernel_cache as kc; "
+            "before = ('numba' in sys.modules, kc._checked); "
+            "import jamflow.neighbors._cell_kernels; "
+            "print(before, kc._checked)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "(False, False) True"

@@ -1,4 +1,4 @@
-"""Lubachevsky–Stillinger compression (jamflow.ls): exact events, conservation laws,
+"""Lubachevsky–Stillinger compression (jamflow.protocols.ls): exact events, conservation laws,
 equation of state against Carnahan–Starling and Eq. 15, targets, inputs."""
 
 from __future__ import annotations
@@ -8,13 +8,13 @@ import math
 import numpy as np
 import pytest
 
-from jamflow import _ls_kernels as kern
-from jamflow.box import Box
 from jamflow.analysis.eos import carnahan_starling, fit_jamming_density
 from jamflow.analysis.structure import CRYSTAL_FRACTION_THRESHOLD, crystal_fraction
-from jamflow.initial import random_packing
-from jamflow.ls import _State, compress
-from jamflow.packing import Packing, max_overlap
+from jamflow.box import Box
+from jamflow.protocols import _ls_kernels as kern
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.ls import _State, compress
+from jamflow.state.packing import Packing, max_overlap
 from jamflow.tolerances import OVERLAP_TOL
 
 
@@ -78,8 +78,7 @@ def test_collision_time_near_contact_is_accurate():
 
 def _state(packing, rate, seed=0, beta=10.0, neighbor_list=None):
     st = _State(packing, beta, np.random.default_rng(seed), neighbor_list)
-    st.sc[2] = rate
-    st.rebuild()
+    st.set_rate(rate)
     return st
 
 
@@ -122,8 +121,8 @@ def test_energy_gain_with_growth_is_growth_rate_times_impulse(neighbor_list):
     ncoll = _run(st, 5_000, math.inf)
     assert ncoll > 1000
     K1 = kern.kinetic_energy(st.v)
-    assert K1 == pytest.approx(st.sc[3], rel=1e-12)  # bookkeeping of the kernel
-    dK, vir = K1 - K0, st.sc[5]
+    assert K1 == pytest.approx(st.kinetic, rel=1e-12)  # bookkeeping of the kernel
+    dK, vir = K1 - K0, st.virial
     assert dK > 0.0
     assert vir / st.scale() * (1 - 1e-12) <= dK / kappa <= vir / s0 * (1 + 1e-12)
     assert np.abs(st.v.sum(axis=0)).max() < 1e-12
@@ -296,7 +295,7 @@ def test_real_ls_configurations_stay_without_overlap(calippso_ls_file):
     # the CALiPPSO authors' LS packings (N = 1024, d = 3, 4, 5, relative gaps down to
     # ~1e-11): hard-sphere dynamics at fixed diameters keeps energy, momentum and
     # non-overlap, and measures a pressure in the glass regime (p >> 1) in both windows
-    from jamflow.io import read_dat
+    from jamflow.io.formats import read_dat
 
     pk = read_dat(calippso_ls_file)
     res = compress(pk, 0.0, max_collisions=20 * pk.n, fast_growth_rate=None, seed=0)

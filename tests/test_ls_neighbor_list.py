@@ -1,4 +1,4 @@
-"""Verlet neighbour lists of the LS kernel (jamflow._ls_kernels, jamflow.ls): the same
+"""Verlet neighbour lists of the LS kernel (jamflow.protocols._ls_kernels, jamflow.protocols.ls): the same
 dynamics as the cell scan, the no-missed-pair guarantee, conservation over many
 rebuilds, and no overlaps up to jamming in d = 4, 5."""
 
@@ -9,17 +9,16 @@ import math
 import numpy as np
 import pytest
 
-from jamflow import _ls_kernels as kern
-from jamflow.initial import random_packing
-from jamflow.ls import _State, compress
-from jamflow.packing import max_overlap
+from jamflow.protocols import _ls_kernels as kern
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.ls import _State, compress
+from jamflow.state.packing import max_overlap
 from jamflow.tolerances import OVERLAP_TOL
 
 
 def _state(packing, rate, neighbor_list, seed=0):
     st = _State(packing, 10.0, np.random.default_rng(seed), neighbor_list)
-    st.sc[2] = rate
-    st.rebuild()
+    st.set_rate(rate)
     return st
 
 

@@ -7,21 +7,22 @@ import re
 import numpy as np
 import pytest
 
-from jamflow.bodies import Links
 from jamflow.box import Box
-from jamflow.initial import random_packing
-from jamflow.models import EnergyModel, LinkedSpheresModel, ModelEvaluation, SphereModel
-from jamflow.soft import (
-    evaluate,
-    fire,
-    minimize,
-    minimize_cg,
+from jamflow.minimize import minimize
+from jamflow.minimize.cg import minimize_cg
+from jamflow.minimize.descent import minimize_sd
+from jamflow.minimize.fire import (
+    DEFAULT_FIRE,
+    _fire_generic,
     minimize_enthalpy_model,
     minimize_fire,
-    minimize_sd,
 )
-from jamflow.soft.minimize import DEFAULT_FIRE, _fire_generic
-from jamflow.soft.potential import HARMONIC
+from jamflow.minimize.model import EnergyModel, ModelEvaluation, WithoutFastPaths
+from jamflow.models.links import LinkedSpheresModel
+from jamflow.models.spheres.model import SphereModel, fire
+from jamflow.models.spheres.potential import HARMONIC, evaluate
+from jamflow.protocols.initial import random_packing
+from jamflow.state.bodies import Links
 from jamflow.tolerances import LINK_LENGTH_RTOL
 
 
@@ -91,7 +92,7 @@ def test_generic_fire_on_spheres_reaches_the_compiled_minimum():
 
 # --- masses: a time step means the same thing for every degree of freedom -----------
 
-class _Oscillator:
+class _Oscillator(WithoutFastPaths):
     """One 2D harmonic degree of freedom ``U = k |q|^2 / 2`` with mass ``m`` (toy model)."""
 
     constrained = False
@@ -289,7 +290,7 @@ def test_sd_on_spheres_is_the_compiled_descent():
 def test_cli_minimize_spheres_and_linked_spheres(tmp_path, capsys, method, bodies):
     from jamflow.cli import main
     from jamflow.io import read_dataset, read_packing, write_packing
-    from jamflow.packing import Packing
+    from jamflow.state.packing import Packing
 
     x, box, D, links = _chains()
     # steepest descent of the linked packing crawls (test_rigid_trimer_keeps_its_shape covers it)
@@ -327,7 +328,7 @@ def test_cli_minimize_spheres_and_linked_spheres(tmp_path, capsys, method, bodie
 def test_cli_minimize_refuses_bad_options(tmp_path, capsys):
     from jamflow.cli import main
     from jamflow.io import write_packing
-    from jamflow.packing import Packing
+    from jamflow.state.packing import Packing
 
     x, box, D = _compressed(16, 2, 0.85, seed=1)
     src = tmp_path / "s.nc"
@@ -341,7 +342,7 @@ def test_cli_minimize_refuses_bad_options(tmp_path, capsys):
 
 def test_jamming_bisection_of_linked_spheres_reaches_the_target_pressure():
     """The compress/decompress bisection takes any model: linked spheres end at P0 with links intact."""
-    from jamflow.soft.jamming import JammingSettings, jam_model_to_pressure
+    from jamflow.minimize.onset import JammingSettings, jam_model_to_pressure
 
     x, box, D, links = _chains(seed=4)
     start = LinkedSpheresModel(box, D, links, x)

@@ -13,12 +13,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from shape_numerics import numerical_gradient, numerical_hessian
 from shapely.geometry import LineString, Polygon
 
-from jamflow.bodies import ShapeTable
 from jamflow.box import Box
 from jamflow.models.shapes import ShapeModel
-from shape_numerics import numerical_gradient, numerical_hessian
+from jamflow.state.bodies import ShapeTable
 
 BOX = Box.cubic(2, 6.0)
 LINE = dict(kind="circulo_line", vertices=[(-0.5, 0.0), (0.5, 0.0)], radius=0.2)

@@ -13,12 +13,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from shape_numerics import numerical_gradient, numerical_hessian, onset_distances
 from shapely.geometry import Polygon
 
-from jamflow.bodies import ShapeTable, _polygon_moment
 from jamflow.box import Box
 from jamflow.models.shapes import ShapeModel
-from shape_numerics import numerical_gradient, numerical_hessian, onset_distances
+from jamflow.state.bodies import ShapeTable, _polygon_moment
 
 # lobes R at +-h, shaft half-width R/2 (Fig. 4 a: shaft length 2h = 4R), small and large
 TABLE = ShapeTable.from_shapes([dict(kind="dumbbell", vertices=[(-0.5, 0.0), (0.5, 0.0)], radius=0.25,

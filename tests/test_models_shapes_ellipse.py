@@ -10,13 +10,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from shape_numerics import numerical_gradient, numerical_hessian
 from shapely.geometry import Polygon
 
-from jamflow.bodies import ShapeTable
 from jamflow.box import Box
 from jamflow.models.shapes import ShapeModel
 from jamflow.models.shapes._kernels import perram_wertheim
-from shape_numerics import numerical_gradient, numerical_hessian
+from jamflow.state.bodies import ShapeTable
 
 BOX = Box.cubic(2, 8.0)
 TABLE = ShapeTable.from_shapes([

@@ -9,12 +9,12 @@ forces and torques stay continuous when a contact moves from arc-arc to vertex-a
 from __future__ import annotations
 
 import numpy as np
+from shape_numerics import numerical_gradient, numerical_hessian, onset_distances
 from shapely.geometry import Polygon
 
-from jamflow.bodies import ShapeTable
 from jamflow.box import Box
 from jamflow.models.shapes import ShapeModel
-from shape_numerics import numerical_gradient, numerical_hessian, onset_distances
+from jamflow.state.bodies import ShapeTable
 
 _A = 2.0 * np.pi * np.arange(3) / 3
 TABLE = ShapeTable.from_shapes([dict(kind="reuleaux", vertices=0.5 * np.stack([np.cos(_A), np.sin(_A)], 1)),

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from jamflow.box import Box
-from jamflow.neighbors import (
+from jamflow.neighbors.pairs import (
     PairList,
     pairs_within,
     pairs_within_brute_force,
@@ -156,7 +156,7 @@ def test_a_verlet_list_misses_no_contact_within_its_rebuild_criterion(d: int, st
     contact): the brute-force contacts (r < sigma_ij) with their minimum images must
     all be in the list built before the moves.
     """
-    from jamflow.soft.potential import NeighborList
+    from jamflow.neighbors.verlet import NeighborList
 
     rng = np.random.default_rng(7 + d + int(10 * strain))
     box = _box(d, strain, rng)
@@ -193,9 +193,9 @@ def test_a_verlet_list_misses_no_contact_within_its_rebuild_criterion(d: int, st
 
 def test_a_box_too_small_for_the_skin_builds_with_a_smaller_skin_and_the_same_minimum() -> None:
     """max D + skin >= half the width > max D: the build takes SMALL_BOX_SKIN_SHARE of the room; results unchanged."""
-    from jamflow.models.spheres import SphereModel
-    from jamflow.soft.minimize import minimize_fire
-    from jamflow.soft.potential import SMALL_BOX_SKIN_SHARE, SPHERE_SKIN, NeighborList
+    from jamflow.minimize.fire import minimize_fire
+    from jamflow.models.spheres.model import SphereModel
+    from jamflow.neighbors.verlet import SMALL_BOX_SKIN_SHARE, SPHERE_SKIN, NeighborList
 
     rng = np.random.default_rng(3)
     box = Box.cubic(3, 2.5)  # half width 1.25: room 0.25 for unit spheres, below the 3D skin 0.3
@@ -208,9 +208,9 @@ def test_a_box_too_small_for_the_skin_builds_with_a_smaller_skin_and_the_same_mi
     r = np.linalg.norm(box.minimum_image(x[b] - x[a]), axis=1)
     want = {(i, j) for i, j, keep in zip(a.tolist(), b.tolist(), r < 1.0 + nlist.skin) if keep}
     assert set(zip(nlist.i.tolist(), nlist.j.tolist())) == want
-    # a build in a roomy box is back at the default skin
+    # a build in a roomy box is back at the default skin (as the difference reach - max D)
     nlist.build(2.0 * x, box.scaled(2.0))
-    assert nlist.skin == SPHERE_SKIN[3]
+    assert nlist.reach == 1.0 + SPHERE_SKIN[3] and nlist.skin == nlist.reach - 1.0
     # the skin changes no result: FIRE from an overlapping start ends bitwise where an explicit small skin does
     ends = [minimize_fire(SphereModel(box, D, nlist=NeighborList(D, skin)), x, force_tol=1e-12)
             for skin in (None, 0.02)]
@@ -221,7 +221,7 @@ def test_a_box_too_small_for_the_skin_builds_with_a_smaller_skin_and_the_same_mi
 def test_the_rebuild_criterion_is_the_sum_of_the_two_largest_displacements() -> None:
     """One sphere moved by 0.6 skin and the rest by 0.3: u1 + u2 = 0.9 skin keeps the list
     (2 u1 = 1.2 skin would not); one more sphere pushed to 0.41 skin makes it stale."""
-    from jamflow.soft.potential import NeighborList
+    from jamflow.neighbors.verlet import NeighborList
 
     rng = np.random.default_rng(5)
     box = Box.cubic(2, 10.0)
@@ -242,7 +242,11 @@ def test_a_search_reusing_its_work_arrays_finds_the_pairs_of_a_fresh_one() -> No
     """``cell_pairs_into`` with the buffers of earlier searches (other N, other d, more
     pairs than the buffers hold, more cells) returns what a search with fresh buffers
     returns, and every pair by brute force; the buffers grow where needed."""
-    from jamflow._cell_kernels import cell_pairs, cell_pairs_into, pair_buffers
+    from jamflow.neighbors._cell_kernels import (
+        cell_pairs,
+        cell_pairs_into,
+        pair_buffers,
+    )
 
     rng = np.random.default_rng(17)
     buffers = pair_buffers(40, 2)
@@ -275,7 +279,7 @@ def test_the_tree_and_the_cell_list_find_the_same_pairs(d: int, monkeypatch: pyt
     and by the compiled cell list above: both give the same pairs, in the same order,
     with the same separations, for unwrapped positions and coordinates a rounding error
     below 0 (which wrap to the box's upper face)."""
-    import jamflow.neighbors as neighbors
+    import jamflow.neighbors.pairs as neighbors
 
     rng = np.random.default_rng(40 + d)
     L = rng.uniform(4.0, 6.0, d)

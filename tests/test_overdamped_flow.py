@@ -14,15 +14,16 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from jamflow.analysis.contacts import force_balance_residual, summarize
+from jamflow.analysis.contacts import summarize
 from jamflow.box import Box
-from jamflow.initial import random_packing
-from jamflow.neighbors import pairs_within_brute_force
-from jamflow.overdamped.driving import Drive, SelfPropulsion
-from jamflow.overdamped.integrate import FlowOptions, Integrator
-from jamflow.overdamped.network import pair_vectors, pair_velocities
-from jamflow.overdamped.run import Stop, length_unit, run_flow
-from jamflow.packing import Packing
+from jamflow.neighbors.pairs import pairs_within_brute_force
+from jamflow.network.spheres import force_balance_residual
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.overdamped.driving import Drive, SelfPropulsion
+from jamflow.protocols.overdamped.integrate import FlowOptions, Integrator
+from jamflow.protocols.overdamped.network import pair_vectors, pair_velocities
+from jamflow.protocols.overdamped.run import Stop, length_unit, run_flow
+from jamflow.state.packing import Packing
 
 FAST = FlowOptions(dt_max=1e-2, step_drift=1e-7, drift_tol=1e-6, correct_every=20)
 
@@ -59,7 +60,7 @@ def _check_invariants(integ: Integrator) -> None:
     if f.size:
         assert f.min() > -o.rel_tol * np.abs(f).max()
         # rigid contacts: dr/dt = 0
-        pairs, images = st.nl.pairs[st.contact], st.nl.images[st.contact]
+        pairs, images = st.nl.pairs[st.contact], st.nl.image[st.contact]
         v = pair_velocities(pair_vectors(st.x, st.h, pairs, images), pairs, integ.solution)
         assert np.max(np.abs(v)) <= 1e-8 * integ.velocity_scale(integ.solution)
     # (b) no overlaps among non-contacts: every pair, brute force over minimum images
@@ -87,7 +88,7 @@ def test_reported_stress_is_that_of_the_current_separations_and_forces(dense32, 
     """The stress reported at every step (from the solve's virial where the state is the one
     solved at) equals the contact stress of the current separations and forces to 1e-13, across
     collisions, rewirings, drift corrections and list rebuilds, at fixed volume and pressure."""
-    from jamflow.overdamped.network import stress_tensor
+    from jamflow.protocols.overdamped.network import stress_tensor
 
     drive = Drive("shear") if pressure is None else Drive("shear_fixed_pressure", pressure=pressure)
     integ = _integrator(dense32, drive, FAST)
@@ -95,7 +96,7 @@ def test_reported_stress_is_that_of_the_current_separations_and_forces(dense32, 
     while integ.state.strain < 0.05:
         integ.step()
         st = integ.state
-        R = pair_vectors(st.x, st.h, st.nl.pairs[st.contact], st.nl.images[st.contact])
+        R = pair_vectors(st.x, st.h, st.nl.pairs[st.contact], st.nl.image[st.contact])
         expected = stress_tensor(R, integ.solution.force, integ.volume())
         assert np.max(np.abs(integ.stress() - expected)) <= 1e-13 * np.max(np.abs(expected))
         by_virial += integ._solved_at[0] is integ.solution
@@ -119,7 +120,7 @@ def test_fixed_pressure_forces_meet_the_solver_tolerance_where_their_two_parts_c
     """Fixed-pressure shear, p = 40: f = a + kappa b, and near jamming a and b cancel by up to
     ~300x. CG solves them on to the tolerance relative to f, so at every step the forces equal a
     direct solve to 1e-10 of the largest (8e-10 with a and b only solved to their own size)."""
-    from jamflow.overdamped import network
+    from jamflow.protocols.overdamped import network
 
     gains = []
     split = network._pressure_forces
@@ -138,7 +139,7 @@ def test_fixed_pressure_forces_meet_the_solver_tolerance_where_their_two_parts_c
             st = integ.state
             f = integ.solution.force
             if f.size and integ.solution.velocity.size:
-                pairs, images = st.nl.pairs[st.contact], st.nl.images[st.contact]
+                pairs, images = st.nl.pairs[st.contact], st.nl.image[st.contact]
                 direct = network.solve_network(st.x, st.h, pairs, images, integ.base_gradient,
                                                pressure=integ.pressure_internal, rate=integ.drive.rate)
                 worst = max(worst, float(np.max(np.abs(direct.force - f)) / np.max(np.abs(direct.force))))
@@ -154,7 +155,7 @@ def test_midpoint_contacts_only_open_so_no_pair_leaves_the_network_overlapping(d
     while integ.state.strain < 0.1:
         integ.step()
         st = integ.state
-        gap = np.linalg.norm(pair_vectors(st.x, st.h, st.nl.pairs, st.nl.images), axis=1) / st.nl.sigma - 1.0
+        gap = np.linalg.norm(pair_vectors(st.x, st.h, st.nl.pairs, st.nl.image), axis=1) / st.nl.sigma - 1.0
         # the Verlet list holds every pair that could touch: contacts open by the drift
         # only, and no other listed pair overlaps (round-off aside)
         assert gap[st.contact].min() >= -1e-12

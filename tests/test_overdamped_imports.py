@@ -9,7 +9,7 @@ import sys
 def test_checkpoint_imports_without_the_run_driver() -> None:
     # run.py imports checkpoint.py; the reverse import made a cycle (only a deferred
     # import inside run_flow kept it working)
-    code = ("import sys, jamflow.overdamped.checkpoint; "
-            "print('jamflow.overdamped.run' in sys.modules)")
+    code = ("import sys, jamflow.protocols.overdamped.checkpoint; "
+            "print('jamflow.protocols.overdamped.run' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"

@@ -11,10 +11,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from jamflow.initial import random_packing
-from jamflow.overdamped.driving import Drive
-from jamflow.overdamped.integrate import FlowOptions
-from jamflow.overdamped.run import Stop, run_flow
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.overdamped.driving import Drive
+from jamflow.protocols.overdamped.integrate import FlowOptions
+from jamflow.protocols.overdamped.run import Stop, run_flow
 
 STRAIN = 0.01
 

@@ -5,9 +5,16 @@ from __future__ import annotations
 import numpy as np
 
 from jamflow.cli import main
-from jamflow.initial import random_packing
-from jamflow.overdamped.driving import Drive
-from jamflow.overdamped.run import DILUTE_FRACTION, PHI_J_REFERENCE, Stop, dilute_start, fraction_done, run_flow
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.overdamped.driving import Drive
+from jamflow.protocols.overdamped.run import (
+    DILUTE_FRACTION,
+    PHI_J_REFERENCE,
+    Stop,
+    dilute_start,
+    fraction_done,
+    run_flow,
+)
 
 
 def test_fraction_done_follows_phi_towards_its_target():

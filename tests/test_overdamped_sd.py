@@ -2,7 +2,7 @@
 
 Same N = 100 bidisperse 2D start at phi = 0.82 (reached by the event-driven compression, mode (b),
 stopped at the target), sheared by the event-driven dynamics and by strain steps + steepest descent
-of Eq. 32 with stresses from hard-sphere forces on the tentative network (``jamflow.soft``). The two
+of Eq. 32 with stresses from hard-sphere forces on the tentative network (``jamflow.minimize``). The two
 independent methods must give the same stress-strain trace. Strain step of SD: 1e-4 (paper: 1e-6).
 """
 
@@ -12,13 +12,12 @@ import numpy as np
 import pytest
 
 from jamflow.box import Box
-from jamflow.initial import random_packing
-from jamflow.overdamped.driving import Drive
-from jamflow.overdamped.integrate import FlowOptions
-from jamflow.overdamped.run import Stop, length_unit, run_flow
-from jamflow.packing import Packing
-from jamflow.soft import shear as soft_shear
-
+from jamflow.protocols import quasistatic as soft_shear
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.overdamped.driving import Drive
+from jamflow.protocols.overdamped.integrate import FlowOptions
+from jamflow.protocols.overdamped.run import Stop, length_unit, run_flow
+from jamflow.state.packing import Packing
 
 SD_STEP = 1e-4
 

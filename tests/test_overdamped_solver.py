@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 
 from jamflow.box import Box, lattice_volume
-from jamflow.overdamped.collisions import build_neighbor_list
-from jamflow.overdamped.network import FactorCache, SingularNetworkError, solve_network
+from jamflow.protocols.overdamped.collisions import build_neighbor_list
+from jamflow.protocols.overdamped.ldl import SingularNetworkError
+from jamflow.protocols.overdamped.network import FactorCache, solve_network
 
 #: Relative agreement of the CG forces with the direct solve demanded by issue 20.
 FORCE_REL = 1e-10
@@ -26,7 +27,7 @@ def _random_network(rng, n, d, n_contacts, length=5.0):
     box = Box.cubic(d, length)
     nl = build_neighbor_list(x, box, np.full(n, 0.5), skin=0.4 * length - 1.0)
     pick = np.sort(rng.choice(len(nl.pairs), size=n_contacts, replace=False))
-    return x, box, nl.pairs[pick], nl.images[pick]
+    return x, box, nl.pairs[pick], nl.image[pick]
 
 
 def _drive_kwargs(mode, n, d, rng):
@@ -139,11 +140,11 @@ def test_bordered_preconditioner_on_a_changed_network_matches_direct_solve(rng, 
            "add_and_remove": np.sort(np.concatenate([base[2:], spare]))}[change]
     kw = _drive_kwargs(mode, n, d, rng)
     cache = FactorCache()
-    solve_network(x, box.matrix, nl.pairs[base], nl.images[base], check_pivots=False, cache=cache, **kw)
+    solve_network(x, box.matrix, nl.pairs[base], nl.image[base], check_pivots=False, cache=cache, **kw)
     x1 = x + 1e-3 * rng.normal(size=x.shape)
-    fast = solve_network(x1, box.matrix, nl.pairs[new], nl.images[new], check_pivots=False, cache=cache, **kw)
+    fast = solve_network(x1, box.matrix, nl.pairs[new], nl.image[new], check_pivots=False, cache=cache, **kw)
     assert (cache.n_factor, cache.n_bordered) == (1, 1), "the bordered CG path was not taken"
-    direct = solve_network(x1, box.matrix, nl.pairs[new], nl.images[new], **kw)
+    direct = solve_network(x1, box.matrix, nl.pairs[new], nl.image[new], **kw)
     assert _rel(fast.force, direct.force) < FORCE_REL
 
 
@@ -163,7 +164,7 @@ def test_pair_closing_a_self_stress_is_not_solved_by_the_bordered_path():
 def _contact_network(rng, eps):
     """Pairs, unit vectors and particle count of a random 40-disc network (``eps`` None) or of
     the bent ring near a self-stress."""
-    from jamflow.overdamped.network import pair_vectors
+    from jamflow.protocols.overdamped.network import pair_vectors
 
     if eps is None:
         x, box, pairs, images = _random_network(rng, 40, 2, n_contacts=45)
@@ -176,7 +177,7 @@ def _contact_network(rng, eps):
 
 def _s_operator(rng, eps):
     """S of :func:`_contact_network`."""
-    from jamflow.overdamped.network import s_matrix
+    from jamflow.protocols.overdamped.solver import s_matrix
 
     return s_matrix(*_contact_network(rng, eps))
 
@@ -185,7 +186,7 @@ def _s_operator(rng, eps):
 def test_compiled_triangular_solve_matches_a_dense_solve(rng, eps):
     """The cached factor's compiled substitution solves N x = b as a dense solve does (random and
     nearly singular N, one and several right-hand sides)."""
-    from jamflow.overdamped.network import TriangularFactor
+    from jamflow.protocols.overdamped.ldl import TriangularFactor
 
     S = _s_operator(rng, eps)
     N = (S @ S.T).tocsc()
@@ -215,9 +216,9 @@ def test_extrapolated_warm_starts_and_memoised_borders_match_direct_solves(rng, 
         t = 1e-3 * step
         sel = np.sort(pick[:-1] if step < 4 else pick)
         xt = x + t * U
-        fast = solve_network(xt, box.matrix, nl.pairs[sel], nl.images[sel], check_pivots=False, cache=cache,
+        fast = solve_network(xt, box.matrix, nl.pairs[sel], nl.image[sel], check_pivots=False, cache=cache,
                              time=t, **kw)
-        direct = solve_network(xt, box.matrix, nl.pairs[sel], nl.images[sel], **kw)
+        direct = solve_network(xt, box.matrix, nl.pairs[sel], nl.image[sel], **kw)
         assert _rel(fast.force, direct.force) < FORCE_REL, step
     assert cache.n_factor == 1 and cache.n_cg == 7 and cache.n_bordered == 4
     assert len(cache.bordered) == 1
@@ -264,7 +265,7 @@ def test_warm_start_extrapolation_lowers_its_degree_rather_than_amplify(rng):
     """Four solves of a smooth solution, two of them 1e-9 apart (a collision right after a step):
     the cubic through them would multiply the solutions by ~1e9; the warm start lowers its degree
     until its weights sum to at most WARM_WEIGHT_LIMIT and stays close to the solution."""
-    from jamflow.overdamped.solver import WARM_WEIGHT_LIMIT
+    from jamflow.protocols.overdamped.solver import WARM_WEIGHT_LIMIT
 
     codes = np.array([2, 5, 9])
     a, b = rng.normal(size=(2, 3))
@@ -285,8 +286,7 @@ def test_ldlt_factor_reproduces_n_and_solves_as_superlu_does(rng, eps):
     import scipy.sparse as sp
     import scipy.sparse.linalg as spla
 
-    from jamflow.overdamped.network import s_matrix
-    from jamflow.overdamped.solver import _factorize
+    from jamflow.protocols.overdamped.solver import _factorize, s_matrix
 
     pairs, unit, n = _contact_network(rng, eps)
     S = s_matrix(pairs, unit, n)
@@ -317,7 +317,7 @@ def test_ldlt_factor_reproduces_n_and_solves_as_superlu_does(rng, eps):
 def test_compiled_ldlt_equals_qdldl_under_the_same_ordering(rng, eps):
     """Two implementations of one factorisation: the compiled up-looking LDL^T under QDLDL's AMD
     ordering gives QDLDL's L and D to round-off (random N and N near a self-stress)."""
-    from jamflow.overdamped.ldl import TriangularFactor
+    from jamflow.protocols.overdamped.ldl import TriangularFactor
 
     pairs, unit, n = _contact_network(rng, eps)
     ref = TriangularFactor.of_network(pairs, unit, n)
@@ -342,8 +342,9 @@ def test_a_carried_ordering_factorises_a_changed_network_exactly(rng):
     kept pairs are eliminated in their order there and the added ones last; the factor under it
     solves the changed network's N as a dense solve does, and a fill limit below its entries
     refuses it."""
-    from jamflow.overdamped.ldl import CarriedOrder, TriangularFactor
-    from jamflow.overdamped.network import pair_vectors, s_matrix
+    from jamflow.protocols.overdamped.ldl import CarriedOrder, TriangularFactor
+    from jamflow.protocols.overdamped.network import pair_vectors
+    from jamflow.protocols.overdamped.solver import s_matrix
 
     x, box, pairs, images = _random_network(rng, 40, 2, n_contacts=53)
     R = pair_vectors(x, box.matrix, pairs, images)
@@ -371,7 +372,7 @@ def test_locate_merges_increasing_codes_and_sorts_others_to_the_same_positions(r
     """Positions of pair codes in another network's codes: the linear merge (both increasing, as
     networks cut from a neighbour list are) and the sorted search (any order) agree with a
     search entry by entry, -1 for codes absent (pairs added), including codes beyond both ends."""
-    from jamflow.overdamped.ldl import _ascending, locate
+    from jamflow.protocols.overdamped.ldl import _ascending, locate
 
     old = np.unique(rng.integers(5, 10_000, 300))
     kept = old[rng.random(len(old)) < 0.9]
@@ -390,9 +391,9 @@ def test_locate_merges_increasing_codes_and_sorts_others_to_the_same_positions(r
 def test_a_self_stress_under_a_carried_ordering_is_reported():
     """The pair that closes the collinear ring, factorised under the open chain's carried
     ordering (appended last), leaves a round-off pivot: reported as singular."""
-    from jamflow.overdamped.ldl import CarriedOrder, TriangularFactor
-    from jamflow.overdamped.network import pair_vectors
-    from jamflow.overdamped.solver import _factorize
+    from jamflow.protocols.overdamped.ldl import CarriedOrder, TriangularFactor
+    from jamflow.protocols.overdamped.network import pair_vectors
+    from jamflow.protocols.overdamped.solver import _factorize
 
     x, h, pairs, images = _bent_ring(0.0)
     R = pair_vectors(x, h, pairs, images)
@@ -418,13 +419,13 @@ def test_the_cache_carries_its_ordering_and_forgets_it_on_reset(rng, mode):
     base, new = np.sort(pick[:-2]), np.sort(pick[2:])
     kw = _drive_kwargs(mode, n, d, rng)
     cache = FactorCache(max_changes=0)
-    solve_network(x, box.matrix, nl.pairs[base], nl.images[base], check_pivots=False, cache=cache, **kw)
+    solve_network(x, box.matrix, nl.pairs[base], nl.image[base], check_pivots=False, cache=cache, **kw)
     carried = cache.order
     assert np.array_equal(carried.codes, cache.codes)
     x1 = x + 1e-3 * rng.normal(size=x.shape)
-    fast = solve_network(x1, box.matrix, nl.pairs[new], nl.images[new], check_pivots=False, cache=cache, **kw)
+    fast = solve_network(x1, box.matrix, nl.pairs[new], nl.image[new], check_pivots=False, cache=cache, **kw)
     assert cache.n_factor == 2 and cache.order is carried, "the changed network was not factorised under the carried ordering"
-    direct = solve_network(x1, box.matrix, nl.pairs[new], nl.images[new], **kw)
+    direct = solve_network(x1, box.matrix, nl.pairs[new], nl.image[new], **kw)
     assert _rel(fast.force, direct.force) < FORCE_REL
     cache.reset()
     assert cache.order is None
@@ -444,14 +445,14 @@ def test_bordered_preconditioner_with_several_added_and_removed_pairs(rng, mode)
     kw = _drive_kwargs(mode, n, d, rng)
     x1 = x + 1e-3 * rng.normal(size=x.shape)
     cache = FactorCache(max_changes=8)
-    solve_network(x, box.matrix, nl.pairs[base], nl.images[base], check_pivots=False, cache=cache, **kw)
-    fast = solve_network(x1, box.matrix, nl.pairs[new], nl.images[new], check_pivots=False, cache=cache, **kw)
+    solve_network(x, box.matrix, nl.pairs[base], nl.image[base], check_pivots=False, cache=cache, **kw)
+    fast = solve_network(x1, box.matrix, nl.pairs[new], nl.image[new], check_pivots=False, cache=cache, **kw)
     assert (cache.n_factor, cache.n_bordered) == (1, 1), "the bordered CG path was not taken"
-    direct = solve_network(x1, box.matrix, nl.pairs[new], nl.images[new], **kw)
+    direct = solve_network(x1, box.matrix, nl.pairs[new], nl.image[new], **kw)
     assert _rel(fast.force, direct.force) < FORCE_REL
     few = FactorCache(max_changes=5)
-    solve_network(x, box.matrix, nl.pairs[base], nl.images[base], check_pivots=False, cache=few, **kw)
-    solve_network(x1, box.matrix, nl.pairs[new], nl.images[new], check_pivots=False, cache=few, **kw)
+    solve_network(x, box.matrix, nl.pairs[base], nl.image[base], check_pivots=False, cache=few, **kw)
+    solve_network(x1, box.matrix, nl.pairs[new], nl.image[new], check_pivots=False, cache=few, **kw)
     assert (few.n_factor, few.n_bordered) == (2, 0)
 
 
@@ -492,7 +493,7 @@ def test_compiled_pair_kernels_match_their_formulas(rng, d):
     tensor, the negative-force test and the straight-line move of positions and box from the
     compiled kernels agree with their formulas written in numpy; the box volume the dynamics use is
     det h."""
-    from jamflow.overdamped.network import (
+    from jamflow.protocols.overdamped.network import (
         Solution,
         advance_box,
         advance_positions,

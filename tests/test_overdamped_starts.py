@@ -10,12 +10,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from jamflow.initial import random_packing
-from jamflow.neighbors import pairs_within_brute_force
-from jamflow.overdamped.driving import Drive
-from jamflow.overdamped.integrate import FlowOptions
-from jamflow.overdamped.run import Stop, run_flow
-from jamflow.overdamped.starts import decompressed
+from jamflow.neighbors.pairs import pairs_within_brute_force
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.overdamped.driving import Drive
+from jamflow.protocols.overdamped.integrate import FlowOptions
+from jamflow.protocols.overdamped.run import Stop, run_flow
+from jamflow.protocols.overdamped.starts import decompressed
 
 OPTS = FlowOptions(dt_max=1e-2, step_drift=1e-6, drift_tol=1e-5)
 

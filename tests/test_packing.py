@@ -9,7 +9,14 @@ import numpy as np
 import pytest
 
 from jamflow.box import Box
-from jamflow.packing import OverlapError, Packing, length_unit, max_overlap, near_pairs, sphere_volume
+from jamflow.state.packing import (
+    OverlapError,
+    Packing,
+    length_unit,
+    max_overlap,
+    near_pairs,
+    sphere_volume,
+)
 from jamflow.tolerances import OVERLAP_TOL
 
 

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from jamflow.box import Box
-from jamflow.calippso import calippso
-from jamflow.initial import random_packing
-from jamflow.packing import Packing, near_pairs
+from jamflow.protocols.calippso import calippso
+from jamflow.protocols.initial import random_packing
+from jamflow.state.packing import Packing, near_pairs
 from jamflow.tolerances import FLOAT32_RTOL
 
 #: a few float32 roundings of a unit-size box (coordinates, then differences of them)

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_analysis_flow import flow_dataset
 
 from jamflow import plots
 from jamflow.analysis.flow import flow_summary
@@ -15,9 +16,7 @@ from jamflow.analysis.overlap import overlap_series
 from jamflow.analysis.structure import structure_dataset
 from jamflow.box import Box
 from jamflow.io import write_dataset, write_packing
-from jamflow.packing import Packing, near_pairs
-
-from test_analysis_flow import flow_dataset
+from jamflow.state.packing import Packing, near_pairs
 
 
 def lattice(nx: int = 8, ny: int = 8, gamma: float = 0.0) -> Packing:

@@ -33,7 +33,7 @@ def test_import_is_cheap():
 
 
 def test_public_names_survive_importing_the_submodules():
-    # a submodule import binds its name on the package: jamflow.calippso must stay the function
+    # a submodule import binds its name on the package: jamflow.protocols.calippso must stay the function
     code = ("import importlib, pkgutil, jamflow\n"
             "for m in pkgutil.iter_modules(jamflow.__path__):\n"
             "    if m.name != '__main__':\n"

@@ -7,11 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from jamflow.bodies import ShapeTable
 from jamflow.box import Box
 from jamflow.io import read_packing
-from jamflow.packing import Packing
 from jamflow.shapes.analysis import contact_angle_distribution, contact_angles
+from jamflow.state.bodies import ShapeTable
+from jamflow.state.packing import Packing
 
 LINES = ShapeTable.from_shapes([dict(kind="circulo_line", vertices=[(-0.5, 0.0), (0.5, 0.0)], radius=0.2)])
 

@@ -13,11 +13,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from jamflow.bodies import ShapeTable
 from jamflow.box import Box
 from jamflow.models.shapes import ShapeModel
 from jamflow.network import contact_jacobian
 from jamflow.shapes.counting import shape_contacts
+from jamflow.state.bodies import ShapeTable
 
 _A = 2.0 * np.pi * np.arange(3) / 3
 REULEAUX = ShapeTable.from_shapes([dict(kind="reuleaux", vertices=0.5 * np.stack([np.cos(_A), np.sin(_A)], 1)),

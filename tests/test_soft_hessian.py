@@ -7,12 +7,17 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from jamflow.initial import random_packing
-from jamflow.soft import evaluate, fire
-from jamflow.soft.hessian import backbone_pairs, elastic_moduli, hessian, lowest_modes
-from jamflow.soft.jamming import jam_to_pressure
-from jamflow.soft.potential import PowerLawPotential
-from jamflow.soft.shear import affine_shear
+from jamflow.models.spheres.hessian import (
+    backbone_pairs,
+    elastic_moduli,
+    hessian,
+    lowest_modes,
+)
+from jamflow.models.spheres.model import fire
+from jamflow.models.spheres.potential import PowerLawPotential, evaluate
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.quasistatic import affine_shear
+from jamflow.protocols.soft_jam import jam_to_pressure
 
 
 @lru_cache

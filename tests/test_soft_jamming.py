@@ -5,12 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from jamflow.analysis.contacts import find_rattlers, isostatic_count, summarize
+from jamflow.analysis.contacts import summarize
 from jamflow.cli import main
-from jamflow.initial import random_packing
 from jamflow.io import read_dataset, read_packing, write_packing
-from jamflow.soft.jamming import jam_to_pressure
-from jamflow.soft.potential import evaluate, overlapping_pairs
+from jamflow.models.spheres.potential import evaluate, overlapping_pairs
+from jamflow.network import isostatic_count
+from jamflow.network.spheres import find_rattlers
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.soft_jam import jam_to_pressure
 
 P0 = 1e-7
 
@@ -27,7 +29,7 @@ def _check_jammed(p, pressure: float) -> tuple[int, int]:
     rattler = find_rattlers(p.n, p.d, p.contacts)
     assert np.array_equal(rattler, p.rattler)
     s = summarize(p)
-    return s.n_contacts, isostatic_count(p.d, s.n_stable)
+    return s.n_contacts, isostatic_count(s.n_stable, p.d, global_dofs=p.d)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

@@ -7,15 +7,12 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from jamflow.initial import random_packing
-from jamflow.soft import (
-    conjugate_gradient,
-    evaluate,
-    fire,
-    minimize_enthalpy,
-    steepest_descent,
-)
-from jamflow.soft.jamming import FORCE_TOL_VANDERWERF, jam_to_pressure
+from jamflow.minimize.onset import FORCE_TOL_VANDERWERF
+from jamflow.models.spheres.fast import steepest_descent
+from jamflow.models.spheres.model import conjugate_gradient, fire, minimize_enthalpy
+from jamflow.models.spheres.potential import evaluate
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.soft_jam import jam_to_pressure
 
 
 @lru_cache
@@ -87,7 +84,7 @@ def test_enthalpy_minimisation_rejects_nonpositive_pressure():
 def test_full_box_enthalpy_minimum_has_isotropic_stress_p0(d):
     """With the whole box free the residual shear stress of a strained packing relaxes:
     the stress tensor becomes -P0 1 (the isotropic box alone leaves sigma_xy != 0)."""
-    from jamflow.soft.shear import affine_shear
+    from jamflow.protocols.quasistatic import affine_shear
 
     p = _jammed(48, d, 1e-2, 5)
     x, box = affine_shear(p.position, p.box, 0.02)
@@ -111,7 +108,7 @@ def test_fire_trajectory_does_not_depend_on_the_neighbour_list_skin(enthalpy):
     delay (no dt cut on uphill steps) covers the run's first ``n_delay`` steps, not
     the first steps after every rebuild (regression: it restarted at each rebuild).
     """
-    from jamflow.soft.potential import NeighborList
+    from jamflow.neighbors.verlet import NeighborList
 
     start = random_packing(256, 2, 0.5, "bi", seed=3)
     factor = (start.packing_fraction / 0.86) ** 0.5
@@ -136,15 +133,16 @@ def test_fire_trajectory_does_not_depend_on_the_neighbour_list_skin(enthalpy):
 def test_lists_rebuilt_inside_the_compiled_loop_give_the_path_of_python_rebuilds(pressure):
     """An orthogonal box lets the FIRE kernel rebuild its list itself; the path, the
     evaluations and the builds must be those of returning to Python for every rebuild."""
-    from jamflow.models.spheres import SphereModel
-    from jamflow.soft.minimize import DEFAULT_FIRE, _fire, _SphereFire
+    from jamflow.minimize.fire import DEFAULT_FIRE, _fire
+    from jamflow.models.spheres.fast import SphereFire
+    from jamflow.models.spheres.model import SphereModel
 
     start = random_packing(256, 2, 0.5, "bi", seed=3)
     factor = (start.packing_fraction / 0.86) ** 0.5
     x, box, D = start.position * factor, start.box.scaled(factor), start.diameter
     runs = []
     for inline in (True, False):
-        engine = _SphereFire(SphereModel(box, D), x, DEFAULT_FIRE, pressure, 1e-6)
+        engine = SphereFire(SphereModel(box, D), x, DEFAULT_FIRE, pressure, 1e-6)
         if not inline:
             engine.lengths = np.empty(0)  # what a sheared box passes: every rebuild returns to Python
         runs.append((_fire(engine, 1e-10, 5_000 if pressure else 20_000), engine.inline_builds))
@@ -161,9 +159,9 @@ def test_large_runs_sorted_by_cell_return_the_callers_order_and_differ_by_round_
     a short run agrees with the caller-order run to round-off (the sums are reordered)."""
     import sys
 
-    from jamflow.soft.potential import NeighborList
+    from jamflow.neighbors.verlet import NeighborList
 
-    minimize = sys.modules["jamflow.soft.minimize"]
+    minimize = sys.modules["jamflow.models.spheres.fast"]
     start = random_packing(minimize.SPATIAL_SORT_MIN_N, 2, 0.5, "bi", seed=1)
     factor = (start.packing_fraction / 0.86) ** 0.5
     x, box, D = start.position * factor, start.box.scaled(factor), start.diameter

@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 
 from jamflow.box import Box
-from jamflow.soft.hessian import hessian
-from jamflow.soft.potential import (
-    NeighborList,
+from jamflow.models.spheres.hessian import hessian
+from jamflow.models.spheres.potential import (
     PowerLawPotential,
     evaluate,
     overlapping_pairs,
 )
-from jamflow.soft.shear import affine_shear
+from jamflow.neighbors.verlet import NeighborList
+from jamflow.protocols.quasistatic import affine_shear
 
 
 def _overlapping_config(d: int, rng: np.random.Generator, gamma: float = 0.3):

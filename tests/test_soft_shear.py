@@ -10,13 +10,17 @@ import scipy.sparse as sp
 
 from jamflow.box import Box
 from jamflow.cli import main
-from jamflow.initial import random_packing
 from jamflow.io import read_dataset, write_packing
-from jamflow.packing import length_unit
-from jamflow.soft.hessian import elastic_moduli
-from jamflow.soft.jamming import jam_to_pressure
-from jamflow.soft.potential import evaluate
-from jamflow.soft.shear import aqs_shear, lerner_sd_shear, tentative_network_stress
+from jamflow.models.spheres.hessian import elastic_moduli
+from jamflow.models.spheres.potential import evaluate
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.quasistatic import (
+    aqs_shear,
+    lerner_sd_shear,
+    tentative_network_stress,
+)
+from jamflow.protocols.soft_jam import jam_to_pressure
+from jamflow.state.packing import length_unit
 
 
 @lru_cache
@@ -106,7 +110,7 @@ def test_sd_shear_step_size_convergence():
 def test_sd_shear_agrees_with_event_driven_shear(tmp_path):
     """Lerner et al. Fig. 6: steepest descent and the event-driven scheme give the same
     stress-strain curve (here N = 48, phi = 0.80, delta gamma = 2e-4 instead of 1e-6)."""
-    from jamflow.soft import fire
+    from jamflow.models.spheres.model import fire
 
     p = _floppy(48, 0.80, 1)
     relaxed = fire(p.position, p.box, p.diameter, force_tol=1e-14)  # hard-sphere start: overlaps ~1e-14

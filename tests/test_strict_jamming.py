@@ -1,6 +1,6 @@
 """Jamming certificates: rigidity matrix, lattices of known category, soft and LS packings.
 
-Independent check used throughout (Roth-Whiteley, see ``jamflow.rigidity``): a strut
+Independent check used throughout (Roth-Whiteley, see ``jamflow.network.rigidity``): a strut
 framework is rigid iff its rigidity matrix has rank ``d (N_s - 1)`` (fixed box; plus
 the strain coordinates for strict jamming) and a strictly positive self-stress
 exists. Rank comes from a dense SVD, the self-stress from non-negative least squares;
@@ -9,26 +9,23 @@ the certificate itself uses randomized interior-point / simplex LPs.
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
-
-from jamflow.analysis.contacts import force_balance_residual
-from jamflow.cli import main
-from jamflow.initial import random_packing
-from jamflow.io import read_dat, read_dataset, write_packing
-from jamflow.lattices import LATTICES, lattice_packing
-from jamflow.packing import near_pairs
-from jamflow.rigidity import (
-    positive_self_stress,
-    rigidity_matrix,
-    rigidity_rank,
-    strain_basis,
-)
-from jamflow.soft.jamming import jam_to_pressure
-from jamflow.strict_jamming import CLASSIFICATIONS, MotionLP, certify
 from ls_data import ls_dat
 
+from jamflow.cli import main
+from jamflow.io import read_dataset, write_packing
+from jamflow.io.formats import read_dat
+from jamflow.network import jacobian_rank
+from jamflow.network.jacobian import strain_basis
+from jamflow.network.rigidity import rigidity_matrix
+from jamflow.network.self_stress import positive_self_stress
+from jamflow.network.spheres import force_balance_residual
+from jamflow.protocols.certify import CLASSIFICATIONS, MotionLP, certify
+from jamflow.protocols.initial import random_packing
+from jamflow.protocols.lattices import LATTICES, lattice_packing
+from jamflow.protocols.soft_jam import jam_to_pressure
+from jamflow.state.packing import near_pairs
 
 
 def _independent(packing, contacts, backbone, strain, method="nnls"):
@@ -36,7 +33,7 @@ def _independent(packing, contacts, backbone, strain, method="nnls"):
     idx = np.flatnonzero(backbone)
     keep = backbone[contacts[:, 0]] & backbone[contacts[:, 1]]
     R = rigidity_matrix(packing, contacts[keep], strain=strain, particles=idx)
-    rank, _ = rigidity_rank(R)
+    rank, _ = jacobian_rank(R)
     full = packing.d * (len(idx) - 1) + (R.shape[1] - packing.d * len(idx))
     return rank == full, positive_self_stress(R, method=method) is not None
 

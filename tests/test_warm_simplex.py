@@ -21,11 +21,19 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-import jamflow.calippso as cal
 from jamflow import simplex
-from jamflow.calippso import CONTACT_DUAL_REL_TOL, SOLVER_TOL, calippso, jamming_lp
 from jamflow.io import read_packing
-from jamflow.lattices import lattice_packing
+from jamflow.protocols.calippso import (
+    CONTACT_DUAL_REL_TOL,
+    SOLVER_TOL,
+    WARM_ENGINE_MIN_COLUMNS,
+    WARM_SIMPLEX_SCALE,
+    calippso,
+    jamming_lp,
+)
+from jamflow.protocols.calippso.lp import _highs_lp
+from jamflow.protocols.calippso.options import _engine_of_warm_lps
+from jamflow.protocols.lattices import lattice_packing
 
 DATA = Path(__file__).parent / "data"
 TOL = simplex.Tolerances(primal=SOLVER_TOL, dual=SOLVER_TOL)
@@ -62,8 +70,8 @@ def _highs(lp: dict, warm: bool = True) -> tuple[np.ndarray, np.ndarray]:
         h.setOptionValue(option, SOLVER_TOL)
     h.setOptionValue("solver", "simplex")
     h.setOptionValue("simplex_strategy", 4)
-    h.setOptionValue("simplex_scale_strategy", cal.WARM_SIMPLEX_SCALE)
-    h.passModel(cal._highs_lp(lp["A"], lp["rhs"], lp["lower"], lp["upper"]))
+    h.setOptionValue("simplex_scale_strategy", WARM_SIMPLEX_SCALE)
+    h.passModel(_highs_lp(lp["A"], lp["rhs"], lp["lower"], lp["upper"]))
     if warm:
         basis = highspy.HighsBasis()
         basis.col_status = [highspy.HighsBasisStatus(int(v)) for v in lp["col_status"]]
@@ -207,5 +215,6 @@ def test_the_engine_option_is_checked_and_auto_follows_the_lp_size():
     start = read_packing(DATA / "calippso_near_start_n256.nc")
     with pytest.raises(ValueError, match="warm engine"):
         calippso(start, warm_engine="gurobi")
-    assert cal._check_choices(SOLVER_TOL, "lp", "auto", cal.WARM_ENGINE_MIN_COLUMNS) == "jamflow"
-    assert cal._check_choices(SOLVER_TOL, "lp", "auto", cal.WARM_ENGINE_MIN_COLUMNS - 1) == "highs"
+    assert _engine_of_warm_lps("auto", WARM_ENGINE_MIN_COLUMNS) == "jamflow"
+    assert _engine_of_warm_lps("auto", WARM_ENGINE_MIN_COLUMNS - 1) == "highs"
+    assert _engine_of_warm_lps("highs", WARM_ENGINE_MIN_COLUMNS) == "highs"

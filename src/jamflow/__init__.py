@@ -1,4 +1,4 @@
-"""jamflow: jammed packings of frictionless hard spheres, driven, certified and analysed.
+"""jamflow: jammed packings of frictionless particles: hard and soft spheres, linked spheres, 2D shapes.
 
 The public API, importable from the package itself::
 
@@ -14,41 +14,50 @@ numba kernels, HiGHS and matplotlib load only with the stage that needs them.
 
 from __future__ import annotations
 
-import importlib
 import os
-import warnings
-from pathlib import Path
+import signal
+import sys
+
+
+def _interrupted_while_starting(signum: int, frame: object) -> None:
+    sys.stderr.write("jamflow: interrupted (Ctrl-C) while starting; nothing written\n")
+    os._exit(130)
+
+
+def _started_as_command() -> bool:
+    """Whether this process is the ``jamflow`` console script or ``python -m jamflow``."""
+    argv = getattr(sys, "orig_argv", sys.argv)
+    if "-m" in argv[:-1] and argv[argv.index("-m") + 1] == "jamflow":
+        return True
+    return os.path.basename(sys.argv[0] if sys.argv else "") == "jamflow"
+
+
+if _started_as_command() and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+    # the command line's start-up: until jamflow.cli.main runs (it restores Ctrl-C as
+    # KeyboardInterrupt), Ctrl-C ends the process in one line instead of an import traceback
+    signal.signal(signal.SIGINT, _interrupted_while_starting)
+
+import importlib
 from typing import Any
 
-from ._kernel_cache import refresh as _refresh_kernel_caches
 from .box import Box
-from .packing import Packing
-
-# before any kernel module loads: numba's caches must not outlive a change of a kernel
-# they inline from another module (see jamflow._kernel_cache); the package is named
-# by its absolute, unresolved path, as numba names its NUMBA_CACHE_DIR entries
-try:
-    _refresh_kernel_caches(Path(os.path.abspath(__file__)).parent)
-except OSError as _exc:
-    warnings.warn(f"jamflow could not clear numba's kernel caches after a change of kernel code ({_exc}); "
-                  f"clear them by hand: find {os.environ.get('NUMBA_CACHE_DIR') or Path(__file__).parent} "
-                  "-name '*.nb[ci]' -delete", stacklevel=2)
+from .state.packing import Packing
 
 #: Public name -> module (relative to this package) that defines it.
 _LAZY: dict[str, str] = {
     # stages: Packing -> Packing / result / Dataset
-    "random_packing": ".initial",
-    "ls_compress": ".ls",
-    "calippso_jam": ".calippso",
-    "jam_to_pressure": ".soft.jamming",
-    "aqs_shear": ".soft.shear",
-    "lerner_sd_shear": ".soft.shear",
-    "elastic_moduli": ".soft.hessian",
-    "run_flow": ".overdamped.run",
-    "Drive": ".overdamped.driving",
-    "Stop": ".overdamped.run",
-    "FlowOptions": ".overdamped.integrate",
-    "certify": ".strict_jamming",
+    "random_packing": ".protocols.initial",
+    "ls_compress": ".protocols.ls",
+    "calippso_jam": ".protocols.calippso",
+    "jam_to_pressure": ".protocols.soft_jam",
+    "aqs_shear": ".protocols.quasistatic",
+    "lerner_sd_shear": ".protocols.quasistatic",
+    "elastic_moduli": ".models.spheres.hessian",
+    "run_flow": ".protocols.overdamped.run",
+    "Drive": ".protocols.overdamped.driving",
+    "Stop": ".protocols.overdamped.run",
+    "FlowOptions": ".protocols.overdamped.integrate",
+    "certify": ".protocols.certify",
     # analyses
     "summarize": ".analysis.contacts",
     "gap_distribution": ".analysis.gaps",
@@ -72,7 +81,7 @@ _LAZY: dict[str, str] = {
 }
 
 #: Names whose defining module calls them differently. A public name never equals a
-#: submodule's (``jamflow.calippso`` is the module; importing it rebinds that attribute).
+#: submodule's (importing a submodule binds its name as an attribute of its package).
 _RENAMED: dict[str, str] = {"ls_compress": "compress", "calippso_jam": "calippso"}
 
 __all__ = ["Box", "Packing", *_LAZY]

@@ -9,8 +9,9 @@ editable install that pulls such a change would silently mix old and new code.
 
 :func:`refresh` stamps the caches with a hash of every module of the package that
 uses numba and deletes all of them when the hash changes, so the next use compiles
-afresh. It runs on ``import jamflow``, before any kernel module loads, and costs a few
-milliseconds (reading the ~15 kernel modules).
+afresh. :func:`ensure_fresh` runs it once per process when the first kernel module
+is imported (they import ``njit`` from :mod:`jamflow._numba`), so it costs a few
+milliseconds (reading the kernel modules) only where numba is used.
 
 With ``NUMBA_CACHE_DIR`` set numba keeps every cache there instead, one directory
 per source directory (``<name>_<sha1 of its absolute path>``, numba's
@@ -28,6 +29,7 @@ from __future__ import annotations
 import hashlib
 import os
 import tempfile
+import warnings
 from pathlib import Path
 
 #: stamp file, in the package's top ``__pycache__`` (see :func:`stamp_path`)
@@ -106,3 +108,21 @@ def refresh(package_dir: Path) -> bool:
         f.write(digest)
     os.replace(tmp, stamp)
     return True
+
+
+_checked = False
+
+
+def ensure_fresh() -> None:
+    """:func:`refresh` this package's caches, once per process (a failure to clear them is a warning)."""
+    global _checked
+    if _checked:
+        return
+    _checked = True
+    package = Path(os.path.abspath(__file__)).parent
+    try:
+        refresh(package)
+    except OSError as exc:
+        warnings.warn(f"jamflow could not clear numba's kernel caches after a change of kernel code ({exc}); "
+                      f"clear them by hand: find {os.environ.get('NUMBA_CACHE_DIR') or package} "
+                      "-name '*.nb[ci]' -delete", stacklevel=2)

@@ -34,8 +34,9 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from ..io import new_dataset_attrs
-from ..packing import Packing
-from .contacts import rattler_mask
+from ..network.spheres import rattler_mask
+from ..stages import require
+from ..state.packing import Packing
 from .fitting import analyse_exponent, check_window, density_prefactor
 from .gaps import log_bin_edges, sample_average
 
@@ -156,6 +157,8 @@ def force_distribution(
         ``fit_max`` (chosen window), ``fit_method``, ``buckler_fraction`` (bucklers
         over non-rattlers), ``buckler_contact_fraction``.
     """
+    for packing in packings:
+        require("forces", packing.body_kind)
     if len(packings) == 0:
         raise ValueError("force_distribution needs at least one packing")
     check_window(fit_min, fit_max)

@@ -7,7 +7,7 @@ network) when it has them, otherwise pairs with ``h <= gap_tol``.
 Rattlers
 --------
 By default only gaps between two *stable* particles are kept: rattlers are removed
-iteratively from the contact network (:func:`jamflow.analysis.contacts.rattler_mask`,
+iteratively from the contact network (:func:`jamflow.network.spheres.rattler_mask`,
 the stored rattlers or :func:`~jamflow.analysis.contacts.find_rattlers`), as in
 Charbonneau et al. (PRL 2012, Nat. Commun. 2014) and the CALiPPSO paper. A rattler
 sits loose in its cage, so its gaps are not those of the rigid backbone; in a
@@ -44,9 +44,10 @@ import xarray as xr
 from numpy.typing import ArrayLike, NDArray
 
 from ..io import new_dataset_attrs
-from ..packing import Packing, near_pairs
+from ..network.spheres import contact_network, rattler_mask
+from ..stages import require
+from ..state.packing import Packing, near_pairs
 from ..tolerances import CONTACT_GAP_TOL
-from .contacts import contact_network, rattler_mask
 from .fitting import analyse_exponent, check_window, density_prefactor
 
 __all__ = [
@@ -281,10 +282,14 @@ def gap_distribution(
         ``fit_min``, ``fit_max`` (chosen window), ``fit_method``,
         ``fit_exponent_n_in_window``, ``rattlers_included``, ``mean_field_exponent``.
     """
+    for packing in packings:
+        require("gaps", packing.body_kind)
     if len(packings) == 0:
         raise ValueError("gap_distribution needs at least one packing")
     check_window(fit_min, fit_max)
-    pressures = [p.pressure for p in packings]
+    # the plateau is of hard spheres at a finite reduced pressure (LS snapshots); a soft
+    # packing's pressure P0 is an energy density, not that pressure
+    pressures = [p.pressure if p.protocol.rsplit(">", 1)[-1] == "ls" else None for p in packings]
     lower = fit_min
     if all(p is not None and np.isfinite(p) and p > 0 for p in pressures):
         lower = max(fit_min, 1.0 / min(pressures))

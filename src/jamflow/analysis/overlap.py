@@ -21,9 +21,10 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from ..io import new_dataset_attrs
-from ..packing import Packing
+from ..network.spheres import contact_network
+from ..stages import require
+from ..state.packing import Packing
 from ..tolerances import DIAMETER_RATIO_RTOL
-from .contacts import contact_network
 
 __all__ = ["check_same_sample", "contact_overlap", "overlap_dataset", "overlap_series"]
 
@@ -59,6 +60,8 @@ def contact_overlap(a: Packing, b: Packing, gap_tol: float | None = None) -> tup
     Q : float
     n_common, n_contacts_a, n_contacts_b : int
     """
+    for packing in (a, b):
+        require("overlap", packing.body_kind)
     check_same_sample(a, b)
     ka = _keys(contact_network(a, gap_tol), a.n)
     kb = _keys(contact_network(b, gap_tol), b.n)

@@ -33,7 +33,7 @@ can have a negative shear modulus, Dagois-Bohy et al., PRL 109, 095703 (2012);
 shear stabilisation removes them): they are kept, counted (``n_unstable``) and give
 negative moduli, never infinite ones.
 
-The moduli of :func:`jamflow.soft.hessian.elastic_moduli` (``jamflow moduli`` of
+The moduli of :func:`jamflow.models.spheres.hessian.elastic_moduli` (``jamflow moduli`` of
 spheres) follow from ``C`` without another solve. With ``W`` the total virial
 (contacts and link tensions, ``P = tr W / (d V)``), ``F = 1 + eps`` linear:
 
@@ -52,8 +52,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..packing import Packing
-from ..soft.potential import HARMONIC, PowerLawPotential
+from ..models.spheres.potential import HARMONIC, PowerLawPotential
+from ..models.strain import _upper
+from ..state.packing import Packing
 from .hessian import (
     ZERO_MODE_RTOL,
     _Geometry,
@@ -64,7 +65,6 @@ from .hessian import (
     tangent_basis,
     tension_hessian,
 )
-from .shear import _upper
 
 __all__ = ["Compliance", "compliance", "total_virial"]
 
@@ -89,7 +89,7 @@ class Compliance:
         Negative eigenvalues of ``S`` (strains of negative stiffness).
     bulk_dilation, shear_simple : float
         ``-V dP/dV`` and the simple-shear modulus in the x-y plane (module doc), the
-        definitions of :func:`jamflow.soft.hessian.elastic_moduli`; ``inf`` where infinite.
+        definitions of :func:`jamflow.models.spheres.hessian.elastic_moduli`; ``inf`` where infinite.
     pressure : float
         Virial pressure of contacts and link tensions [epsilon / length^d].
     """
@@ -142,7 +142,7 @@ def _strain_compliance(geo: _Geometry, multipliers: tuple[NDArray[np.float64], f
 
 
 def total_virial(packing: Packing, potential: PowerLawPotential = HARMONIC) -> NDArray[np.float64]:
-    """``W`` (d, d) of the contacts and the link tensions [epsilon] (:class:`jamflow.models.base.ModelEvaluation`).
+    """``W`` (d, d) of the contacts and the link tensions [epsilon] (:class:`jamflow.minimize.model.ModelEvaluation`).
 
     The tensions are those of :func:`~jamflow.chains.hessian.constraint_multipliers`.
     """

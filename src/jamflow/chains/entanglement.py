@@ -25,9 +25,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..bodies import Links
 from ..box import Box
-from ..soft.potential import HARMONIC, PowerLawPotential, overlapping_pairs
+from ..models.spheres.potential import HARMONIC, PowerLawPotential, overlapping_pairs
+from ..state.bodies import Links
 from ..tolerances import ENTANGLED_FORCE_RATIO, ENTANGLED_OVERLAP
 from .builders import crossing_links
 

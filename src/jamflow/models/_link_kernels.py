@@ -18,7 +18,8 @@ Layout: ``order`` lists the links cluster by cluster, cluster ``c`` owning
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from .._numba import njit
 
 
 @njit(cache=True)

@@ -1,7 +1,7 @@
 """Linked soft spheres: pair repulsion plus holonomic fixed-length links.
 
 Model of ``soft-chains-of-spheres-packings.md`` Sec. II. Spheres interact by the
-power-law contact potential of :mod:`jamflow.soft.potential` unless they are linked;
+power-law contact potential of :mod:`jamflow.models.spheres.potential` unless they are linked;
 a link ``k = (i, j)`` is the constraint ``c_k = |x_ij| - l_k = 0`` with
 ``x_ij = x_j - x_i + h n_k`` (Eq. 1; the periodic image ``n_k`` is fixed by the
 minimum image at construction, the box being fixed). Degrees of freedom are the
@@ -41,14 +41,17 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
-from ..bodies import Links
 from ..box import Box
-from ..soft import _kernels
-from ..soft.potential import HARMONIC, NeighborList, PowerLawPotential
+from ..minimize import _fire_kernels
+from ..minimize.model import ModelEvaluation
+from ..neighbors import _verlet_kernels
+from ..neighbors.verlet import NeighborList
+from ..state.bodies import Links
 from ..tolerances import LINK_LENGTH_RTOL, LINK_RANK_RTOL
 from . import _link_kernels
-from .base import ModelEvaluation
-from .spheres import SphereBodies
+from .spheres import _kernels
+from .spheres.model import SphereBodies
+from .spheres.potential import HARMONIC, PowerLawPotential
 
 __all__ = ["LINK_NEWTON_MAX_ITERATIONS", "ClusterGram", "LinkedSpheresModel"]
 
@@ -247,17 +250,17 @@ class LinkedSpheresModel(SphereBodies):
 
     def max_force(self, g: NDArray[np.float64]) -> float:
         """Largest per-sphere norm of ``g`` (compiled: the generic FIRE asks once per step)."""
-        return float(np.sqrt(_kernels._max_force_sq(np.asarray(g, dtype=np.float64).reshape(self.n, self.d))))
+        return float(np.sqrt(_fire_kernels._max_force_sq(np.asarray(g, dtype=np.float64).reshape(self.n, self.d))))
 
     def _update_list(self, x: NDArray[np.float64]) -> None:
-        """``nlist.update`` in this fixed box: the Verlet criterion (:func:`jamflow.soft._kernels._needs_rebuild`) compiled.
+        """``nlist.update`` in this fixed box: the Verlet criterion (:func:`jamflow.neighbors._verlet_kernels._needs_rebuild`) compiled.
 
         The box never deforms between builds here, so the affine map and its norm
         (an SVD and an inverse per call, a third of a 2D N = 60 trimer step) are skipped.
         """
         nl = self.nlist
         if (nl.x_build.shape != x.shape or not np.array_equal(nl.h_build, self.box.matrix)
-                or _kernels._needs_rebuild(x, nl.x_build, 1.0, 1.0, nl.reach, nl.skin, 0.0)):
+                or _verlet_kernels._needs_rebuild(x, nl.x_build, 1.0, 1.0, nl.reach, nl.skin, 0.0)):
             nl.build(x, self.box)
 
     def _pairs(self) -> None:

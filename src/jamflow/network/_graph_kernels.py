@@ -9,7 +9,8 @@ bordered preconditioners use the incidence.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from .._numba import njit
 
 __all__ = ["incidence", "peel"]
 

@@ -31,8 +31,8 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
-from ..bodies import Links
 from ..box import Box
+from ..state.bodies import Links
 from .contacts import ContactSet, sphere_contacts
 
 __all__ = ["contact_jacobian", "link_jacobian", "n_strain", "pair_rows", "strain_basis"]

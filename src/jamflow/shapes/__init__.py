@@ -4,7 +4,12 @@
 initial packings), :mod:`~jamflow.shapes.jamming` (bisection to ``P0`` with rotations).
 """
 
-from .generation import SHAPE_CHOICES, bidisperse_shapes, random_shape_packing, unit_shape
+from .generation import (
+    SHAPE_CHOICES,
+    bidisperse_shapes,
+    random_shape_packing,
+    unit_shape,
+)
 from .jamming import jam_shapes
 
 __all__ = ["SHAPE_CHOICES", "bidisperse_shapes", "jam_shapes", "random_shape_packing", "unit_shape"]

@@ -8,7 +8,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
-from ..packing import Packing
+from ..state.packing import Packing
 from .counting import count_constraints
 
 __all__ = ["contact_angle_dataset", "contact_angle_distribution", "contact_angles"]

@@ -12,7 +12,8 @@ zero entries, so a sparse right-hand side costs only its reach.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from .._numba import njit
 
 
 @njit(cache=True)

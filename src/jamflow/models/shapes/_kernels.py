@@ -18,7 +18,8 @@ with no subtraction error, which the eigenvalues of hypostatic packings
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from ..._numba import njit
 
 #: Complex step [length or rad]: far below round-off of any coordinate, so the
 #: derivative carries no truncation error (the real part is untouched).

@@ -1,7 +1,7 @@
 """Soft 2D shaped bodies (VanderWerf et al., Eq. 1) as an energy model with rotations.
 
 Degrees of freedom ``q`` (shape ``(3N,)``): centres ``(N, 2)`` row-major, then one
-orientation per body [rad] (the order of :mod:`jamflow.models.base`). A
+orientation per body [rad] (the order of :mod:`jamflow.minimize.model`). A
 *configuration* is the ``(N, 3)`` array of rows ``(x, y, theta)``: it is what
 :meth:`ShapeModel.dofs` takes and :meth:`ShapeModel.positions` returns, so that
 the generic minimisers and the bisection to ``P0`` (which hand ``positions(q)`` back
@@ -30,10 +30,10 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
-from ...bodies import ShapeTable
 from ...box import Box
-from ...soft.potential import DEFAULT_SKIN, NeighborList
-from ..base import ModelEvaluation
+from ...minimize.model import ModelEvaluation, WithoutFastPaths
+from ...neighbors.verlet import DEFAULT_SKIN, NeighborList
+from ...state.bodies import ShapeTable
 from . import _kernels
 
 __all__ = ["POINT_TERM_FAMILIES", "SHAPE_FAMILIES", "ShapeModel", "shape_family"]
@@ -91,7 +91,7 @@ def _shape_parameters(shapes: ShapeTable, family: str) -> NDArray[np.float64]:
     return out
 
 
-class ShapeModel:
+class ShapeModel(WithoutFastPaths):
     """Soft shaped bodies in 2D with translations and rotations (see the module doc).
 
     Parameters
@@ -108,12 +108,13 @@ class ShapeModel:
         Mass of every body [mass].
     nlist : NeighborList, optional
         Verlet list on bounding diameters (reused by :meth:`rescaled`).
+    rotations : bool
+        False freezes every orientation (VanderWerf et al. Fig. 3a, non-rotating
+        circulo-lines): :meth:`project` removes the torques from forces and velocities.
     """
 
-    constrained = False
-
     def __init__(self, box: Box, shapes: ShapeTable, shape_index: ArrayLike, k: float = 1.0,
-                 mass: float = 1.0, nlist: NeighborList | None = None) -> None:
+                 mass: float = 1.0, nlist: NeighborList | None = None, rotations: bool = True) -> None:
         if box.d != 2:
             raise ValueError(f"shaped bodies are 2D; the box has d = {box.d}")
         if not (np.isfinite(k) and k > 0.0 and np.isfinite(mass) and mass > 0.0):
@@ -137,6 +138,8 @@ class ShapeModel:
         self.torque_arm = float(self.bounding_diameter.mean())
         self.time_unit = self.torque_arm * np.sqrt(self.mass / (self.k * self.torque_arm**2))
         self._pair = _PAIR[self.family]
+        self.rotations = bool(rotations)
+        self.constrained = not self.rotations
 
     @property
     def neighbor_builds(self) -> int:
@@ -248,7 +251,12 @@ class ShapeModel:
                 "r": rows[:, 8], "delta": rows[:, 9]}
 
     def project(self, g: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
-        return g
+        """``g`` itself, or with frozen orientations a copy without its orientation components."""
+        if self.rotations:
+            return g
+        out = np.array(g, dtype=np.float64)
+        out[2 * self.n:] = 0.0
+        return out
 
     def reproject(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         return q
@@ -281,5 +289,6 @@ class ShapeModel:
         """The model in the box scaled by ``factor`` (shapes unchanged), centres moved affinely."""
         c = np.array(configuration, dtype=np.float64)
         c[:, :2] *= factor
-        model = ShapeModel(self.box.scaled(factor), self.shapes, self.shape_index, self.k, self.mass, self.nlist)
+        model = ShapeModel(self.box.scaled(factor), self.shapes, self.shape_index, self.k, self.mass, self.nlist,
+                           self.rotations)
         return model, c

@@ -1,0 +1,1 @@
+"""Soft repulsive spheres: the power-law potential, its compiled kernels, Hessian and fast minimisers."""

@@ -1,0 +1,335 @@
+"""Shear stabilisation of linked packings: strain degrees of freedom at fixed volume (chains paper Sec. II D-E).
+
+Degrees of freedom ``q = (y, e)``: reference centres ``y`` (N, d) in the reference box
+``H0`` and the ``m = d (d + 1) / 2`` independent components of a symmetric strain
+``eps`` (Eqs. 11-12), scaled to lengths, ``e_aa = q_s eps_aa`` and
+``e_ab = sqrt(2) q_s eps_ab`` (a < b), so that ``|e|^2 = q_s^2 ||eps||_F^2`` and a
+unit-mass Euclidean projection is the mass-metric one; ``q_s = sqrt(N) <D>`` gives
+the strain mode a stiffness of the order of a particle's (as the enthalpy
+minimiser's box mode, :func:`jamflow.models.spheres.model.minimize_enthalpy`). The
+deformation is ``F = 1 + eps``: centres ``F y``, lattice ``F H0`` (Eq. 23), pair and
+link vectors ``F (y_j - y_i + H0 n)`` (Eq. 13). Unlike the paper, the strain is not
+reset to zero after every step: ``F`` is kept exactly (the energy is that of the
+finite deformation), which gives the same minima without re-linearising, and the
+volume constraint is kept exactly, ``det F = 1``, instead of ``Tr eps = 0`` plus a
+rescaling (its gradient ``det F F^-T`` is ``1`` at ``eps = 0``, Eq. 17).
+
+Constraints ``Gamma`` (Eqs. 15-17): link ``k`` has gradient ``+-F^T u_k`` on its
+ends and ``u_k R0_k^T`` (symmetrised) on the strain, ``u_k`` the current unit link
+vector and ``R0_k`` the reference one (Eq. 16 at ``eps = 0``: ``tau_a tau_b l``);
+the volume has ``det F F^-T`` on the strain only. The strain columns couple every
+cluster, so the per-cluster Cholesky factors of :mod:`jamflow.models.links` are kept for the
+link block ``A = B_y B_y^T = L L^T`` and the Gram matrix ``Gamma^T Gamma`` is solved by
+Woodbury for the rank-``m`` strain coupling and a Schur complement for the volume
+row. Projection (Eq. 18) ``P g = g - Gamma (Gamma^T Gamma)^-1 Gamma^T g`` and Newton
+re-affixing (Eq. 7) ``dq = -Gamma (Gamma^T Gamma)^-1 c`` use that one solve.
+
+Energy gradient on the strain: ``dU/dF = -W F^-1`` with ``W = sum f r r^T / r`` the
+pair virial (Eq. 22 at ``eps = 0``). The reported virial adds the link tensions
+(the multipliers of the projection), so at a shear-stabilised minimum the total
+stress ``-W / V`` is isotropic: its deviatoric part is the volume multiplier's
+residue, zero to the force tolerance.
+
+Neighbours are searched in the rotated frame where the lattice ``F H0 = Q U`` is
+upper triangular (``U``); energies are rotation invariant, and packings are written
+in that frame (centres ``Q^T F y``, box ``U``).
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import ArrayLike, NDArray
+
+from ..box import Box
+from ..minimize.model import ModelEvaluation
+from ..neighbors import _verlet_kernels
+from ..neighbors.verlet import NeighborList
+from ..state.bodies import Links
+from ..tolerances import LINK_LENGTH_RTOL
+from . import _link_kernels
+from .links import LINK_NEWTON_MAX_ITERATIONS, LinkedSpheresModel
+from .spheres import _kernels
+from .spheres.potential import HARMONIC, PowerLawPotential
+
+__all__ = ["ShearStabilizedModel", "strain_components", "strain_matrix"]
+
+
+@lru_cache(maxsize=8)
+def _upper(d: int) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
+    """Row and column of each independent strain component and its weight (1 on, sqrt 2 off the diagonal)."""
+    a, b = np.triu_indices(d)
+    return a, b, np.where(a == b, 1.0, np.sqrt(2.0))
+
+
+def strain_matrix(e: NDArray[np.float64], d: int, scale: float) -> NDArray[np.float64]:
+    """Symmetric strain ``eps`` (d, d) from the scaled components ``e`` (m,) (module doc)."""
+    eps = np.zeros((d, d))
+    a, b, weight = _upper(d)
+    value = e / (scale * weight)
+    eps[a, b] = value
+    eps[b, a] = value
+    return eps
+
+
+def strain_components(G: NDArray[np.float64], scale: float) -> NDArray[np.float64]:
+    """``dX/de`` (..., m) of scalars ``X`` with ``dX/dF = G`` (..., d, d): the chain rule of :func:`strain_matrix`."""
+    a, b, weight = _upper(G.shape[-1])
+    return (G[..., a, b] + G[..., b, a]) / (weight * scale) * np.where(a == b, 0.5, 1.0)
+
+
+class ShearStabilizedModel(LinkedSpheresModel):
+    """Linked spheres with strain degrees of freedom at fixed volume (module doc).
+
+    Parameters
+    ----------
+    box : Box
+        Reference box ``H0``.
+    diameter, links, position, potential, nlist, length_rtol
+        As :class:`~jamflow.models.links.LinkedSpheresModel` (``links`` may be empty:
+        shear-stabilised spheres).
+    fixed_volume : bool
+        Keep ``det F = 1`` (shear stabilisation); False frees the volume (the
+        compliance of Sec. VI and its stress-controlled check).
+    """
+
+    def __init__(self, box: Box, diameter: ArrayLike, links: Links, position: ArrayLike,
+                 potential: PowerLawPotential = HARMONIC, nlist: NeighborList | None = None,
+                 length_rtol: float = LINK_LENGTH_RTOL, fixed_volume: bool = True) -> None:
+        super().__init__(box, diameter, links, position, potential, nlist, length_rtol)
+        self.fixed_volume = fixed_volume
+        self.m = self.d * (self.d + 1) // 2
+        self.strain_scale = float(np.sqrt(self.n) * self.diameter.mean())
+        self.n_dof = self.n * self.d + self.m
+        self.inverse_mass = np.ones(self.n_dof)
+        self._last_q: NDArray[np.float64] | None = None
+        self._solver_q: NDArray[np.float64] | None = None
+        self._strain_key: bytes | None = None
+        self._h0 = np.ascontiguousarray(self.box.matrix)
+        self._h_build_key: NDArray[np.float64] | None = None
+
+    # --- degrees of freedom -----------------------------------------------------------
+    def dofs(self, position: ArrayLike) -> NDArray[np.float64]:
+        """``q`` of centres ``position`` in the reference box at zero strain."""
+        return np.concatenate([super().dofs(position), np.zeros(self.m)])
+
+    def _strain_state(self, q: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+        """``(F, Q, T, U, det F, F^-1)`` of the strain part of ``q``, cached for the last strain.
+
+        A minimiser asks for these several times per step at one strain (positions,
+        link vectors, constraint columns, volume error); each is a few small LAPACK calls.
+        """
+        e = q[self.n * self.d:]
+        key = e.tobytes()
+        if key != self._strain_key:
+            self._strain = _link_kernels.strain_state(np.ascontiguousarray(e), self._h0, self.strain_scale)
+            self._strain_key = key
+        return self._strain
+
+    def deformation(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``F = 1 + eps`` (d, d)."""
+        return self._strain_state(q)[0].copy()
+
+    def current_box(self, q: NDArray[np.float64]) -> Box:
+        """The deformed box ``U`` in the rotated frame."""
+        return Box(self._strain_state(q)[3])
+
+    def positions(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Centres in the rotated frame of :meth:`current_box`, shape (N, d)."""
+        T = self._strain_state(q)[2]
+        return q[: self.n * self.d].reshape(self.n, self.d) @ T.T
+
+    def last_box(self) -> Box:
+        """:meth:`current_box` of the last evaluated ``q`` (a minimiser's final state)."""
+        if self._last_q is None:
+            raise RuntimeError("the model has not been evaluated yet")
+        return self.current_box(self._last_q)
+
+    def _split(self, q: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        return q[: self.n * self.d].reshape(self.n, self.d), q[self.n * self.d:]
+
+    def link_vectors(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Current (unrotated) link vectors ``F R0_k``, shape (L, d)."""
+        return self._reference_links(q) @ self._strain_state(q)[0].T
+
+    def _reference_links(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        y, _ = self._split(q)
+        return y[self.links.j] - y[self.links.i] + self.link_offset
+
+    def volume(self, q: NDArray[np.float64]) -> float:
+        """Box volume ``det F V_0`` at ``q`` [length^d] (an enthalpy wrapper, :mod:`jamflow.models.box`)."""
+        return float(self._strain_state(q)[4]) * self.box.volume
+
+    def volume_gradient(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``dV/dq`` (n_dof,): ``V_0 det F F^-T`` on the strain, zero on the centres."""
+        _, _, _, _, det, F_inv = self._strain_state(q)
+        return np.concatenate([np.zeros(self.n * self.d),
+                               strain_components(self.box.volume * det * F_inv.T, self.strain_scale)])
+
+    def volume_error(self, q: NDArray[np.float64]) -> float:
+        """``det F - 1`` (0 when the volume is free)."""
+        return self._strain_state(q)[4] - 1.0 if self.fixed_volume else 0.0
+
+    # --- constraints ------------------------------------------------------------------
+    def _solver(self, q: NDArray[np.float64]) -> dict:
+        """Factorisation of ``Gamma^T Gamma`` at ``q`` (cached for the last ``q``)."""
+        if self._solver_q is not None and _link_kernels.same(q, self._solver_q):
+            return self._cache
+        F, _, _, _, det, F_inv = self._strain_state(q)
+        R0 = self._reference_links(q)
+        r = R0 @ F.T
+        u = r / np.linalg.norm(r, axis=1)[:, None]
+        w = u @ F  # F^T u per link (rows)
+        Be = strain_components(u[:, :, None] * R0[:, None, :], self.strain_scale)
+        ce = strain_components(det * F_inv.T, self.strain_scale)
+        w = np.ascontiguousarray(w)
+        self.gram.factorise(w)
+        cache = {"w": w, "Be": Be, "ce": ce}
+        self._cache = cache
+        AiBe = self._a_inverse(Be)
+        cache["AiBe"] = AiBe
+        cache["small"] = np.linalg.inv(np.eye(self.m) + Be.T @ AiBe)
+        b = Be @ ce
+        cache["b"], cache["Kib"] = b, self._k_inverse(b)
+        cache["schur"] = float(ce @ ce - b @ cache["Kib"])
+        self._solver_q = np.array(q)
+        return cache
+
+    def _a_inverse(self, rhs: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``A^-1 rhs`` for ``A = B_y B_y^T`` (block diagonal, Cholesky per cluster); rhs (L,) or (L, k)."""
+        return self.gram.solve(rhs)
+
+    def _k_inverse(self, rhs: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``(A + B_e B_e^T)^-1 rhs`` by Woodbury, rhs (L,)."""
+        c = self._cache
+        a = self._a_inverse(rhs)
+        return a - c["AiBe"] @ (c["small"] @ (c["Be"].T @ a))
+
+    def _gram_solve(self, q: NDArray[np.float64], r_links: NDArray[np.float64], r_vol: float
+                    ) -> tuple[NDArray[np.float64], float]:
+        """``(lambda, nu)`` solving ``Gamma^T Gamma (lambda, nu) = (r_links, r_vol)`` (Schur on the volume row)."""
+        c = self._solver(q)
+        Kir = self._k_inverse(r_links)
+        if not self.fixed_volume:
+            return Kir, 0.0
+        nu = (r_vol - c["b"] @ Kir) / c["schur"]
+        return Kir - c["Kib"] * nu, float(nu)
+
+    def _gamma_t(self, q: NDArray[np.float64], g: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
+        """``Gamma^T g``: (links (L,), volume)."""
+        c = self._solver(q)
+        gy, ge = self._split(np.asarray(g, dtype=np.float64))
+        links = self.gram.apply(c["w"], np.ascontiguousarray(gy)) + c["Be"] @ ge
+        return links, float(c["ce"] @ ge)
+
+    def _gamma(self, q: NDArray[np.float64], lam: NDArray[np.float64], nu: float) -> NDArray[np.float64]:
+        """``Gamma (lambda, nu)``, shape (n_dof,)."""
+        c = self._solver(q)
+        out = np.zeros(self.n_dof)
+        self.gram.subtract_transpose(c["w"], -lam, out[: self.n * self.d].reshape(self.n, self.d))
+        out[self.n * self.d:] = c["Be"].T @ lam + c["ce"] * nu
+        return out
+
+    def constraint_multipliers(self, g: NDArray[np.float64], q: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
+        """Least-squares multipliers ``(mu, nu)`` of ``g`` on the constraint gradients (link tensions, volume)."""
+        return self._gram_solve(q, *self._gamma_t(q, g))
+
+    def project(self, g: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
+        lam, nu = self.constraint_multipliers(g, q)
+        return np.asarray(g, dtype=np.float64) - self._gamma(q, lam, nu)
+
+    def newton_step(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """One minimum-norm Newton sweep on the links and ``det F = 1``."""
+        c_links = np.linalg.norm(self.link_vectors(q), axis=1) - self.links.length
+        lam, nu = self._gram_solve(q, c_links, self.volume_error(q))
+        return q - self._gamma(q, lam, nu)
+
+    def reproject(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Newton re-affixing until every link and ``det F`` hold to ``length_rtol`` (relative).
+
+        Chord iterations: the sweeps reuse the last factorised ``Gamma`` (a minimiser's
+        previous point, one FIRE step away) as long as each sweep at least halves the
+        error, and refactorise at the current point otherwise. Any fixed point lies on
+        the constraint manifold; the chord only changes which nearby point of it is
+        reached (by the square of the step), and saves the factorisation of the moved
+        point, which the next evaluation would discard.
+        """
+        out = np.array(q, dtype=np.float64)
+        chord = self._solver_q is not None
+        previous = np.inf
+        for _ in range(LINK_NEWTON_MAX_ITERATIONS + 1):
+            c_links = np.linalg.norm(self.link_vectors(out), axis=1) - self.links.length
+            c_volume = self.volume_error(out)
+            err = max(float(np.max(np.abs(c_links / self.links.length), initial=0.0)), abs(c_volume))
+            if err <= self.length_rtol:
+                return out
+            chord = chord and err <= 0.5 * previous
+            base = self._solver_q if chord else out
+            previous = err
+            lam, nu = self._gram_solve(base, c_links, c_volume)
+            out = out - self._gamma(base, lam, nu)
+        raise RuntimeError(f"Newton re-affixing of links and volume stalled at a relative error {err:.3g} "
+                           f"(asked {self.length_rtol:.3g}) after {LINK_NEWTON_MAX_ITERATIONS} sweeps")
+
+    def multipliers(self, gradient: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
+        return self.constraint_multipliers(gradient, q)[0]
+
+    # --- energy -----------------------------------------------------------------------
+    def evaluate(self, q: NDArray[np.float64]) -> ModelEvaluation:
+        y, _ = self._split(q)
+        _, Q, T, U, _, F_inv = self._strain_state(q)
+        self._update_strained_list(np.ascontiguousarray(y @ T.T), U)
+        self._pairs()
+        force = np.zeros((self.n, self.d))
+        virial = np.zeros((self.d, self.d))
+        energy, n_contacts = _kernels.pair_forces_affine(
+            np.ascontiguousarray(y), T, self._offset, self._pi, self._pj, self._sigma,
+            self.potential.epsilon, self.potential.exponent, force, virial)
+        W = Q @ virial @ Q.T  # unrotated pair virial
+        gradient = np.concatenate([-(force @ T).ravel(), strain_components(-W @ F_inv, self.strain_scale)])
+        if len(self.links):
+            r = self.link_vectors(q)
+            mu = self.multipliers(gradient, q)
+            W = W + np.einsum("k,ka,kb->ab", mu / np.linalg.norm(r, axis=1), r, r)
+        self._last_q = np.array(q)
+        return ModelEvaluation(float(energy), gradient, Q.T @ W @ Q, int(n_contacts))
+
+    def _update_strained_list(self, x: NDArray[np.float64], U: NDArray[np.float64]) -> None:
+        """``nlist.update`` in the deformed box ``U``, with the Verlet test compiled.
+
+        The deformation since the build, ``A = U h_build^-1``, enters through the
+        Frobenius norm ``||A - 1||_F >= ||A - 1||_2`` (no SVD per step; a list is at
+        worst rebuilt a little earlier than needed), and the box object is made only
+        when the list is rebuilt.
+        """
+        nl = self.nlist
+        if nl.x_build.shape == x.shape:
+            if self._h_build_key is not nl.h_build:
+                self._h_build_inv, self._h_build_key = np.linalg.inv(nl.h_build), nl.h_build
+            A = U @ self._h_build_inv
+            slack = float(np.sqrt(np.sum((A - np.eye(self.d)) ** 2))) * nl.reach
+            if not _verlet_kernels._needs_rebuild(x, nl.x_build @ A.T, 1.0, 1.0, nl.reach, nl.skin, slack):
+                return
+        nl.build(x, Box(U))
+
+    def max_force(self, g: NDArray[np.float64]) -> float:
+        """Largest per-sphere norm of the centre part and the norm of the strain part of ``g``."""
+        gy, ge = self._split(g)
+        return max(float(np.sqrt(np.max(np.sum(gy**2, axis=1)))), float(np.linalg.norm(ge)))
+
+    def rescaled(self, factor: float, position: NDArray[np.float64]) -> tuple[ShearStabilizedModel, NDArray[np.float64]]:
+        """The model rebased on the last evaluated box (rotated frame), scaled by ``factor``, at zero strain.
+
+        ``position`` are the centres a minimiser returned (:meth:`positions` of the
+        last evaluated ``q``), so the pair of (box, centres) is consistent.
+        """
+        box = self.last_box().scaled(factor)
+        x = np.asarray(position) * factor
+        model = ShearStabilizedModel(box, self.diameter, self.links, x, self.potential, self.nlist, self.length_rtol,
+                                     self.fixed_volume)
+        return model, x
+
+    def hessian(self, q: NDArray[np.float64]) -> sp.csr_matrix:
+        raise NotImplementedError("use jamflow.chains.hessian for the constrained Hessian with strain blocks")

@@ -1,0 +1,1 @@
+"""Pair queries (k-d tree, cells, sheared boxes) and the one Verlet list every model uses."""

@@ -1,0 +1,163 @@
+"""Soft-sphere jamming at a target pressure: the bisection of :mod:`jamflow.minimize.onset` on the sphere model.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..box import Box
+from ..minimize.fire import FireParameters
+from ..minimize.onset import JammingSettings, jam_model_to_pressure
+from ..models.spheres.model import SphereModel
+from ..models.spheres.potential import HARMONIC, PowerLawPotential, overlapping_pairs
+from ..neighbors.verlet import NeighborList
+from ..network.spheres import find_rattlers
+from ..state.packing import Packing, sphere_volume
+
+__all__ = ["JammingResult", "soft_packing", "jam_to_pressure"]
+
+
+
+
+@dataclass(frozen=True)
+class JammingResult:
+    """A soft packing at the target pressure and how it was reached.
+
+    Attributes
+    ----------
+    packing : Packing
+        Wrapped centres in units of the mean diameter, overlapping pairs as contacts
+        with their repulsive force magnitudes, rattlers, virial pressure.
+    converged : bool
+        Final enthalpy minimisation met both tolerances.
+    history : dict of lists
+        Per bisection step: ``phi``, ``pressure``, ``steps`` (FIRE steps).
+    steps : int
+        Total FIRE steps (force evaluations) of the whole protocol.
+    """
+
+    packing: Packing
+    converged: bool
+    history: dict[str, list] = field(default_factory=dict)
+    steps: int = 0
+
+
+def soft_packing(
+    x: np.ndarray,
+    box: Box,
+    diameter: np.ndarray,
+    potential: PowerLawPotential,
+    template: Packing,
+    protocol_suffix: str,
+    parameters: dict,
+    attrs: dict,
+) -> Packing:
+    """Packing with contacts = overlapping pairs, forces, rattlers and virial pressure.
+
+    Centres are wrapped first, so the stored forces are those of the stored centres
+    (wrapping moves centres by round-off, ~L 2^-53).
+    """
+    x = box.wrap(x)
+    pairs, _, f = overlapping_pairs(x, box, diameter, potential)
+    contacts = np.stack([pairs.i, pairs.j], axis=1)
+    rattler = find_rattlers(len(x), box.d, contacts)
+    pressure = float(np.sum(f * pairs.distance) / (box.d * box.volume))
+    return Packing(
+        position=x, diameter=diameter, box=box, contacts=contacts, force=f,
+        rattler=rattler, pressure=pressure, protocol=template.protocol + protocol_suffix,
+        seed=template.seed, parameters=parameters, attrs=attrs,
+    )
+
+
+def jam_to_pressure(
+    packing: Packing,
+    pressure: float = 1e-7,
+    potential: PowerLawPotential = HARMONIC,
+    force_tol: float = JammingSettings.force_tol,
+    pressure_rtol: float = JammingSettings.pressure_rtol,
+    delta_phi: float = JammingSettings.delta_phi,
+    bisection_rtol: float = JammingSettings.bisection_rtol,
+    bisection_force_factor: float = JammingSettings.bisection_force_factor,
+    max_steps: int = JammingSettings.max_steps,
+    fire_params: FireParameters = JammingSettings.fire_params,
+    progress: Callable[[dict], None] | None = None,
+    box_dof: str = JammingSettings.box_dof,
+) -> JammingResult:
+    """Bring a packing to the jamming onset at pressure ``P0`` (see module doc).
+
+    Parameters
+    ----------
+    packing : Packing
+        Starting configuration (any packing fraction; overlaps allowed).
+    pressure : float
+        Target pressure ``P0`` [epsilon / <D>^d], > 0 (e.g. 1e-7 ... 1e-9).
+    potential : PowerLawPotential
+    force_tol : float
+        Final ``max_i |F_i|`` [epsilon / <D>]; default 1e-13 (F^2 <= 1e-26 < 1e-25).
+    pressure_rtol : float
+        Final ``|P - P0| / P0``.
+    delta_phi : float
+        First packing-fraction step of the bisection.
+    bisection_rtol : float
+        Bisection stops when ``|P - P0| <= bisection_rtol * P0``.
+    bisection_force_factor : float
+        Bisection minimisations stop at ``max_i |F_i| <= factor * P0``.
+    max_steps : int
+        Budget of FIRE steps for the whole protocol; raises RuntimeError if exceeded.
+    fire_params : FireParameters
+    progress : callable, optional
+        Called with a dict (``phi``, ``pressure``, ``delta_phi``, ``steps``) after each
+        bisection step.
+    box_dof : {"isotropic", "full"}
+        Box freedom of the final enthalpy minimisation: isotropic scale, or the whole
+        upper-triangular box so the final stress tensor is ``-P0 1`` (shear-stress
+        free; the box may tilt). See :func:`~jamflow.models.spheres.model.minimize_enthalpy`.
+        With the full box free the backbone needs ``d (N_s - 1) + d (d + 1) / 2``
+        contacts instead of ``d (N_s - 1) + 1`` (Dagois-Bohy et al., PRL 109, 095703).
+
+    Returns
+    -------
+    JammingResult
+    """
+    if packing.body_kind != "spheres":
+        raise ValueError(f"jam_to_pressure jams plain periodic spheres; this packing holds {packing.body_kind} "
+                         "(linked spheres: jamflow.chains.jamming.jam_linked; shapes: jamflow.shapes.jamming.jam_shapes)")
+    if not (np.isfinite(pressure) and pressure > 0.0):
+        raise ValueError(f"target pressure must be positive and finite, got {pressure}")
+    if not (force_tol > 0.0 and pressure_rtol > 0.0 and delta_phi > 0.0):
+        raise ValueError("force_tol, pressure_rtol and delta_phi must be positive")
+    d = packing.d
+    unit = float(packing.diameter.mean())
+    D = packing.diameter / unit
+    box = Box(packing.box.matrix / unit)
+    x = packing.position / unit
+    particle_volume = float(sphere_volume(d, D).sum())
+    phi = particle_volume / box.volume
+    model = SphereModel(box, D, potential, NeighborList(D))
+    settings = JammingSettings(force_tol, pressure_rtol, delta_phi, bisection_rtol, bisection_force_factor,
+                               max_steps, fire_params, box_dof)
+    model, final, history, steps = jam_model_to_pressure(model, x, phi, pressure, settings, progress)
+    box = final.box
+    fmax2 = final.max_force**2
+    attrs = {
+        "length_unit": "mean particle diameter",
+        "force_unit": "epsilon / mean diameter",
+        "pressure_unit": "epsilon / mean diameter^d",
+        "energy": final.energy,
+        "energy_unit": "epsilon",
+        "max_force_sq": fmax2,
+        "potential_exponent": potential.exponent,
+        "target_pressure": pressure,
+        "fire_steps": steps,
+        "converged": int(final.converged),
+    }
+    params = {
+        "pressure": pressure, "force_tol": force_tol, "pressure_rtol": pressure_rtol,
+        "bisection_rtol": bisection_rtol, "bisection_force_factor": bisection_force_factor,
+        "potential_exponent": potential.exponent, "fire": fire_params.as_dict(), "box_dof": box_dof,
+    }
+    out = soft_packing(final.position, box, D, potential, packing, ">soft", params, attrs)
+    return JammingResult(out, bool(final.converged), history, steps)
