@@ -11,7 +11,8 @@ Two steps, each one command:
     ``col_lower``, ``col_upper``, the carried basis (``col_status``, ``row_status``,
     HiGHS's codes), and HiGHS's answer: model status, ``col_value``, ``row_dual``,
     ``col_dual``, the optimal basis, pivots and wall time [s]. The chain itself runs
-    unchanged (the capture wraps ``_Solver._run``, the chain's one HiGHS call).
+    unchanged with ``warm_engine="highs"`` (the capture wraps ``_Solver._run``, the chain's
+    one HiGHS call; ``auto`` would hand the warm LPs of d N >= 4096 to jamflow.simplex).
 ``compare``
     For every captured LP (or a sample of them per start): HiGHS's warm primal simplex
     from the carried basis as the chain runs it, and ``jamflow.simplex`` from the same
@@ -130,7 +131,7 @@ def capture(start: Path, tag: str, max_warm: int) -> int:
     cal_solver._Solver._run = capturing_run
     t0 = time.perf_counter()
     try:
-        res = calippso(read_packing(start))
+        res = calippso(read_packing(start), warm_engine="highs")  # every warm LP goes through _run
         print(f"{tag}: chain of {res.iterations} LPs done in "
               f"{time.perf_counter() - t0:.1f} s, {count[0]} warm LPs", flush=True)
     except Enough:
