@@ -361,5 +361,6 @@ def _newton_record(chain: _Chain, container: _Container, net: _Network, attempt:
         max_displacement=float(rel.max()), max_displacement_stable=float(rel[stable].max()),
         n_constraints=net.n_c, n_contacts=net.n_c, n_stable=net.n_s, isostatic=True, lp_status="Certified",
         lp_time=attempt.seconds, solver="newton", cutoff=lp.ell / lp.sig_max, bound=np.inf,
-        min_active_dual=attempt.min_dual, max_inactive_dual=np.nan, accepted=True, newton_steps=attempt.steps)
+        min_active_dual=attempt.min_dual, max_inactive_dual=np.nan, accepted=True, newton_steps=attempt.steps,
+        engine="newton")
 

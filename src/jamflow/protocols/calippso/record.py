@@ -68,7 +68,7 @@ class IterationRecord:
     simplex_iterations: int = 0  # simplex pivots, crossover pivots included
     ipm_iterations: int = 0
     newton_steps: int = 0  # Newton steps of a certified finish (its own record, solver "newton")
-    engine: str = "highs"  # engine of the LP (WARM_ENGINES; interior point LPs are HiGHS's)
+    engine: str = "highs"  # engine of the LP (highs or jamflow; interior point LPs are HiGHS's), or "newton"
     warm_fallback: str = ""  # the trouble jamflow.simplex reported before HiGHS solved the LP
 
 
@@ -204,7 +204,8 @@ def _history(records: list[IterationRecord]) -> xr.Dataset:
     data["lp_status"] = (("iteration",), col("lp_status").astype(str), {"long_name": "HiGHS model status"})
     data["solver"] = (("iteration",), col("solver").astype(str), {"long_name": "HiGHS method of the LP"})
     data["engine"] = (("iteration",), col("engine").astype(str), {"long_name": "engine of the LP: highs, or jamflow "
-                                                                              "(jamflow.simplex, warm simplex LPs)"})
+                                                                              "(jamflow.simplex, warm simplex LPs); "
+                                                                              "newton for the Newton finish"})
     data["warm_fallback"] = (("iteration",), col("warm_fallback").astype(str), {
         "long_name": "trouble jamflow.simplex reported on this warm LP before HiGHS solved it ('' = none)"})
     return xr.Dataset(data, coords={"iteration": np.arange(1, len(records) + 1)})
