@@ -90,7 +90,9 @@ def test_overlap_cli(tmp_path):
     from jamflow.cli import main
 
     ref = lattice_with_contacts()
-    part = ref.evolve(contacts=ref.contacts[5:])
+    # the same sample jammed at another pressure: proportional diameters (a pooled input
+    # identical to another would be refused as given twice)
+    part = ref.evolve(diameter=ref.diameter * (1 - 1e-9), contacts=ref.contacts[5:])
     write_packing(ref, tmp_path / "b.nc")
     write_packing(part, tmp_path / "a.nc")
     assert main(["overlap", str(tmp_path / "a.nc"), str(tmp_path / "b.nc"), str(tmp_path / "q.nc")]) == 0

@@ -199,9 +199,10 @@ def test_cli_init_chains(tmp_path, capsys):
     c4 = read_packing(tmp_path / "c4.nc", None)
     assert c4.packing_fraction == pytest.approx(DILUTE_PHI[3], rel=1e-12)
     c4.validate(OVERLAP_TOL)
-    assert main(["init-chains", str(tmp_path / "x.nc"), "--d", "4", "--clusters", "3", "--cluster", "trimer",
-                 "--seed", "1"]) == 1
-    assert "d = 2 or 3" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as usage:
+        main(["init-chains", str(tmp_path / "x.nc"), "--d", "4", "--clusters", "3", "--cluster", "trimer",
+              "--seed", "1"])
+    assert usage.value.code == 2 and "--d" in capsys.readouterr().err
 
 
 def test_cli_cement_records_the_cemented_contacts_not_the_angle_links(tmp_path, jammed):

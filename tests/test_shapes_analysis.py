@@ -10,6 +10,7 @@ import pytest
 from jamflow.box import Box
 from jamflow.io import read_packing
 from jamflow.shapes.analysis import contact_angle_distribution, contact_angles
+from jamflow.shapes.counting import count_constraints
 from jamflow.state.bodies import ShapeTable
 from jamflow.state.packing import Packing
 
@@ -25,7 +26,8 @@ def _pair(conf) -> Packing:
 def test_t_contact_angles():
     # a periodic column of T's: vertical lines standing on the middle of horizontal
     # ones: psi = pi/2 on the horizontal (side contact), 0 on the vertical (tip);
-    # every body has two contacts, so all are rattlers and are kept on purpose
+    # every body is pinched between two antiparallel contacts along the column: it carries
+    # force and slides across it, a slider and not a rattler, so its contacts count
     n = 8
     conf = []
     for k in range(n // 2):
@@ -35,8 +37,10 @@ def test_t_contact_angles():
     p = _pair(conf).evolve(box=Box.orthogonal([6.0, 1.5 * n / 2]))
     # vertical line: centre 0.75 above, half length 0.5, radius 0.2: tips at 0.25 and 1.25
     # from the horizontal at 0 and the next at 1.5: overlaps 0.4 - 0.25 = 0.15 each
-    assert contact_angles(p).size == 0  # all rattlers
-    psi = contact_angles(p, rattlers=True)
+    counts, rattler, slider, _ = count_constraints(p)
+    assert not rattler.any() and slider.all() and counts.n_sliders == n
+    np.testing.assert_array_equal(contact_angles(p), contact_angles(p, rattlers=True))
+    psi = contact_angles(p)
     assert psi.size == 2 * n
     np.testing.assert_allclose(np.sort(psi), np.repeat([0.0, np.pi / 2], n), atol=1e-12)
     centres, density = contact_angle_distribution(psi)

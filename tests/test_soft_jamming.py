@@ -108,6 +108,7 @@ def test_cli_soft_jam_aqs_moduli(tmp_path, capsys):
     m = read_dataset(tmp_path / "m.nc")
     assert 0.0 < float(m["shear"]) < float(m["shear_affine"])
     assert np.all(m["eigenvalue"].values > 0.0)
-    assert main(["soft-jam", str(tmp_path / "r.nc"), str(tmp_path / "x.nc"), "--pressure", "-1", "--quiet"]) == 1
-    assert "pressure" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as usage:
+        main(["soft-jam", str(tmp_path / "r.nc"), str(tmp_path / "x.nc"), "--pressure", "-1", "--quiet"])
+    assert usage.value.code == 2 and "--pressure" in capsys.readouterr().err
     assert not (tmp_path / "x.nc").exists()

@@ -10,6 +10,7 @@ from snakemake.utils import validate
 from jamflow.scenes import SceneError, cost_report, plan_scene, read_scene
 from jamflow.scenes.plan import WILDCARDS
 from jamflow.scenes.resources import request_mb, request_minutes
+from jamflow.scenes.studies import caption_of
 
 try:
     PLAN = plan_scene(read_scene(dict(config)))
@@ -58,7 +59,7 @@ def rule_outputs(spec):
     if not spec.name.startswith("figure_"):
         return spec.outputs
     figure = spec.name.removeprefix("figure_").replace("_", "-")
-    caption = {"gaps-windows": "fit-windows", "forces-windows": "fit-windows"}.get(figure, figure)
+    caption = caption_of(figure)
     png = report(spec.outputs[0], caption=f"../report/{caption}.rst", category="Figures")
     return [png, *spec.outputs[1:]]
 

@@ -284,6 +284,15 @@ FIGURES: dict[str, Figure] = {
     "chains-moduli": _one("chains-moduli", "chains-moduli"),
 }
 
+#: The caption (``workflow/report/<caption>.rst``) of each figure in ``snakemake --report``:
+#: the figure's own name unless it shares another's.
+SHARED_CAPTIONS: dict[str, str] = {"gaps-windows": "fit-windows", "forces-windows": "fit-windows"}
+
+
+def caption_of(figure: str) -> str:
+    """Name of the report caption of the scene figure ``figure`` (a key of :data:`FIGURES`)."""
+    return SHARED_CAPTIONS.get(figure, figure)
+
 
 def add_figures(plan: Plan) -> None:
     """One job per figure (per body, sample or run where the figure is of one)."""
