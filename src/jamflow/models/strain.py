@@ -50,7 +50,7 @@ from ..neighbors.verlet import NeighborList
 from ..state.bodies import Links
 from ..tolerances import LINK_LENGTH_RTOL
 from . import _link_kernels
-from .links import LINK_NEWTON_MAX_ITERATIONS, LinkedSpheresModel
+from .links import LINK_NEWTON_MAX_ITERATIONS, ClusterGram, LinkedSpheresModel
 from .spheres import _kernels
 from .spheres.potential import HARMONIC, PowerLawPotential
 
@@ -93,12 +93,15 @@ class ShearStabilizedModel(LinkedSpheresModel):
     fixed_volume : bool
         Keep ``det F = 1`` (shear stabilisation); False frees the volume (the
         compliance of Sec. VI and its stress-controlled check).
+    gram : ClusterGram, optional
+        The cluster structure of the same links (shared by :meth:`rescaled`).
     """
 
     def __init__(self, box: Box, diameter: ArrayLike, links: Links, position: ArrayLike,
                  potential: PowerLawPotential = HARMONIC, nlist: NeighborList | None = None,
-                 length_rtol: float = LINK_LENGTH_RTOL, fixed_volume: bool = True) -> None:
-        super().__init__(box, diameter, links, position, potential, nlist, length_rtol)
+                 length_rtol: float = LINK_LENGTH_RTOL, fixed_volume: bool = True,
+                 gram: ClusterGram | None = None) -> None:
+        super().__init__(box, diameter, links, position, potential, nlist, length_rtol, gram)
         self.fixed_volume = fixed_volume
         self.m = self.d * (self.d + 1) // 2
         self.strain_scale = float(np.sqrt(self.n) * self.diameter.mean())
@@ -304,6 +307,11 @@ class ShearStabilizedModel(LinkedSpheresModel):
                 return
         nl.build(x, Box(U))
 
+    def fire_engine(self, q: NDArray[np.float64], params: object, pressure0: float | None = None,
+                    pressure_rtol: float = 0.0, box_dof: str = "isotropic") -> None:
+        """No compiled loop: the flat-vector FIRE steps this model."""
+        return None
+
     def max_force(self, g: NDArray[np.float64]) -> float:
         """Largest per-sphere norm of the centre part and the norm of the strain part of ``g``."""
         gy, ge = self._split(g)
@@ -318,7 +326,7 @@ class ShearStabilizedModel(LinkedSpheresModel):
         box = self.last_box().scaled(factor)
         x = np.asarray(position) * factor
         model = ShearStabilizedModel(box, self.diameter, self.links, x, self.potential, self.nlist, self.length_rtol,
-                                     self.fixed_volume)
+                                     self.fixed_volume, self.gram)
         return model, x
 
     def hessian(self, q: NDArray[np.float64]) -> sp.csr_matrix:
