@@ -184,12 +184,42 @@ def omega_t_subtract(w, li, lj, lam, out):
 
 
 @njit(cache=True)
+def _det_inverse(F):
+    """``det F`` and ``F^-1`` of a small matrix: closed forms for d = 2 and 3 (no LAPACK call per step)."""
+    d = F.shape[0]
+    if d == 2:
+        det = F[0, 0] * F[1, 1] - F[0, 1] * F[1, 0]
+        inv = np.empty((2, 2))
+        inv[0, 0] = F[1, 1] / det
+        inv[0, 1] = -F[0, 1] / det
+        inv[1, 0] = -F[1, 0] / det
+        inv[1, 1] = F[0, 0] / det
+        return det, inv
+    if d == 3:
+        inv = np.empty((3, 3))
+        for a in range(3):
+            a1, a2 = (a + 1) % 3, (a + 2) % 3
+            for b in range(3):
+                b1, b2 = (b + 1) % 3, (b + 2) % 3
+                # cofactor of F[b, a]
+                inv[a, b] = F[b1, a1] * F[b2, a2] - F[b1, a2] * F[b2, a1]
+        det = F[0, 0] * inv[0, 0] + F[0, 1] * inv[1, 0] + F[0, 2] * inv[2, 0]
+        for a in range(3):
+            for b in range(3):
+                inv[a, b] /= det
+        return det, inv
+    return np.linalg.det(F), np.linalg.inv(F)
+
+
+@njit(cache=True)
 def strain_state(e, h0, scale):
     """Deformation of scaled strain components ``e`` (m,) in the reference box ``h0`` (d, d).
 
     Returns ``F = 1 + eps`` (``eps_aa = e / scale``, ``eps_ab = e / (sqrt 2 scale)``, components in
     ``numpy.triu_indices`` order), ``Q`` and ``T = Q^T F`` with ``F h0 = Q U`` (``U`` upper
-    triangular with a positive diagonal, zeros below it), ``U``, ``det F`` and ``F^-1``.
+    triangular with a positive diagonal, zeros below it), ``U``, ``det F`` and ``F^-1``. The
+    QR is Gram–Schmidt applied twice (orthogonal to round-off for the well-conditioned
+    boxes of a packing; no LAPACK call, which cost more than the arithmetic at d <= 3).
     """
     d = h0.shape[0]
     F = np.eye(d)
@@ -203,18 +233,37 @@ def strain_state(e, h0, scale):
                 F[a, b] += v
                 F[b, a] += v
             p += 1
-    Q, U = np.linalg.qr(F @ h0)
+    M = F @ h0
+    Q = np.zeros((d, d))
+    U = np.zeros((d, d))
+    v = np.empty(d)
+    for k in range(d):
+        for a in range(d):
+            v[a] = M[a, k]
+        for _ in range(2):
+            for j in range(k):
+                t = 0.0
+                for a in range(d):
+                    t += Q[a, j] * v[a]
+                U[j, k] += t
+                for a in range(d):
+                    v[a] -= t * Q[a, j]
+        norm = 0.0
+        for a in range(d):
+            norm += v[a] * v[a]
+        norm = np.sqrt(norm)
+        U[k, k] = norm
+        for a in range(d):
+            Q[a, k] = v[a] / norm
+    T = np.zeros((d, d))
     for a in range(d):
-        if U[a, a] < 0.0:
-            for b in range(d):
-                Q[b, a] = -Q[b, a]
-                U[a, b] = -U[a, b]
-    T = np.ascontiguousarray(Q.T) @ F
-    for a in range(d):
-        for b in range(a):
-            T[a, b] = 0.0
-            U[a, b] = 0.0
-    return F, Q, T, U, np.linalg.det(F), np.linalg.inv(F)
+        for b in range(a, d):
+            t = 0.0
+            for c in range(d):
+                t += Q[c, a] * F[c, b]
+            T[a, b] = t
+    det, inv = _det_inverse(F)
+    return F, Q, T, U, det, inv
 
 
 @njit(cache=True)

@@ -331,8 +331,14 @@ class LinkedSpheresModel(SphereBodies):
 
     def fire_engine(self, q: NDArray[np.float64], params: FireParameters, pressure0: float | None = None,
                     pressure_rtol: float = 0.0, box_dof: str = "isotropic") -> LinkedFire | None:
-        """The compiled FIRE loop at fixed box (:class:`LinkedFire`); None for enthalpy (no box degree of freedom)."""
-        return None if pressure0 is not None else LinkedFire(self, q, params)
+        """The compiled FIRE loop at fixed box (:class:`LinkedFire`); None for enthalpy (no box degree of freedom).
+
+        None too for a subclass with an energy of its own (another :meth:`evaluate`): the
+        loop computes this class's energy, not the subclass's.
+        """
+        if pressure0 is not None or type(self).evaluate is not LinkedSpheresModel.evaluate:
+            return None
+        return LinkedFire(self, q, params)
 
     def _pairs(self) -> None:
         """Listed pairs minus linked pairs, refreshed after each neighbour-list build."""
