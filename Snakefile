@@ -1,5 +1,7 @@
-# jamflow workflow: a scene (config/*.yaml) names a system, a protocol chain, analyses and
-# figures; this file includes the scene validation (rules/common.smk) and the stages.
+# jamflow workflow: a scene (config/*.yaml, docs/scenes.md) names bodies, seeds, a chain of
+# stages, analyses, studies and figures; jamflow.scenes checks it against the stage table and
+# plans every job; workflow/rules/common.smk reads the plan, workflow/rules/stages.smk makes
+# one rule per step, analysis, study and figure. `--config scale=paper` picks the paper's size.
 from snakemake.utils import min_version
 
 min_version("9.0")
@@ -7,24 +9,17 @@ min_version("9.0")
 
 # The default scene, unless a scene is given with --configfile (scenes are not merged
 # into the default: a scene file is complete on its own).
-if not config:
+if "scene" not in config:
 
     configfile: "config/config.yaml"
 
 
 
 include: "workflow/rules/common.smk"
-include: "workflow/rules/pack.smk"
-include: "workflow/rules/flow.smk"
-include: "workflow/rules/analysis.smk"
-include: "workflow/rules/figures.smk"
-include: "workflow/rules/tradeoff.smk"
-include: "workflow/rules/chains.smk"
-include: "workflow/rules/shapes_common.smk"
-include: "workflow/rules/shapes.smk"
+include: "workflow/rules/stages.smk"
 
 
 rule all:
     input:
-        scene_targets(),
+        PLAN.targets,
     default_target: True

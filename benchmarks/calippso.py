@@ -89,6 +89,7 @@ from matplotlib.ticker import NullFormatter
 from numpy.typing import NDArray
 
 import jamflow.protocols.calippso as cal
+import jamflow.protocols.calippso.solver as cal_solver
 from jamflow.analysis.contacts import summarize
 from jamflow.analysis.overlap import contact_overlap
 from jamflow.box import Box
@@ -339,19 +340,19 @@ def part_scale(quick: bool, max_n: int) -> xr.Dataset:
         if max_n >= 2048:
             starts["near_N2048_s1"] = near_start(2048)
     # HiGHS's own scaling is the module's private default for cold LPs
-    variants = {"scaled": cal._HIGHS_SCALE, "unscaled": cal.WARM_SIMPLEX_SCALE}
+    variants = {"scaled": cal_solver._HIGHS_SCALE, "unscaled": cal_solver.WARM_SIMPLEX_SCALE}
     parts = []
     for case, path in starts.items():
         start = read_packing(path)
         results, rows = {}, []
         for name, scale in variants.items():
-            cal.WARM_SIMPLEX_SCALE = scale
+            cal_solver.WARM_SIMPLEX_SCALE = scale
             try:
                 t0 = time.perf_counter()
                 res = cal.calippso(start)
                 wall = time.perf_counter() - t0
             finally:
-                cal.WARM_SIMPLEX_SCALE = variants["unscaled"]
+                cal_solver.WARM_SIMPLEX_SCALE = variants["unscaled"]
             h = res.history
             results[name] = res.packing
             rows.append(dict(time=wall, t_lps=float(h["lp_time"].sum()), lps=float(res.iterations),
@@ -512,7 +513,7 @@ def highs_factor_time(K: sp.csc_matrix) -> float:
     h = new_highs(1)
     for option, value in (("solver", "simplex"),
                           ("simplex_strategy", 4), ("simplex_iteration_limit", 0),
-                          ("simplex_scale_strategy", cal.WARM_SIMPLEX_SCALE)):
+                          ("simplex_scale_strategy", cal_solver.WARM_SIMPLEX_SCALE)):
         h.setOptionValue(option, value)
     h.passModel(lp)
     basis = highspy.HighsBasis()

@@ -36,7 +36,8 @@ import numpy as np
 import scipy.sparse as sp
 import xarray as xr
 
-import jamflow.protocols.calippso as calippso_module
+import jamflow.protocols.calippso.lp as cal_lp
+import jamflow.protocols.calippso.solver as cal_solver
 from jamflow.io import new_dataset_attrs, read_packing, write_dataset
 from jamflow.protocols.calippso import SOLVER_TOL, calippso
 
@@ -83,7 +84,7 @@ def capture(start: Path, n_warm: int) -> list[WarmLP]:
     benchmark has to see the LP and basis exactly as HiGHS gets them); the chain itself
     is unchanged."""
     captured: list[WarmLP] = []
-    run = calippso_module._Solver._run
+    run = cal_solver._Solver._run
 
     def capturing_run(self, lp, method, basis):
         status, seconds = run(self, lp, method, basis)
@@ -101,13 +102,13 @@ def capture(start: Path, n_warm: int) -> list[WarmLP]:
                 raise _Enough
         return status, seconds
 
-    calippso_module._Solver._run = capturing_run
+    cal_solver._Solver._run = capturing_run
     try:
         calippso(read_packing(start))
     except _Enough:
         pass
     finally:
-        calippso_module._Solver._run = run
+        cal_solver._Solver._run = run
     return captured
 
 
@@ -141,8 +142,8 @@ def clp_solve(w: WarmLP, col_status, row_status) -> tuple[float, int, float, tup
 def highs_refactor(w: WarmLP) -> float:
     """HiGHS from its own optimal basis (zero pivots), solved as the chain solves a warm
     LP (``_Solver._run``): the basis factorisation [s]."""
-    solver = calippso_module._Solver()
-    lp = calippso_module._highs_lp(w.A, w.row_upper, w.col_lower, w.col_upper)
+    solver = cal_solver._Solver()
+    lp = cal_lp._highs_lp(w.A, w.row_upper, w.col_lower, w.col_upper)
     _, seconds = solver._run(lp, "simplex", w.optimal_basis)
     if solver.h.getInfo().simplex_iteration_count != 0:
         raise RuntimeError("HiGHS pivoted from its own optimal basis")

@@ -6,7 +6,7 @@ bidisperse discs at phi = 0.80; or ``--start FILE.nc``) this shears with a tight
 (``step_drift = 1e-11``, ``steps_per_event = --ref-steps-per-event``, correction every 10 steps,
 order 1) and with a grid of ``order`` (1: the paper's straight-line step, 2: explicit midpoint),
 ``steps_per_event`` and ``step_drift``. Per setting it prints the wall time, steps per event, the
-harness's errors (:func:`jamflow.tradeoff._flow_compare`: the recorded stress compared as a step
+harness's errors (:func:`jamflow.tradeoff.stages._flow_compare`: the recorded stress compared as a step
 function, i.e. the value of the last step before each of 399 grid strains) and the same median
 error with the stress interpolated linearly between steps (the stress is continuous between
 events), both relative to the reference's mean |stress|.
@@ -26,7 +26,8 @@ from jamflow.io import read_packing
 from jamflow.protocols.overdamped.driving import Drive
 from jamflow.protocols.overdamped.integrate import FlowOptions
 from jamflow.protocols.overdamped.run import Stop, run_flow
-from jamflow.tradeoff import FLOW_PHI, _flow_compare, flow_start
+from jamflow.tradeoff import FLOW_PHI, flow_start
+from jamflow.tradeoff.stages import _flow_compare
 
 
 def interpolated_error(series, ref) -> tuple[float, float]:

@@ -98,7 +98,7 @@ def main() -> None:
                 res = jam_shapes(start, args.pressure, settings)
                 jam_time[a, b], jam_cpu[a, b] = time.perf_counter() - t0, time.process_time() - c0
                 phi[a, b], steps[a, b] = res.packing.packing_fraction, res.steps
-                z[a, b] = count_constraints(res.packing, "twice")[0].z
+                z[a, b] = count_constraints(res.packing, "twice")[0].z_eq3
                 t0, c0 = time.perf_counter(), time.process_time()
                 n_quartic[a, b] = spectrum(res.packing, fourth=False).n_quartic
                 spec_time[a, b], spec_cpu[a, b] = time.perf_counter() - t0, time.process_time() - c0

@@ -1,8 +1,9 @@
 """Bitwise regression of the soft-sphere minimisers between two versions of jamflow.
 
 Runs FIRE, isotropic and full-box enthalpy minimisation, steepest descent, CG, the
-soft-jam bisection, AQS shear (fixed volume and fixed pressure) and the elastic
-moduli from fixed seeded inputs and stores every resulting array in one ``.npz``.
+soft-jam bisection, AQS shear (fixed volume and fixed pressure), Lerner et al.'s
+steepest-descent shear (tentative-network stress) and the elastic moduli from fixed
+seeded inputs and stores every resulting array in one ``.npz``.
 Run it once with each version on ``PYTHONPATH`` and compare the byte strings::
 
     PYTHONPATH=/path/to/old/src python benchmarks/soft_bitwise.py run /tmp/old.npz
@@ -32,6 +33,7 @@ def run(path: str) -> None:
     minimize_enthalpy = find("minimize_enthalpy", "jamflow.models.spheres.model", "jamflow.soft")
     random_packing = find("random_packing", "jamflow.protocols.initial", "jamflow.initial")
     aqs_shear = find("aqs_shear", "jamflow.protocols.quasistatic", "jamflow.soft.shear")
+    lerner_sd_shear = find("lerner_sd_shear", "jamflow.protocols.quasistatic", "jamflow.soft.shear")
     jam_to_pressure = find("jam_to_pressure", "jamflow.protocols.soft_jam", "jamflow.soft.jamming")
 
     print("jamflow from", jamflow.__file__)
@@ -71,6 +73,13 @@ def run(path: str) -> None:
             for name in series.data_vars:
                 out[f"{tag}.aqs_{mode}.{name}"] = series[name].values
             out[f"{tag}.aqs_{mode}.final"] = final.position
+        # a start near jamming (2D phi = 0.83, 3D 0.63) with overlaps the first descent removes
+        scale = (start.packing_fraction / (0.83 if d == 2 else 0.63)) ** (1.0 / d) / start.diameter.mean()
+        sd_start = start.evolve(position=start.position * scale, diameter=start.diameter / start.diameter.mean(),
+                                box=start.box.scaled(scale))
+        sd_series = lerner_sd_shear(sd_start, 0.01, 2e-3)
+        for name in sd_series.data_vars:
+            out[f"{tag}.sd_shear.{name}"] = sd_series[name].values
         m = elastic_moduli(jam.packing.position, jam.packing.box, jam.packing.diameter)
         out[f"{tag}.moduli"] = np.array([m.bulk, m.shear, m.bulk_affine, m.shear_affine, m.pressure])
     np.savez(path, **out)

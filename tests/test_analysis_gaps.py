@@ -174,3 +174,16 @@ def test_inverted_fit_window_is_a_one_line_error(tmp_path, capsys, command):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--fit-min/--fit-max" in err[0] and "fit-min < fit-max" in err[0]
     assert not out.exists()
+
+
+def test_a_soft_packing_s_pressure_does_not_move_the_fit_window():
+    """The 1/p plateau is of LS snapshots (hard spheres at a reduced pressure); a soft packing at
+    P0 = 1e-3 (an energy density) keeps the window it was given, where 1/P0 = 1e3 would lie above it."""
+    from pathlib import Path
+
+    from jamflow.io import read_packing
+
+    soft = read_packing(Path(__file__).parent / "data" / "bodies" / "spheres_soft.nc", None)
+    assert soft.protocol.endswith(">soft") and soft.pressure == pytest.approx(1e-3)
+    ds = gap_distribution([soft], fit_min=1e-5, fit_max=1e-2)
+    assert ds.attrs["fit_min"] == 1e-5 and ds.attrs["fit_max"] == 1e-2

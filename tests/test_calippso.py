@@ -14,6 +14,11 @@ import pytest
 from ls_data import ls_dat
 
 import jamflow.protocols.calippso as cal
+import jamflow.protocols.calippso.chain as cal_chain
+import jamflow.protocols.calippso.container as cal_container
+import jamflow.protocols.calippso.lp as cal_lp
+import jamflow.protocols.calippso.recovery as cal_recovery
+import jamflow.protocols.calippso.solver as cal_solver
 from jamflow.analysis.contacts import summarize
 from jamflow.analysis.overlap import contact_overlap
 from jamflow.box import Box
@@ -31,8 +36,10 @@ from jamflow.protocols.calippso import (
     IterationRecord,
     calippso,
     jamming_lp,
+    result_to_dataset,
 )
 from jamflow.protocols.initial import random_packing
+from jamflow.protocols.ls import compress
 from jamflow.state.packing import Packing, max_overlap, near_pairs
 from jamflow.tolerances import FORCE_BALANCE_TOL, OVERLAP_TOL
 
@@ -248,27 +255,44 @@ def test_cli_roundtrip(tmp_path):
     assert main(["calippso", str(tmp_path / "missing.nc"), str(out), "--quiet"]) == 1
 
 
+def test_an_ls_start_keeps_its_phi_and_p_under_start_names():
+    """A jammed packing's attributes describe the jammed packing: the LS snapshot's
+    ``phi`` and ``p`` come back as ``phi_start`` and ``p_start``, and the stored packing
+    fraction is phi_J, above the start's. The typed diagnostics carry the same numbers."""
+    snap = compress(random_packing(32, 2, 0.5, "bi", seed=2), 1e-3, (1e3,), seed=2).snapshots[0]
+    res = calippso(snap)
+    a = res.packing.attrs
+    assert "phi" not in a and "p" not in a
+    assert a["phi_start"] == snap.attrs["phi"] and a["p_start"] == snap.attrs["p"] >= 1e3
+    ds = result_to_dataset(res)
+    assert "phi" not in ds.attrs and "p" not in ds.attrs
+    assert ds.attrs["packing_fraction"] == a["phi_J"] == res.packing.packing_fraction > a["phi_start"]
+    diag = res.diagnostics
+    assert (diag.phi_J, diag.n_contacts, diag.isostatic_count) == (a["phi_J"], a["n_contacts"], a["isostatic_count"])
+    assert diag.isostatic and diag.why == "ok" and diag.max_overlap == a["max_overlap"] < OVERLAP_TOL
+
+
 def _record(it: int, sg: float, accepted: bool = True) -> IterationRecord:
     return IterationRecord(it, sg, 0.0, 0.0, 10, 0, 0, False, "Optimal", 0.0, "ipm", 1.7, 0.1,
                            np.nan, np.nan, accepted)
 
 
 def test_stall_test_compares_window_with_earlier_best(monkeypatch):
-    monkeypatch.setattr(cal, "STALL_WINDOW", 3)
+    monkeypatch.setattr(cal_recovery, "STALL_WINDOW", 3)
     falling = [_record(k, 10.0 ** -k) for k in range(1, 8)]
-    assert not cal._stalled(falling, 0)
+    assert not cal_recovery._stalled(falling, 0)
     plateau = [_record(k, 1e-3 * (1 + 0.1 * (k % 2))) for k in range(1, 8)]
-    assert cal._stalled(plateau, 0)
+    assert cal_recovery._stalled(plateau, 0)
     # rejected LPs do not count, and nothing before ``start`` is compared
-    assert not cal._stalled(plateau[:3] + [_record(9, 1e-9, accepted=False)], 0)
-    assert not cal._stalled(plateau, 4)
+    assert not cal_recovery._stalled(plateau[:3] + [_record(9, 1e-9, accepted=False)], 0)
+    assert not cal_recovery._stalled(plateau, 4)
 
 
 def test_stalled_chain_recovers_unbounded_then_raises(monkeypatch):
     # every window counts as a stall: the first gets an unbounded LP, the third raises
-    monkeypatch.setattr(cal, "STALL_WINDOW", 1)
-    monkeypatch.setattr(cal, "STALL_PROGRESS", -np.inf)
-    monkeypatch.setattr(cal, "MAX_STALL_RECOVERIES", 2)
+    monkeypatch.setattr(cal_recovery, "STALL_WINDOW", 1)
+    monkeypatch.setattr(cal_recovery, "STALL_PROGRESS", -np.inf)
+    monkeypatch.setattr(cal_recovery, "MAX_STALL_RECOVERIES", 2)
     seen = []
     start = random_packing(64, 2, 0.4, "bi", seed=3)
     with pytest.raises(RuntimeError, match="stalled"):
@@ -338,9 +362,9 @@ def test_unscaled_warm_simplex_lps_end_in_the_packing_of_scaled_ones(monkeypatch
     pivot, and it ends in the same packing: same contacts (Q = 1), forces to 1e-8 in
     norm, phi_J to 1e-12. Both results pass every check of a jammed packing."""
     start = read_dat(ls_dat(3))
-    assert cal.WARM_SIMPLEX_SCALE != cal._HIGHS_SCALE
+    assert cal_solver.WARM_SIMPLEX_SCALE != cal_solver._HIGHS_SCALE
     unscaled = calippso(start)
-    monkeypatch.setattr(cal, "WARM_SIMPLEX_SCALE", cal._HIGHS_SCALE)
+    monkeypatch.setattr(cal_solver, "WARM_SIMPLEX_SCALE", cal_solver._HIGHS_SCALE)
     scaled = calippso(start)
     for res in (unscaled, scaled):
         _check_jammed(res, start)
@@ -360,12 +384,12 @@ def test_a_near_start_takes_the_near_cutoff_and_jams_to_the_packing_of_the_far_s
     interior point LPs skip presolve, and the chain ends in the same packing as with
     the far settings: same contacts (Q = 1) and forces to 1e-8 in norm."""
     start = read_dat(ls_dat(3))
-    container = cal._Container(start.box, False)
-    assert cal._near_start(start.box.wrap(start.position), start.diameter, container)
+    container = cal_container._Container(start.box, False)
+    assert cal_lp._near_start(start.box.wrap(start.position), start.diameter, container)
     far = random_packing(128, 3, 0.3, "mono", seed=1)
-    assert not cal._near_start(far.box.wrap(far.position), far.diameter, container)
+    assert not cal_lp._near_start(far.box.wrap(far.position), far.diameter, container)
     near = calippso(start)
-    monkeypatch.setattr(cal, "_near_start", lambda *args: False)
+    monkeypatch.setattr(cal_chain, "_near_start", lambda *args: False)
     ref = calippso(start)
     assert near.packing.attrs["near_start"] == 1 and ref.packing.attrs["near_start"] == 0
     assert float(near.history["cutoff"].values[0]) == cal.DEFAULT_CUTOFF_NEAR

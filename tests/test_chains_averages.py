@@ -46,3 +46,21 @@ def test_unstable_packings_are_counted_and_left_out_of_the_averages():
     assert int(table.n_packings.values[0]) == 2 and int(table.n_unstable.values[0]) == 1
     assert table.shear_weighted.values[0] == pytest.approx(0.75) and table.bulk_weighted.values[0] == pytest.approx(1.5)
     assert table.shear_reuss_mean.values[0] == pytest.approx(0.5)
+
+
+def test_the_figure_draws_infinite_moduli_off_scale_with_their_counts():
+    """An infinite modulus has no height: its marker sits above the axes (axes fraction > 1), labelled k/n."""
+    from jamflow.plots import plot_chains_moduli
+
+    table = moduli_against_links([_moduli(0, (2, 1), (1, 0.5)), _moduli(0, (2, 1), (1, 0.5)),
+                                  _moduli(50, (4, 3), (np.inf, np.inf)), _moduli(50, (4, 3), (3.0, 2.0)),
+                                  _moduli(90, (np.inf, np.inf), (np.inf, np.inf))])
+    fig = plot_chains_moduli(table)
+    shear = fig.axes[0]
+    markers = [line for line in shear.lines if line.get_marker() == "^"]
+    assert markers and all(np.all(line.get_ydata() > 1.0) for line in markers)
+    assert all(line.get_transform() != shear.transData for line in markers)
+    assert sorted(t.get_text() for t in shear.texts) == ["inf x 1/1", "inf x 1/2"]
+    # the finite points stay on the data scale, below the top of the axes
+    finite = shear.get_ylim()[1]
+    assert np.isfinite(finite) and finite < 10

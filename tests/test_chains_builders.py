@@ -229,3 +229,78 @@ def test_no_overlap_placement_is_a_hard_sphere_start(d, tmp_path):
     q, _ = linked_packing(d, 30, "trimer", np.random.default_rng(2), phi=0.2, no_overlap=False)
     with pytest.raises(ValueError, match="overlap"):
         q.validate(OVERLAP_TOL)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_long_chains_grow_without_overlaps_or_crossings(d):
+    """Paper Fig. 4: chains of 30 spheres placed by the growth walk (the whole-chain draw failed at
+    M = 30 in 2D for every seed tried): a hard-sphere start, bonds of contact length, no crossing links,
+    every chain within half the box (check_linked_start ran), f = d M - (M - 1) per flexible chain."""
+    from jamflow.tolerances import OVERLAP_TOL
+
+    p, messages = linked_packing(d, 4, "chain", np.random.default_rng(1), chain_length=30, free_angles=True)
+    assert messages == [] and p.n == 120 and len(p.links) == 4 * 29
+    p.validate(OVERLAP_TOL)
+    np.testing.assert_allclose(np.linalg.norm(p.box.minimum_image(p.position[p.links.j] - p.position[p.links.i]),
+                                              axis=1), 1.0, rtol=1e-14)
+    if d == 2:
+        assert len(crossing_links(p.links, p.position, p.box)) == 0
+    members = np.flatnonzero(p.clusters == 2)
+    assert _floppy_modes(p.links, p.position, p.box, members) == d * 30 - 29
+
+
+def test_semi_flexible_chains_freeze_angles_by_rule_or_probability():
+    m = 9
+    p, _ = linked_packing(3, 6, "chain", np.random.default_rng(2), chain_length=m, frozen_every=2)
+    angle = p.links.j - p.links.i == 2
+    # the angles at spheres 2, 4, 6 of each chain: links (1, 3), (3, 5), (5, 7) in chain coordinates
+    first = p.links.i[angle] % m
+    assert sorted(set(first.tolist())) == [1, 3, 5] and angle.sum() == 6 * 3
+    assert p.attrs["n_frozen_angles"] == 18 and p.attrs["frozen_angle_rule"] == "every 2"
+    q, _ = linked_packing(3, 6, "chain", np.random.default_rng(2), chain_length=m, frozen_fraction=0.5)
+    r, _ = linked_packing(3, 6, "chain", np.random.default_rng(2), chain_length=m, frozen_fraction=0.5)
+    assert np.array_equal(q.links.i, r.links.i) and 0 < q.attrs["n_frozen_angles"] < 6 * (m - 2)
+    # degrees of freedom: d m - bonds - frozen angles (3D: a frozen angle removes one)
+    members = np.flatnonzero(q.clusters == 0)
+    n_angles = int(np.sum((q.links.j - q.links.i == 2) & np.isin(q.links.i, members)))
+    assert _floppy_modes(q.links, q.position, q.box, members) == 3 * m - (m - 1) - n_angles
+    with pytest.raises(ValueError, match="semi-flexible"):
+        linked_packing(2, 4, "trimer", np.random.default_rng(1), frozen_every=2)
+
+
+@pytest.mark.parametrize("per", ["cluster", "sphere"])
+def test_mixed_sizes_of_chains(per):
+    """Bidisperse clusters (a scaled copy each, half small) or polydisperse spheres; bonds are contact distances."""
+    from jamflow.chains.builders import Sizes
+    from jamflow.tolerances import OVERLAP_TOL
+
+    sizes = Sizes("bi", 1.4, 0.5, per=per) if per == "cluster" else Sizes("poly", width=0.2, per=per)
+    p, _ = linked_packing(2, 20, "trimer", np.random.default_rng(4), sizes=sizes)
+    p.validate(OVERLAP_TOL)
+    D = p.diameter.reshape(20, 3)
+    if per == "cluster":
+        assert np.all(D == D[:, :1]) and sorted(set(D[:, 0].tolist())) == [1.0, 1.4]
+        assert np.sum(D[:, 0] == 1.0) == 10 and p.attrs["length_unit"] == "small sphere diameter"
+    else:
+        assert 0.8 <= D.min() < D.max() <= 1.2 and len(set(D.ravel().tolist())) == 60
+    bonds = p.links.j - p.links.i == 1
+    r = np.linalg.norm(p.box.minimum_image(p.position[p.links.j] - p.position[p.links.i]), axis=1)
+    np.testing.assert_allclose(r[bonds], 0.5 * (p.diameter[p.links.i] + p.diameter[p.links.j])[bonds], rtol=1e-14)
+    # the box is set from whole spheres; unequal next-nearest spheres at a frozen angle may share a lens
+    assert p.attrs["dispersity"] == sizes.dispersity and p.packing_fraction == pytest.approx(0.2, rel=1e-3)
+    assert p.packing_fraction <= 0.2 * (1 + 1e-12)
+    with pytest.raises(ValueError, match="dimers are bidisperse"):
+        linked_packing(2, 4, "dimer", np.random.default_rng(1), sizes=sizes)
+
+
+def test_check_of_a_dilute_start_is_not_isostatic(tmp_path, capsys):
+    """0 contacts: every cluster rattles, there is no backbone, and that is not isostatic."""
+    import json
+
+    assert main(["init-chains", str(tmp_path / "s.nc"), "--d", "2", "--clusters", "10", "--cluster", "trimer",
+                 "--seed", "1", "--quiet"]) == 0
+    assert main(["check", str(tmp_path / "s.nc"), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["n_contacts"] == 0 and report["isostatic_count"] == 0
+    assert report["isostatic"] is False and report["rigidity_counting"] == "no backbone"
+    assert report["n_rattling_clusters"] == report["n_clusters_removed"] == 10

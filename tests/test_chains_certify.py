@@ -58,3 +58,15 @@ def test_a_trimer_without_contacts_is_a_rattling_cluster(trimers):
     loose = loose.evolve(contacts=contacts[~loose.links.contains(contacts[:, 0], contacts[:, 1])])
     cert = certify_linked(loose, strict=False)
     assert cert.rattler[:3].all()
+
+
+def test_certify_of_an_overlapping_sphere_packing_says_soft(tmp_path, capsys):
+    """A soft-jam output overlaps: without --soft certify stops and names the option; with it, it runs."""
+    from pathlib import Path
+
+    src = Path(__file__).parent / "data" / "bodies" / "spheres_soft.nc"
+    assert main(["certify", str(src), str(tmp_path / "c.nc")]) == 1
+    err = capsys.readouterr().err
+    assert "overlap by more than" in err and "written by soft-jam" in err and "--soft" in err
+    assert not (tmp_path / "c.nc").exists()
+    assert main(["certify", str(src), str(tmp_path / "c.nc"), "--soft", "--quiet"]) == 0

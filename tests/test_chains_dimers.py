@@ -12,7 +12,6 @@ from shapely.geometry import Point
 from shapely.ops import unary_union
 
 from jamflow.chains.builders import linked_packing
-from jamflow.chains.clusters import count_clusters
 from jamflow.chains.dimers import (
     dimer_aspect_ratio,
     dimer_asphericity,
@@ -23,6 +22,7 @@ from jamflow.chains.jamming import jam_linked
 from jamflow.cli import main
 from jamflow.minimize.onset import JammingSettings
 from jamflow.models.links import LinkedSpheresModel
+from jamflow.network import count_bodies
 from jamflow.state.bodies import Links
 from jamflow.state.packing import lens_volume, linked_volume, sphere_volume
 
@@ -149,14 +149,15 @@ def test_jammed_dimers_are_force_balanced_and_isostatic_with_rotators(jammed_dim
     r = np.linalg.norm(p.contact_vectors(), axis=1)
     assert np.max(1.0 - r / p.sigma(p.contacts[:, 0], p.contacts[:, 1])) < 1e-4
     # Fig. 3b: N_c = 3 N' - 1 - N_rot with N' the non-rattling dimers; <z> of Eq. 3 is 6
-    count = count_clusters(p.n, 2, p.links, p.contacts)
+    count = count_bodies(p.contacts, p.n, 2, p.links, p.position, p.box)
     n_rot, n_rat, z = p.attrs["n_rotators"], p.attrs["n_rattling_dimers"], p.attrs["z"]
     assert count.n_contacts == count.isostatic_count == 3 * (24 - n_rat) - 1 - n_rot
     assert z == pytest.approx(6.0, rel=1e-14)
     # a rotator's free monomer touches nothing; its other monomer holds the dimer
     contacts_per_sphere = np.bincount(p.contacts.ravel(), minlength=p.n)
-    free = count.rattler & ~count.rattler[np.arange(p.n) ^ 1]  # dimers are spheres (2c, 2c + 1)
+    free = count.dangler  # dimers are spheres (2c, 2c + 1)
     assert free.sum() == n_rot and np.all(contacts_per_sphere[free] == 0)
+    assert np.all(count.free_dofs[count.cluster[free]] == 1)
     assert np.all(contacts_per_sphere[free.reshape(-1, 2)[:, ::-1].ravel()] >= 3)
 
 
@@ -166,8 +167,8 @@ def test_zero_modes_of_jammed_dimers_are_translations_rotators_and_rattlers(jamm
     h = constrained_hessian(p, strain=False)
     assert h.n_zero == 2 + p.attrs["n_rotators"] + 3 * p.attrs["n_rattling_dimers"]
     # every rotator's free rotation is a zero mode: its free monomer moving perpendicular to the link
-    count = count_clusters(p.n, 2, p.links, p.contacts)
-    free = np.flatnonzero(count.rattler & ~count.rattler[np.arange(p.n) ^ 1])
+    count = count_bodies(p.contacts, p.n, 2, p.links, p.position, p.box)
+    free = np.flatnonzero(count.dangler)
     assert free.size == p.attrs["n_rotators"]
     zero = h.modes[:, :h.n_zero]
     for s in free:
@@ -184,7 +185,7 @@ def test_jammed_3d_dimers_are_isostatic_with_z_10_and_rotator_zero_modes():
     result = jam_linked(start, 1e-6, settings=JammingSettings(force_tol=1e-13, pressure_rtol=1e-3, delta_phi=1e-2))
     p = result.packing
     assert result.converged
-    count = count_clusters(p.n, 3, p.links, p.contacts)
+    count = count_bodies(p.contacts, p.n, 3, p.links, p.position, p.box)
     n_rot, n_rat = p.attrs["n_rotators"], p.attrs["n_rattling_dimers"]
     assert n_rot > 0  # the case under test
     assert count.n_contacts == count.isostatic_count == 5 * (24 - n_rat) - 2 * n_rot - 2

@@ -101,26 +101,71 @@ def test_zero_modes_are_the_global_translations_and_self_stress(jammed):
     assert np.max(np.abs(f @ RE)) <= 1e-8
 
 
-def test_rigidity_and_link_columns_agree_with_the_network_core(jammed):
-    """R0 and Gamma's link columns equal jamflow.network's Jacobians (independent code) after the
-    change of strain coordinates: network s (E_aa, then E_ab + E_ba) -> ours e_aa = q_s s_aa,
-    e_ab = sqrt(2) q_s s_ab."""
-    from jamflow.chains.hessian import _geometry, gamma_matrix
-    from jamflow.network import contact_jacobian, link_jacobian, sphere_contacts
+def test_rigidity_link_columns_and_gradient_are_the_papers_first_derivatives(jammed):
+    """R0, Gamma and dU/dq come from the network core's Jacobian; they equal the paper's
+    Eqs. 15-16 (links), 17 (volume) and 35-36 (contacts) written out here in the model's strain
+    coordinates (e_aa = q_s eps_aa, e_ab = sqrt(2) q_s eps_ab), and the gradient equals the
+    energy model's, to round-off."""
+    from jamflow.chains.hessian import _geometry, energy_gradient, gamma_matrix
+    from jamflow.models.strain import strain_components
 
-    _, p = jammed
+    stabilized, p = jammed
     geo = _geometry(p, HARMONIC)
+    n, d = p.n, 2
+
+    def rows(i, j, dx):
+        u = dx / np.linalg.norm(dx, axis=1)[:, None]
+        R = np.zeros((len(i), n * d + 3))
+        Rx = R[:, : n * d].reshape(len(i), n, d)
+        Rx[np.arange(len(i)), j] = u
+        Rx[np.arange(len(i)), i] -= u
+        # d |F R| / d e at F = 1: u_a R_b through the chain rule of the symmetric strain
+        R[:, n * d:] = strain_components(u[:, :, None] * dx[:, None, :], geo.strain_scale)
+        return R
+
     _, R0, _, _ = extended_rigidity(p, strain=True)
-    nd = 2 * p.n
-    # our strain columns in upper-triangle order (0,0), (0,1), (1,1); the network's (0,0), (1,1), (0,1)
-    order, factor = [0, 2, 1], geo.strain_scale * np.array([1.0, 1.0, np.sqrt(2.0)])
+    want = rows(geo.pairs.i, geo.pairs.j, geo.pairs.dx)
+    np.testing.assert_allclose(R0, want, rtol=0, atol=1e-15 * np.abs(want).max())
+    G = gamma_matrix(geo, strain=True, volume=True)
+    links = rows(p.links.i, p.links.j, p.box.minimum_image(p.position[p.links.j] - p.position[p.links.i]))
+    volume = np.r_[np.zeros(n * d), strain_components(np.eye(d), geo.strain_scale)]
+    np.testing.assert_allclose(G, np.column_stack([links.T, volume]), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(gamma_matrix(geo, strain=False), links[:, : n * d].T, rtol=0, atol=1e-15)
+    model = ShearStabilizedModel(p.box, p.diameter, p.links, p.position)
+    raw = model.evaluate(model.dofs(p.position)).gradient
+    np.testing.assert_allclose(energy_gradient(geo, strain=True), raw, rtol=0, atol=1e-13 * np.abs(raw).max())
 
-    def to_network(A):
-        return np.hstack([A[:, :nd], A[:, nd:][:, order] * factor])
 
-    pairs = np.stack([geo.pairs.i, geo.pairs.j], axis=1)
-    J = contact_jacobian(sphere_contacts(p.position, p.box, pairs), p.n, 2, strain="symmetric").toarray()
-    np.testing.assert_allclose(to_network(R0), J, atol=1e-12)
-    G = gamma_matrix(geo, strain=True, volume=False)
-    L = link_jacobian(p.links, p.position, p.box, strain="symmetric").toarray()
-    np.testing.assert_allclose(to_network(G.T), L, atol=1e-12)
+def test_modes_keep_the_constraints_and_are_the_second_derivative_along_them(jammed, tmp_path):
+    """linked_modes (jamflow modes): every mode mapped back by B^T keeps every link (and the volume)
+    to first order, |Gamma^T y| <= 1e-12, and U'' along a mode on the manifold is its eigenvalue."""
+    from jamflow.chains.hessian import _geometry, gamma_matrix
+    from jamflow.chains.modes import linked_modes
+    from jamflow.cli import main
+    from jamflow.io import read_dataset, write_packing
+
+    strain, p = jammed
+    modes = linked_modes(p, strain=strain)
+    G = gamma_matrix(_geometry(p, HARMONIC), strain)
+    assert np.max(np.abs(G.T @ modes.vectors)) <= 1e-12
+    np.testing.assert_allclose(modes.vectors.T @ modes.vectors, np.eye(modes.vectors.shape[1]), atol=1e-12)
+    assert modes.n_zero == 2 == modes.n_label("translation")
+    kind = ShearStabilizedModel if strain else LinkedSpheresModel
+    model = kind(p.box, p.diameter, p.links, p.position)
+    q0 = model.dofs(p.position)
+    h = 1e-5  # as in test_constrained_hessian_is_the_second_derivative_on_the_manifold
+    for k in (2, 3, modes.eigenvalues.size // 2, modes.eigenvalues.size - 1):
+        y = modes.vectors[:, k]
+        num = (_manifold_energy(model, q0, y, h) - 2 * _manifold_energy(model, q0, y, 0.0)
+               + _manifold_energy(model, q0, y, -h)) / h**2
+        assert num == pytest.approx(modes.eigenvalues[k], rel=1e-4)
+    # the command stores them, with strain components when the strain is a degree of freedom
+    write_packing(p, tmp_path / "p.nc")
+    assert main(["modes", str(tmp_path / "p.nc"), str(tmp_path / "m.nc"), "--quiet"]) == 0
+    ds = read_dataset(tmp_path / "m.nc", "linked-modes")
+    np.testing.assert_allclose(ds["eigenvalue"].values, modes.eigenvalues, rtol=1e-12, atol=1e-15)
+    assert ds.attrs["max_constraint_violation"] <= 1e-12 and ds.attrs["n_translation"] == 2
+    assert ds.attrs["hessian_strain"] == int(strain)
+    assert (np.abs(ds["mode_strain"].values).max() > 0) == strain
+    assert main(["plot", "mode", str(tmp_path / "p.nc"), str(tmp_path / "m.nc"), str(tmp_path / "m.png"),
+                 "--quiet"]) == 0

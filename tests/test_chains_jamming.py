@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from jamflow.chains.builders import linked_packing
-from jamflow.chains.clusters import count_clusters
 from jamflow.chains.jamming import jam_linked
 from jamflow.cli import main
 from jamflow.io import read_packing, write_packing
@@ -18,7 +17,7 @@ from jamflow.minimize.model import ModelEvaluation
 from jamflow.minimize.onset import JammingSettings
 from jamflow.models.links import LinkedSpheresModel
 from jamflow.models.spheres.model import SphereModel
-from jamflow.network import isostatic_count
+from jamflow.network import count_bodies, isostatic_count
 from jamflow.network.spheres import find_rattlers
 from jamflow.state.bodies import Links
 from jamflow.tolerances import LINK_LENGTH_RTOL
@@ -106,8 +105,8 @@ def test_jammed_rigid_trimers_are_force_balanced_on_the_manifold_and_isostatic(j
     # the raw gradient is not zero: the links carry the forces
     assert model.max_force(ev.gradient) > 1e3 * 1e-13
     # isostatic backbone of rigid trimers: N_c = 3 N_clusters - 2 + 1 after rattling clusters are removed
-    count = count_clusters(p.n, 2, p.links, p.contacts)
-    assert count.n_contacts == count.isostatic_count == 3 * (12 - count.rattling_cluster.sum()) - 1
+    count = count_bodies(p.contacts, p.n, 2, p.links, p.position, p.box)
+    assert count.n_contacts == count.isostatic_count == 3 * (12 - count.removed.sum()) - count.free_dofs.sum() - 1
     assert p.attrs["n_contacts"] == count.n_contacts and np.array_equal(p.rattler, count.rattler)
 
 
@@ -127,23 +126,10 @@ def test_without_links_the_linked_model_is_the_sphere_model():
     rng = np.random.default_rng(0)
     c = np.unique(np.sort(rng.integers(0, 60, (150, 2)), axis=1), axis=0)
     c = c[c[:, 0] < c[:, 1]]
-    count = count_clusters(60, 2, None, c)
+    count = count_bodies(c, 60, 2)
     rattler = find_rattlers(60, 2, c)
     assert np.array_equal(count.rattler, rattler)
     assert count.isostatic_count == isostatic_count(int((~rattler).sum()), 2, global_dofs=2)
-
-
-def test_danglers_and_rattling_clusters():
-    """A free chain end with no contact dangles (Fig. 4); a dimer held by 3 contacts rattles (needs f + 1 = 4)."""
-    links = Links(np.array([0, 1, 3]), np.array([1, 2, 4]), np.ones(3))
-    # spheres 5..9 are a held frame: each has many contacts with the others
-    frame = [(a, b) for a in range(5, 10) for b in range(a + 1, 10)]
-    contacts = np.array(frame + [(0, 5), (0, 6), (1, 7), (1, 8), (3, 5), (3, 6), (4, 7)])
-    count = count_clusters(10, 2, links, contacts)
-    assert count.dangler.tolist() == [False, False, True] + [False] * 7
-    # chain 0-1 without its dangler: f = 2 * 2 - 1 = 3, held by 4 contacts: stays; dimer 3-4: 3 contacts < 4
-    assert count.rattler.tolist() == [False, False, True, True, True] + [False] * 5
-    assert count.rattling_cluster[count.cluster[3]] and not count.rattling_cluster[count.cluster[0]]
 
 
 def test_cli_soft_jam_and_check_of_a_linked_packing(tmp_path, capsys, jammed_trimers):

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from jamflow.chains.builders import linked_packing
-from jamflow.chains.clusters import count_clusters
 from jamflow.chains.jamming import jam_linked
 from jamflow.minimize.onset import JammingSettings
 from jamflow.models.spheres.model import SphereModel
 from jamflow.models.strain import ShearStabilizedModel
+from jamflow.network import count_bodies
 from jamflow.state.bodies import Links
 from jamflow.tolerances import LINK_LENGTH_RTOL
 
@@ -126,6 +126,59 @@ def test_shear_stabilized_trimers_have_vanishing_strain_forces_and_isotropic_str
     # the box changed shape, not volume
     assert not np.allclose(p.box.matrix / p.box.matrix[0, 0], start.box.matrix / start.box.matrix[0, 0])
     # rigid: at least the shear-stabilised isostatic count sum f_c - d + 1 + d(d+1)/2 - 1
-    count = count_clusters(p.n, 2, p.links, p.contacts, shear_stabilized=True)
-    assert count.isostatic_count == 3 * (8 - count.rattling_cluster.sum()) - 2 + 1 + 2
+    count = count_bodies(p.contacts, p.n, 2, p.links, p.position, p.box, shear_stabilized=True)
+    assert count.isostatic_count == 3 * (8 - count.removed.sum()) - count.free_dofs.sum() - 2 + 1 + 2
     assert count.n_contacts >= count.isostatic_count
+
+
+def test_enthalpy_of_linked_spheres_relaxes_the_whole_box_to_the_pressure():
+    """models.box.EnthalpyModel on the strain model with the volume free: the gradient of U + P0 V is the
+    finite difference of it, and FIRE ends with the total stress -P0 1 (contacts and link tensions),
+    the links held; a model without a deformable box is refused."""
+    from pathlib import Path
+
+    from jamflow.io import read_packing
+    from jamflow.minimize.fire import minimize_fire
+    from jamflow.models.box import EnthalpyModel
+    from jamflow.models.links import LinkedSpheresModel
+
+    p = read_packing(Path(__file__).parent / "data" / "bodies" / "linked_soft.nc", None)
+    P0 = 2e-3
+    free = ShearStabilizedModel(p.box, p.diameter, p.links, p.position, fixed_volume=False)
+    model = EnthalpyModel(free, P0)
+    q = model.dofs(p.position)
+    q[-3:] = [0.01, -0.02, 0.015]  # a finite strain
+    g = model.evaluate(q).gradient
+    h = 1e-7
+    for k in (0, 5, q.size - 3, q.size - 2, q.size - 1):
+        e = np.zeros(q.size)
+        e[k] = h
+        num = (model.evaluate(q + e).energy - model.evaluate(q - e).energy) / (2 * h)
+        assert num == pytest.approx(g[k], abs=1e-7 * np.abs(g).max())
+    res = minimize_fire(model, p.position, 1e-12, 2_000_000)
+    assert res.converged
+    box = free.last_box()
+    W = LinkedSpheresModel(box, p.diameter, p.links, res.position).evaluate(res.position.ravel()).virial
+    # strain forces below the tolerance: |W / V - P0 1| <= q_s F_tol / V per component (scaled strain)
+    np.testing.assert_allclose(W / box.volume, P0 * np.eye(2), rtol=0, atol=2 * free.strain_scale * 1e-12 / box.volume)
+    assert np.max(np.abs(p.links.length_errors(res.position, box))) <= LINK_LENGTH_RTOL
+    assert box.volume != pytest.approx(p.box.volume, rel=1e-3)  # the volume moved to reach P0
+    with pytest.raises(TypeError, match="no box degrees of freedom"):
+        EnthalpyModel(LinkedSpheresModel(p.box, p.diameter, p.links, p.position), P0)
+
+
+@pytest.mark.slow
+def test_cli_soft_jam_box_dof_full_of_a_linked_packing(tmp_path):
+    """soft-jam --box-dof full: the shear-stabilised bisection to P0, then the enthalpy with the box free."""
+    from pathlib import Path
+
+    from jamflow.cli import main
+    from jamflow.io import read_packing
+
+    src = Path(__file__).parent / "data" / "bodies" / "linked_soft.nc"
+    assert main(["soft-jam", str(src), str(tmp_path / "f.nc"), "--pressure", "1e-3", "--box-dof", "full",
+                 "--quiet"]) == 0
+    p = read_packing(tmp_path / "f.nc", None)
+    assert p.protocol.endswith(">soft-enthalpy") and p.attrs["box_dof"] == "full"
+    assert p.pressure == pytest.approx(1e-3, rel=1e-9) and p.attrs["stress_deviation"] <= 1e-8
+    assert p.attrs["n_contacts"] >= p.attrs["isostatic_count"] > 0

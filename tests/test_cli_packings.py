@@ -168,13 +168,13 @@ def test_wrong_options(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> No
 
 def test_bad_values_are_one_line_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "p.nc"
-    for argv, message in (
-        (["--d", "1", "--n", "10", "--phi", "0.1"], "d must be"),
-        (["--d", "2", "--n", "10", "--phi", "1.5"], "phi"),
-        (["--d", "2", "--n", "2", "--phi", "0.5"], "half the box"),
+    for argv, message, expected in (
+        (["--d", "1", "--n", "10", "--phi", "0.1"], "--d", 2),
+        (["--d", "2", "--n", "10", "--phi", "1.5"], "--phi", 2),
+        (["--d", "2", "--n", "2", "--phi", "0.5"], "half the box", 1),
     ):
         code, _, err = _run(capsys, "init", out, *argv, "--seed", "0")
-        assert code == 1, argv
+        assert code == expected, argv
         _one_line_error(err)
         assert message in err
     assert not out.exists()

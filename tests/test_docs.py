@@ -47,3 +47,16 @@ def test_docs_build_without_warnings(tmp_path):
     api = (tmp_path / "site" / "api" / "index.html").read_text()
     for name in ("random_packing", "calippso", "load_scene", "write_xyz", "Packing"):
         assert name in api
+
+
+def test_every_test_the_reliability_page_names_exists():
+    # docs/reliability.md maps each guarantee to its test; a renamed or deleted test must fail here
+    import re
+
+    text = (DOCS / "reliability.md").read_text()
+    named = set(re.findall(r"\b(test_[a-z0-9_]+)\b(?!\.py)", text)) - {
+        name for name in re.findall(r"\b(test_[a-z0-9_]+)\.py", text)}
+    defined = {m for path in (REPO / "tests").glob("test_*.py")
+               for m in re.findall(r"^def (test_[a-z0-9_]+)\(", path.read_text(), flags=re.M)}
+    assert named, "the page names no test"
+    assert named <= defined, f"tests named in docs/reliability.md that do not exist: {sorted(named - defined)}"

@@ -237,12 +237,12 @@ def test_walls_mono_stores_geometric_pair_and_wall_contacts():
 
 def test_failed_force_qp_falls_back_to_the_dual_vertex_and_says_so(monkeypatch):
     """Should the QP fail, the geometric contacts carry the vertex's (balanced) duals."""
-    import jamflow.protocols.calippso as cal
+    import jamflow.protocols.calippso.network as cal_network
 
     def fail(*args, **kwargs):
         raise RuntimeError("minimum-norm force QP not solved: HiGHS status 'Infeasible'")
 
-    monkeypatch.setattr(cal, "min_norm_forces", fail)
+    monkeypatch.setattr(cal_network, "min_norm_forces", fail)
     lattice = lattice_packing("triangular", (8, 4))
     res = calippso(lattice.evolve(contacts=None))
     p = res.packing

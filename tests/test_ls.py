@@ -78,8 +78,7 @@ def test_collision_time_near_contact_is_accurate():
 
 def _state(packing, rate, seed=0, beta=10.0, neighbor_list=None):
     st = _State(packing, beta, np.random.default_rng(seed), neighbor_list)
-    st.sc[2] = rate
-    st.rebuild()
+    st.set_rate(rate)
     return st
 
 
@@ -122,8 +121,8 @@ def test_energy_gain_with_growth_is_growth_rate_times_impulse(neighbor_list):
     ncoll = _run(st, 5_000, math.inf)
     assert ncoll > 1000
     K1 = kern.kinetic_energy(st.v)
-    assert K1 == pytest.approx(st.sc[3], rel=1e-12)  # bookkeeping of the kernel
-    dK, vir = K1 - K0, st.sc[5]
+    assert K1 == pytest.approx(st.kinetic, rel=1e-12)  # bookkeeping of the kernel
+    dK, vir = K1 - K0, st.virial
     assert dK > 0.0
     assert vir / st.scale() * (1 - 1e-12) <= dK / kappa <= vir / s0 * (1 + 1e-12)
     assert np.abs(st.v.sum(axis=0)).max() < 1e-12

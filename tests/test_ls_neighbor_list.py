@@ -18,8 +18,7 @@ from jamflow.tolerances import OVERLAP_TOL
 
 def _state(packing, rate, neighbor_list, seed=0):
     st = _State(packing, 10.0, np.random.default_rng(seed), neighbor_list)
-    st.sc[2] = rate
-    st.rebuild()
+    st.set_rate(rate)
     return st
 
 

@@ -208,9 +208,9 @@ def test_a_box_too_small_for_the_skin_builds_with_a_smaller_skin_and_the_same_mi
     r = np.linalg.norm(box.minimum_image(x[b] - x[a]), axis=1)
     want = {(i, j) for i, j, keep in zip(a.tolist(), b.tolist(), r < 1.0 + nlist.skin) if keep}
     assert set(zip(nlist.i.tolist(), nlist.j.tolist())) == want
-    # a build in a roomy box is back at the default skin
+    # a build in a roomy box is back at the default skin (as the difference reach - max D)
     nlist.build(2.0 * x, box.scaled(2.0))
-    assert nlist.skin == SPHERE_SKIN[3]
+    assert nlist.reach == 1.0 + SPHERE_SKIN[3] and nlist.skin == nlist.reach - 1.0
     # the skin changes no result: FIRE from an overlapping start ends bitwise where an explicit small skin does
     ends = [minimize_fire(SphereModel(box, D, nlist=NeighborList(D, skin)), x, force_tol=1e-12)
             for skin in (None, 0.02)]

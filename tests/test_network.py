@@ -16,6 +16,7 @@ from jamflow.network import (
     link_jacobian,
     pair_rows,
     prune_rattlers,
+    prune_unheld,
     self_stresses,
     sphere_contacts,
     strain_basis,
@@ -209,6 +210,58 @@ def test_slider_is_the_body_whose_normals_leave_one_translation_free() -> None:
     # tilt one normal: the x translation is blocked too
     tilted = ContactSet(cs.i, cs.j, np.array([[0.6, 0.8], [0.0, 1.0], [0.0, -1.0]]), cs.separation)
     assert not find_sliders(contact_jacobian(tilted, 4), tilted, 4, 2)[0]
+
+
+def test_a_body_pinched_between_two_antiparallel_contacts_is_held_not_a_rattler() -> None:
+    """A periodic 4 x 4 square network (every body four contacts) and body 16 touching only
+    bodies 0 and 1 (normals given): with antiparallel normals it carries force along their
+    line, prune_unheld keeps it and find_sliders calls it a slider, while prune_rattlers'
+    count removes it; tilted normals cannot balance it, nor can two pushing the same way,
+    and one contact never can."""
+    side = 4
+    rows, normals = [], []
+    for a in range(side * side):
+        r, c = divmod(a, side)
+        for b, n in ((r * side + (c + 1) % side, (1.0, 0.0)), (((r + 1) % side) * side + c, (0.0, 1.0))):
+            rows.append((a, b))
+            normals.append(n)
+
+    def network(extra_normals):
+        i = [p[0] for p in rows] + [0, 1][: len(extra_normals)]
+        j = [p[1] for p in rows] + [16, 16][: len(extra_normals)]
+        n = np.array(normals + list(extra_normals), dtype=float)
+        return ContactSet(i, j, n, n)
+
+    for extra, held in ((((0.0, 1.0), (0.0, -1.0)), True), (((0.0, 1.0), (0.3, -0.95)), False),
+                        (((0.0, 1.0), (0.0, 1.0)), False), (((0.0, 1.0),), False)):
+        cs = network(extra)
+        rattler = prune_unheld(cs, 17)
+        assert rattler[16] == (not held) and not rattler[:16].any()
+        assert prune_rattlers(cs, 17, dofs_per_body=2)[16]
+        if held:
+            assert find_sliders(contact_jacobian(cs, 17), cs, 17, 2, rattler=rattler)[16]
+
+
+@pytest.mark.parametrize("tilt, slides", [(1e-12, True), (1e-8, True), (1e-4, False)])
+def test_slider_by_rank_within_the_zero_mode_floor(tilt, slides) -> None:
+    """A normal tilted by ``tilt`` leaves the slide a stiffness ``~ k tilt^2``: below the
+    spectrum's zero-mode floor (~1e-12 k, SLIDER_RTOL = 1e-6 on the singular values) the
+    body slides; a numerically exact rank test (rtol 1e-10) missed tilts of 1e-8. The
+    lever arms give the rotation column; with them the body's own block has rank 2 and its
+    kernel is the slide (no rotation), whatever the arms."""
+    from jamflow.tolerances import SLIDER_RTOL
+
+    normal = np.array([[np.sin(tilt), np.cos(tilt)], [0.0, 1.0], [0.0, -1.0]])
+    arm = np.array([[0.3, 0.2], [-0.4, 0.2], [0.1, -0.2]])
+    sep = np.array([[0.0, 1.0], [0.0, 1.0], [0.0, -1.0]])
+    cs = ContactSet([0, 0, 0], [1, 2, 3], normal, sep, arm, arm - sep)
+    J = contact_jacobian(cs, 4, 2, rotations=True)
+    assert find_sliders(J, cs, 4, 2)[0] == slides
+    s = np.linalg.svd(normal, compute_uv=False)
+    assert (s[-1] <= SLIDER_RTOL * s[0]) == slides
+    # a body with fewer contacts than d keeps a free translation by construction
+    one = ContactSet([0], [1], normal[1:2], sep[1:2], arm[1:2], arm[1:2] - sep[1:2])
+    assert find_sliders(contact_jacobian(one, 2, 2, rotations=True), one, 2, 2)[0]
 
 
 def test_isostatic_count_conventions() -> None:

@@ -60,7 +60,7 @@ def _check_invariants(integ: Integrator) -> None:
     if f.size:
         assert f.min() > -o.rel_tol * np.abs(f).max()
         # rigid contacts: dr/dt = 0
-        pairs, images = st.nl.pairs[st.contact], st.nl.images[st.contact]
+        pairs, images = st.nl.pairs[st.contact], st.nl.image[st.contact]
         v = pair_velocities(pair_vectors(st.x, st.h, pairs, images), pairs, integ.solution)
         assert np.max(np.abs(v)) <= 1e-8 * integ.velocity_scale(integ.solution)
     # (b) no overlaps among non-contacts: every pair, brute force over minimum images
@@ -96,7 +96,7 @@ def test_reported_stress_is_that_of_the_current_separations_and_forces(dense32, 
     while integ.state.strain < 0.05:
         integ.step()
         st = integ.state
-        R = pair_vectors(st.x, st.h, st.nl.pairs[st.contact], st.nl.images[st.contact])
+        R = pair_vectors(st.x, st.h, st.nl.pairs[st.contact], st.nl.image[st.contact])
         expected = stress_tensor(R, integ.solution.force, integ.volume())
         assert np.max(np.abs(integ.stress() - expected)) <= 1e-13 * np.max(np.abs(expected))
         by_virial += integ._solved_at[0] is integ.solution
@@ -139,7 +139,7 @@ def test_fixed_pressure_forces_meet_the_solver_tolerance_where_their_two_parts_c
             st = integ.state
             f = integ.solution.force
             if f.size and integ.solution.velocity.size:
-                pairs, images = st.nl.pairs[st.contact], st.nl.images[st.contact]
+                pairs, images = st.nl.pairs[st.contact], st.nl.image[st.contact]
                 direct = network.solve_network(st.x, st.h, pairs, images, integ.base_gradient,
                                                pressure=integ.pressure_internal, rate=integ.drive.rate)
                 worst = max(worst, float(np.max(np.abs(direct.force - f)) / np.max(np.abs(direct.force))))
@@ -155,7 +155,7 @@ def test_midpoint_contacts_only_open_so_no_pair_leaves_the_network_overlapping(d
     while integ.state.strain < 0.1:
         integ.step()
         st = integ.state
-        gap = np.linalg.norm(pair_vectors(st.x, st.h, st.nl.pairs, st.nl.images), axis=1) / st.nl.sigma - 1.0
+        gap = np.linalg.norm(pair_vectors(st.x, st.h, st.nl.pairs, st.nl.image), axis=1) / st.nl.sigma - 1.0
         # the Verlet list holds every pair that could touch: contacts open by the drift
         # only, and no other listed pair overlaps (round-off aside)
         assert gap[st.contact].min() >= -1e-12

@@ -15,17 +15,24 @@ import numpy as np
 import pytest
 
 from jamflow.box import Box
-from jamflow.protocols.overdamped.collisions import build_neighbor_list, next_collision
+from jamflow.protocols.overdamped.collisions import (
+    FLOW_ROOM_SHARE,
+    build_neighbor_list,
+    next_collision,
+)
 from jamflow.protocols.overdamped.driving import Drive
 from jamflow.protocols.overdamped.integrate import FlowOptions, Integrator
 from jamflow.protocols.overdamped.jamming import constrained_subset, self_stress
 from jamflow.protocols.overdamped.network import (
+    advance_box,
+    advance_positions,
     affine_rates,
     pair_vectors,
     pair_velocities,
     solve_network,
 )
 from jamflow.protocols.overdamped.rewiring import admissible, rewire
+from jamflow.protocols.overdamped.skin import SkinBudget
 from jamflow.protocols.overdamped.solver import s_matrix
 
 
@@ -49,7 +56,7 @@ def _dense_projection(S):
 @pytest.mark.parametrize("d", [2, 3])
 def test_shear_forces_and_velocities_are_rigid_and_balanced(rng, d):
     x, box, radius, nl, pick = _random_network(rng, n=12, d=d, n_contacts=3 * d)
-    pairs, images = nl.pairs[pick], nl.images[pick]
+    pairs, images = nl.pairs[pick], nl.image[pick]
     E = np.zeros((d, d))
     E[0, 1] = 1.0
     xi0 = 0.7
@@ -69,7 +76,7 @@ def test_shear_forces_and_velocities_are_rigid_and_balanced(rng, d):
 
 def test_external_force_velocities_match_projection(rng):
     x, box, radius, nl, pick = _random_network(rng, n=10, d=2, n_contacts=8)
-    pairs, images = nl.pairs[pick], nl.images[pick]
+    pairs, images = nl.pairs[pick], nl.image[pick]
     F = rng.normal(size=x.shape)
     sol = solve_network(x, box.matrix, pairs, images, np.zeros((2, 2)), external=F, xi0=2.0)
     R = pair_vectors(x, box.matrix, pairs, images)
@@ -81,7 +88,7 @@ def test_external_force_velocities_match_projection(rng):
 
 def test_fixed_pressure_forces_reproduce_pressure(rng):
     x, box, radius, nl, pick = _random_network(rng, n=12, d=2, n_contacts=14)
-    pairs, images = nl.pairs[pick], nl.images[pick]
+    pairs, images = nl.pairs[pick], nl.image[pick]
     E = np.array([[0.0, 1.0], [0.0, 0.0]])
     p = 3.5
     sol = solve_network(x, box.matrix, pairs, images, E, pressure=p, rate=1.0)
@@ -115,12 +122,12 @@ def test_next_collision_matches_brute_force_scan(rng, d):
     x = rng.uniform(0, length, size=(n, d))
     nl = build_neighbor_list(x, box, radius, skin=1.0)
     # only initially separated pairs are candidates
-    R0 = pair_vectors(x, box.matrix, nl.pairs, nl.images)
+    R0 = pair_vectors(x, box.matrix, nl.pairs, nl.image)
     skip = np.linalg.norm(R0, axis=1) <= nl.sigma
     U = rng.normal(size=(n, d))
     E = np.zeros((d, d))
     E[0, 1] = 0.8
-    t, k = next_collision(x, box.matrix, nl.pairs, nl.images, nl.sigma, skip, U, E, 0.2)
+    t, k = next_collision(x, box.matrix, nl.pairs, nl.image, nl.sigma, skip, U, E, 0.2)
     # brute force: sample the straight-line motion finely, then bisect the first crossing
     W = R0 @ E.T + U[nl.pairs[:, 1]] - U[nl.pairs[:, 0]]
     ts = np.linspace(0, 0.2, 20001)
@@ -137,6 +144,86 @@ def test_next_collision_matches_brute_force_scan(rng, d):
     assert abs(t - first[kb]) <= ts[1]
     Rt = R0[k] + t * W[k]
     assert np.linalg.norm(Rt) == pytest.approx(nl.sigma[k], rel=1e-12)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_the_flow_list_holds_every_pair_within_its_contact_distance_plus_skin(rng, d):
+    """The integrator's list is the one Verlet list: each pair with r < d_i + d_j + skin, once,
+    contact distances exactly d_i + d_j, images giving the minimum image, positions by index_of."""
+    n, length = 80, 6.0
+    box = Box.lees_edwards([length] * d, 0.3)
+    radius = rng.uniform(0.25, 0.5, size=n)
+    x = rng.uniform(0, length, size=(n, d))
+    nl = build_neighbor_list(x, box, radius, skin=0.4)
+    a, b = np.triu_indices(n, k=1)
+    r = np.linalg.norm(box.minimum_image(x[b] - x[a]), axis=1)
+    want = r < radius[a] + radius[b] + nl.skin
+    assert want.sum() > n and (~want & (r < 2 * radius.max() + nl.skin)).any()  # per pair, not one cutoff
+    assert list(zip(nl.i.tolist(), nl.j.tolist())) == list(zip(a[want].tolist(), b[want].tolist()))
+    np.testing.assert_array_equal(nl.sigma, radius[nl.i] + radius[nl.j])
+    assert nl.reach == 2.0 * radius.max() + nl.skin and abs(nl.skin - 0.4) < 1e-15
+    np.testing.assert_allclose(pair_vectors(x, box.matrix, nl.pairs, nl.image),
+                               box.minimum_image(x[nl.j] - x[nl.i]), rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(nl.index_of(nl.pairs), np.arange(len(nl.i)))
+    assert np.all(nl.index_of(np.stack([a[~want], b[~want]], axis=1)) == -1)
+
+
+def test_the_flow_list_caps_its_skin_in_a_small_box():
+    """A box with room 0.5 beside unit discs: the skin is FLOW_ROOM_SHARE of it; no room at all is refused."""
+    rng = np.random.default_rng(4)
+    box = Box.cubic(2, 3.0)  # half width 1.5, largest contact distance 1.0
+    x = rng.uniform(0, 3.0, size=(6, 2))
+    nl = build_neighbor_list(x, box, np.full(6, 0.5), skin=1.0)
+    assert nl.reach == 1.0 + FLOW_ROOM_SHARE * 0.5 and nl.skin == nl.reach - 1.0
+    with pytest.raises(ValueError, match="box too small"):
+        build_neighbor_list(x, box, np.full(6, 0.75), skin=0.1)
+
+
+def test_the_skin_budget_horizon_is_tight_for_a_head_on_pair():
+    """Two discs closing head-on at the largest speed u, no shear: the horizon is skin / (2 u), and
+    there the pair that was just outside the list stands at its contact distance."""
+    box = Box.cubic(2, 20.0)
+    x = np.array([[5.0, 5.0], [6.3 + 1e-9, 5.0], [12.0, 12.0]])  # r = sigma + skin (+1e-9): unlisted
+    nl = build_neighbor_list(x, box, np.full(3, 0.5), skin=0.3)
+    assert nl.index_of(np.array([[0, 1]]))[0] == -1
+    U = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 0.3]])
+    E = np.zeros((2, 2))
+    budget = SkinBudget.fresh(x)
+    t = budget.horizon(nl, U, E)
+    assert t == pytest.approx(nl.skin / 2.0, rel=1e-14)
+    r = np.linalg.norm(pair_vectors(advance_positions(x, U, E, t), box.matrix, np.array([[0, 1]]),
+                                    np.zeros((1, 2))))
+    assert 0.0 <= r - 1.0 < 1e-8
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_no_unlisted_pair_meets_within_the_skin_budget_horizon(rng, d):
+    """Moved on straight lines under shear to the horizon, every pair closer than its contact
+    distance is listed; the budget is valid just before the horizon and spent just after."""
+    n, length = 150, 6.0
+    box = Box.lees_edwards([length] * d, 0.2)
+    radius = rng.uniform(0.3, 0.4, size=n)
+    x = rng.uniform(0, length, size=(n, d))
+    nl = build_neighbor_list(x, box, radius, skin=0.3)
+    U = rng.normal(size=(n, d))
+    E = np.zeros((d, d))
+    E[0, 1] = 2.0
+    budget = SkinBudget.fresh(x)
+    t = budget.horizon(nl, U, E)
+    assert 0.0 < t < np.inf
+    before, after = SkinBudget.fresh(x), SkinBudget.fresh(x)
+    before.advance(U, E, t * (1.0 - 1e-9))
+    after.advance(U, E, t * (1.0 + 1e-6))
+    assert before.valid(nl) and not after.valid(nl)
+    x1, h1 = advance_positions(x, U, E, t), Box(advance_box(box.matrix, E, t))
+    a, b = np.triu_indices(n, k=1)
+    r1 = np.linalg.norm(h1.minimum_image(x1[b] - x1[a]), axis=1)
+    close = r1 < radius[a] + radius[b]
+    assert close.sum() > 0
+    assert np.all(nl.index_of(np.stack([a[close], b[close]], axis=1)) >= 0)
+    r0 = np.linalg.norm(box.minimum_image(x[b] - x[a]), axis=1)
+    # the motion used the skin: some listed pair closed by more than a third of it
+    assert np.max(r0 - r1) > nl.skin / 3.0
 
 
 def _integrator_for(x, box, radius, drive, skin):
@@ -232,9 +319,9 @@ def test_self_stress_of_isostatic_triangle_lattice_is_positive():
     box = Box.orthogonal(L)
     radius = np.full(len(pts), 0.5)
     nl = build_neighbor_list(pts, box, radius, skin=0.2)
-    R = pair_vectors(pts, box.matrix, nl.pairs, nl.images)
+    R = pair_vectors(pts, box.matrix, nl.pairs, nl.image)
     touching = np.abs(np.linalg.norm(R, axis=1) - 1.0) < 1e-12
-    pairs, images = nl.pairs[touching], nl.images[touching]
+    pairs, images = nl.pairs[touching], nl.image[touching]
     assert len(pairs) == 3 * len(pts)  # hyperstatic: 2N - 1 < 3N
     # remove contacts until exactly isostatic in the constrained sense, keeping rigidity
     count = constrained_subset(len(pts), 2, pairs)

@@ -27,7 +27,7 @@ def _random_network(rng, n, d, n_contacts, length=5.0):
     box = Box.cubic(d, length)
     nl = build_neighbor_list(x, box, np.full(n, 0.5), skin=0.4 * length - 1.0)
     pick = np.sort(rng.choice(len(nl.pairs), size=n_contacts, replace=False))
-    return x, box, nl.pairs[pick], nl.images[pick]
+    return x, box, nl.pairs[pick], nl.image[pick]
 
 
 def _drive_kwargs(mode, n, d, rng):
@@ -140,11 +140,11 @@ def test_bordered_preconditioner_on_a_changed_network_matches_direct_solve(rng, 
            "add_and_remove": np.sort(np.concatenate([base[2:], spare]))}[change]
     kw = _drive_kwargs(mode, n, d, rng)
     cache = FactorCache()
-    solve_network(x, box.matrix, nl.pairs[base], nl.images[base], check_pivots=False, cache=cache, **kw)
+    solve_network(x, box.matrix, nl.pairs[base], nl.image[base], check_pivots=False, cache=cache, **kw)
     x1 = x + 1e-3 * rng.normal(size=x.shape)
-    fast = solve_network(x1, box.matrix, nl.pairs[new], nl.images[new], check_pivots=False, cache=cache, **kw)
+    fast = solve_network(x1, box.matrix, nl.pairs[new], nl.image[new], check_pivots=False, cache=cache, **kw)
     assert (cache.n_factor, cache.n_bordered) == (1, 1), "the bordered CG path was not taken"
-    direct = solve_network(x1, box.matrix, nl.pairs[new], nl.images[new], **kw)
+    direct = solve_network(x1, box.matrix, nl.pairs[new], nl.image[new], **kw)
     assert _rel(fast.force, direct.force) < FORCE_REL
 
 
@@ -216,9 +216,9 @@ def test_extrapolated_warm_starts_and_memoised_borders_match_direct_solves(rng, 
         t = 1e-3 * step
         sel = np.sort(pick[:-1] if step < 4 else pick)
         xt = x + t * U
-        fast = solve_network(xt, box.matrix, nl.pairs[sel], nl.images[sel], check_pivots=False, cache=cache,
+        fast = solve_network(xt, box.matrix, nl.pairs[sel], nl.image[sel], check_pivots=False, cache=cache,
                              time=t, **kw)
-        direct = solve_network(xt, box.matrix, nl.pairs[sel], nl.images[sel], **kw)
+        direct = solve_network(xt, box.matrix, nl.pairs[sel], nl.image[sel], **kw)
         assert _rel(fast.force, direct.force) < FORCE_REL, step
     assert cache.n_factor == 1 and cache.n_cg == 7 and cache.n_bordered == 4
     assert len(cache.bordered) == 1
@@ -419,13 +419,13 @@ def test_the_cache_carries_its_ordering_and_forgets_it_on_reset(rng, mode):
     base, new = np.sort(pick[:-2]), np.sort(pick[2:])
     kw = _drive_kwargs(mode, n, d, rng)
     cache = FactorCache(max_changes=0)
-    solve_network(x, box.matrix, nl.pairs[base], nl.images[base], check_pivots=False, cache=cache, **kw)
+    solve_network(x, box.matrix, nl.pairs[base], nl.image[base], check_pivots=False, cache=cache, **kw)
     carried = cache.order
     assert np.array_equal(carried.codes, cache.codes)
     x1 = x + 1e-3 * rng.normal(size=x.shape)
-    fast = solve_network(x1, box.matrix, nl.pairs[new], nl.images[new], check_pivots=False, cache=cache, **kw)
+    fast = solve_network(x1, box.matrix, nl.pairs[new], nl.image[new], check_pivots=False, cache=cache, **kw)
     assert cache.n_factor == 2 and cache.order is carried, "the changed network was not factorised under the carried ordering"
-    direct = solve_network(x1, box.matrix, nl.pairs[new], nl.images[new], **kw)
+    direct = solve_network(x1, box.matrix, nl.pairs[new], nl.image[new], **kw)
     assert _rel(fast.force, direct.force) < FORCE_REL
     cache.reset()
     assert cache.order is None
@@ -445,14 +445,14 @@ def test_bordered_preconditioner_with_several_added_and_removed_pairs(rng, mode)
     kw = _drive_kwargs(mode, n, d, rng)
     x1 = x + 1e-3 * rng.normal(size=x.shape)
     cache = FactorCache(max_changes=8)
-    solve_network(x, box.matrix, nl.pairs[base], nl.images[base], check_pivots=False, cache=cache, **kw)
-    fast = solve_network(x1, box.matrix, nl.pairs[new], nl.images[new], check_pivots=False, cache=cache, **kw)
+    solve_network(x, box.matrix, nl.pairs[base], nl.image[base], check_pivots=False, cache=cache, **kw)
+    fast = solve_network(x1, box.matrix, nl.pairs[new], nl.image[new], check_pivots=False, cache=cache, **kw)
     assert (cache.n_factor, cache.n_bordered) == (1, 1), "the bordered CG path was not taken"
-    direct = solve_network(x1, box.matrix, nl.pairs[new], nl.images[new], **kw)
+    direct = solve_network(x1, box.matrix, nl.pairs[new], nl.image[new], **kw)
     assert _rel(fast.force, direct.force) < FORCE_REL
     few = FactorCache(max_changes=5)
-    solve_network(x, box.matrix, nl.pairs[base], nl.images[base], check_pivots=False, cache=few, **kw)
-    solve_network(x1, box.matrix, nl.pairs[new], nl.images[new], check_pivots=False, cache=few, **kw)
+    solve_network(x, box.matrix, nl.pairs[base], nl.image[base], check_pivots=False, cache=few, **kw)
+    solve_network(x1, box.matrix, nl.pairs[new], nl.image[new], check_pivots=False, cache=few, **kw)
     assert (few.n_factor, few.n_bordered) == (2, 0)
 
 

@@ -6,6 +6,8 @@ is not written); here every kind is drawn on small synthetic inputs and saved.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import xarray as xr
@@ -22,7 +24,10 @@ from jamflow.analysis.gaps import gap_histogram
 from jamflow.analysis.overlap import overlap_series
 from jamflow.analysis.structure import structure_dataset
 from jamflow.chains.averages import moduli_against_links
+from jamflow.chains.figures import plot_mode
+from jamflow.chains.modes import linked_modes, modes_dataset
 from jamflow.cli.analysis import PLOT_KINDS
+from jamflow.io import read_packing
 from jamflow.shapes import figures as shape_figures
 from jamflow.shapes.survey import survey_dataset
 
@@ -45,13 +50,18 @@ def _modes(rng, pressure: float) -> xr.Dataset:
     d4 = np.where(region == 1, rng.random(48), np.nan)
     return xr.Dataset({"eigenvalue": ("mode", lam), "region": ("mode", region), "fourth_derivative": ("mode", d4),
                        "rotational_weight": ("mode", rng.random(48))},
-                      attrs={"pressure": pressure, "n_quartic": 4, "lambda_c": 1e-3, "N": 16,
-                             "isostatic_count": 47, "n_contacts_twice": 43})
+                      attrs={"pressure": pressure, "n_quartic": 4, "lambda_c": 1e-3, "lambda_0": 1e-14, "N": 16,
+                             "isostatic_count": 47, "n_contacts_twice": 43, "family": "circulo_line",
+                             "asphericity": 1.1})
 
 
 def _shape_figures(rng) -> dict[str, Figure]:
-    rows = [dict(family=f, asphericity=a, N=16, phi_J=0.85 + 0.01 * rng.random(), pressure=1e-6, n_contacts=40,
-                 n_rattlers=1, n_sliders=0, z=4.5 + rng.random(), isostatic_count=44, counting="hypostatic")
+    def counts():
+        return dict(n_contacts=40, n_rattlers=1, n_sliders=0, isostatic_count=44, z_contacts=4.4 + rng.random(),
+                    z_eq3=4.5 + rng.random())
+
+    rows = [dict(family=f, asphericity=a, N=16, phi_J=0.85 + 0.01 * rng.random(), pressure=1e-6, jammed=1,
+                 status="jammed", n_quartic=4, counts={c: counts() for c in ("once", "twice", "spectral")})
             for f, a in [("disk", 1.0), ("ellipse", 1.01), ("ellipse", 1.01), ("circulo_line", 1.1)]]
     survey = survey_dataset(rows, ["a", "b", "c", "d"])
     angles = xr.Dataset({"P_psi": ("bin", 2 / np.pi * np.ones(9)), "P_psi_err": ("bin", 0.1 * np.ones(9))},
@@ -84,6 +94,7 @@ def _figures(rng) -> dict[str, Figure]:
                           coords={"label": ("setting", ["a", "b", "ref"])},
                           attrs={"primary_error": "err", "stage": "synthetic"})
     gaps, forces = _gaps(rng), _forces(rng)
+    swing = read_packing(Path(__file__).parent / "data" / "bodies" / "swinging_trimer_2d.nc", None)
     cemented = [xr.Dataset({f"{m}_{b}": ((), v) for m in ("bulk", "shear") for b, v in
                             (("voigt", 2.0 + k + rng.random()), ("reuss", 1.0 + k + rng.random()))},
                            attrs={"N": 64, "n_cemented": 8 * k, "d": 3, "n_unstable": 0}) for k in range(3) for _ in range(2)]
@@ -101,6 +112,7 @@ def _figures(rng) -> dict[str, Figure]:
         "jamming-table": plots.plot_jamming_table(table),
         "eos": plots.plot_eos(eos),
         "chains-moduli": plots.plot_chains_moduli(moduli_against_links(cemented)),
+        "mode": plot_mode(swing, modes_dataset(linked_modes(swing), swing)),
         "fit-windows (forces)": plots.plot_fit_windows(forces),
         **_shape_figures(rng),
     }

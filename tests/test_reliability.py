@@ -6,6 +6,7 @@ their run. Each test reproduces a reported case and fails on the code before its
 from __future__ import annotations
 
 import hashlib
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -51,13 +52,14 @@ def two_packings(tmp_path: Path) -> tuple[Path, Path]:
 # --- item 3: an input packing is never destroyed ------------------------------------------
 
 
-@pytest.mark.parametrize("command", ["gaps", "forces", "export-xyz"])
-def test_a_forgotten_output_does_not_overwrite_the_second_packing(capsys, two_packings, command):
+@pytest.mark.parametrize("command, code, named", [("gaps", 1, "packing"), ("forces", 1, "packing"),
+                                                  ("export-xyz", 2, ".xyz or .gsd")])
+def test_a_forgotten_output_does_not_overwrite_the_second_packing(capsys, two_packings, command, code, named):
     s1, s2 = two_packings
     before = _sha(s2)
-    code, _, err = _run(capsys, command, s1, s2)
-    assert code == 1
-    _one_line_error(err, s2, "packing")
+    exit_code, _, err = _run(capsys, command, s1, s2)
+    assert exit_code == code
+    _one_line_error(err, s2, named)
     assert _sha(s2) == before and file_kind(s2) == "packing"
     assert [p.name for p in s2.parent.iterdir() if p.name.startswith(".")] == []  # no temporary left
 
@@ -291,7 +293,7 @@ def test_overdamped_compress_past_jamming_stops_jammed_with_one_line(capsys, tmp
     (["shear", "{s1}", "{out}", "--strain", "-0.1"], "--strain"),
     (["aqs", "{s1}", "{out}", "--strain", "-0.1", "--step", "1e-3"], "--strain"),
     (["init", "{out}", "--d", "2", "--n", "4", "--phi", "0.1", "--seed", "-1"], "--seed"),
-    (["ls", "{s1}", "{out}", "--growth-rate", "1e-3", "--p-target", "-1e3"], "pressure targets must be positive"),
+    (["ls", "{s1}", "{out}", "--growth-rate", "1e-3", "--p-target", "-1e3"], "--p-target"),
 ])
 def test_negative_values_are_named(capsys, tmp_path, two_packings, argv, named):
     s1, _ = two_packings
@@ -337,3 +339,243 @@ def test_check_and_certify_refuse_a_walled_packing_instead_of_printing_rattlers(
         assert code == 1 and out == ""
         _one_line_error(err, "walls")
     assert not (tmp_path / "c.nc").exists()
+
+
+# --- issue 47: nothing wrong in print, nothing that hangs, every bad value refused -------------
+
+KINDS = Path(__file__).parent / "data" / "kinds"
+
+
+@pytest.mark.parametrize("argv, named", [
+    (["gaps", "{s1}", "{out}", "--bootstrap", "-1"], "--bootstrap"),
+    (["forces", "{s1}", "{out}", "--linear-bins", "0"], "--linear-bins"),
+    (["shear", "{s1}", "{out}", "--strain", "0.1", "--snapshots", "-2"], "--snapshots"),
+    (["moduli", "{s1}", "{out}", "--modes", "-1"], "--modes"),
+    (["compress", "{s1}", "{out}", "--phi", "nan"], "--phi"),
+    (["drive", "{s1}", "{out}", "--time", "1", "--random-forces", "nan"], "--random-forces"),
+    (["init", "{out}", "--d", "2", "--n", "4", "--phi", "0.1", "--seed", str(2**64)], "--seed"),
+    (["export-xyz", "{s1}", "{s2}"], ".xyz or .gsd"),
+    (["rdf", "{s1}", "{s2}.xyz"], ".nc"),
+])
+def test_a_bad_value_of_the_issue_is_a_usage_error(capsys, tmp_path, two_packings, argv, named):
+    s1, s2 = two_packings
+    sums = (_sha(s1), _sha(s2))
+    out = tmp_path / "o.nc"
+    code, _, err = _run(capsys, *[a.format(s1=s1, s2=s2, out=out) for a in argv])
+    assert code == 2
+    _one_line_error(err, named)
+    assert (_sha(s1), _sha(s2)) == sums and not out.exists()
+
+
+def test_the_largest_seed_is_written_and_read_back(capsys, tmp_path):
+    out = tmp_path / "s.nc"
+    assert _run(capsys, "init", out, "--d", "2", "--n", "4", "--phi", "0.1", "--seed", str(2**64 - 1))[0] == 0
+    from jamflow.io import read_packing
+
+    assert read_packing(out).seed == 2**64 - 1
+
+
+@pytest.mark.parametrize("how", ["same path", "symlink", "hard link", "copy"])
+def test_a_pooled_analysis_refuses_one_packing_given_twice(capsys, tmp_path, two_packings, how):
+    s1, _ = two_packings
+    twin = {"same path": s1, "symlink": tmp_path / "twin.nc", "hard link": tmp_path / "twin.nc",
+            "copy": tmp_path / "twin.nc"}[how]
+    if how == "symlink":
+        twin.symlink_to(s1)
+    elif how == "hard link":
+        twin.hardlink_to(s1)
+    elif how == "copy":
+        twin.write_bytes(s1.read_bytes())
+    code, _, err = _run(capsys, "gaps", s1, twin, tmp_path / "g.nc", "--gap-tol", "0.5", "--include-rattlers",
+                        "--quiet")
+    assert code == (1 if how == "copy" else 2)
+    _one_line_error(err, "twice")
+    assert not (tmp_path / "g.nc").exists()
+
+
+def test_an_existing_output_of_another_kind_is_refused_before_any_work(capsys, tmp_path, two_packings):
+    s1, s2 = two_packings
+    gaps, rdf = tmp_path / "g.nc", tmp_path / "r.nc"
+    shutil.copy(KINDS / "rdf.nc", rdf)
+    before = _sha(rdf)
+    code, _, err = _run(capsys, "gaps", s1, s2, rdf, "--gap-tol", "0.5", "--include-rattlers", "--quiet")
+    assert code == 1
+    _one_line_error(err, rdf, "g(r) dataset", "gap distribution")
+    assert _sha(rdf) == before
+    # someone else's netCDF file and a text file under an output name are not replaced either
+    foreign = tmp_path / "foreign.nc"
+    import xarray as xr
+
+    xr.Dataset({"temperature": ("t", [1.0, 2.0])}).to_netcdf(foreign)
+    for target in (foreign, tmp_path / "notes.nc"):
+        if target.name == "notes.nc":
+            target.write_text("my notes\n")
+        code, _, err = _run(capsys, "gaps", s1, s2, target, "--gap-tol", "0.5", "--include-rattlers", "--quiet")
+        assert code == 1
+        _one_line_error(err, target, "no jamflow dataset" if target == foreign else "no netCDF data")
+    # an output of the same kind is replaced, and the command says so
+    assert _run(capsys, "gaps", s1, s2, gaps, "--gap-tol", "0.5", "--include-rattlers", "--quiet")[0] == 0
+    code, _, err = _run(capsys, "gaps", s1, s2, gaps, "--gap-tol", "0.5", "--include-rattlers", "--quiet")
+    assert code == 0 and f"replaced {gaps} (a gap distribution" in err
+    # and the writers refuse another kind too (a library caller, or an output no command declared)
+    from jamflow.io import write_dataset
+
+    with pytest.raises(ValueError, match="refusing to overwrite"):
+        write_dataset(read_dataset(gaps), rdf)
+
+
+def test_a_full_disk_is_named_as_such_and_leaves_nothing(capsys, tmp_path, two_packings, monkeypatch):
+    # the netCDF library reports a full disk as "Permission denied" (or "HDF error")
+    import os
+
+    import xarray as xr
+
+    s1, _ = two_packings
+    statvfs = os.statvfs(tmp_path)
+
+    class Full:
+        f_bavail, f_frsize = 0, statvfs.f_frsize
+
+    def full_write(*args, **kwargs):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", full_write)
+    monkeypatch.setattr(os, "statvfs", lambda path: Full)
+    out = tmp_path / "o.nc"
+    code, _, err = _run(capsys, "rdf", s1, out, "--r-max", "1")
+    assert code == 1
+    _one_line_error(err, "no space left", out)
+    assert "Permission" not in err and not out.exists()
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def test_summary_refuses_a_flow_series_where_a_packing_should_be(capsys, tmp_path):
+    sample = tmp_path / "scene" / "packings" / "seed1"
+    sample.mkdir(parents=True)
+    shutil.copy(KINDS / "packing.nc", sample / "calippso.nc")
+    shutil.copy(KINDS / "flow.nc", sample / "soft.nc")
+    code, out, err = _run(capsys, "summary", tmp_path / "scene")
+    assert code == 1 and out == ""
+    _one_line_error(err, "soft.nc", "flow time series", "not a packing")
+
+
+@pytest.mark.parametrize("argv", [
+    ["init", "{out}", "--d", "3", "--n", "1e9", "--phi", "0.3", "--seed", "1"],
+    ["init-shapes", "{out}", "--shape", "ellipse", "--asphericity", "1.1", "--n", "1000000000", "--seed", "1"],
+    ["init-chains", "{out}", "--d", "3", "--clusters", "1000000000", "--cluster", "trimer", "--seed", "1"],
+])
+def test_a_start_that_does_not_fit_in_memory_is_refused_before_allocating(capsys, tmp_path, argv):
+    import tracemalloc
+
+    out = tmp_path / "o.nc"
+    tracemalloc.start()
+    code, _, err = _run(capsys, *[a.format(out=out) for a in argv])
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert code == 1
+    _one_line_error(err, "of memory and this machine has")
+    assert peak < 100e6 and not out.exists()
+
+
+def test_resources_scale_with_the_system():
+    from jamflow.resources import (
+        INTERPRETER_BYTES,
+        check_fits,
+        machine_memory,
+        stage_memory,
+    )
+
+    assert machine_memory() > INTERPRETER_BYTES
+    for stage in ("init", "init-shapes", "init-chains"):
+        small, large = stage_memory(stage, 10**3, 2), stage_memory(stage, 10**6, 2)
+        assert INTERPRETER_BYTES < small < large
+        assert stage_memory(stage, 10**6, 3) > large
+        check_fits(stage, 10**3, 3)
+        with pytest.raises(ValueError, match="use fewer particles"):
+            check_fits(stage, 10**12, 3)
+
+
+def test_rdf_beyond_half_the_box_is_clipped_and_said(capsys, tmp_path, two_packings):
+    s1, _ = two_packings  # 16 discs: half the box is ~2 mean diameters
+    out = tmp_path / "r.nc"
+    code, stdout, err = _run(capsys, "rdf", s1, out, "--r-max", "3", "--bins", "150")
+    assert code == 0
+    assert "note: r_max 3 clipped to" in err
+    ds = read_dataset(out, "rdf")
+    assert ds.attrs["r_max_clipped"] == 1 and ds.attrs["r_max_requested"] == 3.0
+    width = 3.0 / 150
+    assert ds.sizes["r"] < 150 and ds.attrs["r_max"] == pytest.approx(ds.sizes["r"] * width)
+    np.testing.assert_allclose(np.diff(ds["r"].values), width)  # the bins keep their width
+    assert f"up to r = {ds.attrs['r_max']:.6g}" in stdout
+
+
+def _mirrored(packing):
+    """The mirror image x -> -x: every shear stress changes sign."""
+    x = packing.position.copy()
+    x[:, 0] = -x[:, 0]
+    return packing.evolve(position=packing.box.wrap(x))
+
+
+def test_shear_of_a_start_jammed_against_it_is_refused_in_one_line(capsys, tmp_path):
+    from jamflow.io import read_packing
+    from jamflow.protocols.overdamped.driving import Drive
+    from jamflow.protocols.overdamped.starts import jammed_start
+
+    jammed = read_packing(KINDS / "packing.nc")
+    shear = Drive("shear", rate=1.0)
+    against = jammed if jammed_start(jammed, shear) else _mirrored(jammed)
+    unloading = _mirrored(against)
+    assert jammed_start(against, shear) and jammed_start(unloading, shear) is None
+    # the stored forces resist the shear: sum f_c n_c . E r_c < 0 (what makes it jammed)
+    r = against.contact_vectors()
+    n = r / np.linalg.norm(r, axis=1)[:, None]
+    assert against.force @ np.einsum("ca,ab,cb->c", n, shear.gradient(2), r) < 0
+    # a fixed-pressure shear and a decompressed start are not refused
+    assert jammed_start(against, Drive("shear_fixed_pressure", rate=1.0, pressure=1.0)) is None
+    assert jammed_start(against.evolve(contacts=None, force=None), shear) is None
+    start, out = tmp_path / "jammed.nc", tmp_path / "o.nc"
+    write_packing(against, start)
+    code, _, err = _run(capsys, "shear", start, out, "--strain", "1e-6")
+    assert code == 1
+    _one_line_error(err, start, "jammed against this shear", "--pressure", "decompress")
+    assert not out.exists()
+
+
+def _started_its_kernels(pid: int) -> bool:
+    """Whether process ``pid`` has loaded the kernel compiler (it does so inside jamflow.cli.main)."""
+    return "llvmlite" in Path(f"/proc/{pid}/maps").read_text()
+
+
+@pytest.mark.parametrize("after", [0.0, 3.0])
+def test_ctrl_c_is_one_line_exit_130_and_no_output(tmp_path, after):
+    # 0 s after the kernel compiler is loaded: while the command starts (imports, compiling);
+    # 3 s later: while it compiles or compresses
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    start = tmp_path / "s.nc"
+    write_packing(random_packing(2000, 3, 0.3, "mono", 3), start)
+    out = tmp_path / "o.nc"
+    proc = subprocess.Popen([sys.executable, "-m", "jamflow", "ls", str(start), str(out), "--growth-rate", "1e-6",
+                             "--p-target", "1e12", "--quiet"], stderr=subprocess.PIPE, text=True)
+    while proc.poll() is None and not _started_its_kernels(proc.pid):
+        time.sleep(0.01)
+    time.sleep(after)
+    proc.send_signal(signal.SIGINT)
+    err = proc.communicate(timeout=600)[1]
+    assert proc.returncode == 130, err
+    assert err.count("\n") == 1 and "interrupted (Ctrl-C)" in err and "Traceback" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.nc"]
+
+
+def test_a_closed_stdout_ends_quietly(tmp_path):
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-m", "jamflow", "check", str(KINDS / "packing.nc")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()  # the reader has gone, as `jamflow check x.nc | head -0`
+    err = proc.communicate(timeout=600)[1]
+    assert proc.returncode == 141 and err == b""

@@ -36,6 +36,67 @@ def test_asphericity_matches_table_one(kind, alpha, a_minus_1, rel):
     assert shape.asphericity[0] - 1.0 == pytest.approx(a_minus_1, rel=rel)
 
 
+@pytest.mark.parametrize("shaft, a_minus_1", [(2.0, 0.514), (8.0, 2.405)])
+def test_dumbbell_shaft_length_gives_table_one(shaft, a_minus_1):
+    """Table I's dumbbell A - 1 from 0.514 to 2.405: the lobe-centre distance X from 2 R (touching
+    lobes, Table I's alpha - 1 = 2) to 8 R, shaft half-width R / 2 (Fig. 4); the same shapes as
+    ``--aspect-ratio 1 + X / 2``, tip to tip over the lobe diameter."""
+    table = bidisperse_shapes(unit_shape("dumbbell", shaft_length=shaft))
+    assert table.asphericity[0] - 1.0 == pytest.approx(a_minus_1, abs=5e-4)
+    same = bidisperse_shapes(unit_shape("dumbbell", aspect_ratio=1.0 + 0.5 * shaft))
+    np.testing.assert_array_equal(table.vertices, same.vertices)
+    v = table.vertex_list(0)
+    assert np.linalg.norm(v[1] - v[0]) == pytest.approx(shaft * table.radius[0], rel=1e-14)
+    assert table.shaft_half_width[0] == pytest.approx(0.5 * table.radius[0], rel=1e-14)
+
+
+def test_frozen_orientations_jam_and_count_two_degrees_of_freedom(tmp_path, capsys):
+    """Non-rotating circulo-lines (Fig. 3a): soft-jam --frozen-orientations keeps every angle,
+    balances forces (the torques are not asked), and counting uses 2 degrees of freedom per
+    body: N_c^0 = 2 N' - 1 - N_s and <z> (Eq. 3) = 2 (N_c + 1) / (N' - N_s / 2)."""
+    from jamflow.shapes.counting import count_constraints
+
+    src = tmp_path / "start.nc"
+    out = tmp_path / "j.nc"
+    assert main(["init-shapes", str(src), "--shape", "circulo-line", "--asphericity", "1.06", "--n", "16",
+                 "--seed", "2", "--quiet"]) == 0
+    assert main(["soft-jam", str(src), str(out), "--pressure", "1e-5", "--frozen-orientations",
+                 "--delta-phi", "1e-2", "--pressure-rtol", "1e-3"]) == 0
+    assert "frozen (Fig. 3a)" in capsys.readouterr().out
+    start, p = read_packing(src, None), read_packing(out, None)
+    np.testing.assert_array_equal(p.orientation, np.mod(start.orientation, 2.0 * np.pi))
+    assert p.attrs["frozen_orientations"] == 1 and p.attrs["max_force_sq"] <= 1e-26
+    c, rattler, slider, _ = count_constraints(p, "once")
+    n_prime = p.n - c.n_rattlers
+    assert c.dofs_per_body == 2 and c.isostatic_count == 2 * n_prime - 1 - c.n_sliders
+    assert c.z_eq3 == pytest.approx(2.0 * (c.n_contacts + 1) / (n_prime - c.n_sliders / 2.0), rel=1e-14)
+    from jamflow.shapes.spectrum import spectrum
+
+    spec = spectrum(p, fourth=False)
+    assert spec.eigenvalue.size == 2 * p.n and np.all(spec.rotational_weight == 0.0)
+
+
+def test_pressure_is_the_papers_at_box_side_one():
+    """P / k does not depend on the length unit in 2D: the packing scaled to box side L = 1 (the
+    paper's unit; k unchanged) has the same pressure, its energy divided by L^2 (the stored
+    ``paper_energy``), and ``paper_length_unit`` is L."""
+    from jamflow.minimize.model import pressure_of
+    from jamflow.shapes.jamming import shape_packing
+
+    table = bidisperse_shapes(unit_shape("ellipse", asphericity=1.1))
+    res = jam_shapes(random_shape_packing(table, 16, 0.4, 4), 1e-4,
+                     JammingSettings(force_tol=1e-12, pressure_rtol=1e-3, delta_phi=1e-2))
+    p = res.packing
+    side = float(np.sqrt(p.box.volume))
+    assert p.attrs["paper_length_unit"] == pytest.approx(side, rel=1e-15)
+    small = ShapeModel(p.box.scaled(1.0 / side), table.scaled(1.0 / side), p.shape_index)
+    q = small.dofs(np.column_stack([p.position / side, p.orientation]))
+    ev = small.evaluate(q)
+    assert pressure_of(ev, small.box) == pytest.approx(p.pressure, rel=1e-10)
+    assert ev.energy == pytest.approx(p.attrs["paper_energy"], rel=1e-10)
+    assert shape_packing(small, small.positions(q), p, {}, {}).attrs["paper_length_unit"] == pytest.approx(1.0)
+
+
 @pytest.mark.parametrize("kind, sides", [("ellipse", None), ("circulo-line", None), ("circulo-polygon", 5),
                                          ("dumbbell", None)])
 def test_target_asphericity_is_met_exactly(kind, sides):
@@ -74,7 +135,10 @@ def test_init_shapes_writes_overlap_free_start(tmp_path, capsys):
     (["--shape", "circulo-polygon", "--sides", "3", "--asphericity", "2.0"], "asphericity in"),
     (["--shape", "ellipse", "--asphericity", "0.9"], "--asphericity >"),
     (["--shape", "ellipse", "--aspect-ratio", "1.5", "--asphericity", "1.1"], "not both"),
-    (["--shape", "dumbbell", "--aspect-ratio", "1.9"], "--aspect-ratio >"),
+    (["--shape", "dumbbell", "--aspect-ratio", "1.9"], "--aspect-ratio >="),
+    (["--shape", "dumbbell", "--shaft-length", "1.5"], "at least 2"),
+    (["--shape", "ellipse", "--shaft-length", "3"], "dumbbell"),
+    (["--shape", "dumbbell", "--shaft-length", "3", "--aspect-ratio", "2.5"], "one of"),
 ])
 def test_init_shapes_bad_input(tmp_path, capsys, argv, needle):
     out = tmp_path / "bad.nc"

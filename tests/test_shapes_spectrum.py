@@ -129,10 +129,11 @@ def test_check_json_on_shapes(capsys):
 
     assert main(["check", str(DATA), "--json", "--parallel-contacts", "twice"]) == 0
     report = json.loads(capsys.readouterr().out)
-    assert {"z", "n_sliders", "isostatic_count", "n_contacts", "n_rattlers"} <= set(report)
+    assert {"z_eq3", "z_contacts", "n_sliders", "isostatic_count", "n_contacts", "n_rattlers"} <= set(report)
     n_prime = report["N"] - report["n_rattlers"]
     assert report["isostatic_count"] == 3 * n_prime - 1 - report["n_sliders"]
-    assert report["z"] == pytest.approx(2 * (report["n_contacts"] + 1) / (n_prime - report["n_sliders"] / 3))
+    assert report["z_eq3"] == pytest.approx(2 * (report["n_contacts"] + 1) / (n_prime - report["n_sliders"] / 3))
+    assert report["z_contacts"] == pytest.approx(2 * report["n_contacts"] / n_prime)
 
 
 DISK_LIMIT = Path(__file__).parent / "data" / "shapes_ellipse_alpha1.001_n16_p1e-7.nc"
@@ -153,7 +154,7 @@ def test_disk_limit_of_ellipses():
     c, rattler, slider, _ = count_constraints(p)
     n_prime = p.n - c.n_rattlers
     assert c.n_contacts == 2 * n_prime - 1
-    assert c.z == pytest.approx(4.0, rel=1e-15)
+    assert c.z_eq3 == pytest.approx(4.0, rel=1e-15)
     assert c.counting == "hypostatic"
     spec = spectrum(p, fourth=False)
     assert spec.n_quartic == n_prime == c.isostatic_count - c.n_contacts
@@ -273,8 +274,28 @@ class _Quartic:
                                                    (-np.inf, 0.7e-6, 7.0), (-0.7e-6, 1.5e-6, np.nan)])
 def test_fourth_derivative_along_picks_the_smooth_side(left, right, expected):
     model = _Quartic(1e-6, 7.0, left, right)
-    d4 = fourth_derivative_along(model, np.zeros(1), np.ones(1), 1e-6, 1e-6)
+    d4 = fourth_derivative_along(model, np.zeros(1), np.ones(1), 1e-6)
     if np.isnan(expected):
         assert np.isnan(d4)
     else:
         assert d4 == pytest.approx(expected, rel=1e-6)
+
+@pytest.mark.parametrize("name", ["shapes_ellipse_alpha1.001_n16_p1e-7.nc"])
+def test_fourth_derivatives_of_near_disk_quartic_modes_are_finite_positive_and_step_independent(name):
+    """Near disks the quartic modes are rotations with d^4U/ds^4 ~ k (alpha - 1)^2 (1e-6 here):
+    a second difference with f(0) taken as the eigenvalue, or at the step that merely opens no
+    contact, drowns in round-off (~eps ||M|| / h^2; the former code gave NaN for most modes).
+    Every region-1 mode gets a finite positive value, the same to 1e-3 when the first step is
+    4 times larger."""
+    from jamflow.shapes.spectrum import contact_signature, fourth_derivative_step
+
+    p = read_packing(Path(__file__).parent / "data" / name, None)
+    spec = spectrum(p)
+    d4 = spec.fourth_derivative[spec.region == 1]
+    assert spec.n_quartic >= 10 and np.all(np.isfinite(d4)) and np.all(d4 > 0.0)
+    model, q = shape_model_of(p)
+    lam, vec = np.linalg.eigh(model.hessian(q).toarray())
+    h = fourth_derivative_step(float(np.sqrt(2.0 * model.pair_table(q)["energy"].min())))
+    for k in np.flatnonzero(spec.region == 1):
+        wide = fourth_derivative_along(model, q, vec[:, k], 4.0 * h, lambda x: contact_signature(model, x))
+        assert wide == pytest.approx(spec.fourth_derivative[k], rel=1e-3)

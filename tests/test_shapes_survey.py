@@ -1,4 +1,5 @@
-"""phi_J and <z> against asphericity (Figs. 5, 8) and P(psi) datasets (Fig. 14): disk limits and normalisation."""
+"""phi_J and <z> against asphericity (Figs. 5, 6, 8) and P(psi) datasets (Fig. 14): disk limits,
+the three contact conventions, refusal of unjammed starts, normalisation."""
 
 from __future__ import annotations
 
@@ -58,9 +59,12 @@ def test_disk_limit_of_phi_j_and_z_matches_the_sphere_code():
     q = read_packing(NEAR_DISKS, None)
     disks = jam_to_pressure(_disks_like(q), 1e-7).packing
     ellipses, disk = survey_row(q), survey_row(disks)
-    assert disk["family"] == "disk" and disk["counting"] == "isostatic"
-    assert disk["z"] == ellipses["z"] == 4.0
-    assert disk["n_contacts"] == ellipses["n_contacts"] and disk["n_rattlers"] == ellipses["n_rattlers"]
+    e, d = ellipses["counts"]["once"], disk["counts"]["once"]
+    assert disk["family"] == "disk" and d["n_contacts"] == d["isostatic_count"]
+    assert d["z_eq3"] == e["z_eq3"] == 4.0
+    # z = 2 N_c / N' is 4 - 2 / N' for an isostatic disk backbone (N_c = 2 N' - 1)
+    assert d["z_contacts"] == pytest.approx(4.0 - 2.0 / (q.n - d["n_rattlers"]), rel=1e-15)
+    assert d["n_contacts"] == e["n_contacts"] and d["n_rattlers"] == e["n_rattlers"]
     assert abs(disk["phi_J"] - ellipses["phi_J"]) < 2 * ALPHA_MINUS_1
     _, rattler, _, cs = count_constraints(q)
     live = ~(rattler[cs.i] | rattler[cs.j])
@@ -69,15 +73,25 @@ def test_disk_limit_of_phi_j_and_z_matches_the_sphere_code():
 
 def test_survey_groups_means_and_errors():
     q, lines = read_packing(NEAR_DISKS, None), read_packing(LINES, None)
-    rows = [survey_row(q), survey_row(lines), survey_row(lines)]
+    rows = [survey_row(q, spectral=True), survey_row(lines, spectral=True), survey_row(lines, spectral=True)]
     ds = survey_dataset(rows, ["a", "b", "c"])
     assert list(ds.group_family.values) == ["circulo_line", "ellipse"]
     assert list(ds.n_packings.values) == [2, 1]
     assert ds.phi_J_mean.values[0] == pytest.approx(lines.packing_fraction)
-    assert ds.z_sem.values[0] == 0.0
-    # Eq. 3 with the counts of the packing: <z> = 2 (N_c + 1) / (N - N_r - N_s / 3)
-    r = rows[1]
-    assert r["z"] == pytest.approx(2 * (r["n_contacts"] + 1) / (r["N"] - r["n_rattlers"] - r["n_sliders"] / 3))
+    assert list(ds.convention.values) == ["once", "twice", "spectral"]
+    assert np.all(ds.z_eq3_sem.values[0] == 0.0)
+    for r in rows:
+        for c in ("once", "twice", "spectral"):
+            n = r["counts"][c]
+            # Eq. 3 with the counts of the packing: <z> = 2 (N_c + 1) / (N - N_r - N_s / 3)
+            assert n["z_eq3"] == pytest.approx(2 * (n["n_contacts"] + 1) / (r["N"] - n["n_rattlers"] - n["n_sliders"] / 3))
+            assert n["z_contacts"] == pytest.approx(2 * n["n_contacts"] / (r["N"] - n["n_rattlers"]))
+        # the spectral count N_c^0 - N_1 equals the contacts counted twice on both packings (Sec. III B)
+        assert r["counts"]["spectral"]["n_contacts"] == r["counts"]["twice"]["n_contacts"]
+    # the circulo-lines have parallel contacts: counted once they are fewer
+    assert rows[1]["counts"]["once"]["n_contacts"] < rows[1]["counts"]["twice"]["n_contacts"]
+    k = list(ds.convention.values).index("spectral")
+    assert ds.z_eq3_mean.values[0, k] == pytest.approx(rows[1]["counts"]["spectral"]["z_eq3"])
 
 
 def test_shape_survey_and_contact_angles_commands(tmp_path):
@@ -85,8 +99,10 @@ def test_shape_survey_and_contact_angles_commands(tmp_path):
     run = subprocess.run([sys.executable, "-m", "jamflow", "shape-survey", str(NEAR_DISKS), str(LINES), str(out)],
                          capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
-    assert "phi_J 0.83631" in run.stdout and "<z> 4.0000" in run.stdout
-    assert read_dataset(out, "shape-survey").sizes["group"] == 2
+    assert "phi_J 0.83631" in run.stdout and "4.0000 ± 0.0000 / 4.0000 ± 0.0000" in run.stdout
+    assert "z = 2 N_c / N' once/twice" in run.stdout
+    ds = read_dataset(out, "shape-survey")
+    assert ds.sizes["group"] == 2 and np.all(np.isnan(ds.z_eq3.sel(convention="spectral").values))
     angles = tmp_path / "angles.nc"
     run = subprocess.run([sys.executable, "-m", "jamflow", "contact-angles", str(LINES), str(angles)],
                          capture_output=True, text=True)
@@ -97,7 +113,10 @@ def test_shape_survey_and_contact_angles_commands(tmp_path):
     assert bad.returncode != 0 and "at least one input" in bad.stderr
 
 
-def test_reuleaux_rows_are_counted_from_their_contact_points():
+def test_survey_and_modes_refuse_unjammed_starts(tmp_path):
+    """A random start (init-shapes) is refused in one line before any work, never counted
+    as a packing with every body a rattler at the start's packing fraction."""
+    from jamflow.io import write_packing
     from jamflow.shapes.generation import (
         bidisperse_shapes,
         random_shape_packing,
@@ -105,10 +124,23 @@ def test_reuleaux_rows_are_counted_from_their_contact_points():
     )
 
     p = random_shape_packing(bidisperse_shapes(unit_shape("reuleaux", None, None, None)), 8, 0.3, 1)
-    row = survey_row(p)
-    c, _, _, _ = count_constraints(p, "once")
-    assert row["family"] == "reuleaux" and row["phi_J"] == pytest.approx(0.3)
-    assert (row["n_contacts"], row["n_rattlers"]) == (c.n_contacts, c.n_rattlers)
-    # a dilute non-overlapping start touches nowhere: every body rattles
-    assert (row["n_contacts"], row["n_rattlers"]) == (0, 8)
-    assert row["asphericity"] == pytest.approx(np.pi / (2 * (np.pi - np.sqrt(3))), rel=1e-12)
+    with pytest.raises(ValueError, match="not jammed by soft-jam"):
+        survey_row(p)
+    start = tmp_path / "start.nc"
+    write_packing(p, start)
+    for command in (["shape-survey", str(start), str(tmp_path / "s.nc")], ["modes", str(start), str(tmp_path / "m.nc")]):
+        run = subprocess.run([sys.executable, "-m", "jamflow", *command], capture_output=True, text=True)
+        assert run.returncode == 1 and "not jammed by soft-jam" in run.stderr and "lambda" not in run.stderr
+        assert len(run.stderr.strip().splitlines()) == 1
+        assert not Path(command[-1]).exists()
+
+
+def test_a_jammed_packing_without_backbone_is_left_out_of_the_means():
+    lines = read_packing(LINES, None)
+    # the same packing with its box doubled: nothing touches, yet it carries the soft-jam history
+    far = lines.evolve(position=2.0 * lines.position, box=lines.box.scaled(2.0))
+    rows = [survey_row(lines), survey_row(far)]
+    assert rows[1]["jammed"] == 0 and "rattler" in rows[1]["status"]
+    ds = survey_dataset(rows, ["jammed", "apart"])
+    assert ds.n_packings.values.tolist() == [1] and ds.n_excluded.values.tolist() == [1]
+    assert ds.phi_J_mean.values[0] == pytest.approx(lines.packing_fraction)

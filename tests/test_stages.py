@@ -51,6 +51,7 @@ TEMPLATES: dict[str, tuple[list[str], bool, str | None]] = {
     "rdf": (["IN", "OUT.nc", "--r-max", "1.5"], True, None),
     "shape-survey": (["IN", "OUT.nc"], False, None),
     "contact-angles": (["IN", "OUT.nc"], False, None),
+    "constraint-curvature": (["IN", "OUT.nc"], False, None),
 }
 
 #: What a command's output holds when it is not the input's kind of packing.

@@ -17,7 +17,7 @@ from jamflow.io import write_dataset
 #: discs per sample: enough that the gap and force fits have their minimum number of samples
 N = 128
 KAPPA, P_TARGETS = 1e-2, (1e3, 1e6)
-VARIANTS = [f"_k{KAPPA:g}_p{p:g}" for p in P_TARGETS]
+POINTS = [f"p_target={p:g}" for p in P_TARGETS]
 
 
 def _cli(*argv: object) -> None:
@@ -26,28 +26,28 @@ def _cli(*argv: object) -> None:
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """results/<scene> laid out as the workflow lays it out: 2 samples, init -> ls -> calippso, analyses, a run."""
+    """results/<scene> laid out as the workflow lays it out (jamflow.scenes.plan): 2 samples,
+    init -> ls -> calippso, a certificate, gaps and forces studies, a flow run."""
     root = tmp_path_factory.mktemp("results") / "mini"
+    body = root / "spheres"
     for seed in (1, 2):
-        pk = root / "packings" / f"seed{seed}"
-        pk.mkdir(parents=True)
-        _cli("init", pk / "init.nc", "--d", "2", "--n", str(N), "--phi", "0.5", "--dispersity", "bi",
-             "--seed", seed, "--quiet")
-        _cli("ls", pk / "init.nc", *(pk / f"ls{v}.nc" for v in VARIANTS), "--growth-rate", KAPPA,
-             "--p-target", *P_TARGETS, "--seed", seed, "--quiet")
-        for v in VARIANTS:
-            _cli("calippso", pk / f"ls{v}.nc", pk / f"calippso{v}.nc", "--quiet")
-    v = VARIANTS[-1]
-    _cli("certify", root / "packings" / "seed1" / f"calippso{v}.nc", root / "analysis" / "seed1" / f"certify{v}.nc",
-         "--quiet")
-    finals = [root / "packings" / f"seed{s}" / f"calippso{v}.nc" for s in (1, 2)]
+        start = body / "base" / f"seed{seed}" / "init.nc"
+        start.parent.mkdir(parents=True)
+        _cli("init", start, "--d", "2", "--n", str(N), "--phi", "0.5", "--dispersity", "bi", "--seed", seed, "--quiet")
+        snapshots = [body / pt / f"seed{seed}" / "ls.nc" for pt in POINTS]
+        _cli("ls", start, *snapshots, "--growth-rate", KAPPA, "--p-target", *P_TARGETS, "--seed", seed, "--quiet")
+        for snapshot in snapshots:
+            _cli("calippso", snapshot, snapshot.with_name("calippso.nc"), "--quiet")
+    last = body / POINTS[-1]
+    _cli("certify", last / "seed1" / "calippso.nc", last / "seed1" / "calippso.certify.nc", "--quiet")
+    finals = [last / f"seed{s}" / "calippso.nc" for s in (1, 2)]
     # a wide window, so the fits have the minimum number of gaps and forces
-    _cli("gaps", *finals, root / "analysis" / f"gaps{v}.nc", "--fit-min", "1e-10", "--fit-max", "1e-1",
+    _cli("gaps", *finals, root / "studies" / "gaps" / f"{POINTS[-1]}.nc", "--fit-min", "1e-10", "--fit-max", "1e-1",
          "--bins-per-decade", "1", "--quiet")
-    _cli("forces", *finals, root / "analysis" / f"forces{v}.nc", "--quiet")
-    lss = [root / "packings" / f"seed{s}" / f"ls{v}.nc" for s in (1, 2)]
-    _cli("gaps", *lss, root / "analysis" / f"ls-gaps{v}.nc", "--gap-tol", "1e-4", "--include-rattlers", "--fit-min", "1e-4",
-         "--fit-max", "1e-1", "--bins-per-decade", "2", "--quiet")
+    _cli("forces", *finals, root / "studies" / "forces" / f"{POINTS[-1]}.nc", "--quiet")
+    lss = [last / f"seed{s}" / "ls.nc" for s in (1, 2)]
+    _cli("gaps", *lss, root / "studies" / "ls-gaps" / f"{POINTS[-1]}.nc", "--gap-tol", "1e-4", "--include-rattlers",
+         "--fit-min", "1e-4", "--fit-max", "1e-1", "--bins-per-decade", "2", "--quiet")
     # a flow time series in the flow schema's variables (its values are what the table must report)
     steps = np.arange(5.0)
     series = xr.Dataset(
@@ -57,7 +57,7 @@ def scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
         coords={"strain": ("step", 0.01 * steps), "time": ("step", 0.02 * steps)},
         attrs={"N": N, "d": 2, "mode": "shear"},
     )
-    write_dataset(series, root / "flow" / "seed1" / "shear_fixed-volume.nc")
+    write_dataset(series, last / "seed1" / "shear.series.nc")
     return root
 
 
@@ -68,7 +68,7 @@ def _attrs(root: Path, rel: str) -> dict:
 def test_one_row_per_packing_and_run_with_the_datasets_numbers(scene):
     table = jamflow.load_scene(scene)
     packings = table[table.kind == "packing"]
-    assert len(packings) == 2 * (1 + 2 * len(VARIANTS))
+    assert len(packings) == 2 * (1 + 2 * len(POINTS))
     assert list(packings[packings["sample"] == "seed1"].stage) == ["init", "ls", "ls", "calippso", "calippso"]
     for row in packings.itertuples():
         a = _attrs(scene, row.file)
@@ -88,11 +88,11 @@ def test_one_row_per_packing_and_run_with_the_datasets_numbers(scene):
             assert np.isnan(row.phi_J) and np.isnan(row.n_contacts)
 
 
-def test_scene_level_exponents_and_certificate_land_on_their_stage_and_variant(scene):
+def test_study_exponents_and_certificate_land_on_the_packings_they_pooled(scene):
     table = jamflow.load_scene(scene).set_index(["sample", "stage", "p_target"])
-    gaps = _attrs(scene, f"analysis/gaps{VARIANTS[-1]}.nc")
-    forces = _attrs(scene, f"analysis/forces{VARIANTS[-1]}.nc")
-    ls_gaps = _attrs(scene, f"analysis/ls-gaps{VARIANTS[-1]}.nc")
+    gaps = _attrs(scene, f"studies/gaps/{POINTS[-1]}.nc")
+    forces = _attrs(scene, f"studies/forces/{POINTS[-1]}.nc")
+    ls_gaps = _attrs(scene, f"studies/ls-gaps/{POINTS[-1]}.nc")
     p_max = P_TARGETS[-1]
     assert np.isfinite([gaps["fit_exponent"], ls_gaps["fit_exponent"]]).all()
     for sample in ("seed1", "seed2"):
@@ -102,7 +102,7 @@ def test_scene_level_exponents_and_certificate_land_on_their_stage_and_variant(s
         assert table.loc[(sample, "ls", p_max)].gamma == ls_gaps["fit_exponent"]
         # no analysis was run for the lower target: nothing attached there
         assert np.isnan(table.loc[(sample, "calippso", P_TARGETS[0])].gamma)
-    cert = _attrs(scene, f"analysis/seed1/certify{VARIANTS[-1]}.nc")["classification"]
+    cert = _attrs(scene, f"spheres/{POINTS[-1]}/seed1/calippso.certify.nc")["classification"]
     assert table.loc[("seed1", "calippso", p_max)].classification == cert
     # the certificate is of the CALiPPSO packing, not of the LS snapshot with the same variant
     assert table.loc[("seed1", "ls", p_max)].classification == ""
@@ -113,7 +113,7 @@ def test_a_run_row_reports_the_last_record(scene):
     table = jamflow.load_scene(scene)
     (run,) = table[table.kind == "run"].itertuples()
     assert (run.stage, run.strain, run.time, run.pressure, run.phi, run.n_contacts) == (
-        "shear_fixed-volume", 0.04, 0.08, 7.0, 0.804, 24.0)
+        "shear", 0.04, 0.08, 7.0, 0.804, 24.0)
 
 
 def test_dataset_form_has_the_same_values_and_long_names(scene):

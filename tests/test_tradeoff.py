@@ -12,7 +12,8 @@ from jamflow.box import Box
 from jamflow.cli import main
 from jamflow.io import read_dataset
 from jamflow.state.packing import Packing
-from jamflow.tradeoff import STAGES, _flow_compare, pareto_front, recommend
+from jamflow.tradeoff import STAGES, pareto_front, recommend
+from jamflow.tradeoff.stages import _flow_compare
 
 
 def test_pareto_front_against_brute_force(rng):
@@ -68,7 +69,7 @@ def test_shapes_stage_errors_and_grid():
     from jamflow.state.bodies import ShapeTable
     from jamflow.state.packing import Packing
     from jamflow.tolerances import SOFT_FORCE_TOL
-    from jamflow.tradeoff import _shapes_compare
+    from jamflow.tradeoff.stages import _shapes_compare
 
     lines = ShapeTable.from_shapes([dict(kind="circulo_line", vertices=[(-0.5, 0.0), (0.5, 0.0)], radius=0.2)])
 
@@ -92,7 +93,7 @@ def test_chains_stage_keeps_the_asked_link_precision():
     # the swept knob reaches the model: each jammed packing's links, measured from its
     # positions, hold to the asked length_rtol, and the loose setting really is looser;
     # the packings are jammed at the stage's P0 and agree in phi_J to the loose precision
-    from jamflow.tradeoff import CHAINS_P0, _chains_compare
+    from jamflow.tradeoff.stages import CHAINS_P0, _chains_compare
 
     sw = STAGES["chains"]
     start = sw.prepare(0, True)

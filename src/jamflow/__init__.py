@@ -14,6 +14,29 @@ numba kernels, HiGHS and matplotlib load only with the stage that needs them.
 
 from __future__ import annotations
 
+import os
+import signal
+import sys
+
+
+def _interrupted_while_starting(signum: int, frame: object) -> None:
+    sys.stderr.write("jamflow: interrupted (Ctrl-C) while starting; nothing written\n")
+    os._exit(130)
+
+
+def _started_as_command() -> bool:
+    """Whether this process is the ``jamflow`` console script or ``python -m jamflow``."""
+    argv = getattr(sys, "orig_argv", sys.argv)
+    if "-m" in argv[:-1] and argv[argv.index("-m") + 1] == "jamflow":
+        return True
+    return os.path.basename(sys.argv[0] if sys.argv else "") == "jamflow"
+
+
+if _started_as_command() and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+    # the command line's start-up: until jamflow.cli.main runs (it restores Ctrl-C as
+    # KeyboardInterrupt), Ctrl-C ends the process in one line instead of an import traceback
+    signal.signal(signal.SIGINT, _interrupted_while_starting)
+
 import importlib
 from typing import Any
 

@@ -12,11 +12,14 @@ the requested count changes (jamflow never solves two LPs at once).
 from __future__ import annotations
 
 import highspy
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import ArrayLike
 
-__all__ = ["new_highs", "DEFAULT_THREADS"]
+__all__ = ["new_highs", "colwise_lp", "DEFAULT_THREADS"]
 
-#: HiGHS threads when a stage does not ask for more: its LPs gained nothing from a
-#: second thread on 2 cores (README, "Resources per job"), and one thread is reproducible.
+#: HiGHS threads when a stage does not ask for more: one thread is reproducible, and a
+#: second one gained nothing (measured: docs/notes/resources.md).
 DEFAULT_THREADS: int = 1
 
 _scheduler_threads: int | None = None
@@ -41,3 +44,28 @@ def new_highs(threads: int = DEFAULT_THREADS) -> highspy.Highs:
         highspy.Highs.resetGlobalScheduler(True)
         _scheduler_threads = threads
     return h
+
+
+def colwise_lp(A: sp.csc_matrix, cost: ArrayLike, col_lower: ArrayLike, col_upper: ArrayLike,
+               row_lower: ArrayLike, row_upper: ArrayLike) -> highspy.HighsLp:
+    """The LP ``min cost . x`` s.t. ``row_lower <= A x <= row_upper``, ``col_lower <= x <= col_upper``.
+
+    Parameters
+    ----------
+    A : scipy.sparse.csc_matrix, shape (m, n)
+        Constraint matrix, passed to HiGHS column-wise as it is (sorted indices
+        are the caller's choice).
+    cost, col_lower, col_upper : array_like, shape (n,)
+    row_lower, row_upper : array_like, shape (m,)
+        Bounds; ``highspy.kHighsInf`` for none.
+    """
+    lp = highspy.HighsLp()
+    lp.num_col_, lp.num_row_ = A.shape[1], A.shape[0]
+    lp.col_cost_ = np.asarray(cost, dtype=np.float64)
+    lp.col_lower_, lp.col_upper_ = np.asarray(col_lower, np.float64), np.asarray(col_upper, np.float64)
+    lp.row_lower_, lp.row_upper_ = np.asarray(row_lower, np.float64), np.asarray(row_upper, np.float64)
+    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
+    lp.a_matrix_.start_ = A.indptr.astype(np.int32)
+    lp.a_matrix_.index_ = A.indices.astype(np.int32)
+    lp.a_matrix_.value_ = A.data.astype(np.float64)
+    return lp

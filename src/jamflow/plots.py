@@ -25,6 +25,8 @@ from matplotlib.ticker import NullFormatter
 
 from .analysis.forces import THETA_EXTENDED, THETA_LOCALISED
 from .analysis.gaps import MEAN_FIELD_GAP_EXPONENT
+from .io import atomic_file
+from .network import count_bodies
 from .network.spheres import contact_network, find_rattlers
 from .state.packing import Packing
 from .tolerances import CONTACT_GAP_TOL
@@ -85,10 +87,10 @@ def save_figure(fig: Figure, path: str | os.PathLike, dpi: int = 150) -> tuple[P
     if problems:
         raise ValueError(f"figure {path} not saved: " + "; ".join(problems))
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     png, pdf = path.with_suffix(".png"), path.with_suffix(".pdf")
-    fig.savefig(png, dpi=dpi, bbox_inches="tight")
-    fig.savefig(pdf, bbox_inches="tight")
+    for target, options in ((png, {"dpi": dpi}), (pdf, {})):
+        with atomic_file(target) as tmp:  # an interrupted save leaves no half-written figure
+            fig.savefig(tmp, format=target.suffix[1:], bbox_inches="tight", **options)
     return png, pdf
 
 
@@ -101,7 +103,9 @@ def plot_packing(packing: Packing, slab_axis: int = 2, title: str | None = None)
     2D: every disc, periodic images clipped to the box. d >= 3: the slab of
     particles whose centre lies within one radius of the mid-plane of coordinate
     ``slab_axis``, drawn as their cross-sections with that plane, projected on the
-    first two axes. Contacts are lines between centres, their width proportional
+    first two axes; with links, every sphere of each cluster that crosses the slab is
+    drawn whole (its projection, nearer spheres on top), so no cluster is cut. Linked
+    packings count rattling clusters by :func:`jamflow.network.count_bodies`. Contacts are lines between centres, their width proportional
     to the force when the packing has forces; rattlers are drawn in orange.
     Shaped particles are drawn as their outlines at their orientations and links as
     green lines between centres; a packing with shapes or links shows only its stored
@@ -117,8 +121,13 @@ def plot_packing(packing: Packing, slab_axis: int = 2, title: str | None = None)
         contacts = packing.contacts if packing.contacts is not None else np.empty((0, 2), np.int64)
     else:
         contacts = contact_network(packing)
+    count = None
+    if packing.links is not None and len(packing.links) and packing.contacts is not None:
+        count = count_bodies(packing.contacts, packing.n, packing.d, packing.links, packing.position, packing.box)
     # without stored contacts (e.g. an LS snapshot) near contacts are only geometric: flag no rattlers
-    if packing.rattler is not None:
+    if count is not None:
+        rattler = count.rattler
+    elif packing.rattler is not None:
         rattler = packing.rattler
     elif packing.contacts is not None and not bodies:
         rattler = find_rattlers(packing.n, packing.d, contacts)
@@ -126,11 +135,17 @@ def plot_packing(packing: Packing, slab_axis: int = 2, title: str | None = None)
         rattler = np.zeros(packing.n, dtype=bool)
     source = "" if packing.contacts is not None or bodies else f" with h <= {CONTACT_GAP_TOL:g}"
     shown = np.ones(packing.n, dtype=bool)
+    linked = packing.links is not None and len(packing.links) > 0
+    order = np.arange(packing.n)
     if packing.d >= 3:
         mid = 0.5 * h[slab_axis, slab_axis]
         dz = x[:, slab_axis] - mid
         shown = np.abs(dz) < radius
-        radius = np.sqrt(np.clip(radius**2 - dz**2, 0.0, None))
+        if linked:
+            shown = np.isin(packing.clusters, packing.clusters[shown])
+            order = np.argsort(dz, kind="stable")
+        else:
+            radius = np.sqrt(np.clip(radius**2 - dz**2, 0.0, None))
     a1, a2 = h[:2, 0], h[:2, 1]
     corners = np.array([[0.0, 0.0], a1, a1 + a2, a2])
     clip = Polygon(corners, closed=True, facecolor="none", edgecolor="k", lw=1.2)
@@ -138,13 +153,13 @@ def plot_packing(packing: Packing, slab_axis: int = 2, title: str | None = None)
     big = packing.diameter > np.median(packing.diameter) * (1 + 1e-9)
     colours = np.where(rattler, "tab:orange", np.where(big, "#9ecae1", "#c6dbef"))
     shifts = [i * a1 + j * a2 for i, j in itertools.product((-1, 0, 1), repeat=2)]
-    idx = np.flatnonzero(shown)
+    idx = order[shown[order]]
     outlines = _body_outlines(packing, x) if packing.shapes is not None else None
     for s in shifts:
         if outlines is None:
             col = EllipseCollection(2 * radius[idx], 2 * radius[idx], 0.0, units="xy", offsets=x[idx, :2] + s,
                                     offset_transform=ax.transData, facecolors=colours[idx], edgecolors="#3b5b7a",
-                                    linewidths=0.4)
+                                    linewidths=0.4, alpha=0.75 if linked and packing.d >= 3 else None)
         else:
             col = PolyCollection([o + s for o in outlines], facecolors=colours, edgecolors="#3b5b7a", linewidths=0.4)
         col.set_clip_path(clip)
@@ -189,10 +204,17 @@ def plot_packing(packing: Packing, slab_axis: int = 2, title: str | None = None)
     unit = packing.attrs.get("length_unit", "length unit")
     ax.set_xlabel(f"x [{unit}]")
     ax.set_ylabel(f"y [{unit}]")
-    slab = "" if packing.d == 2 else f", slab |x_{slab_axis} - L/2| < D/2 ({int(shown.sum())} particles)"
+    slab = "" if packing.d == 2 else (f", clusters crossing |x_{slab_axis} - L/2| < D/2 drawn whole "
+                                       f"({int(shown.sum())} spheres)" if linked else
+                                       f", slab |x_{slab_axis} - L/2| < D/2 ({int(shown.sum())} particles)")
     n_r = int(np.sum(rattler))
-    ax.set_title(title or f"d={packing.d}, N={packing.n}, phi={packing.packing_fraction:.5f}, "
-                          f"{len(contacts)} contacts{source}, {n_r} {free}{slab}", fontsize=9)
+    counted = f"{n_r} {free}"
+    if count is not None:
+        counted = (f"{int(count.rattling_cluster.sum())} rattling cluster(s) ({int(count.removed.sum())} whole, "
+                   f"{int(count.dangler.sum())} dangler(s))")
+    ax.set_title(title or "\n".join(textwrap.wrap(f"d={packing.d}, N={packing.n}, phi={packing.packing_fraction:.5f}, "
+                                                  f"{len(contacts)} contacts{source}, {counted}{slab}", 90)),
+                 fontsize=9)
     if ax.get_legend_handles_labels()[0]:
         ax.legend(loc="upper right", fontsize=8, framealpha=0.8)
     return fig
@@ -687,7 +709,10 @@ def plot_chains_moduli(ds: xr.Dataset) -> Figure:
 
     ``ds`` is a ``jamflow chains-moduli`` output: Reuss-Voigt weighted values with
     weighted standard errors (points), the mean Voigt and Reuss bounds (dashed and
-    dotted). Groups whose modulus is infinite in every packing are marked on the top edge.
+    dotted). An infinite modulus has no height: every group with packings of infinite
+    modulus gets an upward triangle just above the axes (outside the data
+    scale) labelled with their count, ``inf x k/n``; filled when every packing of the
+    group is infinite, open when the point below averages the finite rest.
     """
     fig = Figure(layout="constrained", figsize=(8.4, 3.6))
     axes = fig.subplots(1, 2)
@@ -702,9 +727,17 @@ def plot_chains_moduli(ds: xr.Dataset) -> Figure:
             v = ds[f"{name}_{part}"].values
             ok = np.isfinite(v)
             ax.plot(x[ok], v[ok], style, color="0.4", lw=1, label=f"mean {part.split('_')[0].capitalize()} bound")
-        if (~finite).any():
-            top = np.nanmax(np.where(finite, y, np.nan)) if finite.any() else 1.0
-            ax.plot(x[~finite], np.full((~finite).sum(), 1.05 * top), "^", color="C3", label="infinite")
+        n_inf = ds[f"{name}_infinite"].values
+        n_all = ds["n_packings"].values - ds["n_unstable"].values
+        edge = ax.get_xaxis_transform()  # x in data, y in axes fraction: off the modulus scale
+        for fill, pick, label in (("C3", n_inf >= n_all, "infinite in every packing"),
+                                  ("none", (n_inf > 0) & (n_inf < n_all), "infinite in some packings")):
+            if pick.any():
+                ax.plot(x[pick], np.full(pick.sum(), 1.04), "^", transform=edge, ms=8, color="C3",
+                        markerfacecolor=fill, clip_on=False, label=label)
+        for xi, k, n in zip(x[n_inf > 0], n_inf[n_inf > 0], n_all[n_inf > 0]):
+            ax.annotate(f"inf x {int(k)}/{int(n)}", (xi, 1.04), xycoords=edge, xytext=(0, 7),
+                        textcoords="offset points", ha="center", fontsize=7, color="C3")
         ax.set_xlabel(f"added links per sphere n_l / N {_DL}")
         ax.set_ylabel(f"{name} modulus {symbol} [epsilon / <D>^{d}]")
         ax.legend(fontsize=7)

@@ -1,14 +1,25 @@
-"""Provenance attributes every jamflow dataset carries (version, git sha, time)."""
+"""Provenance attributes every jamflow dataset carries (version, git sha, time, scan point).
+
+A workflow job runs with its scene's scan point in the environment variable
+:data:`SCAN_POINT_ENV` (JSON, set by the rule's command line, :mod:`jamflow.scenes.plan`):
+every dataset it writes carries it as ``scan_point`` (JSON) and one attribute
+``point_<key>`` per dimension, so a file read alone still says where in the scan it sits.
+"""
 
 from __future__ import annotations
 
+import json
+import os
 import subprocess
 from datetime import datetime, timezone
 from functools import lru_cache
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
-__all__ = ["jamflow_version", "git_sha", "provenance_attrs"]
+__all__ = ["SCAN_POINT_ENV", "git_sha", "jamflow_version", "provenance_attrs", "scan_point_attrs"]
+
+#: Environment variable holding the scan point (a JSON object) of the workflow job that runs the command.
+SCAN_POINT_ENV = "JAMFLOW_SCAN_POINT"
 
 
 def jamflow_version() -> str:
@@ -36,10 +47,28 @@ def git_sha() -> str:
     return f"{sha}-dirty" if dirty else sha
 
 
+def scan_point_attrs() -> dict[str, str | float]:
+    """``scan_point`` and ``point_<key>`` attributes from :data:`SCAN_POINT_ENV` (none outside a workflow job)."""
+    text = os.environ.get(SCAN_POINT_ENV)
+    if not text:
+        return {}
+    try:
+        point = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{SCAN_POINT_ENV} is not JSON ({error}): {text!r}") from None
+    if not isinstance(point, dict):
+        raise ValueError(f"{SCAN_POINT_ENV} must be a JSON object, got {text!r}")
+    attrs: dict[str, str | float] = {"scan_point": json.dumps(point, sort_keys=True)}
+    for key, value in point.items():
+        attrs[f"point_{key}"] = value if isinstance(value, (int, float)) and not isinstance(value, bool) else str(value)
+    return attrs
+
+
 def provenance_attrs(title: str) -> dict[str, str]:
-    """CF global attributes plus jamflow provenance for a new dataset."""
+    """CF global attributes plus jamflow provenance (and a workflow job's scan point) for a new dataset."""
     created = datetime.now(timezone.utc).isoformat(timespec="seconds")
     return {
+        **scan_point_attrs(),
         "Conventions": "CF-1.10",
         "title": title,
         "source": f"jamflow {jamflow_version()}",

@@ -1,29 +1,31 @@
-"""One table of a whole scene: a row per packing or flow run, with its parameters and key numbers.
+"""One table of a whole scene: a row per packing or flow run, with its scan point and key numbers.
 
-The workflow writes ``results/<scene>/packings/<sample>/<stage>[_k<kappa>_p<p_tar>].nc``
-(one packing per sample and stage), ``results/<scene>/flow/<sample>/<run>.nc`` (flow time
-series) and scene-level analyses in ``results/<scene>/analysis/`` (``gaps*.nc``,
-``forces*.nc`` over samples, ``<sample>/certify*.nc`` per packing). :func:`load_scene`
-reads them and returns one row per packing and per flow run:
+The workflow writes (``docs/scenes.md``, :mod:`jamflow.scenes.plan`)
+``results/<scene>/<bodies>/<point>/<sample>/<step>.nc`` (one packing per bodies, scan point,
+sample and step), ``<step>.series.nc`` beside a flow step's final packing,
+``<step>.<analysis>.nc`` for the analyses of a packing and ``results/<scene>/studies/`` for
+the studies. :func:`load_scene` reads them and returns one row per packing and per flow run:
 
-- packings: parameters (sample, stage, kappa, p_target, N, d, protocol, seed) and numbers
-  (phi, phi_J, pressure, backbone contacts N_c, the isostatic count d(N_s - 1) + 1,
-  rattlers, number of LPs, max overlap, force-balance residual, certificate); each
-  row also carries the scene-level gap exponent gamma and force exponent theta of the
-  analysis over the samples of its stage and variant (the same value on every sample's
-  row), with their standard errors;
+- packings: parameters (bodies, scan point, sample, stage, kappa, p_target, N, d, protocol,
+  seed, and one column ``point_<dimension>`` per scan dimension) and numbers (phi, phi_J,
+  pressure, backbone contacts N_c, the isostatic count d(N_s - 1) + 1, rattlers, number of
+  LPs, max overlap, force-balance residual, certificate); each row also carries the gap
+  exponent gamma and force exponent theta of the study that pooled it (the same value on
+  every row of one study point), with their standard errors;
 - flow runs: the last record of the time series (strain, time, phi, pressure, shear
   stress, contacts) and, when a flow summary exists, the steady-state friction.
 
-Every number is read from the datasets' own attributes or variables; nothing is
+Every file is read as the kind of dataset its folder says (a flow series where a packing
+should be is an error naming the file, not a row of blanks). Every number is read from
+the datasets' own attributes or variables; nothing is
 recomputed except the backbone counts of a packing that has contacts and rattler flags
 but no count attributes (soft packings), which are counted from those variables.
 """
 
 from __future__ import annotations
 
+import json
 import os
-import re
 from pathlib import Path
 from typing import Any, Literal
 
@@ -31,7 +33,7 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-from .io import read_dataset
+from .io import dataset_kind, read_dataset
 from .network import isostatic_count
 
 __all__ = ["COLUMNS", "load_scene", "scene_results_dir"]
@@ -40,8 +42,10 @@ __all__ = ["COLUMNS", "load_scene", "scene_results_dir"]
 COLUMNS: dict[str, str] = {
     "scene": "scene name (the results folder)",
     "kind": "'packing' or 'run' (flow time series)",
-    "sample": "sample (seed<S> or import name)",
-    "stage": "stage that wrote the file (init, ls, calippso, soft, shear_<condition>, ...)",
+    "body": "body block of the scene (spheres, linked-trimer, shapes-ellipse, ...)",
+    "point": "scan point of the packing (key=value,... or base)",
+    "sample": "sample (seed<S>)",
+    "stage": "step of the chain that wrote the file (init, ls, calippso, soft-jam, shear, ...)",
     "kappa": "LS growth rate of the sample (NaN without LS)",
     "p_target": "LS target reduced pressure of the snapshot (NaN without LS)",
     "N": "number of particles",
@@ -59,9 +63,9 @@ COLUMNS: dict[str, str] = {
     "max_overlap": "largest overlap relative to the pair diameter (CALiPPSO packings)",
     "force_balance_residual": "largest per-particle force-balance residual relative to the mean force",
     "classification": "LP jamming certificate (jamflow certify) of the packing, if run",
-    "gamma": "gap exponent, p(h) ~ h^-gamma, fitted over the samples of this stage and variant",
+    "gamma": "gap exponent, p(h) ~ h^-gamma, of the gaps study point that pooled this packing",
     "gamma_err": "standard error of gamma",
-    "theta": "small-force exponent, P(f) ~ f^theta, over the samples of this stage and variant",
+    "theta": "small-force exponent, P(f) ~ f^theta, of the forces study point that pooled this packing",
     "theta_err": "standard error of theta",
     "strain": "runs: accumulated strain at the last record",
     "time": "runs: time at the last record",
@@ -70,7 +74,8 @@ COLUMNS: dict[str, str] = {
     "file": "the dataset, relative to the results folder",
 }
 
-_VARIANT = re.compile(r"^(?P<stage>.+?)(?P<variant>_k[^_]+_p[^_]+)?$")
+#: file suffixes that are not packings: flow series, LS equations of state, analyses
+_NOT_PACKINGS = (".series.nc", ".eos.nc")
 
 
 def scene_results_dir(path: str | os.PathLike) -> Path:
@@ -91,8 +96,8 @@ def scene_results_dir(path: str | os.PathLike) -> Path:
         path = Path("results") / str(scene)
     if not path.is_dir():
         raise FileNotFoundError(f"no results folder {path} (run the scene first, from the repository root)")
-    if not (path / "packings").is_dir() and not (path / "flow").is_dir():
-        raise ValueError(f"{path} has neither packings/ nor flow/: not a scene results folder")
+    if not any(path.glob("*/*/*/*.nc")):
+        raise ValueError(f"{path} holds no <bodies>/<point>/<sample>/<step>.nc: not a scene results folder")
     return path
 
 
@@ -112,37 +117,52 @@ def load_scene(
     Returns
     -------
     pandas.DataFrame or xarray.Dataset
-        Rows sorted by kind, sample, stage (in chain order), kappa and p_target.
+        Rows sorted by kind, body, sample, stage (in chain order) and scan point; the
+        columns of :data:`COLUMNS`, then one ``point_<dimension>`` per scan dimension.
     """
     if as_ not in ("dataframe", "dataset"):
         raise ValueError(f"as_ must be 'dataframe' or 'dataset', got {as_!r}")
     root = scene_results_dir(path)
-    rows = [_packing_row(root, f) for f in sorted(root.glob("packings/*/*.nc")) if not f.name.endswith(".eos.nc")]
-    _attach_scene_analyses(root, rows)
-    rows += [_run_row(root, f) for f in sorted(root.glob("flow/*/*.nc")) if _is_series(f)]
+    files = sorted(f for f in root.glob("*/*/*/*.nc") if f.parts[-4] not in ("studies", "figures", "logs"))
+    rows = [_packing_row(root, f) for f in files if f.name.count(".") == 1]
+    _attach_studies(root, rows)
+    rows += [_run_row(root, f) for f in files if f.name.endswith(".series.nc")]
     if not rows:
         raise ValueError(f"{root}: no packings or flow runs found")
+    dims = sorted({k for row in rows for k in row.get("_point", {})})
     for row in rows:
         row["scene"] = root.name
-    table = pd.DataFrame(rows, columns=list(COLUMNS))
+        for k in dims:
+            row[f"point_{k}"] = row.get("_point", {}).get(k, np.nan)
+        row.pop("_point", None)
+    table = pd.DataFrame(rows, columns=[*COLUMNS, *(f"point_{k}" for k in dims)])
     # stages in chain order (init, ls, calippso): by the number of steps of their protocol
     depth = table["protocol"].astype(str).str.count(">")
     table = (table.assign(_depth=depth)
-             .sort_values(["kind", "sample", "_depth", "stage", "kappa", "p_target"], kind="stable", na_position="first")
+             .sort_values(["kind", "body", "sample", "_depth", "stage", "point"], kind="stable", na_position="first")
              .drop(columns="_depth").reset_index(drop=True))
     if as_ == "dataframe":
         return table
     ds = xr.Dataset.from_dataframe(table.rename_axis("row"))
     for name, text in COLUMNS.items():
         ds[name].attrs["long_name"] = text
+    for k in dims:
+        ds[f"point_{k}"].attrs["long_name"] = f"scan dimension {k}"
     ds.attrs["title"] = f"jamflow scene summary: {root.name}"
     return ds
 
 
-def _split_name(name: str) -> tuple[str, str]:
-    """``calippso_k0.001_p1e+06`` -> (``calippso``, ``_k0.001_p1e+06``)."""
-    m = _VARIANT.match(name)
-    return m["stage"], m["variant"] or ""
+def _location(root: Path, path: Path) -> dict[str, Any]:
+    """Bodies, scan point and sample of a file from its path, and the point's values from its attributes."""
+    body, point, sample = path.relative_to(root).parts[:3]
+    return {"body": body, "point": point, "sample": sample, "stage": path.name.split(".")[0]}
+
+
+def _scan_point(attrs: dict[str, Any]) -> dict[str, Any]:
+    text = attrs.get("scan_point")
+    if not text:
+        return {}
+    return {k: v for k, v in json.loads(text).items() if k not in ("body", "sample", "seed")}
 
 
 def _attr(attrs: dict[str, Any], key: str, default: Any = np.nan) -> Any:
@@ -151,31 +171,27 @@ def _attr(attrs: dict[str, Any], key: str, default: Any = np.nan) -> Any:
 
 
 def _packing_row(root: Path, path: Path) -> dict[str, Any]:
-    ds = read_dataset(path)
+    ds = read_dataset(path, "packing")
     a = ds.attrs
-    stage, variant = _split_name(path.stem)
     is_p_target = _attr(a, "target_kind", "") == "p"
     row: dict[str, Any] = {
-        "kind": "packing", "sample": path.parent.name, "stage": stage,
+        "kind": "packing", **_location(root, path),
         "kappa": float(_attr(a, "kappa")), "p_target": float(_attr(a, "target")) if is_p_target else np.nan,
         "N": int(_attr(a, "N")), "d": int(_attr(a, "d")), "protocol": _attr(a, "protocol", ""),
         "seed": int(_attr(a, "seed", -1)), "phi": float(_attr(a, "packing_fraction")),
         "pressure": float(_attr(a, "pressure")), "phi_J": float(_attr(a, "phi_J")),
         "n_lp": _attr(a, "n_lps", _attr(a, "iterations")), "max_overlap": _attr(a, "max_overlap"),
         "force_balance_residual": _attr(a, "force_balance_residual"),
-        "file": path.relative_to(root).as_posix(), "_variant": variant,
+        "file": path.relative_to(root).as_posix(), "_point": _scan_point(a),
     }
     if str(row["protocol"]).endswith(">soft") and "target_pressure" in a:
         # a soft packing brought to the target pressure P0 sits at the jamming onset to O(P0)
         row["phi_J"] = row["phi"]
     row.update(_network_counts(ds))
     row["classification"] = ""
-    certificate = root / "analysis" / path.parent.name / f"certify{variant}.nc"
+    certificate = path.with_name(f"{row['stage']}.certify.nc")
     if certificate.is_file():
-        cert = read_dataset(certificate).attrs
-        # a sample's certificate is of one stage's packing (the chain's last), named by its protocol
-        if cert.get("packing_protocol") == row["protocol"]:
-            row["classification"] = cert["classification"]
+        row["classification"] = read_dataset(certificate, ("certificate", "chain-certificate")).attrs["classification"]
     return row
 
 
@@ -196,50 +212,37 @@ def _network_counts(ds: xr.Dataset) -> dict[str, Any]:
     return {"n_contacts": n_c, "isostatic_count": iso, "isostatic": int(n_c == iso), "n_rattlers": n_r}
 
 
-def _attach_scene_analyses(root: Path, rows: list[dict[str, Any]]) -> None:
-    """Copy gamma and theta of each scene-level analysis onto the rows of its stage and variant.
-
-    ``analysis/gaps<variant>.nc`` and ``forces<variant>.nc`` analyse the packings of the
-    last stage of the chain; ``analysis/ls-gaps<variant>.nc`` the LS snapshots.
-    """
-    if not rows:
-        return
-    # the chain's last stage: the one whose protocol has the most steps
-    final = max(rows, key=lambda r: str(r["protocol"]).count(">"))["stage"]
-    for kind, stage_of, columns in (("gaps", lambda p: "ls" if p == "ls-gaps" else final, ("gamma", "gamma_err")),
-                                    ("forces", lambda p: final, ("theta", "theta_err"))):
-        for path in sorted((root / "analysis").glob(f"*{kind}*.nc")):
-            prefix, variant = _split_name(path.stem)
-            if prefix not in (kind, f"ls-{kind}"):
-                continue
-            a = read_dataset(path).attrs
-            values = (float(a["fit_exponent"]), float(a["fit_exponent_err"]))
-            for row in rows:
-                if row["stage"] == stage_of(prefix) and row["_variant"] == variant:
-                    row.update(zip(columns, values, strict=True))
-    for row in rows:
-        del row["_variant"]
-
-
-def _is_series(path: Path) -> bool:
-    """A flow time series (not a final packing, snapshots or checkpoint)."""
-    return not path.name.endswith(("_final.nc", ".snapshots.nc")) and "checkpoint" not in path.name
+def _attach_studies(root: Path, rows: list[dict[str, Any]]) -> None:
+    """Copy gamma and theta of each gaps and forces study point onto the rows of the packings it pooled
+    (its ``inputs`` parameter)."""
+    by_file = {row["file"]: row for row in rows}
+    for path in sorted((root / "studies").glob("*/*.nc")):
+        ds = read_dataset(path)
+        a = ds.attrs
+        kind = {"gaps": ("gamma", "gamma_err"), "forces": ("theta", "theta_err")}.get(dataset_kind(ds) or "")
+        if kind is None or "fit_exponent" not in a:
+            continue
+        values = (float(a["fit_exponent"]), float(a["fit_exponent_err"]))
+        for name in json.loads(a.get("parameters", "{}")).get("inputs", []):
+            relative = Path(name).as_posix().split(f"{root.name}/", 1)[-1]
+            if relative in by_file:
+                by_file[relative].update(zip(kind, values, strict=True))
 
 
 def _run_row(root: Path, path: Path) -> dict[str, Any]:
-    ds = read_dataset(path)
+    ds = read_dataset(path, ("flow", "aqs"))
     a = ds.attrs
     row: dict[str, Any] = {
-        "kind": "run", "sample": path.parent.name, "stage": path.stem,
+        "kind": "run", **_location(root, path),
         "kappa": np.nan, "p_target": np.nan, "N": int(_attr(a, "N")), "d": int(_attr(a, "d")),
         "protocol": _attr(a, "protocol", _attr(a, "mode", "")), "seed": int(_attr(a, "seed", -1)),
-        "file": path.relative_to(root).as_posix(), "classification": "",
+        "file": path.relative_to(root).as_posix(), "classification": "", "_point": _scan_point(a),
     }
     last = {"phi": "packing_fraction", "pressure": "pressure", "n_contacts": "n_contacts",
             "strain": "strain", "time": "time", "shear_stress": "shear_stress"}
     for column, name in last.items():
         row[column] = float(ds[name].values[-1]) if name in ds.variables and ds[name].size else np.nan
-    summary = root / "analysis" / path.parent.name / f"{path.stem}_summary.nc"
+    summary = path.with_name(f"{row['stage']}.flow-summary.nc")
     if summary.is_file():
-        row["friction"] = float(read_dataset(summary).attrs["friction_ratio_of_means"])
+        row["friction"] = float(read_dataset(summary, "flow-summary").attrs["friction_ratio_of_means"])
     return row

@@ -20,6 +20,13 @@ OVERLAP_TOL: float = 1e-8
 #: without a dual in the jammed d = 3 LS example is at 1.4e-7.
 CONTACT_GAP_TOL: float = 1e-8
 
+#: Histograms of distances (g(r)): a value within this relative distance of a bin edge
+#: counts in the bin above the edge. Contacts sit on their contact distance to
+#: :data:`CONTACT_GAP_TOL` (and round-off ~1e-15), so a contact distance on an edge (the
+#: small-large contacts of a 1:1.4 mixture at r = 1 mean diameter) never straddles it
+#: under a rigid shift or a relabelling; the same holds for lattice distances of crystals.
+BIN_EDGE_RTOL: float = CONTACT_GAP_TOL
+
 #: Position tolerance in fractional coordinates when checking that particles lie
 #: inside the primary cell (absorbs round-off of wrapping).
 INSIDE_BOX_TOL: float = 1e-12
@@ -65,9 +72,8 @@ CERTIFY_BOUND_TOL: float = 1e-6
 #: Force balance of soft-sphere packings: largest per-particle force norm
 #: ``max_i |F_i|`` in units of ``epsilon / <D>`` (mean diameter). VanderWerf et al.
 #: ask for ``F_i^2 < 1e-25`` (``|F_i| < 3.2e-13``); 1e-13 meets it with a factor ten
-#: in ``F^2`` to spare, so that wrapping centres into the box (round-off ~L 2^-53)
-#: cannot push a stored packing over it. float64 balances forces down to ~1e-14
-#: (measured: 2D N = 1024 reaches max F^2 = 9e-29; asked for less it stalls at 2e-28 ... 4e-28).
+#: in ``F^2`` to spare, above the float64 floor of ~1e-14
+#: (measured: docs/notes/soft-constants.md#soft_force_tol).
 SOFT_FORCE_TOL: float = 1e-13
 
 #: Default ``max_i |F_i|`` [epsilon / <D>] at which a single soft-sphere minimisation
@@ -110,17 +116,31 @@ LINK_RANK_RTOL: float = 1e-8
 #: are not linked counts as trapped (links of soft spheres passed through each other
 #: during a minimisation from an overlapping start) when its relative overlap exceeds
 #: this bound *and* its force exceeds :data:`ENTANGLED_FORCE_RATIO` times the pressure's
-#: force scale. At the jamming onset (P0 << 1) overlaps are of the order of P0 (measured:
-#: <= 7e-4 at P0 = 1e-4 in 2D and 3D trimer packings), while links threaded through
-#: spheres hold them at geometric overlaps of 0.16-0.45 diameters; 0.1 separates the two
-#: and keeps residual overlaps of unjammed minima (~force_tol) from ever counting.
+#: force scale. Onset overlaps are of the order of P0, threaded links hold overlaps of
+#: 0.16-0.45 diameters (measured: docs/notes/chains.md#entanglement-thresholds).
 ENTANGLED_OVERLAP: float = 0.1
 
 #: Largest ratio of a contact force to the pressure's force scale ``f_P = d V P / sum_c r_c``
 #: (the mean contact force if the pressure P, contacts and link tensions together, were
 #: carried by the contacts alone) before a pair counts as trapped (with
-#: :data:`ENTANGLED_OVERLAP`). Force distributions of jammed packings have exponential
-#: tails: max / f_P is 3-10 even for 10^6 contacts (measured 5.1 in a 3D trimer packing at
-#: P0 = 1e-4); the entangled 2D trimer packing of chains-fig2 had 800-2200 (contact forces
-#: balanced by link tensions, not by the pressure). 100 leaves a factor ten either side.
+#: :data:`ENTANGLED_OVERLAP`): a factor ten above the largest ratio of jammed packings and
+#: below that of entangled ones (measured: docs/notes/chains.md#entanglement-thresholds).
 ENTANGLED_FORCE_RATIO: float = 100.0
+
+#: Rattling clusters (:mod:`jamflow.network.bodies`): a singular value of a cluster's
+#: orthonormal motion basis restricted to its contact-bearing spheres below this counts
+#: as zero, i.e. as a free motion that moves no contact-bearing sphere (a swinging
+#: trimer, a dangler, a rotator). A free motion leaves a singular value at round-off
+#: (~1e-16); a held motion moves the contact-bearing spheres by a fraction of its norm
+#: set by the geometry (sines of bond angles, which the link-degeneracy test keeps above
+#: :data:`LINK_RANK_RTOL`), so the same 1e-8 separates the two.
+BODY_FREE_RTOL: float = 1e-8
+#: Sliders (:func:`jamflow.network.find_sliders`): a body's translation ``t`` is free
+#: when the matrix of its contacts' unit normals has its smallest singular value
+#: ``sqrt(sum_c (n_c . t)^2)`` at most this fraction of the largest. The stiffness
+#: along ``t``, ``k sum_c (n_c . t)^2``, is then at most 1e-12 of the body's stiffest
+#: translation: the dynamical matrix's zero-mode floor (1e-13 of its largest
+#: eigenvalue, ~10 k) in the shapes' spectrum. Measured on 64 circulo-lines
+#: (A = 1.1, P0 = 1e-9, three seeds): 1e-17 ... 1e-16 for every sliding body, 0.28 and
+#: above for every other (docs/notes/shapes.md, "Sliders").
+SLIDER_RTOL: float = 1e-6

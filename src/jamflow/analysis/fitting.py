@@ -161,8 +161,11 @@ def bootstrap_error(samples: Sequence[NDArray[np.float64]], x_min: float, x_max:
 
     Each resample draws ``len(samples)`` packings with replacement, then the samples
     of every drawn packing with replacement. Resamples with fewer than two samples
-    in the window are dropped; NaN when fewer than two resamples remain.
+    in the window are dropped; NaN when fewer than two resamples remain. Each
+    packing's samples are sorted first, so the error does not depend on the order in
+    which its pairs were listed (a relabelling of the particles).
     """
+    samples = [np.sort(np.asarray(s, dtype=np.float64)) for s in samples]
     rng = np.random.default_rng(seed)
     m = len(samples)
     alphas = []

@@ -287,7 +287,9 @@ def gap_distribution(
     if len(packings) == 0:
         raise ValueError("gap_distribution needs at least one packing")
     check_window(fit_min, fit_max)
-    pressures = [p.pressure for p in packings]
+    # the plateau is of hard spheres at a finite reduced pressure (LS snapshots); a soft
+    # packing's pressure P0 is an energy density, not that pressure
+    pressures = [p.pressure if p.protocol.rsplit(">", 1)[-1] == "ls" else None for p in packings]
     lower = fit_min
     if all(p is not None and np.isfinite(p) and p > 0 for p in pressures):
         lower = max(fit_min, 1.0 / min(pressures))

@@ -2,7 +2,11 @@
 
 * g(r) in any dimension. Distances are measured in units of the **mean diameter**;
   for polydisperse packings this is the total (all-species) g(r) of centre
-  distances, not a per-species or gap-based one.
+  distances, not a per-species or gap-based one. Bins are ``[k w, (k + 1) w)``; a
+  distance within :data:`~jamflow.tolerances.BIN_EDGE_RTOL` of an edge counts in the
+  bin above it, so contacts (and lattice distances) that sit on an edge, as the
+  small-large contacts of a 1:1.4 mixture sit on r = 1 mean diameter, fall in one bin
+  whatever the round-off of a rigid shift or a relabelling.
 * 2D: bond-orientational order ``psi6_i = (1/6) sum_j exp(6 i theta_ij)`` over the
   six nearest neighbours of ``i``; ``|psi6|`` is 1 on a triangular lattice and of
   order ``1/sqrt(N)`` for the global value of a random configuration.
@@ -26,11 +30,14 @@ from ..io import new_dataset_attrs
 from ..neighbors.pairs import pairs_within
 from ..stages import require
 from ..state.packing import Packing, sphere_volume
+from ..tolerances import BIN_EDGE_RTOL
 
 __all__ = [
     "TWF_DOT_THRESHOLD",
     "TWF_MIN_CONNECTED",
     "radial_distribution",
+    "largest_r_max",
+    "binned_counts",
     "nearest_neighbours",
     "hexatic_order",
     "bond_order_vectors",
@@ -59,6 +66,26 @@ def _half_width(packing: Packing) -> float:
     return 0.5 * float(np.min(packing.box.widths))
 
 
+def largest_r_max(packing: Packing) -> float:
+    """The largest ``r_max`` [mean diameters] of :func:`radial_distribution`: just below half the smallest box width."""
+    return _half_width(packing) / float(np.mean(packing.diameter)) * (1.0 - 1e-12)
+
+
+def binned_counts(values: NDArray[np.float64], width: float, bins: int) -> NDArray[np.int64]:
+    """Counts of ``values`` in the bins ``[k width, (k + 1) width)``, ``k = 0 .. bins - 1``.
+
+    A value within :data:`~jamflow.tolerances.BIN_EDGE_RTOL` (relative) of an edge counts
+    in the bin above that edge, so round-off never decides the bin of a value that
+    lies on an edge.
+    """
+    k = np.asarray(values, dtype=np.float64) / width
+    edge = np.rint(k)
+    on_edge = np.abs(k - edge) <= BIN_EDGE_RTOL * np.maximum(edge, 1.0)
+    index = np.where(on_edge, edge, np.floor(k))
+    index = index[(index >= 0) & (index < bins)].astype(np.int64)
+    return np.bincount(index, minlength=bins)
+
+
 def radial_distribution(packing: Packing, r_max: float = 3.0, bins: int = 150) -> tuple[NDArray, NDArray, NDArray]:
     """Radial distribution function g(r).
 
@@ -67,8 +94,9 @@ def radial_distribution(packing: Packing, r_max: float = 3.0, bins: int = 150) -
     packing : Packing
     r_max : float
         Largest distance in units of the mean diameter; must stay below half the
-        smallest box width.
+        smallest box width (:func:`largest_r_max`).
     bins : int
+        Bins of width ``r_max / bins`` (edges: :func:`binned_counts`).
 
     Returns
     -------
@@ -86,8 +114,9 @@ def radial_distribution(packing: Packing, r_max: float = 3.0, bins: int = 150) -
             f"({_half_width(packing) / unit:.4g} mean diameters)"
         )
     pairs = pairs_within(packing.position, packing.box, cutoff)
-    edges = np.linspace(0.0, r_max, bins + 1)
-    counts, _ = np.histogram(pairs.distance / unit, bins=edges)
+    width = r_max / bins
+    edges = width * np.arange(bins + 1)
+    counts = binned_counts(pairs.distance / unit, width, bins)
     shell = np.diff(sphere_volume(packing.d, 2.0 * edges * unit))
     rho = packing.n / packing.box.volume
     g = 2.0 * counts / (packing.n * rho * shell)
@@ -233,10 +262,21 @@ def structure_dataset(packing: Packing, r_max: float = 3.0, bins: int = 150, par
     Variables: ``g(r)``; 2D ``psi6_abs(particle)`` (local |psi6|); 3D
     ``q6(particle)`` and ``crystal_like(particle)``. Attributes: ``psi6_global``,
     ``psi6_local_mean`` (2D); ``Q6_global``, ``q6_local_mean``,
-    ``crystal_fraction`` (3D); ``crystallinity`` says which was computed.
+    ``crystal_fraction`` (3D); ``crystallinity`` says which was computed;
+    ``r_max`` and ``r_max_requested``.
+
+    An ``r_max`` beyond half the smallest box width (where minimum-image distances end)
+    is clipped there: the bins keep their width ``r_max / bins`` and the last ones are
+    dropped, so g(r) of small and large packings share their bins; ``r_max_clipped``
+    (0/1) says whether that happened.
     """
     require("rdf", packing.body_kind)
-    r, g, edges = radial_distribution(packing, r_max, bins)
+    width = r_max / bins
+    kept = min(bins, int(np.floor(largest_r_max(packing) / width)))
+    if kept < 1:
+        raise ValueError(f"half the smallest box width ({largest_r_max(packing):.4g} mean diameters) is below one "
+                         f"bin width ({width:.4g}): use more bins or a larger packing")
+    r, g, edges = radial_distribution(packing, kept * width, kept)
     one = {"units": "1"}
     data_vars: dict = {
         "g": ("r", g, {**one, "long_name": "radial distribution function g(r)"}),
@@ -268,7 +308,8 @@ def structure_dataset(packing: Packing, r_max: float = 3.0, bins: int = 150, par
         coords={"r": ("r", r, {**one, "long_name": "centre distance in units of the mean diameter (bin centre)"})},
         attrs=new_dataset_attrs(
             "jamflow structure", parameters or {}, d=packing.d, N=packing.n,
-            packing_fraction=packing.packing_fraction,
+            packing_fraction=packing.packing_fraction, r_max=float(edges[-1]), r_max_requested=float(r_max),
+            r_max_clipped=int(kept < bins),
             length_unit_g="mean diameter; polydisperse packings: total g(r) of centre distances",
             **extra,
         ),

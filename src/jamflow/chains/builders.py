@@ -30,14 +30,16 @@ link lengths no configuration satisfies (Newton re-affixing fails).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from math import pi
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..box import Box
+from ..protocols.initial import draw_diameters
 from ..state.bodies import Links
-from ..state.packing import Packing, linked_volume
+from ..state.packing import Packing, linked_volume, sphere_volume
 from ..tolerances import LINK_RANK_RTOL, OVERLAP_TOL
 from .dimers import (
     DIMER_DIAMETER_RATIO,
@@ -46,12 +48,15 @@ from .dimers import (
     check_dimer,
     dimer_asphericity,
 )
+from .growth import grow_chain
 
 __all__ = [
     "BOND_ANGLE_RANGE",
     "CLUSTER_KINDS",
     "DILUTE_PHI",
     "OVERLAP_PHI",
+    "SIZE_CLASSES",
+    "Sizes",
     "cement",
     "cement_links",
     "cement_pairs",
@@ -60,6 +65,7 @@ __all__ = [
     "check_linked_start",
     "cluster_extent",
     "crossing_links",
+    "frozen_angles",
     "linked_packing",
     "read_link_file",
     "remove_degenerate_links",
@@ -68,6 +74,11 @@ __all__ = [
 
 #: Cluster kinds of :func:`linked_packing`.
 CLUSTER_KINDS = ("trimer", "chain", "dimer")
+
+#: How :func:`linked_packing` draws sizes of a mixture: one diameter per cluster (every
+#: sphere of a cluster the same, the cluster a scaled copy) or one per sphere (bonds are
+#: the contact distances of their two spheres).
+SIZE_CLASSES = ("cluster", "sphere")
 
 #: Range [rad] of random bond angles (the angle at a sphere between its two bonds).
 #: Below pi/3 the spheres next-but-one overlap (their distance ``2 b sin(theta/2)`` is
@@ -89,8 +100,8 @@ def chain_offsets(m: int, d: int, bond: float, angles: ArrayLike, rng: np.random
         Number of spheres, >= 1.
     d : int
         Dimension, 2 or 3.
-    bond : float
-        Bond length [length].
+    bond : float or array_like, shape (m - 1,)
+        Bond length(s) [length].
     angles : array_like, shape (m - 2,)
         Bond angle at spheres ``1 .. m-2`` [rad], in ``(0, pi]``.
     rng : numpy.random.Generator
@@ -100,6 +111,7 @@ def chain_offsets(m: int, d: int, bond: float, angles: ArrayLike, rng: np.random
     angles = np.asarray(angles, dtype=np.float64).reshape(-1)
     if angles.size != max(m - 2, 0):
         raise ValueError(f"a chain of {m} spheres has {max(m - 2, 0)} bond angles, got {angles.size}")
+    bonds = np.broadcast_to(np.asarray(bond, dtype=np.float64), (max(m - 1, 0),))
     x = np.zeros((m, d))
     u = rng.normal(size=d)
     u /= np.linalg.norm(u)
@@ -115,21 +127,36 @@ def chain_offsets(m: int, d: int, bond: float, angles: ArrayLike, rng: np.random
                 w -= (w @ u) * u
                 w /= np.linalg.norm(w)
                 u = np.cos(turn) * u + np.sin(turn) * w
-        x[k] = x[k - 1] + bond * u
+        x[k] = x[k - 1] + bonds[k - 1] * u
     return x - x.mean(axis=0)
 
 
-def chain_links(m: int, offset: int, x: NDArray[np.float64], free_angles: bool) -> tuple[list, list]:
-    """Links of one chain: bonds ``(k, k+1)`` and, unless ``free_angles``, angle links ``(k, k+2)``.
+def chain_links(m: int, offset: int, x: NDArray[np.float64], free_angles: bool,
+                frozen: ArrayLike | None = None) -> tuple[list, list]:
+    """Links of one chain: bonds ``(k, k+1)`` and angle links ``(k, k+2)`` freezing the bond angles.
 
-    Returns ``(pairs, lengths)`` with global indices ``offset + k`` and the distances
-    of ``x`` (shape (m, d), unwrapped). Bonds come first.
+    Every angle is frozen unless ``free_angles``; ``frozen`` (shape (m - 2,), bool: the
+    angle at sphere ``k + 1``) picks them one by one (semi-flexible chains). Returns
+    ``(pairs, lengths)`` with global indices ``offset + k`` and the distances of ``x``
+    (shape (m, d), unwrapped). Bonds come first.
     """
+    mask = np.full(max(m - 2, 0), not free_angles) if frozen is None else np.asarray(frozen, dtype=bool)
     pairs = [(offset + k, offset + k + 1) for k in range(m - 1)]
-    if not free_angles:
-        pairs += [(offset + k, offset + k + 2) for k in range(m - 2)]
+    pairs += [(offset + k, offset + k + 2) for k in range(m - 2) if mask[k]]
     lengths = [float(np.linalg.norm(x[b - offset] - x[a - offset])) for a, b in pairs]
     return pairs, lengths
+
+
+def frozen_angles(m: int, free_angles: bool, fraction: float | None, every: int | None,
+                  rng: np.random.Generator) -> NDArray[np.bool_]:
+    """Which bond angles of a chain of ``m`` are frozen, shape (m - 2,): all, none (``free_angles``),
+    each with probability ``fraction`` (drawn from ``rng``), or those at spheres ``k`` with ``k % every == 0``."""
+    n = max(m - 2, 0)
+    if fraction is not None:
+        return rng.random(n) < fraction
+    if every is not None:
+        return (np.arange(1, n + 1) % every) == 0
+    return np.full(n, not free_angles)
 
 
 def rigid_cluster_links(x: ArrayLike, offset: int = 0) -> tuple[list, list]:
@@ -433,12 +460,48 @@ def _distances(pairs: NDArray[np.int64], x: NDArray[np.float64], box: Box) -> ND
     return np.linalg.norm(box.minimum_image(x[pairs[:, 1]] - x[pairs[:, 0]]), axis=1)
 
 
-#: Default packing fraction of the start without overlaps, per d. Random sequential
-#: placement of chains of M = 3, 4, 6 spheres, K = 8 to 64 clusters, 8 seeds each: in 2D
-#: every draw places at 0.2; in 3D 0.2 fails (3 to 8 of 8 draws fail for M >= 4, 1 of 8
-#: for 32 and 64 trimers), 0.15 fails once (64 chains of 6) and 0.1 never (also 32
-#: chains of 8). The bisection's compression steps of ``delta_phi`` make overlaps too
-#: small for a link to pass through a sphere.
+@dataclass(frozen=True)
+class Sizes:
+    """A size mixture of linked spheres (as :func:`jamflow.protocols.initial.draw_diameters`).
+
+    Attributes
+    ----------
+    dispersity : {"mono", "bi", "poly", "lognormal"}
+    ratio, fraction, width : float
+        Bidisperse size ratio (> 1) and number fraction of small ones; relative width of
+        ``poly`` / ``lognormal``.
+    per : {"cluster", "sphere"}
+        :data:`SIZE_CLASSES`: one diameter per cluster (a scaled copy; a bidisperse
+        mixture of clusters, ``fraction`` of them small) or one per sphere.
+    """
+
+    dispersity: str = "mono"
+    ratio: float = 1.4
+    fraction: float = 0.5
+    width: float = 0.1
+    per: str = "cluster"
+
+    def __post_init__(self) -> None:
+        if self.per not in SIZE_CLASSES:
+            raise ValueError(f"sizes are drawn per {' or per '.join(SIZE_CLASSES)}, got {self.per!r}")
+
+    def draw(self, clusters: int, m: int, rng: np.random.Generator) -> NDArray[np.float64]:
+        """Diameters of ``clusters`` clusters of ``m`` spheres, shape (clusters m,), cluster-major."""
+        if self.per == "cluster":
+            return np.repeat(draw_diameters(clusters, self.dispersity, rng, self.ratio, self.fraction, self.width), m)
+        return draw_diameters(clusters * m, self.dispersity, rng, self.ratio, self.fraction, self.width)
+
+    def attrs(self) -> dict:
+        """Dataset attributes of the mixture."""
+        return {"dispersity": self.dispersity, "size_ratio": self.ratio, "small_fraction": self.fraction,
+                "size_width": self.width, "sizes_per": self.per}
+
+
+#: Default packing fraction of the start without overlaps, per d: the densest at which
+#: every random sequential placement of the chains tried succeeded
+#: (measured: docs/notes/chains.md#dilute-placement-how-dense-a-start-places). The
+#: bisection's compression steps of ``delta_phi`` make overlaps too small for a link to
+#: pass through a sphere.
 DILUTE_PHI: dict[int, float] = {2: 0.2, 3: 0.1}
 #: Packing fraction of the paper's start with overlaps (Sec. III), per d: just above the
 #: sphere jamming densities, so the bisection decompresses.
@@ -449,7 +512,8 @@ def linked_packing(
     d: int, clusters: int, kind: str, rng: np.random.Generator, chain_length: int = 3,
     free_angles: bool = False, phi: float | None = None, bond_angle: float | None = None, no_overlap: bool = True,
     diameter_ratio: float = DIMER_DIAMETER_RATIO, size_ratio: float = DIMER_SIZE_RATIO,
-    separation: float = DIMER_SEPARATION,
+    separation: float = DIMER_SEPARATION, sizes: Sizes | None = None, frozen_fraction: float | None = None,
+    frozen_every: int | None = None,
 ) -> tuple[Packing, list[str]]:
     """A random start of ``clusters`` chains, trimers or dimers at packing fraction ``phi``.
 
@@ -464,7 +528,7 @@ def linked_packing(
     clusters are placed without overlaps at the dilute :data:`DILUTE_PHI` and the jamming bisection compresses them.
     This departs from the paper (Sec. III starts above jamming with overlaps, ``no_overlap=False``): where soft
     spheres overlap, a link can pass through a sphere or another link during the minimisation, and the clusters end
-    entangled (refused by :mod:`jamflow.chains.entanglement`) from a third of such starts (docs/chains.md).
+    entangled (refused by :mod:`jamflow.chains.entanglement`) from a third of such starts (docs/notes/chains.md).
 
     Parameters
     ----------
@@ -491,6 +555,17 @@ def linked_packing(
         Dimers only: large over small monomer diameter, large over small dimer length,
         and the monomers' centre distance in small-monomer diameters
         (defaults: the paper's 1.4, 1.4 and 1).
+    frozen_fraction, frozen_every : optional
+        Chains only, semi-flexible: freeze each bond angle with probability
+        ``frozen_fraction`` (drawn per chain), or the angle at every ``frozen_every``-th
+        sphere (1, 2, ... along the chain); the rest are free.
+    sizes : Sizes, optional
+        Chains and trimers: a size mixture (default: all spheres of diameter 1). Equal
+        spheres partly crystallise (2D dimers, flexible chains), which is why studies of
+        the jamming point need mixtures. The box is set from the volume of whole spheres:
+        with sizes per sphere, unequal next-nearest spheres at a frozen angle near pi/3
+        can share a lens, and the packing fraction of the union is then a little below
+        ``phi`` (the packing's own is exact).
 
     Returns
     -------
@@ -506,6 +581,7 @@ def linked_packing(
         raise ValueError(f"a chain needs at least 2 spheres, got --chain-length {m}")
     if clusters < 1:
         raise ValueError(f"need at least one cluster, got {clusters}")
+    _check_semi_flexible(kind, free_angles, frozen_fraction, frozen_every)
     phi = (DILUTE_PHI[d] if no_overlap else OVERLAP_PHI[d]) if phi is None else phi
     if not 0.0 < phi < 1.5:
         raise ValueError(f"packing fraction must lie in (0, 1.5), got {phi}")
@@ -514,27 +590,39 @@ def linked_packing(
         raise ValueError(f"bond angle must lie in [pi/3, pi] rad, got {bond_angle}")
     scale = np.ones(clusters)
     if kind == "dimer":
+        if sizes is not None and sizes.dispersity != "mono":
+            raise ValueError("dimers are bidisperse by --size-ratio (the paper's mixture); --dispersity is for "
+                             "chains and trimers")
         check_dimer(diameter_ratio, separation)
         if not (np.isfinite(size_ratio) and size_ratio >= 1.0):
             raise ValueError(f"dimer size ratio (large over small dimers) must be >= 1, got {size_ratio}")
         scale[1::2] = size_ratio
         body_d, bond = np.array([1.0, diameter_ratio]), separation
+        D = np.concatenate([s * body_d for s in scale])
     else:
-        body_d, bond = np.ones(m), 1.0
+        D = np.ones(clusters * m) if sizes is None else sizes.draw(clusters, m, rng)
     n = clusters * m
-    D = np.concatenate([s * body_d for s in scale])
-    # volume of a cluster of scale 1: chains' spheres do not overlap, a dimer's share a lens
+    # spheres of a chain touch or overlap (a dimer's share a lens): the union's volume
     body_link = Links(np.array([0]), np.array([1]), np.array([bond])) if kind == "dimer" else None
-    unit_volume = linked_volume(d, body_d, body_link)
-    side = (float(np.sum(scale**d)) * unit_volume / phi) ** (1.0 / d)
+    volume = float(np.sum(scale**d)) * linked_volume(d, body_d, body_link) if kind == "dimer" else \
+        float(np.sum(sphere_volume(d, D)))
+    side = (volume / phi) ** (1.0 / d)
     box = Box.cubic(d, side)
     x = np.zeros((n, d))
     pairs: list[tuple[int, int]] = []
     lengths: list[float] = []
     for c in range(clusters):
+        if kind == "chain":
+            frozen = frozen_angles(m, free_angles, frozen_fraction, frozen_every, rng)
+            p, r = _grow(c, m, x, D, pairs, box, bond_angle, frozen, no_overlap, rng)
+            pairs += p
+            lengths += r
+            continue
         for _ in range(PLACEMENT_TRIES):
             angles = np.full(max(m - 2, 0), bond_angle) if bond_angle is not None else rng.uniform(lo, hi, max(m - 2, 0))
-            body = chain_offsets(m, d, bond * scale[c], angles, rng)
+            own = D[c * m:(c + 1) * m]
+            bonds = bond * scale[c] if kind == "dimer" else 0.5 * (own[:-1] + own[1:])
+            body = chain_offsets(m, d, bonds, angles, rng)
             if np.max(np.linalg.norm(body[:, None, :] - body[None, :, :], axis=2)) >= 0.5 * side:
                 continue  # would meet its own image: redraw the bond directions
             x[c * m:(c + 1) * m] = box.wrap(body + rng.random(d) * side)
@@ -551,8 +639,15 @@ def linked_packing(
         pairs += p
         lengths += r
     links, messages = remove_degenerate_links(pairs, lengths, x, box)
-    attrs = {"length_unit": "small monomer diameter" if kind == "dimer" else "sphere diameter",
+    unit = {"mono": "sphere diameter", "bi": "small sphere diameter"}.get(
+        "mono" if sizes is None else sizes.dispersity, "nominal mean sphere diameter")
+    attrs = {"length_unit": "small monomer diameter" if kind == "dimer" else unit,
              "cluster_kind": kind, "chain_length": m, "free_angles": int(free_angles)}
+    if frozen_fraction is not None or frozen_every is not None:
+        attrs.update(frozen_angle_rule=f"fraction {frozen_fraction}" if frozen_fraction is not None
+                     else f"every {frozen_every}", n_frozen_angles=int(len(pairs) - clusters * (m - 1)))
+    if sizes is not None and kind != "dimer":
+        attrs.update(sizes.attrs())
     if kind == "dimer":
         attrs.update(dimer_diameter_ratio=diameter_ratio, dimer_size_ratio=size_ratio, dimer_separation=separation)
         if d == 2:
@@ -560,6 +655,36 @@ def linked_packing(
     packing = Packing(x, D, box, protocol=f"init-chains({kind})", links=links, attrs=attrs)
     check_linked_start(packing)
     return packing, messages
+
+
+def _check_semi_flexible(kind: str, free_angles: bool, fraction: float | None, every: int | None) -> None:
+    """Refuse semi-flexible options that do not describe a chain's frozen angles."""
+    if fraction is None and every is None:
+        return
+    if kind != "chain" or free_angles or (fraction is not None and every is not None):
+        raise ValueError("semi-flexible chains (a fraction or every k-th bond angle frozen) are --cluster chain "
+                         "without --free-angles, with one of --frozen-fraction and --frozen-every")
+    if fraction is not None and not 0.0 <= fraction <= 1.0:
+        raise ValueError(f"--frozen-fraction must lie in [0, 1], got {fraction}")
+    if every is not None and every < 1:
+        raise ValueError(f"--frozen-every must be at least 1, got {every}")
+
+
+def _grow(c: int, m: int, x: NDArray[np.float64], D: NDArray[np.float64], pairs: list, box: Box,
+          bond_angle: float | None, frozen: NDArray[np.bool_], no_overlap: bool,
+          rng: np.random.Generator) -> tuple[list, list]:
+    """Grow chain ``c`` beside the placed spheres ``x[:c m]`` (:mod:`.growth`), write it into ``x``; its links."""
+    own = D[c * m:(c + 1) * m]
+    p = np.array(pairs, np.int64).reshape(-1, 2)
+    segments = (x[p[:, 0]], box.minimum_image(x[p[:, 1]] - x[p[:, 0]]))
+    chain = grow_chain(m, 0.5 * (own[:-1] + own[1:]), own, bond_angle, BOND_ANGLE_RANGE, x[:c * m], D[:c * m],
+                       segments, box, frozen, no_overlap, rng)
+    if chain is None:
+        raise ValueError(f"could not grow chain {c} of {m} spheres without overlaps or crossing links within half "
+                         f"the box width ({0.5 * float(np.min(box.widths)):.4g}): lower --phi or use more, "
+                         f"shorter chains")
+    x[c * m:(c + 1) * m] = box.wrap(chain)
+    return chain_links(m, c * m, chain, False, frozen)
 
 
 def _crosses(pairs: list, lengths: list, x: NDArray[np.float64], box: Box, first_new: int) -> bool:

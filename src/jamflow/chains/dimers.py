@@ -16,9 +16,9 @@ freedom), so a jammed packing of ``N'`` non-rattling dimers in a fixed box is is
 with ``N_c = f N' - (d - 1) N_rot - d + 1`` contacts (2D: ``3 N' - 1 - N_rot``), where a
 **rotator** is a dimer held only through one monomer (its other monomer touches
 nothing): it keeps ``d - 1`` free rotations about the held monomer's centre. In the
-cluster count of :mod:`jamflow.chains.clusters` the free monomer is a dangler and the
-rest a one-sphere cluster, which gives exactly this count (a rattling dimer is a
-rattling cluster, or two danglers). :func:`dimer_counting` names the rotators and gives
+counting of :mod:`jamflow.network.bodies` these are the dimer's free motions
+(``m = d - 1``, the free monomer a dangler), which gives exactly this count; a
+rattling dimer is a cluster that rattles whole. :func:`dimer_counting` names the rotators and gives
 ``<z>`` of the paper's Eq. 3 (2D) and its d-dimensional form, with a rotator counted as
 the fraction ``(f - d + 1) / f`` of a particle that is held (like a slider in 2D, a
 third missing), so an isostatic dimer packing has ``<z> = 2 f``: 6 in 2D, 10 in 3D.
@@ -30,8 +30,8 @@ from math import acos, pi
 
 import numpy as np
 
+from ..network import BodyCount
 from ..state.packing import lens_volume
-from .clusters import ClusterCount
 
 __all__ = [
     "DIMER_DIAMETER_RATIO",
@@ -106,36 +106,36 @@ def dimer_aspect_ratio(diameter_ratio: float = DIMER_DIAMETER_RATIO, separation:
     return (separation + 0.5 * (1.0 + diameter_ratio)) / diameter_ratio
 
 
-def dimer_counting(count: ClusterCount, d: int = 2) -> dict:
+def dimer_counting(count: BodyCount, d: int = 2) -> dict:
     """Rotators and ``<z>`` (Eq. 3, rotators counted in part) of a dimer packing in d dimensions (module doc).
 
     Parameters
     ----------
-    count : ClusterCount
-        Fixed-box cluster count of the packing, whose clusters are dimers (two spheres each).
+    count : BodyCount
+        Fixed-box count of the packing (:func:`jamflow.network.count_bodies`), whose clusters
+        are dimers (two spheres each).
     d : int
         Dimension.
 
     Returns
     -------
     dict
-        ``n_dimers``, ``n_rotators`` (dimers with one monomer outside the backbone: a
-        dangler), ``n_rattling_dimers`` (both monomers outside) and ``z``
+        ``n_dimers``, ``n_rotators`` (dimers in the backbone with free motions: one monomer
+        a dangler), ``n_rattling_dimers`` (dimers that rattle whole) and ``z``
         (``2 (N_c + d - 1) / (N - N_r - N_rot (d - 1) / f)`` with ``f = 2 d - 1``; in 2D
         the paper's ``2 (N_c + 1) / (N - N_r - N_rot / 3)``; NaN when every dimer rattles).
     """
     sizes = np.bincount(count.cluster)
     if np.any(sizes != 2):
         raise ValueError(f"a dimer packing has clusters of two spheres, found sizes {sorted(set(sizes.tolist()))}")
-    free = np.bincount(count.cluster[count.rattler], minlength=sizes.size)  # rattling monomers per dimer
-    n, n_rot, n_rat = sizes.size, int(np.sum(free == 1)), int(np.sum(free == 2))
+    n, n_rot, n_rat = sizes.size, int(np.sum(count.free_dofs > 0)), int(np.sum(count.removed))
     f = 2 * d - 1
     held = n - n_rat - n_rot * (d - 1) / f
     z = 2.0 * (count.n_contacts + d - 1) / held if held > 0 else float("nan")
     return {"n_dimers": n, "n_rotators": n_rot, "n_rattling_dimers": n_rat, "z": z}
 
 
-def dimer_report(count: ClusterCount, d: int) -> dict:
+def dimer_report(count: BodyCount, d: int) -> dict:
     """:func:`dimer_counting` for a packing whose clusters are all dimers, else an empty dict."""
     if count.cluster.size == 0 or np.any(np.bincount(count.cluster) != 2):
         return {}

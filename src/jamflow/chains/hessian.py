@@ -16,6 +16,13 @@ and the strain part is mapped to ``e`` by the linear chain rule of
 further term). The extended Hessian ``H0`` (Eq. 27) sums the contact potential over
 overlapping pairs that are not linked.
 
+First derivatives come from THE contact Jacobian of :mod:`jamflow.network.jacobian`:
+its link rows (:func:`~jamflow.network.jacobian.link_jacobian`, Eqs. 15-16) are the
+columns of ``Gamma`` and its contact rows (:func:`~jamflow.network.jacobian.contact_jacobian`,
+Eqs. 35-36) those of ``R0``, both with strain columns in the basis ``dF / de_k`` of the
+model's strain coordinates (:func:`strain_coordinate_basis`); the energy gradient is
+``-R0^T f``.
+
 Change of basis (Eqs. 28-31): ``Gamma`` (n_dof x (L + 1), links and volume) is
 factorised by a complete Householder QR, whose last ``n_dof - L - 1`` columns are an
 orthonormal basis of ``Null(Gamma^T)``; their transpose is ``B`` (``y_t = B y``).
@@ -45,8 +52,10 @@ import numpy as np
 import scipy.linalg as sla
 from numpy.typing import NDArray
 
+from ..box import Box
 from ..models.spheres.potential import HARMONIC, PowerLawPotential, overlapping_pairs
 from ..models.strain import _upper, strain_components
+from ..network import contact_jacobian, link_jacobian, sphere_contacts
 from ..state.bodies import Links
 from ..state.packing import Packing
 
@@ -58,6 +67,7 @@ __all__ = [
     "contact_virial",
     "extended_rigidity",
     "pair_second_derivatives",
+    "strain_coordinate_basis",
 ]
 
 #: An eigenvalue of a constrained Hessian (or a singular value of a rigidity matrix)
@@ -74,6 +84,13 @@ def _strain_jacobian(d: int, scale: float) -> NDArray[np.float64]:
     J[a * d + b, np.arange(a.size)] = 1.0 / (scale * weight)
     J[b * d + a, np.arange(a.size)] = 1.0 / (scale * weight)
     return J
+
+
+def strain_coordinate_basis(d: int, scale: float) -> NDArray[np.float64]:
+    """``d eps / d e_k`` (m, d, d): the model's strain coordinates as a strain basis of
+    :func:`~jamflow.network.jacobian.contact_jacobian` (``e_aa = q_s eps_aa``,
+    ``e_ab = sqrt(2) q_s eps_ab``, upper-triangle order of :func:`~jamflow.models.strain.strain_matrix`)."""
+    return _strain_jacobian(d, scale).T.reshape(-1, d, d)
 
 
 def pair_second_derivatives(n: int, d: int, i: NDArray[np.int64], j: NDArray[np.int64], R: NDArray[np.float64],
@@ -160,6 +177,8 @@ class _Geometry:
 
     n: int
     d: int
+    position: NDArray[np.float64]  # (n, d) centres
+    box: Box
     strain_scale: float
     pairs: object  # PairList of contacts
     force: NDArray[np.float64]  # (P,) repulsive contact forces
@@ -182,40 +201,38 @@ def _geometry(packing: Packing, potential: PowerLawPotential) -> _Geometry:
     sigma = 0.5 * (D[pairs.i] + D[pairs.j])
     k = potential.stiffness(1.0 - pairs.distance / sigma, sigma)
     R = box.minimum_image(x[links.j] - x[links.i])
-    return _Geometry(packing.n, packing.d, float(np.sqrt(packing.n) * D.mean()), pairs, f, k, links, R)
+    return _Geometry(packing.n, packing.d, x, box, float(np.sqrt(packing.n) * D.mean()), pairs, f, k, links, R)
 
 
 def gamma_matrix(geo: _Geometry, strain: bool, volume: bool = True) -> NDArray[np.float64]:
     """Dense ``Gamma`` (n_dof, L [+ 1]) at zero strain: link columns (and ``det F``), or ``Omega`` without strain.
 
+    The link columns are the rows of :func:`~jamflow.network.jacobian.link_jacobian`.
     Built from geometry alone (no factorisation), so over-constrained position blocks
     (links closing loops around the box, which only the strain makes independent) are fine.
     """
-    n, d, L = geo.n, geo.d, len(geo.links)
-    m = geo.m if strain else 0
-    u = geo.link_vector / np.linalg.norm(geo.link_vector, axis=1)[:, None]
-    G = np.zeros((n * d + m, L + (1 if strain and volume else 0)))
-    k = np.arange(L)
-    Gx = G[: n * d].reshape(n, d, -1)
-    Gx[geo.links.j, :, k] += u
-    Gx[geo.links.i, :, k] -= u
-    if strain:
-        G[n * d:, :L] = strain_components(u[:, :, None] * geo.link_vector[:, None, :], geo.strain_scale).T
-        if volume:
-            G[n * d:, L] = strain_components(np.eye(d), geo.strain_scale)
+    basis = strain_coordinate_basis(geo.d, geo.strain_scale) if strain else None
+    G = link_jacobian(geo.links, geo.position, geo.box, strain=basis).toarray().T
+    if strain and volume:
+        # d det F / d e at F = 1: the strain columns of the trace, no position columns (Eq. 17)
+        column = np.zeros(G.shape[0])
+        column[geo.n * geo.d:] = strain_components(np.eye(geo.d), geo.strain_scale)
+        G = np.hstack([G, column[:, None]])
     return G
 
 
+def rigidity_rows(geo: _Geometry, strain: bool) -> NDArray[np.float64]:
+    """Dense ``R0`` (n_c, n_dof): the contact rows of :func:`~jamflow.network.jacobian.contact_jacobian`
+    (Eqs. 35-37) at zero strain, the paper's ``sigma_ij`` being the contact distance."""
+    p = geo.pairs
+    contacts = sphere_contacts(geo.position, geo.box, np.stack([p.i, p.j], axis=1), separation=p.dx)
+    basis = strain_coordinate_basis(geo.d, geo.strain_scale) if strain else None
+    return contact_jacobian(contacts, geo.n, geo.d, strain=basis).toarray()
+
+
 def energy_gradient(geo: _Geometry, strain: bool) -> NDArray[np.float64]:
-    """``dU/dq`` of the contact potential at zero strain, shape (n_dof,)."""
-    n, d = geo.n, geo.d
-    u = geo.pairs.dx / geo.pairs.distance[:, None]
-    g = np.zeros((n, d))
-    np.add.at(g, geo.pairs.i, geo.force[:, None] * u)
-    np.add.at(g, geo.pairs.j, -geo.force[:, None] * u)
-    if not strain:
-        return g.ravel()
-    return np.r_[g.ravel(), strain_components(-contact_virial(geo), geo.strain_scale)]
+    """``dU/dq = -R0^T f`` of the contact potential at zero strain, shape (n_dof,) (``f`` repulsive)."""
+    return -(geo.force @ rigidity_rows(geo, strain))
 
 
 def contact_virial(geo: _Geometry) -> NDArray[np.float64]:
@@ -321,7 +338,7 @@ def _volume_curvature(d: int, scale: float) -> NDArray[np.float64]:
 
 
 def extended_rigidity(packing: Packing, strain: bool = True, potential: PowerLawPotential = HARMONIC,
-                      translations: bool = False
+                      translations: bool = False, exclude: NDArray[np.float64] | None = None
                       ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Constrained extended rigidity matrix ``R_E = R0 B^T`` (Eqs. 35-39) and the states of self stress.
 
@@ -329,6 +346,10 @@ def extended_rigidity(packing: Packing, strain: bool = True, potential: PowerLaw
     ----------
     translations : bool
         Also remove the ``d`` uniform translations from the basis (the LP of Sec. V).
+    exclude : ndarray, shape (N d, k), optional
+        Further motions of the centres removed from the basis (no strain part): the free
+        motions of clusters (:attr:`jamflow.network.BodyCount.free_motions`), which move
+        no contact.
 
     Returns
     -------
@@ -342,20 +363,16 @@ def extended_rigidity(packing: Packing, strain: bool = True, potential: PowerLaw
         The basis of true degrees of freedom.
     """
     geo = _geometry(packing, potential)
-    pairs, n, d, P = geo.pairs, geo.n, geo.d, len(geo.pairs.i)
+    n, d = geo.n, geo.d
     m = geo.m if strain else 0
-    u = pairs.dx / pairs.distance[:, None]
-    R0 = np.zeros((P, n * d + m))
-    Rx = R0[:, : n * d].reshape(P, n, d)
-    Rx[np.arange(P), pairs.j] = u
-    Rx[np.arange(P), pairs.i] -= u
-    if strain:
-        R0[:, n * d:] = strain_components(u[:, :, None] * pairs.dx[:, None, :], geo.strain_scale)
+    R0 = rigidity_rows(geo, strain)
     G = gamma_matrix(geo, strain)
     if translations:
         T = np.zeros((n * d + m, d))
         T[: n * d] = np.tile(np.eye(d), (n, 1))
         G = np.hstack([G, T])
+    if exclude is not None and exclude.shape[1]:
+        G = np.hstack([G, np.vstack([exclude, np.zeros((m, exclude.shape[1]))])])
     B = tangent_basis(G)
     RE = R0 @ B.T
     U, s, _ = np.linalg.svd(RE, full_matrices=True)

@@ -21,7 +21,7 @@ Two protocols (``protocol=``):
   predicts, until ``0 < U / N <= energy_tol``.
 
 Default chosen by measurement (``benchmarks/chains.py --protocols``, same starts,
-side by side; numbers in docs/chains.md): see :data:`DEFAULT_PROTOCOL`.
+side by side; numbers in docs/notes/chains.md): see :data:`DEFAULT_PROTOCOL`.
 """
 
 from __future__ import annotations
@@ -35,15 +35,16 @@ from ..box import Box
 from ..minimize.fire import FireParameters, MinimizeResult, minimize_fire
 from ..minimize.model import EnergyModel
 from ..minimize.onset import JammingSettings, jam_model_to_pressure
+from ..models.box import EnthalpyModel
 from ..models.links import LinkedSpheresModel
 from ..models.spheres.potential import HARMONIC, PowerLawPotential, overlapping_pairs
 from ..models.strain import ShearStabilizedModel
+from ..network import count_bodies
 from ..protocols.soft_jam import JammingResult
 from ..state.bodies import Links
 from ..state.packing import Packing, linked_volume
 from ..tolerances import LINK_LENGTH_RTOL
 from .builders import check_linked_start
-from .clusters import count_clusters
 from .dimers import dimer_report
 from .entanglement import check_untangled
 
@@ -52,11 +53,9 @@ __all__ = ["DEFAULT_PROTOCOL", "ENERGY_FLOOR", "PROTOCOLS", "jam_linked", "linke
 #: Jamming protocols of :func:`jam_linked`.
 PROTOCOLS = ("bisection", "energy")
 
-#: The default protocol. Measured (docs/chains.md; 2D trimers N = 60, shear-stabilised, 3
-#: starts): the energy steps took 0.5-0.7 of the bisection's time in 5 of 6 runs but end
-#: at 0.48-0.87 of the equivalent pressure and, for one start, 0.014 lower in phi_J (a
-#: different path). The bisection ends at a stated pressure (to pressure_rtol), which
-#: contact numbers and moduli depend on, so it stays the default.
+#: The default protocol: the bisection ends at a stated pressure (to pressure_rtol), which
+#: contact numbers and moduli depend on; the energy steps are faster but end at an
+#: uncontrolled pressure (measured: docs/notes/chains.md#bisection-against-the-energy-steps).
 DEFAULT_PROTOCOL = "bisection"
 
 #: A minimum whose energy per sphere is below ``ENERGY_FLOOR * energy_tol`` counts as
@@ -75,8 +74,8 @@ def linked_soft_packing(packing: Packing, model: LinkedSpheresModel, res: Minimi
                         attrs: dict, parameters: dict, shear_stabilized: bool = False) -> Packing:
     """A minimised linked packing: contacts are the overlapping pairs that are not linked.
 
-    Rattlers are the danglers and rattling clusters of
-    :func:`~jamflow.chains.clusters.count_clusters`; their counts, the clusters'
+    Rattlers are the danglers and the clusters that rattle whole, by the counting of
+    :func:`jamflow.network.count_bodies`; their counts, the clusters'
     isostatic count (for dimers also rotators and ``<z>``, :func:`~jamflow.chains.dimers.dimer_report`), the largest relative link-length error and the stress
     anisotropy ``stress_deviation = max_ab |W_ab - P' delta_ab| / P'`` (``W`` the
     total virial of pairs and link tensions, ``P' = tr W / d``) go into the attributes.
@@ -86,7 +85,7 @@ def linked_soft_packing(packing: Packing, model: LinkedSpheresModel, res: Minimi
     pairs, _, f = overlapping_pairs(x, box, model.diameter, model.potential)
     linked = model.links.contains(pairs.i, pairs.j)
     contacts = np.stack([pairs.i, pairs.j], axis=1)[~linked]
-    count = count_clusters(len(x), box.d, model.links, contacts, shear_stabilized)
+    count = count_bodies(contacts, len(x), box.d, model.links, x, box, shear_stabilized=shear_stabilized)
     err = np.abs(model.links.length_errors(x, box))
     # total virial (pairs and link tensions) of the final configuration in its box
     W = LinkedSpheresModel(box, model.diameter, model.links, x, model.potential).evaluate(x.ravel()).virial
@@ -148,8 +147,13 @@ def jam_linked(
         raise ValueError(f"target pressure must be positive and finite, got {pressure}")
     if protocol == "energy" and not (energy_tol is not None and np.isfinite(energy_tol) and energy_tol > 0.0):
         raise ValueError(f"energy_tol must be positive and finite for the energy protocol, got {energy_tol}")
-    if settings.box_dof != "isotropic":
-        raise ValueError("linked packings are jammed in a fixed-shape box or shear-stabilised, not with box_dof 'full'")
+    full_box = settings.box_dof == "full"
+    if full_box and protocol != "bisection":
+        raise ValueError("box_dof 'full' (enthalpy at P0 with the whole box free) follows the bisection to P0, not "
+                         "the energy protocol")
+    if settings.box_dof not in ("isotropic", "full"):
+        raise ValueError(f"box_dof must be 'isotropic' or 'full', got {settings.box_dof!r}")
+    shear_stabilize = shear_stabilize or full_box
     if packing.links is None:
         packing = packing.evolve(links=Links(np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0)))
     check_linked_start(packing)
@@ -175,12 +179,16 @@ def jam_linked(
                                                  settings.max_steps, potential.exponent, settings.fire_params,
                                                  checked, history)
     final = replace(final, box=_current_box(model))
+    if full_box:
+        model, final, more = _relax_box(model, final, pressure, settings, potential)
+        steps += more
     check_untangled(model.links, final.position, final.box, D, final.pressure, potential)
     attrs = {
         "length_unit": "mean particle diameter", "force_unit": "epsilon / mean diameter",
         "pressure_unit": "epsilon / mean diameter^d", "energy": final.energy, "energy_unit": "epsilon",
         "max_force_sq": final.max_force**2, "potential_exponent": potential.exponent,
         "fire_steps": steps, "converged": int(final.converged), "jamming_protocol": protocol,
+        "box_dof": settings.box_dof,
         **({"target_pressure": pressure} if protocol == "bisection" else {"energy_tol": energy_tol}),
     }
     params = {"protocol": protocol, "force_tol": settings.force_tol, "delta_phi": settings.delta_phi,
@@ -191,13 +199,29 @@ def jam_linked(
                   "bisection_force_factor": settings.bisection_force_factor}
                  if protocol == "bisection" else {"energy_tol": energy_tol, "energy_floor": ENERGY_FLOOR,
                                                    "energy_step_ratio": ENERGY_STEP_RATIO})}
-    suffix = ">soft-shear-stabilized" if shear_stabilize else ">soft"
+    suffix = ">soft-enthalpy" if full_box else (">soft-shear-stabilized" if shear_stabilize else ">soft")
     out = linked_soft_packing(scaled, model, final, suffix, attrs, params, shear_stabilize)
     if protocol == "bisection":
         converged = final.converged and abs(final.pressure - pressure) <= settings.pressure_rtol * pressure
     else:
         converged = final.converged and ENERGY_FLOOR * energy_tol < final.energy / model.n <= energy_tol
     return JammingResult(out, bool(converged), history, steps)
+
+
+def _relax_box(model: ShearStabilizedModel, final: MinimizeResult, pressure: float, settings: JammingSettings,
+               potential: PowerLawPotential) -> tuple[ShearStabilizedModel, MinimizeResult, int]:
+    """Enthalpy ``U + P0 V`` with the whole box free (:class:`~jamflow.models.box.EnthalpyModel`) from the
+    shear-stabilised minimum at ``P0``: the box takes the stress ``-P0 1`` exactly (to the force tolerance)."""
+    free = ShearStabilizedModel(final.box, model.diameter, model.links, final.position, potential,
+                                length_rtol=model.length_rtol, fixed_volume=False)
+    res = minimize_fire(EnthalpyModel(free, pressure), final.position, settings.force_tol, settings.max_steps,
+                        settings.fire_params)
+    box = free.last_box()
+    W = LinkedSpheresModel(box, free.diameter, free.links, res.position, potential).evaluate(
+        res.position.ravel()).virial
+    # report U (the minimiser's energy is U + P0 V)
+    return free, replace(res, box=box, pressure=float(np.trace(W)) / (box.d * box.volume),
+                         energy=res.energy - pressure * box.volume), res.steps
 
 
 def _current_box(model: LinkedSpheresModel) -> Box:

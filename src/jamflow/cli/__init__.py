@@ -2,14 +2,30 @@
 
 Each topic module in this package exposes ``register(subparsers)``, adding its
 subcommands; a subcommand's handler takes the parsed arguments and returns an exit
-code. Errors from bad input reach the user as one line on stderr and exit code 1.
+code. Every failure reaches the user as one line on stderr, without a traceback:
+
+====  =====================================================================
+code  meaning
+====  =====================================================================
+0     done (the outputs are written)
+1     refused or failed: bad input file or value, impossible target, disk full
+2     usage: an option missing, unknown or out of its range (:mod:`jamflow.cli.types`)
+130   interrupted by Ctrl-C (SIGINT); no partial output is left
+141   stdout closed early (``jamflow check x.nc | head -1``); quiet
+====  =====================================================================
+
+Ctrl-C during start-up is one line too: until :func:`main` runs, the handler that
+``jamflow/__init__.py`` installs for the command line ends the process; inside it the
+imports of the command's modules and the compilation of kernels are covered.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import re
+import signal
 import sys
 import typing
 from collections.abc import Sequence
@@ -19,6 +35,7 @@ from ..presets import preset_options
 from ..provenance import jamflow_version
 from ..stages import STAGES, refusal
 from .common import path_arguments
+from .types import UsageError
 
 #: Topic modules of this package that contribute subcommands.
 COMMAND_MODULES: tuple[str, ...] = ("packings", "analysis", "soft", "flow", "certify", "tradeoff", "ls", "calippso",
@@ -35,9 +52,10 @@ COMMAND_MODULE: dict[str, str] = {
     **dict.fromkeys(("soft-jam", "aqs", "sd-shear", "moduli"), "soft"),
     **dict.fromkeys(("shear", "compress", "decompress", "drive"), "flow"),
     "certify": "certify", "tradeoff": "tradeoff", "ls": "ls", "calippso": "calippso", "summary": "summary",
-    "minimize": "minimize",
+    "pool": "summary", "reproduce": "summary", "minimize": "minimize",
     **dict.fromkeys(("init-chains", "link", "chains-moduli"), "chains"),
-    **dict.fromkeys(("init-shapes", "contact-angles", "shape-survey", "modes"), "shapes"),
+    **dict.fromkeys(("init-shapes", "contact-angles", "shape-survey", "modes", "constraint-curvature",
+                     "feasible-region"), "shapes"),
 }
 
 
@@ -98,22 +116,75 @@ def check_bodies(command: str, inputs: Sequence[str]) -> None:
             raise ValueError(f"{path}: {why}")
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``jamflow`` console script."""
-    words = sys.argv[1:] if argv is None else list(argv)
-    parser = build_parser(words[0] if words else None)
+def _one_line(exc: BaseException) -> str:
+    """An exception's message on one line (an OSError's own words, without ``[Errno n]``)."""
+    if isinstance(exc, OSError) and exc.strerror and exc.filename is None:
+        text = exc.strerror
+    else:
+        text = str(exc) or type(exc).__name__
+    return "; ".join(part.strip() for part in text.splitlines() if part.strip())
+
+
+def _run(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:
+    """Parse, check paths and bodies before any work, run the handler, say what was replaced."""
     args = parser.parse_args(argv)
+    preset = getattr(args, "preset", "default")
+    if preset != "default":
+        # a preset changes the defaults; options given explicitly still win
+        parser.subcommands[args.command].set_defaults(**preset_options(args.command, preset))
+        args = parser.parse_args(argv)
+    reads, writes, packings = args.path_roles
+    outputs = path_arguments(args, writes)
+    kinds = {path: kinds for role, kinds in args.output_kinds.items() for path in path_arguments(args, (role,))}
+    replaced = check_output_paths(path_arguments(args, reads), outputs, getattr(args, "in_place", False),
+                                  path_arguments(args, packings), kinds)
+    check_bodies(args.command, path_arguments(args, reads))
+    code = int(args.handler(args) or 0)
+    if code == 0:
+        for line in replaced:
+            if "flow checkpoint" not in line:  # a checkpoint is resumed, not replaced
+                print(f"jamflow {args.command}: replaced {line}", file=sys.stderr)
+    return code
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``jamflow`` console script (exit codes: module docstring)."""
+    words = sys.argv[1:] if argv is None else [str(a) for a in argv]
+    name = f"jamflow {words[0]}" if words and words[0] in COMMAND_MODULE else "jamflow"
+    _restore_ctrl_c()
     try:
-        preset = getattr(args, "preset", "default")
-        if preset != "default":
-            # a preset changes the defaults; options given explicitly still win
-            parser.subcommands[args.command].set_defaults(**preset_options(args.command, preset))
-            args = parser.parse_args(argv)
-        reads, writes, packings = args.path_roles
-        check_output_paths(path_arguments(args, reads), path_arguments(args, writes),
-                           getattr(args, "in_place", False), path_arguments(args, packings))
-        check_bodies(args.command, path_arguments(args, reads))
-        return int(args.handler(args) or 0)
-    except (ValueError, FileNotFoundError, RuntimeError, OSError) as exc:
-        print(f"jamflow {args.command}: error: {exc}", file=sys.stderr)
+        return _run(build_parser(words[0] if words else None), argv)
+    except UsageError as exc:
+        print(f"{name}: error: {_one_line(exc)} (see {name} --help)", file=sys.stderr)
+        return 2
+    except BrokenPipeError:
+        # the reader of stdout has gone (| head): nothing more to say, and no traceback at exit
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
+    except (KeyboardInterrupt, Exception) as exc:
+        if _interrupted(exc):
+            print(f"{name}: interrupted (Ctrl-C); no partial output is left", file=sys.stderr)
+            return 130
+        if not isinstance(exc, (ValueError, FileNotFoundError, RuntimeError, OSError)):
+            raise  # a bug: its traceback is the report
+        print(f"{name}: error: {_one_line(exc)}", file=sys.stderr)
         return 1
+
+
+def _restore_ctrl_c() -> None:
+    """Ctrl-C raises KeyboardInterrupt again once :func:`main` runs (the start-up handler exits at once)."""
+    from .. import _interrupted_while_starting
+
+    if signal.getsignal(signal.SIGINT) is _interrupted_while_starting:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+def _interrupted(exc: BaseException | None) -> bool:
+    """Whether Ctrl-C is anywhere in ``exc``'s chain (a compiled kernel wraps it in a SystemError)."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import hashlib
 import sys
 from pathlib import Path
 
@@ -19,8 +20,19 @@ from ..analysis.structure import structure_dataset
 from ..io import read_dataset, read_packing, write_dataset
 from ..io.formats import read_dat
 from ..state.packing import Packing
-from .common import add_command, add_quiet, print_summary, stage_parameters
+from .common import add_command, add_quiet, print_summary, split_paths, stage_parameters
 from .packings import add_overlap_option, overlap_tol
+from .types import (
+    MAX_BINS,
+    bins,
+    integer,
+    non_negative,
+    non_negative_int,
+    path_with_suffix,
+    positive,
+    resamples,
+    seed,
+)
 
 #: ``jamflow plot`` kinds and what each takes as input (matplotlib is imported only when plotting).
 PLOT_KINDS: dict[str, str] = {
@@ -43,6 +55,9 @@ PLOT_KINDS: dict[str, str] = {
     "spectra": "one or more `jamflow modes` outputs (sorted eigenvalues, VanderWerf et al. Fig. 7)",
     "quartic-pressure": "`jamflow modes` outputs at several P0 (region-1 eigenvalues and fourth derivatives, "
                         "VanderWerf et al. Figs. 10-11)",
+    "mode": "a linked packing and its `jamflow modes` output: one mode as arrows (--mode)",
+    "feasible-region": "one `jamflow feasible-region` output (the caged circulo-line, its feasible region and "
+                       "their volume and surface against dR, VanderWerf et al. Figs. 12-13)",
 }
 #: the dataset kinds (jamflow.io.DATASET_KINDS) each figure kind reads
 PLOT_INPUT_KINDS: dict[str, tuple[str, ...]] = {
@@ -64,6 +79,8 @@ PLOT_INPUT_KINDS: dict[str, tuple[str, ...]] = {
     "contact-angles": ("contact-angles",),
     "spectra": ("modes",),
     "quartic-pressure": ("modes",),
+    "mode": ("packing", "linked-modes"),
+    "feasible-region": ("feasible-region",),
 }
 
 
@@ -75,14 +92,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "likelihood on the pooled gaps in a window chosen inside [fit-min, fit-max] (raised to 1/p "
                     "for LS snapshots, lowered to a power-law break), with a bootstrap statistical error and a "
                     "systematic error from a scan of windows spanning >= 1.5 decades.",
-                    reads=("paths[:-1]",), writes=("paths[-1]",))
+                    reads=("paths[:-1]",), writes=("paths[-1]",), makes={"paths[-1]": ("gaps",)})
     p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc", help="input packings (.nc or .dat), then the output")
-    p.add_argument("--max-gap", type=float, default=0.1, help="largest gap binned (default 0.1)")
-    p.add_argument("--min-gap", type=float, default=1e-13, help="smallest gap binned (default 1e-13)")
-    p.add_argument("--bins-per-decade", type=int, default=5, help="logarithmic bins per decade (default 5)")
-    p.add_argument("--fit-min", type=float, default=1e-5, help="lower end of the scaling range (default 1e-5)")
-    p.add_argument("--fit-max", type=float, default=1e-2, help="upper end of the scaling range (default 1e-2)")
-    p.add_argument("--gap-tol", type=float, default=None,
+    p.add_argument("--max-gap", type=positive, default=0.1, help="largest gap binned (default 0.1)")
+    p.add_argument("--min-gap", type=positive, default=1e-13, help="smallest gap binned (default 1e-13)")
+    p.add_argument("--bins-per-decade", type=bins, default=5, help="logarithmic bins per decade (default 5)")
+    p.add_argument("--fit-min", type=positive, default=1e-5, help="lower end of the scaling range (default 1e-5)")
+    p.add_argument("--fit-max", type=positive, default=1e-2, help="upper end of the scaling range (default 1e-2)")
+    p.add_argument("--gap-tol", type=non_negative, default=None,
                    help="pairs with h <= GAP_TOL are contacts; default: the packing's own contacts, "
                         "else jamflow.tolerances.CONTACT_GAP_TOL")
     p.add_argument("--include-rattlers", action="store_true",
@@ -92,14 +109,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_quiet(p)
 
     p = add_command(sub, "forces", _forces, "contact-force distribution P(f/<f>), tail exponent, bucklers",
-                    reads=("paths[:-1]",), writes=("paths[-1]",))
+                    reads=("paths[:-1]",), writes=("paths[-1]",), makes={"paths[-1]": ("forces",)})
     p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc", help="packings with forces, then the output")
-    p.add_argument("--f-max", type=float, default=6.0, help="upper end of the bins, in mean forces (default 6)")
-    p.add_argument("--linear-bins", type=int, default=60, help="linear bins on [0, f_max] (default 60)")
-    p.add_argument("--log-min", type=float, default=1e-6, help="lower end of the log bins (default 1e-6)")
-    p.add_argument("--bins-per-decade", type=int, default=5, help="log bins per decade (default 5)")
-    p.add_argument("--fit-min", type=float, default=1e-3, help="lower end of the small-force scaling range (default 1e-3)")
-    p.add_argument("--fit-max", type=float, default=1e-1, help="upper end of the small-force scaling range (default 1e-1)")
+    p.add_argument("--f-max", type=positive, default=6.0, help="upper end of the bins, in mean forces (default 6)")
+    p.add_argument("--linear-bins", type=bins, default=60, help="linear bins on [0, f_max] (default 60)")
+    p.add_argument("--log-min", type=positive, default=1e-6, help="lower end of the log bins (default 1e-6)")
+    p.add_argument("--bins-per-decade", type=bins, default=5, help="log bins per decade (default 5)")
+    p.add_argument("--fit-min", type=positive, default=1e-3,
+                   help="lower end of the small-force scaling range (default 1e-3)")
+    p.add_argument("--fit-max", type=positive, default=1e-1,
+                   help="upper end of the small-force scaling range (default 1e-1)")
     p.add_argument("--all-contacts", action="store_true",
                    help="use every contact, no rattler removal (flowing, hypostatic networks)")
     _add_fit_options(p)
@@ -107,21 +126,24 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_quiet(p)
 
     p = add_command(sub, "overlap", _overlap, "contact-network overlap Q(A, B) = |C_A ∩ C_B| / N_c(B)",
-                    reads=("a", "b"), writes=("out",))
+                    reads=("a", "b"), writes=("out",), makes={"out": ("overlap",)})
     p.add_argument("a", help="packing A")
     p.add_argument("b", help="reference packing B")
-    p.add_argument("out", help="output netCDF")
-    p.add_argument("--gap-tol", type=float, default=None, help="contacts from h <= GAP_TOL instead of the stored ones")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF")
+    p.add_argument("--gap-tol", type=non_negative, default=None,
+                   help="contacts from h <= GAP_TOL instead of the stored ones")
     add_overlap_option(p)
     add_quiet(p)
 
     p = add_command(sub, "overlap-series", _overlap_series,
                     "Q(p_tar) and |Delta phi_J| of one sample against its largest p_tar",
-                    reads=("paths[:-1]",), writes=("paths[-1]",))
+                    reads=("paths[:-1]",), writes=("paths[-1]",), makes={"paths[-1]": ("overlap-series",)})
     p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc", help="jammed packings of one sample, then the output")
-    p.add_argument("--p-target", type=float, nargs="+", required=True, help="target pressure of each input, same order")
-    p.add_argument("--gap-tol", type=float, default=None, help="contacts from h <= GAP_TOL instead of the stored ones")
-    p.add_argument("--growth-rate", type=float, default=None,
+    p.add_argument("--p-target", type=positive, nargs="+", required=True,
+                   help="target pressure of each input, same order")
+    p.add_argument("--gap-tol", type=non_negative, default=None,
+                   help="contacts from h <= GAP_TOL instead of the stored ones")
+    p.add_argument("--growth-rate", type=positive, default=None,
                    help="LS growth rate kappa of the sample, stored as attribute 'kappa' to group samples in plots")
     add_overlap_option(p)
     add_quiet(p)
@@ -131,31 +153,34 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "Fits Eq. 15, phi = phi_J (1 - d/p), to each LS run's equation of state on a pressure window and "
                     "compares the extrapolated phi_J^(LS) with the phi_J of the packings CALiPPSO jams from its "
                     "snapshots; sample means and standard errors per growth rate. Prints the table as markdown.",
-                    reads=("paths[:-1]", "eos"), writes=("paths[-1]",))
+                    reads=("paths[:-1]", "eos"), writes=("paths[-1]",), makes={"paths[-1]": ("jamming-table",)})
     p.add_argument("paths", nargs="+", metavar="SERIES.nc ... OUT.nc",
                    help="overlap-series outputs (one per sample and kappa, with --growth-rate), then the output")
     p.add_argument("--eos", nargs="+", required=True, help="equation of state of each LS run, same order as the series")
-    p.add_argument("--fit-min", type=float, default=1e5, help="lowest reduced pressure of the fit (default 1e5)")
-    p.add_argument("--fit-max", type=float, default=1e11, help="highest reduced pressure of the fit (default 1e11)")
+    p.add_argument("--fit-min", type=positive, default=1e5, help="lowest reduced pressure of the fit (default 1e5)")
+    p.add_argument("--fit-max", type=positive, default=1e11, help="highest reduced pressure of the fit (default 1e11)")
     add_quiet(p)
 
     p = add_command(sub, "rdf", _rdf, "radial distribution g(r) and crystallinity (2D psi6, 3D Q6)",
-                    reads=("packing",), writes=("out",))
+                    reads=("packing",), writes=("out",), makes={"out": ("rdf",)})
     p.add_argument("packing", help="input packing (.nc or .dat)")
-    p.add_argument("out", help="output netCDF")
-    p.add_argument("--r-max", type=float, default=3.0, help="largest r in mean diameters (default 3)")
-    p.add_argument("--bins", type=int, default=150, help="number of r bins (default 150)")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF")
+    p.add_argument("--r-max", type=positive, default=3.0,
+                   help="largest r in mean diameters (default 3; clipped, with a note, to below half the smallest "
+                        "box width)")
+    p.add_argument("--bins", type=bins, default=150, help="number of r bins (default 150)")
     add_overlap_option(p)
     add_quiet(p)
 
     p = add_command(sub, "flow-summary", _flow_summary,
                     "stress-strain, friction, steady-state averages, contact lifetimes, event rates of a flow run",
-                    reads=("run",), writes=("out",))
+                    reads=("run",), writes=("out",), makes={"out": ("flow-summary",)})
     p.add_argument("run", help="flow time series netCDF")
-    p.add_argument("out", help="output netCDF")
-    p.add_argument("--strain-min", type=float, default=None, help="start of the steady-state window (default: mid run)")
-    p.add_argument("--strain-max", type=float, default=None, help="end of the steady-state window (default: end)")
-    p.add_argument("--blocks", type=int, default=10, help="blocks of the error estimate (default 10)")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF")
+    p.add_argument("--strain-min", type=non_negative, default=None,
+                   help="start of the steady-state window (default: mid run)")
+    p.add_argument("--strain-max", type=non_negative, default=None, help="end of the steady-state window (default: end)")
+    p.add_argument("--blocks", type=integer(2, MAX_BINS), default=10, help="blocks of the error estimate (default 10)")
     add_quiet(p)
 
     p = add_command(sub, "flow-curve", _flow_curve,
@@ -163,26 +188,32 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "Collects `jamflow flow-summary` outputs of shear runs (one per pressure or density) into "
                     "mu(I), phi(I) with block errors; I = 1 / <p> in the runs' reduced stress unit "
                     "gamma_dot / (xi0 lambda^(d-2)).",
-                    reads=("paths[:-1]",), writes=("paths[-1]",))
+                    reads=("paths[:-1]",), writes=("paths[-1]",), makes={"paths[-1]": ("flow-curve",)})
     p.add_argument("paths", nargs="+", metavar="SUMMARY.nc ... OUT.nc", help="flow summaries, then the output")
     p.add_argument("--labels", nargs="+", default=None, help="one label per summary (default run0, run1, ...)")
     add_quiet(p)
 
     p = add_command(sub, "plot", _plot, "draw a figure (writes OUT.png and OUT.pdf)",
-                    "Kinds: " + "; ".join(f"{k}: {v}" for k, v in PLOT_KINDS.items()), reads=("paths[:-1]",), writes=("paths[-1]",))
+                    "Kinds: " + "; ".join(f"{k}: {v}" for k, v in PLOT_KINDS.items()), reads=("paths[:-1]",), writes=("paths[-1]",), makes={"paths[-1]": ()})
     p.add_argument("kind", choices=sorted(PLOT_KINDS), help="figure kind")
     p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.png", help="inputs, then the output figure")
     p.add_argument("--labels", nargs="+", default=None, help="legend label per input")
-    p.add_argument("--slab-axis", type=int, default=2, help="packing, d >= 3: axis normal to the drawn slab (default 2)")
+    p.add_argument("--slab-axis", type=non_negative_int, default=2, help="packing, d >= 3: axis normal to the drawn slab (default 2)")
+    p.add_argument("--mode", type=non_negative_int, default=None,
+                   help="mode: index of the mode (ascending eigenvalue; default the lowest vibration)")
+    p.add_argument("--convention", choices=("paper", "once", "twice", "spectral"), default="paper",
+                   help="z-asphericity: contacts of <z> (Eq. 3): each family's paper definition (default; Fig. 8: "
+                        "N_c = N_c^0 - N_1 for circulo shapes, contacts for the rest), parallel circulo contacts "
+                        "once or twice (Fig. 6), or N_c^0 - N_1 for all")
     add_overlap_option(p)
     add_quiet(p)
 
 
 def _add_fit_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--bootstrap", type=int, default=200,
+    p.add_argument("--bootstrap", type=resamples, default=200,
                    help="bootstrap resamples (packings, then samples within packings) of the statistical error "
                         "(default 200)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the bootstrap (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the bootstrap (default 0)")
 
 
 def _exponent_rows(ds, name: str, symbol: str, reference: str) -> list[tuple[str, str]]:
@@ -206,12 +237,6 @@ def _break_rows(ds) -> list[tuple[str, str]]:
                                 f"[{a['fit_scaling_range_min']:.3g}, {a['fit_scaling_range_max']:.3g}]")]
 
 
-def _split(paths: list[str], what: str) -> tuple[list[str], str]:
-    if len(paths) < 2:
-        raise ValueError(f"give at least one {what} and an output path")
-    return paths[:-1], paths[-1]
-
-
 def _load_packing(path: str, tol: float | None) -> Packing:
     if Path(path).suffix == ".dat":
         packing = read_dat(path)
@@ -221,11 +246,23 @@ def _load_packing(path: str, tol: float | None) -> Packing:
 
 
 def _load_all(paths: list[str], tol: float | None, quiet: bool) -> list[Packing]:
-    return [_load_packing(p, tol) for p in tqdm(paths, desc="reading", disable=quiet or len(paths) < 2)]
+    """The packings of a pooled analysis; two files holding one packing (a copy) are refused."""
+    packings = [_load_packing(p, tol) for p in tqdm(paths, desc="reading", disable=quiet or len(paths) < 2)]
+    seen: dict[str, str] = {}
+    for path, packing in zip(paths, packings, strict=True):
+        digest = hashlib.sha256()
+        for array in (packing.position, packing.diameter, packing.box.matrix):
+            digest.update(np.ascontiguousarray(array, dtype=np.float64).tobytes())
+        key = digest.hexdigest()
+        if key in seen:
+            raise ValueError(f"{seen[key]} and {path} hold the same packing (same centres, diameters and box): "
+                             "it would be counted twice")
+        seen[key] = path
+    return packings
 
 
 def _gaps(args: argparse.Namespace) -> int:
-    inputs, out = _split(args.paths, "packing")
+    inputs, out = split_paths(args.paths, "packing")
     check_window(args.fit_min, args.fit_max, "--fit-min/--fit-max")
     ds = gap_distribution(_load_all(inputs, overlap_tol(args), args.quiet), args.max_gap, args.min_gap,
                           args.bins_per_decade, args.fit_min, args.fit_max, args.gap_tol,
@@ -243,7 +280,7 @@ def _gaps(args: argparse.Namespace) -> int:
 
 
 def _forces(args: argparse.Namespace) -> int:
-    inputs, out = _split(args.paths, "packing")
+    inputs, out = split_paths(args.paths, "packing")
     check_window(args.fit_min, args.fit_max, "--fit-min/--fit-max")
     ds = force_distribution(_load_all(inputs, overlap_tol(args), args.quiet), args.f_max, args.linear_bins,
                             args.log_min, args.bins_per_decade, args.fit_min, args.fit_max,
@@ -274,7 +311,7 @@ def _overlap(args: argparse.Namespace) -> int:
 
 
 def _overlap_series(args: argparse.Namespace) -> int:
-    inputs, out = _split(args.paths, "packing")
+    inputs, out = split_paths(args.paths, "packing")
     packings = _load_all(inputs, overlap_tol(args), True)
     ds = overlap_series(packings, args.p_target, args.gap_tol,
                         stage_parameters(args, "paths") | {"inputs": inputs}, args.growth_rate)
@@ -289,7 +326,7 @@ def _overlap_series(args: argparse.Namespace) -> int:
 
 
 def _jamming_table(args: argparse.Namespace) -> int:
-    inputs, out = _split(args.paths, "overlap series")
+    inputs, out = split_paths(args.paths, "overlap series")
     series = [read_dataset(p, "overlap-series") for p in inputs]
     ds = jamming_table(series, [read_dataset(p, "eos") for p in args.eos], args.fit_min,
                        args.fit_max, stage_parameters(args, "paths") | {"inputs": inputs})
@@ -306,7 +343,10 @@ def _rdf(args: argparse.Namespace) -> int:
     write_dataset(ds, args.out)
     crystal = [(k, f"{ds.attrs[k]:.4g}") for k in ("psi6_global", "psi6_local_mean", "Q6_global", "q6_local_mean",
                                                     "crystal_fraction") if k in ds.attrs]
-    print_summary(args, args.out, [("g(r)", f"{ds.sizes['r']} bins up to r = {args.r_max:g} mean diameters"),
+    if ds.attrs["r_max_clipped"]:
+        print(f"jamflow rdf: note: r_max {args.r_max:g} clipped to {ds.attrs['r_max']:.6g} mean diameters, below half "
+              f"the smallest box width of {args.packing} ({ds.sizes['r']} of {args.bins} bins)", file=sys.stderr)
+    print_summary(args, args.out, [("g(r)", f"{ds.sizes['r']} bins up to r = {ds.attrs['r_max']:.6g} mean diameters"),
                                    ("packing fraction", f"{ds.attrs['packing_fraction']:.10f}"), *crystal])
     return 0
 
@@ -327,7 +367,7 @@ def _flow_summary(args: argparse.Namespace) -> int:
 
 
 def _flow_curve(args: argparse.Namespace) -> int:
-    inputs, out = _split(args.paths, "flow summary")
+    inputs, out = split_paths(args.paths, "flow summary")
     ds = flow_curve([read_dataset(p, "flow-summary") for p in inputs], args.labels, stage_parameters(args, "paths"))
     write_dataset(ds, out)
     print_summary(args, out, [
@@ -353,9 +393,7 @@ def _plot(args: argparse.Namespace) -> int:
     from .. import plots
     from ..shapes import figures as shape_figures
 
-    inputs, out = _split(args.paths, "input")
-    if Path(out).suffix.lower() not in (".png", ".pdf"):
-        raise ValueError(f"output must end in .png (a .pdf is written beside it), got {out}")
+    inputs, out = split_paths(args.paths, "input", (".png", ".pdf"), distinct=False)
     if args.labels is not None and len(args.labels) != len(inputs):
         raise ValueError(f"--labels needs one label per input ({len(inputs)}), got {len(args.labels)}")
     single = {"packing": None, "forces": plots.plot_forces, "fit-windows": plots.plot_fit_windows,
@@ -363,7 +401,8 @@ def _plot(args: argparse.Namespace) -> int:
               "pareto": plots.pareto, "jamming-table": plots.plot_jamming_table,
               "chains-moduli": plots.plot_chains_moduli,
               "phi-asphericity": lambda ds: shape_figures.plot_survey(ds, "phi_J"),
-              "z-asphericity": lambda ds: shape_figures.plot_survey(ds, "z")}
+              "z-asphericity": lambda ds: shape_figures.plot_survey(ds, "z", args.convention),
+              "feasible-region": shape_figures.plot_feasible_region}
     labelled = {"gaps": plots.plot_gaps, "rdf": plots.plot_rdf, "stress-strain": plots.plot_stress_strain,
                 "eos": plots.plot_eos, "contact-angles": shape_figures.plot_contact_angles,
                 "spectra": shape_figures.plot_spectra}
@@ -371,6 +410,12 @@ def _plot(args: argparse.Namespace) -> int:
         raise ValueError(f"plot {args.kind} takes one input, got {len(inputs)}")
     if args.kind == "packing":
         fig = plots.plot_packing(_with_shape_rattlers(_load_packing(inputs[0], overlap_tol(args))), args.slab_axis)
+    elif args.kind == "mode":
+        from ..chains.figures import plot_mode
+
+        if len(inputs) != 2:
+            raise ValueError(f"plot mode takes a packing and its `jamflow modes` output, got {len(inputs)} inputs")
+        fig = plot_mode(read_packing(inputs[0], None), read_dataset(inputs[1], "linked-modes"), args.mode)
     else:
         data = [read_dataset(p, PLOT_INPUT_KINDS[args.kind]) for p in inputs]
         if args.kind in single:

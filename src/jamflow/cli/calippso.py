@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 
 from tqdm import tqdm
 
@@ -25,6 +26,7 @@ from ..protocols.calippso import (
     result_to_dataset,
 )
 from .common import add_command, add_preset, add_quiet, print_summary, stage_parameters
+from .types import count, integer, path_with_suffix, positive, real
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -39,30 +41,30 @@ def register(sub: argparse._SubParsersAction) -> None:
         reads=("packing",), writes=("out",), packings=("out",),
     )
     p.add_argument("packing", help="input netCDF packing (no overlaps)")
-    p.add_argument("out", help="output netCDF jammed packing")
-    p.add_argument("--tol-s", type=float, default=DEFAULT_TOL_S,
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF jammed packing")
+    p.add_argument("--tol-s", type=positive, default=DEFAULT_TOL_S,
                    help=f"convergence: largest stable displacement in mean diameters (default {DEFAULT_TOL_S:g})")
-    p.add_argument("--tol-gamma", type=float, default=DEFAULT_TOL_GAMMA,
+    p.add_argument("--tol-gamma", type=positive, default=DEFAULT_TOL_GAMMA,
                    help=f"convergence: sqrt(Gamma)-1 (default {DEFAULT_TOL_GAMMA:g})")
     p.add_argument("--solver", choices=SOLVERS, default=DEFAULT_SOLVER,
                    help=f"HiGHS strategy (default {DEFAULT_SOLVER})")
-    p.add_argument("--solver-tol", type=float, default=SOLVER_TOL,
+    p.add_argument("--solver-tol", type=positive, default=SOLVER_TOL,
                    help=f"HiGHS feasibility/optimality tolerance of the scaled rows, 1e-10..2e-8 (default {SOLVER_TOL:g})")
-    p.add_argument("--cutoff", type=float, default=DEFAULT_CUTOFF,
+    p.add_argument("--cutoff", type=positive, default=DEFAULT_CUTOFF,
                    help="neighbour cutoff far from jamming, in largest diameters; unused by a start near jamming "
                         f"(median nearest gap below {NEAR_START_GAP:g} of the contact distance) (default {DEFAULT_CUTOFF})")
-    p.add_argument("--cutoff-near", type=float, default=DEFAULT_CUTOFF_NEAR,
+    p.add_argument("--cutoff-near", type=positive, default=DEFAULT_CUTOFF_NEAR,
                    help="neighbour cutoff close to jamming (last bound phase, unbounded LPs, every LP of a start near "
                         f"jamming), in largest diameters (default {DEFAULT_CUTOFF_NEAR})")
-    p.add_argument("--bound", type=float, nargs=2, default=None, metavar=("MID", "NEAR"),
+    p.add_argument("--bound", type=positive, nargs=2, default=None, metavar=("MID", "NEAR"),
                    help="displacement bounds in mean radii for 5e-4 >= sqrt(Gamma)-1 > 1e-5 and below "
                         "(default 0.1 0.01)")
-    p.add_argument("--relax", type=float, default=None,
+    p.add_argument("--relax", type=real(0.0, 1.0, lo_open=True, need="a number c with 0 < c <= 1"), default=None,
                    help="Sec. IV relaxation: sigma <- sqrt(1 + c gamma) sigma with 0 < c <= 1 (default off)")
     p.add_argument("--walls", action="store_true", help="hard walls on the box faces instead of periodic boundaries")
-    p.add_argument("--max-iterations", type=int, default=DEFAULT_MAX_ITERATIONS,
+    p.add_argument("--max-iterations", type=count, default=DEFAULT_MAX_ITERATIONS,
                    help=f"largest number of LPs (default {DEFAULT_MAX_ITERATIONS})")
-    p.add_argument("--threads", type=int, default=1, help="HiGHS threads (default 1)")
+    p.add_argument("--threads", type=integer(1, os.cpu_count() or 1), default=1, help="HiGHS threads (default 1)")
     p.add_argument("--interior", choices=INTERIOR_POINTS, default=DEFAULT_INTERIOR,
                    help="HiGHS interior point method of the interior point LPs; hipo needs "
                         f"pip install 'jamflow[hipo]' (default {DEFAULT_INTERIOR})")

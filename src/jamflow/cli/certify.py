@@ -14,15 +14,20 @@ from ..protocols.certify import (
     certificate_to_dataset,
     certify,
 )
+from ..state.packing import OverlapError, Packing
 from .common import (
     add_command,
     add_preset,
     add_quiet,
     print_summary,
-    seed,
     stage_parameters,
 )
 from .packings import add_overlap_option, overlap_tol
+from .types import integer, non_negative, path_with_suffix, probability, seed
+
+#: Most random loads per LP kind: each load is two LPs, and a certificate that 1000 loads
+#: have not decided is not decided by more.
+MAX_LOADS = 1000
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -33,20 +38,20 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "rattlers are removed, then random loads of both signs probe for unjamming "
                     "motions at fixed box (collective) and, with --strict, with a volume-preserving "
                     "box strain. Writes a dataset with attribute 'classification'.",
-        reads=("packing",), writes=("out",),
+        reads=("packing",), writes=("out",), makes={"out": ("certificate", "chain-certificate")},
     )
     p.add_argument("packing", help="input netCDF packing")
-    p.add_argument("out", help="output netCDF certificate")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF certificate")
     p.add_argument("--strict", action="store_true", help="also test strict jamming (box may deform at fixed volume)")
-    p.add_argument("--gap-tol", type=float, default=None,
+    p.add_argument("--gap-tol", type=non_negative, default=None,
                    help="pairs with relative gap <= T are contacts, with gap-aware constraints; "
                         "default: the packing's own contacts as exact contacts")
     p.add_argument("--exact", action="store_true",
                    help="with --gap-tol: treat the pairs as exact contacts (zero right-hand side)")
-    p.add_argument("--loads", type=int, default=DEFAULT_LOADS,
+    p.add_argument("--loads", type=integer(1, MAX_LOADS), default=DEFAULT_LOADS,
                    help=f"random loads per LP kind, each with both signs (default {DEFAULT_LOADS})")
     p.add_argument("--seed", type=seed, default=0, help="seed of the random loads (default 0)")
-    p.add_argument("--max-cluster-fraction", type=float, default=DEFAULT_MAX_CLUSTER_FRACTION,
+    p.add_argument("--max-cluster-fraction", type=probability, default=DEFAULT_MAX_CLUSTER_FRACTION,
                    help="largest non-wrapping moving group removed as a rattling cluster, as a fraction "
                         f"of the backbone (default {DEFAULT_MAX_CLUSTER_FRACTION})")
     p.add_argument("--solver", choices=["ipm", "simplex", "choose"], default=DEFAULT_SOLVER,
@@ -62,11 +67,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _certify(args: argparse.Namespace) -> int:
     if args.exact and args.gap_tol is None:
         raise ValueError("--exact needs --gap-tol (explicit contacts are always exact)")
-    packing = read_packing(args.packing, overlap_tol(args))
+    packing = read_packing(args.packing, None)
     if packing.links is not None and len(packing.links):
         from .chains import certify_linked_packing
 
+        # the linked certificate's contacts are the overlapping pairs (soft-jam's contacts)
         return certify_linked_packing(args, packing)
+    _check_overlaps(args, packing)
     with tqdm(desc="certify LPs", unit="LP", disable=args.quiet) as bar:
         cert = certify(
             packing,
@@ -85,3 +92,12 @@ def _certify(args: argparse.Namespace) -> int:
                                    ("rattlers", int(cert.rattler.sum())), ("LPs", len(cert.lp)),
                                    ("self-stress decisions", cert.self_stress_decisions)])
     return 0
+
+
+def _check_overlaps(args: argparse.Namespace, packing: Packing) -> None:
+    """Refuse overlaps beyond the tolerance, saying how to certify a soft packing on its own contacts."""
+    try:
+        packing.validate(overlap_tol(args))
+    except OverlapError as exc:
+        soft = " (written by soft-jam)" if packing.protocol.split(">")[-1].startswith("soft") else ""
+        raise OverlapError(f"{exc}: a soft packing{soft} is certified on its stored contacts with --soft") from None

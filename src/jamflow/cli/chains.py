@@ -14,6 +14,8 @@ from ..chains.builders import (
     CLUSTER_KINDS,
     DILUTE_PHI,
     OVERLAP_PHI,
+    SIZE_CLASSES,
+    Sizes,
     cement_links,
     cement_pairs,
     check_linked_start,
@@ -30,13 +32,25 @@ from ..io import (
     write_dataset,
     write_packing,
 )
+from ..resources import check_fits
 from .common import (
     add_command,
     add_quiet,
     packing_rows,
     print_summary,
-    seed,
+    split_paths,
     stage_parameters,
+)
+from .types import (
+    count,
+    integer,
+    non_negative,
+    packing_fraction,
+    path_with_suffix,
+    positive,
+    probability,
+    real,
+    seed,
 )
 
 
@@ -45,26 +59,43 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "random start of chains or rigid trimers of unit spheres, or of bidisperse asymmetric dimers "
                     "(links, no overlaps unless --overlap; no crossing links in 2D)", writes=("out",),
                     packings=("out",))
-    p.add_argument("out", help="output netCDF packing with links")
-    p.add_argument("--d", type=int, required=True, help="dimension (2 or 3)")
-    p.add_argument("--clusters", type=int, required=True, help="number of clusters K (N = K M spheres)")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF packing with links")
+    p.add_argument("--d", type=integer(2, 3), required=True, help="dimension (2 or 3)")
+    p.add_argument("--clusters", type=count, required=True, help="number of clusters K (N = K M spheres)")
     p.add_argument("--cluster", choices=CLUSTER_KINDS, required=True,
                    help="trimer: three spheres with the bond angle frozen (rigid); chain: --chain-length spheres; "
                         "dimer: a small and a large monomer at a fixed distance (van der Werf et al. Fig. 3b), "
                         "half of the dimers scaled by --size-ratio")
-    p.add_argument("--chain-length", type=int, default=3, help="spheres per chain M (default 3)")
+    p.add_argument("--chain-length", type=integer(2), default=3, help="spheres per chain M (default 3)")
     p.add_argument("--free-angles", action="store_true",
                    help="bonds only (flexible); default: every bond angle frozen by an angle link")
-    p.add_argument("--bond-angle", type=float, default=None,
+    semi = p.add_mutually_exclusive_group()
+    semi.add_argument("--frozen-fraction", type=probability, default=None,
+                      help="chain: semi-flexible, each bond angle frozen with this probability (seeded)")
+    semi.add_argument("--frozen-every", type=count, default=None,
+                      help="chain: semi-flexible, the bond angle at every k-th sphere frozen (k = 1: all)")
+    p.add_argument("--bond-angle", type=real(0.0, 180.0, lo_open=True, need="an angle in (0, 180] degrees"),
+                   default=None,
                    help="every bond angle [degrees]; default uniform in [60, 150] degrees")
-    p.add_argument("--diameter-ratio", type=float, default=DIMER_DIAMETER_RATIO,
+    p.add_argument("--diameter-ratio", type=positive, default=DIMER_DIAMETER_RATIO,
                    help=f"dimer: large over small monomer diameter (default {DIMER_DIAMETER_RATIO})")
-    p.add_argument("--separation", type=float, default=DIMER_SEPARATION,
+    p.add_argument("--separation", type=positive, default=DIMER_SEPARATION,
                    help=f"dimer: monomer centre distance in small-monomer diameters (default {DIMER_SEPARATION}, "
                         f"the paper's A - 1 = 0.349)")
-    p.add_argument("--size-ratio", type=float, default=DIMER_SIZE_RATIO,
+    p.add_argument("--size-ratio", type=positive, default=DIMER_SIZE_RATIO,
                    help=f"dimer: length of large over small dimers (default {DIMER_SIZE_RATIO})")
-    p.add_argument("--phi", type=float, default=None,
+    p.add_argument("--dispersity", choices=["mono", "bi", "poly", "lognormal"], default="mono",
+                   help="chains and trimers: size mixture as `jamflow init` (default mono: unit spheres; equal "
+                        "spheres partly crystallise in 2D)")
+    p.add_argument("--ratio", type=real(1.0, lo_open=True, need="a size ratio > 1"), default=1.4,
+                   help="bidisperse size ratio large / small (default 1.4)")
+    p.add_argument("--fraction", type=probability, default=0.5,
+                   help="bidisperse number fraction of small clusters (or spheres) (default 0.5)")
+    p.add_argument("--width", type=non_negative, default=0.1, help="poly / lognormal relative width (default 0.1)")
+    p.add_argument("--sizes-per", choices=SIZE_CLASSES, default="cluster",
+                   help="one size class per cluster (a scaled copy, default) or per sphere (bonds are the "
+                        "contact distances)")
+    p.add_argument("--phi", type=packing_fraction, default=None,
                    help=f"packing fraction of the union of each cluster's spheres (default without overlaps {DILUTE_PHI[2]} in 2D, {DILUTE_PHI[3]} in 3D; "
                         f"with --overlap "
                         f"{OVERLAP_PHI[2]} in 2D, {OVERLAP_PHI[3]} in 3D)")
@@ -74,7 +105,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     start.add_argument("--overlap", dest="no_overlap", action="store_false",
                        help="the paper's Sec. III start above jamming with overlaps: links can pass through each "
                             "other during soft-jam and a third of such starts end entangled, which soft-jam refuses "
-                            "(docs/chains.md)")
+                            "(docs/notes/chains.md)")
     p.add_argument("--seed", type=seed, required=True, help="random seed")
     add_quiet(p)
 
@@ -82,9 +113,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "add links to a packing: cement K random contacts (freezing the bond angles they create) "
                     "or read a link file", reads=("input", "file"), writes=("out",), packings=("out",))
     p.add_argument("input", help="input netCDF packing (with contacts for --cement)")
-    p.add_argument("out", help="output netCDF packing with links")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF packing with links")
     group = p.add_mutually_exclusive_group(required=True)
-    group.add_argument("--cement", type=int, default=None, help="number of random contacts turned into links")
+    group.add_argument("--cement", type=count, default=None, help="number of random contacts turned into links")
     group.add_argument("--file", default=None,
                        help="text file of links, one 'i j [length]' per line (length: current distance if omitted)")
     p.add_argument("--seed", type=seed, default=None, help="random seed of --cement")
@@ -99,7 +130,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "Groups `jamflow moduli` outputs of packings made by `jamflow link --cement` by n_l / N and "
                     "averages each group's Hill moduli weighted by their Reuss-Voigt spread, with the weighted "
                     "standard error; infinite moduli are counted, not averaged (jamflow.chains.averages).",
-                    reads=("paths[:-1]",), writes=("paths[-1]",))
+                    reads=("paths[:-1]",), writes=("paths[-1]",),
+                    makes={"paths[-1]": ("chains-moduli-table",)})
     p.add_argument("paths", nargs="+", metavar="MODULI.nc ... OUT.nc", help="moduli datasets, then the output")
     add_quiet(p)
 
@@ -120,14 +152,27 @@ def _link_rows(packing) -> list[tuple[str, object]]:
 
 
 def _init_chains(args: argparse.Namespace) -> int:
+    per_cluster = {"trimer": 3, "dimer": 2}.get(args.cluster, args.chain_length)
+    check_fits("init-chains", args.clusters * per_cluster, args.d, "spheres")
     angle = None if args.bond_angle is None else radians(args.bond_angle)
+    sizes = Sizes(args.dispersity, args.ratio, args.fraction, args.width, args.sizes_per)
     packing, messages = linked_packing(args.d, args.clusters, args.cluster, np.random.default_rng(args.seed),
                                        args.chain_length, args.free_angles, args.phi, angle,
-                                       args.no_overlap, args.diameter_ratio, args.size_ratio, args.separation)
+                                       args.no_overlap, args.diameter_ratio, args.size_ratio, args.separation,
+                                       sizes=None if args.cluster == "dimer" and args.dispersity == "mono" else sizes,
+                                       frozen_fraction=args.frozen_fraction, frozen_every=args.frozen_every)
     _messages(messages)
     packing = packing.evolve(seed=args.seed)
     write_packing(packing, args.out, stage_parameters(args, "out"))
     shape = [("dimer asphericity A", f"{packing.attrs['asphericity']:.6f}")] if "asphericity" in packing.attrs else []
+    if "frozen_angle_rule" in packing.attrs:
+        shape.append(("frozen bond angles", f"{packing.attrs['n_frozen_angles']} of "
+                                            f"{args.clusters * (packing.attrs['chain_length'] - 2)} "
+                                            f"({packing.attrs['frozen_angle_rule']})"))
+    if packing.attrs.get("dispersity", "mono") != "mono":
+        D = packing.diameter
+        shape.append(("diameters", f"{args.dispersity} per {args.sizes_per}: {D.min():.4g} .. {D.max():.4g} "
+                                   f"(mean {D.mean():.4g})"))
     print_summary(args, args.out, [*_link_rows(packing), *shape, ("degenerate links removed", len(messages))])
     return 0
 
@@ -172,8 +217,9 @@ def _link(args: argparse.Namespace) -> int:
 
 
 def _chains_moduli(args: argparse.Namespace) -> int:
-    datasets = [read_dataset(path, "chain-moduli") for path in args.paths[:-1]]
-    for path, ds in zip(args.paths[:-1], datasets):
+    inputs, out = split_paths(args.paths, "moduli dataset")
+    datasets = [read_dataset(path, "chain-moduli") for path in inputs]
+    for path, ds in zip(inputs, datasets):
         if "n_cemented" not in ds.attrs:
             raise ValueError(f"{path} has no n_cemented attribute (moduli of a packing made by jamflow link --cement)")
         if "n_unstable" not in ds.attrs:
@@ -183,7 +229,7 @@ def _chains_moduli(args: argparse.Namespace) -> int:
                                     stage_parameters(args, "paths"), d=int(datasets[0].attrs["d"]),
                                     method=("Reuss-Voigt weighted average (chains paper Fig. 5): Hill values "
                                             "weighted by 1 / ((V - R)^2 / 12), scatter standard error"))
-    write_dataset(table, args.paths[-1])
+    write_dataset(table, out)
     rows = []
     for k in range(table.sizes["links_per_sphere"]):
         t = table.isel(links_per_sphere=k)
@@ -193,7 +239,7 @@ def _chains_moduli(args: argparse.Namespace) -> int:
         label = f"n_l / N = {float(t.links_per_sphere):.4g} ({int(t.n_packings)} packings"
         label += f", {int(t.n_unstable)} unstable, not averaged)" if int(t.n_unstable) else ")"
         rows.append((label, value))
-    print_summary(args, args.paths[-1], rows)
+    print_summary(args, out, rows)
     return 0
 
 
@@ -217,9 +263,46 @@ def certify_linked_packing(args: argparse.Namespace, packing) -> int:
         attrs=new_dataset_attrs("jamflow chain jamming certificate", stage_parameters(args, "packing", "out"),
                                 classification=cert.classification, motion_stage=cert.motion_stage,
                                 n_lp=cert.n_lp, strict_tested=int(args.strict), d=packing.d, N=packing.n,
-                                n_links=len(packing.links)),
+                                n_links=len(packing.links), n_clusters_removed_by_lp=int(cert.lp_removed.sum()),
+                                **{k: v for k, v in cert.count.as_dict().items()
+                                   if k in ("n_rattling_clusters", "n_clusters_removed", "n_danglers", "free_dofs")}),
     )
     write_dataset(ds, args.out)
-    print_summary(args, args.out, [("classification", cert.classification),
-                                   ("rattlers", int(cert.rattler.sum())), ("LPs", cert.n_lp)])
+    c = cert.count.as_dict()
+    print_summary(args, args.out, [
+        ("classification", cert.classification),
+        ("contacts", "overlapping pairs that are not linked"),
+        ("rattlers", f"{int(cert.rattler.sum())} spheres ({c['n_rattling_clusters']} rattling clusters by counting: "
+                     f"{c['n_clusters_removed']} removed whole, {c['n_danglers']} danglers with {c['free_dofs']} "
+                     f"free motions; {int(cert.lp_removed.sum())} clusters removed by the LPs)"),
+        ("LPs", cert.n_lp)])
+    return 0
+
+
+def linked_modes_command(args: argparse.Namespace, packing) -> int:
+    """``jamflow modes`` of a linked packing: constrained-Hessian modes mapped to centres and strain, zero
+    modes named (:mod:`jamflow.chains.modes`)."""
+    from ..chains.modes import linked_modes, modes_dataset
+
+    if args.lambda_c is not None:
+        raise ValueError("--lambda-c is for shape packings (quartic modes); a linked packing's modes are not split")
+    strain = None if args.strain == "auto" else args.strain == "yes"
+    modes = linked_modes(packing, strain=strain)
+    ds = modes_dataset(modes, packing)
+    ds.attrs.update(new_dataset_attrs("jamflow linked-packing normal modes", stage_parameters(args, "input", "out")))
+    write_dataset(ds, args.out)
+    a = ds.attrs
+    if modes.unexplained or a["n_floppy"]:
+        print(f"jamflow modes: warning: {args.input}: {a['n_floppy']} floppy zero mode(s) no counting explains, "
+              f"{modes.unexplained} counted motion(s) that are not zero modes: certify the packing", file=sys.stderr)
+    nonzero = modes.eigenvalues[modes.label == 0]
+    print_summary(args, args.out, [
+        ("N, modes", f"{packing.n}, {modes.eigenvalues.size} "
+                     f"({'with strain at fixed volume' if modes.strain else 'fixed box'})"),
+        ("zero modes", f"{modes.n_zero}: {a['n_translation']} translations, {a['n_rattling_cluster']} of rattling "
+                       f"clusters, {a['n_free_motion']} free motions (swings, danglers, rotators), "
+                       f"{a['n_floppy']} floppy"),
+        ("lowest vibration", f"{nonzero.min():.4g} epsilon / length^2" if nonzero.size else "none"),
+        ("max |Gamma^T mode|", f"{a['max_constraint_violation']:.2e} (links and volume kept to first order)"),
+    ])
     return 0

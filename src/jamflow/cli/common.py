@@ -3,26 +3,34 @@
 from __future__ import annotations
 
 import argparse
-from collections.abc import Iterable
+import os
+from collections.abc import Iterable, Sequence
+from pathlib import Path
 from typing import Any
 
-__all__ = ["add_command", "add_quiet", "add_preset", "stage_parameters", "path_arguments", "seed", "positive",
+from .types import UsageError, require_suffix
+
+__all__ = ["add_command", "add_quiet", "add_preset", "stage_parameters", "path_arguments", "split_paths",
            "format_rows", "print_summary", "packing_rows"]
 
 
 def add_command(sub: Any, name: str, handler: Any, help: str, description: str | None = None,
                 reads: tuple[str, ...] = (), writes: tuple[str, ...] = (),
-                packings: tuple[str, ...] = ()) -> argparse.ArgumentParser:
+                packings: tuple[str, ...] = (),
+                makes: dict[str, tuple[str, ...]] | None = None) -> argparse.ArgumentParser:
     """Add a subcommand whose handler is ``handler(args) -> int``.
 
     ``reads`` and ``writes`` name the arguments (``dest``) holding input and output
     paths; ``"paths[:-1]"`` and ``"paths[-1]"`` split an ``IN ... OUT`` list; ``packings``
-    are the outputs (among ``writes``) that are packings. Before the handler runs, an
-    output that is also an input is refused unless ``--in-place`` (added here to commands
-    that both read and write) is given, and so is a non-packing output where a packing is.
+    are the outputs (among ``writes``) that are packings, and ``makes`` gives the others'
+    dataset kinds (:data:`jamflow.io.DATASET_KINDS`; an empty tuple for a text or image
+    file). Before the handler runs, an output that is also an input is refused unless
+    ``--in-place`` (added here to commands that both read and write) is given, and so is
+    an existing file of another kind where an output goes
+    (:func:`jamflow.io.check_output_paths`).
     """
     parser = sub.add_parser(name, help=help, description=description or help)
-    parser.set_defaults(handler=handler, path_roles=(reads, writes, packings))
+    parser.set_defaults(handler=handler, path_roles=(reads, writes, packings), output_kinds=dict(makes or {}))
     if reads and writes:
         parser.add_argument("--in-place", action="store_true",
                             help="allow an output to be one of the inputs (the input file is replaced)")
@@ -45,6 +53,41 @@ def path_arguments(args: argparse.Namespace, roles: tuple[str, ...]) -> list[str
     return out
 
 
+def split_paths(paths: Sequence[str], what: str, suffixes: tuple[str, ...] = (".nc",),
+                distinct: bool = True) -> tuple[list[str], str]:
+    """``IN ... OUT``: the inputs and the output, which must end in one of ``suffixes``.
+
+    Raises
+    ------
+    UsageError
+        No input, an output with another suffix, or (``distinct``: the inputs are pooled)
+        one file given twice, under any name (a pooled analysis would count it twice).
+    """
+    if len(paths) < 2:
+        raise UsageError(f"give at least one {what} and then the output path")
+    inputs, out = list(paths[:-1]), paths[-1]
+    try:
+        require_suffix(out, suffixes)
+    except ValueError as exc:
+        raise UsageError(f"output {exc}") from None
+    seen: dict[Any, str] = {}
+    for path in inputs if distinct else ():
+        key = _file_key(path)
+        if key in seen:
+            raise UsageError(f"{seen[key]} and {path} are the same file: an input given twice would be counted twice")
+        seen[key] = path
+    return inputs, out
+
+
+def _file_key(path: str) -> Any:
+    """What names one file: device and inode when it exists (symlinks, hard links), else its resolved path."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return Path(path).resolve()
+    return (st.st_dev, st.st_ino)
+
+
 def add_quiet(parser: argparse.ArgumentParser) -> None:
     """``--quiet``: no progress bars."""
     parser.add_argument("--quiet", action="store_true",
@@ -63,7 +106,7 @@ def add_preset(parser: argparse.ArgumentParser) -> None:
 
 def stage_parameters(args: argparse.Namespace, *exclude: str) -> dict[str, Any]:
     """The parsed options of a stage as a JSON-able dict (for dataset provenance)."""
-    skip = {"handler", "command", "quiet", "path_roles", "in_place", *exclude}
+    skip = {"handler", "command", "quiet", "path_roles", "output_kinds", "in_place", *exclude}
     return {k: v for k, v in vars(args).items() if k not in skip}
 
 
@@ -103,23 +146,3 @@ def packing_rows(packing: Any) -> list[tuple[str, Any]]:
         rows.append(("rattlers", int(packing.rattler.sum())))
     return rows
 
-
-def _checked(text: str, cast: type, ok: Any, need: str) -> Any:
-    """``cast(text)`` if it parses and satisfies ``ok``, else an argparse error saying ``need``."""
-    try:
-        value = cast(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be {need}, got {text!r}") from None
-    if not ok(value):
-        raise argparse.ArgumentTypeError(f"must be {need}, got {text}")
-    return value
-
-
-def seed(text: str) -> int:
-    """Argument type of random seeds: a non-negative integer (numpy's generators need one)."""
-    return _checked(text, int, lambda v: v >= 0, "a non-negative integer")
-
-
-def positive(text: str) -> float:
-    """Argument type of a strictly positive finite number (strains, durations)."""
-    return _checked(text, float, lambda v: 0.0 < v < float("inf"), "a positive number")

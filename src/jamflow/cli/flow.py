@@ -12,7 +12,7 @@ from ..io import read_packing, write_dataset, write_packing
 from ..protocols.overdamped.driving import Drive, SelfPropulsion
 from ..protocols.overdamped.integrate import FlowOptions
 from ..protocols.overdamped.run import Stop, dilute_start, run_flow
-from ..protocols.overdamped.starts import decompressed
+from ..protocols.overdamped.starts import decompressed, jammed_start
 from ..state.packing import LENGTH_UNITS, near_pairs
 from ..tolerances import OVERLAP_TOL
 from .common import (
@@ -20,16 +20,24 @@ from .common import (
     add_preset,
     add_quiet,
     packing_rows,
-    positive,
     print_summary,
-    seed,
     stage_parameters,
 )
 from .packings import add_overlap_option, overlap_tol
+from .types import (
+    count,
+    non_negative_int,
+    packing_fraction,
+    path_with_suffix,
+    positive,
+    seed,
+)
 
 #: path arguments of the flow runs (the checkpoint is written, and must not be an input)
 FLOW_READS = ("input", "composite")
 FLOW_WRITES = ("out", "final", "snapshot_file", "checkpoint")
+#: the dataset kinds of the non-packing outputs of the flow runs
+FLOW_MAKES = {"out": ("flow",), "snapshot_file": ("snapshots",), "checkpoint": ("checkpoint",)}
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -38,23 +46,26 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "Physical starts are dense or jammed packings (e.g. from jamflow compress, or with a contact "
                     "network): a start without contacts below 0.9 phi_J (reference phi_J 0.84 in 2D, 0.64 in 3D) "
                     "shears a dilute gas and a warning is printed.",
-                    reads=FLOW_READS, writes=FLOW_WRITES, packings=("final",))
+                    reads=FLOW_READS, writes=FLOW_WRITES, packings=("final",),
+                    makes=FLOW_MAKES)
     _io_options(p)
     p.add_argument("--strain", type=positive, required=True,
                    help="total shear strain gamma (> 0)")
-    p.add_argument("--pressure", type=float, default=None,
+    p.add_argument("--pressure", type=positive, default=None,
                    help="shear at this fixed pressure (units gamma_dot xi0^-1 lambda^(2-d)); default fixed volume")
-    p.add_argument("--rate", type=float, default=1.0, help="shear rate gamma_dot (default 1)")
+    p.add_argument("--rate", type=positive, default=1.0, help="shear rate gamma_dot (default 1)")
     _common_options(p)
 
     p = add_command(sub, "compress", _compress, "event-driven overdamped compression (to a packing fraction or jamming)",
                     "Isotropic compression V_aff = -rate R until the target packing fraction or a jammed packing.",
-                    reads=FLOW_READS, writes=FLOW_WRITES, packings=("final",))
+                    reads=FLOW_READS, writes=FLOW_WRITES, packings=("final",),
+                    makes=FLOW_MAKES)
     _io_options(p)
-    p.add_argument("--phi", type=float, default=None, help="stop at this packing fraction (default: run to jamming)")
+    p.add_argument("--phi", type=packing_fraction, default=None,
+                   help="stop at this packing fraction (default: run to jamming)")
     p.add_argument("--strain", type=positive, default=10.0, help="give up after this compressive strain rate*t (default 10)")
     p.add_argument("--shear", action="store_true", help="shear while compressing (Sec. IV D: jamming under both)")
-    p.add_argument("--rate", type=float, default=1.0, help="compression rate (default 1)")
+    p.add_argument("--rate", type=positive, default=1.0, help="compression rate (default 1)")
     _common_options(p)
 
     p = add_command(sub, "decompress", _decompress, "dense flow start: a jammed packing decompressed to a packing fraction",
@@ -65,32 +76,37 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "transient of a flow run from it.",
                     reads=("input",), writes=("out",), packings=("out",))
     p.add_argument("input", help="input packing netCDF (jammed: LS + CALiPPSO, or soft-jam with --soft)")
-    p.add_argument("out", help="output packing netCDF")
-    p.add_argument("--phi", type=positive, required=True, help="target packing fraction, below the input's")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output packing netCDF")
+    p.add_argument("--phi", type=packing_fraction, required=True, help="target packing fraction, below the input's")
     add_overlap_option(p)
     add_quiet(p)
 
     p = add_command(sub, "drive", _drive, "event-driven overdamped dynamics under external or self-propelling forces",
-                    reads=(*FLOW_READS, "forces"), writes=FLOW_WRITES, packings=("final",))
+                    reads=(*FLOW_READS, "forces"), writes=FLOW_WRITES, packings=("final",),
+                    makes=FLOW_MAKES)
     _io_options(p)
     p.add_argument("--time", type=positive, required=True, help="duration in units of tau = lambda/(f_ext xi0)")
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--forces", default=None, help="external forces: .npy file of shape (N, d) [input force units]")
-    g.add_argument("--random-forces", type=float, default=None, metavar="F_EXT",
+    g.add_argument("--random-forces", type=positive, default=None, metavar="F_EXT",
                    help="constant random forces, components uniform, rms magnitude F_EXT (seeded)")
-    g.add_argument("--self-propelled", type=float, default=None, metavar="F_EXT",
+    g.add_argument("--self-propelled", type=positive, default=None, metavar="F_EXT",
                    help="self-propelled discs (Sec. V B): rms force F_EXT, redrawn after random persistence times")
-    p.add_argument("--tau-max", type=float, default=10.0, help="persistence times uniform in [0, TAU_MAX tau] (default 10)")
+    p.add_argument("--tau-max", type=positive, default=10.0,
+                   help="persistence times uniform in [0, TAU_MAX tau] (default 10)")
     _common_options(p)
 
 
 def _io_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("input", help="input packing netCDF (non-overlapping)")
-    p.add_argument("out", help="output time-series netCDF (flow schema)")
-    p.add_argument("--final", default=None, help="write the last (or jammed) packing with contacts and forces here")
-    p.add_argument("--snapshots", type=int, default=0, metavar="N", help="number of evenly spaced packing snapshots")
-    p.add_argument("--snapshot-file", default=None, help="snapshot netCDF (default OUT with suffix .snapshots.nc)")
-    p.add_argument("--checkpoint", default=None,
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output time-series netCDF (flow schema)")
+    p.add_argument("--final", type=path_with_suffix(".nc"), default=None,
+                   help="write the last (or jammed) packing with contacts and forces here")
+    p.add_argument("--snapshots", type=non_negative_int, default=0, metavar="N",
+                   help="number of evenly spaced packing snapshots")
+    p.add_argument("--snapshot-file", type=path_with_suffix(".nc"), default=None,
+                   help="snapshot netCDF (default OUT with suffix .snapshots.nc)")
+    p.add_argument("--checkpoint", type=path_with_suffix(".nc"), default=None,
                    help="checkpoint netCDF: written periodically, resumed from if present (only by the same input "
                         "and trajectory parameters), removed after a complete run")
     p.add_argument("--seed", type=seed, default=0, help="seed of random choices (self-propulsion, random forces)")
@@ -101,27 +117,28 @@ def _io_options(p: argparse.ArgumentParser) -> None:
 
 def _common_options(p: argparse.ArgumentParser) -> None:
     d = FlowOptions()
-    p.add_argument("--xi0", type=float, default=1.0, help="mobility xi0 (default 1)")
-    p.add_argument("--dt", type=float, default=d.dt_max, dest="dt_max",
+    p.add_argument("--xi0", type=positive, default=1.0, help="mobility xi0 (default 1)")
+    p.add_argument("--dt", type=positive, default=d.dt_max, dest="dt_max",
                    help=f"largest integration step in units of 1/rate or tau (default {d.dt_max}; paper 1e-5)")
-    p.add_argument("--steps-per-event", type=float, default=d.steps_per_event,
+    p.add_argument("--steps-per-event", type=positive, default=d.steps_per_event,
                    help=f"target steps between events (default {d.steps_per_event:g})")
-    p.add_argument("--step-drift", type=float, default=d.step_drift,
+    p.add_argument("--step-drift", type=positive, default=d.step_drift,
                    help=f"largest relative constraint error created per step (default {d.step_drift:g})")
-    p.add_argument("--order", type=int, choices=(1, 2), default=d.order,
+    p.add_argument("--order", type=count, choices=(1, 2), default=d.order,
                    help=f"1: Euler step (the paper's), 2: explicit midpoint step (default {d.order})")
-    p.add_argument("--correct-every", type=int, default=d.correct_every, metavar="M",
+    p.add_argument("--correct-every", type=non_negative_int, default=d.correct_every, metavar="M",
                    help=f"drift correction every M steps, 0 = only on --drift-tol (default {d.correct_every})")
-    p.add_argument("--drift-tol", type=float, default=d.drift_tol,
+    p.add_argument("--drift-tol", type=positive, default=d.drift_tol,
                    help=f"constraint error forcing a correction (default {d.drift_tol:g})")
-    p.add_argument("--sync-every", type=int, default=d.sync_every,
+    p.add_argument("--sync-every", type=count, default=d.sync_every,
                    help=f"steps between list rebuilds / checkpoints (default {d.sync_every})")
-    p.add_argument("--record-every", type=int, default=1, help="record the time series every K steps (default 1)")
+    p.add_argument("--record-every", type=count, default=1, help="record the time series every K steps (default 1)")
     p.add_argument("--unit", choices=LENGTH_UNITS, default="small_diameter",
                    help="length unit lambda (default small_diameter, as in the paper's shear runs)")
     p.add_argument("--composite", default=None,
                    help="permanent contacts (composite rigid particles, Sec. V C): text file of 'i j' rows")
-    p.add_argument("--max-steps", type=int, default=None, help="stop this invocation after this many steps (resume later)")
+    p.add_argument("--max-steps", type=count, default=None,
+                   help="stop this invocation after this many steps (resume later)")
 
 
 def _options(args: argparse.Namespace) -> FlowOptions:
@@ -157,8 +174,8 @@ def _run(args: argparse.Namespace, drive: Drive, stop: Stop, packing) -> int:
     finally:
         if bar is not None:
             bar.close()
-    target = stop.packing_fraction
-    if target is not None and res.jammed and res.final.packing_fraction < target * (1 - 1e-12):
+    short = _jammed_short(res, drive, stop)
+    if short:
         # jammed before the target: the outputs hold a state the target never describes
         out = str(Path(args.out).with_suffix(".reached.nc"))
         write_dataset(res.series, out)
@@ -168,8 +185,7 @@ def _run(args: argparse.Namespace, drive: Drive, stop: Stop, packing) -> int:
             write_packing(res.final, written[-1], params)
         if args.checkpoint and Path(args.checkpoint).exists():
             Path(args.checkpoint).unlink()
-        raise RuntimeError(f"jammed at phi = {res.final.packing_fraction:.8f} before the target phi {target:g}; "
-                           f"reached state written to {', '.join(written)}")
+        raise RuntimeError(f"{short}; reached state written to {', '.join(written)}")
     write_dataset(res.series, args.out)
     if args.final:
         write_packing(res.final, args.final, params)
@@ -190,6 +206,20 @@ def _run(args: argparse.Namespace, drive: Drive, stop: Stop, packing) -> int:
     return 0
 
 
+def _jammed_short(res, drive: Drive, stop: Stop) -> str | None:
+    """Why a run that ended jammed missed its target (a packing fraction, or a fixed-volume strain), or None."""
+    if not res.jammed:
+        return None
+    phi = res.final.packing_fraction
+    if stop.packing_fraction is not None and phi < stop.packing_fraction * (1 - 1e-12):
+        return f"jammed at phi = {phi:.8f} before the target phi {stop.packing_fraction:g}"
+    strain = float(res.series.strain[-1])
+    if drive.mode == "shear" and stop.strain is not None and strain < stop.strain * (1 - 1e-12):
+        return (f"jammed at strain {strain:.6g} before the target strain {stop.strain:g}: hard spheres at fixed "
+                "volume cannot flow past this state (shear at fixed pressure, --pressure P)")
+    return None
+
+
 def _shear(args: argparse.Namespace) -> int:
     packing = read_packing(args.input, overlap_tol(args))
     warning = dilute_start(packing)
@@ -197,6 +227,9 @@ def _shear(args: argparse.Namespace) -> int:
         print(f"jamflow shear: warning: {warning}", file=sys.stderr)
     mode = "shear" if args.pressure is None else "shear_fixed_pressure"
     drive = Drive(mode, rate=args.rate, xi0=args.xi0, pressure=args.pressure, permanent=_permanent(args))
+    jammed = jammed_start(packing, drive)
+    if jammed:
+        raise ValueError(f"{args.input}: {jammed}")
     return _run(args, drive, Stop(strain=args.strain, max_steps=args.max_steps), packing)
 
 

@@ -20,8 +20,15 @@ from .common import (
     add_preset,
     add_quiet,
     print_summary,
-    seed,
     stage_parameters,
+)
+from .types import (
+    count,
+    non_negative,
+    packing_fraction,
+    path_with_suffix,
+    positive,
+    seed,
 )
 
 
@@ -36,31 +43,32 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "file per pressure target, in the order of the targets (OUT1 for P1, OUT2 for "
                     "P2, ...); with --phi-target and no pressure target give one output for the "
                     "state at that packing fraction.",
-        reads=("packing",), writes=("out", "eos"), packings=("out",),
+        reads=("packing",), writes=("out", "eos"), packings=("out",), makes={"eos": ("eos",)},
     )
     p.add_argument("packing", help="input netCDF packing (orthogonal periodic box, no overlaps)")
-    p.add_argument("out", nargs="+",
+    p.add_argument("out", nargs="+", type=path_with_suffix(".nc"),
                    help="output netCDF packings: one per --p-target, in the same order "
                         "(or one for --phi-target alone)")
-    p.add_argument("--growth-rate", type=float, required=True,
+    p.add_argument("--growth-rate", type=positive, required=True,
                    help="slow growth rate kappa of the mean diameter [input length per time unit, "
                         "mass 1, k_B T = 1/beta], e.g. 1e-4")
-    p.add_argument("--p-target", type=float, nargs="+", default=[],
+    p.add_argument("--p-target", type=positive, nargs="+", default=[],
                    help="strictly increasing reduced pressures beta P V / N; a snapshot is written "
                         "when each is first reached")
-    p.add_argument("--phi-target", type=float, default=None, help="stop at this packing fraction")
-    p.add_argument("--max-collisions", type=int, default=None, help="collision budget")
-    p.add_argument("--max-time", type=float, default=None, help="simulated-time budget")
-    p.add_argument("--fast-growth-rate", type=float, default=DEFAULT_FAST_GROWTH_RATE,
+    p.add_argument("--phi-target", type=packing_fraction, default=None, help="stop at this packing fraction")
+    p.add_argument("--max-collisions", type=count, default=None, help="collision budget")
+    p.add_argument("--max-time", type=positive, default=None, help="simulated-time budget")
+    p.add_argument("--fast-growth-rate", type=non_negative, default=DEFAULT_FAST_GROWTH_RATE,
                    help=f"growth rate of the fast first stage (default {DEFAULT_FAST_GROWTH_RATE:g}; "
                         "0 skips the stage, as the paper does in d >= 4)")
-    p.add_argument("--fast-until", type=float, default=DEFAULT_FAST_UNTIL,
+    p.add_argument("--fast-until", type=positive, default=DEFAULT_FAST_UNTIL,
                    help=f"reduced pressure ending the fast stage (default {DEFAULT_FAST_UNTIL:g})")
-    p.add_argument("--beta", type=float, default=DEFAULT_BETA,
+    p.add_argument("--beta", type=positive, default=DEFAULT_BETA,
                    help=f"inverse temperature set at every velocity rescaling (default {DEFAULT_BETA:g})")
     p.add_argument("--seed", type=seed, default=0, help="seed of the initial velocities (default 0)")
-    p.add_argument("--eos", default=None, help="also write the equation of state (p vs phi) as netCDF")
-    p.add_argument("--max-pressure", type=float, default=MAX_PRESSURE,
+    p.add_argument("--eos", type=path_with_suffix(".nc"), default=None,
+                   help="also write the equation of state (p vs phi) as netCDF")
+    p.add_argument("--max-pressure", type=positive, default=MAX_PRESSURE,
                    help=f"stop as jammed at this reduced pressure (default {MAX_PRESSURE:g}, where the cages reach "
                         "the float64 resolution); a target beyond it is impossible"),
     add_quiet(p)

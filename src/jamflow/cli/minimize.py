@@ -20,6 +20,8 @@ from ..shapes.jamming import shape_packing
 from ..state.packing import Packing
 from ..tolerances import MINIMIZE_FORCE_TOL
 from .common import add_command, add_quiet, print_summary, stage_parameters
+from .soft import EXPONENT
+from .types import count, path_with_suffix, positive
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -28,22 +30,18 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "rotations) with FIRE, CG or steepest descent", reads=("input",), writes=("out",), packings=("out",))
     p.add_argument("input", help="input netCDF packing (overlaps allowed; links make it a linked-spheres model, "
                                  "a shape table a shaped-body model)")
-    p.add_argument("out", help="output netCDF packing (contacts = overlapping unlinked pairs with their forces)")
-    p.add_argument("--force-tol", type=float, default=MINIMIZE_FORCE_TOL,
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF packing (contacts = overlapping unlinked pairs with their forces)")
+    p.add_argument("--force-tol", type=positive, default=MINIMIZE_FORCE_TOL,
                    help=f"stop when the largest per-particle (projected) force norm is at most this "
                         f"[epsilon / length] (default {MINIMIZE_FORCE_TOL:g})")
-    p.add_argument("--max-steps", type=int, default=1_000_000, help="step budget (default 1000000)")
+    p.add_argument("--max-steps", type=count, default=1_000_000, help="step budget (default 1000000)")
     p.add_argument("--method", choices=METHODS, default="fire", help="minimiser (default fire)")
-    p.add_argument("--exponent", type=float, default=2.0,
+    p.add_argument("--exponent", type=EXPONENT, default=2.0,
                    help="contact potential exponent w of spheres (2 harmonic, 2.5 Hertz; shapes: linear spring only)")
     add_quiet(p)
 
 
 def _minimize(args: argparse.Namespace) -> int:
-    if not args.force_tol > 0.0:
-        raise ValueError(f"--force-tol must be positive, got {args.force_tol}")
-    if args.max_steps < 1:
-        raise ValueError(f"--max-steps must be at least 1, got {args.max_steps}")
     packing = read_packing(args.input, None)
     model, start = _model(args, packing)
     res = minimize(model, start, args.method, args.force_tol, args.max_steps)

@@ -10,13 +10,15 @@ import numpy as np
 from tqdm import tqdm
 
 from ..analysis.contacts import summarize
-from ..chains.clusters import count_clusters
+from ..analysis.structure import crystal_fraction, hexatic_order
 from ..chains.dimers import dimer_report
 from ..io import read_dataset, read_packing, write_packing
 from ..io.formats import gsd_types, read_dat, size_classes, write_gsd, write_xyz
+from ..network import count_bodies
 from ..network.spheres import contact_network
 from ..protocols.initial import random_packing
 from ..protocols.overdamped.run import snapshot_packings
+from ..resources import check_fits
 from ..state.packing import Packing
 from ..tolerances import OVERLAP_TOL
 from .common import (
@@ -25,22 +27,32 @@ from .common import (
     format_rows,
     packing_rows,
     print_summary,
-    seed,
     stage_parameters,
+)
+from .types import (
+    count,
+    integer,
+    non_negative,
+    packing_fraction,
+    path_with_suffix,
+    positive,
+    probability,
+    seed,
 )
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "init", _init, "random non-overlapping packing at a packing fraction", writes=("out",), packings=("out",))
-    p.add_argument("out", help="output netCDF")
-    p.add_argument("--d", type=int, required=True, help="dimension (>= 2)")
-    p.add_argument("--n", type=int, required=True, help="number of particles")
-    p.add_argument("--phi", type=float, required=True, help="packing fraction")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF")
+    p.add_argument("--d", type=integer(2), required=True, help="dimension (>= 2)")
+    p.add_argument("--n", type=count, required=True, help="number of particles")
+    p.add_argument("--phi", type=packing_fraction, required=True, help="packing fraction")
     p.add_argument("--dispersity", choices=["mono", "bi", "poly", "lognormal"], default="mono")
-    p.add_argument("--ratio", type=float, default=1.4, help="bidisperse size ratio (default 1.4)")
-    p.add_argument("--fraction", type=float, default=0.5, help="bidisperse number fraction of small spheres (default 0.5)")
-    p.add_argument("--width", type=float, default=0.1, help="polydisperse relative width (default 0.1)")
-    p.add_argument("--species-spread", type=float, default=0.0,
+    p.add_argument("--ratio", type=positive, default=1.4, help="bidisperse size ratio (default 1.4)")
+    p.add_argument("--fraction", type=probability, default=0.5,
+                   help="bidisperse number fraction of small spheres (default 0.5)")
+    p.add_argument("--width", type=non_negative, default=0.1, help="polydisperse relative width (default 0.1)")
+    p.add_argument("--species-spread", type=non_negative, default=0.0,
                    help="bidisperse: relative standard deviation within each species (default 0)")
     p.add_argument("--seed", type=seed, required=True, help="random seed")
     p.add_argument("--walls", action="store_true",
@@ -50,7 +62,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "import-dat", _import_dat, "read a CALiPPSO .dat configuration",
                     reads=("dat",), writes=("out",), packings=("out",))
     p.add_argument("dat", help="input .dat file (d, N, diameter, positions)")
-    p.add_argument("out", help="output netCDF")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF")
     add_overlap_option(p)
     add_quiet(p)
 
@@ -67,9 +79,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "links needs .gsd), orientations as quaternions, one particle type per shape with its "
                     "type_shapes entry, the other columns as log/particles/<name>; GSD stores positions in "
                     "single precision.",
-                    reads=("packing",), writes=("out",))
+                    reads=("packing",), writes=("out",), makes={"out": ()})
     p.add_argument("packing", help="input netCDF packing or flow snapshot file")
-    p.add_argument("out", help="output .xyz (extended XYZ) or .gsd (HOOMD GSD with links as bonds)")
+    p.add_argument("out", type=path_with_suffix(".xyz", ".gsd"),
+                   help="output .xyz (extended XYZ) or .gsd (HOOMD GSD with links as bonds)")
     p.add_argument("--pos-2d", action="store_true",
                    help="2D: write x and y only (pos:R:2), which OVITO reads as a 2D system; ASE cannot read it")
     add_overlap_option(p)
@@ -78,7 +91,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "check", _check, "contacts, rattlers, isostaticity, overlaps, force balance",
                     reads=("packing",))
     p.add_argument("packing", help="input netCDF packing")
-    p.add_argument("--gap-tol", type=float, default=None,
+    p.add_argument("--gap-tol", type=non_negative, default=None,
                    help="relative gap counted as contact; default: the packing's own contacts, "
                         "else jamflow.tolerances.CONTACT_GAP_TOL")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -93,7 +106,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def add_overlap_option(p: argparse.ArgumentParser, default: float | None = OVERLAP_TOL) -> None:
     """``--overlap-tol`` / ``--soft`` for commands that read a packing."""
-    p.add_argument("--overlap-tol", type=float, default=default,
+    p.add_argument("--overlap-tol", type=non_negative, default=default,
                    help=f"largest accepted relative overlap when reading (default {default})")
     p.add_argument("--soft", action="store_true", help="accept overlaps (soft packings)")
 
@@ -104,6 +117,7 @@ def overlap_tol(args: argparse.Namespace) -> float | None:
 
 
 def _init(args: argparse.Namespace) -> int:
+    check_fits("init", args.n, args.d, "spheres")
     # delay: no bar for quick runs, nor before a one-line error on bad input
     with tqdm(total=args.n, desc="init (RSA)", unit="sphere", disable=args.quiet, delay=1.0) as bar:
         p = random_packing(args.n, args.d, args.phi, args.dispersity, args.seed,
@@ -164,8 +178,8 @@ def _export_xyz(args: argparse.Namespace) -> int:
 def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
     """What check can say of links and shapes: how well links hold, and the counting of each body model.
 
-    Linked spheres get the cluster count of :func:`jamflow.chains.clusters.count_clusters`
-    (stated in ``docs/chains.md``) over the packing's stored contacts (or, with
+    Linked spheres get the cluster count of :func:`jamflow.network.count_bodies`
+    (convention in :mod:`jamflow.network.bodies`) over the packing's stored contacts (or, with
     ``--gap-tol`` or none stored, pairs within the gap tolerance), never linked pairs;
     packings of dimers add rotators and ``<z>`` (:func:`jamflow.chains.dimers.dimer_report`).
     Shape packings of a family with an energy model get the counting of
@@ -184,9 +198,13 @@ def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
         contacts = contact_network(packing, args.gap_tol)
         contacts = contacts[~packing.links.contains(contacts[:, 0], contacts[:, 1])]
         stabilized = bool(packing.attrs.get("shear_stabilized", 0))
-        count = count_clusters(packing.n, packing.d, packing.links, contacts, stabilized)
-        report.update({**count.as_dict(), "isostatic": count.n_contacts == count.isostatic_count,
-                       "contact_source": source, "shear_stabilized": stabilized, **dimer_report(count, packing.d)})
+        count = count_bodies(contacts, packing.n, packing.d, packing.links, packing.position, packing.box,
+                             shear_stabilized=stabilized)
+        if packing.d == 2:
+            psi = hexatic_order(packing)
+            report.update(psi6_local_mean=float(np.abs(psi).mean()), psi6_global=float(np.abs(psi.mean())),
+                          crystal_fraction=crystal_fraction(packing))
+        report.update({**count.as_dict(), "contact_source": source, "shear_stabilized": stabilized, **dimer_report(count, packing.d)})
     if packing.shapes is not None:
         kinds, counts = np.unique(packing.shapes.kind[packing.shape_index], return_counts=True)
         report["shapes"] = {str(k): int(c) for k, c in zip(kinds, counts)}
@@ -205,11 +223,16 @@ def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
                  ("max link-length error", f"{report['max_link_error']:.3e} (relative)")]
     if links_counted:
         rows += [("contacts (backbone)", f"{report['n_contacts']}  [{report['contact_source']}]"),
-                 ("rattlers", f"{report['n_rattlers']} ({report['n_rattling_clusters']} rattling clusters, "
-                              f"{report['n_danglers']} danglers)"),
+                 ("rattlers", f"{report['n_rattlers']} ({report['n_rattling_clusters']} rattling clusters: "
+                              f"{report['n_clusters_removed']} removed whole, {report['n_danglers']} danglers "
+                              f"with {report['free_dofs']} free motions)"),
                  ("isostatic", f"{str(report['isostatic']).lower()}  (N_c = {report['n_contacts']}, "
-                               f"sum f_c - d + 1{' + d(d+1)/2 - 1' if stabilized else ''} = "
+                               f"sum (f_c - m_c) - d + 1{' + d(d+1)/2 - 1' if stabilized else ''} = "
                                f"{report['isostatic_count']}: {report['rigidity_counting']})")]
+        if "psi6_local_mean" in report:
+            rows.append(("hexatic order |psi6|", f"local mean {report['psi6_local_mean']:.4f}, global "
+                                                 f"{report['psi6_global']:.4f}, crystal-like fraction "
+                                                 f"{report['crystal_fraction']:.4f} (sphere centres)"))
         if "n_dimers" in report:
             rows += [("dimers", f"{report['n_dimers']} ({report['n_rotators']} rotators, "
                                 f"{report['n_rattling_dimers']} rattling)"),
@@ -219,7 +242,9 @@ def _check_bodies(args: argparse.Namespace, packing: Packing) -> int:
     if shapes_counted:
         rows += [("contacts (non-rattlers)", f"{report['n_contacts']} (parallel contacts counted {report['parallel']})"),
                  ("rattlers, sliders", f"{report['n_rattlers']}, {report['n_sliders']}"),
-                 ("coordination <z> (Eq. 3)", f"{report['z']:.6f}"),
+                 ("z = 2 N_c / N'", f"{report['z_contacts']:.6f} (contacts per backbone body)"),
+                 ("<z> Eq. 3 = 2 (N_c + 1) / (N - N_r - N_s / f)",
+                  f"{report['z_eq3']:.6f} (isostatic: {2 * report['dofs_per_body']}; f = {report['dofs_per_body']})"),
                  ("isostatic count 3N' - 1 - N_s", f"{report['isostatic_count']} ({report['counting']})")]
     elif "shapes" in report:
         rows.append(("contacts, rattlers", "not counted for linked shapes"))
@@ -256,7 +281,9 @@ def _check(args: argparse.Namespace) -> int:
         ("rattlers", s.n_rattlers), ("non-rattlers", s.n_stable),
         ("isostatic", f"{str(s.isostatic).lower()}  (N_c = {s.n_contacts}, d(N_s-1)+1 = {s.isostatic_count}: "
                       f"{s.counting})"),
-        ("coordination z", f"{s.z:.6f}"),
+        ("z = 2 N_c / N'", f"{s.z:.6f} (contacts per non-rattler)"),
+        *([("<z> Eq. 3 (VanderWerf) = 2 (N_c + 1) / N'", f"{2.0 * (s.n_contacts + 1) / s.n_stable:.6f} (isostatic: 4)")]
+          if s.d == 2 and s.n_stable else []),
         ("max overlap", f"{s.max_overlap:.3e} (relative to the mean diameter: {s.max_overlap_rel:.3e})"),
         ("max force-balance residual", "no forces" if s.force_balance_residual is None
          else f"{s.force_balance_residual:.3e} (relative to mean force)"),

@@ -22,19 +22,23 @@ from ..models.spheres.hessian import (
     lowest_modes,
 )
 from ..models.spheres.potential import PowerLawPotential
+from ..protocols.overdamped.run import dilute_start
 from ..protocols.quasistatic import LERNER_DELTA_R, aqs_shear, lerner_sd_shear
 from ..protocols.soft_jam import jam_to_pressure
+from ..resources import check_memory, series_memory
 from ..state.packing import LENGTH_UNITS, Packing, length_unit
 from ..tolerances import MINIMIZE_FORCE_TOL
 from .common import (
     add_command,
     add_preset,
     add_quiet,
-    positive,
     print_summary,
-    seed,
     stage_parameters,
 )
+from .types import count, non_negative_int, path_with_suffix, positive, real, seed
+
+#: Exponent w of the contact potential (eps / w) (1 - r / sigma)^w: the force is continuous at contact for w > 1.
+EXPONENT = real(1.0, lo_open=True, need="an exponent w > 1 (2 harmonic, 2.5 Hertz)")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -43,62 +47,69 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "(linked packings: fixed-box bisection with constraint projection)",
                     reads=("input",), writes=("out",), packings=("out",))
     p.add_argument("input", help="input netCDF packing (overlaps allowed)")
-    p.add_argument("out", help="output netCDF packing (lengths in units of the mean diameter)")
-    p.add_argument("--pressure", type=float, default=None,
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF packing (lengths in units of the mean diameter)")
+    p.add_argument("--pressure", type=positive, default=None,
                    help="target pressure P0 [epsilon / mean diameter^d], e.g. 1e-7 (required unless "
                         "--jam-protocol energy)")
     p.add_argument("--seed", type=seed, default=None,
                    help="start from uniformly random centres drawn with this seed (O'Hern's "
                         "infinite-temperature quench); default: start from the input centres")
-    p.add_argument("--force-tol", type=float, default=FORCE_TOL_VANDERWERF,
+    p.add_argument("--force-tol", type=positive, default=FORCE_TOL_VANDERWERF,
                    help=f"final max per-particle |F| [epsilon / mean diameter] (default {FORCE_TOL_VANDERWERF:.3g}: F^2 <= 1e-26)")
-    p.add_argument("--pressure-rtol", type=float, default=1e-6, help="final |P - P0| / P0 (default 1e-6)")
-    p.add_argument("--delta-phi", type=float, default=1e-3, help="first bisection step in packing fraction (default 1e-3)")
-    p.add_argument("--exponent", type=float, default=2.0, help="potential exponent w (2 harmonic, 2.5 Hertz)")
+    p.add_argument("--pressure-rtol", type=positive, default=1e-6, help="final |P - P0| / P0 (default 1e-6)")
+    p.add_argument("--delta-phi", type=positive, default=1e-3,
+                   help="first bisection step in packing fraction (default 1e-3)")
+    p.add_argument("--exponent", type=EXPONENT, default=2.0, help="potential exponent w (2 harmonic, 2.5 Hertz)")
     p.add_argument("--box-dof", choices=["isotropic", "full"], default="isotropic",
                    help="final enthalpy minimisation over an isotropic box scale (default) or the whole box "
-                        "(stress tensor -P0 1, the box may tilt)")
-    p.add_argument("--max-steps", type=int, default=20_000_000, help="FIRE step budget of the whole protocol")
+                        "(stress tensor -P0 1, the box may tilt); linked packings: full adds an enthalpy "
+                        "minimisation with the whole box free after the shear-stabilised bisection")
+    p.add_argument("--max-steps", type=count, default=20_000_000, help="FIRE step budget of the whole protocol")
     p.add_argument("--shear-stabilize", action="store_true",
                    help="strain degrees of freedom at fixed volume in every minimisation (chains paper Sec. II D): "
                         "the final stress is isotropic; spheres and linked packings")
     p.add_argument("--jam-protocol", choices=PROTOCOLS, default=DEFAULT_PROTOCOL,
                    help=f"linked packings: bisection to --pressure, or the chains paper's decompression by the "
                         f"energy scaling of phi - phi_J down to --energy-tol (default {DEFAULT_PROTOCOL}; "
-                        f"docs/chains.md has the measurement)")
-    p.add_argument("--energy-tol", type=float, default=None,
+                        f"docs/notes/chains.md has the measurement)")
+    p.add_argument("--energy-tol", type=positive, default=None,
                    help="energy per sphere [epsilon] at which --jam-protocol energy stops, e.g. 1e-12")
+    p.add_argument("--frozen-orientations", action="store_true",
+                   help="shaped bodies: jam with every orientation fixed (VanderWerf et al. Fig. 3a, non-rotating "
+                        "circulo-lines); counted with 2 degrees of freedom per body")
     add_quiet(p)
     add_preset(p)
 
     p = add_command(sub, "aqs", _aqs, "athermal quasistatic shear of a soft packing (stress-strain time series)",
-                    reads=("input",), writes=("out", "final"), packings=("final",))
+                    reads=("input",), writes=("out", "final"), packings=("final",),
+                    makes={"out": ("aqs",)})
     p.add_argument("input", help="input netCDF soft packing")
-    p.add_argument("out", help="output netCDF time series (dim step, coordinate strain)")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF time series (dim step, coordinate strain)")
     p.add_argument("--strain", type=positive, required=True, help="total strain (> 0)")
     p.add_argument("--step", type=positive, required=True, help="strain step delta gamma")
     p.add_argument("--fixed-pressure", action="store_true",
                    help="minimise the enthalpy at the input's pressure (or --pressure) after every step")
-    p.add_argument("--pressure", type=float, default=None, help="fixed pressure P0 (implies --fixed-pressure)")
-    p.add_argument("--force-tol", type=float, default=MINIMIZE_FORCE_TOL,
+    p.add_argument("--pressure", type=positive, default=None, help="fixed pressure P0 (implies --fixed-pressure)")
+    p.add_argument("--force-tol", type=positive, default=MINIMIZE_FORCE_TOL,
                    help=f"FIRE tolerance on max |F| per strain step (default {MINIMIZE_FORCE_TOL:g})")
-    p.add_argument("--exponent", type=float, default=2.0, help="potential exponent w")
-    p.add_argument("--max-steps", type=int, default=10_000_000, help="FIRE steps allowed per strain step")
-    p.add_argument("--final", default=None, help="also write the last state as a packing netCDF")
+    p.add_argument("--exponent", type=EXPONENT, default=2.0, help="potential exponent w")
+    p.add_argument("--max-steps", type=count, default=10_000_000, help="FIRE steps allowed per strain step")
+    p.add_argument("--final", type=path_with_suffix(".nc"), default=None,
+                   help="also write the last state as a packing netCDF")
     add_quiet(p)
     add_preset(p)
 
     p = add_command(sub, "sd-shear", _sd_shear,
                     "Lerner et al. steepest-descent shear with tentative-network hard-sphere stress (flow schema)",
-                    reads=("input",), writes=("out",))
+                    reads=("input",), writes=("out",), makes={"out": ("flow",)})
     p.add_argument("input", help="input netCDF packing")
-    p.add_argument("out", help="output netCDF flow time series")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF flow time series")
     p.add_argument("--strain", type=positive, required=True, help="total strain (> 0)")
-    p.add_argument("--step", type=float, default=1e-6, help="strain step (paper: 1e-6)")
-    p.add_argument("--dt", type=float, default=0.1, help="steepest-descent step (paper: 0.1)")
-    p.add_argument("--grad-tol", type=float, default=1e-9, help="max |grad U| stop (paper: 1e-9)")
-    p.add_argument("--delta-r", type=float, default=LERNER_DELTA_R, help="tentative network distance (paper: 1e-5)")
-    p.add_argument("--max-steps", type=int, default=10_000_000, help="descent steps allowed per strain step")
+    p.add_argument("--step", type=positive, default=1e-6, help="strain step (paper: 1e-6)")
+    p.add_argument("--dt", type=positive, default=0.1, help="steepest-descent step (paper: 0.1)")
+    p.add_argument("--grad-tol", type=positive, default=1e-9, help="max |grad U| stop (paper: 1e-9)")
+    p.add_argument("--delta-r", type=positive, default=LERNER_DELTA_R, help="tentative network distance (paper: 1e-5)")
+    p.add_argument("--max-steps", type=count, default=10_000_000, help="descent steps allowed per strain step")
     p.add_argument("--unit", choices=LENGTH_UNITS, default="small_diameter",
                    help="length unit lambda the input is rescaled to (default small_diameter, as jamflow shear)")
     add_quiet(p)
@@ -106,11 +117,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "moduli", _moduli,
                     "bulk and shear moduli (affine and relaxed) and lowest Hessian eigenvalues of a soft packing; "
                     "linked packings: compliance matrix, Voigt/Reuss/Hill moduli and constrained-Hessian modes",
-                    reads=("input",), writes=("out",))
+                    reads=("input",), writes=("out",), makes={"out": ("moduli", "chain-moduli")})
     p.add_argument("input", help="input netCDF soft packing at force balance")
-    p.add_argument("out", help="output netCDF dataset")
-    p.add_argument("--modes", type=int, default=10, help="number of lowest non-translational eigenvalues")
-    p.add_argument("--exponent", type=float, default=2.0, help="potential exponent w")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF dataset")
+    p.add_argument("--modes", type=non_negative_int, default=10,
+                   help="number of lowest non-translational eigenvalues (0: moduli only)")
+    p.add_argument("--exponent", type=EXPONENT, default=2.0, help="potential exponent w")
     add_quiet(p)
 
 
@@ -133,9 +145,6 @@ def _soft_jam_linked(args: argparse.Namespace, packing: Packing) -> int:
     if args.seed is not None:
         raise ValueError("--seed draws random sphere centres, which would tear the links: start linked packings "
                          "from jamflow init-chains with its own --seed")
-    if args.box_dof != "isotropic":
-        raise ValueError("--box-dof full is for spheres without --shear-stabilize; linked packings are jammed in a "
-                         "fixed-shape box or with --shear-stabilize")
     bar = tqdm(desc="soft-jam", unit=" bisection", disable=args.quiet)
 
     def progress(info: dict) -> None:
@@ -147,7 +156,8 @@ def _soft_jam_linked(args: argparse.Namespace, packing: Packing) -> int:
         raise ValueError("--jam-protocol energy needs --energy-tol (energy per sphere at which it stops)")
     if energy and args.pressure is not None:
         raise ValueError("--pressure is the bisection's target; --jam-protocol energy stops at --energy-tol instead")
-    settings = JammingSettings(args.force_tol, args.pressure_rtol, args.delta_phi, max_steps=args.max_steps)
+    settings = JammingSettings(args.force_tol, args.pressure_rtol, args.delta_phi, max_steps=args.max_steps,
+                               box_dof=args.box_dof)
     result = jam_linked(packing, args.pressure, PowerLawPotential(exponent=args.exponent), settings, progress,
                         args.shear_stabilize, args.jam_protocol, args.energy_tol)
     bar.close()
@@ -164,11 +174,14 @@ def _soft_jam_linked(args: argparse.Namespace, packing: Packing) -> int:
         ("pressure", f"{out.pressure:.6g} ("
                      + (f"energy per sphere {a['energy'] / out.n:.3g} <= {args.energy_tol:g}" if energy
                         else f"target {args.pressure:g}") + ") epsilon / mean diameter^d"),
-        ("shear-stabilised", f"{'yes' if args.shear_stabilize else 'no'} (max |sigma_ab - P delta_ab| / P = {stress:.3g})"),
+        ("shear-stabilised", ("at fixed pressure, the whole box free (enthalpy)" if args.box_dof == "full" else
+                              "at fixed volume" if args.shear_stabilize else "no")
+         + f" (max |sigma_ab - P delta_ab| / P = {stress:.3g})"),
         ("links", f"{len(out.links)} (max relative length error {a['max_link_error']:.3g})"),
         ("contacts N_c (backbone)", f"{a['n_contacts']} (cluster isostatic count {a['isostatic_count']}, "
                                     f"excess {a['n_contacts'] - a['isostatic_count']})"),
-        ("rattlers", f"{a['n_rattlers']} ({a['n_rattling_clusters']} rattling clusters, {a['n_danglers']} danglers)"),
+        ("rattlers", f"{a['n_rattlers']} ({a['n_rattling_clusters']} rattling clusters: {a['n_clusters_removed']} "
+                     f"removed whole, {a['n_danglers']} danglers with {a['free_dofs']} free motions)"),
         ("max |P F|", f"{a['max_force_sq'] ** 0.5:.3g} epsilon / mean diameter"),
         ("FIRE steps", result.steps),
     ])
@@ -184,6 +197,8 @@ def _soft_jam(args: argparse.Namespace) -> int:
         raise ValueError("--pressure is required (the target pressure P0)")
     if packing.shapes is not None:
         return _soft_jam_shapes(args, packing)
+    if args.frozen_orientations:
+        raise ValueError("--frozen-orientations is for shaped bodies (spheres have no orientation)")
     if linked:
         return _soft_jam_linked(args, packing)
     if args.seed is not None:
@@ -237,15 +252,19 @@ def _soft_jam_shapes(args: argparse.Namespace, packing: Packing) -> int:
 
     settings = JammingSettings(force_tol=args.force_tol, pressure_rtol=args.pressure_rtol,
                                delta_phi=args.delta_phi, max_steps=args.max_steps)
-    result = jam_shapes(packing, args.pressure, settings, progress)
+    result = jam_shapes(packing, args.pressure, settings, progress, rotations=not args.frozen_orientations)
     bar.close()
     if not result.converged:
         raise RuntimeError(f"FIRE did not reach force_tol {args.force_tol:g} within {args.max_steps} steps")
     out = result.packing
     write_packing(out, args.out, stage_parameters(args, "input", "out"))
+    side = out.attrs["paper_length_unit"]
     print_summary(args, args.out, [
         ("phi_J", f"{out.packing_fraction:.10f}"),
-        ("pressure", f"{out.pressure:.6g} (target {args.pressure:g}) k"),
+        ("pressure", f"{out.pressure:.6g} k (target {args.pressure:g}); in the paper's units (box side L = 1) "
+                     f"also {out.pressure:.6g} k: P / k does not depend on the length unit in 2D"),
+        ("box side L (the paper's length unit)", f"{side:.8g} mean area-equivalent diameters"),
+        ("orientations", "frozen (Fig. 3a)" if args.frozen_orientations else "free"),
         ("interacting pairs", len(out.contacts)),
         ("max |F|", f"{out.attrs['max_force_sq'] ** 0.5:.3g} k length"),
         ("max |torque|", f"{out.attrs['max_torque_sq'] ** 0.5:.3g} k length^2"),
@@ -254,14 +273,22 @@ def _soft_jam_shapes(args: argparse.Namespace, packing: Packing) -> int:
     return 0
 
 
+def _strain_steps(args: argparse.Namespace) -> int:
+    """Strain steps of ``--strain`` in ``--step``; refused when their time series would not fit in memory."""
+    n = int(np.ceil(args.strain / args.step - 1e-9))
+    check_memory(f"{args.command} of {n:.4g} strain steps", series_memory(n + 1),
+                 "(give a larger --step or a smaller --strain)")
+    return n
+
+
 def _aqs(args: argparse.Namespace) -> int:
+    n = _strain_steps(args)
     packing = read_packing(args.input, None)
     pressure = args.pressure
     if args.fixed_pressure and pressure is None:
         if packing.pressure is None or not packing.pressure > 0:
             raise ValueError("--fixed-pressure needs a positive pressure attribute in the input or --pressure")
         pressure = packing.pressure
-    n = int(np.ceil(args.strain / args.step - 1e-9))
     bar = tqdm(total=n, desc="aqs", disable=args.quiet)
     ds, final = aqs_shear(
         packing, args.strain, args.step, PowerLawPotential(exponent=args.exponent), args.force_tol,
@@ -276,9 +303,12 @@ def _aqs(args: argparse.Namespace) -> int:
 
 
 def _sd_shear(args: argparse.Namespace) -> int:
+    n = _strain_steps(args)
     packing = read_packing(args.input, None)
+    warning = dilute_start(packing)
+    if warning:
+        print(f"jamflow sd-shear: warning: {warning}", file=sys.stderr)
     packing = packing.in_units(length_unit(packing.diameter, args.unit))
-    n = int(np.ceil(args.strain / args.step - 1e-9))
     bar = tqdm(total=n + 1, desc="sd-shear", disable=args.quiet)
     ds = lerner_sd_shear(packing, args.strain, args.step, args.dt, args.grad_tol, args.delta_r,
                          max_steps=args.max_steps, progress=lambda _: bar.update(1))
@@ -356,7 +386,11 @@ def _moduli(args: argparse.Namespace) -> int:
     m = elastic_moduli(packing.position, packing.box, packing.diameter, potential)
     pairs, rattler = backbone_pairs(packing.position, packing.box, packing.diameter, potential)
     H = hessian(packing.position, packing.box, packing.diameter, potential, pairs)
-    eigenvalues, _ = lowest_modes(H, packing.d, args.modes, keep=~rattler)
+    available = max(0, packing.d * int((~rattler).sum()) - packing.d)
+    if args.modes > available:
+        print(f"jamflow moduli: note: --modes {args.modes}: the {int((~rattler).sum())} non-rattlers have "
+              f"{available} non-translational modes; computing those", file=sys.stderr)
+    eigenvalues, _ = lowest_modes(H, packing.d, min(args.modes, available), keep=~rattler)
     unit = "epsilon / length^d"
     scalars = {name: ((), value, {"units": "1", "long_name": name.replace("_", " ") + " modulus", "comment": unit})
                for name, value in (("bulk", m.bulk), ("shear", m.shear),

@@ -8,7 +8,8 @@ from tqdm import tqdm
 
 from ..io import write_dataset
 from ..tradeoff import STAGES, recommend, sweep
-from .common import add_command, add_quiet, print_summary, seed
+from .common import add_command, add_quiet, print_summary
+from .types import path_with_suffix, seed
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -20,10 +21,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "reference per setting (dim 'setting', coordinate 'label'), the Pareto front and the "
                     "recommended fast/default/publication settings (attributes). Stages: "
                     + "; ".join(f"{k}: {v.description}" for k, v in STAGES.items()),
-        writes=("out",),
+        writes=("out",), makes={"out": ("tradeoff",)},
     )
     p.add_argument("stage", choices=sorted(STAGES), help="stage to sweep")
-    p.add_argument("out", help="output netCDF")
+    p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF")
     p.add_argument("--quick", action="store_true", help="smaller inputs and grid (seconds to a minute per stage)")
     p.add_argument("--seed", type=seed, default=0, help="seed of the fixed inputs (default 0)")
     add_quiet(p)

@@ -5,10 +5,11 @@ This is the only library module that touches files.
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import tempfile
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -33,6 +34,7 @@ __all__ = [
     "read_packing",
     "new_dataset_attrs",
     "write_table",
+    "atomic_file",
 ]
 
 
@@ -68,10 +70,16 @@ DATASET_KINDS: dict[str, tuple[frozenset[str], str]] = {
     "chains-moduli-table": (frozenset({"bulk_weighted", "shear_weighted", "n_packings"}),
                             "moduli of cemented packings against n_l / N (jamflow chains-moduli)"),
     "contact-angles": (frozenset({"P_psi", "psi"}), "a contact-angle distribution P(psi) (jamflow contact-angles)"),
-    "shape-survey": (frozenset({"phi_J_mean", "z_mean", "group_asphericity"}),
+    "shape-survey": (frozenset({"phi_J_mean", "z_eq3_mean", "group_asphericity"}),
                      "phi_J and <z> against asphericity (jamflow shape-survey)"),
+    "constraint-curvature": (frozenset({"kappa1_mean", "kappa2_mean", "contact_type"}),
+                             "constraint curvatures per contact type (jamflow constraint-curvature)"),
+    "feasible-region": (frozenset({"volume", "surface", "shrink"}),
+                        "the feasible region of a caged circulo-line (jamflow feasible-region)"),
     "modes": (frozenset({"eigenvalue", "region", "rotational_weight"}),
               "a dynamical-matrix spectrum of a shape packing (jamflow modes)"),
+    "linked-modes": (frozenset({"eigenvalue", "mode_label", "mode_displacement"}),
+                     "normal modes of a linked packing (jamflow modes on links)"),
     "tradeoff": (frozenset({"time", "on_front", "is_reference"}), "a speed/accuracy sweep (jamflow tradeoff)"),
     "checkpoint": (frozenset({"x", "h", "radius", "nl_pairs"}), "a flow checkpoint (--checkpoint)"),
     "snapshots": (frozenset({"snapshot_position", "snapshot_box"}), "flow snapshots (--snapshots)"),
@@ -105,41 +113,104 @@ def file_kind(path: str | os.PathLike) -> str | None:
 
 def check_output_paths(inputs: Sequence[str | os.PathLike], outputs: Sequence[str | os.PathLike],
                        allow_input: bool = False,
-                       packing_outputs: Sequence[str | os.PathLike] = ()) -> None:
-    """Check output paths before any work is done.
+                       packing_outputs: Sequence[str | os.PathLike] = (),
+                       kinds: Mapping[str, Sequence[str]] | None = None) -> list[str]:
+    """Check output paths before any work is done; the one place of the overwrite policy.
 
     Refuses outputs that repeat each other, an output that is an input (unless
-    ``allow_input``), and an output not among ``packing_outputs`` where a packing is
-    (the writers refuse that too, but only after the work).
+    ``allow_input``), and an existing file that an output would replace by another kind
+    of file: a packing by anything but a packing; a jamflow dataset by another kind of
+    dataset; a netCDF file that is no jamflow dataset (someone else's file, or a broken
+    one); a jamflow dataset by a text or image file. An existing output of the kind the
+    command writes is replaced (the writers then refuse another kind once more).
+
+    Parameters
+    ----------
+    inputs, outputs : sequence of path-like
+    allow_input : bool
+        ``--in-place``: an output may be an input (of the same kind).
+    packing_outputs : sequence of path-like
+        The outputs that are packings.
+    kinds : mapping of str to sequence of str, optional
+        Output path -> the :data:`DATASET_KINDS` it may hold (an empty sequence: a file
+        that is not netCDF, e.g. ``.xyz``, ``.png``, ``.csv``). Outputs missing here are
+        checked only against clobbering a packing.
+
+    Returns
+    -------
+    list of str
+        One line per existing output that will be replaced (``path (what it holds)``).
 
     Raises
     ------
     ValueError
         One line naming the file.
     """
-    for out in outputs:
-        if out not in packing_outputs:
-            _refuse_clobbering_a_packing(Path(out), "this output is not a packing")
+    kinds = {str(k): tuple(v) for k, v in (kinds or {}).items()}
+    for out in packing_outputs:
+        kinds[str(out)] = ("packing",)
     seen: dict[Path, str] = {}
     for out in outputs:
         key = Path(out).resolve()
         if key in seen:
             raise ValueError(f"{out} is given twice as an output")
         seen[key] = str(out)
-    if allow_input:
-        return
-    for inp in inputs:
-        for out in outputs:
-            if Path(inp).resolve() == Path(out).resolve() or (
-                    Path(inp).exists() and Path(out).exists() and os.path.samefile(inp, out)):
-                raise ValueError(f"output {out} is also an input: give another output path "
-                                 "(or --in-place to replace the input)")
+    if not allow_input:
+        for inp in inputs:
+            for out in outputs:
+                if Path(inp).resolve() == Path(out).resolve() or (
+                        Path(inp).exists() and Path(out).exists() and os.path.samefile(inp, out)):
+                    raise ValueError(f"output {out} is also an input: give another output path "
+                                     "(or --in-place to replace the input)")
+    replaced = []
+    for out in outputs:
+        held = _existing_output(Path(out), kinds.get(str(out)))
+        if held is not None:
+            replaced.append(f"{out} ({held})")
+    return replaced
+
+
+def _existing_output(path: Path, kinds: tuple[str, ...] | None) -> str | None:
+    """What an existing output file holds, if it may be replaced; None when there is no file.
+
+    Raises ``ValueError`` when the file is of another kind than ``kinds`` (see
+    :func:`check_output_paths`).
+    """
+    if not path.exists():
+        return None
+    if not path.is_file():
+        raise ValueError(f"output {path} exists and is not a file")
+    held = file_kind(path)
+    what = DATASET_KINDS[held][1] if held else None
+    if kinds is None or held == "packing":
+        if held == "packing" and kinds != ("packing",):
+            _refuse_clobbering_a_packing(path, "this output is not a packing")
+        return what or "a file"
+    if not kinds:
+        if held is not None:
+            raise ValueError(f"refusing to overwrite {path}: it holds {what}, and this writes a {path.suffix} file")
+        return f"a {path.suffix} file"
+    if held in kinds:
+        return what
+    wanted = " or ".join(DATASET_KINDS[k][1] for k in kinds)
+    holds = what or ("no jamflow dataset" if _is_netcdf(path) else "no netCDF data")
+    raise ValueError(f"refusing to overwrite {path}: it holds {holds}, and this writes {wanted} "
+                     "(remove it or give another output path)")
 
 
 def _refuse_clobbering_a_packing(path: Path, writing: str) -> None:
     """Never replace a file that holds a packing by another kind of file."""
     if path.is_file() and file_kind(path) == "packing":
         raise ValueError(f"refusing to overwrite {path}: it holds a packing, and {writing}")
+
+
+def _is_netcdf(path: Path) -> bool:
+    """Whether ``path`` opens as netCDF (of any content)."""
+    try:
+        with xr.open_dataset(path, engine="netcdf4"):
+            return True
+    except (OSError, ValueError):
+        return False
 
 
 def new_dataset_attrs(title: str, parameters: dict[str, Any], **extra: Any) -> dict[str, Any]:
@@ -168,14 +239,20 @@ def write_dataset(ds: xr.Dataset, path: str | os.PathLike) -> Path:
 
     Variables are zlib-compressed. A process killed during the write leaves only a
     hidden ``.*.tmp`` file, never a partial file under ``path``.
-    Raises ``ValueError`` rather than replace a packing by another kind of dataset.
+    Raises ``ValueError`` rather than replace a file of another kind (:func:`check_output_paths`),
+    and ``OSError`` (ENOSPC) naming the file when the disk is full.
     """
     path = Path(path)
     kind = dataset_kind(ds)
     if kind != "packing":
         _refuse_clobbering_a_packing(path, f"this writes {DATASET_KINDS[kind][1] if kind else 'a non-packing dataset'}")
+    if path.is_file() and kind is not None:
+        _existing_output(path, (kind,))
     path.parent.mkdir(parents=True, exist_ok=True)
     ds = ds.copy()
+    for key, value in ds.attrs.items():
+        if isinstance(value, int) and not isinstance(value, bool) and not -(2**63) <= value < 2**64:
+            raise ValueError(f"attribute {key} = {value} does not fit a 64-bit netCDF integer (seeds are < 2**64)")
     ds.attrs = {k: _netcdf_attr(v) for k, v in ds.attrs.items()}
     for var in ds.variables.values():
         var.attrs = {k: _netcdf_attr(v) for k, v in var.attrs.items()}
@@ -281,6 +358,20 @@ def write_table(table: pd.DataFrame, path: str | os.PathLike) -> Path:
     return _atomic_text(path, text)
 
 
+@contextmanager
+def atomic_file(path: str | os.PathLike) -> Iterator[Path]:
+    """A hidden temporary path beside ``path`` to write to, renamed onto ``path`` on success.
+
+    For writers that take a file name (figures): an exception or Ctrl-C leaves the
+    previous file (or none) and no temporary; a full disk is named as such.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with _atomic(path) as (fd, tmp):
+        os.close(fd)
+        yield Path(tmp)
+
+
 def _atomic_text(path: Path, text: str) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     with _atomic(path) as (fd, _):
@@ -298,14 +389,46 @@ def _atomic(path: Path) -> Iterator[tuple[int, str]]:
     Any exception (or a kill) leaves ``path`` untouched; the temporary is removed
     on exceptions.
     """
-    fd, tmp = _temporary(path)
+    try:
+        fd, tmp = _temporary(path)
+    except OSError as exc:
+        raise _write_error(path, exc) from exc
     try:
         yield fd, tmp
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
+        full = isinstance(exc, Exception) and _disk_full(path.parent)
         if os.path.exists(tmp):
             os.unlink(tmp)
+        if full or isinstance(exc, OSError) and exc.errno in _FULL:
+            raise _write_error(path, exc, full=True) from exc
         raise
+
+
+#: errno values of a full disk or an exhausted quota
+_FULL = {errno.ENOSPC, errno.EDQUOT}
+#: A write that fails with less than this many bytes free [bytes] failed because the disk
+#: is full: the netCDF library reports that as "Permission denied" or "HDF error".
+_FULL_DISK_BYTES = 1 << 20
+
+
+def _disk_full(folder: Path) -> bool:
+    """Whether the file system of ``folder`` has (almost) no space left for a user."""
+    try:
+        st = os.statvfs(folder)
+    except OSError:
+        return False
+    return st.f_bavail * st.f_frsize < _FULL_DISK_BYTES
+
+
+def _write_error(path: Path, exc: BaseException, full: bool = False) -> OSError:
+    """The error of a failed write, naming the file and the reason the library hid (a full disk)."""
+    if full or isinstance(exc, OSError) and exc.errno in _FULL or _disk_full(path.parent):
+        return OSError(errno.ENOSPC, f"no space left on the device of {path.parent}: {path} not written "
+                                     "(nothing half-written is left; free space and run again)")
+    if isinstance(exc, PermissionError):
+        return PermissionError(errno.EACCES, f"no permission to write in {path.parent}: {path} not written")
+    return exc if isinstance(exc, OSError) else OSError(f"{path} not written: {exc}")
 
 
 def _temporary(path: Path) -> tuple[int, str]:

@@ -31,11 +31,8 @@ diameter ``<D>``, pressure ``epsilon / <D>^d``, force ``epsilon / <D>``.
 Force-balance floor of float64: VanderWerf et al. ask for squared forces per particle
 below 1e-25; the default ``force_tol = 1e-13`` gives ``F^2 <= 1e-26``. With
 ``<D> = 1`` and box sides ``L ~ N^(1/d)``, pair vectors carry a round-off of
-``~ L 2^-53``, so per-particle forces cannot be balanced much below ``~1e-14``.
-Measured (``benchmarks/soft_jamming.py``, 2D N = 1024 at P0 = 1e-7): FIRE reaches
-``max_i |F_i| <= 1e-14`` (``max F^2 = 9e-29``) and stalls at ``F^2 ~ 2e-28 ... 4e-28``
-(two runs) when asked for 1e-15. The 1e-25 criterion is thus met with about three orders of
-magnitude to spare; pushing below ``F^2 ~ 1e-28`` is not possible in float64.
+``~ L 2^-53``, so per-particle forces cannot be balanced much below ``~1e-14``
+(measured: docs/notes/soft-constants.md#soft_force_tol).
 """
 
 from __future__ import annotations

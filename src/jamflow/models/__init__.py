@@ -56,7 +56,8 @@ def model_for(packing: Packing, potential: PowerLawPotential = HARMONIC, *,
                              f"{potential.exponent:g}")
         model = ShapeModel(packing.box, packing.shapes, packing.shape_index,
                            k=float(packing.attrs.get("spring_constant", 1.0)),
-                           mass=float(packing.attrs.get("mass", 1.0)))
+                           mass=float(packing.attrs.get("mass", 1.0)),
+                           rotations=not int(packing.attrs.get("frozen_orientations", 0)))
         return model, model.dofs(np.column_stack([packing.position, packing.orientation]))
     if kind == "linked":
         cls = ShearStabilizedModel if shear_stabilized else LinkedSpheresModel

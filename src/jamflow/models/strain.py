@@ -163,6 +163,16 @@ class ShearStabilizedModel(LinkedSpheresModel):
         y, _ = self._split(q)
         return y[self.links.j] - y[self.links.i] + self.link_offset
 
+    def volume(self, q: NDArray[np.float64]) -> float:
+        """Box volume ``det F V_0`` at ``q`` [length^d] (an enthalpy wrapper, :mod:`jamflow.models.box`)."""
+        return float(self._strain_state(q)[4]) * self.box.volume
+
+    def volume_gradient(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``dV/dq`` (n_dof,): ``V_0 det F F^-T`` on the strain, zero on the centres."""
+        _, _, _, _, det, F_inv = self._strain_state(q)
+        return np.concatenate([np.zeros(self.n * self.d),
+                               strain_components(self.box.volume * det * F_inv.T, self.strain_scale)])
+
     def volume_error(self, q: NDArray[np.float64]) -> float:
         """``det F - 1`` (0 when the volume is free)."""
         return self._strain_state(q)[4] - 1.0 if self.fixed_volume else 0.0

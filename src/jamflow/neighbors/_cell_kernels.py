@@ -7,8 +7,8 @@ LS lists, :mod:`jamflow.protocols._ls_kernels`), and the pair search. Kept apart
 
 A search can reuse the work arrays of the previous one (:func:`pair_buffers`,
 :func:`cell_pairs_into`): a list rebuilt every hundred steps inside a compiled loop
-otherwise pays for its fresh memory, whose first touch page-faults (about 350 minor
-faults and a quarter of a build at 2D N = 16384 on the reference machine).
+otherwise pays for its fresh memory, whose first touch page-faults
+(measured: docs/notes/energy-models.md#constants-of-the-neighbour-search).
 """
 
 from __future__ import annotations
@@ -165,39 +165,9 @@ def cell_pairs_into(x, L, cutoff, diameter, skin, buffers):
         buffers = pair_buffers(n, d)
     wrapped, ws, Ds, per_particle, per_cell, found, out, image = buffers
     verlet = diameter.shape[0] > 0
-    ncell = np.empty(d, dtype=np.int64)
-    span = np.empty(d, dtype=np.int64)
-    n_stencil = 1
-    n_cells = 1
-    for k in range(d):
-        ncell[k] = max(int(L[k] // cutoff), 1)
-        n_cells *= ncell[k]
-    if n_cells > 2 * n + 8:
-        # sparse systems (small cutoff, high d): wider cells, about two particles per cell,
-        # so the cell tables stay O(N)
-        widen = (n_cells / (2.0 * n + 8.0)) ** (1.0 / d)
-        n_cells = 1
-        for k in range(d):
-            ncell[k] = max(int(ncell[k] / widen), 1)
-            n_cells *= ncell[k]
-    for k in range(d):
-        span[k] = 3 if ncell[k] >= 3 else ncell[k]
-        n_stencil *= span[k]
-    for i in range(n):
-        for k in range(d):
-            v = x[i, k] - L[k] * np.floor(x[i, k] / L[k])
-            # round-off can put x - L floor(x / L) at L
-            wrapped[i, k] = 0.0 if v >= L[k] else v
-    cell = _cell_index_into(wrapped[:n], L, ncell, per_particle[0])
-    if per_cell.shape[1] < n_cells + 1:
-        per_cell = np.empty((2, n_cells + 1), dtype=np.int64)
-    start, members = _sort_by_cell_into(cell, n_cells, per_cell[0], per_cell[1], per_particle[1])
-    # positions and diameters in cell order, so a cell's members are contiguous
-    for q in range(n):
-        for k in range(d):
-            ws[q, k] = wrapped[members[q], k]
-        if verlet:
-            Ds[q] = diameter[members[q]]
+    ncell, span, n_cells, n_stencil = _grid(L, cutoff, n, d)
+    start, members, per_cell = _in_cell_order(x, L, ncell, n_cells, diameter, verlet, wrapped, ws, Ds,
+                                              per_particle, per_cell)
     cut2 = cutoff * cutoff
     # half-stencil sweep in cell order over the contiguous cell-ordered positions
     # (no per-candidate j > i test); pairs are then sorted by (i, j) below
@@ -209,49 +179,22 @@ def cell_pairs_into(x, L, cutoff, diameter, skin, buffers):
     for k in range(d):
         shifted &= span[k] == 3
     centre = np.empty(d)
-    # cells and stencil offsets counted like odometers (last axis fastest); the
-    # neighbour cell and the image shift of its members (-+L across the boundary along
-    # axes with at least 3 cells; fewer cells along an axis round instead) follow
-    # without integer divisions. Each cell pair is visited once: with 3 cells or more
-    # along every axis by the forward half of the stencil (offsets lexicographically
-    # >= 0; the pair (c, c + o) is met from c with o > 0, never from c + o with -o),
-    # else by keeping, of the distinct and symmetric stencil cells, those with a larger
-    # id (pairs within a cell once). The forward half skips the 4 (2D) or 13 (3D)
-    # offsets the id test would compute and drop: about 10 % of a build
     own = np.zeros(d, dtype=np.int64)
     step = np.zeros(d, dtype=np.int64)
-    if shifted:
-        n_fwd = (n_stencil - 1) // 2 + 1
-        fwd = np.empty((n_fwd, d), dtype=np.int64)
-        for t in range(n_fwd):
-            tt = t + (n_stencil - 1) // 2
-            for k in range(d - 1, -1, -1):
-                fwd[t, k] = tt % 3 - 1
-                tt //= 3
-    else:
-        n_fwd = n_stencil
-        fwd = np.empty((0, d), dtype=np.int64)
-    # with 3 cells or more along every axis, the forward stencil of a cell whose last-axis
-    # index is not on the boundary is a few runs of consecutive cells (last axis fastest):
-    # the cell and its successor (prefix 0), and for every forward prefix of the other
-    # axes the 3 cells around it. Their members are contiguous, so each run is one scan:
-    # 2 in 2D and 5 in 3D instead of 5 and 14 cell visits. Every cell's runs (or, on the
-    # boundary, its stencil cells) are collected first and swept by one loop below
-    last = d - 1
-    n_pre = 0
-    pre = np.empty((0, last), dtype=np.int64)
-    if shifted:
-        n_pre = (3**last - 1) // 2
-        pre = np.empty((n_pre, last), dtype=np.int64)
-        for t in range(n_pre):
-            tt = t + n_pre + 1
-            for k in range(last - 1, -1, -1):
-                pre[t, k] = tt % 3 - 1
-                tt //= 3
+    fwd, n_fwd, pre, n_pre = _forward_stencil(shifted, n_stencil, d)
     run_first = np.empty(n_fwd, dtype=np.int64)
     run_end = np.empty(n_fwd, dtype=np.int64)
     run_own = np.empty(n_fwd, dtype=np.bool_)
     run_shift = np.empty((n_fwd, d))
+    last = d - 1
+    # every cell's runs (ranges of cell-ordered particles, each with the image shift of
+    # its members) are collected, then swept by one loop. Cells and stencil offsets are
+    # counted like odometers (last axis fastest): the neighbour cell and its image shift
+    # (-+L across the boundary along axes with at least 3 cells; fewer cells along an
+    # axis round instead) follow without integer divisions. Without ``shifted`` the
+    # distinct, symmetric stencil cells with a larger id are kept (pairs within a cell
+    # once). The loop stays in one piece: helpers called per cell measured 1.2-1.9x
+    # slower even inlined.
     for ci in range(n_cells):
         n_runs = 0
         if shifted and 1 <= own[last] <= ncell[last] - 2:
@@ -304,8 +247,8 @@ def cell_pairs_into(x, L, cutoff, diameter, skin, buffers):
                 for k in range(d):
                     centre[k] = ws[p, k] - run_shift[t, k]
                 first = p + 1 if run_own[t] else run_first[t]
-                # d = 2 and 3 with the dimension a constant: the runtime loop over k
-                # measured 1.5x slower
+                # d = 2 and 3 with the dimension a constant: the runtime loop over k is slower
+                # (measured: docs/notes/energy-models.md#constants-of-the-neighbour-search)
                 if shifted and d == 2:
                     c0, c1 = centre[0], centre[1]
                     for q in range(first, end):
@@ -331,7 +274,108 @@ def cell_pairs_into(x, L, cutoff, diameter, skin, buffers):
                         if _keep(r2, p, q, Ds, skin, cut2, verlet):
                             pa[m], pb[m] = p, q
                             m += 1
-    # lexicographic order: counting sort by i, then each row's few partners by insertion
+    out, image = _sorted_pairs(x, L, members, pa, pb, m, per_particle, out, image, capacity)
+    out_i, out_j = out[0], out[1]
+    return out_i[:m], out_j[:m], image[:m], (wrapped, ws, Ds, per_particle, per_cell, found, out, image)
+
+
+@njit(inline="always")
+def _grid(L, cutoff, n, d):
+    """Cells per axis (at least ``cutoff`` wide, widened to about two particles per cell
+    when sparse), their number, the stencil span per axis (3, or fewer cells) and the
+    number of stencil cells."""
+    ncell = np.empty(d, dtype=np.int64)
+    span = np.empty(d, dtype=np.int64)
+    n_stencil = 1
+    n_cells = 1
+    for k in range(d):
+        ncell[k] = max(int(L[k] // cutoff), 1)
+        n_cells *= ncell[k]
+    if n_cells > 2 * n + 8:
+        # sparse systems (small cutoff, high d): wider cells, about two particles per cell,
+        # so the cell tables stay O(N)
+        widen = (n_cells / (2.0 * n + 8.0)) ** (1.0 / d)
+        n_cells = 1
+        for k in range(d):
+            ncell[k] = max(int(ncell[k] / widen), 1)
+            n_cells *= ncell[k]
+    for k in range(d):
+        span[k] = 3 if ncell[k] >= 3 else ncell[k]
+        n_stencil *= span[k]
+    return ncell, span, n_cells, n_stencil
+
+
+@njit(inline="always")
+def _in_cell_order(x, L, ncell, n_cells, diameter, verlet, wrapped, ws, Ds, per_particle, per_cell):
+    """Positions wrapped into ``[0, L)``, the particles sorted by cell, and the positions
+    (and diameters) copied in cell order so that a cell's members are contiguous.
+
+    Returns the cell starts, the members in cell order and ``per_cell`` (regrown if needed).
+    """
+    n, d = x.shape
+    for i in range(n):
+        for k in range(d):
+            v = x[i, k] - L[k] * np.floor(x[i, k] / L[k])
+            # round-off can put x - L floor(x / L) at L
+            wrapped[i, k] = 0.0 if v >= L[k] else v
+    cell = _cell_index_into(wrapped[:n], L, ncell, per_particle[0])
+    if per_cell.shape[1] < n_cells + 1:
+        per_cell = np.empty((2, n_cells + 1), dtype=np.int64)
+    start, members = _sort_by_cell_into(cell, n_cells, per_cell[0], per_cell[1], per_particle[1])
+    for q in range(n):
+        for k in range(d):
+            ws[q, k] = wrapped[members[q], k]
+        if verlet:
+            Ds[q] = diameter[members[q]]
+    return start, members, per_cell
+
+
+@njit(inline="always")
+def _forward_stencil(shifted, n_stencil, d):
+    """The forward half of the stencil and the prefixes of its runs.
+
+    With 3 cells or more along every axis (``shifted``), each cell pair is visited once
+    by the forward half of the stencil (offsets lexicographically >= 0; the pair
+    ``(c, c + o)`` is met from ``c`` with ``o > 0``, never from ``c + o`` with ``-o``);
+    the forward stencil of a cell off the boundary of the last axis is a few runs of
+    consecutive cells (last axis fastest): the cell and its successor (prefix 0), and
+    for every forward prefix of the other axes the 3 cells around it. Their members are
+    contiguous, so each run is one scan: 2 in 2D and 5 in 3D instead of 5 and 14 cell
+    visits. Otherwise every stencil cell is visited (``n_fwd = n_stencil``).
+
+    Returns ``fwd`` (n_fwd, d) offsets, ``n_fwd``, ``pre`` (n_pre, d - 1) prefixes and ``n_pre``.
+    """
+    if shifted:
+        n_fwd = (n_stencil - 1) // 2 + 1
+        fwd = np.empty((n_fwd, d), dtype=np.int64)
+        for t in range(n_fwd):
+            tt = t + (n_stencil - 1) // 2
+            for k in range(d - 1, -1, -1):
+                fwd[t, k] = tt % 3 - 1
+                tt //= 3
+    else:
+        n_fwd = n_stencil
+        fwd = np.empty((0, d), dtype=np.int64)
+    last = d - 1
+    n_pre = 0
+    pre = np.empty((0, last), dtype=np.int64)
+    if shifted:
+        n_pre = (3**last - 1) // 2
+        pre = np.empty((n_pre, last), dtype=np.int64)
+        for t in range(n_pre):
+            tt = t + n_pre + 1
+            for k in range(last - 1, -1, -1):
+                pre[t, k] = tt % 3 - 1
+                tt //= 3
+    return fwd, n_fwd, pre, n_pre
+
+
+@njit(inline="always")
+def _sorted_pairs(x, L, members, pa, pb, m, per_particle, out, image, capacity):
+    """The ``m`` found pairs as particle indices ``i < j`` in lexicographic order (a
+    counting sort by ``i``, then each row's few partners by insertion) in ``out`` (2, P),
+    and their periodic images in ``image`` (P, d); both regrown to ``capacity`` if needed."""
+    n, d = x.shape
     row, slot = per_particle[2], per_particle[3]
     row[:] = 0
     for e in range(m):
@@ -361,4 +405,4 @@ def cell_pairs_into(x, L, cutoff, diameter, skin, buffers):
         for k in range(d):
             raw = x[out_j[p], k] - x[out_i[p], k]
             image[p, k] = -int(np.floor(raw / L[k] + 0.5))
-    return out_i[:m], out_j[:m], image[:m], (wrapped, ws, Ds, per_particle, per_cell, found, out, image)
+    return out, image

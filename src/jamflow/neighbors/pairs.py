@@ -24,12 +24,9 @@ from ..box import Box
 __all__ = ["KDTREE_MAX_N", "PairList", "pairs_within", "pairs_within_brute_force", "verlet_pairs"]
 
 #: Orthogonal boxes with at most this many particles are searched with scipy's
-#: periodic k-d tree, larger ones with the compiled cell list. The first compiled
-#: call of a process loads numba and its cached kernels, 0.5-0.7 s: a command that
-#: needs a few searches (reading and checking a packing, CALiPPSO's rows and overlap
-#: checks) does not use numba otherwise, and at this size the tree costs at most a
-#: few ms more per search (3D N = 4096 at 1.7 diameters: 10 against 3 ms; 5D
-#: N = 1024: 14 against 18 ms).
+#: periodic k-d tree, larger ones with the compiled cell list: a command that needs a
+#: few searches then never pays for loading numba, and the tree costs at most a few ms
+#: more per search (measured: docs/notes/energy-models.md#constants-of-the-neighbour-search).
 KDTREE_MAX_N: int = 8192
 
 

@@ -1,4 +1,5 @@
-"""Counting on a contact network: rattlers and sliders by pruning, the isostatic count.
+"""Counting on a contact network: rattlers by pruning (by count, or by what contacts hold), sliders by rank,
+the isostatic count.
 
 Isostatic count convention
 --------------------------
@@ -16,6 +17,11 @@ Spheres in a periodic box: ``d (N_s - 1) + 1`` (2D: ``2 N_s - 1``); spheres
 between walls: ``d N_s + 1``; rotating 2D bodies: ``3 N_s - 1`` (van der Werf et
 al., Fig. 3 and Eq. 3). Contacts are counted once per pair. An empty backbone has
 count 0.
+
+Clusters of linked spheres (bodies with a motion space of their own, free motions
+and rattling clusters decided by rank; chains paper Sec. II F) are counted by
+:func:`jamflow.network.bodies.count_bodies`, whose module docstring states that
+convention; for free spheres it is :func:`prune_rattlers` and this count.
 """
 
 from __future__ import annotations
@@ -24,9 +30,10 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
+from ..tolerances import SLIDER_RTOL
 from .contacts import ContactSet
 
-__all__ = ["find_sliders", "isostatic_count", "prune_rattlers", "rigidity_counting"]
+__all__ = ["find_sliders", "isostatic_count", "prune_rattlers", "prune_unheld", "rigidity_counting"]
 
 
 def _pairs(contacts: ContactSet | ArrayLike) -> NDArray[np.int64]:
@@ -99,16 +106,82 @@ def prune_rattlers(
         alive &= ~(rattler[pairs[:, 0]] | rattler[pairs[:, 1]])
 
 
-def find_sliders(jacobian: sp.spmatrix, contacts: ContactSet | ArrayLike, n_bodies: int, d: int, *,
-                 rattler: NDArray[np.bool_] | None = None, rtol: float = 1e-10) -> NDArray[np.bool_]:
-    """Sliders: backbone bodies with exactly one unconstrained translation.
+def prune_unheld(contacts: ContactSet, n_bodies: int, *, rtol: float = SLIDER_RTOL) -> NDArray[np.bool_]:
+    """Rattlers by what their contacts can hold: :func:`prune_rattlers`' rule (fewer than
+    ``d + 1`` contacts, removed repeatedly) except for a body *pinched* between two contacts
+    whose normals are antiparallel.
 
-    A slider (van der Werf et al., Fig. 3: a circulo-line that can translate along
-    its long axis) keeps enough contacts to survive :func:`prune_rattlers`, but its
-    own block of the contact Jacobian (its contacts' rows restricted to its own
-    ``dofs_per_body`` columns, the other bodies held fixed) has a one-dimensional
-    kernel that is a translation: every contact normal is perpendicular to one
-    direction and the contacts exert no torque along it.
+    Two repulsive contacts balance a body only along one line: force balance needs
+    ``n_1 = -n_2``, and then the lines of action coincide (torque balance) in a balanced
+    packing. Such a body carries force and holds its two neighbours apart like a strut; it
+    is free only to slide across the line, one degree of freedom, which
+    :func:`find_sliders` finds (a slider, Eq. 3 of VanderWerf et al.: "a single
+    unconstrained translational degree of freedom"; a rattler has all its degrees of
+    freedom unconstrained). Counted as a rattler it would take its two contacts and all its
+    degrees of freedom: the same net constraint for rotating 2D bodies (3 against 2) but one
+    constraint too few for bodies that do not rotate (2 against 2, while the strut holds
+    one). Measured on non-rotating circulo-lines: every packing with a pinched body came out
+    hypostatic by exactly its number of pinched bodies with the contact-count rule, while its
+    dynamical matrix had no floppy mode (docs/notes/shapes.md).
+
+    Parameters
+    ----------
+    contacts : ContactSet
+        Every contact point of the bodies (normals needed).
+    n_bodies : int
+    rtol : float
+        Antiparallel within ``|n_1 + n_2| <= rtol`` (the rank test of :func:`find_sliders`).
+
+    Returns
+    -------
+    ndarray of bool, shape (n_bodies,)
+        True for rattlers.
+    """
+    pairs, normal = contacts.pairs, contacts.normal
+    d = normal.shape[1] if len(normal) else 2
+    rattler = np.zeros(n_bodies, dtype=bool)
+    while True:
+        alive = ~(rattler[pairs[:, 0]] | rattler[pairs[:, 1]])
+        z = np.bincount(pairs[alive].ravel(), minlength=n_bodies)
+        weak = np.flatnonzero((~rattler) & (z < d + 1))
+        new = []
+        for b in weak:
+            if z[b] == 2:
+                rows = np.flatnonzero(alive & ((pairs[:, 0] == b) | (pairs[:, 1] == b)))
+                # the normal pointing into b from each contact
+                into = np.where((pairs[rows, 1] == b)[:, None], normal[rows], -normal[rows])
+                if np.linalg.norm(into[0] + into[1]) <= rtol:
+                    continue
+            new.append(b)
+        if not new:
+            return rattler
+        rattler[new] = True
+
+
+def find_sliders(jacobian: sp.spmatrix, contacts: ContactSet | ArrayLike, n_bodies: int, d: int, *,
+                 rattler: NDArray[np.bool_] | None = None, rtol: float = SLIDER_RTOL) -> NDArray[np.bool_]:
+    """Sliders: backbone bodies whose contacts leave a translation free, found by rank.
+
+    A body's contacts constrain its own motion (neighbours held fixed) through their
+    rows of the contact Jacobian restricted to its columns: ``-n_c`` (or ``+n_c``) on
+    its centre, the lever arm ``a_c x n_c`` on its orientation. A translation ``t``
+    with ``n_c . t = 0`` for every contact changes no gap at first order: the body
+    slides. So the body is a slider when the matrix of its contacts' normals (the
+    translation block) has rank below ``d``, i.e. its smallest singular value is at
+    most ``rtol`` times the largest. Lever arms do not enter: a kernel vector of the
+    whole block that turns the body (a rotation about the point where the normals
+    meet) is a rotation free at linear order, which the curvature of the contacts
+    holds at quartic order -- a quartic mode of the dynamical matrix (region 1), not
+    a slider and not a rattler.
+
+    Convention (VanderWerf et al. 2018, Eq. 3 and Fig. 3): rattlers, bodies with all
+    degrees of freedom unconstrained (fewer than ``d + 1 = 3`` contacts, except two
+    antiparallel ones, :func:`prune_unheld`), are removed first and take all their degrees
+    of freedom and contacts with them; a slider keeps its contacts and removes one degree
+    of freedom, so the isostatic count of rotating 2D bodies is ``N_c^0 = 3 N' - 1 - N_s``
+    (:func:`isostatic_count`) and ``<z> = 2 (N_c + 1) / (N - N_r - N_s / 3)``;
+    non-rotating bodies (Fig. 3a): ``2 N' - 1 - N_s``. A 2D body with contacts keeps at
+    most one free translation; in ``d >= 3`` a flagged body may keep up to ``d - 1``.
 
     Parameters
     ----------
@@ -116,14 +189,16 @@ def find_sliders(jacobian: sp.spmatrix, contacts: ContactSet | ArrayLike, n_bodi
         :func:`~jamflow.network.jacobian.contact_jacobian` of ``contacts`` with all
         bodies as columns and no strain columns; ``f = n_cols / n_bodies`` is ``d``
         (translations only) or ``d + 1`` (with the rotation columns, which follow
-        all centre columns).
+        all centre columns). Only the centre columns are read. Give every contact
+        point of a body (e.g. both end-middle terms of a parallel circulo contact),
+        not a reduced count: a normal left out can fake a free translation.
     contacts : ContactSet or array_like of int, shape (n_c, 2)
     n_bodies, d : int
     rattler : ndarray of bool, shape (n_bodies,), optional
         Bodies already removed (not tested; their contacts do not count).
     rtol : float
-        Singular values below ``rtol`` times the largest of a block count as zero
-        (the blocks hold unit normals and arms of order one body size).
+        Relative singular-value threshold of the translation block
+        (:data:`jamflow.tolerances.SLIDER_RTOL`).
 
     Returns
     -------
@@ -139,15 +214,11 @@ def find_sliders(jacobian: sp.spmatrix, contacts: ContactSet | ArrayLike, n_bodi
     slider = np.zeros(n_bodies, dtype=bool)
     for b in np.flatnonzero(~rattler):
         rows = np.flatnonzero(live & ((pairs[:, 0] == b) | (pairs[:, 1] == b)))
-        cols = np.arange(d * b, d * b + d)
-        if f == d + 1:
-            cols = np.append(cols, d * n_bodies + b)
         if not len(rows):
             continue
-        _, s, vt = np.linalg.svd(J[rows][:, cols].toarray(), full_matrices=True)
-        rank = int(np.sum(s > rtol * s.max()))
-        # one free direction, and it moves the centre without turning the body
-        slider[b] = rank == f - 1 and abs(vt[-1][d:]).max(initial=0.0) <= rtol
+        s = np.linalg.svd(J[rows][:, d * b: d * b + d].toarray(), compute_uv=False)
+        # fewer contacts than d leave d - len(s) singular values at zero
+        slider[b] = len(s) < d or s[-1] <= rtol * s[0]
     return slider
 
 

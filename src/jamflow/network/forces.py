@@ -31,7 +31,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.sparse.linalg import lsqr, splu
 
-from ..highs import new_highs
+from ..highs import colwise_lp, new_highs
 from ..tolerances import FORCE_BALANCE_TOL
 from . import pair_rows
 
@@ -45,9 +45,8 @@ MIN_NORM: str = "min_norm_balanced"
 _QP_TOL: float = 1e-10
 
 #: Dual Newton: Tikhonov term of the normal matrix (its entries are O(1) per contact)
-#: and the largest number of steps (a piecewise quadratic: steps grow with the number
-#: of contacts left without force; measured 1 step for crystals, 3-4 for 2D
-#: monodisperse N = 64 packings with 6-22 such contacts, 83 for N = 1024 with 256).
+#: and the largest number of steps, which grow with the contacts left without force
+#: (measured: docs/notes/network-constants.md#dual-newton-of-the-minimum-norm-forces-jamflownetworkforces).
 _NEWTON_REG: float = 1e-12
 _NEWTON_MAX_ITER: int = 200
 
@@ -202,17 +201,7 @@ def _dual_newton(B: sp.csr_matrix, wn: NDArray[np.float64], total: float) -> NDA
 def _highs_qp(A: sp.csc_matrix, rhs: NDArray[np.float64]) -> NDArray[np.float64]:
     """``argmin |phi|^2 / 2`` s.t. ``A phi = rhs``, ``phi >= 0`` by HiGHS's QP solver."""
     nc = A.shape[1]
-    lp = highspy.HighsLp()
-    lp.num_col_, lp.num_row_ = nc, A.shape[0]
-    lp.col_cost_ = np.zeros(nc)
-    lp.col_lower_ = np.zeros(nc)
-    lp.col_upper_ = np.full(nc, highspy.kHighsInf)
-    lp.row_lower_ = rhs
-    lp.row_upper_ = rhs
-    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
-    lp.a_matrix_.start_ = A.indptr.astype(np.int32)
-    lp.a_matrix_.index_ = A.indices.astype(np.int32)
-    lp.a_matrix_.value_ = A.data.astype(np.float64)
+    lp = colwise_lp(A, np.zeros(nc), np.zeros(nc), np.full(nc, highspy.kHighsInf), rhs, rhs)
     hess = highspy.HighsHessian()
     hess.dim_ = nc
     hess.format_ = highspy.HessianFormat.kTriangular

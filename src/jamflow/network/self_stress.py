@@ -25,7 +25,7 @@ import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 from scipy.optimize import linprog, nnls
 
-from ..highs import new_highs
+from ..highs import colwise_lp, new_highs
 from ..tolerances import RIGID_PIVOT_RTOL, SELF_STRESS_POSITIVE_RTOL
 
 __all__ = ["RigidNetwork", "jacobian_rank", "positive_self_stress", "rigid_network", "self_stresses", "strain_motion"]
@@ -70,7 +70,9 @@ def self_stresses(J: sp.spmatrix, *, k: int | None = None, rtol: float | None = 
     G = sp.csc_matrix(J @ J.T)
     scale = float(abs(G).sum(axis=1).max())  # >= largest eigenvalue s_max^2
     shift = -1e-8 * scale
-    w, v = spla.eigsh(G, k=min(k, nc - 1), sigma=shift, which="LM")
+    # a seeded start vector: ARPACK's own draws depend on the calls made before in the process
+    start = np.random.default_rng(0).standard_normal(nc)
+    w, v = spla.eigsh(G, k=min(k, nc - 1), sigma=shift, which="LM", v0=start)
     keep = w <= (tol**2) * scale
     return v[:, keep]
 
@@ -259,7 +261,7 @@ def strain_motion(rigid: RigidNetwork, J: sp.spmatrix, E: sp.spmatrix,
     zero = np.zeros(N.shape[1])
     # objective lambda_0 . c (> 0 at every opening motion since lambda_0 > 0): it equals
     # lambda_0^T E e on the feasible set, so the simplex moves e, not every c to its
-    # bound as sum(c) would (soft 3D N = 4096: 15.5 s against 79 s)
+    # bound as sum(c) would (measured: docs/notes/network-constants.md)
     x = _max_lp(np.r_[rigid.self_stress, np.zeros(k)], np.hstack([N.T, -NE]), zero, zero,
                 np.r_[np.zeros(nc), -np.ones(k)], np.ones(nc + k))
     if x is None:
@@ -276,15 +278,7 @@ def _max_lp(cost, A, row_lower, row_upper, col_lower, col_upper) -> NDArray[np.f
     (dense ``A``; dual simplex, one thread), or None when not solved to optimality."""
     csc = sp.csc_matrix(A)
     csc.sort_indices()
-    lp = highspy.HighsLp()
-    lp.num_col_, lp.num_row_ = csc.shape[1], csc.shape[0]
-    lp.col_cost_ = -np.asarray(cost, dtype=np.float64)
-    lp.col_lower_, lp.col_upper_ = np.asarray(col_lower, np.float64), np.asarray(col_upper, np.float64)
-    lp.row_lower_, lp.row_upper_ = np.asarray(row_lower, np.float64), np.asarray(row_upper, np.float64)
-    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
-    lp.a_matrix_.start_ = csc.indptr.astype(np.int32)
-    lp.a_matrix_.index_ = csc.indices.astype(np.int32)
-    lp.a_matrix_.value_ = csc.data.astype(np.float64)
+    lp = colwise_lp(csc, -np.asarray(cost, dtype=np.float64), col_lower, col_upper, row_lower, row_upper)
     h = new_highs()
     h.setOptionValue("solver", "simplex")
     h.passModel(lp)

@@ -18,11 +18,11 @@ State (all float64 unless stated; ``N`` particles, ``d`` dimensions):
   kept in a complete binary tournament tree ``tree`` (leaves ``M + i``, root 1).
   A collision is valid only if the partner has not collided since it was predicted
   (counter ``count``); otherwise the particle is rescanned (Isobe's scheme).
-* Verlet neighbour lists (``use_nl``; the cells then only serve to build them): the
-  partners of ``i`` are ``nl_idx[nl_start[i]:nl_start[i + 1]]`` (CSR, symmetric), every
+* Verlet neighbour lists (``Lists.use``; the cells then only serve to build them): the
+  partners of ``i`` are ``idx[start[i]:start[i + 1]]`` (CSR, symmetric), every
   ``j`` with ``|r_ij| < sigma_ij(t_b) + delta`` at the build time ``t_b``, where ``xb``
-  are the positions at the build. ``nlp = [t_b, delta / 2, g_max]`` with
-  ``g_max = rate max(a) / 2``. Positions are not wrapped in this mode (no cell
+  are the positions at the build; the :data:`LIST_BUILD` record holds ``t_b``,
+  ``delta / 2`` and ``g_max = rate max(a) / 2``. Positions are not wrapped in this mode (no cell
   crossings; the minimum image takes care of the periodicity), and ``cross_time`` holds
   each particle's *leave* time (``cross_dim = -1``): the first time at which
   ``|x_i(t) - xb_i| + g_max (t - t_b)`` may reach ``delta / 2``, bounded linearly from
@@ -34,6 +34,10 @@ State (all float64 unless stated; ``N`` particles, ``d`` dimensions):
   ``delta / 2 - g_max (t - t_b)``, so ``|r_ij(t)| > sigma_ij(t_b) + 2 g_max (t - t_b)
   >= sigma_ij(t_b) + (a_i + a_j) rate (t - t_b) / 2 = sigma_ij(t)``.
 
+The arrays travel in a few records (:class:`Spheres`, :class:`PeriodicBox`,
+:class:`Cells`, :class:`Events`, :class:`Lists`; NamedTuples, which numba passes as their
+fields) and the run's scalars in one :data:`CLOCK` record, updated in place.
+
 Collision rule for growing spheres (equal masses ``m = 1``): with ``n`` the unit
 vector from ``i`` to ``j``, ``u_n = (v_j - v_i) . n`` and ``g = d sigma_ij / dt``,
 the impulse ``J = g - u_n`` (``v_j += J n``, ``v_i -= J n``) reverses the rate of
@@ -44,7 +48,10 @@ virial ``r_ij J`` is accumulated for the pressure.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
+from numpy.typing import NDArray
 
 from .._numba import njit
 from ..neighbors._cell_kernels import sort_by_cell
@@ -52,6 +59,80 @@ from ..neighbors._cell_kernels import sort_by_cell
 #: Status codes of :func:`run_events`: collision budget used, time limit reached, a
 #: particle may leave the neighbour-list skin (rebuild the lists before continuing).
 WINDOW_DONE, TIME_LIMIT, LIST_EXPIRED = 0, 1, 2
+
+#: The run's clock and sums, one record updated in place by :func:`run_events`: the time
+#: ``t`` since the start of the window, the diameter scale ``s_w`` at ``t = 0`` and its
+#: growth rate ``rate`` (``s(t) = s_w + rate t``), the kinetic energy ``kinetic``, its time
+#: integral ``kinetic_integral`` over the window and the collision virial ``virial``
+#: (the sum of ``r_ij J`` over the window's collisions).
+CLOCK = np.dtype([("t", np.float64), ("s_w", np.float64), ("rate", np.float64), ("kinetic", np.float64),
+                  ("kinetic_integral", np.float64), ("virial", np.float64)])
+
+#: The neighbour lists' build, one record: the build time ``t_build`` (window time), half
+#: the skin ``half_skin`` and ``g_max = rate max(a) / 2``, the fastest growth of a radius.
+LIST_BUILD = np.dtype([("t_build", np.float64), ("half_skin", np.float64), ("g_max", np.float64)])
+
+
+class Spheres(NamedTuple):
+    """Lazy centres ``x`` (N, d) at the particles' own times ``tl`` (N,), velocities ``v``
+    (N, d) and diameter ratios ``a`` (N,)."""
+
+    x: NDArray[np.float64]
+    v: NDArray[np.float64]
+    tl: NDArray[np.float64]
+    a: NDArray[np.float64]
+
+
+class PeriodicBox(NamedTuple):
+    """Sides ``L`` (d,) of the orthogonal periodic box and their inverses ``invL``."""
+
+    L: NDArray[np.float64]
+    invL: NDArray[np.float64]
+
+
+class Cells(NamedTuple):
+    """The cell grid: widths ``w`` (d,), integer cell coordinates ``cc`` (N, d) and flat
+    cell ``cell`` (N,) of every particle, cells per axis ``ncell`` (d,) and their flat
+    ``stride``, neighbour offsets ``offs`` (noff, d), and the doubly linked lists
+    ``head`` (per cell), ``nxt``, ``prv`` (per particle)."""
+
+    w: NDArray[np.float64]
+    cc: NDArray[np.int64]
+    cell: NDArray[np.int64]
+    ncell: NDArray[np.int64]
+    stride: NDArray[np.int64]
+    offs: NDArray[np.int64]
+    head: NDArray[np.int64]
+    nxt: NDArray[np.int64]
+    prv: NDArray[np.int64]
+
+
+class Events(NamedTuple):
+    """Per particle: collision counter ``count``, predicted collision (``coll_time``,
+    ``coll_partner``, the partner's counter ``coll_pcount``), next cell crossing or list
+    leave (``cross_time``, ``cross_dim``), ``ev_time`` (N + 1,) the earlier of the two;
+    the tournament tree ``tree`` (2 M,) over ``M`` leaves."""
+
+    count: NDArray[np.int64]
+    coll_time: NDArray[np.float64]
+    coll_partner: NDArray[np.int64]
+    coll_pcount: NDArray[np.int64]
+    cross_time: NDArray[np.float64]
+    cross_dim: NDArray[np.int64]
+    ev_time: NDArray[np.float64]
+    tree: NDArray[np.int64]
+    M: int
+
+
+class Lists(NamedTuple):
+    """Verlet neighbour lists: in use (``use``), CSR partners ``start`` (N + 1,), ``idx``,
+    positions at the build ``xb`` (N, d) and the :data:`LIST_BUILD` record ``build`` (1,)."""
+
+    use: bool
+    start: NDArray[np.int64]
+    idx: NDArray[np.int64]
+    xb: NDArray[np.float64]
+    build: NDArray[np.void]
 
 
 @njit(cache=True, inline="always")
@@ -111,8 +192,10 @@ def collision_time(dx, u, sigma, g):
 
 
 @njit(cache=True, inline="always")
-def _pair(i, j, t, x, v, tl, a, L, invL, s_t, rate):
+def _pair(i, j, t, sph, box, s_t, rate):
     """Collision time (absolute) of the pair i, j from time t."""
+    x, v, tl, a = sph.x, sph.v, sph.tl, sph.a
+    L, invL = box.L, box.invL
     A = 0.0
     B = 0.0
     C = 0.0
@@ -132,8 +215,7 @@ def _pair(i, j, t, x, v, tl, a, L, invL, s_t, rate):
 
 
 @njit(cache=True)
-def _scan(i, t, only_dim, only_off, x, v, tl, a, L, invL, s_t, rate, cc, ncell, stride, offs,
-          head, nxt, count, coll_time, coll_partner, coll_pcount):
+def _scan(i, t, only_dim, only_off, sph, box, s_t, rate, cells, ev):
     """Lower particle i's predicted collision by scanning neighbour cells.
 
     ``only_dim < 0``: all neighbour cells, starting from no prediction. Otherwise only
@@ -142,7 +224,9 @@ def _scan(i, t, only_dim, only_off, x, v, tl, a, L, invL, s_t, rate, cc, ncell, 
     partner counter: re-stamping that counter would validate a prediction that the
     partner's own collision since then has made stale.
     """
-    d = x.shape[1]
+    cc, ncell, stride, offs, head, nxt = cells.cc, cells.ncell, cells.stride, cells.offs, cells.head, cells.nxt
+    coll_time, coll_partner = ev.coll_time, ev.coll_partner
+    d = sph.x.shape[1]
     found = False
     if only_dim < 0:
         best = np.inf
@@ -164,7 +248,7 @@ def _scan(i, t, only_dim, only_off, x, v, tl, a, L, invL, s_t, rate, cc, ncell, 
         j = head[cid]
         while j >= 0:
             if j != i:
-                tc = _pair(i, j, t, x, v, tl, a, L, invL, s_t, rate)
+                tc = _pair(i, j, t, sph, box, s_t, rate)
                 if tc < best:
                     best = tc
                     partner = j
@@ -173,59 +257,62 @@ def _scan(i, t, only_dim, only_off, x, v, tl, a, L, invL, s_t, rate, cc, ncell, 
     coll_time[i] = best
     coll_partner[i] = partner
     if found:
-        coll_pcount[i] = count[partner]
+        ev.coll_pcount[i] = ev.count[partner]
 
 
 @njit(cache=True)
-def _scan_list(i, t, x, v, tl, a, L, invL, s_t, rate, nl_start, nl_idx, count, coll_time,
-               coll_partner, coll_pcount):
+def _scan_list(i, t, sph, box, s_t, rate, lists, ev):
     """Predict particle i's next collision from its neighbour list."""
     best = np.inf
     partner = -1
-    for q in range(nl_start[i], nl_start[i + 1]):
-        j = nl_idx[q]
-        tc = _pair(i, j, t, x, v, tl, a, L, invL, s_t, rate)
+    for q in range(lists.start[i], lists.start[i + 1]):
+        j = lists.idx[q]
+        tc = _pair(i, j, t, sph, box, s_t, rate)
         if tc < best:
             best = tc
             partner = j
-    coll_time[i] = best
-    coll_partner[i] = partner
+    ev.coll_time[i] = best
+    ev.coll_partner[i] = partner
     if partner >= 0:
-        coll_pcount[i] = count[partner]
+        ev.coll_pcount[i] = ev.count[partner]
 
 
 @njit(cache=True)
-def _leave(i, t, x, v, tl, xb, nlp, cross_time, cross_dim):
+def _leave(i, t, sph, lists, ev):
     """Conservative time at which particle i may exhaust its half skin.
 
     With ``D = |x_i(t) - xb_i|`` and ``r = delta / 2 - D - g_max (t - t_b)``, the bound
     ``|x_i(t + tau) - xb_i| <= D + |v_i| tau`` gives the leave time
     ``t + r / (|v_i| + g_max)`` (``t`` if ``r <= 0``; never if nothing moves or grows).
     """
-    dt = t - tl[i]
+    x, v, xb = sph.x, sph.v, lists.xb
+    build = lists.build[0]
+    cross_time = ev.cross_time
+    dt = t - sph.tl[i]
     disp2 = 0.0
     v2 = 0.0
     for k in range(x.shape[1]):
         dk = x[i, k] + v[i, k] * dt - xb[i, k]
         disp2 += dk * dk
         v2 += v[i, k] * v[i, k]
-    rest = nlp[1] - np.sqrt(disp2) - nlp[2] * (t - nlp[0])
-    speed = np.sqrt(v2) + nlp[2]
+    rest = build.half_skin - np.sqrt(disp2) - build.g_max * (t - build.t_build)
+    speed = np.sqrt(v2) + build.g_max
     if rest <= 0.0:
         cross_time[i] = t
     elif speed > 0.0:
         cross_time[i] = t + rest / speed
     else:
         cross_time[i] = np.inf
-    cross_dim[i] = -1
+    ev.cross_dim[i] = -1
 
 
 @njit(cache=True)
-def _cross(i, t, x, v, tl, cc, w, cross_time, cross_dim):
+def _cross(i, t, sph, cells, ev):
     """Next time particle i leaves its cell, and along which axis."""
+    x, v, cc, w = sph.x, sph.v, cells.cc, cells.w
     best = np.inf
     bd = -1
-    dt = t - tl[i]
+    dt = t - sph.tl[i]
     for k in range(x.shape[1]):
         vk = v[i, k]
         xk = x[i, k] + vk * dt
@@ -239,13 +326,15 @@ def _cross(i, t, x, v, tl, cc, w, cross_time, cross_dim):
             best = tau
             bd = k
     best = max(best, 0.0)
-    cross_time[i] = t + best
-    cross_dim[i] = bd
+    ev.cross_time[i] = t + best
+    ev.cross_dim[i] = bd
 
 
 @njit(cache=True, inline="always")
-def _update_tree(i, ev_time, tree, M):
-    pos = (M + i) >> 1
+def _update_tree(i, ev):
+    """Replay the tournament above leaf ``i`` after its event time changed."""
+    ev_time, tree = ev.ev_time, ev.tree
+    pos = (ev.M + i) >> 1
     while pos >= 1:
         l = tree[2 * pos]
         r = tree[2 * pos + 1]
@@ -254,9 +343,10 @@ def _update_tree(i, ev_time, tree, M):
 
 
 @njit(cache=True, inline="always")
-def _link(i, cid, cell, head, nxt, prv):
+def _link(i, cid, cells):
     """Put particle i at the head of cell cid's doubly linked list."""
-    cell[i] = cid
+    head, nxt, prv = cells.head, cells.nxt, cells.prv
+    cells.cell[i] = cid
     prv[i] = -1
     nxt[i] = head[cid]
     if head[cid] >= 0:
@@ -265,10 +355,11 @@ def _link(i, cid, cell, head, nxt, prv):
 
 
 @njit(cache=True)
-def build_cells(x, L, ncell, cc, cell, stride, head, nxt, prv):
+def build_cells(x, L, cells):
     """Assign every particle (positions already in [0, L)) to its cell."""
+    ncell, cc, stride = cells.ncell, cells.cc, cells.stride
     n, d = x.shape
-    head[:] = -1
+    cells.head[:] = -1
     for i in range(n):
         cid = 0
         for k in range(d):
@@ -279,7 +370,7 @@ def build_cells(x, L, ncell, cc, cell, stride, head, nxt, prv):
                 c = ncell[k] - 1
             cc[i, k] = c
             cid += c * stride[k]
-        _link(i, cid, cell, head, nxt, prv)
+        _link(i, cid, cells)
 
 
 @njit(cache=True)
@@ -291,8 +382,8 @@ def build_neighbor_lists(x, a, L, invL, s_t, skin, cell, ncell, stride, offs):
     and diameters; every pair of neighbour cells ``c <= c'`` is then swept once over
     contiguous ranges (cells at least ``max sigma + skin`` wide, positions synced), and
     a counting sort of the pairs gives the CSR arrays. Cost ``O(N * stencil)``; the
-    contiguous, branch-free inner loop is about four times faster in 5D than walking
-    the linked cell lists.
+    contiguous, branch-free inner loop is faster than walking the linked cell lists
+    (measured: docs/notes/ls-constants.md#building-the-lists-by-cell-order).
 
     Parameters
     ----------
@@ -380,31 +471,25 @@ def build_neighbor_lists(x, a, L, invL, s_t, skin, cell, ncell, stride, offs):
 
 
 @njit(cache=True, inline="always")
-def _predict(i, t, x, v, tl, a, L, invL, s_t, rate, w, cc, ncell, stride, offs, head, nxt, count,
-             coll_time, coll_partner, coll_pcount, cross_time, cross_dim, ev_time,
-             use_nl, nl_start, nl_idx, xb, nlp):
+def _predict(i, t, sph, box, s_t, rate, cells, ev, lists):
     """Predict particle i's next collision and its list-leave (or cell-crossing) time."""
-    if use_nl:
-        _scan_list(i, t, x, v, tl, a, L, invL, s_t, rate, nl_start, nl_idx, count,
-                   coll_time, coll_partner, coll_pcount)
-        _leave(i, t, x, v, tl, xb, nlp, cross_time, cross_dim)
+    if lists.use:
+        _scan_list(i, t, sph, box, s_t, rate, lists, ev)
+        _leave(i, t, sph, lists, ev)
     else:
-        _scan(i, t, -1, 0, x, v, tl, a, L, invL, s_t, rate, cc, ncell, stride, offs,
-              head, nxt, count, coll_time, coll_partner, coll_pcount)
-        _cross(i, t, x, v, tl, cc, w, cross_time, cross_dim)
-    ev_time[i] = min(coll_time[i], cross_time[i])
+        _scan(i, t, -1, 0, sph, box, s_t, rate, cells, ev)
+        _cross(i, t, sph, cells, ev)
+    ev.ev_time[i] = min(ev.coll_time[i], ev.cross_time[i])
 
 
 @njit(cache=True)
-def init_events(t, x, v, tl, a, L, invL, w, s_t, rate, cc, ncell, stride, offs, head, nxt, count,
-                coll_time, coll_partner, coll_pcount, cross_time, cross_dim, ev_time, tree, M,
-                use_nl, nl_start, nl_idx, xb, nlp):
-    """Predict every particle's next events at time t and build the tree."""
-    n = x.shape[0]
+def init_events(t, s_t, rate, sph, box, cells, ev, lists):
+    """Predict every particle's next events at time t (diameter scale ``s_t``, growth
+    ``rate``) and build the tree."""
+    n = sph.x.shape[0]
+    ev_time, tree, M = ev.ev_time, ev.tree, ev.M
     for i in range(n):
-        _predict(i, t, x, v, tl, a, L, invL, s_t, rate, w, cc, ncell, stride, offs, head, nxt, count,
-                 coll_time, coll_partner, coll_pcount, cross_time, cross_dim, ev_time,
-                 use_nl, nl_start, nl_idx, xb, nlp)
+        _predict(i, t, sph, box, s_t, rate, cells, ev, lists)
     ev_time[n] = np.inf
     for p in range(M):
         tree[M + p] = min(p, n)
@@ -435,17 +520,92 @@ def kinetic_energy(v):
     return 0.5 * e
 
 
+@njit(cache=True, inline="always")
+def _cross_cell(i, t, s_t, rate, sph, box, cells, ev):
+    """Move particle i into the neighbouring cell it reaches at time t (wrapping its
+    centre across the box) and predict again: its next crossing, and collisions with
+    the layer of cells that became adjacent."""
+    x, v, tl = sph.x, sph.v, sph.tl
+    cc, ncell, stride, head, nxt, prv = cells.cc, cells.ncell, cells.stride, cells.head, cells.nxt, cells.prv
+    d = x.shape[1]
+    dt = t - tl[i]
+    for k in range(d):
+        x[i, k] += v[i, k] * dt
+    tl[i] = t
+    k = ev.cross_dim[i]
+    off = 1 if v[i, k] > 0.0 else -1
+    cid = cells.cell[i]
+    if prv[i] >= 0:
+        nxt[prv[i]] = nxt[i]
+    else:
+        head[cid] = nxt[i]
+    if nxt[i] >= 0:
+        prv[nxt[i]] = prv[i]
+    c = cc[i, k] + off
+    if c >= ncell[k]:
+        c = 0
+        x[i, k] -= box.L[k]
+    elif c < 0:
+        c = ncell[k] - 1
+        x[i, k] += box.L[k]
+    cid += (c - cc[i, k]) * stride[k]
+    cc[i, k] = c
+    _link(i, cid, cells)
+    _cross(i, t, sph, cells, ev)
+    if ncell[k] >= 3:
+        _scan(i, t, k, off, sph, box, s_t, rate, cells, ev)
+    ev.ev_time[i] = min(ev.coll_time[i], ev.cross_time[i])
+    _update_tree(i, ev)
+
+
+@njit(cache=True, inline="always")
+def _collide(i, j, t, s_t, rate, sph, box):
+    """Bring i and j to time t and apply the collision impulse ``J`` (module docstring).
+
+    Returns ``J`` (not positive: the pair was already separating, nothing changed) and
+    the pair's centre distance ``r`` and normal relative velocity ``u_n`` before it.
+    """
+    x, v, tl, a = sph.x, sph.v, sph.tl, sph.a
+    L, invL = box.L, box.invL
+    d = x.shape[1]
+    dti = t - tl[i]
+    dtj = t - tl[j]
+    for k in range(d):
+        x[i, k] += v[i, k] * dti
+        x[j, k] += v[j, k] * dtj
+    tl[i] = t
+    tl[j] = t
+    r2 = 0.0
+    un = 0.0
+    for k in range(d):
+        dx = x[j, k] - x[i, k]
+        dx -= L[k] * np.floor(dx * invL[k] + 0.5)
+        r2 += dx * dx
+        un += dx * (v[j, k] - v[i, k])
+    r = np.sqrt(r2)
+    un /= r
+    S = 0.5 * (a[i] + a[j])
+    g = S * rate
+    # an overlap of round-off size (r < sigma) reflects the rate of |r|^2 - sigma^2
+    # instead, so that the pair is separating by both measures afterwards
+    J = g * max(1.0, S * s_t / r) - un
+    if J > 0.0:
+        for k in range(d):
+            dx = x[j, k] - x[i, k]
+            dx -= L[k] * np.floor(dx * invL[k] + 0.5)
+            nk = dx / r
+            v[i, k] -= J * nk
+            v[j, k] += J * nk
+    return J, r, un
+
+
 @njit(cache=True)
-def run_events(max_coll, t_limit, sc, x, v, tl, a, L, invL, w, cc, cell, ncell, stride, offs,
-               head, nxt, prv, count, coll_time, coll_partner, coll_pcount, cross_time, cross_dim,
-               ev_time, tree, M, use_nl, nl_start, nl_idx, xb, nlp):
+def run_events(max_coll, t_limit, clock, sph, box, cells, ev, lists):
     """Process events until ``max_coll`` collisions or time ``t_limit``.
 
-    ``sc`` holds ``[t, s_w, rate, K, Kint, virial]`` (time, diameter scale at t = 0,
-    d s/dt, kinetic energy, its time integral over the window, and the sum of
-    ``r_ij J`` over collisions) and is updated in place. With ``use_nl`` the partners
-    come from the neighbour lists ``nl_start, nl_idx`` built at positions ``xb`` and
-    ``nlp = [t_b, delta / 2, g_max]`` (module docstring); otherwise from the cells.
+    ``clock`` (one :data:`CLOCK` record) is read and updated in place. With
+    ``lists.use`` the partners come from the neighbour lists (module docstring);
+    otherwise from the cells.
 
     Returns
     -------
@@ -455,18 +615,19 @@ def run_events(max_coll, t_limit, sc, x, v, tl, a, L, invL, w, cc, cell, ncell, 
     ncoll : int
         Collisions processed.
     """
-    d = x.shape[1]
-    t = sc[0]
-    s_w = sc[1]
-    rate = sc[2]
-    K = sc[3]
-    Kint = sc[4]
-    vir = sc[5]
+    c = clock[0]
+    t = c.t
+    s_w = c.s_w
+    rate = c.rate
+    K = c.kinetic
+    Kint = c.kinetic_integral
+    vir = c.virial
+    count, coll_time, coll_partner, coll_pcount = ev.count, ev.coll_time, ev.coll_partner, ev.coll_pcount
     ncoll = 0
     status = WINDOW_DONE
     while ncoll < max_coll:
-        i = tree[1]
-        te = ev_time[i]
+        i = ev.tree[1]
+        te = ev.ev_time[i]
         if te >= t_limit:
             Kint += K * (t_limit - t)
             t = t_limit
@@ -475,93 +636,34 @@ def run_events(max_coll, t_limit, sc, x, v, tl, a, L, invL, w, cc, cell, ncell, 
         Kint += K * (te - t)
         t = te
         s_t = s_w + rate * t
-        if cross_time[i] <= coll_time[i]:
-            if use_nl:
+        if ev.cross_time[i] <= coll_time[i]:
+            if lists.use:
                 status = LIST_EXPIRED
                 break
-            # cell crossing of particle i
-            dt = t - tl[i]
-            for k in range(d):
-                x[i, k] += v[i, k] * dt
-            tl[i] = t
-            k = cross_dim[i]
-            off = 1 if v[i, k] > 0.0 else -1
-            cid = cell[i]
-            if prv[i] >= 0:
-                nxt[prv[i]] = nxt[i]
-            else:
-                head[cid] = nxt[i]
-            if nxt[i] >= 0:
-                prv[nxt[i]] = prv[i]
-            c = cc[i, k] + off
-            if c >= ncell[k]:
-                c = 0
-                x[i, k] -= L[k]
-            elif c < 0:
-                c = ncell[k] - 1
-                x[i, k] += L[k]
-            cid += (c - cc[i, k]) * stride[k]
-            cc[i, k] = c
-            _link(i, cid, cell, head, nxt, prv)
-            _cross(i, t, x, v, tl, cc, w, cross_time, cross_dim)
-            if ncell[k] >= 3:
-                _scan(i, t, k, off, x, v, tl, a, L, invL, s_t, rate, cc, ncell, stride, offs,
-                      head, nxt, count, coll_time, coll_partner, coll_pcount)
-            ev_time[i] = min(coll_time[i], cross_time[i])
-            _update_tree(i, ev_time, tree, M)
+            _cross_cell(i, t, s_t, rate, sph, box, cells, ev)
             continue
         j = coll_partner[i]
         if count[j] != coll_pcount[i]:
             # the partner collided since the prediction: predict again
-            if use_nl:
-                _scan_list(i, t, x, v, tl, a, L, invL, s_t, rate, nl_start, nl_idx, count,
-                           coll_time, coll_partner, coll_pcount)
+            if lists.use:
+                _scan_list(i, t, sph, box, s_t, rate, lists, ev)
             else:
-                _scan(i, t, -1, 0, x, v, tl, a, L, invL, s_t, rate, cc, ncell, stride, offs,
-                      head, nxt, count, coll_time, coll_partner, coll_pcount)
-            ev_time[i] = min(coll_time[i], cross_time[i])
-            _update_tree(i, ev_time, tree, M)
+                _scan(i, t, -1, 0, sph, box, s_t, rate, cells, ev)
+            ev.ev_time[i] = min(coll_time[i], ev.cross_time[i])
+            _update_tree(i, ev)
             continue
-        dti = t - tl[i]
-        dtj = t - tl[j]
-        for k in range(d):
-            x[i, k] += v[i, k] * dti
-            x[j, k] += v[j, k] * dtj
-        tl[i] = t
-        tl[j] = t
-        r2 = 0.0
-        un = 0.0
-        for k in range(d):
-            dx = x[j, k] - x[i, k]
-            dx -= L[k] * np.floor(dx * invL[k] + 0.5)
-            r2 += dx * dx
-            un += dx * (v[j, k] - v[i, k])
-        r = np.sqrt(r2)
-        un /= r
-        S = 0.5 * (a[i] + a[j])
-        g = S * rate
-        # an overlap of round-off size (r < sigma) reflects the rate of |r|^2 - sigma^2
-        # instead, so that the pair is separating by both measures afterwards
-        J = g * max(1.0, S * s_t / r) - un
+        J, r, un = _collide(i, j, t, s_t, rate, sph, box)
         if J > 0.0:
-            for k in range(d):
-                dx = x[j, k] - x[i, k]
-                dx -= L[k] * np.floor(dx * invL[k] + 0.5)
-                nk = dx / r
-                v[i, k] -= J * nk
-                v[j, k] += J * nk
             K += J * (un + J)
             vir += r * J
             count[i] += 1
             count[j] += 1
             ncoll += 1
         for p in (i, j):
-            _predict(p, t, x, v, tl, a, L, invL, s_t, rate, w, cc, ncell, stride, offs, head, nxt, count,
-                     coll_time, coll_partner, coll_pcount, cross_time, cross_dim, ev_time,
-                     use_nl, nl_start, nl_idx, xb, nlp)
-            _update_tree(p, ev_time, tree, M)
-    sc[0] = t
-    sc[3] = K
-    sc[4] = Kint
-    sc[5] = vir
+            _predict(p, t, sph, box, s_t, rate, cells, ev, lists)
+            _update_tree(p, ev)
+    c.t = t
+    c.kinetic = K
+    c.kinetic_integral = Kint
+    c.virial = vir
     return status, ncoll

@@ -102,21 +102,17 @@ WINDOW_COLLISIONS_PER_PARTICLE: int = 10
 #: rebuilt only after the diameters have grown by this factor.
 CELL_SLACK: float = 1.02
 #: Skin delta of the Verlet neighbour lists in mean diameters at the build: a pair is
-#: listed when its centre distance is below its contact distance plus delta. Measured
-#: in 5D, N = 1024, to p = 1e6: 0.1 rebuilds too often, 0.2 was fastest (289k
-#: collisions per CPU-second), 0.3 and 0.4 scan longer lists (262k, 241k).
+#: listed when its centre distance is below its contact distance plus delta
+#: (measured: docs/notes/ls-constants.md#nl_skin).
 NL_SKIN: float = 0.2
 #: Neighbour lists replace the cell scan when the neighbour cells hold on average at
 #: least this many times more particles than a list would (estimated from the mean
-#: diameter and the density). Measured at N = 1024 (two-stage protocol, first 2e6
-#: collisions): at a ratio of 2.9 (2D bidisperse, the lowest met in d >= 2) lists are
-#: already 1.8 times faster; ratio 4.5 (3D) 2.6 times, 10 (4D) 4.8 times, 30-40 (5D)
-#: 15 times.
+#: diameter and the density) (measured: docs/notes/ls-constants.md#nl_min_gain).
 NL_MIN_GAIN: float = 2.0
 #: Reduced pressure at which a run stops as jammed (stop reason ``"max_pressure"``)
 #: when its targets lie beyond: the relative gaps of the cages, ~d/p, are then ~1e-14,
 #: a hundred times the float64 resolution of the centres (~1e-16 of the box), and the
-#: pressure no longer rises (docs/extremes.md: 2D and 3D reach ~1e14, never 1e15).
+#: pressure no longer rises (measured: docs/notes/ls-constants.md#max_pressure).
 MAX_PRESSURE: float = 1e14
 
 
@@ -162,7 +158,10 @@ class LSResult:
 
 
 class _State:
-    """Arrays of the event-driven simulation (see :mod:`jamflow.protocols._ls_kernels`)."""
+    """Arrays of the event-driven simulation (see :mod:`jamflow.protocols._ls_kernels`),
+    handed to the kernels as its records; the scalars in the :data:`~jamflow.protocols._ls_kernels.CLOCK`
+    record ``clock``, read through the properties ``t``, ``s_w``, ``rate``, ``kinetic``,
+    ``kinetic_integral`` and ``virial``."""
 
     def __init__(self, packing: Packing, beta: float, rng: np.random.Generator,
                  neighbor_list: bool | None = None) -> None:
@@ -180,8 +179,9 @@ class _State:
         self.K_target = 0.5 * d * n / beta
         self.v *= math.sqrt(self.K_target / _k.kinetic_energy(self.v))
         self.tl = np.zeros(n)
-        # [t, s_w, rate, K, Kint, virial]
-        self.sc = np.array([0.0, mean_D, 0.0, _k.kinetic_energy(self.v), 0.0, 0.0])
+        self.clock = np.zeros(1, dtype=_k.CLOCK)
+        self.clock["s_w"] = mean_D
+        self.clock["kinetic"] = _k.kinetic_energy(self.v)
         self.count = np.zeros(n, dtype=np.int64)
         self.coll_time = np.empty(n)
         self.coll_partner = np.empty(n, dtype=np.int64)
@@ -203,22 +203,60 @@ class _State:
         self.nl_start = np.zeros(n + 1, dtype=np.int64)
         self.nl_idx = np.empty(0, dtype=np.int64)
         self.xb = np.zeros((n, d))
-        # [t_b, delta / 2, g_max]
-        self.nlp = np.zeros(3)
+        self.list_build = np.zeros(1, dtype=_k.LIST_BUILD)
         self.list_builds = 0
 
-    # scale and packing fraction --------------------------------------------------
+    # the clock ------------------------------------------------------------------------
     @property
     def t(self) -> float:
-        return float(self.sc[0])
+        """Time since the start of the window."""
+        return float(self.clock["t"][0])
 
+    @property
+    def s_w(self) -> float:
+        """Mean diameter at the start of the window."""
+        return float(self.clock["s_w"][0])
+
+    @property
+    def rate(self) -> float:
+        """Growth rate of the mean diameter, ``ds/dt``."""
+        return float(self.clock["rate"][0])
+
+    @property
+    def kinetic(self) -> float:
+        """Kinetic energy (unit masses)."""
+        return float(self.clock["kinetic"][0])
+
+    @property
+    def kinetic_integral(self) -> float:
+        """Time integral of the kinetic energy over the window."""
+        return float(self.clock["kinetic_integral"][0])
+
+    @property
+    def virial(self) -> float:
+        """Sum of ``r_ij J`` over the window's collisions."""
+        return float(self.clock["virial"][0])
+
+    # scale and packing fraction --------------------------------------------------
     def scale(self, t: float | None = None) -> float:
         """Mean diameter s at window time t (default: now)."""
         t = self.t if t is None else t
-        return float(self.sc[1] + self.sc[2] * t)
+        return float(self.s_w + self.rate * t)
 
     def phi(self, t: float | None = None) -> float:
         return self.phi_unit * self.scale(t) ** self.d
+
+    # the kernels' records -----------------------------------------------------------
+    def _records(self) -> tuple[_k.Spheres, _k.PeriodicBox, _k.Cells, _k.Events, _k.Lists]:
+        """The arrays as the kernels take them."""
+        return (_k.Spheres(self.x, self.v, self.tl, self.a), _k.PeriodicBox(self.L, self.invL), self._cells(),
+                _k.Events(self.count, self.coll_time, self.coll_partner, self.coll_pcount, self.cross_time,
+                          self.cross_dim, self.ev_time, self.tree, self.M),
+                _k.Lists(self.use_nl, self.nl_start, self.nl_idx, self.xb, self.list_build))
+
+    def _cells(self) -> _k.Cells:
+        return _k.Cells(self.w, self.cc, self.cell, self.ncell, self.stride, self.offs, self.head, self.nxt,
+                        self.prv)
 
     # cells and events --------------------------------------------------------------
     def _lists_pay(self, ncell: np.ndarray, skin: float) -> bool:
@@ -237,7 +275,7 @@ class _State:
         lists are built with the cells at least ``max sigma + delta`` wide, and all
         events are predicted again.
         """
-        _k.sync_all(self.sc[0], self.x, self.v, self.tl)
+        _k.sync_all(self.t, self.x, self.v, self.tl)
         self.x -= self.L * np.floor(self.x * self.invL)
         self.x[self.x >= self.L] = 0.0
         sig_max = float(self.a.max()) * self.scale()
@@ -253,58 +291,47 @@ class _State:
         per_axis = [np.array([-1, 0, 1]) if m >= 3 else np.arange(m) for m in ncell]
         grids = np.meshgrid(*per_axis, indexing="ij")
         self.offs = np.stack([g.ravel() for g in grids], axis=1).astype(np.int64)
-        _k.build_cells(self.x, self.L, self.ncell, self.cc, self.cell, self.stride,
-                       self.head, self.nxt, self.prv)
+        _k.build_cells(self.x, self.L, self._cells())
         constrained = ncell >= 3
         if self.use_nl:
             self.nl_start, self.nl_idx = _k.build_neighbor_lists(
                 self.x, self.a, self.L, self.invL, self.scale(), skin, self.cell, self.ncell,
                 self.stride, self.offs)
             self.xb[:] = self.x
-            self.nlp[:] = (self.t, 0.5 * skin, 0.5 * self.sc[2] * float(self.a.max()))
+            self.list_build[0] = (self.t, 0.5 * skin, 0.5 * self.rate * float(self.a.max()))
             self.list_builds += 1
             self.t_rebuild = math.inf
-        elif np.any(constrained) and self.sc[2] > 0.0:
+        elif np.any(constrained) and self.rate > 0.0:
             w_min = float(self.w[constrained].min())
-            self.t_rebuild = self.t + (w_min / float(self.a.max()) - self.scale()) / self.sc[2]
+            self.t_rebuild = self.t + (w_min / float(self.a.max()) - self.scale()) / self.rate
         else:
             self.t_rebuild = math.inf
         self.predict()
 
     def predict(self) -> None:
-        _k.init_events(self.sc[0], self.x, self.v, self.tl, self.a, self.L, self.invL, self.w,
-                       self.scale(), self.sc[2], self.cc, self.ncell, self.stride, self.offs,
-                       self.head, self.nxt, self.count, self.coll_time, self.coll_partner,
-                       self.coll_pcount, self.cross_time, self.cross_dim, self.ev_time,
-                       self.tree, self.M, self.use_nl, self.nl_start, self.nl_idx, self.xb,
-                       self.nlp)
+        _k.init_events(self.t, self.scale(), self.rate, *self._records())
 
     def run(self, max_coll: int, t_limit: float) -> tuple[int, int]:
-        return _k.run_events(max_coll, t_limit, self.sc, self.x, self.v, self.tl, self.a, self.L,
-                             self.invL, self.w, self.cc, self.cell, self.ncell, self.stride,
-                             self.offs, self.head, self.nxt, self.prv, self.count, self.coll_time,
-                             self.coll_partner, self.coll_pcount, self.cross_time, self.cross_dim,
-                             self.ev_time, self.tree, self.M, self.use_nl, self.nl_start,
-                             self.nl_idx, self.xb, self.nlp)
+        return _k.run_events(max_coll, t_limit, self.clock, *self._records())
 
     def set_rate(self, rate: float) -> None:
-        self.sc[2] = rate
+        self.clock["rate"] = rate
         self.rebuild()
 
     def new_window(self, rescale: bool) -> None:
         """Sync everything, restart the window clock at 0, rescale velocities."""
         t = self.t
         _k.sync_all(t, self.x, self.v, self.tl)
-        self.sc[1] = self.scale(t)
+        self.clock["s_w"] = self.scale(t)
         self.tl[:] = 0.0
-        self.sc[0] = 0.0
+        self.clock["t"] = 0.0
         self.t_rebuild -= t
-        self.nlp[0] -= t
+        self.list_build["t_build"] -= t
         if rescale:
-            self.v *= math.sqrt(self.K_target / self.sc[3])
-            self.sc[3] = _k.kinetic_energy(self.v)
-        self.sc[4] = 0.0
-        self.sc[5] = 0.0
+            self.v *= math.sqrt(self.K_target / self.kinetic)
+            self.clock["kinetic"] = _k.kinetic_energy(self.v)
+        self.clock["kinetic_integral"] = 0.0
+        self.clock["virial"] = 0.0
         self.predict()
 
     def packing(self, template: Packing, **attrs: Any) -> Packing:
@@ -440,7 +467,7 @@ def compress(
     require("ls", packing.body_kind)
     targets = _check_inputs(packing, growth_rate, p_targets, phi_target, max_collisions, max_time,
                             beta, fast_growth_rate, fast_until, max_pressure)
-    n, d = packing.n, packing.d
+    n = packing.n
     window = WINDOW_COLLISIONS_PER_PARTICLE * n if window is None else int(window)
     if window < 1:
         raise ValueError(f"window must be >= 1 collision, got {window}")
@@ -453,105 +480,166 @@ def compress(
         "max_pressure": max_pressure,
     }
     state = _State(packing, beta, np.random.default_rng(seed), neighbor_list)
-    # a packing's diameters stay below half the smallest box width (Packing); stop a
-    # relative 1e-9 short of it, far above the round-off of s(t)
-    half_width = 0.5 * float(packing.box.widths.min()) * (1.0 - 1e-9)
-    a_max = float(state.a.max())
     fast = fast_growth_rate is not None and fast_growth_rate > 0.0
-    rate = fast_growth_rate if fast else growth_rate
-    state.sc[2] = rate
+    state.clock["rate"] = fast_growth_rate if fast else growth_rate
     state.rebuild()
-
-    cpu0 = time.process_time()
-    elapsed = 0.0  # simulated time before the current window
-    collisions = 0
-    records: dict[str, list[float]] = {k: [] for k in
-                                       ("time", "packing_fraction", "pressure", "collisions",
-                                        "growth_rate", "temperature")}
-    snapshots: list[Packing] = []
-    next_target = 0
-    stop_reason = ""
-    last_p = math.nan
-
-    def snapshot(p: float, kind: str, target: float) -> Packing:
-        snap = state.packing(
-            packing, p=p, phi=state.phi(), kappa=float(state.sc[2]), collisions=collisions,
-            target_kind=kind, target=target,
-            time=elapsed + state.t, cpu_time=time.process_time() - cpu0,
-            parameters=parameters,
-        )
-        snap.validate(OVERLAP_TOL)
-        return snap
-
+    run = _Run(state, packing, parameters, _Stops(targets, phi_target, max_collisions, max_time, max_pressure,
+                                                   window, packing), progress)
     while True:
-        t_limit = state.t_rebuild
-        limit_kind = "rebuild"
-        if max_time is not None and max_time - elapsed < t_limit:
-            t_limit, limit_kind = max_time - elapsed, "max_time"
-        if phi_target is not None and state.sc[2] > 0.0:
-            t_phi = ((phi_target / state.phi_unit) ** (1.0 / d) - state.sc[1]) / state.sc[2]
-            if t_phi < t_limit:
-                t_limit, limit_kind = t_phi, "phi_target"
-        if state.sc[2] > 0.0:
-            # the largest contact distance a_max s reaches half the smallest box width
-            t_box = (half_width / a_max - state.sc[1]) / state.sc[2]
-            if t_box < t_limit:
-                t_limit, limit_kind = t_box, "box_width"
-        todo = window - state.window_coll
-        if max_collisions is not None:
-            todo = min(todo, max_collisions - collisions)
-        status, ncoll = state.run(todo, t_limit)
-        collisions += ncoll
+        t_limit, limit_kind = run.time_limit()
+        status, ncoll = state.run(run.todo(), t_limit)
+        run.collisions += ncoll
         state.window_coll += ncoll
         if status == _k.LIST_EXPIRED or (status == _k.TIME_LIMIT and limit_kind == "rebuild"):
             state.rebuild()
             continue
-        dt = state.t
-        if dt > 0.0 and state.sc[4] > 0.0 and state.window_coll > 0:
-            p = 1.0 + state.sc[5] / (2.0 * state.sc[4])
-            temperature = 2.0 * state.sc[4] / dt / (d * n)
-            records["time"].append(elapsed + 0.5 * dt)
-            records["packing_fraction"].append(state.phi(0.5 * dt))
-            records["pressure"].append(p)
-            records["collisions"].append(collisions)
-            records["growth_rate"].append(float(state.sc[2]))
-            records["temperature"].append(temperature)
-            last_p = p
-        else:
-            p = math.nan
-        if progress is not None:
-            progress({"collisions": collisions, "time": elapsed + dt, "phi": state.phi(),
-                      "p": last_p, "kappa": float(state.sc[2])})
-        while next_target < len(targets) and p >= targets[next_target]:
-            snapshots.append(snapshot(p, "p", targets[next_target]))
-            next_target += 1
-        if targets and next_target == len(targets):
-            stop_reason = "p_targets"
-        elif status == _k.TIME_LIMIT and limit_kind == "phi_target":
-            snapshots.append(snapshot(last_p, "phi", float(phi_target)))
-            stop_reason = "phi_target"
-        elif status == _k.TIME_LIMIT and limit_kind == "max_time":
-            stop_reason = "max_time"
-        elif max_collisions is not None and collisions >= max_collisions:
-            stop_reason = "max_collisions"
-        elif status == _k.TIME_LIMIT and limit_kind == "box_width":
-            stop_reason = "box_width"
-        elif max_pressure is not None and p >= max_pressure:
-            stop_reason = "max_pressure"
-        if stop_reason:
+        p = run.measure()
+        if run.stop(p, status, limit_kind):
             break
-        switch = fast and state.sc[2] == fast_growth_rate and p >= fast_until
-        elapsed += state.t
+        switch = fast and state.rate == fast_growth_rate and p >= fast_until
+        run.elapsed += state.t
         state.window_coll = 0
         state.new_window(rescale=True)
         if switch:
             state.set_rate(growth_rate)
-
-    cpu = time.process_time() - cpu0
-    final = state.packing(packing, p=last_p, phi=state.phi(), kappa=float(state.sc[2]),
-                          collisions=collisions, time=elapsed + state.t, cpu_time=cpu,
+    cpu = time.process_time() - run.cpu0
+    final = state.packing(packing, p=run.last_p, phi=state.phi(), kappa=state.rate,
+                          collisions=run.collisions, time=run.elapsed + state.t, cpu_time=cpu,
                           parameters=parameters)
-    eos = xr.Dataset(
+    rate = run.collisions / cpu if cpu > 0 else math.nan
+    eos = _eos_dataset(run.records, new_dataset_attrs(
+        "LS equation of state", parameters, N=n, d=packing.d, beta=beta, kappa=growth_rate,
+        stop_reason=run.stop_reason, collisions=run.collisions, cpu_time=cpu, collisions_per_second=rate))
+    return LSResult(snapshots=run.snapshots, eos=eos, final=final, stop_reason=run.stop_reason,
+                    collisions=run.collisions, cpu_time=cpu, collisions_per_second=rate)
+
+
+@dataclass(frozen=True)
+class _Stops:
+    """When a run stops: pressure targets (increasing), a packing fraction, a budget of
+    collisions or simulated time, the largest pressure; ``window`` collisions per
+    pressure window; the input packing fixes the box."""
+
+    p_targets: list[float]
+    phi_target: float | None
+    max_collisions: int | None
+    max_time: float | None
+    max_pressure: float | None
+    window: int
+    packing: Packing
+
+    @property
+    def half_width(self) -> float:
+        """Largest contact distance [length]: a packing's diameters stay below half the
+        smallest box width (Packing); a relative 1e-9 short of it, far above the
+        round-off of s(t)."""
+        return 0.5 * float(self.packing.box.widths.min()) * (1.0 - 1e-9)
+
+
+class _Run:
+    """The counters of one :func:`compress` run: simulated time before the window,
+    collisions, the equation-of-state records, the snapshots and the stop reason."""
+
+    def __init__(self, state: _State, packing: Packing, parameters: dict[str, Any], stops: _Stops,
+                 progress: Callable[[dict[str, float]], None] | None) -> None:
+        self.state, self.packing, self.parameters, self.stops, self.progress = state, packing, parameters, stops, progress
+        self.half_width = stops.half_width
+        self.a_max = float(state.a.max())
+        self.cpu0 = time.process_time()
+        self.elapsed = 0.0  # simulated time before the current window
+        self.collisions = 0
+        self.records: dict[str, list[float]] = {k: [] for k in
+                                                ("time", "packing_fraction", "pressure", "collisions",
+                                                 "growth_rate", "temperature")}
+        self.snapshots: list[Packing] = []
+        self.next_target = 0
+        self.stop_reason = ""
+        self.last_p = math.nan
+
+    def time_limit(self) -> tuple[float, str]:
+        """The next window time at which the kernel must stop, and why: a rebuild of the
+        cells, ``max_time``, ``phi_target``, or the box width."""
+        state, stops = self.state, self.stops
+        t_limit = state.t_rebuild
+        limit_kind = "rebuild"
+        if stops.max_time is not None and stops.max_time - self.elapsed < t_limit:
+            t_limit, limit_kind = stops.max_time - self.elapsed, "max_time"
+        if stops.phi_target is not None and state.rate > 0.0:
+            t_phi = ((stops.phi_target / state.phi_unit) ** (1.0 / state.d) - state.s_w) / state.rate
+            if t_phi < t_limit:
+                t_limit, limit_kind = t_phi, "phi_target"
+        if state.rate > 0.0:
+            # the largest contact distance a_max s reaches half the smallest box width
+            t_box = (self.half_width / self.a_max - state.s_w) / state.rate
+            if t_box < t_limit:
+                t_limit, limit_kind = t_box, "box_width"
+        return t_limit, limit_kind
+
+    def todo(self) -> int:
+        """Collisions left in the window (and in the budget)."""
+        todo = self.stops.window - self.state.window_coll
+        if self.stops.max_collisions is not None:
+            todo = min(todo, self.stops.max_collisions - self.collisions)
+        return todo
+
+    def measure(self) -> float:
+        """The window's pressure (NaN without a collision), recorded with the state."""
+        state = self.state
+        d, n = state.d, state.n
+        dt = state.t
+        if dt > 0.0 and state.kinetic_integral > 0.0 and state.window_coll > 0:
+            p = 1.0 + state.virial / (2.0 * state.kinetic_integral)
+            temperature = 2.0 * state.kinetic_integral / dt / (d * n)
+            self.records["time"].append(self.elapsed + 0.5 * dt)
+            self.records["packing_fraction"].append(state.phi(0.5 * dt))
+            self.records["pressure"].append(p)
+            self.records["collisions"].append(self.collisions)
+            self.records["growth_rate"].append(state.rate)
+            self.records["temperature"].append(temperature)
+            self.last_p = p
+        else:
+            p = math.nan
+        if self.progress is not None:
+            self.progress({"collisions": self.collisions, "time": self.elapsed + dt, "phi": state.phi(),
+                           "p": self.last_p, "kappa": state.rate})
+        return p
+
+    def snapshot(self, p: float, kind: str, target: float) -> Packing:
+        snap = self.state.packing(
+            self.packing, p=p, phi=self.state.phi(), kappa=self.state.rate, collisions=self.collisions,
+            target_kind=kind, target=target,
+            time=self.elapsed + self.state.t, cpu_time=time.process_time() - self.cpu0,
+            parameters=self.parameters,
+        )
+        snap.validate(OVERLAP_TOL)
+        return snap
+
+    def stop(self, p: float, status: int, limit_kind: str) -> bool:
+        """Snapshots of the targets reached; whether the run stops (``stop_reason`` says why)."""
+        stops = self.stops
+        targets = stops.p_targets
+        while self.next_target < len(targets) and p >= targets[self.next_target]:
+            self.snapshots.append(self.snapshot(p, "p", targets[self.next_target]))
+            self.next_target += 1
+        if targets and self.next_target == len(targets):
+            self.stop_reason = "p_targets"
+        elif status == _k.TIME_LIMIT and limit_kind == "phi_target":
+            self.snapshots.append(self.snapshot(self.last_p, "phi", float(stops.phi_target)))
+            self.stop_reason = "phi_target"
+        elif status == _k.TIME_LIMIT and limit_kind == "max_time":
+            self.stop_reason = "max_time"
+        elif stops.max_collisions is not None and self.collisions >= stops.max_collisions:
+            self.stop_reason = "max_collisions"
+        elif status == _k.TIME_LIMIT and limit_kind == "box_width":
+            self.stop_reason = "box_width"
+        elif stops.max_pressure is not None and p >= stops.max_pressure:
+            self.stop_reason = "max_pressure"
+        return bool(self.stop_reason)
+
+
+def _eos_dataset(records: dict[str, list[float]], attrs: dict[str, Any]) -> xr.Dataset:
+    """The equation of state along the run, one record per pressure window."""
+    return xr.Dataset(
         {
             "time": ("record", np.array(records["time"]),
                      {"units": "1", "long_name": "simulated time at the middle of the window",
@@ -567,13 +655,5 @@ def compress(
             "temperature": ("record", np.array(records["temperature"]),
                             {"units": "1", "long_name": "time-averaged kinetic temperature 2K/(dN) before rescaling"}),
         },
-        attrs=new_dataset_attrs(
-            "LS equation of state", parameters, N=n, d=d, beta=beta, kappa=growth_rate, stop_reason=stop_reason,
-            collisions=collisions, cpu_time=cpu,
-            collisions_per_second=collisions / cpu if cpu > 0 else math.nan,
-        ),
-    )
-    return LSResult(
-        snapshots=snapshots, eos=eos, final=final, stop_reason=stop_reason, collisions=collisions,
-        cpu_time=cpu, collisions_per_second=collisions / cpu if cpu > 0 else math.nan,
+        attrs=attrs,
     )

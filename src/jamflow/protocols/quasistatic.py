@@ -25,7 +25,6 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 import xarray as xr
 from numpy.typing import NDArray
@@ -38,10 +37,11 @@ from ..models.spheres.model import fire, minimize_enthalpy
 from ..models.spheres.potential import HARMONIC, PowerLawPotential, evaluate
 from ..neighbors.pairs import pairs_within
 from ..neighbors.verlet import NeighborList
-from ..network.spheres import find_rattlers
+from ..network import pair_rows
 from ..stages import require
 from ..state.packing import Packing
 from ..tolerances import MINIMIZE_FORCE_TOL
+from .overdamped.jamming import constrained_subset
 from .soft_jam import soft_packing
 
 __all__ = [
@@ -221,12 +221,9 @@ def tentative_network_stress(
                    z_bar=0.0)
         return out
     R = pairs.dx
-    nvec = R / r[:, None]
-    rows = np.repeat(np.arange(nc), 2 * d)
-    cols = np.concatenate([pairs.i[:, None] * d + np.arange(d), pairs.j[:, None] * d + np.arange(d)],
-                          axis=1).ravel()
-    vals = np.concatenate([-nvec, nvec], axis=1).ravel()
-    S = sp.csr_matrix((vals, (rows, cols)), shape=(nc, n * d))
+    contacts = np.stack([pairs.i, pairs.j], axis=1)
+    # S = d r / d x, the contact Jacobian (Eq. 2)
+    S = pair_rows(contacts, R / r[:, None], n)
     b = R[:, 0] * R[:, 1] / r
     Nmat = (S @ S.T).tocsc()
     f = None
@@ -238,16 +235,12 @@ def tentative_network_stress(
         f = None
     if f is None:
         f = spla.lsqr(Nmat, -b, atol=1e-14, btol=1e-14, iter_lim=100 * nc)[0]
-    contacts = np.stack([pairs.i, pairs.j], axis=1)
-    rattler = find_rattlers(n, d, contacts)
-    constrained = ~(rattler[pairs.i] | rattler[pairs.j])
-    n_bar = int((~rattler).sum())
     out.update(
         force=f,
         shear_stress=float(-np.sum(f * b) / volume),
         pressure=float(np.sum(f * r) / (d * volume)),
         constraint_error=float(np.max(np.abs(r - sigma) / sigma)),
-        z_bar=(2.0 * (d - 1) + 2.0 * int(constrained.sum())) / n_bar if n_bar else 0.0,
+        z_bar=constrained_subset(n, d, contacts).z_bar,
     )
     return out
 

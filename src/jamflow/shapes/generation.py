@@ -14,7 +14,12 @@ Shape families and their aspect ratio ``alpha`` (length over width):
   the asphericity is a parameter (``R / rho`` is solved for it); or App. B's random
   polygons, one shape per body (:func:`random_polygon_shapes`);
 - ``dumbbell``: lobes of radius ``R`` at ``+-v``, shaft half-width ``R / 2`` (Fig. 4),
-  ``alpha = (2 |v| + 2R) / (2R) >= 2`` (lobes disjoint);
+  aspect ratio (tip to tip over the lobe diameter) ``alpha = (2 |v| + 2R) / (2R) >= 2``
+  (lobes disjoint or touching), or the paper's *shaft length* ``X = 2 |v| / R``, the
+  lobe-centre distance in lobe radii (Fig. 4: 2.4, isostatic, and 4, hypostatic), with
+  ``alpha = 1 + X / 2``. Table I's dumbbell ``alpha - 1`` is this ``X``: ``X = 2`` (touching
+  lobes) gives its ``A - 1 = 0.514``, ``X = 4`` gives 1.141; its upper ``A - 1 = 2.405`` is
+  ``X = 8`` (``alpha - 1 = 4`` tip to tip), so the table's two columns disagree at the top;
 - ``reuleaux``: no parameter (``A = pi / (2 (pi - sqrt 3)) = 1.1140``).
 
 The asphericity ``A = p^2 / (4 pi a)`` of each is exact (:attr:`ShapeTable.asphericity`)
@@ -67,8 +72,11 @@ def _asphericity(kind: str, x: float, sides: int) -> float:
 
 
 def unit_shape(kind: str, aspect_ratio: float | None = None, asphericity: float | None = None,
-               sides: int | None = None) -> dict:
+               sides: int | None = None, shaft_length: float | None = None) -> dict:
     """One shape of family ``kind`` (see the module doc) at the given parameter, any scale.
+
+    ``shaft_length`` (dumbbells only) is the paper's ``X``, the lobe-centre distance in
+    lobe radii, the same shape as ``aspect_ratio = 1 + X / 2``.
 
     Raises
     ------
@@ -78,6 +86,14 @@ def unit_shape(kind: str, aspect_ratio: float | None = None, asphericity: float 
     """
     if kind not in SHAPE_CHOICES:
         raise ValueError(f"--shape must be one of {', '.join(SHAPE_CHOICES)}, got {kind!r}")
+    if shaft_length is not None:
+        if kind != "dumbbell":
+            raise ValueError(f"--shaft-length is the dumbbell's lobe-centre distance, not a parameter of {kind}")
+        if aspect_ratio is not None or asphericity is not None:
+            raise ValueError("give one of --shaft-length, --aspect-ratio and --asphericity")
+        if not (np.isfinite(shaft_length) and shaft_length >= 2.0):
+            raise ValueError(f"--shaft-length is at least 2 (touching lobes), got {shaft_length}")
+        aspect_ratio = 1.0 + 0.5 * shaft_length
     if aspect_ratio is not None and asphericity is not None:
         raise ValueError("give --aspect-ratio or --asphericity, not both")
     if kind == "circulo-polygon":
@@ -110,9 +126,11 @@ def unit_shape(kind: str, aspect_ratio: float | None = None, asphericity: float 
     if aspect_ratio is None and asphericity is None:
         raise ValueError(f"{kind} needs --aspect-ratio or --asphericity")
     if aspect_ratio is not None:
-        ok = aspect_ratio >= 1.0 if kind == "ellipse" else aspect_ratio > low
+        # an ellipse at 1 is a disk; a dumbbell at 2 has touching lobes; a circulo-line needs a core
+        closed = kind in ("ellipse", "dumbbell")
+        ok = aspect_ratio >= low if closed else aspect_ratio > low
         if not (np.isfinite(aspect_ratio) and ok):
-            raise ValueError(f"{kind} needs --aspect-ratio {'>=' if kind == 'ellipse' else '>'} {low:g}, got {aspect_ratio}")
+            raise ValueError(f"{kind} needs --aspect-ratio {'>=' if closed else '>'} {low:g}, got {aspect_ratio}")
         return _shape(kind, aspect_ratio, 0)
     a_low = _asphericity(kind, low, 0) if kind == "dumbbell" else 1.0
     if not (np.isfinite(asphericity) and asphericity > a_low):

@@ -25,25 +25,30 @@ spans at least ``REGION_GAP_MIN_RATIO``. Without such a gap region 1 is empty
 (``lambda_c = lambda_0``): the widest gap alone put a lone ordinary mode
 (``lambda = 2e-3`` at ``P = 1e-9``, negative fourth derivative) of a dumbbell packing
 into region 1. The fourth derivative of ``U`` along
-each region-1 mode ``v`` (Fig. 11) is the second difference of ``v^T M(q + h v) v`` with a
-step that opens no contact (:func:`fourth_derivative_step`), central where it is smooth,
-else one-sided on the side where it is (:func:`fourth_derivative_along`): a contact at the
-verge of opening, or of changing type, makes ``M`` jump between two samples.
+each region-1 mode ``v`` (Fig. 11) is the second difference of ``v^T M(q + s v) v``: the
+first step opens no contact (:func:`fourth_derivative_step`); it grows while the
+contact network stays the same (:func:`contact_signature`) until two steps agree, central
+where the network is unchanged on both sides, else one-sided on the side where it is
+(:func:`fourth_derivative_along`): a contact at the verge of opening, or of changing type,
+makes ``M`` jump between two samples.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..minimize.model import pressure_of
+from ..models.shapes import POINT_TERM_FAMILIES
 from ..state.packing import Packing
-from .counting import count_constraints, shape_model_of
+from .counting import count_constraints, dofs_per_body, shape_model_of
 
-__all__ = ["ZERO_EIGENVALUE_RTOL", "QUARTIC_PRESSURE_RATIO", "REGION_GAP_MIN_RATIO", "SPECTRUM_FORCE_RATIO", "FOURTH_DERIVATIVE_STEP",
-           "FOURTH_AGREEMENT_RTOL", "fourth_derivative_step", "fourth_derivative_along", "Spectrum", "spectrum"]
+__all__ = ["ZERO_EIGENVALUE_RTOL", "QUARTIC_PRESSURE_RATIO", "REGION_GAP_MIN_RATIO", "SPECTRUM_FORCE_RATIO",
+           "FOURTH_DERIVATIVE_STEP", "FOURTH_AGREEMENT_RTOL", "FOURTH_TARGET_RTOL", "contact_signature",
+           "fourth_derivative_step", "fourth_derivative_along", "Spectrum", "quartic_check", "spectrum"]
 
 #: Eigenvalues with ``|lambda| <= ZERO_EIGENVALUE_RTOL * lambda_max`` are zero modes:
 #: LAPACK's eigenvalues err by ``O(eps ||M||) ~ 1e-16 lambda_max``; 1e-13 leaves a
@@ -52,51 +57,72 @@ ZERO_EIGENVALUE_RTOL: float = 1e-13
 
 #: Region-1 (quartic) eigenvalues are stress terms and vanish with the pressure: a gap
 #: opens region 1 only when its lower edge is at most this many times the pressure
-#: [k units]. Measured ``lambda / P``: at most 1.1 (circulo-lines, A = 1.03 and 1.1,
-#: P = 1e-7, 1e-6) and 0.004 (ellipses, alpha = 1.001), while region 2 does not scale
-#: with P (lowest 7e-4 .. 2e-2 on the same packings).
+#: [k units]; region 2 does not scale with P
+#: (measured: docs/notes/shapes.md#constants-of-the-spectrum-jamflowshapesspectrum).
 QUARTIC_PRESSURE_RATIO: float = 1e3
 
 #: A gap that separates regions 1 and 2 spans at least this factor in ``lambda``
-#: (measured: 1.1e4, 990 and 5e7 on the packings above).
+#: (measured: docs/notes/shapes.md#constants-of-the-spectrum-jamflowshapesspectrum).
 REGION_GAP_MIN_RATIO: float = 10.0
 
 #: The spectrum's region 1 is trusted only when the largest generalised force of the
 #: packing is at most this fraction of its pressure: quartic eigenvalues are ~P, and
-#: residual forces shift them. Measured on 32 circulo-lines (A = 1.1, tradeoff stage
-#: ``shapes``): max F / P = 9.3e-3 (force_tol 1e-10, P0 = 1e-8) miscounted N_1 by one;
-#: 5e-4 (1e-10, 1e-7) and 7.5e-5 (1e-12, 1e-8) counted it right.
+#: residual forces shift them
+#: (measured: docs/notes/shapes.md#constants-of-the-spectrum-jamflowshapesspectrum).
 SPECTRUM_FORCE_RATIO: float = 1e-3
 
 #: Largest step [length, or rad] of the second difference of ``v^T M v`` along a quartic
-#: mode: truncation ``h^2 U^(6) ~ 1e-6`` relative; round-off ``eps ||M|| / h^2 ~ 1e-9``.
-FOURTH_DERIVATIVE_STEP: float = 1e-3
+#: mode. Truncation is ``~ h^2 U^(6) / U^(4)``: measured 1e-4 relative at ``h = 1e-2`` on
+#: the near-disk ellipse packings (``alpha - 1 = 1e-3``), whose fourth derivatives
+#: (~1e-6 ... 1e-8 k, ``~ k (alpha - 1)^2``) need steps of 1e-4 ... 1e-2 above round-off.
+FOURTH_DERIVATIVE_STEP: float = 1e-2
 
-#: The step is also at most this fraction of ``sqrt(delta_min)``, ``delta_min`` the
-#: smallest pair overlap: along a quartic mode contact distances change at second order,
-#: ``~ h^2``, so a step ``h^2 << delta_min`` opens no contact. With the fixed 1e-3 the
+#: First step: at most this fraction of ``sqrt(delta_min)``, ``delta_min`` the smallest
+#: pair overlap: along a quartic mode contact distances change at second order,
+#: ``~ h^2``, so a step ``h^2 << delta_min`` opens no contact. With a fixed 1e-3 the
 #: steps at P0 = 1e-7 (overlaps ~1e-7) broke contacts and gave fourth derivatives 1e3-1e5
-#: times those of the same packing at P0 = 1e-6.
+#: times those of the same packing at P0 = 1e-6. Larger steps are taken only while the
+#: contact network stays the same (:func:`contact_signature`).
 FOURTH_STEP_OVERLAP_FRACTION: float = 0.1
 
-#: Smallest step: round-off ``eps ||M|| / h^2`` stays below ~1e-3 of ``||M||`` (a pair
-#: touching by less than ``(h / FOURTH_STEP_OVERLAP_FRACTION)^2 = 1e-10`` may then open).
+#: Smallest first step: round-off ``~ eps ||M|| / h^2`` stays below ~1e-3 of ``||M||``.
 FOURTH_DERIVATIVE_MIN_STEP: float = 1e-6
 
-
 #: Two second differences of ``v^T M v`` (steps ``h`` and ``h / 2``) agree when they
-#: differ by at most this fraction of the larger magnitude. Smooth data agree far better:
-#: truncation is ``~ h U^(5) / U^(4)`` one-sided (1e-3 measured at ``h = 1e-6``) and
-#: round-off ``~ 4 eps ||M|| / (h / 2)^2`` (~1e-3 of the smallest measured fourth
-#: derivative, 0.1, at the smallest step); a jump of ``M`` between samples changes the
-#: estimate by orders of magnitude (8e5 against 9.7 on the vendored A = 1.3 packing).
+#: differ by at most this fraction of the larger magnitude; the step grows (x4) until they
+#: do. Smooth data at a step well above round-off agree to 1e-4 ... 1e-6 (measured on the
+#: near-disk ellipses); a jump of ``M`` between samples changes the estimate by orders of
+#: magnitude (8e5 against 9.7 on the vendored A = 1.3 packing).
+FOURTH_TARGET_RTOL: float = 1e-3
+
+#: Largest disagreement of the two steps accepted when no step reaches
+#: :data:`FOURTH_TARGET_RTOL` inside the smooth window (else NaN).
 FOURTH_AGREEMENT_RTOL: float = 0.05
 
 
 def fourth_derivative_step(min_overlap: float) -> float:
-    """Step [length or rad] of the fourth derivative for a packing whose smallest overlap is ``min_overlap``."""
+    """First step [length or rad] of the fourth derivative for a packing whose smallest overlap is ``min_overlap``."""
     return float(np.clip(FOURTH_STEP_OVERLAP_FRACTION * np.sqrt(max(min_overlap, 0.0)), FOURTH_DERIVATIVE_MIN_STEP,
-                         FOURTH_DERIVATIVE_STEP))
+                         1e-3))
+
+
+def contact_signature(model, q: NDArray[np.float64]) -> frozenset:
+    """The contact network of a shape configuration as a set: its second derivatives are
+    smooth while it does not change.
+
+    One entry per energy term: circulo vertex-edge terms with whether the foot is clamped
+    to an edge end (the kink of App. A's distance), Reuleaux and dumbbell point terms
+    with their kind, ellipse pairs.
+    """
+    if model.family == "circulo":
+        t = model.contact_terms(q)
+        return frozenset(zip(t["i"], t["j"], t["vertex_body"], t["vertex"], t["edge"], t["t"] <= 0.0, t["t"] >= 1.0,
+                             strict=True))
+    if model.family in POINT_TERM_FAMILIES:
+        t = model.point_terms(q)
+        return frozenset(zip(t["i"], t["j"], t["type"], t["a"], t["b"], strict=True))
+    t = model.pair_table(q)
+    return frozenset(zip(t["i"], t["j"], strict=True))
 
 
 @dataclass(frozen=True)
@@ -142,41 +168,77 @@ class Spectrum:
         return self.max_force <= SPECTRUM_FORCE_RATIO * self.pressure
 
 
-def fourth_derivative_along(model, q: NDArray[np.float64], v: NDArray[np.float64], lam: float, h: float) -> float:
-    """``d^4 U / ds^4`` along the unit mode ``v`` (eigenvalue ``lam``) at ``q``, or NaN [k].
+def fourth_derivative_along(model, q: NDArray[np.float64], v: NDArray[np.float64], h: float,
+                            signature: Callable[[NDArray[np.float64]], frozenset] | None = None,
+                            max_step: float = FOURTH_DERIVATIVE_STEP) -> float:
+    """``d^4 U / ds^4`` along the unit mode ``v`` at ``q``, or NaN [k].
 
-    The second derivative of ``f(s) = v^T M(q + s v) v`` from samples at
-    ``s = 0, +-h/2, +-h, +-2h``: central, right and left second differences at steps
-    ``h`` and ``h / 2``. The first of these three (in that order) whose two steps agree
-    (:data:`FOURTH_AGREEMENT_RTOL`) gives the value at step ``h``; a jump of ``M`` (a
-    contact opening or changing type between samples) spoils the central difference
-    and the one-sided difference on its side, not the other. NaN when none agrees.
+    The second derivative of ``f(s) = v^T M(q + s v) v`` (``f(0)`` evaluated the same
+    way, not the eigensolver's eigenvalue, whose error ~``eps ||M||`` would swamp a
+    small fourth derivative) from samples at ``s = 0, +-h/2, +-h, +-2h``: central,
+    right and left second differences at steps ``h`` and ``h / 2``; of those whose
+    stencil keeps the contact network (``signature``, when given) the one where the two
+    steps agree best. While they disagree by more than :data:`FOURTH_TARGET_RTOL` the
+    step grows by 4 (a small fourth derivative, ``~ k (alpha - 1)^2`` near disks, needs
+    a step far above the one that merely opens no contact), up to ``max_step`` or the
+    step at which no stencil keeps the network. A jump of ``M`` (a contact opening or
+    changing type between samples) spoils the stencils that straddle it, not the
+    others.
 
     Parameters
     ----------
-    model : ShapeModel
+    model
         Anything with ``hessian(q)`` returning a sparse matrix.
-    q : ndarray, shape (3N,)
-    v : ndarray, shape (3N,)
-        Unit eigenvector.
-    lam : float
-        Its eigenvalue ``f(0)``.
+    q : ndarray, shape (n_dof,)
+    v : ndarray, shape (n_dof,)
+        Unit mode.
     h : float
-        Step [length or rad], from :func:`fourth_derivative_step`.
+        First step [length or rad], from :func:`fourth_derivative_step`.
+    signature : callable, optional
+        ``q -> frozenset`` of the contact network (:func:`contact_signature`).
+    max_step : float
+
+    Returns
+    -------
+    float
+        The estimate at the accepted step, or NaN when no smooth stencil agrees to
+        :data:`FOURTH_AGREEMENT_RTOL`.
     """
-    f = {0.0: lam}
-    for s in (-2.0, -1.0, -0.5, 0.5, 1.0, 2.0):
-        f[s] = float(v @ (model.hessian(q + s * h * v) @ v))
+    reference = None if signature is None else signature(q)
+    f: dict[float, float] = {}
+    same: dict[float, bool] = {}
 
-    def second(a: float, b: float, c: float, step: float) -> float:
-        return (f[a] - 2.0 * f[b] + f[c]) / (step * step)
+    def sample(s: float) -> float:
+        if s not in f:
+            f[s] = float(v @ (model.hessian(q + s * v) @ v))
+        return f[s]
 
-    for coarse, fine in ((second(-1.0, 0.0, 1.0, h), second(-0.5, 0.0, 0.5, 0.5 * h)),
-                         (second(0.0, 1.0, 2.0, h), second(0.0, 0.5, 1.0, 0.5 * h)),
-                         (second(0.0, -1.0, -2.0, h), second(0.0, -0.5, -1.0, 0.5 * h))):
-        if abs(coarse - fine) <= FOURTH_AGREEMENT_RTOL * max(abs(coarse), abs(fine)):
-            return coarse
-    return float("nan")
+    def smooth(*points: float) -> bool:
+        for s in points:
+            if s not in same:
+                same[s] = reference is None or s == 0.0 or signature(q + s * v) == reference
+        return all(same[s] for s in points)
+
+    best, best_gap = np.nan, np.inf
+    step = h
+    while step <= max_step * (1.0 + 1e-12):
+        found = False
+        for sign, (a, b, c) in ((0, (-1.0, 0.0, 1.0)), (1, (0.0, 1.0, 2.0)), (-1, (0.0, -1.0, -2.0))):
+            nodes = [x * step for x in (a, b, c)] + [0.5 * x * step for x in (a, b, c)]
+            if not smooth(*nodes):
+                continue
+            found = True
+            coarse = (sample(a * step) - 2.0 * sample(b * step) + sample(c * step)) / step**2
+            fine = (sample(0.5 * a * step) - 2.0 * sample(0.5 * b * step) + sample(0.5 * c * step)) / (0.5 * step) ** 2
+            gap = abs(coarse - fine) / max(abs(coarse), abs(fine), np.finfo(float).tiny)
+            if gap < best_gap:
+                best, best_gap = coarse, gap
+            if sign == 0 and gap <= FOURTH_TARGET_RTOL:
+                break
+        if not found or best_gap <= FOURTH_TARGET_RTOL:
+            break
+        step *= 4.0
+    return float(best) if best_gap <= FOURTH_AGREEMENT_RTOL else float("nan")
 
 
 def _auto_cutoff(lam: NDArray[np.float64], lambda_0: float, pressure: float) -> float:
@@ -194,20 +256,27 @@ def _auto_cutoff(lam: NDArray[np.float64], lambda_0: float, pressure: float) -> 
 
 
 def spectrum(packing: Packing, lambda_c: float | None = None, fourth: bool = True) -> Spectrum:
-    """Full spectrum of the dynamical matrix with regions and quartic modes (module doc)."""
+    """Full spectrum of the dynamical matrix with regions and quartic modes (module doc).
+
+    Bodies jammed with frozen orientations (Fig. 3a, :func:`~jamflow.shapes.counting.dofs_per_body`)
+    have the ``2N x 2N`` translational block as their dynamical matrix.
+    """
     model, q = shape_model_of(packing)
-    hess = model.hessian(q).toarray()
-    lam, vec = np.linalg.eigh(hess)
     n = model.n
+    dofs = 2 * n if dofs_per_body(packing) == 2 else 3 * n
+    hess = model.hessian(q).toarray()[:dofs, :dofs]
+    lam, vec = np.linalg.eigh(hess)
     # dofs are centres first, then orientations
     rot = np.sum(vec[2 * n:] ** 2, axis=0)
     lambda_0 = ZERO_EIGENVALUE_RTOL * float(max(abs(lam[-1]), abs(lam[0])))
     ev = model.evaluate(q)
     pressure = pressure_of(ev, packing.box)
-    if lambda_c is None:
-        lambda_c = _auto_cutoff(lam, lambda_0, pressure)
-    if not (np.isfinite(lambda_c) and lambda_c > 0.0):
+    if lambda_c is not None and not (np.isfinite(lambda_c) and lambda_c > 0.0):
         raise ValueError(f"--lambda-c must be positive and finite, got {lambda_c}")
+    if lambda_c is None:
+        if not lambda_0 > 0.0:
+            raise ValueError("the dynamical matrix is zero: no body touches another (not a jammed packing)")
+        lambda_c = _auto_cutoff(lam, lambda_0, pressure)
     region = np.where(np.abs(lam) <= lambda_0, 0, np.where(lam < lambda_c, 1, np.where(rot > 0.5, 2, 3)))
     d4 = np.full(lam.size, np.nan)
     if fourth:
@@ -215,18 +284,25 @@ def spectrum(packing: Packing, lambda_c: float | None = None, fourth: bool = Tru
         # one harmonic term per pair: U = (k/2) delta^2 (the shallowest term of a pair bounds this from above)
         h = fourth_derivative_step(float(np.sqrt(2.0 * energy.min() / model.k)) if energy.size else 0.0)
         for k in np.flatnonzero(region == 1):
-            d4[k] = fourth_derivative_along(model, q, vec[:, k], float(lam[k]), h)
+            v = np.zeros(q.size)
+            v[:dofs] = vec[:, k]
+            d4[k] = fourth_derivative_along(model, q, v, h, lambda x: contact_signature(model, x))
     return Spectrum(lam, region.astype(np.int64), rot, d4, lambda_0, float(lambda_c),
                     int(np.count_nonzero(region == 1)), int(np.count_nonzero(region == 0)), pressure,
-                    float(model.max_force(ev.gradient)))
+                    # frozen orientations carry unbalanced torques by design: only the forces count
+                    float(model.max_force(model.project(ev.gradient, q))))
 
 
 def quartic_check(packing: Packing, spec: Spectrum) -> dict:
-    """``N_c = N_c^0 - N_1`` with contacts counted once and twice (Sec. III B)."""
+    """``N_c = N_c^0 - N_1`` (Sec. III B) with contacts counted once and twice.
+
+    ``isostatic_count``, ``n_rattlers`` and ``n_sliders`` are those of the ``twice``
+    count (every contact point, as the dynamical matrix sees them).
+    """
     out = {}
     for mode in ("once", "twice"):
         c, *_ = count_constraints(packing, mode)
         out[f"n_contacts_{mode}"] = c.n_contacts
-        out["isostatic_count"] = c.isostatic_count
-    out["isostatic_minus_quartic"] = out["isostatic_count"] - spec.n_quartic
+    out.update(isostatic_count=c.isostatic_count, n_rattlers=c.n_rattlers, n_sliders=c.n_sliders,
+               isostatic_minus_quartic=c.isostatic_count - spec.n_quartic)
     return out

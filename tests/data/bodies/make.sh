@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Regenerates the one small packing per body kind that tests/test_stages.py runs every command on.
+# Regenerates the one small packing per body kind that tests/test_stages.py runs every command on,
+# and the packings of named cases.
 # Run from this directory with jamflow on the path: bash make.sh
 set -euo pipefail
 tmp=$(mktemp -d)
@@ -12,4 +13,13 @@ jamflow init-chains "$tmp/l0.nc" --d 2 --clusters 6 --cluster trimer --seed 1 --
 jamflow soft-jam "$tmp/l0.nc" linked_soft.nc --pressure 1e-3 --quiet
 jamflow init-shapes "$tmp/e0.nc" --shape ellipse --asphericity 1.1 --n 12 --seed 1 --quiet
 jamflow soft-jam "$tmp/e0.nc" shapes_soft.nc --pressure 1e-3 --quiet
+# 12 rigid trimers, fixed box, P0 = 1e-6: one trimer touches only through one sphere and swings
+# about it (tests/test_chains_swinging.py); seed 19 is the first of seeds 1-28 that gives one
+jamflow init-chains "$tmp/t0.nc" --d 2 --clusters 12 --cluster trimer --seed 19 --quiet
+jamflow soft-jam "$tmp/t0.nc" swinging_trimer_2d.nc --pressure 1e-6 --pressure-rtol 1e-3 --force-tol 1e-13 \
+    --delta-phi 1e-2 --quiet
+# the same, shear-stabilised: seed 5 is the first of seeds 1-5 that gives a swinging trimer
+jamflow init-chains "$tmp/t1.nc" --d 2 --clusters 12 --cluster trimer --seed 5 --quiet
+jamflow soft-jam "$tmp/t1.nc" swinging_trimer_2d_shear.nc --pressure 1e-6 --pressure-rtol 1e-3 --force-tol 1e-13 \
+    --delta-phi 1e-2 --shear-stabilize --quiet
 rm -r "$tmp"

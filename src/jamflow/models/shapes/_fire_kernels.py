@@ -96,7 +96,7 @@ def _max_generalized_sq(force, torque_arm):
 @njit(cache=True)
 def shape_fire(
     y, v, box_state, fire_state, fire_params, inv_mass,
-    offset, pi, pj, lam, family, params, bound, k, torque_arm,
+    offset, pi, pj, lam, family, params, bound, k, torque_arm, rotations,
     y_build, s_build, reach, skin, lengths, diameter,
     barostat, pressure0, volume_ref, q_scale, force_tol, pressure_rtol, max_steps, force, virial,
 ):
@@ -111,6 +111,8 @@ def shape_fire(
     offset, pi, pj, lam : the list (reference offsets) and its pairs' Perram–Wertheim multipliers.
     family, params, bound, k : family code, per-body pair parameters, bounding radii, spring constant.
     torque_arm : length turning a torque into a force in the convergence test.
+    rotations : bool
+        False freezes the orientations (torques removed from the forces, so they never move).
     y_build, s_build, reach, skin : the list's build centres (reference), scale, reach and skin.
     lengths, diameter : sides of an orthogonal reference box (empty: a sheared box) and
         bounding diameters, for lists rebuilt inside the loop.
@@ -164,6 +166,8 @@ def shape_fire(
             s_build = s
             builds += 1
         energy, n_contact = shape_forces(y, s, offset, pi, pj, family, params, bound, lam, k, force, virial)
+        if not rotations:
+            force[:, 2] = 0.0
         volume = volume_ref * s**d
         pressure = (virial[0, 0] + virial[1, 1]) / (d * volume)
         fmax2 = _max_generalized_sq(force, torque_arm)

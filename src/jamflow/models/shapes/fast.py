@@ -27,7 +27,8 @@ class ShapeFire:
 
     The steps of the flat-vector FIRE (:class:`~jamflow.minimize.fire._ModelFire`) on
     the model, in its mass metric, with the family's pair kernel and, for ellipses,
-    warm-started Perram–Wertheim solves. Fixed box, or an isotropic barostat
+    warm-started Perram–Wertheim solves; frozen orientations (``model.rotations``
+    false) lose their torques as in :meth:`ShapeModel.project`. Fixed box, or an isotropic barostat
     (``pressure0``: enthalpy ``U + P0 V``, centres scaled with the box, shapes not;
     the box mode's scale ``q_s = sqrt(N) <D_b>`` as for spheres). The loop rebuilds
     its bounding-circle list itself in an orthogonal box and returns here for the
@@ -78,9 +79,9 @@ class ShapeFire:
         pi, pj, offset, lam = self.pairs
         status, n, _, _, _, _, builds, pi, pj, offset, lam, self.s_build = _loop.shape_fire(
             self.y, self.v, self.box_state, self.fire_state, self.fparams, self.inv_mass, offset, pi, pj, lam,
-            self.family, m.params, self.bound, m.k, m.torque_arm, self.y_build, self.s_build, m.nlist.reach,
-            m.nlist.skin, self.lengths, m.bounding_diameter, self.barostat, self.pressure0, m.box.volume,
-            self.q_scale, float(force_tol), self.pressure_rtol, int(budget), self.force, self.virial,
+            self.family, m.params, self.bound, m.k, m.torque_arm, m.rotations, self.y_build, self.s_build,
+            m.nlist.reach, m.nlist.skin, self.lengths, m.bounding_diameter, self.barostat, self.pressure0,
+            m.box.volume, self.q_scale, float(force_tol), self.pressure_rtol, int(budget), self.force, self.virial,
         )
         self.pairs = (pi, pj, offset, lam)
         self.inline_builds += builds
@@ -94,7 +95,7 @@ class ShapeFire:
         ev = model.evaluate(q)
         return MinimizeResult(
             position=config, box=model.box, energy=ev.energy, pressure=pressure_of(ev, model.box),
-            max_force=model.max_force(ev.gradient), n_contacts=ev.n_contacts, steps=steps,
+            max_force=model.max_force(model.project(ev.gradient, q)), n_contacts=ev.n_contacts, steps=steps,
             converged=status == _fire_kernels.CONVERGED,
             rebuilds=self.model.nlist.builds - self.builds0 + self.inline_builds, evaluations=steps + 2,
         )

@@ -110,13 +110,15 @@ class ShapeModel(WithoutFastPaths):
         Mass of every body [mass].
     nlist : NeighborList, optional
         Verlet list on bounding diameters (reused by :meth:`rescaled`).
+    rotations : bool
+        False freezes every orientation (VanderWerf et al. Fig. 3a, non-rotating
+        circulo-lines): :meth:`project` removes the torques from forces and velocities.
     """
 
-    constrained = False
     box_dofs = True
 
     def __init__(self, box: Box, shapes: ShapeTable, shape_index: ArrayLike, k: float = 1.0,
-                 mass: float = 1.0, nlist: NeighborList | None = None) -> None:
+                 mass: float = 1.0, nlist: NeighborList | None = None, rotations: bool = True) -> None:
         if box.d != 2:
             raise ValueError(f"shaped bodies are 2D; the box has d = {box.d}")
         if not (np.isfinite(k) and k > 0.0 and np.isfinite(mass) and mass > 0.0):
@@ -140,6 +142,8 @@ class ShapeModel(WithoutFastPaths):
         self.torque_arm = float(self.bounding_diameter.mean())
         self.time_unit = self.torque_arm * np.sqrt(self.mass / (self.k * self.torque_arm**2))
         self._pair = _PAIR[self.family]
+        self.rotations = bool(rotations)
+        self.constrained = not self.rotations
 
     @property
     def neighbor_builds(self) -> int:
@@ -258,7 +262,12 @@ class ShapeModel(WithoutFastPaths):
                 "r": rows[:, 8], "delta": rows[:, 9]}
 
     def project(self, g: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
-        return g
+        """``g`` itself, or with frozen orientations a copy without its orientation components."""
+        if self.rotations:
+            return g
+        out = np.array(g, dtype=np.float64)
+        out[2 * self.n:] = 0.0
+        return out
 
     def reproject(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         return q
@@ -291,5 +300,6 @@ class ShapeModel(WithoutFastPaths):
         """The model in the box scaled by ``factor`` (shapes unchanged), centres moved affinely."""
         c = np.array(configuration, dtype=np.float64)
         c[:, :2] *= factor
-        model = ShapeModel(self.box.scaled(factor), self.shapes, self.shape_index, self.k, self.mass, self.nlist)
+        model = ShapeModel(self.box.scaled(factor), self.shapes, self.shape_index, self.k, self.mass, self.nlist,
+                           self.rotations)
         return model, c

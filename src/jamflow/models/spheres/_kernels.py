@@ -5,11 +5,19 @@ and ``s`` an isotropic scale factor (``s = 1`` and no box degree of freedom for
 fixed-box minimisation). The pair vector of pair ``p`` is
 ``s * (y[j] - y[i] + offset[p])`` with ``offset[p] = h_ref @ n_p`` the periodic image
 fixed when the neighbour list was built. All kernels are single-threaded and cached.
+
+The minimisers take their inputs in a few records (NamedTuples, which numba passes as
+their fields): the neighbour list (:class:`PairList`), when it was built
+(:class:`ListBuild`), the potential (:class:`Potential`), the enthalpy terms
+(:class:`Enthalpy`) and the stopping rule (:class:`Stop`).
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
+from numpy.typing import NDArray
 
 from ..._numba import njit
 from ...minimize._fire_kernels import (
@@ -27,6 +35,54 @@ from ...minimize._fire_kernels import (
     _mixed,
 )
 from ...neighbors._verlet_kernels import _inline_list, _list_buffers, _needs_rebuild
+
+
+class PairList(NamedTuple):
+    """A neighbour list as the kernels read it: per pair the image offset ``offset``
+    (P, d) [reference-box lengths], the particles ``pi``, ``pj`` (P,) and the contact
+    distance ``sigma`` (P,)."""
+
+    offset: NDArray[np.float64]
+    pi: NDArray[np.int64]
+    pj: NDArray[np.int64]
+    sigma: NDArray[np.float64]
+
+
+class ListBuild(NamedTuple):
+    """When the list is due: the reference coordinates ``y_build`` (N, d) it was built
+    at, its reach and skin [length], and the ``slack`` [length] its build already used."""
+
+    y_build: NDArray[np.float64]
+    reach: float
+    skin: float
+    slack: float
+
+
+class Potential(NamedTuple):
+    """The pair potential ``epsilon / w (1 - r / sigma)^w``: ``epsilon`` [energy] and the exponent ``w``."""
+
+    epsilon: float
+    exponent: float
+
+
+class Enthalpy(NamedTuple):
+    """The enthalpy ``H = U + P0 V`` of a free box: whether it is minimised (``on``; fixed
+    box otherwise), the pressure ``pressure0``, the reference volume ``volume_ref`` and the
+    box coordinate's scale ``q_scale`` [length]."""
+
+    on: bool
+    pressure0: float
+    volume_ref: float
+    q_scale: float
+
+
+class Stop(NamedTuple):
+    """When a run stops: the largest force ``force_tol`` [energy / length], the relative
+    tolerance ``rtol`` of the pressure (or stress) to ``P0``, and the step budget ``max_steps``."""
+
+    force_tol: float
+    rtol: float
+    max_steps: int
 
 
 @njit(cache=True, inline="always")
@@ -153,27 +209,28 @@ def pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial=
 
 
 @njit(cache=True)
-def fire(
-    y, v, box_state, fire_state, fire_params,
-    offset, pi, pj, sigma, eps, w,
-    y_build, s_build, reach, skin, slack,
-    barostat, pressure0, volume_ref, q_scale,
-    force_tol, pressure_rtol, max_steps, force, virial,
-    lengths, diameter,
-):
+def fire(y, v, box_state, fire_state, fire_params, pairs, potential, built, s_build, enthalpy, stop,
+         force, virial, lengths, diameter):
     """FIRE 2.0 (Guénolé et al. 2020, Algorithm 2; Bitzek et al. 2006) with unit masses.
 
     Parameters (arrays are updated in place so a run can resume after a rebuild)
     ----------
     y, v : (N, d) reference-box coordinates and velocities.
     box_state : (3,) ``[q, v_q, s]`` with ``s = exp(q / q_scale)`` the box scale
-        (only evolves when ``barostat``).
+        (only evolves when ``enthalpy.on``).
     fire_state : (4,) ``[dt, alpha, n_positive, steps]``, ``steps`` taken by the run before this call.
     fire_params : (8,) ``[dt_max, dt_min, f_inc, f_dec, alpha0, f_alpha, n_delay,
         initial_delay]``.
-    barostat : bool
-        Minimise the enthalpy ``H = U + P0 V`` with ``q`` as a degree of freedom, whose
-        generalised force is ``d V (P - P0) / q_scale``.
+    pairs : PairList
+    potential : Potential
+    built : ListBuild
+        With ``s_build`` the box scale at the build.
+    enthalpy : Enthalpy
+        With ``on``, minimise the enthalpy ``H = U + P0 V`` with ``q`` as a degree of
+        freedom, whose generalised force is ``d V (P - P0) / q_scale``.
+    stop : Stop
+        ``rtol`` bounds ``|P - P0| / P0`` (with ``enthalpy.on``).
+    force, virial : (N, d), (d, d) work arrays, the last evaluation's on return.
     lengths : (d,) or (0,)
         Sides of an orthogonal reference box: the list is rebuilt inside the loop
         (:func:`_inline_list`) while ``reach`` stays below half the scaled sides; empty
@@ -189,6 +246,11 @@ def fire(
         last one's pairs, integer images, build positions (reference coordinates) and
         scale (the inputs when ``builds`` is 0).
     """
+    offset, pi, pj, sigma = pairs
+    eps, w = potential
+    y_build, reach, skin, slack = built
+    barostat, pressure0, volume_ref, q_scale = enthalpy
+    force_tol, pressure_rtol, max_steps = stop
     d = y.shape[1]
     dt, alpha, npos = fire_state[0], fire_state[1], int(fire_state[2])
     # steps of the run before this call: the initial delay counts from the run's start,
@@ -270,19 +332,21 @@ def fire(
 
 
 @njit(cache=True)
-def steepest_descent(
-    y, offset, pi, pj, sigma, eps, w, y_build, reach, skin, slack,
-    dt, force_tol, max_steps, force, virial, energies,
-):
+def steepest_descent(y, pairs, potential, built, dt, stop, force, virial, energies):
     """Overdamped integrator ``dx/dt = -grad U`` (Lerner et al. Eq. 31, xi_0 = 1), fixed step.
 
-    Stops when the largest per-particle ``|grad U|`` falls below ``force_tol``.
-    ``energies`` (K,) receives the energy before each of the first K steps.
+    Stops when the largest per-particle ``|grad U|`` falls below ``stop.force_tol``
+    (a fixed box: ``stop.rtol`` is not used). ``energies`` (K,) receives the energy
+    before each of the first K steps.
 
     Returns
     -------
     status, steps, energy, n_contact, max_force_sq
     """
+    offset, pi, pj, sigma = pairs
+    eps, w = potential
+    y_build, reach, skin, slack = built
+    force_tol, _, max_steps = stop
     energy, n_contact = pair_forces(y, 1.0, offset, pi, pj, sigma, eps, w, force, virial, False)
     fmax2 = _max_force_sq(force)
     status = MAX_STEPS
@@ -357,25 +421,26 @@ def _box_force(virial, A, volume, pressure0, q_scale, out):
 
 
 @njit(cache=True)
-def fire_stress(
-    y, v, A, vA, fire_state, fire_params,
-    offset, pi, pj, sigma, eps, w,
-    y_build, A_build_inv, reach, skin, slack,
-    pressure0, volume_ref, q_scale,
-    force_tol, stress_tol, max_steps, force, virial,
-):
+def fire_stress(y, v, A, vA, fire_state, fire_params, pairs, potential, built, A_build_inv, enthalpy, stop,
+                force, virial):
     """FIRE 2.0 on ``H = U + P0 V`` with centres and the full upper-triangular box.
 
     Centres are ``x = A y`` and the box ``A h_ref``; the box degrees of freedom are
     ``q_scale A_ab`` (a <= b) with generalised forces ``(W - P0 V 1) A^-T / q_scale``
     (``W = sum f R R^T / r``), so at the minimum the stress tensor is ``-P0 1``.
-    Converged when ``max_i |F_i| <= force_tol`` and
-    ``max_ab |W_ab / V - P0 delta_ab| <= stress_tol * P0``.
+    Converged when ``max_i |F_i| <= stop.force_tol`` and
+    ``max_ab |W_ab / V - P0 delta_ab| <= stop.rtol * P0``. ``A_build_inv`` is the
+    inverse of ``A`` at the list's build (``built``); ``enthalpy.on`` is not read.
 
     Returns
     -------
     status, steps, energy, n_contact, max_force_sq, max_stress_error
     """
+    offset, pi, pj, sigma = pairs
+    eps, w = potential
+    y_build, reach, skin, slack = built
+    _, pressure0, volume_ref, q_scale = enthalpy
+    force_tol, stress_tol, max_steps = stop
     d = y.shape[1]
     dt, alpha, npos = fire_state[0], fire_state[1], int(fire_state[2])
     # steps of the run before this call: the initial delay counts from the run's start,

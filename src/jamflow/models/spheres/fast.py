@@ -24,8 +24,8 @@ __all__ = ["SPATIAL_SORT_MIN_N", "SphereFire", "SphereFireFullBox", "steepest_de
 
 #: Sphere FIRE runs of at least this many spheres work on them sorted by cell (as
 #: LAMMPS's ``atom_modify sort``) and return them in the caller's order: the pair and
-#: particle arrays are then walked nearly in memory order (2D N = 16384: about 4 % less
-#: time per force evaluation; 3D N = 4096: no measurable change; docs/energy-models.md).
+#: particle arrays are then walked nearly in memory order
+#: (measured: docs/notes/energy-models.md#constants-of-the-neighbour-search).
 #: The order is fixed for the run, taken from the start (a minimisation moves spheres little), so a
 #: run stays deterministic and independent of the skin; its sums differ from the
 #: caller-order run's by round-off. Smaller systems fit the cache and keep the
@@ -61,7 +61,8 @@ class SphereFire:
             self.nlist = model.nlist
         else:
             skin = model.nlist.requested_skin
-            self.nlist = NeighborList(model.diameter[self.order], None if np.isnan(skin) else skin)
+            self.nlist = NeighborList(model.diameter[self.order], None if np.isnan(skin) else skin,
+                                      model.nlist.room_share)
             x = x[self.order]
         self.builds0 = self.nlist.builds
         unit = model.time_unit
@@ -93,11 +94,11 @@ class SphereFire:
         affine, slack = nlist.affine_reference(current)
         status, n, *self.last, builds, i, j, image, y_build, s_build = _kernels.fire(
             self.y, self.v, self.box_state, self.fire_state, self.fparams,
-            nlist.image @ h_ref.matrix.T, nlist.i, nlist.j, nlist.sigma,
-            potential.epsilon, potential.exponent,
-            affine / s, s, nlist.reach, nlist.skin, slack,
-            self.barostat, self.pressure0, h_ref.volume, self.q_scale,
-            float(force_tol), self.pressure_rtol, int(budget), self.force, self.virial,
+            _kernels.PairList(nlist.image @ h_ref.matrix.T, nlist.i, nlist.j, nlist.sigma),
+            _kernels.Potential(potential.epsilon, potential.exponent),
+            _kernels.ListBuild(affine / s, nlist.reach, nlist.skin, slack), s,
+            _kernels.Enthalpy(self.barostat, self.pressure0, h_ref.volume, self.q_scale),
+            _kernels.Stop(float(force_tol), self.pressure_rtol, int(budget)), self.force, self.virial,
             self.lengths, nlist.diameter,
         )
         if builds:
@@ -152,10 +153,12 @@ class SphereFireFullBox:
         affine, slack = nlist.affine_reference(current)
         A_inv = np.linalg.inv(A)
         status, n, *self.last = _kernels.fire_stress(
-            self.y, self.v, A, self.vA, self.fire_state, self.fparams, offset, nlist.i, nlist.j, nlist.sigma,
-            potential.epsilon, potential.exponent, affine @ A_inv.T, A_inv, nlist.reach, nlist.skin,
-            slack, self.pressure0, h_ref.volume, self.q_scale, float(force_tol), self.stress_rtol,
-            int(budget), self.force, self.virial,
+            self.y, self.v, A, self.vA, self.fire_state, self.fparams,
+            _kernels.PairList(offset, nlist.i, nlist.j, nlist.sigma),
+            _kernels.Potential(potential.epsilon, potential.exponent),
+            _kernels.ListBuild(affine @ A_inv.T, nlist.reach, nlist.skin, slack), A_inv,
+            _kernels.Enthalpy(True, self.pressure0, h_ref.volume, self.q_scale),
+            _kernels.Stop(float(force_tol), self.stress_rtol, int(budget)), self.force, self.virial,
         )
         return status, n
 
@@ -217,9 +220,10 @@ def steepest_descent(
         affine, slack = nlist.affine_reference(box)
         buf = np.full(max(record - steps, 1), np.nan)
         status, n, energy, n_contacts, fmax2 = _kernels.steepest_descent(
-            y, nlist.offsets(box), nlist.i, nlist.j, nlist.sigma,
-            potential.epsilon, potential.exponent, affine, nlist.reach, nlist.skin, slack,
-            float(dt), float(force_tol), int(max_steps - steps), force, virial, buf,
+            y, _kernels.PairList(nlist.offsets(box), nlist.i, nlist.j, nlist.sigma),
+            _kernels.Potential(potential.epsilon, potential.exponent),
+            _kernels.ListBuild(affine, nlist.reach, nlist.skin, slack), float(dt),
+            _kernels.Stop(float(force_tol), 0.0, int(max_steps - steps)), force, virial, buf,
         )
         if record > steps:
             traces.append(buf[: min(n + 1, record - steps)] if status != _fire_kernels.REBUILD else buf[:n])

@@ -2,8 +2,11 @@
 
 A checkpoint is a netCDF file (written atomically with :func:`jamflow.io.write_dataset`)
 holding the complete dynamical state at a synchronisation point — positions, box,
-Verlet list with its images and accumulated displacements, contact network, dt-rule
-state, self-propulsion forces and generator state — plus everything recorded so far.
+Verlet list with its images, the motion since its build (:class:`.skin.SkinBudget`),
+contact network, dt-rule state, self-propulsion forces and generator state — plus
+everything recorded so far. The list is restored as saved, built at the saved
+positions and box: checkpoints are written at synchronisation points, right after a
+rebuild.
 Synchronisation points happen every ``sync_every`` steps whether or not a checkpoint
 is written, and the solution is recomputed from the state there, so a resumed run
 repeats the uninterrupted one bit for bit.
@@ -17,11 +20,14 @@ import os
 import numpy as np
 import xarray as xr
 
+from ...box import Box
 from ...io import new_dataset_attrs, read_dataset, write_dataset
-from .collisions import NeighborList
+from ...neighbors.verlet import NeighborList
+from .collisions import FLOW_ROOM_SHARE
 from .driving import Drive
 from .integrate import FlowOptions, FlowState, Integrator
 from .recorder import SERIES, Recorder
+from .skin import SkinBudget
 
 __all__ = ["check_binding", "load_checkpoint", "save_checkpoint"]
 
@@ -38,7 +44,7 @@ def save_checkpoint(path: str | os.PathLike, integ: Integrator, rec: Recorder,
     that only the same run can resume from the file.
     """
     st = integ.state
-    nl = st.nl
+    nl, budget = st.nl, st.budget
     ev = np.array(st.events, dtype=np.float64).reshape(-1, 5)
     snaps = rec.snapshots
     d = integ.d
@@ -47,9 +53,9 @@ def save_checkpoint(path: str | os.PathLike, integ: Integrator, rec: Recorder,
         "h": _v(("spatial", "lattice_vector"), st.h, "box matrix [lambda]"),
         "radius": _v(("particle",), st.radius, "radii [lambda]"),
         "nl_pairs": _v(("pair", "two"), nl.pairs, "neighbour-list pairs"),
-        "nl_images": _v(("pair", "spatial"), nl.images, "periodic images of listed pairs"),
+        "nl_images": _v(("pair", "spatial"), nl.image.astype(np.int64), "periodic images of listed pairs"),
         "nl_sigma": _v(("pair",), nl.sigma, "contact distances [lambda]"),
-        "nl_displacement": _v(("particle", "spatial"), nl.displacement, "non-affine displacement since list build"),
+        "nl_displacement": _v(("particle", "spatial"), budget.displacement, "non-affine displacement since list build"),
         "contact": _v(("pair",), st.contact.astype(np.int8), "pair is a contact"),
         "permanent": _v(("pair",), st.permanent.astype(np.int8), "pair is a permanent contact"),
         "events": _v(("event", "event_field"), ev, "events (strain, time, i, j, kind)"),
@@ -67,7 +73,7 @@ def save_checkpoint(path: str | os.PathLike, integ: Integrator, rec: Recorder,
         dv["snap_pairs"] = _v(("snap_contact", "two"), np.concatenate([s["pairs"] for s in snaps]).reshape(-1, 2), "snapshot contacts")
         dv["snap_force"] = _v(("snap_contact",), np.concatenate([s["force"] for s in snaps]), "snapshot forces")
     attrs = {
-        "nl_cutoff": nl.cutoff, "nl_skin": nl.skin, "nl_strain_norm": nl.strain_norm,
+        "nl_cutoff": nl.reach, "nl_skin": nl.skin, "nl_strain_norm": budget.strain_norm,
         "time": st.time, "strain": st.strain, "step": st.step, "event_interval": st.event_interval,
         "last_event_time": st.last_event_time, "jammed": int(st.jammed), "kappa": st.kappa,
         "next_snapshot": rec.next_snapshot, "d": d, "drive_mode": integ.drive.mode,
@@ -119,13 +125,16 @@ def load_checkpoint(path: str | os.PathLike, drive: Drive, options: FlowOptions,
     ds = read_dataset(path, "checkpoint")
     a = ds.attrs
     check_binding(path, a, binding)
-    nl = NeighborList(
-        ds["nl_pairs"].values.astype(np.int64), ds["nl_images"].values.astype(np.int64),
-        ds["nl_sigma"].values, float(a["nl_cutoff"]), float(a["nl_skin"]),
-        ds["nl_displacement"].values.copy(), float(a["nl_strain_norm"]),
-    )
+    x, h, radius = ds["x"].values.copy(), ds["h"].values.copy(), ds["radius"].values.copy()
+    nl = NeighborList(2.0 * radius, options.skin, room_share=FLOW_ROOM_SHARE)
+    pairs = ds["nl_pairs"].values.astype(np.int64)
+    nl.restore(pairs[:, 0], pairs[:, 1], ds["nl_images"].values.astype(np.float64), x, Box(h),
+               float(a["nl_skin"]), float(a["nl_cutoff"]))
+    if not np.array_equal(nl.sigma, ds["nl_sigma"].values):
+        raise ValueError(f"checkpoint {path}: the contact distances of its neighbour list disagree with its radii")
+    budget = SkinBudget(ds["nl_displacement"].values.copy(), float(a["nl_strain_norm"]))
     st = FlowState(
-        ds["x"].values.copy(), ds["h"].values.copy(), ds["radius"].values.copy(), nl,
+        x, h, radius, nl, budget,
         ds["contact"].values.astype(bool), ds["permanent"].values.astype(bool),
         time=float(a["time"]), strain=float(a["strain"]), step=int(a["step"]),
         event_interval=float(a["event_interval"]), last_event_time=float(a["last_event_time"]),

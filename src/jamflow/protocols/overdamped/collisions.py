@@ -7,25 +7,28 @@ follows ``dh/dt = E h``, so a pair's separation with fixed periodic image m move
 smallest root of ``|R0 + t W|^2 = sigma^2`` — the ballistic prediction of
 event-driven hard spheres (Allen & Tildesley), restricted to pairs not in contact.
 
-Pairs come from a Verlet list (``jamflow.neighbors.pairs.verlet_pairs``, the pair search of
-the soft-sphere lists: compiled cell list, O(N)) with cutoff ``sigma_max + skin``; the
-list stays valid while the largest possible change of any listed separation stays
-below the skin (see :class:`NeighborList`).
+Pairs come from the Verlet list of every model (:class:`jamflow.neighbors.verlet.NeighborList`,
+pairs closer than ``sigma_ij + skin``, compiled cell list, O(N)); the list stays valid
+while the largest possible change of any listed separation stays below the skin
+(:class:`.skin.SkinBudget`).
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..._numba import njit
 from ...box import Box
-from ...neighbors.pairs import verlet_pairs
-from .network import max_row_norm, spectral_norm
+from ...neighbors.verlet import NeighborList
 
-__all__ = ["next_collision", "NeighborList", "build_neighbor_list", "images_of"]
+__all__ = ["FLOW_ROOM_SHARE", "next_collision", "build_neighbor_list", "images_of"]
+
+#: Largest share of the room ``min(widths) / 2 - max D`` the integrator's list gives
+#: its skin (:class:`~jamflow.neighbors.verlet.NeighborList` ``room_share``). Unlike a
+#: minimiser's, the integrator's skin is part of its trajectory: a step cut short by
+#: the list horizon (:meth:`.skin.SkinBudget.horizon`) ends on a rebuild.
+FLOW_ROOM_SHARE: float = 0.9
 
 
 @njit(cache=True)
@@ -78,7 +81,7 @@ def next_collision(
     x: NDArray[np.float64],
     h: NDArray[np.float64],
     pairs: NDArray[np.int64],
-    images: NDArray[np.int64],
+    images: NDArray[np.float64],
     sigma: NDArray[np.float64],
     skip: NDArray[np.bool_],
     velocity: NDArray[np.float64],
@@ -93,8 +96,10 @@ def next_collision(
         Centres [lambda].
     h : ndarray, shape (d, d)
         Box matrix [lambda].
-    pairs, images : ndarray of int64, shapes (P, 2), (P, d)
-        Neighbour list with fixed periodic images.
+    pairs : ndarray of int64, shape (P, 2)
+        Listed pairs (:attr:`NeighborList.pairs`).
+    images : ndarray, shape (P, d)
+        Their fixed periodic images, integer-valued lattice vectors (:attr:`NeighborList.image`).
     sigma : ndarray, shape (P,)
         Contact distances [lambda].
     skip : ndarray of bool, shape (P,)
@@ -120,77 +125,27 @@ def next_collision(
     return float(t), int(k)
 
 
-def images_of(x: NDArray[np.float64], h: NDArray[np.float64], pairs: NDArray[np.int64], dx: NDArray[np.float64]) -> NDArray[np.int64]:
-    """Integer lattice vectors m with ``dx = x_j - x_i + h m``, shape (P, d)."""
+def images_of(x: NDArray[np.float64], h: NDArray[np.float64], pairs: NDArray[np.int64],
+              dx: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Integer-valued lattice vectors m with ``dx = x_j - x_i + h m``, shape (P, d)."""
     raw = dx - (x[pairs[:, 1]] - x[pairs[:, 0]])
-    return np.rint(raw @ np.linalg.inv(h).T).astype(np.int64)
-
-
-@dataclass
-class NeighborList:
-    """Verlet list of near pairs with fixed periodic images.
-
-    Attributes
-    ----------
-    pairs : ndarray of int64, shape (P, 2)
-        ``i < j``, lexicographically sorted.
-    images : ndarray of int64, shape (P, d)
-    sigma : ndarray, shape (P,)
-        Contact distances ``d_i + d_j`` (radii) [lambda].
-    cutoff : float
-        List cutoff [lambda].
-    skin : float
-        ``cutoff - max sigma`` [lambda].
-    displacement : ndarray, shape (N, d)
-        Non-affine displacement accumulated since the build [lambda].
-    strain_norm : float
-        Accumulated ``integral |E|_2 dt`` since the build (affine change bound).
-    """
-
-    pairs: NDArray[np.int64]
-    images: NDArray[np.int64]
-    sigma: NDArray[np.float64]
-    cutoff: float
-    skin: float
-    displacement: NDArray[np.float64]
-    strain_norm: float = 0.0
-
-    def advance(self, velocity: NDArray[np.float64], gradient: NDArray[np.float64], dt: float) -> None:
-        """Account for one straight-line step of length ``dt``."""
-        self.displacement += dt * velocity
-        self.strain_norm += dt * spectral_norm(gradient)
-
-    @property
-    def valid(self) -> bool:
-        """Whether every pair closer than sigma is still guaranteed to be listed."""
-        move = 2.0 * max_row_norm(self.displacement)
-        # an affine deformation of size a changes |R| <= cutoff by at most ~a * cutoff
-        move += self.strain_norm * (1.0 + self.strain_norm) * self.cutoff
-        return move < self.skin
-
-    def index_of(self, pairs: NDArray[np.int64], n: int) -> NDArray[np.int64]:
-        """Positions of ``pairs`` (rows i < j) in the list; -1 where absent."""
-        key = self.pairs[:, 0] * n + self.pairs[:, 1]
-        q = pairs[:, 0] * n + pairs[:, 1]
-        pos = np.searchsorted(key, q)
-        pos = np.minimum(pos, len(key) - 1) if len(key) else pos
-        found = (len(key) > 0) & (key[pos] == q) if len(key) else np.zeros(len(q), bool)
-        return np.where(found, pos, -1)
+    return np.rint(raw @ np.linalg.inv(h).T)
 
 
 def build_neighbor_list(x: NDArray[np.float64], box: Box, radius: NDArray[np.float64], skin: float) -> NeighborList:
-    """Verlet list of pairs closer than ``2 max(radius) + skin``.
+    """The integrator's Verlet list: pairs closer than ``d_i + d_j + skin`` at ``x`` in ``box``.
 
-    The skin is reduced if needed to keep the cutoff below half the smallest box width.
+    Parameters
+    ----------
+    x : ndarray, shape (N, d)
+        Centres [lambda].
+    box : Box
+    radius : ndarray, shape (N,)
+        Radii d_i [lambda] (contact at ``r_ij = d_i + d_j``).
+    skin : float
+        Requested skin [lambda]; at most :data:`FLOW_ROOM_SHARE` of the room left by
+        the largest particles in ``box``.
     """
-    smax = 2.0 * float(radius.max())
-    half = 0.5 * float(np.min(box.widths))
-    cutoff = min(smax + skin, smax + 0.9 * (half - smax))
-    if cutoff <= smax:
-        raise ValueError("box too small for the largest particles (2 * diameter >= box width)")
-    # every pair within the cutoff: the Verlet pairs of spheres all of diameter smax
-    i, j, image = verlet_pairs(x, box, np.full(len(x), smax), cutoff - smax)
-    pairs = np.stack([i, j], axis=1).astype(np.int64)
-    images = image.astype(np.int64)
-    sigma = radius[pairs[:, 0]] + radius[pairs[:, 1]]
-    return NeighborList(pairs, images, sigma, cutoff, cutoff - smax, np.zeros_like(x))
+    nl = NeighborList(2.0 * np.asarray(radius, dtype=np.float64), skin, room_share=FLOW_ROOM_SHARE)
+    nl.build(x, box)
+    return nl

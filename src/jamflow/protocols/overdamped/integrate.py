@@ -28,9 +28,10 @@ import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 
 from ...box import Box, lattice_volume
+from ...neighbors.verlet import NeighborList
 from ...state.packing import sphere_volume
 from ...tolerances import CONTACT_DRIFT_TOL, REWIRE_REL_TOL
-from .collisions import NeighborList, build_neighbor_list, images_of, next_collision
+from .collisions import build_neighbor_list, images_of, next_collision
 from .driving import Drive
 from .jamming import constrained_subset, self_stress
 from .network import (
@@ -41,7 +42,6 @@ from .network import (
     has_negative,
     max_relative_error,
     max_relative_rate,
-    max_row_norm,
     pair_normals,
     pair_vectors,
     pair_velocities,
@@ -51,6 +51,7 @@ from .network import (
     tangent_velocities,
 )
 from .rewiring import Evaluation, rewire
+from .skin import SkinBudget
 from .solver import (
     COND_LIMIT,
     FactorCache,
@@ -156,6 +157,9 @@ class FlowState:
     radius : ndarray, shape (N,)
         Radii d_i [lambda] (contact at ``r_ij = d_i + d_j``).
     nl : NeighborList
+        The Verlet list (:func:`.collisions.build_neighbor_list`).
+    budget : SkinBudget
+        Motion since the list's build (its validity bound).
     contact : ndarray of bool, shape (P,)
         Which listed pairs form the contact network.
     permanent : ndarray of bool, shape (P,)
@@ -178,6 +182,7 @@ class FlowState:
     h: NDArray[np.float64]
     radius: NDArray[np.float64]
     nl: NeighborList
+    budget: SkinBudget
     contact: NDArray[np.bool_]
     permanent: NDArray[np.bool_]
     time: float = 0.0
@@ -241,17 +246,18 @@ class Integrator:
         box = Box(h).reduced
         x = box.wrap(x)
         nl = build_neighbor_list(x, box, radius, options.skin)
-        contact = np.zeros(len(nl.pairs), bool)
-        permanent = np.zeros(len(nl.pairs), bool)
-        n = len(x)
+        contact = np.zeros(len(nl.i), bool)
+        permanent = np.zeros(len(nl.i), bool)
         for arr, mask in ((contacts, contact), (drive.permanent, permanent)):
             if arr is not None and len(arr):
-                pos = nl.index_of(np.sort(np.asarray(arr, np.int64), axis=1), n)
+                pos = nl.index_of(np.sort(np.asarray(arr, np.int64), axis=1))
                 if np.any(pos < 0):
-                    raise ValueError("a given contact is farther apart than the neighbour-list cutoff")
+                    raise ValueError("a given contact is farther apart than its contact distance plus the "
+                                     "neighbour-list skin")
                 mask[pos] = True
         contact |= permanent
-        state = FlowState(x, np.array(box.matrix), np.asarray(radius, float), nl, contact, permanent)
+        state = FlowState(x, np.array(box.matrix), np.asarray(radius, float), nl, SkinBudget.fresh(x), contact,
+                          permanent)
         state.event_interval = options.dt_max * options.steps_per_event
         integ = cls.__new__(cls)
         integ._setup(state, drive, options)
@@ -266,14 +272,14 @@ class Integrator:
         return integ
 
     # ------------------------------------------------------------- network algebra
-    def _listed(self, idx: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    def _listed(self, idx: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
         """Pairs (k, 2) and images (k, d) of the listed pairs at positions ``idx``."""
-        # np.take: numpy's fancy and boolean indexing of (P, 2) and (P, d) rows took 20 us
-        # each at N = 1024, take 2 us
+        # np.take: ten times faster than fancy indexing of these rows
+        # (measured: docs/notes/overdamped-constants.md)
         nl = self.state.nl
-        return np.take(nl.pairs, idx, axis=0), np.take(nl.images, idx, axis=0)
+        return np.take(nl.pairs, idx, axis=0), np.take(nl.image, idx, axis=0)
 
-    def _pairs(self, mask: NDArray[np.bool_]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    def _pairs(self, mask: NDArray[np.bool_]) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
         """Pairs and images of the sub-network ``mask`` (memoised on the last mask; read-only)."""
         key = (mask.tobytes(), self._nl_version, id(self.state.nl))
         if self._pairs_key != key:
@@ -329,7 +335,7 @@ class Integrator:
             self._count = constrained_subset(self.n, self.d, pairs)
         return self._count
 
-    def _drive_rates(self, pairs: NDArray[np.int64], images: NDArray[np.int64]) -> NDArray[np.float64]:
+    def _drive_rates(self, pairs: NDArray[np.int64], images: NDArray[np.float64]) -> NDArray[np.float64]:
         """``S V_aff / xi0 + S F_ext`` on a network (for the self-stress sign)."""
         R = pair_vectors(self.state.x, self.state.h, pairs, images)
         E = self.base_gradient
@@ -365,7 +371,7 @@ class Integrator:
     def velocity_scale(self, sol: Solution) -> float:
         """Scale against which pair rates are judged zero [lambda / time]."""
         u = float(np.max(np.abs(sol.velocity), initial=0.0))
-        return max(u, spectral_norm(sol.gradient) * self.state.nl.cutoff, 1e-300)
+        return max(u, spectral_norm(sol.gradient) * self.state.nl.reach, 1e-300)
 
     def _rewire(self, candidate: NDArray[np.bool_]) -> None:
         res = rewire(candidate, self.evaluate, self.rates, self.velocity_scale,
@@ -388,7 +394,7 @@ class Integrator:
         broken = np.flatnonzero(old & ~new)
         for idx, kind in ((made, EVENT_MADE), (broken, EVENT_BROKEN)):
             for k in idx:
-                st.events.append((st.strain, st.time, int(st.nl.pairs[k, 0]), int(st.nl.pairs[k, 1]), kind))
+                st.events.append((st.strain, st.time, int(st.nl.i[k]), int(st.nl.j[k]), kind))
         if made.size or broken.size:
             gap = st.time - st.last_event_time
             if gap > 0:
@@ -407,7 +413,7 @@ class Integrator:
     def _move(self, t: float, velocity: NDArray[np.float64], gradient: NDArray[np.float64]) -> None:
         st = self.state
         st.x, st.h = advance_positions(st.x, velocity, gradient, t), advance_box(st.h, gradient, t)
-        st.nl.advance(velocity, gradient, t)
+        st.budget.advance(velocity, gradient, t)
 
     def dt(self) -> float:
         """Current integration step (Sec. IV A rule)."""
@@ -422,26 +428,9 @@ class Integrator:
         return float(max(o.dt_min * self.drive.time_unit, dt))
 
     def list_horizon(self, sol: Solution) -> float:
-        """Longest straight-line move under ``sol`` after which the Verlet list is still valid.
-
-        Collisions are predicted among listed pairs only, so a step must not move any
-        particle so far that an unlisted pair could meet (the bound of
-        :attr:`NeighborList.valid`, extended by the step: non-affine displacements grow
-        by ``t max|U|``, the accumulated strain norm by ``t |E|_2``).
-        """
-        nl = self.state.nl
-        a, u = max_row_norm(nl.displacement), max_row_norm(sol.velocity)
-        g = spectral_norm(sol.gradient)
-        s0, c = nl.strain_norm, nl.cutoff
-        # 2 (a + t u) + (s0 + t g) (1 + s0 + t g) c < skin, a quadratic A t^2 + B t + C < 0
-        A = g * g * c
-        B = 2.0 * u + g * c * (1.0 + 2.0 * s0)
-        C = 2.0 * a + s0 * (1.0 + s0) * c - nl.skin
-        if C >= 0.0:
-            return 0.0
-        if A > 0.0:
-            return float(2.0 * -C / (B + np.sqrt(B * B - 4.0 * A * C)))
-        return float(-C / B) if B > 0.0 else np.inf
+        """Longest straight-line move under ``sol`` after which the Verlet list is still valid
+        (:meth:`.skin.SkinBudget.horizon`): collisions are predicted among listed pairs only."""
+        return self.state.budget.horizon(self.state.nl, sol.velocity, sol.gradient)
 
     def step(self, horizon: float = np.inf) -> bool:
         """One integration step, at most to ``time + horizon``. Returns True on a collision."""
@@ -453,7 +442,7 @@ class Integrator:
             sol = self._midpoint(sol, tmax)
             # the midpoint velocities may be larger: keep the move within the list horizon
             tmax = min(tmax, self.list_horizon(sol))
-        t, k = next_collision(st.x, st.h, st.nl.pairs, st.nl.images, st.nl.sigma, st.contact,
+        t, k = next_collision(st.x, st.h, st.nl.pairs, st.nl.image, st.nl.sigma, st.contact,
                               sol.velocity, sol.gradient, tmax)
         self._move(t, sol.velocity, sol.gradient)
         st.time += t
@@ -477,7 +466,7 @@ class Integrator:
             self.correct()
         if st.step % self.options.sync_every == 0:
             self.synchronize()
-        elif not st.nl.valid or (k < 0 and t >= limit):
+        elif not st.budget.valid(st.nl) or (k < 0 and t >= limit):
             # a step cut short by the list horizon ends on a rebuild (else the next
             # steps would shrink towards the same horizon)
             self.rebuild()
@@ -501,14 +490,13 @@ class Integrator:
         st = self.state
         if not st.contact.any() or self.drive.mode == "self_propelled" or self.count(st.contact).may_self_stress:
             return sol
-        saved = (st.x, st.h, st.nl.displacement.copy(), st.nl.strain_norm, st.time)
+        saved = (st.x, st.h, st.budget.copy(), st.time)
         self._move(0.5 * dt, sol.velocity, sol.gradient)
-        st.time = saved[4] + 0.5 * dt
+        st.time = saved[3] + 0.5 * dt
         try:
             ev = self.evaluate(st.contact, rtol=MIDPOINT_RTOL)
         finally:
-            st.x, st.h = saved[0], saved[1]
-            st.nl.displacement, st.nl.strain_norm, st.time = saved[2], saved[3], saved[4]
+            st.x, st.h, st.budget, st.time = saved
         if ev.solution is None or self._has_negative_force(ev.force):
             return sol
         pairs, _ = self._pairs(st.contact)
@@ -554,13 +542,6 @@ class Integrator:
             self._err_key = self._sep_key
             self._err_value = max_relative_error(R, self._contact_sigma())
         return self._err_value
-
-    def min_gap_noncontact(self) -> float:
-        """Smallest relative gap ``r / sigma - 1`` among listed non-contacting pairs."""
-        st = self.state
-        off = ~st.contact
-        R = pair_vectors(st.x, st.h, st.nl.pairs[off], st.nl.images[off])
-        return float(np.min(np.linalg.norm(R, axis=1) / st.nl.sigma[off] - 1.0, initial=np.inf))
 
     def stress(self) -> NDArray[np.float64]:
         """Contact stress tensor [force / lambda^(d-1)] (see :func:`stress_tensor`)."""
@@ -631,8 +612,8 @@ class Integrator:
                 sol = spla.lsqr(A, -dr, atol=1e-16, btol=1e-16, iter_lim=20 * A.shape[0])[0]
                 dR, grad = sol[:-1], sol[-1] * np.eye(self.d)
             dR = dR.reshape(self.n, self.d)
-            saved = (st.x.copy(), st.h.copy(), st.contact.copy(), len(st.events), st.nl.displacement.copy(), st.nl.strain_norm)
-            t, k = next_collision(st.x, st.h, st.nl.pairs, st.nl.images, st.nl.sigma, st.contact, dR, grad, 1.0)
+            saved = (st.x.copy(), st.h.copy(), st.contact.copy(), len(st.events), st.budget.copy())
+            t, k = next_collision(st.x, st.h, st.nl.pairs, st.nl.image, st.nl.sigma, st.contact, dR, grad, 1.0)
             self._move(t, dR, grad)
             if k >= 0:
                 old = st.contact
@@ -643,7 +624,7 @@ class Integrator:
             if k < 0 and new_err >= err:
                 st.x, st.h, st.contact = saved[0], saved[1], saved[2]
                 del st.events[saved[3]:]
-                st.nl.displacement, st.nl.strain_norm = saved[4], saved[5]
+                st.budget = saved[4]
                 break
             err = new_err
         self._rewire(st.contact.copy())
@@ -661,21 +642,22 @@ class Integrator:
         perm = old_pairs[st.permanent]
         box = Box(st.h).reduced
         # separations of contacts before the remap fix their new images unambiguously
-        R_contact = pair_vectors(st.x, st.h, contacts, st.nl.images[st.contact])
+        R_contact = pair_vectors(st.x, st.h, contacts, st.nl.image[st.contact])
         x = box.wrap(st.x)
         st.h = np.array(box.matrix)
         st.x = x
-        st.nl = build_neighbor_list(x, box, st.radius, self.options.skin)
+        st.nl.build(x, box)
+        st.budget = SkinBudget.fresh(x)
         self._nl_version += 1
-        pos = st.nl.index_of(contacts, self.n)
+        pos = st.nl.index_of(contacts)
         if np.any(pos < 0):
             raise RuntimeError("a contact fell outside the neighbour list (skin too small)")
-        st.nl.images[pos] = images_of(x, st.h, contacts, R_contact)
-        st.contact = np.zeros(len(st.nl.pairs), bool)
+        st.nl.image[pos] = images_of(x, st.h, contacts, R_contact)
+        st.contact = np.zeros(len(st.nl.i), bool)
         st.contact[pos] = True
-        st.permanent = np.zeros(len(st.nl.pairs), bool)
+        st.permanent = np.zeros(len(st.nl.i), bool)
         if len(perm):
-            st.permanent[st.nl.index_of(perm, self.n)] = True
+            st.permanent[st.nl.index_of(perm)] = True
 
     def synchronize(self) -> None:
         """Synchronisation point: rebuild and recompute the solution from the state alone.

@@ -94,7 +94,7 @@ def self_stress(
     x: NDArray[np.float64],
     h: NDArray[np.float64],
     pairs: NDArray[np.int64],
-    images: NDArray[np.int64],
+    images: NDArray[np.float64],
     drive_rates: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], float]:
     """Null vector ``f0`` of ``S^T`` (footnote 23: by diagonalisation), signed to resist the drive.

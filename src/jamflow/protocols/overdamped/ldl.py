@@ -31,7 +31,7 @@ __all__ = ["CARRY_FILL", "CarriedOrder", "SingularNetworkError", "TriangularFact
 #: Largest ratio of the entries of a factor under a carried ordering to those of the
 #: factor under the AMD ordering it was carried from. Each entry of L costs a
 #: multiply-add in every preconditioner application, so beyond it a fresh AMD ordering
-#: pays. At N = 1024 (steady shear) six added pairs give 1.02, eighteen 1.04, thirty-four 1.15.
+#: pays (measured: docs/notes/overdamped-constants.md#carry_fill-jamflowprotocolsoverdampedldl).
 CARRY_FILL: float = 1.1
 
 

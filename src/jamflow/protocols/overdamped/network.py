@@ -58,7 +58,7 @@ __all__ = [
 
 
 def pair_vectors(
-    x: NDArray[np.float64], h: NDArray[np.float64], pairs: NDArray[np.int64], images: NDArray[np.int64]
+    x: NDArray[np.float64], h: NDArray[np.float64], pairs: NDArray[np.int64], images: NDArray[np.float64]
 ) -> NDArray[np.float64]:
     """Separations ``x_j - x_i + h m`` of pairs with fixed periodic images.
 
@@ -70,15 +70,16 @@ def pair_vectors(
         Box lattice matrix (columns = lattice vectors) [lambda].
     pairs : ndarray of int64, shape (P, 2)
         Pairs ``(i, j)``.
-    images : ndarray of int64, shape (P, d)
-        Lattice vector ``m`` of the image of j seen from i.
+    images : ndarray, shape (P, d)
+        Lattice vector ``m`` of the image of j seen from i (integer-valued; integer
+        arrays are converted exactly).
 
     Returns
     -------
     ndarray, shape (P, d)
     """
     return _pair_vectors(np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(h, dtype=np.float64),
-                         np.ascontiguousarray(pairs, dtype=np.int64), np.ascontiguousarray(images, dtype=np.int64))
+                         np.ascontiguousarray(pairs, dtype=np.int64), np.ascontiguousarray(images, dtype=np.float64))
 
 
 @njit(cache=True)
@@ -284,7 +285,7 @@ def solve_network(
     x: NDArray[np.float64],
     h: NDArray[np.float64],
     pairs: NDArray[np.int64],
-    images: NDArray[np.int64],
+    images: NDArray[np.float64],
     gradient: NDArray[np.float64],
     external: NDArray[np.float64] | None = None,
     xi0: float = 1.0,

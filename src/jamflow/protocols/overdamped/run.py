@@ -31,6 +31,7 @@ from .checkpoint import load_checkpoint, save_checkpoint
 from .driving import Drive
 from .integrate import FlowOptions, Integrator
 from .recorder import SERIES, Recorder
+from .starts import jammed_start
 
 __all__ = ["FlowResult", "Stop", "run_flow", "snapshot_packings"]
 
@@ -206,9 +207,18 @@ def run_flow(
         Stage parameters for provenance.
     progress : callable, optional
         ``progress(fraction_done)`` after each recorded step (progress bars).
+
+    Raises
+    ------
+    ValueError
+        Overlapping spheres, a checkpoint of another run, or a fixed-volume shear of a
+        start jammed against it (:func:`~jamflow.protocols.overdamped.starts.jammed_start`).
     """
     require("shear" if drive.mode.startswith("shear") else "compress" if drive.mode == "compress" else "drive",
             packing.body_kind)
+    jammed = jammed_start(packing, drive)
+    if jammed:
+        raise ValueError(jammed)
     lam = length_unit(packing.diameter, unit)
     params = dict(parameters or {})
     params.update({"drive": drive.describe(), "lambda": lam, "unit": unit})

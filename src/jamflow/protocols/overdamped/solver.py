@@ -23,7 +23,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from ..._numba import njit
-from ...network import ContactSet, contact_jacobian
+from ...network import pair_rows
 from ...network._graph_kernels import incidence
 from .ldl import (
     CARRY_FILL,
@@ -53,7 +53,8 @@ EPS: float = float(np.finfo(np.float64).eps)
 
 
 def s_matrix(pairs: NDArray[np.int64], unit: NDArray[np.float64], n: int) -> sp.csr_matrix:
-    """The operator ``S = d r_ij / d R_k`` (Eq. 2), sparse, shape (Nc, N d).
+    """The operator ``S = d r_ij / d R_k`` (Eq. 2), sparse, shape (Nc, N d): the contact Jacobian's
+    centre block (:func:`jamflow.network.pair_rows`).
 
     Parameters
     ----------
@@ -63,8 +64,7 @@ def s_matrix(pairs: NDArray[np.int64], unit: NDArray[np.float64], n: int) -> sp.
     n : int
         Number of particles.
     """
-    # the separations enter only strain columns, which S does not have
-    return contact_jacobian(ContactSet(pairs[:, 0], pairs[:, 1], unit, unit), n, unit.shape[1])
+    return pair_rows(pairs, unit, n)
 
 
 @njit(cache=True)

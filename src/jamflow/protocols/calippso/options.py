@@ -1,0 +1,151 @@
+"""The options of one :func:`~jamflow.protocols.calippso.calippso` call: their defaults,
+the record the chain carries, and the checks of the input."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ...state.packing import Packing
+from ...tolerances import OVERLAP_TOL
+from .container import _Container
+from .lp import FAR_GROWTH
+
+#: Solver strategies. ``ipm``: HiGHS interior point with crossover (vertex duals),
+#: cold every LP; ``simplex``: the primal simplex from the previous LP's basis,
+#: carried over to the new rows by pair (the cold first LP by the dual simplex);
+#: ``hybrid``: interior point while ``sqrt(Gamma*) - 1 > HYBRID_SWITCH``, then the
+#: warm primal simplex (a warm start slower than the last interior point solve is
+#: abandoned for interior point, see :data:`WARM_PIVOTS_PER_ROW`); ``ipm-center``:
+#: interior point without crossover on every bounded LP (a point inside the optimal
+#: face: displacements along directions that do not change Gamma are not pushed onto
+#: the bound as at a vertex) and with crossover on every unbounded LP, the only ones
+#: whose duals give the contacts of the result.
+SOLVERS: tuple[str, ...] = ("ipm", "simplex", "hybrid", "ipm-center")
+
+#: Default solver: the fastest strategy on the LS examples and random starts
+#: (measured: docs/notes/calippso-constants.md#default_solver).
+DEFAULT_SOLVER: str = "hybrid"
+
+#: Convergence: largest displacement of a stable particle [mean diameters].
+DEFAULT_TOL_S: float = 1e-9
+
+#: Convergence: ``sqrt(Gamma*) - 1`` (relative growth of the diameters in one LP).
+DEFAULT_TOL_GAMMA: float = 1e-12
+
+#: HiGHS primal and dual feasibility (and interior point optimality) tolerance, the
+#: default of ``solver_tol``. Rows are relative-gap sized, so a row violation v is a
+#: relative overlap of ~v / 2: ``solver_tol`` may range from HiGHS's smallest
+#: feasibility tolerance, 1e-10, up to ``2 OVERLAP_TOL`` (overlaps up to OVERLAP_TOL).
+SOLVER_TOL: float = 1e-10
+MIN_SOLVER_TOL: float = 1e-10
+MAX_SOLVER_TOL: float = 2.0 * OVERLAP_TOL
+
+#: Default neighbour cutoff ``ell`` [current largest diameters], the reference
+#: implementation's 3.4 R (measured: docs/notes/calippso-constants.md#default_cutoff).
+DEFAULT_CUTOFF: float = 1.7
+
+#: Cutoff in the last bound phase, for unbounded LPs and for a start near jamming
+#: [current largest diameters]: the first shell and a rattler's cage (the paper's 1.4 sigma).
+DEFAULT_CUTOFF_NEAR: float = 1.4
+
+#: Displacement bound schedule: ``(threshold on sqrt(Gamma*) - 1, bound)`` with the
+#: bound in mean radii; the first phase (``far``) bound is derived from the cutoff.
+DEFAULT_BOUND_SCHEDULE: tuple[tuple[float, float], ...] = ((5e-4, 0.1), (1e-5, 0.01))
+
+#: HiGHS interior point methods of the interior point LPs: ``ipx`` (HiGHS's default,
+#: in every highspy wheel) and ``hipo`` (nested-dissection factorisation; needs the
+#: ``hipo`` extra, ``highspy[extras]``, which exists only for highspy <= 1.15.1).
+#: ``hipo`` is opt-in: it wins only at N = 16384
+#: (measured: docs/notes/calippso-constants.md#interior_points).
+INTERIOR_POINTS: tuple[str, ...] = ("ipx", "hipo")
+DEFAULT_INTERIOR: str = "ipx"
+
+#: How a chain ends. ``newton``: once an LP in the tail (``sqrt(Gamma*) - 1 <=
+#: NEWTON_FROM``) gives an isostatic network, the square system of that network is
+#: solved by Newton's method and certified; a rejected finish leaves the chain to the
+#: LPs. ``lp``: the pure LP chain of the paper.
+FINISHES: tuple[str, ...] = ("newton", "lp")
+
+#: The pure LP chain by default: the Newton finish saves LPs but not time
+#: (measured: docs/notes/calippso-constants.md#default_finish).
+DEFAULT_FINISH: str = "lp"
+
+#: Default largest number of LPs.
+DEFAULT_MAX_ITERATIONS: int = 1000
+
+
+@dataclass(frozen=True)
+class _Options:
+    """The user's options of one :func:`~jamflow.protocols.calippso.calippso` call (its
+    keyword arguments but ``progress``; ``walls`` says whether the faces are walls)."""
+
+    tol_s: float
+    tol_gamma: float
+    solver: str
+    solver_tol: float
+    cutoff: float
+    cutoff_near: float
+    bound: tuple[tuple[float, float], ...]
+    relax: float | None
+    walls: bool
+    max_iterations: int
+    require_isostatic: bool
+    threads: int
+    finish: str
+    interior: str
+
+    def settings(self) -> dict[str, Any]:
+        """The options as the stage parameters stored with the result."""
+        return dict(finish=self.finish, interior=self.interior, tol_s=self.tol_s, tol_gamma=self.tol_gamma,
+                    solver=self.solver, solver_tol=self.solver_tol, cutoff=self.cutoff,
+                    cutoff_near=self.cutoff_near, bound=[list(b) for b in self.bound], relax=self.relax,
+                    walls=self.walls, max_iterations=self.max_iterations, threads=self.threads)
+
+    def check(self, packing: Packing) -> None:
+        """Raise ``ValueError`` for a bad start or bad options (the interior point method
+        is checked by the solver)."""
+        _check_options(packing, self.tol_s, self.tol_gamma, self.solver, min(self.cutoff, self.cutoff_near),
+                       self.bound, self.relax, self.walls, self.max_iterations)
+        if not (MIN_SOLVER_TOL <= self.solver_tol <= MAX_SOLVER_TOL):
+            raise ValueError(f"solver_tol must lie in [{MIN_SOLVER_TOL:g}, {MAX_SOLVER_TOL:g}], got {self.solver_tol}")
+        if self.finish not in FINISHES:
+            raise ValueError(f"unknown finish {self.finish!r}; choose one of {', '.join(FINISHES)}")
+
+
+def _check_options(packing, tol_s, tol_gamma, solver, cutoff, bound, relax, walls, max_iterations) -> None:
+    if not isinstance(packing, Packing):
+        raise ValueError(f"calippso needs a Packing, got {type(packing).__name__}")
+    if not (np.isfinite(tol_s) and tol_s > 0):
+        raise ValueError(f"tol_s must be positive and finite, got {tol_s}")
+    if not (np.isfinite(tol_gamma) and tol_gamma > 0):
+        raise ValueError(f"tol_gamma must be positive and finite, got {tol_gamma}")
+    if solver not in SOLVERS:
+        raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
+    if not (np.isfinite(cutoff) and cutoff > FAR_GROWTH):
+        raise ValueError(f"cutoff must exceed {FAR_GROWTH} largest diameters, got {cutoff}")
+    th = [t for t, _ in bound]
+    if any(not (np.isfinite(v) and v > 0) for pair in bound for v in pair) or th != sorted(th, reverse=True):
+        raise ValueError(f"bound schedule must be positive (threshold, bound) pairs with decreasing thresholds, got {bound}")
+    if relax is not None and not (0.0 < relax <= 1.0):
+        raise ValueError(f"relax must lie in (0, 1], got {relax}")
+    if max_iterations < 1:
+        raise ValueError(f"max_iterations must be >= 1, got {max_iterations}")
+    if packing.n < 2:
+        raise ValueError("CALiPPSO needs at least two particles")
+    if walls:
+        if not packing.box.is_orthogonal:
+            raise ValueError("walls need an orthogonal box")
+        rad = 0.5 * packing.diameter[:, None]
+        L = packing.box.lengths
+        out = (packing.position < rad * (1 - OVERLAP_TOL)) | (packing.position > L - rad * (1 - OVERLAP_TOL))
+        if np.any(out):
+            bad = np.flatnonzero(out.any(axis=1))
+            raise ValueError(f"{bad.size} sphere(s) cross a wall (e.g. index {bad[0]}); walls need every sphere inside the box")
+    container = _Container(packing.box, walls)
+    ov = container.max_overlap(container.packing(packing, packing.position, packing.diameter))
+    if ov > OVERLAP_TOL:
+        raise ValueError(f"input overlaps by {ov:.3g} (relative) > {OVERLAP_TOL:g}: CALiPPSO needs a hard-sphere start")
+

@@ -1,0 +1,175 @@
+"""The HiGHS solver of the chain's LPs: interior point, cold or warm simplex, the basis
+carried from one LP's rows to the next."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import highspy
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+
+from ...highs import new_highs
+from .lp import _highs_lp, _Rows
+from .options import DEFAULT_INTERIOR, INTERIOR_POINTS, SOLVER_TOL
+
+#: ``hybrid``: from interior point to the warm simplex below this ``sqrt(Gamma*) - 1``.
+HYBRID_SWITCH: float = 1e-5
+
+#: HiGHS presolve of the interior point LPs of a start near jamming: off, whose vertex
+#: is the better warm start (measured: docs/notes/calippso-constants.md#near_start_presolve).
+NEAR_START_PRESOLVE: str = "off"
+#: HiGHS's own presolve setting, kept by every other LP.
+_HIGHS_PRESOLVE: str = "choose"
+
+#: HiGHS's scaling of a warm simplex LP (``simplex_scale_strategy``): 0, none; the rows
+#: are built well scaled, so ``solver_tol`` acts on them as built
+#: (measured: docs/notes/calippso-constants.md#warm_simplex_scale).
+WARM_SIMPLEX_SCALE: int = 0
+#: HiGHS's own scaling (equilibration), kept by every other LP.
+_HIGHS_SCALE: int = 2
+
+#: Pivots per row a warm simplex may take before the LP is re-solved by interior point
+#: (a pivot limit, not a time limit: the same input gives the same chain)
+#: (measured: docs/notes/calippso-constants.md#warm_pivots_per_row).
+WARM_PIVOTS_PER_ROW: float = 1.0
+
+_NO_PIVOT_LIMIT: int = 2**31 - 1  # HiGHS's default simplex_iteration_limit
+
+
+@dataclass(frozen=True)
+class _Solution:
+    """Outcome of one LP: HiGHS status, wall time [s], columns and row duals (None
+    unless optimal), whether the simplex started warm, the method that produced it
+    and the iterations it took."""
+
+    status: str
+    seconds: float
+    col: NDArray[np.float64] | None
+    dual: NDArray[np.float64] | None
+    warm: bool
+    method: str
+    simplex_iterations: int
+    ipm_iterations: int
+
+
+class _Solver:
+    """One HiGHS instance; keeps the last basis for warm starts on unchanged rows.
+
+    A warm simplex is given :data:`WARM_PIVOTS_PER_ROW` pivots per row; when they run
+    out the LP is solved by interior point instead, so a warm start that does not
+    pay costs about one interior point solve more.
+    """
+
+    def __init__(self, threads: int = 1, tol: float = SOLVER_TOL, interior: str = DEFAULT_INTERIOR) -> None:
+        self.h = new_highs(threads)
+        if interior not in INTERIOR_POINTS:
+            raise ValueError(f"unknown interior point {interior!r}; choose one of {', '.join(INTERIOR_POINTS)}")
+        if self.h.setOptionValue("solver", interior) != highspy.HighsStatus.kOk:
+            raise ValueError(f"interior point {interior!r} is not in this highspy build: HiPO needs "
+                             "`pip install 'jamflow[hipo]'` (highspy[extras]==1.15.1, which must match highspy)")
+        self.interior = interior
+        for option in ("primal_feasibility_tolerance", "dual_feasibility_tolerance", "ipm_optimality_tolerance"):
+            if self.h.setOptionValue(option, tol) != highspy.HighsStatus.kOk:
+                raise ValueError(f"HiGHS refused {option} = {tol:g}")
+        self.basis = None
+        self.basis_rows: _Rows | None = None
+        #: hybrid: a simplex LP without a basis to carry is solved by interior point
+        self.cold_simplex_as_ipm = False
+        #: HiGHS presolve of the interior point LPs (see NEAR_START_PRESOLVE)
+        self.ipm_presolve = _HIGHS_PRESOLVE
+
+    def solve(self, A: sp.csc_matrix, rhs, col_lower, col_upper, method: str, rows: _Rows) -> _Solution:
+        """Solve the LP ``min -g`` s.t. ``A z <= rhs``, ``col_lower <= z <= col_upper``."""
+        lp = _highs_lp(A, rhs, col_lower, col_upper)
+        cold = method == "dual"
+        method = "simplex" if cold else method
+        basis = self._carried_basis(rows, A.shape[1]) if method == "simplex" and not cold else None
+        warm = basis is not None
+        if method == "simplex" and not warm and not cold and self.cold_simplex_as_ipm:
+            method = "ipm"
+        status, elapsed = self._run(lp, method, basis)
+        pivots, ipm_its = self._iterations()
+        if warm and status == highspy.HighsModelStatus.kIterationLimit:
+            warm = False
+            method = "simplex>ipm"
+            status, t_ipm = self._run(lp, "ipm", None)
+            elapsed += t_ipm
+            more_pivots, ipm_its = self._iterations()
+            pivots += more_pivots
+        h = self.h
+        name = h.modelStatusToString(status)
+        # without crossover HiGHS may stop with status "Unknown" at a primal-feasible
+        # interior point; only its primal part is used (the overlap check follows)
+        interior_ok = (method == "ipm-nox" and status == highspy.HighsModelStatus.kUnknown
+                       and int(h.getInfo().primal_solution_status) == 2)
+        if status != highspy.HighsModelStatus.kOptimal and not interior_ok:
+            self.basis = None
+            return _Solution(name, elapsed, None, None, warm, method, pivots, ipm_its)
+        sol = h.getSolution()
+        self.basis = h.getBasis() if method != "ipm-nox" else None
+        self.basis_rows = rows
+        return _Solution(name, elapsed, np.asarray(sol.col_value), -np.asarray(sol.row_dual), warm, method,
+                         pivots, ipm_its)
+
+    def _iterations(self) -> tuple[int, int]:
+        """Simplex pivots (crossover included) and interior point iterations of the last run."""
+        info = self.h.getInfo()
+        return (max(int(info.simplex_iteration_count), 0) + max(int(info.crossover_iteration_count), 0),
+                max(int(info.ipm_iteration_count), 0))
+
+    def _carried_basis(self, rows: _Rows, n_cols: int):
+        """The last basis carried over to ``rows``: rows kept by pair keep their status,
+        new rows enter with a basic slack (inactive); None when there is no basis or
+        the carried one does not have one basic variable per row."""
+        if self.basis is None or self.basis_rows is None:
+            return None
+        if rows is self.basis_rows:
+            return self.basis
+        col = self.basis.col_status
+        if len(col) != n_cols:
+            return None
+        n = len(rows.x_build)
+        old_keys = self.basis_rows.keys(n)
+        old_status = np.array([int(v) for v in self.basis.row_status], dtype=np.int64)
+        order = np.argsort(old_keys)
+        new_keys = rows.keys(n)
+        pos = np.clip(np.searchsorted(old_keys, new_keys, sorter=order), 0, max(len(old_keys) - 1, 0))
+        found = old_keys[order[pos]] == new_keys if len(old_keys) else np.zeros(len(new_keys), bool)
+        basic = int(highspy.HighsBasisStatus.kBasic)
+        status = np.where(found, old_status[order[pos]], basic)
+        n_basic = int(np.sum(status == basic)) + sum(1 for v in col if v == highspy.HighsBasisStatus.kBasic)
+        if n_basic != len(rows):
+            return None
+        carried = highspy.HighsBasis()
+        carried.col_status = list(col)
+        carried.row_status = [highspy.HighsBasisStatus(int(v)) for v in status]
+        carried.valid = True
+        return carried
+
+    def _run(self, lp: highspy.HighsLp, method: str, basis):
+        h = self.h
+        h.clearSolver()
+        if method in ("ipm", "ipm-nox"):
+            h.setOptionValue("solver", self.interior)
+            h.setOptionValue("run_crossover", "on" if method == "ipm" else "off")
+            h.setOptionValue("presolve", self.ipm_presolve)
+        else:
+            # from a carried basis the primal simplex needs a few pivots where the
+            # dual simplex needed thousands (d = 4 LS example: 2 against 5184)
+            h.setOptionValue("solver", "simplex")
+            h.setOptionValue("simplex_strategy", 4 if basis is not None else 1)
+            h.setOptionValue("presolve", _HIGHS_PRESOLVE)
+        h.setOptionValue("simplex_scale_strategy", WARM_SIMPLEX_SCALE if basis is not None else _HIGHS_SCALE)
+        h.passModel(lp)
+        limit = _NO_PIVOT_LIMIT
+        if basis is not None:
+            h.setBasis(basis)
+            limit = max(int(WARM_PIVOTS_PER_ROW * lp.num_row_), 1)
+        h.setOptionValue("simplex_iteration_limit", limit)
+        t0 = time.perf_counter()
+        h.run()
+        return h.getModelStatus(), time.perf_counter() - t0
+
