@@ -24,6 +24,7 @@ from ..minimize._fire_kernels import (
     _dot,
     _fire_adapt,
     _fire_mixing,
+    _max_force_sq,
     _mixed,
 )
 from ..neighbors._cell_kernels import cell_pairs_into, pair_buffers
@@ -443,7 +444,7 @@ def strain_fire(
                        work, lam)
         strain_project(w, Be, ce, li, lj, first, cptr, fptr, chol, AiBe, small, b, Kib, schur, fixed_volume, vy, ve,
                        work, lam)
-        fmax2 = max(_max_sq(fy), _dot1(fe, fe))
+        fmax2 = max(_max_force_sq(fy), _dot1(fe, fe))
         if fmax2 <= force_tol * force_tol:
             status = CONVERGED
             break
@@ -518,18 +519,6 @@ def _deformed(y, T, A, x_build, x, moved):
             x[i, a] = t
             moved[i, a] = t2
     return np.sqrt(dev)
-
-
-@njit(cache=True)
-def _max_sq(f):
-    """Largest squared row norm of ``f`` (N, d)."""
-    m = 0.0
-    for i in range(f.shape[0]):
-        s = 0.0
-        for a in range(f.shape[1]):
-            s += f[i, a] * f[i, a]
-        m = max(m, s)
-    return m
 
 
 @njit(cache=True)
