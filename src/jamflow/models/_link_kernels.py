@@ -1,4 +1,5 @@
-"""Numba kernels of the link constraints: link geometry, per-cluster Gram factorisation and solves.
+"""Numba kernels of the link constraints: link geometry, per-cluster Gram factorisation and solves,
+Newton re-affixing and the compiled FIRE loop of linked spheres.
 
 A link ``k = (i_k, j_k)`` has the constraint-gradient row ``-w_k`` on sphere ``i_k`` and
 ``+w_k`` on ``j_k`` (``w_k = u_k`` in a fixed box, ``F^T u_k`` with strain). Clusters
@@ -10,9 +11,15 @@ diagonal of the ``R`` of a Householder QR of ``Omega_c^T`` (``R^T R = G_c``), so
 rank test ``min L_kk < rtol max L_kk`` is the QR test, resolvable down to
 ``rtol ~ sqrt(machine epsilon) = 1e-8`` (:data:`jamflow.tolerances.LINK_RANK_RTOL`).
 
-Layout: ``order`` lists the links cluster by cluster, cluster ``c`` owning
-``order[cptr[c]:cptr[c+1]]``; its factor is ``chol[fptr[c]:fptr[c+1]]`` (row-major
-``m_c x m_c``, lower triangle). All kernels are single-threaded and cached.
+Layout (cluster order): the factor kernels take the links sorted cluster by cluster
+(by their ends within a cluster, so a chain's links couple only near neighbours),
+cluster ``c`` owning links ``cptr[c]:cptr[c+1]``; its factor is
+``chol[fptr[c]:fptr[c+1]]`` (row-major ``m_c x m_c``, lower triangle) with the signs
+``s_kl`` beside it in ``sign``. Row ``a`` of a block is zero left of its first
+coupled link ``first[a]`` (local index), and the Cholesky factor keeps that envelope,
+so factors and solves cost ``m`` times the squared envelope width, not ``m^3``
+(chains of 30 spheres with frozen angles: width 3, not 57). All kernels are
+single-threaded and cached.
 """
 
 from __future__ import annotations
@@ -20,6 +27,21 @@ from __future__ import annotations
 import numpy as np
 
 from .._numba import njit
+from ..minimize._fire_kernels import (
+    CONVERGED,
+    MAX_STEPS,
+    REBUILD,
+    STALLED,
+    _axpy,
+    _dot,
+    _fire_adapt,
+    _fire_mixing,
+    _fire_step_back,
+    _max_force_sq,
+    _mix_and_move,
+)
+from ..neighbors._verlet_kernels import _inline_list, _list_buffers, _needs_rebuild
+from .spheres._kernels import pair_forces
 
 
 @njit(cache=True)
@@ -43,17 +65,17 @@ def link_geometry(x, li, lj, offset, length, u, r):
 
 
 @njit(cache=True)
-def gram_factor(w, li, lj, order, cptr, fptr, chol, rank_rtol):
-    """Cholesky factors of every cluster's Gram block in ``chol``; returns the first degenerate cluster or -1."""
-    d = w.shape[1]
+def gram_structure(li, lj, cptr, fptr, sign, first):
+    """Signs ``s_kl`` (shared ends of links ``k``, ``l``; cluster order) into ``sign`` and each row's first coupled link."""
     for c in range(cptr.shape[0] - 1):
         k0 = cptr[c]
         m = cptr[c + 1] - k0
         base = fptr[c]
         for a in range(m):
-            ka = order[k0 + a]
+            ka = k0 + a
+            first[ka] = a
             for b in range(a + 1):
-                kb = order[k0 + b]
+                kb = k0 + b
                 s = 0.0
                 if lj[ka] == lj[kb]:
                     s += 1.0
@@ -63,52 +85,82 @@ def gram_factor(w, li, lj, order, cptr, fptr, chol, rank_rtol):
                     s -= 1.0
                 if li[ka] == lj[kb]:
                     s -= 1.0
-                dot = 0.0
-                if s != 0.0:
-                    for e in range(d):
-                        dot += w[ka, e] * w[kb, e]
-                chol[base + a * m + b] = s * dot
+                sign[base + a * m + b] = s
+                if s != 0.0 and b < first[ka]:
+                    first[ka] = b
+
+
+@njit(cache=True)
+def gram_factor(w, sign, first, cptr, fptr, chol, rank_rtol):
+    """Cholesky factors of every cluster's Gram block (rows ``w`` in cluster order) in ``chol``.
+
+    Returns the first degenerate cluster (smallest pivot below ``rank_rtol`` of the
+    largest, or not positive) or -1.
+    """
+    d = w.shape[1]
+    for c in range(cptr.shape[0] - 1):
+        k0 = cptr[c]
+        m = cptr[c + 1] - k0
+        base = fptr[c]
         lmax = 0.0
         lmin = np.inf
-        for j in range(m):
-            s = chol[base + j * m + j]
-            for p in range(j):
-                s -= chol[base + j * m + p] ** 2
-            if not s > 0.0:
-                return c
-            ljj = np.sqrt(s)
-            chol[base + j * m + j] = ljj
-            lmax = max(lmax, ljj)
-            lmin = min(lmin, ljj)
-            for i in range(j + 1, m):
-                t = chol[base + i * m + j]
-                for p in range(j):
-                    t -= chol[base + i * m + p] * chol[base + j * m + p]
-                chol[base + i * m + j] = t / ljj
+        for a in range(m):
+            fa = first[k0 + a]
+            for b in range(fa, a + 1):
+                fb = first[k0 + b]
+                t = 0.0
+                s = sign[base + a * m + b]
+                if s != 0.0:
+                    for e in range(d):
+                        t += w[k0 + a, e] * w[k0 + b, e]
+                    t *= s
+                for p in range(max(fa, fb), b):
+                    t -= chol[base + a * m + p] * chol[base + b * m + p]
+                if b < a:
+                    chol[base + a * m + b] = t / chol[base + b * m + b]
+                else:
+                    if not t > 0.0:
+                        return c
+                    laa = np.sqrt(t)
+                    chol[base + a * m + a] = laa
+                    lmax = max(lmax, laa)
+                    lmin = min(lmin, laa)
         if lmin < rank_rtol * lmax:
             return c
     return -1
 
 
+@njit(cache=True, inline="always")
+def _block_solve(first, k0, m, base, chol, b):
+    """``b <- G_c^-1 b`` for one cluster's local vector ``b`` (m,), through its envelope factor."""
+    for i in range(m):  # L z = b
+        t = b[i]
+        for p in range(first[k0 + i], i):
+            t -= chol[base + i * m + p] * b[p]
+        b[i] = t / chol[base + i * m + i]
+    for i in range(m - 1, -1, -1):  # L^T y = z, by columns
+        t = b[i] / chol[base + i * m + i]
+        b[i] = t
+        for p in range(first[k0 + i], i):
+            b[p] -= chol[base + i * m + p] * t
+
+
 @njit(cache=True)
-def gram_solve(order, cptr, fptr, chol, rhs):
-    """``rhs <- G^-1 rhs`` in place, ``rhs`` (L, k) indexed by link."""
-    ncol = rhs.shape[1]
+def gram_solve(first, cptr, fptr, chol, rhs):
+    """``rhs <- G^-1 rhs`` in place, ``rhs`` (L, k) in cluster order."""
+    mmax = 0
+    for c in range(cptr.shape[0] - 1):
+        mmax = max(mmax, cptr[c + 1] - cptr[c])
+    b = np.empty(mmax)
     for c in range(cptr.shape[0] - 1):
         k0 = cptr[c]
         m = cptr[c + 1] - k0
-        base = fptr[c]
-        for col in range(ncol):
-            for i in range(m):  # L z = b
-                t = rhs[order[k0 + i], col]
-                for p in range(i):
-                    t -= chol[base + i * m + p] * rhs[order[k0 + p], col]
-                rhs[order[k0 + i], col] = t / chol[base + i * m + i]
-            for i in range(m - 1, -1, -1):  # L^T y = z
-                t = rhs[order[k0 + i], col]
-                for p in range(i + 1, m):
-                    t -= chol[base + p * m + i] * rhs[order[k0 + p], col]
-                rhs[order[k0 + i], col] = t / chol[base + i * m + i]
+        for col in range(rhs.shape[1]):
+            for a in range(m):
+                b[a] = rhs[k0 + a, col]
+            _block_solve(first, k0, m, fptr[c], chol, b)
+            for a in range(m):
+                rhs[k0 + a, col] = b[a]
 
 
 @njit(cache=True)
@@ -132,12 +184,42 @@ def omega_t_subtract(w, li, lj, lam, out):
 
 
 @njit(cache=True)
+def _det_inverse(F):
+    """``det F`` and ``F^-1`` of a small matrix: closed forms for d = 2 and 3 (no LAPACK call per step)."""
+    d = F.shape[0]
+    if d == 2:
+        det = F[0, 0] * F[1, 1] - F[0, 1] * F[1, 0]
+        inv = np.empty((2, 2))
+        inv[0, 0] = F[1, 1] / det
+        inv[0, 1] = -F[0, 1] / det
+        inv[1, 0] = -F[1, 0] / det
+        inv[1, 1] = F[0, 0] / det
+        return det, inv
+    if d == 3:
+        inv = np.empty((3, 3))
+        for a in range(3):
+            a1, a2 = (a + 1) % 3, (a + 2) % 3
+            for b in range(3):
+                b1, b2 = (b + 1) % 3, (b + 2) % 3
+                # cofactor of F[b, a]
+                inv[a, b] = F[b1, a1] * F[b2, a2] - F[b1, a2] * F[b2, a1]
+        det = F[0, 0] * inv[0, 0] + F[0, 1] * inv[1, 0] + F[0, 2] * inv[2, 0]
+        for a in range(3):
+            for b in range(3):
+                inv[a, b] /= det
+        return det, inv
+    return np.linalg.det(F), np.linalg.inv(F)
+
+
+@njit(cache=True)
 def strain_state(e, h0, scale):
     """Deformation of scaled strain components ``e`` (m,) in the reference box ``h0`` (d, d).
 
     Returns ``F = 1 + eps`` (``eps_aa = e / scale``, ``eps_ab = e / (sqrt 2 scale)``, components in
     ``numpy.triu_indices`` order), ``Q`` and ``T = Q^T F`` with ``F h0 = Q U`` (``U`` upper
-    triangular with a positive diagonal, zeros below it), ``U``, ``det F`` and ``F^-1``.
+    triangular with a positive diagonal, zeros below it), ``U``, ``det F`` and ``F^-1``. The
+    QR is Gram–Schmidt applied twice (orthogonal to round-off for the well-conditioned
+    boxes of a packing; no LAPACK call, which cost more than the arithmetic at d <= 3).
     """
     d = h0.shape[0]
     F = np.eye(d)
@@ -151,27 +233,46 @@ def strain_state(e, h0, scale):
                 F[a, b] += v
                 F[b, a] += v
             p += 1
-    Q, U = np.linalg.qr(F @ h0)
+    M = F @ h0
+    Q = np.zeros((d, d))
+    U = np.zeros((d, d))
+    v = np.empty(d)
+    for k in range(d):
+        for a in range(d):
+            v[a] = M[a, k]
+        for _ in range(2):
+            for j in range(k):
+                t = 0.0
+                for a in range(d):
+                    t += Q[a, j] * v[a]
+                U[j, k] += t
+                for a in range(d):
+                    v[a] -= t * Q[a, j]
+        norm = 0.0
+        for a in range(d):
+            norm += v[a] * v[a]
+        norm = np.sqrt(norm)
+        U[k, k] = norm
+        for a in range(d):
+            Q[a, k] = v[a] / norm
+    T = np.zeros((d, d))
     for a in range(d):
-        if U[a, a] < 0.0:
-            for b in range(d):
-                Q[b, a] = -Q[b, a]
-                U[a, b] = -U[a, b]
-    T = np.ascontiguousarray(Q.T) @ F
-    for a in range(d):
-        for b in range(a):
-            T[a, b] = 0.0
-            U[a, b] = 0.0
-    return F, Q, T, U, np.linalg.det(F), np.linalg.inv(F)
+        for b in range(a, d):
+            t = 0.0
+            for c in range(d):
+                t += Q[c, a] * F[c, b]
+            T[a, b] = t
+    det, inv = _det_inverse(F)
+    return F, Q, T, U, det, inv
 
 
 @njit(cache=True)
-def gram_project(w, li, lj, order, cptr, fptr, chol, g, lam):
+def gram_project(w, li, lj, first, cptr, fptr, chol, g, lam):
     """``g <- g - Omega^T lam`` with ``lam = G^-1 Omega g`` in place, cluster by cluster, two passes.
 
-    The second pass projects what the first left (``Omega g`` at round-off times
-    ``cond(G)``) and its multipliers are added to ``lam`` (L,), so ``lam`` are the
-    least-squares multipliers of the input ``g`` (N, d).
+    Links in cluster order. The second pass projects what the first left (``Omega g``
+    at round-off times ``cond(G)``) and its multipliers are added to ``lam`` (L,), so
+    ``lam`` are the least-squares multipliers of the input ``g`` (N, d).
     """
     d = w.shape[1]
     mmax = 0
@@ -183,26 +284,16 @@ def gram_project(w, li, lj, order, cptr, fptr, chol, g, lam):
     for c in range(cptr.shape[0] - 1):
         k0 = cptr[c]
         m = cptr[c + 1] - k0
-        base = fptr[c]
         for _ in range(2):
             for a in range(m):
-                k = order[k0 + a]
+                k = k0 + a
                 s = 0.0
                 for e in range(d):
                     s += w[k, e] * (g[lj[k], e] - g[li[k], e])
                 b[a] = s
-            for i in range(m):
-                t = b[i]
-                for p in range(i):
-                    t -= chol[base + i * m + p] * b[p]
-                b[i] = t / chol[base + i * m + i]
-            for i in range(m - 1, -1, -1):
-                t = b[i]
-                for p in range(i + 1, m):
-                    t -= chol[base + p * m + i] * b[p]
-                b[i] = t / chol[base + i * m + i]
+            _block_solve(first, k0, m, fptr[c], chol, b)
             for a in range(m):
-                k = order[k0 + a]
+                k = k0 + a
                 lam[k] += b[a]
                 for e in range(d):
                     v = b[a] * w[k, e]
@@ -219,3 +310,276 @@ def same(a, b):
         if a[k] != b[k]:
             return False
     return True
+
+
+@njit(cache=True)
+def reaffix(x, li, lj, offset, length, sign, first, cptr, fptr, chol, w, u, r, lam, length_rtol, max_sweeps,
+            rank_rtol, chord):
+    """Newton re-affixing of ``x`` (N, d) in place, links in cluster order.
+
+    Minimum-norm sweeps ``x -= Omega_w^T G_w^-1 (r - l)`` until
+    ``max |r - l| / l <= length_rtol``. With ``chord`` the sweeps start with the rows
+    ``w`` and factors ``chol`` of a nearby point (a minimiser's last point, one step
+    away: convergence at the rate ``|step| / l``, no factorisation) as long as each sweep
+    at least quarters the error; otherwise, and without ``chord``, every sweep first
+    factorises at the iterate (``w <- u``: Newton). Any fixed point lies on the
+    constraint manifold; the chord changes only which nearby point of it is reached,
+    by the square of the step. On return ``u``, ``r`` hold the geometry of ``x``.
+
+    Returns
+    -------
+    sweeps, err, bad
+        ``sweeps`` -1 when ``max_sweeps`` did not suffice; ``bad`` the first degenerate
+        cluster or -1.
+    """
+    err = 0.0
+    previous = np.inf
+    for sweep in range(max_sweeps + 1):
+        err = link_geometry(x, li, lj, offset, length, u, r)
+        if err <= length_rtol:
+            return sweep, err, -1
+        if sweep == max_sweeps:
+            break
+        chord = chord and err <= 0.25 * previous
+        if not chord:
+            w[:, :] = u
+            bad = gram_factor(w, sign, first, cptr, fptr, chol, rank_rtol)
+            if bad >= 0:
+                return sweep, err, bad
+        previous = err
+        for k in range(lam.shape[0]):
+            lam[k] = r[k] - length[k]
+        for c in range(cptr.shape[0] - 1):
+            _block_solve(first, cptr[c], cptr[c + 1] - cptr[c], fptr[c], chol, lam[cptr[c]:cptr[c + 1]])
+        omega_t_subtract(w, li, lj, lam, x)
+    return -1, err, -1
+
+
+@njit(cache=True)
+def rigid_project_2d(x, rptr, members, shift, g):
+    """``g`` (N, 2) projected in place onto the rigid motions of each rigid 2D cluster.
+
+    Cluster ``c`` holds spheres ``members[rptr[c]:rptr[c+1]]`` at the unwrapped
+    positions ``x + shift``. Its tangent space is spanned by the two translations and
+    the rotation about the centroid (orthogonal to each other), so the projection is
+    ``g_s <- F / n + (tau / I) e_z x r_s`` with the total force ``F``, the torque
+    ``tau`` and ``I = sum |r_s|^2`` about the centroid: the projection ``P g`` of the
+    Gram path, without a factorisation.
+    """
+    for c in range(rptr.shape[0] - 1):
+        a, b = rptr[c], rptr[c + 1]
+        n = b - a
+        cx = 0.0
+        cy = 0.0
+        for k in range(a, b):
+            s = members[k]
+            cx += x[s, 0] + shift[k, 0]
+            cy += x[s, 1] + shift[k, 1]
+        cx /= n
+        cy /= n
+        fx = 0.0
+        fy = 0.0
+        tau = 0.0
+        inertia = 0.0
+        for k in range(a, b):
+            s = members[k]
+            rx = x[s, 0] + shift[k, 0] - cx
+            ry = x[s, 1] + shift[k, 1] - cy
+            fx += g[s, 0]
+            fy += g[s, 1]
+            tau += rx * g[s, 1] - ry * g[s, 0]
+            inertia += rx * rx + ry * ry
+        omega = tau / inertia
+        for k in range(a, b):
+            s = members[k]
+            rx = x[s, 0] + shift[k, 0] - cx
+            ry = x[s, 1] + shift[k, 1] - cy
+            g[s, 0] = fx / n - omega * ry
+            g[s, 1] = fy / n + omega * rx
+
+
+@njit(cache=True)
+def rigid_place_2d(x, rptr, members, shift, ref):
+    """Each rigid 2D cluster moved in place to the rigid placement of its shape ``ref`` nearest to ``x``.
+
+    ``ref`` (M, 2) are the members' offsets from the centroid in the body frame.
+    The least-squares placement (Kabsch) keeps the centroid and turns ``ref`` by the
+    angle of ``sum ref_s . r_s`` and ``sum ref_s x r_s``: the closest point of the
+    constraint manifold (the limit Newton re-affixing approaches), exact to round-off.
+    """
+    for c in range(rptr.shape[0] - 1):
+        a, b = rptr[c], rptr[c + 1]
+        n = b - a
+        cx = 0.0
+        cy = 0.0
+        for k in range(a, b):
+            s = members[k]
+            cx += x[s, 0] + shift[k, 0]
+            cy += x[s, 1] + shift[k, 1]
+        cx /= n
+        cy /= n
+        dot = 0.0
+        cross = 0.0
+        for k in range(a, b):
+            s = members[k]
+            rx = x[s, 0] + shift[k, 0] - cx
+            ry = x[s, 1] + shift[k, 1] - cy
+            dot += ref[k, 0] * rx + ref[k, 1] * ry
+            cross += ref[k, 0] * ry - ref[k, 1] * rx
+        h = np.sqrt(dot * dot + cross * cross)
+        cos = dot / h
+        sin = cross / h
+        for k in range(a, b):
+            s = members[k]
+            x[s, 0] = cx + cos * ref[k, 0] - sin * ref[k, 1] - shift[k, 0]
+            x[s, 1] = cy + sin * ref[k, 0] + cos * ref[k, 1] - shift[k, 1]
+
+
+@njit(cache=True)
+def unlinked_pairs(pi, pj, offset, sigma, adj_ptr, adj):
+    """Drop linked pairs from a pair list in place (compacted); returns the count kept.
+
+    ``adj[adj_ptr[i]:adj_ptr[i + 1]]`` are the partners ``j > i`` linked to ``i`` (any
+    periodic image: a linked pair never interacts).
+    """
+    kept = 0
+    for p in range(pi.shape[0]):
+        i = pi[p]
+        j = pj[p]
+        linked = False
+        for k in range(adj_ptr[i], adj_ptr[i + 1]):
+            if adj[k] == j:
+                linked = True
+                break
+        if linked:
+            continue
+        pi[kept] = i
+        pj[kept] = j
+        sigma[kept] = sigma[p]
+        for a in range(offset.shape[1]):
+            offset[kept, a] = offset[p, a]
+        kept += 1
+    return kept
+
+
+@njit(cache=True)
+def linked_fire(
+    x, v, fire_state, fire_params,
+    offset, pi, pj, sigma, eps, w_exp, x_build, reach, skin, lengths, diameter, adj_ptr, adj,
+    li, lj, link_offset, length, sign, first, cptr, fptr, chol, w, u, r, rptr, members, shift, ref,
+    length_rtol, max_sweeps, rank_rtol, force_tol, max_steps, force,
+):
+    """FIRE 2.0 of linked spheres at fixed box in one compiled loop (the steps of :class:`~jamflow.minimize.fire._ModelFire`).
+
+    Unit masses; links in cluster order. Every step: FIRE control
+    (:mod:`jamflow.minimize._fire_kernels`), move, re-affixing (:func:`reaffix`, chord
+    sweeps with the last point's factors), the Gram factors at the new point, pair
+    forces of the unlinked listed pairs (exponent ``w_exp``), and the force and the
+    velocity projected onto the tangent space (:func:`gram_project`). Rigid 2D
+    clusters (``rptr``, ``members``, ``shift``, ``ref`` of :func:`rigid_place_2d`; their
+    links are not among ``li``, ``lj``) are projected onto their rigid motions
+    (:func:`rigid_project_2d`) and placed rigidly instead. ``x`` (N, d)
+    must lie on the constraint manifold with ``u``, ``r`` its link geometry on entry;
+    the velocity is projected at ``x`` on entry (after a return for a rebuild it was
+    not yet).
+
+    A move whose displacements use up the skin rebuilds the list before the forces
+    are evaluated, so every force comes from a valid list (as in the model's own
+    :meth:`evaluate`): inside the loop in an orthogonal box of sides ``lengths`` (the
+    call of :class:`~jamflow.neighbors.verlet.NeighborList`, without the linked pairs
+    of ``adj_ptr``, ``adj``; :func:`unlinked_pairs`), else by returning ``REBUILD``
+    (``lengths`` empty, or a box too small for the reach) for the caller's build and
+    re-entry. ``x_build`` is updated in place.
+
+    Returns
+    -------
+    status, steps, energy, n_contact, max_force_sq, sweeps, bad, builds, pi, pj, offset, sigma
+        ``status`` of :mod:`jamflow.minimize._fire_kernels` (``STALLED``: re-affixing did
+        not converge, or the links of cluster ``bad`` are degenerate); ``sweeps`` the
+        re-affixing sweeps and ``builds`` the lists built in the call; the list in use.
+    """
+    d = x.shape[1]
+    dt, alpha, npos = fire_state[0], fire_state[1], int(fire_state[2])
+    done = int(fire_state[3])
+    dt_max, dt_min, f_inc, f_dec = fire_params[0], fire_params[1], fire_params[2], fire_params[3]
+    alpha0, f_alpha, n_delay = fire_params[4], fire_params[5], int(fire_params[6])
+    initial_delay = fire_params[7] > 0.0
+    links = li.shape[0] > 0
+    rigid = rptr.shape[0] > 1
+    lam = np.empty(li.shape[0])
+    virial = np.zeros((d, d))
+    shortest = np.inf if lengths.shape[0] else 0.0
+    for a in range(lengths.shape[0]):
+        shortest = min(shortest, lengths[a])
+    buffers = _list_buffers(x.shape[0] if lengths.shape[0] else 0, d)
+    builds = 0
+    energy = 0.0
+    n_contact = 0
+    fmax2 = np.inf
+    sweeps = 0
+    bad = -1
+    status = MAX_STEPS
+    step = 0
+    while True:
+        # evaluation at x: a valid list, the Gram factors, forces and velocity projected
+        if _needs_rebuild(x, x_build, 1.0, 1.0, reach, skin, 0.0):
+            if not reach < 0.5 * shortest:
+                status = REBUILD
+                break
+            pi, pj, _, offset, sigma, buffers = _inline_list(x, 1.0, lengths, diameter, reach, skin, buffers)
+            kept = unlinked_pairs(pi, pj, offset, sigma, adj_ptr, adj)
+            pi, pj, offset, sigma = pi[:kept], pj[:kept], offset[:kept], sigma[:kept]
+            x_build[:, :] = x
+            builds += 1
+        if links:
+            w[:, :] = u
+            bad = gram_factor(w, sign, first, cptr, fptr, chol, rank_rtol)
+            if bad >= 0:
+                status = STALLED
+                break
+        energy, n_contact = pair_forces(x, 1.0, offset, pi, pj, sigma, eps, w_exp, force, virial, False)
+        if links:
+            gram_project(w, li, lj, first, cptr, fptr, chol, force, lam)
+            gram_project(w, li, lj, first, cptr, fptr, chol, v, lam)
+        if rigid:
+            rigid_project_2d(x, rptr, members, shift, force)
+            rigid_project_2d(x, rptr, members, shift, v)
+        fmax2 = _max_force_sq(force)
+        if fmax2 <= force_tol * force_tol:
+            status = CONVERGED
+            break
+        if step >= max_steps:
+            break
+        power = _dot(force, v)
+        npos, dt, alpha = _fire_adapt(
+            power, done + step, npos, dt, alpha, n_delay, f_inc, f_dec, f_alpha, alpha0, dt_max, dt_min,
+            initial_delay,
+        )
+        if not power > 0.0:
+            _fire_step_back(x, v, dt)
+            if rigid:
+                rigid_place_2d(x, rptr, members, shift, ref)
+            if links:
+                n, err, bad = reaffix(x, li, lj, link_offset, length, sign, first, cptr, fptr, chol, w, u, r, lam,
+                                      length_rtol, max_sweeps, rank_rtol, True)
+                sweeps += max(n, 0)
+                if n < 0 or bad >= 0:
+                    status = STALLED
+                    break
+        _axpy(dt, force, v)
+        vnorm = np.sqrt(_dot(v, v))
+        fnorm = np.sqrt(_dot(force, force))
+        keep, mix = _fire_mixing(alpha, vnorm, fnorm)
+        _mix_and_move(v, force, keep, mix, x, dt)
+        step += 1
+        if rigid:
+            rigid_place_2d(x, rptr, members, shift, ref)
+        if links:
+            n, err, bad = reaffix(x, li, lj, link_offset, length, sign, first, cptr, fptr, chol, w, u, r, lam,
+                                  length_rtol, max_sweeps, rank_rtol, True)
+            sweeps += max(n, 0)
+            if n < 0 or bad >= 0:
+                status = STALLED
+                break
+    fire_state[0], fire_state[1], fire_state[2], fire_state[3] = dt, alpha, npos, done + step
+    return status, step, energy, n_contact, fmax2, sweeps, bad, builds, pi, pj, offset, sigma

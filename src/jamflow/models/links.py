@@ -37,13 +37,17 @@ sphere has unit mass.
 
 from __future__ import annotations
 
+import copy
+import functools
+
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
 from ..box import Box
 from ..minimize import _fire_kernels
-from ..minimize.model import ModelEvaluation
+from ..minimize.fire import FireParameters, MinimizeResult, _fire_params
+from ..minimize.model import ModelEvaluation, pressure_of
 from ..neighbors import _verlet_kernels
 from ..neighbors.verlet import NeighborList
 from ..state.bodies import Links
@@ -53,7 +57,7 @@ from .spheres import _kernels
 from .spheres.model import SphereBodies
 from .spheres.potential import HARMONIC, PowerLawPotential
 
-__all__ = ["LINK_NEWTON_MAX_ITERATIONS", "ClusterGram", "LinkedSpheresModel"]
+__all__ = ["LINK_NEWTON_MAX_ITERATIONS", "ClusterGram", "LinkedFire", "LinkedSpheresModel"]
 
 #: Newton sweeps allowed per re-affixing before it is declared failed: from a
 #: violation of 1e-2 quadratic convergence needs ~4 sweeps to reach 1e-13.
@@ -63,9 +67,11 @@ LINK_NEWTON_MAX_ITERATIONS: int = 50
 class ClusterGram:
     """The block-diagonal Gram matrix ``Omega Omega^T`` of links, one Cholesky block per cluster.
 
-    Kernels in :mod:`jamflow.models._link_kernels` (numba). Rows of ``Omega`` are
-    ``-w_k`` on ``i_k`` and ``+w_k`` on ``j_k`` for any per-link vectors ``w`` (L, d)
-    given to :meth:`factorise`.
+    Kernels in :mod:`jamflow.models._link_kernels` (numba), which take the links in
+    cluster order (``order``: cluster by cluster, by their ends within a cluster, so a
+    chain's factor has a narrow envelope); the methods here take and return arrays in
+    the links' own order. Rows of ``Omega`` are ``-w_k`` on ``i_k`` and ``+w_k`` on
+    ``j_k`` for any per-link vectors ``w`` (L, d) given to :meth:`factorise`.
 
     Parameters
     ----------
@@ -80,13 +86,13 @@ class ClusterGram:
         self.n, self.d = n, d
         if not len(links):
             self.labels = np.arange(n)
-            self.order = np.empty(0, np.int64)
+            self.order = self.first = self.ci = self.cj = np.empty(0, np.int64)
             self.cptr = self.fptr = np.zeros(1, np.int64)
-            self.chol = np.empty(0)
+            self.chol = self.sign = np.empty(0)
             return
         self.labels = links.clusters(n)
         link_cluster = self.labels[self.i]
-        self.order = np.argsort(link_cluster, kind="stable").astype(np.int64)
+        self.order = np.lexsort((self.j, self.i, link_cluster)).astype(np.int64)
         clusters, m = np.unique(link_cluster, return_counts=True)
         spheres = np.bincount(self.labels)[clusters]
         over = np.flatnonzero(m > spheres * d)
@@ -97,24 +103,71 @@ class ClusterGram:
         self.clusters = clusters
         self.cptr = np.concatenate([[0], np.cumsum(m)]).astype(np.int64)
         self.fptr = np.concatenate([[0], np.cumsum(m * m)]).astype(np.int64)
+        self.ci, self.cj = self.i[self.order], self.j[self.order]
+        self.sign = np.zeros(int(self.fptr[-1]))
+        self.first = np.empty(len(links), np.int64)
+        _link_kernels.gram_structure(self.ci, self.cj, self.cptr, self.fptr, self.sign, self.first)
         self.chol = np.zeros(int(self.fptr[-1]))
+
+    def fresh(self) -> ClusterGram:
+        """The same cluster structure (shared, read-only arrays) with factors of its own."""
+        other = copy.copy(self)
+        other.chol = np.zeros_like(self.chol)
+        return other
+
+    @functools.cached_property
+    def rigid_layout(self) -> dict:
+        """Which clusters are rigid in 2D, their spheres, and the Gram blocks of the others (:class:`LinkedFire`).
+
+        A 2D cluster of ``n`` spheres with ``2 n - 3`` independent links has only rigid
+        motions (two translations, one rotation). Keys: ``rptr``, ``members`` (the rigid
+        clusters' spheres, cluster by cluster), ``links`` and ``factor`` (cluster-order
+        indices of the other clusters' links and factor entries), ``cptr``, ``fptr``
+        (their blocks) and ``cluster`` (their index among all blocks).
+        """
+        m = np.diff(self.cptr)
+        if not len(m):
+            empty = np.empty(0, np.int64)
+            return {"rptr": np.zeros(1, np.int64), "members": empty, "links": empty, "factor": empty,
+                    "cptr": np.zeros(1, np.int64), "fptr": np.zeros(1, np.int64), "cluster": empty}
+        spheres = np.bincount(self.labels)[self.clusters]
+        rigid = (spheres * self.d - m == 3) if self.d == 2 else np.zeros(len(m), bool)
+        order = np.argsort(self.labels, kind="stable")
+        starts = np.searchsorted(self.labels[order], self.clusters)
+        members = np.concatenate([order[a:a + n] for a, n in zip(starts[rigid], spheres[rigid])]
+                                 or [np.empty(0, np.int64)]).astype(np.int64)
+        keep = np.flatnonzero(~rigid)
+        return {"rptr": np.concatenate([[0], np.cumsum(spheres[rigid])]).astype(np.int64), "members": members,
+                "links": np.concatenate([np.arange(self.cptr[c], self.cptr[c + 1]) for c in keep]
+                                        or [np.empty(0, np.int64)]).astype(np.int64),
+                "factor": np.concatenate([np.arange(self.fptr[c], self.fptr[c + 1]) for c in keep]
+                                         or [np.empty(0, np.int64)]).astype(np.int64),
+                "cptr": np.concatenate([[0], np.cumsum(m[keep])]).astype(np.int64),
+                "fptr": np.concatenate([[0], np.cumsum(m[keep] ** 2)]).astype(np.int64), "cluster": keep}
+
+    def degenerate(self, c: int) -> ValueError:
+        """The error for the degenerate links of cluster ``c`` (an index into the factor blocks)."""
+        first = np.flatnonzero(self.labels == self.clusters[c])
+        return ValueError(f"the links of the cluster of particles {first.tolist()} are degenerate "
+                          f"(redundant constraints); remove a redundant link")
 
     def factorise(self, w: NDArray[np.float64]) -> None:
         """Cholesky factors of the Gram blocks of rows ``w`` (L, d); ValueError if a cluster is degenerate."""
-        bad = _link_kernels.gram_factor(w, self.i, self.j, self.order, self.cptr, self.fptr, self.chol,
-                                        LINK_RANK_RTOL)
+        bad = _link_kernels.gram_factor(np.ascontiguousarray(w[self.order]), self.sign, self.first, self.cptr,
+                                        self.fptr, self.chol, LINK_RANK_RTOL)
         if bad >= 0:
-            first = np.flatnonzero(self.labels == self.clusters[bad])
-            raise ValueError(f"the links of the cluster of particles {first.tolist()} are degenerate "
-                             f"(redundant constraints); remove a redundant link")
+            raise self.degenerate(bad)
 
     def solve(self, rhs: NDArray[np.float64]) -> NDArray[np.float64]:
         """``G^-1 rhs`` for ``rhs`` (L,) or (L, k) (a new array)."""
-        out = np.array(rhs, dtype=np.float64, order="C")
-        if not out.size:
-            return out
-        _link_kernels.gram_solve(self.order, self.cptr, self.fptr, self.chol, out.reshape(len(out), -1))
-        return out
+        rhs = np.asarray(rhs, dtype=np.float64)
+        if not rhs.size:
+            return np.array(rhs)
+        out = np.ascontiguousarray(rhs[self.order])
+        _link_kernels.gram_solve(self.first, self.cptr, self.fptr, self.chol, out.reshape(len(out), -1))
+        result = np.empty_like(out)
+        result[self.order] = out
+        return result
 
     def apply(self, w: NDArray[np.float64], g: NDArray[np.float64]) -> NDArray[np.float64]:
         """``Omega g`` (L,) of ``g`` (N, d)."""
@@ -135,8 +188,11 @@ class ClusterGram:
         """
         out = np.array(g, dtype=np.float64, order="C")
         lam = np.empty(len(self.i))
-        _link_kernels.gram_project(w, self.i, self.j, self.order, self.cptr, self.fptr, self.chol, out, lam)
-        return out, lam
+        _link_kernels.gram_project(np.ascontiguousarray(w[self.order]), self.ci, self.cj, self.first, self.cptr,
+                                   self.fptr, self.chol, out, lam)
+        result = np.empty_like(lam)
+        result[self.order] = lam
+        return out, result
 
 
 class LinkedSpheresModel(SphereBodies):
@@ -158,6 +214,8 @@ class LinkedSpheresModel(SphereBodies):
     nlist : NeighborList, optional
     length_rtol : float
         Relative link-length precision kept by :meth:`reproject`.
+    gram : ClusterGram, optional
+        The cluster structure of the same links (shared by :meth:`rescaled`).
     """
 
     constrained = True
@@ -171,6 +229,7 @@ class LinkedSpheresModel(SphereBodies):
         potential: PowerLawPotential = HARMONIC,
         nlist: NeighborList | None = None,
         length_rtol: float = LINK_LENGTH_RTOL,
+        gram: ClusterGram | None = None,
     ) -> None:
         super().__init__(box, diameter, potential, nlist)
         self.links = links
@@ -185,7 +244,7 @@ class LinkedSpheresModel(SphereBodies):
         raw = x[links.j] - x[links.i]
         image = np.round((box.minimum_image(raw) - raw) @ box.inverse.T)
         self.link_offset = image @ box.matrix.T
-        self.gram = ClusterGram(links, self.n, self.d)
+        self.gram = ClusterGram(links, self.n, self.d) if gram is None else gram.fresh()
         self._li, self._lj = self.gram.i, self.gram.j
         self._geometry_q: NDArray[np.float64] | None = None
         self._factor_q: NDArray[np.float64] | None = None
@@ -263,6 +322,24 @@ class LinkedSpheresModel(SphereBodies):
                 or _verlet_kernels._needs_rebuild(x, nl.x_build, 1.0, 1.0, nl.reach, nl.skin, 0.0)):
             nl.build(x, self.box)
 
+    def listed_pairs(self, x: NDArray[np.float64]) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64],
+                                                         NDArray[np.float64]]:
+        """``(i, j, offset, sigma)`` of the unlinked pairs of the neighbour list at centres ``x``, rebuilt if stale."""
+        self._update_list(x)
+        self._pairs()
+        return self._pi, self._pj, self._offset, self._sigma
+
+    def fire_engine(self, q: NDArray[np.float64], params: FireParameters, pressure0: float | None = None,
+                    pressure_rtol: float = 0.0, box_dof: str = "isotropic") -> LinkedFire | None:
+        """The compiled FIRE loop at fixed box (:class:`LinkedFire`); None for enthalpy (no box degree of freedom).
+
+        None too for a subclass with an energy of its own (another :meth:`evaluate`): the
+        loop computes this class's energy, not the subclass's.
+        """
+        if pressure0 is not None or type(self).evaluate is not LinkedSpheresModel.evaluate:
+            return None
+        return LinkedFire(self, q, params)
+
     def _pairs(self) -> None:
         """Listed pairs minus linked pairs, refreshed after each neighbour-list build."""
         nl = self.nlist
@@ -305,8 +382,111 @@ class LinkedSpheresModel(SphereBodies):
         """
         x = position * factor
         model = LinkedSpheresModel(self.box.scaled(factor), self.diameter, self.links, x, self.potential,
-                                   self.nlist, self.length_rtol)
+                                   self.nlist, self.length_rtol, self.gram)
         return model, x
 
     def hessian(self, q: NDArray[np.float64]) -> sp.csr_matrix:
         raise NotImplementedError("the constrained Hessian of linked spheres is not implemented yet")
+
+
+class LinkedFire:
+    """FIRE steps of linked spheres at fixed box in one compiled loop (:func:`._link_kernels.linked_fire`).
+
+    The steps of the flat-vector FIRE (:class:`~jamflow.minimize.fire._ModelFire`) on
+    this model, in numba: move, re-affixing, Gram factors, pair forces and projections
+    fused; re-affixing starts with chord sweeps on the last point's factors
+    (:func:`._link_kernels.reaffix`). The loop rebuilds its neighbour list itself in
+    an orthogonal box and returns to Python for the build otherwise; the state
+    persists across calls. It keeps its own link geometry and factors (links in
+    the cluster order of :class:`ClusterGram`), so the model's caches stay valid.
+    """
+
+    def __init__(self, model: LinkedSpheresModel, q: NDArray[np.float64], params: FireParameters) -> None:
+        self.model = model
+        self.builds0 = model.nlist.builds
+        self.x = np.ascontiguousarray(model.positions(model.reproject(np.array(q, dtype=np.float64))), dtype=np.float64)
+        self.v = np.zeros_like(self.x)
+        self.force = np.zeros_like(self.x)
+        unit = model.time_unit
+        self.fire_state = np.array([params.dt * unit, params.alpha0, 0.0, 0.0])
+        self.fparams = _fire_params(params, unit)
+        self.rigid, self.gram = _rigid_clusters(model, self.x)
+        g = self.gram
+        self.u = np.zeros((len(g["ci"]), model.d))
+        self.w = np.zeros_like(self.u)
+        self.r = np.zeros(len(g["ci"]))
+        self.chol = np.zeros_like(g["sign"])
+        _link_kernels.link_geometry(self.x, g["ci"], g["cj"], g["offset"], g["length"], self.u, self.r)
+        # the list in use (i, j, offset, sigma) and its build positions; the loop rebuilds it in an orthogonal box
+        self.pairs: tuple[NDArray, ...] | None = None
+        self.x_build = np.empty((0, model.d))
+        self.lengths = np.diag(model.box.matrix).copy() if model.box.is_orthogonal else np.empty(0)
+        self.adj_ptr = np.concatenate([[0], np.cumsum(np.bincount(model.links.i, minlength=model.n))]).astype(np.int64)
+        self.inline_builds = 0
+
+    def advance(self, force_tol: float, budget: int, rebuild: bool) -> tuple[int, int]:
+        """At most ``budget`` steps; returns ``(status, steps)``.
+
+        Lists are rebuilt inside the loop in an orthogonal box; else (``REBUILD``) the
+        next call builds one here.
+        """
+        m, g, rigid = self.model, self.gram, self.rigid
+        if self.pairs is None or rebuild:
+            self.pairs = m.listed_pairs(self.x)
+            self.x_build = np.array(m.nlist.x_build)
+        nl = m.nlist
+        status, n, _, _, _, _, bad, builds, *pairs = _link_kernels.linked_fire(
+            self.x, self.v, self.fire_state, self.fparams, self.pairs[2], self.pairs[0], self.pairs[1], self.pairs[3],
+            m.potential.epsilon, m.potential.exponent, self.x_build, nl.reach, nl.skin, self.lengths, m.diameter,
+            self.adj_ptr, m.links.j, g["ci"], g["cj"], g["offset"], g["length"], g["sign"], g["first"], g["cptr"],
+            g["fptr"], self.chol, self.w, self.u, self.r, rigid["rptr"], rigid["members"], rigid["shift"], rigid["ref"],
+            m.length_rtol, LINK_NEWTON_MAX_ITERATIONS, LINK_RANK_RTOL, float(force_tol), int(budget), self.force,
+        )
+        self.pairs = (pairs[0], pairs[1], pairs[2], pairs[3])
+        self.inline_builds += builds
+        if status == _fire_kernels.STALLED:
+            if bad >= 0:
+                raise m.gram.degenerate(int(g["cluster"][bad]))
+            raise RuntimeError(f"Newton re-affixing of the links stalled (asked a relative length error "
+                               f"{m.length_rtol:.3g}) after {LINK_NEWTON_MAX_ITERATIONS} sweeps")
+        return status, n
+
+    def result(self, steps: int, calls: int, status: int) -> MinimizeResult:
+        """The run's outcome; energy, virial (pairs and link tensions) and force from one evaluation of the final state."""
+        m = self.model
+        q = self.x.ravel().copy()
+        ev = m.evaluate(q)
+        # from the final state itself: a run that ends on a rebuild has not evaluated it
+        max_force = m.max_force(m.project(ev.gradient, q))
+        return MinimizeResult(
+            position=self.x.copy(), box=m.box, energy=ev.energy, pressure=pressure_of(ev, m.box),
+            max_force=max_force, n_contacts=ev.n_contacts, steps=steps,
+            converged=status == _fire_kernels.CONVERGED, rebuilds=m.nlist.builds - self.builds0 + self.inline_builds,
+            evaluations=steps + 2,
+        )
+
+
+def _rigid_clusters(model: LinkedSpheresModel, x: NDArray[np.float64]) -> tuple[dict, dict]:
+    """The clusters of :class:`LinkedFire` at centres ``x`` (on the manifold): rigid 2D clusters and the Gram blocks of the others.
+
+    Rigid clusters (:attr:`ClusterGram.rigid_layout`) are projected and placed rigidly
+    (:func:`._link_kernels.rigid_project_2d`, :func:`._link_kernels.rigid_place_2d`),
+    with their spheres' periodic shifts relative to each cluster's first sphere and
+    their shapes (offsets from the centroid) taken from ``x``. The other clusters keep
+    their Gram blocks (links in cluster order, sliced from ``model.gram``).
+    """
+    g = model.gram
+    lay = g.rigid_layout
+    rptr, members = lay["rptr"], lay["members"]
+    sizes = np.diff(rptr)
+    anchor = np.repeat(members[rptr[:-1]], sizes)
+    raw = x[members] - x[anchor]
+    shift = model.box.minimum_image(raw) - raw if len(members) else np.zeros((0, model.d))
+    y = x[members] + shift
+    centroid = np.add.reduceat(y, rptr[:-1], axis=0) / sizes[:, None] if len(members) else y
+    links, factor = lay["links"], lay["factor"]
+    gram = {"ci": g.ci[links], "cj": g.cj[links], "offset": np.ascontiguousarray(model.link_offset[g.order[links]]),
+            "length": np.ascontiguousarray(model.links.length[g.order[links]]), "sign": g.sign[factor],
+            "first": g.first[links], "cptr": lay["cptr"], "fptr": lay["fptr"], "cluster": lay["cluster"]}
+    return ({"rptr": rptr, "members": members, "shift": np.ascontiguousarray(shift),
+             "ref": np.ascontiguousarray(y - np.repeat(centroid, sizes, axis=0))}, gram)

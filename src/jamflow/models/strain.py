@@ -44,17 +44,19 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
 from ..box import Box
-from ..minimize.model import ModelEvaluation
+from ..minimize import _fire_kernels
+from ..minimize.fire import FireParameters, MinimizeResult, _fire_params
+from ..minimize.model import ModelEvaluation, pressure_of
 from ..neighbors import _verlet_kernels
 from ..neighbors.verlet import NeighborList
 from ..state.bodies import Links
-from ..tolerances import LINK_LENGTH_RTOL
-from . import _link_kernels
-from .links import LINK_NEWTON_MAX_ITERATIONS, LinkedSpheresModel
+from ..tolerances import LINK_LENGTH_RTOL, LINK_RANK_RTOL
+from . import _link_kernels, _strain_kernels
+from .links import LINK_NEWTON_MAX_ITERATIONS, ClusterGram, LinkedSpheresModel
 from .spheres import _kernels
 from .spheres.potential import HARMONIC, PowerLawPotential
 
-__all__ = ["ShearStabilizedModel", "strain_components", "strain_matrix"]
+__all__ = ["ShearStabilizedModel", "StrainFire", "strain_components", "strain_matrix"]
 
 
 @lru_cache(maxsize=8)
@@ -93,12 +95,15 @@ class ShearStabilizedModel(LinkedSpheresModel):
     fixed_volume : bool
         Keep ``det F = 1`` (shear stabilisation); False frees the volume (the
         compliance of Sec. VI and its stress-controlled check).
+    gram : ClusterGram, optional
+        The cluster structure of the same links (shared by :meth:`rescaled`).
     """
 
     def __init__(self, box: Box, diameter: ArrayLike, links: Links, position: ArrayLike,
                  potential: PowerLawPotential = HARMONIC, nlist: NeighborList | None = None,
-                 length_rtol: float = LINK_LENGTH_RTOL, fixed_volume: bool = True) -> None:
-        super().__init__(box, diameter, links, position, potential, nlist, length_rtol)
+                 length_rtol: float = LINK_LENGTH_RTOL, fixed_volume: bool = True,
+                 gram: ClusterGram | None = None) -> None:
+        super().__init__(box, diameter, links, position, potential, nlist, length_rtol, gram)
         self.fixed_volume = fixed_volume
         self.m = self.d * (self.d + 1) // 2
         self.strain_scale = float(np.sqrt(self.n) * self.diameter.mean())
@@ -314,6 +319,17 @@ class ShearStabilizedModel(LinkedSpheresModel):
                 return
         nl.build(x, Box(U))
 
+    def fire_engine(self, q: NDArray[np.float64], params: FireParameters, pressure0: float | None = None,
+                    pressure_rtol: float = 0.0, box_dof: str = "isotropic") -> StrainFire | None:
+        """The compiled FIRE loop (:class:`StrainFire`); None for enthalpy (the volume is a constraint here).
+
+        None too for a subclass with an energy of its own (another :meth:`evaluate`): the
+        loop computes this class's energy, not the subclass's.
+        """
+        if pressure0 is not None or type(self).evaluate is not ShearStabilizedModel.evaluate:
+            return None
+        return StrainFire(self, q, params)
+
     def max_force(self, g: NDArray[np.float64]) -> float:
         """Largest per-sphere norm of the centre part and the norm of the strain part of ``g``."""
         gy, ge = self._split(g)
@@ -328,8 +344,96 @@ class ShearStabilizedModel(LinkedSpheresModel):
         box = self.last_box().scaled(factor)
         x = np.asarray(position) * factor
         model = ShearStabilizedModel(box, self.diameter, self.links, x, self.potential, self.nlist, self.length_rtol,
-                                     self.fixed_volume)
+                                     self.fixed_volume, self.gram)
         return model, x
 
     def hessian(self, q: NDArray[np.float64]) -> sp.csr_matrix:
         raise NotImplementedError("use jamflow.chains.hessian for the constrained Hessian with strain blocks")
+
+
+class StrainFire:
+    """FIRE steps of shear-stabilised linked spheres in one compiled loop (:func:`._strain_kernels.strain_fire`).
+
+    The steps of the flat-vector FIRE (:class:`~jamflow.minimize.fire._ModelFire`) on
+    the model: move, re-affixing of links and volume (chord sweeps on the last point's
+    factorisation), the Woodbury/Schur factorisation at the new point, pair forces in
+    the deformed box and both projections, in numba. The loop rebuilds its list in the
+    deformed (sheared) box itself (:func:`._strain_kernels.sheared_list`) and returns
+    here for a build only in a box too sheared for it; the state persists across calls. Links in the cluster order of the model's
+    :class:`~jamflow.models.links.ClusterGram`, with factors of its own.
+    """
+
+    def __init__(self, model: ShearStabilizedModel, q: NDArray[np.float64], params: FireParameters) -> None:
+        self.model = model
+        self.builds0 = model.nlist.builds
+        q = model.reproject(np.array(q, dtype=np.float64))
+        y, e = model._split(q)
+        self.y = np.ascontiguousarray(y, dtype=np.float64)
+        self.e = np.array(e, dtype=np.float64)
+        self.vy = np.zeros_like(self.y)
+        self.ve = np.zeros_like(self.e)
+        self.fy = np.zeros_like(self.y)
+        self.fe = np.zeros_like(self.e)
+        unit = model.time_unit
+        self.fire_state = np.array([params.dt * unit, params.alpha0, 0.0, 0.0])
+        self.fparams = _fire_params(params, unit)
+        g = model.gram
+        self.link_offset = np.ascontiguousarray(model.link_offset[g.order])
+        self.length = np.ascontiguousarray(model.links.length[g.order])
+        self.chol = np.zeros_like(g.chol)
+        self.adj_ptr = np.concatenate([[0], np.cumsum(np.bincount(model.links.i, minlength=model.n))]).astype(np.int64)
+        # the list in use (i, j, reference offset, sigma), its build centres (rotated frame) and box
+        self.pairs: tuple[NDArray, ...] | None = None
+        self.x_build = np.empty((0, model.d))
+        self.h_build_inv = np.eye(model.d)
+        self.inline_builds = 0
+
+    def q(self) -> NDArray[np.float64]:
+        """The present degree-of-freedom vector."""
+        return np.concatenate([self.y.ravel(), self.e])
+
+    def advance(self, force_tol: float, budget: int, rebuild: bool) -> tuple[int, int]:
+        """At most ``budget`` steps; returns ``(status, steps)``.
+
+        Lists are rebuilt inside the loop; in a box too sheared or small for that
+        (``REBUILD``) the next call builds one here.
+        """
+        m, g = self.model, self.model.gram
+        if self.pairs is None or rebuild:
+            q = self.q()
+            _, _, T, U, _, _ = m._strain_state(q)
+            m._update_strained_list(np.ascontiguousarray(self.y @ T.T), U)
+            m._pairs()
+            self.pairs = (m._pi, m._pj, m._offset, m._sigma)
+            self.x_build = np.array(m.nlist.x_build)
+            self.h_build_inv = np.linalg.inv(m.nlist.h_build)
+        nl = m.nlist
+        pi, pj, offset, sigma = self.pairs
+        status, n, _, _, _, _, bad, builds, *pairs = _strain_kernels.strain_fire(
+            self.y, self.vy, self.e, self.ve, self.fire_state, self.fparams, m._h0, m.strain_scale, m.fixed_volume,
+            offset, pi, pj, sigma, m.potential.epsilon, m.potential.exponent, self.x_build, self.h_build_inv,
+            nl.reach, nl.skin, m.diameter, self.adj_ptr, m.links.j, g.ci, g.cj, self.link_offset, self.length,
+            g.sign, g.first, g.cptr, g.fptr, self.chol, m.length_rtol, LINK_NEWTON_MAX_ITERATIONS, LINK_RANK_RTOL,
+            float(force_tol), int(budget), self.fy, self.fe,
+        )
+        self.pairs = (pairs[0], pairs[1], pairs[2], pairs[3])
+        self.inline_builds += builds
+        if status == _fire_kernels.STALLED:
+            if bad >= 0:
+                raise g.degenerate(bad)
+            raise RuntimeError(f"Newton re-affixing of links and volume stalled (asked a relative error "
+                               f"{m.length_rtol:.3g}) after {LINK_NEWTON_MAX_ITERATIONS} sweeps")
+        return status, n
+
+    def result(self, steps: int, calls: int, status: int) -> MinimizeResult:
+        """The run's outcome; energy, virial (pairs, link tensions) and force from one evaluation of the final state."""
+        m = self.model
+        q = self.q()
+        ev = m.evaluate(q)
+        box = m.current_box(q)
+        return MinimizeResult(
+            position=np.array(m.positions(q)), box=box, energy=ev.energy, pressure=pressure_of(ev, box),
+            max_force=m.max_force(m.project(ev.gradient, q)), n_contacts=ev.n_contacts, steps=steps,
+            converged=status == _fire_kernels.CONVERGED, rebuilds=m.nlist.builds - self.builds0 + self.inline_builds,
+            evaluations=steps + 2,
+        )

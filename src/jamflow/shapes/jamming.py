@@ -1,17 +1,20 @@
 """Jamming onset of shaped bodies at pressure ``P0``, with rotations.
 
 The protocol of :mod:`jamflow.minimize.onset` on :class:`~jamflow.models.shapes.ShapeModel`
-(VanderWerf et al. Sec. II): isotropic compress/decompress bisection, each step a
-fixed-box FIRE minimisation over centres and orientations (orientations with their
-moments of inertia), halving the step in packing fraction on every reversal, until
-``|P - P0| <= pressure_rtol P0`` with ``max_i sqrt(F_i^2 + (tau_i / l)^2) <= force_tol``
-(``l`` the mean bounding diameter, :meth:`ShapeModel.max_force`). The box keeps its
-shape; shapes are never rescaled, so the packing fraction is the bisection variable.
+(VanderWerf et al. Sec. II): isotropic compress/decompress search on ``P(phi)``, each
+step a fixed-box FIRE minimisation over centres and orientations (orientations with
+their moments of inertia), to within ``bisection_rtol`` of ``P0``; then the enthalpy
+``U + P0 V`` is minimised with an isotropic barostat (the compiled engine of
+:mod:`jamflow.models.shapes.fast`) until ``|P - P0| <= pressure_rtol P0`` with
+``max_i sqrt(F_i^2 + (tau_i / l)^2) <= force_tol`` (``l`` the mean bounding diameter,
+:meth:`ShapeModel.max_force`). The box keeps its shape; shapes are never rescaled, so
+the packing fraction is the search variable.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 
@@ -88,7 +91,9 @@ def jam_shapes(packing: Packing, pressure: float, settings: JammingSettings = Ja
     start = np.column_stack([packing.position, packing.orientation])
     model.check_cores(model.dofs(start))
     model, final, history, steps = jam_model_to_pressure(model, start, packing.packing_fraction, pressure,
-                                                         settings, progress)
+                                                         replace(settings, box_dof="isotropic"), progress)
+    # the enthalpy stage ends in a scaled box: the packing is that box's
+    model = ShapeModel(final.box, model.shapes, model.shape_index, model.k, model.mass, rotations=rotations)
     c = settings
     params = {"pressure": pressure, "force_tol": c.force_tol, "pressure_rtol": c.pressure_rtol,
               "bisection_rtol": c.bisection_rtol, "bisection_force_factor": c.bisection_force_factor,

@@ -141,8 +141,26 @@ def _pw_terms(lam, dx0, dx1, axx, axy, ayy, dxx, dxy, dyy):
     return s0, s1, cxx, cxy, cyy, det, rs, sds, (1.0 - 2.0 * lam) * rs - lam * (1.0 - lam) * sds
 
 
+#: Newton steps below this size [1] end a warm-started Perram–Wertheim solve: the
+#: iteration converges quadratically, so the multiplier after such a step is exact to
+#: round-off.
+_PW_WARM_STEP = 1e-10
+
+
 @njit(cache=True)
-def perram_wertheim(dx0, dx1, ti, tj, pi, pj):
+def _pw_newton(lam, dx0, dx1, axx, axy, ayy, dxx, dxy, dyy):
+    """One Newton step on ``dF/dl = 0`` at ``l``: returns ``-F'(l) / F''(l)``."""
+    s0, s1, cxx, cxy, cyy, det, rs, sds, d1 = _pw_terms(lam, dx0, dx1, axx, axy, ayy, dxx, dxy, dyy)
+    # u = D s; F'' = -2 r.s - 2 (1 - 2 l) s.D.s + 2 l (1 - l) u.C^-1.u
+    ux = dxx * s0 + dxy * s1
+    uy = dxy * s0 + dyy * s1
+    ucu = (cyy * ux * ux - 2.0 * cxy * ux * uy + cxx * uy * uy) / det
+    d2 = -2.0 * rs - 2.0 * (1.0 - 2.0 * lam) * sds + 2.0 * lam * (1.0 - lam) * ucu
+    return -d1 / d2
+
+
+@njit(cache=True)
+def perram_wertheim(dx0, dx1, ti, tj, pi, pj, lam0=-1.0):
     """Perram–Wertheim contact function of two ellipses and its multiplier.
 
     ``F(A, B) = max_{0<=l<=1} l (1 - l) r^T C(l)^-1 r``, ``C = (1 - l) A + l B``
@@ -150,7 +168,11 @@ def perram_wertheim(dx0, dx1, ti, tj, pi, pj):
     inverted in closed form. ``F < 1`` iff the ellipses overlap, and ``F`` is
     homogeneous of degree 2 in ``r``, so the contact distance along ``r`` at fixed
     orientations is ``sigma = |r| / sqrt(F)``. ``F(l)`` is strictly concave: the
-    maximum is bracketed by bisection on ``dF/dl`` and polished by Newton.
+    maximum is bracketed by bisection on ``dF/dl`` and polished by Newton. With a
+    previous multiplier ``0 < lam0 < 1`` (a minimiser's last step, real arguments)
+    Newton starts from it and stops after a step below :data:`_PW_WARM_STEP`; a
+    start that leaves ``(0, 1)`` or does not converge in :data:`_PW_NEWTON` steps
+    falls back to the bracket.
 
     Returns
     -------
@@ -162,24 +184,30 @@ def perram_wertheim(dx0, dx1, ti, tj, pi, pj):
     dxx = bxx - axx
     dxy = bxy - axy
     dyy = byy - ayy
-    lo = 0.0
-    hi = 1.0
-    while hi - lo > 1e-3:
-        mid = 0.5 * (lo + hi)
-        slope = _pw_terms(mid, dx0.real, dx1.real, axx.real, axy.real, ayy.real, dxx.real, dxy.real, dyy.real)[8]
-        if slope > 0.0:
-            lo = mid
-        else:
-            hi = mid
-    lam = 0.5 * (lo + hi) + 0.0 * dx0
-    for _ in range(_PW_NEWTON):
-        s0, s1, cxx, cxy, cyy, det, rs, sds, d1 = _pw_terms(lam, dx0, dx1, axx, axy, ayy, dxx, dxy, dyy)
-        # u = D s; F'' = -2 r.s - 2 (1 - 2 l) s.D.s + 2 l (1 - l) u.C^-1.u
-        ux = dxx * s0 + dxy * s1
-        uy = dxy * s0 + dyy * s1
-        ucu = (cyy * ux * ux - 2.0 * cxy * ux * uy + cxx * uy * uy) / det
-        d2 = -2.0 * rs - 2.0 * (1.0 - 2.0 * lam) * sds + 2.0 * lam * (1.0 - lam) * ucu
-        lam = lam - d1 / d2
+    warm = False
+    lam = lam0 + 0.0 * dx0
+    if 0.0 < lam0 < 1.0:
+        for _ in range(_PW_NEWTON):
+            step = _pw_newton(lam, dx0, dx1, axx, axy, ayy, dxx, dxy, dyy)
+            lam = lam + step
+            if not 0.0 < lam.real < 1.0:
+                break
+            if abs(step) < _PW_WARM_STEP:
+                warm = True
+                break
+    if not warm:
+        lo = 0.0
+        hi = 1.0
+        while hi - lo > 1e-3:
+            mid = 0.5 * (lo + hi)
+            slope = _pw_terms(mid, dx0.real, dx1.real, axx.real, axy.real, ayy.real, dxx.real, dxy.real, dyy.real)[8]
+            if slope > 0.0:
+                lo = mid
+            else:
+                hi = mid
+        lam = 0.5 * (lo + hi) + 0.0 * dx0
+        for _ in range(_PW_NEWTON):
+            lam = lam + _pw_newton(lam, dx0, dx1, axx, axy, ayy, dxx, dxy, dyy)
     s0, s1 = _pw_terms(lam, dx0, dx1, axx, axy, ayy, dxx, dxy, dyy)[:2]
     f = lam * (1.0 - lam) * (dx0 * s0 + dx1 * s1)
     return f, lam, s0, s1
@@ -193,21 +221,22 @@ def _commutator_form(mxx, mxy, myy, s0, s1):
 
 
 @njit(cache=True)
-def ellipse_pair(dx0, dx1, ti, tj, pi, pj, k, g):
-    """Ellipse pair, ``U = (k/2) (sigma - r)^2`` for ``sigma > r`` (Eq. 1).
+def ellipse_terms(dx0, dx1, ti, tj, pi, pj, k, g, lam0):
+    """Ellipse pair, ``U = (k/2) (sigma - r)^2`` for ``sigma > r`` (Eq. 1), and its Perram–Wertheim multiplier.
 
     ``r = |x_j - x_i|``, ``sigma = r / sqrt(F)`` (Perram–Wertheim, see
-    :func:`perram_wertheim`); parameters ``p = [a, b]`` (semi-axes). The gradient of
-    ``F`` follows from the envelope theorem at the maximising ``l``:
-    ``dF/dr = 2 l (1 - l) s`` and ``dF/dtheta_i = -l (1 - l)^2 s^T [Omega, A] s``,
-    ``dF/dtheta_j = -l^2 (1 - l) s^T [Omega, B] s``.
+    :func:`perram_wertheim`, warm-started from ``lam0``); parameters ``p = [a, b]``
+    (semi-axes). The gradient of ``F`` follows from the envelope theorem at the
+    maximising ``l``: ``dF/dr = 2 l (1 - l) s`` and
+    ``dF/dtheta_i = -l (1 - l)^2 s^T [Omega, A] s``, ``dF/dtheta_j = -l^2 (1 - l) s^T [Omega, B] s``.
+    Returns the energy and ``l`` (-1 when the bounding circles do not overlap).
     """
     r = np.sqrt(dx0 * dx0 + dx1 * dx1)
     if r.real >= (pi[0] + pj[0]).real:
-        return 0.0 * dx0
-    f, lam, s0, s1 = perram_wertheim(dx0, dx1, ti, tj, pi, pj)
+        return 0.0 * dx0, -1.0 + 0.0 * dx0
+    f, lam, s0, s1 = perram_wertheim(dx0, dx1, ti, tj, pi, pj, lam0)
     if f.real >= 1.0:
-        return 0.0 * dx0
+        return 0.0 * dx0, lam
     root = np.sqrt(f)
     delta = r / root - r
     axx, axy, ayy = _ellipse_matrix(pi[0], pi[1], ti)
@@ -229,7 +258,13 @@ def ellipse_pair(dx0, dx1, ti, tj, pi, pj, k, g):
     g[3] += gx
     g[4] += gy
     g[5] += kd * b * dfj
-    return 0.5 * k * delta * delta
+    return 0.5 * k * delta * delta, lam
+
+
+@njit(cache=True)
+def ellipse_pair(dx0, dx1, ti, tj, pi, pj, k, g):
+    """Ellipse pair energy and gradient (:func:`ellipse_terms` from a cold Perram–Wertheim solve)."""
+    return ellipse_terms(dx0, dx1, ti, tj, pi, pj, k, g, -1.0)[0]
 
 
 # not cached: a cached kernel that takes a jitted function (the family's pair kernel) as

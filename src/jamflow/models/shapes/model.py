@@ -31,10 +31,12 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
 from ...box import Box
+from ...minimize.fire import FireParameters
 from ...minimize.model import ModelEvaluation, WithoutFastPaths
 from ...neighbors.verlet import DEFAULT_SKIN, NeighborList
 from ...state.bodies import ShapeTable
 from . import _kernels
+from .fast import ShapeFire
 
 __all__ = ["POINT_TERM_FAMILIES", "SHAPE_FAMILIES", "ShapeModel", "shape_family"]
 
@@ -113,6 +115,8 @@ class ShapeModel(WithoutFastPaths):
         circulo-lines): :meth:`project` removes the torques from forces and velocities.
     """
 
+    box_dofs = True
+
     def __init__(self, box: Box, shapes: ShapeTable, shape_index: ArrayLike, k: float = 1.0,
                  mass: float = 1.0, nlist: NeighborList | None = None, rotations: bool = True) -> None:
         if box.d != 2:
@@ -144,6 +148,13 @@ class ShapeModel(WithoutFastPaths):
     @property
     def neighbor_builds(self) -> int:
         return self.nlist.builds
+
+    def fire_engine(self, q: NDArray[np.float64], params: FireParameters, pressure0: float | None = None,
+                    pressure_rtol: float = 0.0, box_dof: str = "isotropic") -> ShapeFire:
+        """The compiled FIRE loop of :mod:`.fast`: fixed box, or an isotropic barostat (the box keeps its shape)."""
+        if pressure0 is not None and box_dof != "isotropic":
+            raise ValueError(f"shaped bodies minimise the enthalpy with an isotropic box only, not box_dof {box_dof!r}")
+        return ShapeFire(self, q, params, pressure0, pressure_rtol)
 
     def dofs(self, configuration: ArrayLike) -> NDArray[np.float64]:
         """Flat ``q`` from a configuration ``(N, 3)`` of rows ``(x, y, theta)``."""
