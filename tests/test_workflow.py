@@ -138,7 +138,11 @@ TINY = {
 }
 
 
-@pytest.mark.parametrize("kind", list(TINY))
+#: the shapes scene is the heaviest (soft-jam of circulo-lines with rotations, in job processes):
+#: slow; the fast suite plans a shapes scene (tests/test_scenes.py) and runs every command on
+#: shapes (tests/test_stages.py)
+@pytest.mark.parametrize("kind", [pytest.param(k, marks=[pytest.mark.slow] if k == "shapes" else [])
+                                  for k in TINY])
 def test_a_tiny_scene_of_each_body_kind_runs_end_to_end(tmp_path, kind):
     work = _workdir(tmp_path)
     scene = {"scene": f"tiny-{kind}", "bodies": {kind: TINY[kind]}, "seeds": [3],
