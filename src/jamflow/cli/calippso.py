@@ -5,8 +5,6 @@ from __future__ import annotations
 import argparse
 import os
 
-from tqdm import tqdm
-
 from ..io import read_packing, write_dataset
 from ..protocols.calippso import (
     DEFAULT_CUTOFF,
@@ -25,7 +23,14 @@ from ..protocols.calippso import (
     calippso,
     result_to_dataset,
 )
-from .common import add_command, add_preset, add_quiet, print_summary, stage_parameters
+from .common import (
+    add_command,
+    add_preset,
+    add_quiet,
+    print_summary,
+    progress_bar,
+    stage_parameters,
+)
 from .types import count, integer, path_with_suffix, positive, real
 
 
@@ -81,7 +86,7 @@ def _calippso(args: argparse.Namespace) -> int:
     kwargs = {}
     if args.bound is not None:
         kwargs["bound"] = ((5e-4, args.bound[0]), (1e-5, args.bound[1]))
-    with tqdm(desc="calippso", unit=" LP", disable=args.quiet) as bar:
+    with progress_bar(args.quiet, desc="calippso", unit=" LP") as bar:
         def progress(rec) -> None:
             bar.update(1)
             bar.set_postfix(sqrtG_1=f"{rec.sqrt_gamma_minus_1:.2e}", s=f"{rec.max_displacement_stable:.2e}",
