@@ -98,7 +98,12 @@ def test_study_exponents_and_certificate_land_on_the_packings_they_pooled(scene)
     for sample in ("seed1", "seed2"):
         final = table.loc[(sample, "calippso", p_max)]
         assert final.gamma == gaps["fit_exponent"] and final.gamma_err == gaps["fit_exponent_err"]
+        assert final.gamma_stat == gaps["fit_exponent_stat"] and final.gamma_sys == gaps["fit_exponent_sys"]
+        assert final.gamma_note == gaps["fit_exponent_reason"]
         assert final.theta == pytest.approx(forces["fit_exponent"], nan_ok=True)
+        # a refused theta fit (NaN) carries its reason, an accepted one an empty note or a caveat
+        assert final.theta_note == forces["fit_exponent_reason"]
+        assert np.isfinite(final.theta) or final.theta_note
         assert table.loc[(sample, "ls", p_max)].gamma == ls_gaps["fit_exponent"]
         # no analysis was run for the lower target: nothing attached there
         assert np.isnan(table.loc[(sample, "calippso", P_TARGETS[0])].gamma)
