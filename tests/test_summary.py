@@ -160,3 +160,22 @@ def test_bad_paths_fail_with_one_line(tmp_path, capsys, bad):
     assert main(["summary", str(path)]) == 1
     err = capsys.readouterr().err
     assert err.startswith("jamflow summary: error:") and str(path) in err and err.count("\n") == 1
+
+
+def test_a_hyperstatic_calippso_packing_says_why_in_its_row(tmp_path):
+    # 2D monodisperse discs jam hyperstatic (CALiPPSO App. A): the row says by how much and why
+    from jamflow.io import write_packing
+    from jamflow.protocols.calippso import calippso
+    from jamflow.protocols.initial import random_packing
+
+    folder = tmp_path / "hyper" / "spheres" / "base" / "seed1"
+    folder.mkdir(parents=True)
+    packing = calippso(random_packing(64, 2, 0.5, "mono", seed=11)).packing
+    a = packing.attrs
+    assert a["hyperstatic"] == 1
+    write_packing(packing, folder / "calippso.nc")
+    row = jamflow.load_scene(tmp_path / "hyper").iloc[0]
+    assert row.n_contacts - row.isostatic_count == a["n_contacts"] - a["isostatic_count"] > 0
+    assert row.counting_note.startswith(f"hyperstatic by {a['n_contacts'] - a['isostatic_count']}: ")
+    assert f"dual vertex has {a['n_contacts_dual']}" in row.counting_note
+    assert f"{a['n_zero_force_contacts']} of them without force" in row.counting_note

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
 
@@ -60,6 +61,7 @@ COLUMNS: dict[str, str] = {
     "isostatic_count": "d (N_s - 1) + 1 for the N_s backbone particles",
     "isostatic": "1 if N_c equals the isostatic count, 0 if not, NaN if unknown",
     "n_rattlers": "rattlers",
+    "counting_note": "why N_c differs from the isostatic count (CALiPPSO's hyperstatic packings); empty otherwise",
     "n_lp": "linear programs CALiPPSO used",
     "max_overlap": "largest overlap relative to the pair diameter (CALiPPSO packings)",
     "force_balance_residual": "largest per-particle force-balance residual relative to the mean force",
@@ -195,11 +197,23 @@ def _packing_row(root: Path, path: Path) -> dict[str, Any]:
         # a soft packing brought to the target pressure P0 sits at the jamming onset to O(P0)
         row["phi_J"] = row["phi"]
     row.update(_network_counts(ds))
+    row["counting_note"] = _counting_note(a)
     row["classification"] = ""
     certificate = path.with_name(f"{row['stage']}.certify.nc")
     if certificate.is_file():
         row["classification"] = read_dataset(certificate, ("certificate", "chain-certificate")).attrs["classification"]
     return row
+
+
+def _counting_note(a: Mapping[str, Any]) -> str:
+    """Why a CALiPPSO packing is hyperstatic (its contacts are the near-touching pairs, some
+    without force), from its attributes; empty for every other packing."""
+    if not int(a.get("hyperstatic", 0)):
+        return ""
+    n_c, iso = int(a["n_contacts"]), int(a["isostatic_count"])
+    return (f"hyperstatic by {n_c - iso}: contacts are the pairs with relative gap <= "
+            f"{float(a['contact_gap_tol']):g} (the LP's dual vertex has {int(a['n_contacts_dual'])}), "
+            f"{int(a['n_zero_force_contacts'])} of them without force")
 
 
 def _network_counts(ds: xr.Dataset) -> dict[str, Any]:

@@ -16,9 +16,9 @@ from .types import path_with_suffix
 
 #: Columns printed (those with at least one value); --json / --csv write every column.
 PRINTED = ("kind", "body", "point", "sample", "stage", "kappa", "p_target", "N", "d", "phi", "phi_J", "pressure", "n_contacts",
-           "isostatic_count", "n_rattlers", "n_lp", "classification", "gamma", "gamma_stat", "gamma_sys",
-           "gamma_err", "gamma_note", "theta", "theta_stat", "theta_sys", "theta_err", "theta_note",
-           "strain", "shear_stress", "friction")
+           "isostatic_count", "n_rattlers", "n_lp", "classification", "gamma", "gamma_stat", "gamma_sys", "gamma_err",
+           "theta", "theta_stat", "theta_sys", "theta_err", "strain", "shear_stress", "friction",
+           "counting_note", "gamma_note", "theta_note")
 #: Significant digits of printed floats: packing fractions in full, exponents and the rest short.
 DIGITS = {"phi": 10, "phi_J": 10}
 
