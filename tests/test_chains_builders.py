@@ -199,9 +199,12 @@ def test_cli_init_chains(tmp_path, capsys):
     c4 = read_packing(tmp_path / "c4.nc", None)
     assert c4.packing_fraction == pytest.approx(DILUTE_PHI[3], rel=1e-12)
     c4.validate(OVERLAP_TOL)
-    assert main(["init-chains", str(tmp_path / "x.nc"), "--d", "4", "--clusters", "3", "--cluster", "trimer",
-                 "--seed", "1"]) == 1
-    assert "d = 2 or 3" in capsys.readouterr().err
+    # refused by the option's type before any work: a usage error (exit code 2) naming the option
+    with pytest.raises(SystemExit) as usage:
+        main(["init-chains", str(tmp_path / "x.nc"), "--d", "4", "--clusters", "3", "--cluster", "trimer",
+              "--seed", "1"])
+    assert usage.value.code == 2 and not (tmp_path / "x.nc").exists()
+    assert "argument --d: must be an integer in [2, 3], got 4" in capsys.readouterr().err
 
 
 def test_cli_cement_records_the_cemented_contacts_not_the_angle_links(tmp_path, jammed):

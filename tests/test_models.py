@@ -333,8 +333,10 @@ def test_cli_minimize_refuses_bad_options(tmp_path, capsys):
     x, box, D = _compressed(16, 2, 0.85, seed=1)
     src = tmp_path / "s.nc"
     write_packing(Packing(position=box.wrap(x), diameter=D, box=box), src)
-    assert main(["minimize", str(src), str(tmp_path / "o.nc"), "--force-tol", "-1"]) == 1
-    assert "--force-tol" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as usage:  # refused by the option's type: a usage error
+        main(["minimize", str(src), str(tmp_path / "o.nc"), "--force-tol", "-1"])
+    assert usage.value.code == 2
+    assert "argument --force-tol: must be a positive finite number, got -1" in capsys.readouterr().err
     assert main(["minimize", str(src), str(tmp_path / "o.nc"), "--max-steps", "3"]) == 1
     assert "did not reach" in capsys.readouterr().err
     assert not (tmp_path / "o.nc").exists()

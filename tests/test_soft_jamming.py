@@ -108,6 +108,8 @@ def test_cli_soft_jam_aqs_moduli(tmp_path, capsys):
     m = read_dataset(tmp_path / "m.nc")
     assert 0.0 < float(m["shear"]) < float(m["shear_affine"])
     assert np.all(m["eigenvalue"].values > 0.0)
-    assert main(["soft-jam", str(tmp_path / "r.nc"), str(tmp_path / "x.nc"), "--pressure", "-1", "--quiet"]) == 1
-    assert "pressure" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as usage:  # refused by the option's type: a usage error
+        main(["soft-jam", str(tmp_path / "r.nc"), str(tmp_path / "x.nc"), "--pressure", "-1", "--quiet"])
+    assert usage.value.code == 2
+    assert "argument --pressure: must be a positive finite number, got -1" in capsys.readouterr().err
     assert not (tmp_path / "x.nc").exists()
