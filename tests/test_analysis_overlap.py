@@ -90,7 +90,9 @@ def test_overlap_cli(tmp_path):
     from jamflow.cli import main
 
     ref = lattice_with_contacts()
-    part = ref.evolve(contacts=ref.contacts[5:])
+    # a packing of the same sample with five contacts fewer; translated by a thousandth of the
+    # box, as overlap-series refuses one packing given twice (Q counts contacts by particle labels)
+    part = ref.evolve(position=ref.box.wrap(ref.position + 1e-3 * ref.box.lengths), contacts=ref.contacts[5:])
     write_packing(ref, tmp_path / "b.nc")
     write_packing(part, tmp_path / "a.nc")
     assert main(["overlap", str(tmp_path / "a.nc"), str(tmp_path / "b.nc"), str(tmp_path / "q.nc")]) == 0
