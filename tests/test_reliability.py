@@ -450,7 +450,7 @@ def test_a_full_disk_is_named_as_such_and_leaves_nothing(capsys, tmp_path, two_p
 
 
 def test_summary_refuses_a_flow_series_where_a_packing_should_be(capsys, tmp_path):
-    sample = tmp_path / "scene" / "packings" / "seed1"
+    sample = tmp_path / "scene" / "spheres" / "base" / "seed1"  # <bodies>/<point>/<sample>/<step>.nc
     sample.mkdir(parents=True)
     shutil.copy(KINDS / "packing.nc", sample / "calippso.nc")
     shutil.copy(KINDS / "flow.nc", sample / "soft.nc")
