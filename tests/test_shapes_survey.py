@@ -110,7 +110,7 @@ def test_shape_survey_and_contact_angles_commands(tmp_path):
     assert read_dataset(angles, "contact-angles").attrs["n_angles"] == 2 * 40
     bad = subprocess.run([sys.executable, "-m", "jamflow", "contact-angles", str(angles)],
                          capture_output=True, text=True)
-    assert bad.returncode != 0 and "at least one input" in bad.stderr
+    assert bad.returncode == 2 and "give at least one shape packing and then the output path" in bad.stderr
 
 
 def test_survey_and_modes_refuse_unjammed_starts(tmp_path):
