@@ -80,7 +80,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "phi_J and <z> against asphericity over jammed packings of shapes and disks (VanderWerf et al. "
                     "Figs. 5, 6, 8): one row per packing with contacts counted once, twice and (--spectral) as "
                     "N_c^0 - N_1, mean and standard error per shape family and asphericity",
-                    reads=("paths[:-1]",), writes=("paths[-1]",))
+                    reads=("paths[:-1]",), writes=("paths[-1]",), makes={"paths[-1]": ("shape-survey",)})
     p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc",
                    help="jammed 2D packings (shapes from soft-jam, or bidisperse disks), then the output")
     p.add_argument("--spectral", action="store_true",
@@ -94,13 +94,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "constraint-curvature", _constraint_curvature,
                     "principal curvatures of the contact constraints of circulo-line packings per contact type "
                     "(VanderWerf et al. Sec. III C, Table II): mean and RMS deviation in units of the box side",
-                    reads=("paths[:-1]",), writes=("paths[-1]",))
+                    reads=("paths[:-1]",), writes=("paths[-1]",), makes={"paths[-1]": ("constraint-curvature",)})
     p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc", help="jammed circulo-line packings, then the output")
     add_quiet(p)
 
     p = add_command(sub, "feasible-region", _feasible_region,
                     "volume and surface of the feasible region of one circulo-line caged by three fixed points "
-                    "against the decrease of its radius (VanderWerf et al. Figs. 12-13)", writes=("out",))
+                    "against the decrease of its radius (VanderWerf et al. Figs. 12-13)", writes=("out",),
+                    makes={"out": ("feasible-region",)})
     p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF (dim shrink)")
     p.add_argument("--half-length", type=positive, default=0.2,
                    help="core half-length over the radius R (default 0.2: A - 1 = 0.013; three points hold lines "

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from ..io import parse_point, pool_datasets, write_dataset, write_table
+from ..io import DATASET_KINDS, parse_point, pool_datasets, write_dataset, write_table
 from ..summary import load_scene
 from .common import add_command, add_quiet, split_paths
 from .types import path_with_suffix
@@ -44,7 +44,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "(from --points, one per input: key=value,key=value or 'base'); numeric attributes that differ "
                     "between the inputs become variables attr_<name>(point). The workflow pools every study "
                     "this way (jamflow.io.pool).",
-        reads=("paths[:-1]",), writes=("paths[-1]",),
+        # the pool holds the study's own kind of dataset: any of them
+        reads=("paths[:-1]",), writes=("paths[-1]",), makes={"paths[-1]": tuple(DATASET_KINDS)},
     )
     p.add_argument("paths", nargs="+", metavar="IN.nc ... OUT.nc", help="datasets, then the output")
     p.add_argument("--points", nargs="+", required=True, help="the scan point of each input, same order")
@@ -55,7 +56,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Reads results/<scene> (laptop scale) and results/<scene>-paper (paper scale) of every paper "
                     "scene, copies the laptop figures beside OUT and writes one table per scene: quantity | paper | "
                     "laptop scale | paper scale (jamflow.reproduce).",
-        writes=("out",),
+        writes=("out",), makes={"out": ()},
     )
     p.add_argument("out", type=path_with_suffix(".md"), help="the markdown page, e.g. docs/reproduced.md")
     p.add_argument("--results", default="results", help="the results folder (default results)")
