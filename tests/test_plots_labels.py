@@ -27,7 +27,7 @@ from jamflow.chains.averages import moduli_against_links
 from jamflow.chains.figures import plot_mode
 from jamflow.chains.modes import linked_modes, modes_dataset
 from jamflow.cli.analysis import PLOT_KINDS
-from jamflow.io import read_packing
+from jamflow.io import read_dataset, read_packing
 from jamflow.shapes import figures as shape_figures
 from jamflow.shapes.survey import survey_dataset
 
@@ -73,6 +73,9 @@ def _shape_figures(rng) -> dict[str, Figure]:
         "contact-angles": shape_figures.plot_contact_angles([angles]),
         "spectra": shape_figures.plot_spectra([_modes(rng, 1e-6), _modes(rng, 1e-5)], ["a", "b"]),
         "quartic-pressure": shape_figures.plot_quartic_pressure([_modes(rng, 1e-6), _modes(rng, 1e-5)]),
+        # the vendored `jamflow feasible-region` output (tests/data/kinds/make.sh)
+        "feasible-region": shape_figures.plot_feasible_region(
+            read_dataset(Path(__file__).parent / "data" / "kinds" / "feasible-region.nc", "feasible-region")),
     }
 
 
