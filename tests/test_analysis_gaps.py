@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from ls_data import ls_dat
 
+from jamflow.analysis.fitting import FitWarning
 from jamflow.analysis.gaps import (
     MEAN_FIELD_GAP_EXPONENT,
     gap_distribution,
@@ -79,8 +80,10 @@ def test_sample_error_is_standard_error_of_the_mean(rng):
 def test_fit_refuses_too_few_gaps_in_window(rng):
     # 30 gaps: below the stated minimum, gamma is NaN with the reason in the summary
     h = power_law_gaps(rng, 0.4, 1e-6, 1e-2, 30)
-    _, fit = gap_histogram([h], [100], fit_min=1e-6, fit_max=1e-2)
+    with pytest.warns(FitWarning, match="fit refused: 30 samples") as caught:  # in API use, not only a CLI line
+        _, fit = gap_histogram([h], [100], fit_min=1e-6, fit_max=1e-2)
     assert np.isnan(fit["fit_exponent"]) and "fewer than the minimum" in fit["fit_exponent_reason"]
+    assert str(caught[0].message) == fit["fit_exponent_reason"]
 
 
 def test_explicit_contacts_are_excluded_and_other_gaps_kept():

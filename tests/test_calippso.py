@@ -91,9 +91,8 @@ def _check_jammed(res, start: Packing, walls: bool = False) -> None:
         assert set(map(tuple, geo.tolist())) == set(map(tuple, dual.tolist()))
 
 
-def test_ls_d3_jams():
-    start = read_dat(ls_dat(3))
-    res = calippso(start)
+def test_ls_d3_jams(ls_d3_calippso):
+    start, res = ls_d3_calippso
     _check_jammed(res, start)
     assert res.iterations <= 8
     hist = res.history
@@ -356,14 +355,13 @@ def _assert_same_packing(p: Packing, ref: Packing) -> None:
     assert p.packing_fraction == pytest.approx(ref.packing_fraction, rel=1e-12)
 
 
-def test_unscaled_warm_simplex_lps_end_in_the_packing_of_scaled_ones(monkeypatch):
+def test_unscaled_warm_simplex_lps_end_in_the_packing_of_scaled_ones(ls_d3_calippso, monkeypatch):
     """The warm simplex LPs run without HiGHS's scaling (``WARM_SIMPLEX_SCALE``): on the
     LS example the chain takes as many LPs as with HiGHS's equilibration, its warm LPs
     pivot, and it ends in the same packing: same contacts (Q = 1), forces to 1e-8 in
     norm, phi_J to 1e-12. Both results pass every check of a jammed packing."""
-    start = read_dat(ls_dat(3))
+    start, unscaled = ls_d3_calippso  # the default settings: unscaled warm simplex LPs
     assert cal_solver.WARM_SIMPLEX_SCALE != cal_solver._HIGHS_SCALE
-    unscaled = calippso(start)
     monkeypatch.setattr(cal_solver, "WARM_SIMPLEX_SCALE", cal_solver._HIGHS_SCALE)
     scaled = calippso(start)
     for res in (unscaled, scaled):
@@ -378,17 +376,16 @@ def test_unscaled_warm_simplex_lps_end_in_the_packing_of_scaled_ones(monkeypatch
     _assert_same_packing(unscaled.packing, scaled.packing)
 
 
-def test_a_near_start_takes_the_near_cutoff_and_jams_to_the_packing_of_the_far_settings(monkeypatch):
+def test_a_near_start_takes_the_near_cutoff_and_jams_to_the_packing_of_the_far_settings(ls_d3_calippso, monkeypatch):
     """The LS example is a near-jamming start (median nearest gap ~1e-6), a random start
     is not; the near start's first LP uses ``cutoff_near`` (fewer rows) and its
     interior point LPs skip presolve, and the chain ends in the same packing as with
     the far settings: same contacts (Q = 1) and forces to 1e-8 in norm."""
-    start = read_dat(ls_dat(3))
+    start, near = ls_d3_calippso  # the default settings: the near-start rule on
     container = cal_container._Container(start.box, False)
     assert cal_lp._near_start(start.box.wrap(start.position), start.diameter, container)
     far = random_packing(128, 3, 0.3, "mono", seed=1)
     assert not cal_lp._near_start(far.box.wrap(far.position), far.diameter, container)
-    near = calippso(start)
     monkeypatch.setattr(cal_chain, "_near_start", lambda *args: False)
     ref = calippso(start)
     assert near.packing.attrs["near_start"] == 1 and ref.packing.attrs["near_start"] == 0

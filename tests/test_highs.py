@@ -40,3 +40,14 @@ def test_a_bare_instance_after_another_thread_count_is_what_new_highs_prevents()
 def test_thread_count_must_be_positive():
     with pytest.raises(ValueError, match="at least 1"):
         new_highs(0)
+
+
+def test_a_new_instance_prints_no_banner_on_the_process_stdout():
+    # HiGHS's first instance prints its version and licence banner from C to file
+    # descriptor 1, whatever Python's sys.stdout is; new_highs sends it to the null device
+    import subprocess
+    import sys
+
+    code = "from jamflow.highs import new_highs; print('before'); new_highs(); new_highs(2); print('after')"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout == "before\nafter\n" and "HiGHS" not in out.stderr

@@ -72,7 +72,9 @@ def _g_of_1(root: Path, name: str, user_cache: Path | None) -> int:
     return int(out.stdout.strip())
 
 
-@pytest.mark.parametrize("user_cache", [False, True], ids=["in_tree", "NUMBA_CACHE_DIR"])
+# each case compiles its kernels three times in fresh processes: the cache-directory variant is slow
+@pytest.mark.parametrize("user_cache", [False, pytest.param(True, marks=pytest.mark.slow)],
+                         ids=["in_tree", "NUMBA_CACHE_DIR"])
 def test_an_edit_of_an_inlined_kernel_reaches_its_callers(tmp_path, user_cache):
     """Without the stamp, numba keeps ``g``'s cache with the old ``f`` inlined (the
     hazard); with it, ``g`` is recompiled with the new ``f``; both with the caches

@@ -129,6 +129,7 @@ def test_energy_gain_with_growth_is_growth_rate_times_impulse(neighbor_list):
     assert max_overlap(st.packing(pk))[1] <= OVERLAP_TOL
 
 
+@pytest.mark.slow  # N = 256 in 3D compressed to phi = 0.46: the heaviest LS test
 def test_carnahan_starling_liquid_3d():
     pk = random_packing(256, 3, 0.28, seed=1)
     res = compress(pk, 1e-4, phi_target=0.46, fast_growth_rate=None, seed=0)

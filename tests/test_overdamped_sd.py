@@ -44,6 +44,7 @@ def _stress_pair(start: Packing, strain: float):
     return ed.shear_stress.values[idx], sd.shear_stress.values
 
 
+@pytest.mark.slow  # the fast suite compares the two methods at N = 48 (test_soft_shear.py)
 def test_stress_matches_steepest_descent_short_strain(start082):
     s_ed, s_sd = _stress_pair(start082, 0.005)
     rel = np.abs(s_sd - s_ed) / np.abs(s_ed)

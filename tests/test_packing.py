@@ -267,3 +267,25 @@ def test_in_units_scales_every_length_and_keeps_phi_and_contacts():
         p.in_units(0.0)
     with pytest.raises(ValueError):
         length_unit(p.diameter, "largest")
+
+
+@pytest.mark.parametrize("name, bodies", [("spheres_hard", "spheres,"), ("linked_soft", "18 links in 6 clusters"),
+                                          ("shapes_soft", "shapes: ellipse"),
+                                          ("walls_hard", "spheres between hard walls")])
+def test_repr_is_one_line_with_n_d_phi_bodies_and_box(name, bodies) -> None:
+    from pathlib import Path
+
+    from jamflow.io import read_packing
+
+    p = read_packing(Path(__file__).parent / "data" / "bodies" / f"{name}.nc", None)
+    text = repr(p)
+    assert "\n" not in text and len(text) < 200
+    assert f"N={p.n}, d={p.d}, phi={p.packing_fraction:.6g}" in text and bodies in text
+    assert f"box {p.box.matrix[0, 0]:.6g} x" in text and str(p) == text
+    assert f"{len(p.contacts)} {'sphere-sphere contacts' if name == 'walls_hard' else 'contacts'}" in text
+
+
+def test_repr_of_a_large_packing_stays_one_short_line() -> None:
+    x = np.random.default_rng(1).uniform(size=(1000, 3))
+    text = repr(Packing(position=x, diameter=np.full(1000, 1e-3), box=Box.cubic(3)))
+    assert "\n" not in text and len(text) < 200 and text.startswith("Packing(N=1000, d=3, phi=")

@@ -87,3 +87,14 @@ def test_plot_cli(tmp_path):
     write_dataset(flow_dataset(s, np.ones(101), np.ones(101), []), tmp_path / "run.nc")
     assert main(["plot", "phi-kappa", str(tmp_path / "run.nc"), str(tmp_path / "pk.png")]) == 0
     assert main(["plot", "forces", str(tmp_path / "p.nc"), str(tmp_path / "x.nc"), str(tmp_path / "f.png")]) == 1
+
+
+def test_a_walled_packing_s_title_counts_its_contacts_as_the_tables_do():
+    # the drawn sphere-sphere contacts and the N_c of the tables (wall contacts included)
+    from jamflow.io import read_packing
+
+    p = read_packing(Path(__file__).parent / "data" / "bodies" / "walls_hard.nc", None)
+    title = " ".join(plots.plot_packing(p).axes[0].get_title().split())
+    assert f"{len(p.contacts)} sphere-sphere contacts (wall contacts not drawn; N_c with them " \
+           f"{p.attrs['n_contacts']})" in title
+    assert p.attrs["n_contacts"] > len(p.contacts)

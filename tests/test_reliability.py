@@ -579,3 +579,18 @@ def test_a_closed_stdout_ends_quietly(tmp_path):
     proc.stdout.close()  # the reader has gone, as `jamflow check x.nc | head -0`
     err = proc.communicate(timeout=600)[1]
     assert proc.returncode == 141 and err == b""
+
+
+def test_a_job_log_holds_the_summary_without_bar_redraws_or_the_solver_banner(tmp_path):
+    # stdout and stderr to one file, as a workflow job's log: no carriage-return redraws of a
+    # progress bar, no HiGHS licence banner, and the printed summary is there
+    import subprocess
+    import sys
+
+    log = tmp_path / "calippso.log"
+    with log.open("w") as fh:
+        code = subprocess.run([sys.executable, "-m", "jamflow", "calippso", str(KINDS / "packing.nc"),
+                               str(tmp_path / "out.nc")], stdout=fh, stderr=subprocess.STDOUT).returncode
+    text = log.read_text()
+    assert code == 0, text
+    assert "\r" not in text and "HiGHS" not in text and "phi_J" in text

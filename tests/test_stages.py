@@ -97,8 +97,16 @@ def test_a_refused_body_kind_is_one_line_and_no_output(command, kind, tmp_path, 
     assert src.read_bytes() == before
 
 
+#: The one body kind each packing command runs on in the smoke set (``pytest -m smoke``):
+#: the first of :data:`BODY_KINDS` it takes. These cases run in the fast suite too.
+SMOKE_KIND = {c: next(k for k in BODY_KINDS if not refusal(c, k)) for c in _PACKING_COMMANDS}
+
+
 def _case(command: str, kind: str):
-    marks = [pytest.mark.slow] if command in _HEAVY else []
+    if SMOKE_KIND[command] == kind:
+        marks = [pytest.mark.smoke]
+    else:
+        marks = [pytest.mark.slow] if command in _HEAVY else []
     return pytest.param(command, kind, marks=marks, id=f"{command}-{kind}")
 
 

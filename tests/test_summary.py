@@ -98,7 +98,12 @@ def test_study_exponents_and_certificate_land_on_the_packings_they_pooled(scene)
     for sample in ("seed1", "seed2"):
         final = table.loc[(sample, "calippso", p_max)]
         assert final.gamma == gaps["fit_exponent"] and final.gamma_err == gaps["fit_exponent_err"]
+        assert final.gamma_stat == gaps["fit_exponent_stat"] and final.gamma_sys == gaps["fit_exponent_sys"]
+        assert final.gamma_note == gaps["fit_exponent_reason"]
         assert final.theta == pytest.approx(forces["fit_exponent"], nan_ok=True)
+        # a refused theta fit (NaN) carries its reason, an accepted one an empty note or a caveat
+        assert final.theta_note == forces["fit_exponent_reason"]
+        assert np.isfinite(final.theta) or final.theta_note
         assert table.loc[(sample, "ls", p_max)].gamma == ls_gaps["fit_exponent"]
         # no analysis was run for the lower target: nothing attached there
         assert np.isnan(table.loc[(sample, "calippso", P_TARGETS[0])].gamma)
@@ -155,3 +160,22 @@ def test_bad_paths_fail_with_one_line(tmp_path, capsys, bad):
     assert main(["summary", str(path)]) == 1
     err = capsys.readouterr().err
     assert err.startswith("jamflow summary: error:") and str(path) in err and err.count("\n") == 1
+
+
+def test_a_hyperstatic_calippso_packing_says_why_in_its_row(tmp_path):
+    # 2D monodisperse discs jam hyperstatic (CALiPPSO App. A): the row says by how much and why
+    from jamflow.io import write_packing
+    from jamflow.protocols.calippso import calippso
+    from jamflow.protocols.initial import random_packing
+
+    folder = tmp_path / "hyper" / "spheres" / "base" / "seed1"
+    folder.mkdir(parents=True)
+    packing = calippso(random_packing(64, 2, 0.5, "mono", seed=11)).packing
+    a = packing.attrs
+    assert a["hyperstatic"] == 1
+    write_packing(packing, folder / "calippso.nc")
+    row = jamflow.load_scene(tmp_path / "hyper").iloc[0]
+    assert row.n_contacts - row.isostatic_count == a["n_contacts"] - a["isostatic_count"] > 0
+    assert row.counting_note.startswith(f"hyperstatic by {a['n_contacts'] - a['isostatic_count']}: ")
+    assert f"dual vertex has {a['n_contacts_dual']}" in row.counting_note
+    assert f"{a['n_zero_force_contacts']} of them without force" in row.counting_note

@@ -138,7 +138,11 @@ TINY = {
 }
 
 
-@pytest.mark.parametrize("kind", list(TINY))
+#: the shapes scene is the heaviest (soft-jam of circulo-lines with rotations, in job processes):
+#: slow; the fast suite plans a shapes scene (tests/test_scenes.py) and runs every command on
+#: shapes (tests/test_stages.py)
+@pytest.mark.parametrize("kind", [pytest.param(k, marks=[pytest.mark.slow] if k == "shapes" else [])
+                                  for k in TINY])
 def test_a_tiny_scene_of_each_body_kind_runs_end_to_end(tmp_path, kind):
     work = _workdir(tmp_path)
     scene = {"scene": f"tiny-{kind}", "bodies": {kind: TINY[kind]}, "seeds": [3],
@@ -147,7 +151,11 @@ def test_a_tiny_scene_of_each_body_kind_runs_end_to_end(tmp_path, kind):
     assert res.returncode == 0, res.stderr[-4000:]
     body = {"spheres": "spheres", "linked": "linked-trimer", "shapes": "shapes-circulo-line"}[kind]
     folder = work / "results" / scene["scene"] / body / "base" / "seed3"
-    check = json.loads((folder / "soft-jam.check.json").read_text())
+    check_text = (folder / "soft-jam.check.json").read_text()
+    check = json.loads(check_text)
+    # the check job's log ends with the summary it printed (its output is its stdout)
+    logs = [q.read_text() for q in (work / "results" / scene["scene"] / "logs").rglob("*") if q.is_file()]
+    assert any(text.endswith(check_text) for text in logs)
     packing = read_packing(folder / "soft-jam.nc", None)
     # the bodies kept their kind through the chain, and the check counted them as such
     assert packing.body_kind == kind

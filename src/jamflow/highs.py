@@ -11,6 +11,10 @@ the requested count changes (jamflow never solves two LPs at once).
 
 from __future__ import annotations
 
+import ctypes
+import os
+import sys
+
 import highspy
 import numpy as np
 import scipy.sparse as sp
@@ -37,13 +41,32 @@ def new_highs(threads: int = DEFAULT_THREADS) -> highspy.Highs:
     global _scheduler_threads
     if threads < 1:
         raise ValueError(f"HiGHS threads must be at least 1, got {threads}")
-    h = highspy.Highs()
+    h = _without_banner()
     h.setOptionValue("output_flag", False)
     h.setOptionValue("threads", int(threads))
     if _scheduler_threads != threads:
         highspy.Highs.resetGlobalScheduler(True)
         _scheduler_threads = threads
     return h
+
+
+def _without_banner() -> highspy.Highs:
+    """``highspy.Highs()`` with the version and licence banner its first instance prints to the
+    process's C-level stdout (before any option can turn logging off) sent to the null device,
+    so a command's stdout holds only what jamflow prints."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, 1)
+        os.close(null)
+        try:
+            return highspy.Highs()
+        finally:
+            ctypes.CDLL(None).fflush(None)  # the banner may sit in C's stdout buffer
+            os.dup2(saved, 1)
+    finally:
+        os.close(saved)
 
 
 def colwise_lp(A: sp.csc_matrix, cost: ArrayLike, col_lower: ArrayLike, col_upper: ArrayLike,

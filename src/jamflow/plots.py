@@ -212,8 +212,14 @@ def plot_packing(packing: Packing, slab_axis: int = 2, title: str | None = None)
     if count is not None:
         counted = (f"{int(count.rattling_cluster.sum())} rattling cluster(s) ({int(count.removed.sum())} whole, "
                    f"{int(count.dangler.sum())} dangler(s))")
+    shown_contacts = f"{len(contacts)} contacts{source}"
+    if packing.body_kind == "walls":
+        # the wall contacts are not drawn; the tables' N_c (the packing's n_contacts) counts them
+        n_all = packing.attrs.get("n_contacts")
+        shown_contacts = f"{len(contacts)} sphere-sphere contacts{source} (wall contacts not drawn" + (
+            f"; N_c with them {int(n_all)})" if n_all is not None else ")")
     ax.set_title(title or "\n".join(textwrap.wrap(f"d={packing.d}, N={packing.n}, phi={packing.packing_fraction:.5f}, "
-                                                  f"{len(contacts)} contacts{source}, {counted}{slab}", 90)),
+                                                  f"{shown_contacts}, {counted}{slab}", 90)),
                  fontsize=9)
     if ax.get_legend_handles_labels()[0]:
         ax.legend(loc="upper right", fontsize=8, framealpha=0.8)

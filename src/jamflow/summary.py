@@ -11,7 +11,8 @@ the studies. :func:`load_scene` reads them and returns one row per packing and p
   pressure, backbone contacts N_c, the isostatic count d(N_s - 1) + 1, rattlers, number of
   LPs, max overlap, force-balance residual, certificate); each row also carries the gap
   exponent gamma and force exponent theta of the study that pooled it (the same value on
-  every row of one study point), with their standard errors;
+  every row of one study point), with their statistical and systematic errors, and the
+  reason where the fit was refused;
 - flow runs: the last record of the time series (strain, time, phi, pressure, shear
   stress, contacts) and, when a flow summary exists, the steady-state friction.
 
@@ -26,6 +27,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
 
@@ -59,14 +61,21 @@ COLUMNS: dict[str, str] = {
     "isostatic_count": "d (N_s - 1) + 1 for the N_s backbone particles",
     "isostatic": "1 if N_c equals the isostatic count, 0 if not, NaN if unknown",
     "n_rattlers": "rattlers",
+    "counting_note": "why N_c differs from the isostatic count (CALiPPSO's hyperstatic packings); empty otherwise",
     "n_lp": "linear programs CALiPPSO used",
     "max_overlap": "largest overlap relative to the pair diameter (CALiPPSO packings)",
     "force_balance_residual": "largest per-particle force-balance residual relative to the mean force",
     "classification": "LP jamming certificate (jamflow certify) of the packing, if run",
     "gamma": "gap exponent, p(h) ~ h^-gamma, of the gaps study point that pooled this packing",
-    "gamma_err": "standard error of gamma",
+    "gamma_stat": "statistical error of gamma (bootstrap)",
+    "gamma_sys": "systematic error of gamma (spread over the scanned fit windows)",
+    "gamma_err": "combined error of gamma, sqrt(stat^2 + sys^2) (not a standard error)",
+    "gamma_note": "why the gamma fit was refused (gamma NaN) or an error is undefined; empty otherwise",
     "theta": "small-force exponent, P(f) ~ f^theta, of the forces study point that pooled this packing",
-    "theta_err": "standard error of theta",
+    "theta_stat": "statistical error of theta (bootstrap)",
+    "theta_sys": "systematic error of theta (spread over the scanned fit windows)",
+    "theta_err": "combined error of theta, sqrt(stat^2 + sys^2) (not a standard error)",
+    "theta_note": "why the theta fit was refused (theta NaN) or an error is undefined; empty otherwise",
     "strain": "runs: accumulated strain at the last record",
     "time": "runs: time at the last record",
     "shear_stress": "runs: shear stress at the last record",
@@ -188,11 +197,23 @@ def _packing_row(root: Path, path: Path) -> dict[str, Any]:
         # a soft packing brought to the target pressure P0 sits at the jamming onset to O(P0)
         row["phi_J"] = row["phi"]
     row.update(_network_counts(ds))
+    row["counting_note"] = _counting_note(a)
     row["classification"] = ""
     certificate = path.with_name(f"{row['stage']}.certify.nc")
     if certificate.is_file():
         row["classification"] = read_dataset(certificate, ("certificate", "chain-certificate")).attrs["classification"]
     return row
+
+
+def _counting_note(a: Mapping[str, Any]) -> str:
+    """Why a CALiPPSO packing is hyperstatic (its contacts are the near-touching pairs, some
+    without force), from its attributes; empty for every other packing."""
+    if not int(a.get("hyperstatic", 0)):
+        return ""
+    n_c, iso = int(a["n_contacts"]), int(a["isostatic_count"])
+    return (f"hyperstatic by {n_c - iso}: contacts are the pairs with relative gap <= "
+            f"{float(a['contact_gap_tol']):g} (the LP's dual vertex has {int(a['n_contacts_dual'])}), "
+            f"{int(a['n_zero_force_contacts'])} of them without force")
 
 
 def _network_counts(ds: xr.Dataset) -> dict[str, Any]:
@@ -219,10 +240,12 @@ def _attach_studies(root: Path, rows: list[dict[str, Any]]) -> None:
     for path in sorted((root / "studies").glob("*/*.nc")):
         ds = read_dataset(path)
         a = ds.attrs
-        kind = {"gaps": ("gamma", "gamma_err"), "forces": ("theta", "theta_err")}.get(dataset_kind(ds) or "")
-        if kind is None or "fit_exponent" not in a:
+        name = {"gaps": "gamma", "forces": "theta"}.get(dataset_kind(ds) or "")
+        if name is None or "fit_exponent" not in a:
             continue
-        values = (float(a["fit_exponent"]), float(a["fit_exponent_err"]))
+        kind = (name, f"{name}_stat", f"{name}_sys", f"{name}_err", f"{name}_note")
+        values = (*(float(a.get(f"fit_exponent{end}", np.nan)) for end in ("", "_stat", "_sys", "_err")),
+                  str(a.get("fit_exponent_reason", "")))
         for name in json.loads(a.get("parameters", "{}")).get("inputs", []):
             relative = Path(name).as_posix().split(f"{root.name}/", 1)[-1]
             if relative in by_file:

@@ -54,6 +54,7 @@ to resolve (e.g. theta = 0.42 against 0.17).
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -69,6 +70,7 @@ __all__ = [
     "FIT_METHOD",
     "ExponentFit",
     "ExponentAnalysis",
+    "FitWarning",
     "check_window",
     "mle_exponent",
     "bootstrap_error",
@@ -92,6 +94,12 @@ FIT_METHOD: str = (
     f"spanning >= {MIN_WINDOW_DECADES} decades inside the chosen window (edges {GRID_PER_DECADE} per decade); "
     f"upper edge lowered to a power-law break (split test z > {BREAK_Z:g})"
 )
+
+
+class FitWarning(UserWarning):
+    """A power-law fit was refused (exponent NaN) or its systematic error is undefined; the
+    message says why (the same text as the analysis' ``reason``). The command line prints it
+    as its own ``jamflow: warning:`` line instead."""
 
 
 def check_window(x_min: float, x_max: float, what: str = "fit window") -> None:
@@ -359,9 +367,9 @@ def analyse_exponent(
                   break_at=split if broken else np.nan, break_z=z,
                   range_min=float(lo), range_max=float(hi), n_boot=n_boot, seed=seed)
     if n_in < min_count:
-        return ExponentAnalysis(alpha=np.nan, stat=np.nan, sys=np.nan,
-                                reason=f"{n_in} samples in [{a:g}, {b:g}], fewer than the minimum {min_count}",
-                                **common)
+        reason = f"fit refused: {n_in} samples in [{a:g}, {b:g}], fewer than the minimum {min_count}"
+        warnings.warn(reason, FitWarning, stacklevel=2)
+        return ExponentAnalysis(alpha=np.nan, stat=np.nan, sys=np.nan, reason=reason, **common)
     alpha = mle_exponent(pooled, a, b).alpha
     stat = bootstrap_error(arrays, a, b, n_boot, seed)
     grid = _grid(a, b)
@@ -384,6 +392,8 @@ def analyse_exponent(
     reason = "" if len(scan) >= 2 else (
         f"systematic error undefined: fewer than two windows spanning >= {min_decades:g} decades "
         f"with >= {min_count} samples inside [{a:g}, {b:g}]")
+    if reason:
+        warnings.warn(reason, FitWarning, stacklevel=2)
     return ExponentAnalysis(alpha=float(alpha), stat=stat, sys=sys_err, sys_half_range=half_range, reason=reason,
                             scan_lower=scan[:, 0], scan_upper=scan[:, 1], scan_alpha=scan[:, 2],
                             scan_alpha_err=scan[:, 3], scan_n=scan[:, 4].astype(np.int64), **common)

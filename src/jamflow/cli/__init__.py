@@ -28,6 +28,7 @@ import re
 import signal
 import sys
 import typing
+import warnings
 from collections.abc import Sequence
 
 from ..io import check_output_paths, file_body_kind
@@ -139,7 +140,10 @@ def _run(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:
     replaced = check_output_paths(path_arguments(args, reads), outputs, getattr(args, "in_place", False),
                                   path_arguments(args, packings), kinds)
     check_bodies(args.command, path_arguments(args, reads))
-    code = int(args.handler(args) or 0)
+    with warnings.catch_warnings():
+        # a refused fit is printed by the command as its own "jamflow: warning:" line
+        warnings.filterwarnings("ignore", category=UserWarning, message="(fit refused|systematic error undefined)")
+        code = int(args.handler(args) or 0)
     if code == 0:
         for line in replaced:
             if "flow checkpoint" not in line:  # a checkpoint is resumed, not replaced

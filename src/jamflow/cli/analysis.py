@@ -8,7 +8,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from ..analysis.eos import jamming_table, table_markdown
 from ..analysis.fitting import check_window
@@ -20,7 +19,14 @@ from ..analysis.structure import structure_dataset
 from ..io import read_dataset, read_packing, write_dataset
 from ..io.formats import read_dat
 from ..state.packing import Packing
-from .common import add_command, add_quiet, print_summary, split_paths, stage_parameters
+from .common import (
+    add_command,
+    add_quiet,
+    print_summary,
+    progress_bar,
+    split_paths,
+    stage_parameters,
+)
 from .packings import add_overlap_option, overlap_tol
 from .types import (
     MAX_BINS,
@@ -247,7 +253,7 @@ def _load_packing(path: str, tol: float | None) -> Packing:
 
 def _load_all(paths: list[str], tol: float | None, quiet: bool) -> list[Packing]:
     """The packings of a pooled analysis; two files holding one packing (a copy) are refused."""
-    packings = [_load_packing(p, tol) for p in tqdm(paths, desc="reading", disable=quiet or len(paths) < 2)]
+    packings = [_load_packing(p, tol) for p in progress_bar(quiet or len(paths) < 2, paths, desc="reading")]
     seen: dict[str, str] = {}
     for path, packing in zip(paths, packings, strict=True):
         digest = hashlib.sha256()

@@ -5,8 +5,6 @@ from __future__ import annotations
 import argparse
 import os
 
-from tqdm import tqdm
-
 from ..io import read_packing, write_dataset
 from ..protocols.calippso import (
     DEFAULT_CUTOFF,
@@ -28,7 +26,14 @@ from ..protocols.calippso import (
     calippso,
     result_to_dataset,
 )
-from .common import add_command, add_preset, add_quiet, print_summary, stage_parameters
+from .common import (
+    add_command,
+    add_preset,
+    add_quiet,
+    print_summary,
+    progress_bar,
+    stage_parameters,
+)
 from .types import count, integer, path_with_suffix, positive, real
 
 
@@ -88,7 +93,7 @@ def _calippso(args: argparse.Namespace) -> int:
     kwargs = {}
     if args.bound is not None:
         kwargs["bound"] = ((5e-4, args.bound[0]), (1e-5, args.bound[1]))
-    with tqdm(desc="calippso", unit=" LP", disable=args.quiet) as bar:
+    with progress_bar(args.quiet, desc="calippso", unit=" LP") as bar:
         def progress(rec) -> None:
             if rec.warm_fallback:
                 bar.write(f"LP {rec.iteration}: jamflow.simplex reported {rec.warm_fallback!r}; HiGHS solved it "

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import argparse
 
-from tqdm import tqdm
-
 from ..io import read_packing, write_dataset
 from ..protocols.certify import (
     DEFAULT_LOADS,
@@ -20,6 +18,7 @@ from .common import (
     add_preset,
     add_quiet,
     print_summary,
+    progress_bar,
     stage_parameters,
 )
 from .packings import add_overlap_option, overlap_tol
@@ -74,7 +73,7 @@ def _certify(args: argparse.Namespace) -> int:
         # the linked certificate's contacts are the overlapping pairs (soft-jam's contacts)
         return certify_linked_packing(args, packing)
     _check_overlaps(args, packing)
-    with tqdm(desc="certify LPs", unit="LP", disable=args.quiet) as bar:
+    with progress_bar(args.quiet, desc="certify LPs", unit="LP") as bar:
         cert = certify(
             packing,
             strict=args.strict,

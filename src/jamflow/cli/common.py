@@ -11,7 +11,7 @@ from typing import Any
 from .types import UsageError, require_suffix
 
 __all__ = ["add_command", "add_quiet", "add_preset", "stage_parameters", "path_arguments", "split_paths",
-           "format_rows", "print_summary", "packing_rows"]
+           "format_rows", "print_summary", "packing_rows", "progress_bar"]
 
 
 def add_command(sub: Any, name: str, handler: Any, help: str, description: str | None = None,
@@ -89,9 +89,22 @@ def _file_key(path: str) -> Any:
 
 
 def add_quiet(parser: argparse.ArgumentParser) -> None:
-    """``--quiet``: no progress bars."""
+    """``--quiet``: no progress bars (they show only on a terminal anyway) and no printed summary."""
     parser.add_argument("--quiet", action="store_true",
                         help="no progress bars and no printed summary (the output files hold every number)")
+
+
+def progress_bar(quiet: bool, iterable: Iterable | None = None, **kwargs: Any) -> Any:
+    """A tqdm bar on a terminal; none under ``--quiet`` or when stderr is a file or pipe (a job
+    log: redraws would fill it with thousands of characters; the printed summary says the result).
+
+    ``kwargs`` go to :class:`tqdm.tqdm` (``desc``, ``unit``, ``total``, ...).
+    """
+    import sys
+
+    from tqdm import tqdm
+
+    return tqdm(iterable, disable=quiet or not sys.stderr.isatty(), **kwargs)
 
 
 def add_preset(parser: argparse.ArgumentParser) -> None:

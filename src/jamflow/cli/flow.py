@@ -21,6 +21,7 @@ from .common import (
     add_quiet,
     packing_rows,
     print_summary,
+    progress_bar,
     stage_parameters,
 )
 from .packings import add_overlap_option, overlap_tol
@@ -160,10 +161,8 @@ def _run(args: argparse.Namespace, drive: Drive, stop: Stop, packing) -> int:
     params = stage_parameters(args)
     bar = None
     progress = None
-    if not args.quiet:
-        from tqdm import tqdm
-
-        bar = tqdm(total=1000, desc=args.command, unit="‰")
+    if not args.quiet and sys.stderr.isatty():
+        bar = progress_bar(args.quiet, total=1000, desc=args.command, unit="‰")
 
         def progress(frac: float) -> None:
             bar.update(int(frac * 1000) - bar.n)

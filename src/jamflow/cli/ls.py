@@ -5,8 +5,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from tqdm import tqdm
-
 from ..io import read_packing, write_dataset, write_packing
 from ..protocols.ls import (
     DEFAULT_BETA,
@@ -20,6 +18,7 @@ from .common import (
     add_preset,
     add_quiet,
     print_summary,
+    progress_bar,
     stage_parameters,
 )
 from .types import (
@@ -93,7 +92,7 @@ def _ls(args: argparse.Namespace) -> int:
     packing = read_packing(args.packing)
     params = stage_parameters(args, "packing", "out", "eos")
     # delay: no bar before a one-line error on bad input
-    with tqdm(desc="LS", unit="coll", unit_scale=True, disable=args.quiet, delay=1.0) as bar:
+    with progress_bar(args.quiet, desc="LS", unit="coll", unit_scale=True, delay=1.0) as bar:
         def progress(info: dict[str, float]) -> None:
             bar.update(int(info["collisions"]) - bar.n)
             bar.set_postfix(p=f"{info['p']:.3g}", phi=f"{info['phi']:.6f}", refresh=False)

@@ -7,7 +7,6 @@ import json
 import math
 
 import numpy as np
-from tqdm import tqdm
 
 from ..analysis.contacts import summarize
 from ..analysis.structure import crystal_fraction, hexatic_order
@@ -27,6 +26,7 @@ from .common import (
     format_rows,
     packing_rows,
     print_summary,
+    progress_bar,
     stage_parameters,
 )
 from .types import (
@@ -119,7 +119,7 @@ def overlap_tol(args: argparse.Namespace) -> float | None:
 def _init(args: argparse.Namespace) -> int:
     check_fits("init", args.n, args.d, "spheres")
     # delay: no bar for quick runs, nor before a one-line error on bad input
-    with tqdm(total=args.n, desc="init (RSA)", unit="sphere", disable=args.quiet, delay=1.0) as bar:
+    with progress_bar(args.quiet, total=args.n, desc="init (RSA)", unit="sphere", delay=1.0) as bar:
         p = random_packing(args.n, args.d, args.phi, args.dispersity, args.seed,
                            args.ratio, args.fraction, args.width, args.species_spread,
                            progress=bar.update, walls=args.walls)

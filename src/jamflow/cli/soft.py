@@ -7,7 +7,6 @@ import sys
 
 import numpy as np
 import xarray as xr
-from tqdm import tqdm
 
 from ..analysis.contacts import summarize
 from ..chains.compliance import compliance
@@ -33,6 +32,7 @@ from .common import (
     add_preset,
     add_quiet,
     print_summary,
+    progress_bar,
     stage_parameters,
 )
 from .types import count, non_negative_int, path_with_suffix, positive, real, seed
@@ -145,7 +145,7 @@ def _soft_jam_linked(args: argparse.Namespace, packing: Packing) -> int:
     if args.seed is not None:
         raise ValueError("--seed draws random sphere centres, which would tear the links: start linked packings "
                          "from jamflow init-chains with its own --seed")
-    bar = tqdm(desc="soft-jam", unit=" bisection", disable=args.quiet)
+    bar = progress_bar(args.quiet, desc="soft-jam", unit=" bisection")
 
     def progress(info: dict) -> None:
         bar.update(1)
@@ -203,7 +203,7 @@ def _soft_jam(args: argparse.Namespace) -> int:
         return _soft_jam_linked(args, packing)
     if args.seed is not None:
         packing = _random_start(packing, args.seed)
-    bar = tqdm(desc="soft-jam", unit=" bisection", disable=args.quiet)
+    bar = progress_bar(args.quiet, desc="soft-jam", unit=" bisection")
 
     def progress(info: dict) -> None:
         bar.update(1)
@@ -244,7 +244,7 @@ def _soft_jam_shapes(args: argparse.Namespace, packing: Packing) -> int:
         raise ValueError(f"--exponent {args.exponent}: shaped bodies use the linear spring of Eq. 1 (exponent 2)")
     if args.box_dof != "isotropic":
         raise ValueError("--box-dof full is not available for shaped bodies (the box stays square)")
-    bar = tqdm(desc="soft-jam", unit=" bisection", disable=args.quiet)
+    bar = progress_bar(args.quiet, desc="soft-jam", unit=" bisection")
 
     def progress(info: dict) -> None:
         bar.update(1)
@@ -289,7 +289,7 @@ def _aqs(args: argparse.Namespace) -> int:
         if packing.pressure is None or not packing.pressure > 0:
             raise ValueError("--fixed-pressure needs a positive pressure attribute in the input or --pressure")
         pressure = packing.pressure
-    bar = tqdm(total=n, desc="aqs", disable=args.quiet)
+    bar = progress_bar(args.quiet, total=n, desc="aqs")
     ds, final = aqs_shear(
         packing, args.strain, args.step, PowerLawPotential(exponent=args.exponent), args.force_tol,
         pressure, max_steps=args.max_steps, progress=lambda _: bar.update(1),
@@ -309,7 +309,7 @@ def _sd_shear(args: argparse.Namespace) -> int:
     if warning:
         print(f"jamflow sd-shear: warning: {warning}", file=sys.stderr)
     packing = packing.in_units(length_unit(packing.diameter, args.unit))
-    bar = tqdm(total=n + 1, desc="sd-shear", disable=args.quiet)
+    bar = progress_bar(args.quiet, total=n + 1, desc="sd-shear")
     ds = lerner_sd_shear(packing, args.strain, args.step, args.dt, args.grad_tol, args.delta_r,
                          max_steps=args.max_steps, progress=lambda _: bar.update(1))
     bar.close()

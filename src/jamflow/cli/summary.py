@@ -16,8 +16,9 @@ from .types import path_with_suffix
 
 #: Columns printed (those with at least one value); --json / --csv write every column.
 PRINTED = ("kind", "body", "point", "sample", "stage", "kappa", "p_target", "N", "d", "phi", "phi_J", "pressure", "n_contacts",
-           "isostatic_count", "n_rattlers", "n_lp", "classification", "gamma", "gamma_err", "theta", "theta_err",
-           "strain", "shear_stress", "friction")
+           "isostatic_count", "n_rattlers", "n_lp", "classification", "gamma", "gamma_stat", "gamma_sys", "gamma_err",
+           "theta", "theta_stat", "theta_sys", "theta_err", "strain", "shear_stress", "friction",
+           "counting_note", "gamma_note", "theta_note")
 #: Significant digits of printed floats: packing fractions in full, exponents and the rest short.
 DIGITS = {"phi": 10, "phi_J": 10}
 
@@ -28,7 +29,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Reads results/<scene> (or the results of a scene YAML, relative to the current directory) and "
                     "prints one row per packing and per flow run: parameters (sample, stage, kappa, p_target) and "
                     "numbers (phi, phi_J, pressure, backbone contacts, isostatic count, rattlers, LPs, certificate, "
-                    "the scene's gap exponent gamma and force exponent theta with their errors). The same table "
+                    "the scene's gap exponent gamma and force exponent theta with their statistical, systematic and "
+                    "combined errors, or why the fit was refused). The same table "
                     "from Python: jamflow.load_scene(PATH).",
         reads=("path",), writes=("json", "csv"), makes={"json": (), "csv": ()},
     )

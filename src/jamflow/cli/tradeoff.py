@@ -4,11 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from tqdm import tqdm
-
 from ..io import write_dataset
 from ..tradeoff import STAGES, recommend, sweep
-from .common import add_command, add_quiet, print_summary
+from .common import add_command, add_quiet, print_summary, progress_bar
 from .types import path_with_suffix, seed
 
 
@@ -32,7 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _tradeoff(args: argparse.Namespace) -> int:
     n = 1 + len(STAGES[args.stage].grid(args.quick))
-    with tqdm(total=n, desc=f"tradeoff {args.stage}", unit="run", disable=args.quiet) as bar:
+    with progress_bar(args.quiet, total=n, desc=f"tradeoff {args.stage}", unit="run") as bar:
         def step(label: str) -> None:
             bar.set_postfix_str(label)
             bar.update(1)

@@ -99,7 +99,10 @@ class Job:
         env = f"JAMFLOW_SCAN_POINT={shlex.quote(json.dumps(self.point, sort_keys=True, default=str))}"
         line = " ".join(shlex.quote(a) for a in ["jamflow", *self.argv])
         if self.stdout:
-            return f"{env} {line} > {shlex.quote(self.outputs[0])} 2> {shlex.quote(log)}"
+            # the output is the command's stdout; the log ends with it too, as every job log ends
+            # with what its command printed
+            out, log = shlex.quote(self.outputs[0]), shlex.quote(log)
+            return f"{env} {line} > {out} 2> {log} && cat {out} >> {log}"
         return f"{env} {line} > {shlex.quote(log)} 2>&1"
 
 

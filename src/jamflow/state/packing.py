@@ -264,6 +264,32 @@ class Packing:
         object.__setattr__(self, "orientation", theta)
         object.__setattr__(self, "shape_index", index)
 
+    def __repr__(self) -> str:
+        """One line (N, d, phi, bodies, contacts, pressure, box, protocol): ``print(packing)`` stays short."""
+        parts = [f"N={self.n}", f"d={self.d}", f"phi={self.packing_fraction:.6g}", self._bodies_text()]
+        if self.contacts is not None:
+            # a walled packing keeps its wall contacts apart (attributes), not in ``contacts``
+            what = "sphere-sphere contacts" if self.body_kind == "walls" else "contacts"
+            parts.append(f"{len(self.contacts)} {what}" +
+                         (f", {int(np.sum(self.rattler))} rattlers" if self.rattler is not None else ""))
+        if self.pressure is not None:
+            parts.append(f"P={self.pressure:.6g}")
+        h = self.box.matrix
+        sides = " x ".join(f"{x:.6g}" for x in np.diag(h))
+        sheared = np.any(np.triu(h, 1) != 0.0)
+        parts.append(f"box {sides}" + (" sheared" if sheared else ""))
+        parts.append(f"protocol={self.protocol!r}")
+        return f"Packing({', '.join(parts)})"
+
+    def _bodies_text(self) -> str:
+        kind = self.body_kind
+        if kind == "linked":
+            return f"{len(self.links)} links in {len(np.unique(self.clusters))} clusters"
+        if kind == "shapes":
+            names = np.unique(self.shapes.kind[self.shape_index])
+            return "shapes: " + "/".join(str(k) for k in names)
+        return "spheres between hard walls" if kind == "walls" else "spheres"
+
     # derived quantities -------------------------------------------------------------
     @property
     def n(self) -> int:
