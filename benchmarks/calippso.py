@@ -54,8 +54,9 @@ Parts (d = 3 monodisperse unless stated):
 ``engine``
     Whole chains with the warm LPs by HiGHS and by jamflow.simplex (``--warm-engine
     highs`` / ``jamflow``), one after the other: the LS examples and ``--seeds`` near
-    starts per N of ``--engine-cases``; time, LPs, pivots, fallbacks, whether both end
-    in the same packing (Q, forces, phi_J), and ``jamflow certify`` of every output.
+    starts per N of ``--engine-cases``; wall and CPU time, LPs, pivots, fallbacks, whether
+    both end in the same packing (Q, forces, phi_J), and ``jamflow certify`` of every
+    output. ``--engines auto highs`` compares another pair (e.g. the default against HiGHS).
 ``relax``
     LP counts with and without the Sec. IV relaxation c = 0.5 (random starts).
 ``tolerances``
@@ -135,20 +136,20 @@ NEAR_PRESSURE = 1e7
 #: Issue 19 targets for the whole command on the LS examples [s] (issue 9 had 10, 40, 120).
 LS_TARGETS = {3: 5.0, 4: 15.0, 5: 40.0}
 PAPER_EXPONENTS = {"time": 3.0, "t_lp": 2.34, "lps": 1.04}
-METRICS = ("time", "peak_memory", "lps", "t_lp", "phi", "overlap", "fb", "iso")
+METRICS = ("time", "cpu_time", "peak_memory", "lps", "t_lp", "phi", "overlap", "fb", "iso")
 #: units of the quantities the parts store that have one (the others are counts or ratios)
-UNITS = {"time": "s", "peak_memory": "B", "t_lp": "s", "t_lps": "s"}
+UNITS = {"time": "s", "cpu_time": "s", "peak_memory": "B", "t_lp": "s", "t_lps": "s"}
 
 
 def command(start: Path, tag: str, *options: str) -> dict[str, float]:
-    """Run ``jamflow calippso`` on ``start``; wall time, peak memory and the checks."""
+    """Run ``jamflow calippso`` on ``start``; wall and CPU time, peak memory and the checks."""
     out = OUT / f"calippso_out_{tag}.nc"
     t0 = time.perf_counter()
     proc = subprocess.Popen([sys.executable, "-m", "jamflow", "calippso", str(start), str(out), "--quiet", *options])
     _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t0
     row = dict.fromkeys(METRICS, np.nan)
-    row.update(time=wall, peak_memory=usage.ru_maxrss * 1024.0)
+    row.update(time=wall, cpu_time=usage.ru_utime + usage.ru_stime, peak_memory=usage.ru_maxrss * 1024.0)
     if os.waitstatus_to_exitcode(status) != 0:
         print(f"   {tag}: failed after {wall:.1f} s", flush=True)
         return row
@@ -157,7 +158,7 @@ def command(start: Path, tag: str, *options: str) -> dict[str, float]:
     s = summarize(q)
     row.update(lps=float(ds.attrs["iterations"]), t_lp=float(np.median(ds["lp_time"].values)), phi=q.packing_fraction,
                overlap=max_overlap(q)[1], fb=float(force_balance_residual(q)[~q.rattler].max()), iso=float(s.isostatic))
-    print(f"   {tag}: {wall:7.2f} s  {int(row['lps']):3d} LPs  median LP {row['t_lp']:.3f} s  phi_J {row['phi']:.7f}  "
+    print(f"   {tag}: {wall:7.2f} s (CPU {row['cpu_time']:.2f} s)  {int(row['lps']):3d} LPs  median LP {row['t_lp']:.3f} s  phi_J {row['phi']:.7f}  "
           f"iso {s.isostatic} (Nc {s.n_contacts} vs {s.isostatic_count})  overlap {row['overlap']:.1e}  "
           f"fb {row['fb']:.1e}  peak {row['peak_memory'] / 2**30:.2f} GiB", flush=True)
     return row
@@ -386,19 +387,21 @@ def certified(out: Path) -> str:
     return str(read_dataset(cert).attrs["classification"])
 
 
-def part_engine(quick: bool, cases: list[str], seeds: int) -> xr.Dataset:
-    """Whole chains with the warm LPs by HiGHS and by jamflow.simplex (``--warm-engine``),
-    the two commands one after the other, their order alternating between starts: time,
-    LPs, pivots, jamflow's fallbacks to HiGHS, and whether they end in the same packing
-    (Q, largest force difference over the largest force, phi_J); every output is also
-    checked (isostatic, overlap, force balance) and certified by ``jamflow certify``."""
+def part_engine(quick: bool, cases: list[str], seeds: int,
+                engines: tuple[str, str] = ("highs", "jamflow")) -> xr.Dataset:
+    """Whole chains with the warm LPs by two engines (``--warm-engine``; by default HiGHS
+    and jamflow.simplex), the two commands one after the other, their order alternating
+    between starts: time, LPs, pivots, jamflow's fallbacks to HiGHS, and whether they end
+    in the same packing (Q, largest force difference over the largest force, phi_J); every
+    output is also checked (isostatic, overlap, force balance) and certified by ``jamflow
+    certify``."""
     starts = {"ls_d3": ls_example(3)} if quick or "ls" in cases else {}
     if not quick:
         if "ls" in cases:
             starts.update({"ls_d4": ls_example(4), "ls_d5": ls_example(5)})
         for n in sorted(int(c) for c in cases if c != "ls"):
             starts.update({f"near_N{n}_s{seed}": near_start(n, seed) for seed in range(1, seeds + 1)})
-    engines = ("highs", "jamflow")
+    ref, alt = engines
     parts = []
     for k, (case, start) in enumerate(starts.items()):
         rows = {}
@@ -415,23 +418,25 @@ def part_engine(quick: bool, cases: list[str], seeds: int) -> xr.Dataset:
         a, b = (read_packing(OUT / f"calippso_out_engine_{case}_{e}.nc") for e in engines)
         q, df = contact_overlap(b, a)[0], force_difference(b, a)
         dphi = b.packing_fraction - a.packing_fraction
-        print(f"   {case}: Q = {q:.6f}, max |df| / max f = {df:.1e}, phi_J {a.packing_fraction:.10f} -> "
-              f"{b.packing_fraction:.10f}, LPs {rows['highs']['lps']:.0f} -> {rows['jamflow']['lps']:.0f}, "
-              f"time {rows['highs']['time']:.1f} -> {rows['jamflow']['time']:.1f} s, fallbacks "
-              f"{rows['jamflow']['fallbacks']:.0f}, certified {rows['highs']['certified']} / "
-              f"{rows['jamflow']['certified']}", flush=True)
-        numeric = [m for m in rows["highs"] if m != "certified"]
+        print(f"   {case}: {ref} -> {alt}: Q = {q:.6f}, max |df| / max f = {df:.1e}, phi_J "
+              f"{a.packing_fraction:.10f} -> {b.packing_fraction:.10f}, LPs {rows[ref]['lps']:.0f} -> "
+              f"{rows[alt]['lps']:.0f}, time {rows[ref]['time']:.1f} -> {rows[alt]['time']:.1f} s (CPU "
+              f"{rows[ref]['cpu_time']:.1f} -> {rows[alt]['cpu_time']:.1f} s), warm LPs by jamflow "
+              f"{rows[ref]['warm_jamflow']:.0f} / {rows[alt]['warm_jamflow']:.0f}, fallbacks "
+              f"{rows[ref]['fallbacks']:.0f} / {rows[alt]['fallbacks']:.0f}, certified {rows[ref]['certified']} / "
+              f"{rows[alt]['certified']}", flush=True)
+        numeric = [m for m in rows[ref] if m != "certified"]
         data = {m: (("engine",), [rows[e][m] for e in engines], {"units": UNITS.get(m, "1")}) for m in numeric}
         data["certified"] = (("engine",), [rows[e]["certified"] for e in engines])
         ds = xr.Dataset(data, coords={"engine": list(engines)})
-        ds = ds.assign(contact_overlap=((), q, {"units": "1", "long_name": "Q of jamflow's packing against HiGHS's"}),
-                       force_difference=((), df, {"units": "1", "long_name": "max |f_jamflow - f_highs| / max f"}),
-                       phi_difference=((), dphi, {"units": "1", "long_name": "phi_J(jamflow) - phi_J(highs)"}),
+        ds = ds.assign(contact_overlap=((), q, {"units": "1", "long_name": f"Q of {alt}'s packing against {ref}'s"}),
+                       force_difference=((), df, {"units": "1", "long_name": f"max |f_{alt} - f_{ref}| / max f"}),
+                       phi_difference=((), dphi, {"units": "1", "long_name": f"phi_J({alt}) - phi_J({ref})"}),
                        n=((), a.n, {"units": "1", "long_name": "number of spheres"}))
         parts.append(ds.expand_dims(case=[case]))
     return xr.concat(parts, "case").assign_attrs(new_dataset_attrs(
-        "CALiPPSO: warm LPs by HiGHS against jamflow.simplex, whole chains", {"quick": quick, "cases": cases,
-                                                                             "seeds": seeds}))
+        f"CALiPPSO: warm LPs by {ref} against {alt}, whole chains", {"quick": quick, "cases": cases,
+                                                                    "seeds": seeds, "engines": list(engines)}))
 
 
 def part_large(n: int, options: tuple[str, ...] = ()) -> xr.Dataset:
@@ -734,6 +739,8 @@ def main() -> None:
     ap.add_argument("--engine-cases", nargs="+", default=["ls", "1024", "2048"],
                     choices=["ls", "1024", "2048", "4096", "8192"],
                     help="starts of the 'engine' part: the LS examples and/or near starts of these N")
+    ap.add_argument("--engines", nargs=2, default=["highs", "jamflow"], choices=list(cal.WARM_ENGINES),
+                    help="the two --warm-engine values the 'engine' part compares (default highs jamflow)")
     args = ap.parse_args()
     if args.seeds < 1 or args.jobs < 1:
         ap.error("--seeds and --jobs must be at least 1")
@@ -743,7 +750,7 @@ def main() -> None:
                "preset": lambda: part_preset(args.quick),
                "finish": lambda: part_finish(args.quick, args.max_finish),
                "scale": lambda: part_scale(args.quick, args.max_scale),
-               "engine": lambda: part_engine(args.quick, args.engine_cases, args.seeds),
+               "engine": lambda: part_engine(args.quick, args.engine_cases, args.seeds, tuple(args.engines)),
                "solvers": lambda: part_solvers(args.quick), "lp": lambda: part_lp(args.quick),
                "relax": lambda: part_relax(args.quick),
                "tolerances": lambda: part_tolerances(args.quick),

@@ -74,7 +74,9 @@ WARM_ENGINES: tuple[str, ...] = ("auto", "highs", "jamflow")
 DEFAULT_WARM_ENGINE: str = "auto"
 #: ``auto``: jamflow.simplex from ``d N`` = 4096 on. The same warm LPs from the same
 #: basis, CPU time HiGHS / jamflow: d = 3, N = 1024 0.5-1.1 (jamflow slower on the
-#: median LP), N = 2048 1.1-1.4, N = 4096 2.7; d = 4 and 5, N = 1024 1.6 and 1.7.
+#: median LP), N = 2048 1.1-1.4, N = 4096 2.0; d = 4 and 5, N = 1024 1.6 and 1.7.
+#: Whole chains also depend on the path each engine's vertices lead to (more LPs with
+#: jamflow at one N = 4096 start, fewer at one N = 2048 start): the note's "Whole chains".
 WARM_ENGINE_MIN_COLUMNS: int = 4096
 
 #: How a chain ends. ``newton``: once an LP in the tail (``sqrt(Gamma*) - 1 <=
