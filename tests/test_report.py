@@ -21,6 +21,8 @@ from jamflow.scenes.studies import FIGURES, caption_of
 
 REPO = Path(__file__).resolve().parents[1]
 CAPTIONS = sorted((REPO / "workflow" / "report").glob("*.rst"))
+#: The report's front page (the Snakefile's ``report:``), not a figure caption
+FRONT_PAGE = REPO / "workflow" / "report" / "workflow.rst"
 
 
 def _render(path: Path) -> str:
@@ -63,7 +65,13 @@ def test_every_referenced_caption_exists_and_every_caption_is_used():
     assert "caption_of(figure)" in (REPO / "workflow" / "rules" / "common.smk").read_text()
     # every scene figure, and the tradeoff scene's Pareto fronts (figure_pareto)
     referenced = {f"{caption_of(figure)}.rst" for figure in (*FIGURES, "pareto")}
-    assert referenced == {p.name for p in CAPTIONS}
+    assert referenced == {p.name for p in CAPTIONS} - {FRONT_PAGE.name}
+
+
+def test_the_report_has_a_front_page_describing_the_workflow():
+    assert f'report: "{FRONT_PAGE.relative_to(REPO).as_posix()}"' in (REPO / "Snakefile").read_text()
+    html = _render(FRONT_PAGE)
+    assert "system-message" not in html and "scene" in html and "stage table" in html
 
 
 def test_the_package_depends_on_what_snakemake_report_needs():
