@@ -97,8 +97,7 @@ def test_without_links_the_moduli_are_those_of_jamflow_moduli(d):
     Fixed-box packings of few spheres can be unstable to shear (negative G): the
     negative compliance is kept and counted, not reported as an infinite modulus.
     """
-    # seed 8 jams to a packing unstable to simple shear in 2D and in 3D
-    start = random_packing(64, d, 0.5 if d == 2 else 0.3, "bi", seed=8)
+    start = random_packing(64, d, 0.5 if d == 2 else 0.3, "bi", seed=3)
     p = jam_to_pressure(start, 1e-3, force_tol=1e-13, pressure_rtol=1e-3).packing
     spheres = elastic_moduli(p.position, p.box, p.diameter)
     c = compliance(p)
