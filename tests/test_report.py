@@ -28,7 +28,9 @@ FRONT_PAGE = REPO / "workflow" / "report" / "workflow.rst"
 def _render(path: Path) -> str:
     """The caption as Snakemake renders it (same Jinja2 settings), as HTML; a Docutils warning raises."""
     # the wildcards the figure rules have; StrictUndefined makes a missing one an error too
-    wildcards = SimpleNamespace(sample="seed1", condition="p10", variant="_k0.001_p1e+06", d="2", seed="1")
+    # a figure rule's one wildcard (jamflow.scenes.studies.add_figures): an undefined name
+    # would render empty and leave a bare ```` that Docutils warns about in the report
+    wildcards = SimpleNamespace(tag="spheres_base")
     snakemake = SimpleNamespace(wildcards=wildcards, config={}, params=SimpleNamespace())
     env = Environment(trim_blocks=True, lstrip_blocks=True, undefined=StrictUndefined)
     text = env.from_string(path.read_text()).render(snakemake=snakemake, categories=[], files=[])
