@@ -36,10 +36,16 @@ _START_SECONDS: dict[str, float] = {"init": 2.5e-3, "init-shapes": 1e-3, "init-c
 RECORD_BYTES: float = 1000.0
 
 
+#: The kernel's memory-limit files of a cgroup v2 and a cgroup v1 hierarchy (operating-system
+#: interfaces, not files of the repository): a SLURM job or a container sees its limit there.
+CGROUP_MEMORY_LIMITS: tuple[Path, ...] = (Path("/sys/fs/cgroup/memory.max"),
+                                          Path("/sys/fs/cgroup/memory/memory.limit_in_bytes"))
+
+
 def machine_memory() -> int:
     """Memory this process may use [bytes]: physical memory, or less under a cgroup limit (a SLURM job)."""
     total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    for limit in (Path("/sys/fs/cgroup/memory.max"), Path("/sys/fs/cgroup/memory/memory.limit_in_bytes")):
+    for limit in CGROUP_MEMORY_LIMITS:
         try:
             text = limit.read_text().strip()
         except OSError:

@@ -355,6 +355,27 @@ def reaffix(x, li, lj, offset, length, sign, first, cptr, fptr, chol, w, u, r, l
     return -1, err, -1
 
 
+@njit(cache=True, inline="always")
+def _centroid_2d(x, members, shift, a, b):
+    """Centroid of the unwrapped positions ``x + shift`` of cluster members ``members[a:b]``."""
+    cx = 0.0
+    cy = 0.0
+    for k in range(a, b):
+        s = members[k]
+        cx += x[s, 0] + shift[k, 0]
+        cy += x[s, 1] + shift[k, 1]
+    return cx / (b - a), cy / (b - a)
+
+
+@njit(cache=True, inline="always")
+def is_linked(adj_ptr, adj, i, j):
+    """Whether ``j`` is among the partners ``adj[adj_ptr[i]:adj_ptr[i + 1]]`` linked to ``i``."""
+    for k in range(adj_ptr[i], adj_ptr[i + 1]):
+        if adj[k] == j:
+            return True
+    return False
+
+
 @njit(cache=True)
 def rigid_project_2d(x, rptr, members, shift, g):
     """``g`` (N, 2) projected in place onto the rigid motions of each rigid 2D cluster.
@@ -369,14 +390,7 @@ def rigid_project_2d(x, rptr, members, shift, g):
     for c in range(rptr.shape[0] - 1):
         a, b = rptr[c], rptr[c + 1]
         n = b - a
-        cx = 0.0
-        cy = 0.0
-        for k in range(a, b):
-            s = members[k]
-            cx += x[s, 0] + shift[k, 0]
-            cy += x[s, 1] + shift[k, 1]
-        cx /= n
-        cy /= n
+        cx, cy = _centroid_2d(x, members, shift, a, b)
         fx = 0.0
         fy = 0.0
         tau = 0.0
@@ -409,15 +423,7 @@ def rigid_place_2d(x, rptr, members, shift, ref):
     """
     for c in range(rptr.shape[0] - 1):
         a, b = rptr[c], rptr[c + 1]
-        n = b - a
-        cx = 0.0
-        cy = 0.0
-        for k in range(a, b):
-            s = members[k]
-            cx += x[s, 0] + shift[k, 0]
-            cy += x[s, 1] + shift[k, 1]
-        cx /= n
-        cy /= n
+        cx, cy = _centroid_2d(x, members, shift, a, b)
         dot = 0.0
         cross = 0.0
         for k in range(a, b):
@@ -446,12 +452,7 @@ def unlinked_pairs(pi, pj, offset, sigma, adj_ptr, adj):
     for p in range(pi.shape[0]):
         i = pi[p]
         j = pj[p]
-        linked = False
-        for k in range(adj_ptr[i], adj_ptr[i + 1]):
-            if adj[k] == j:
-                linked = True
-                break
-        if linked:
+        if is_linked(adj_ptr, adj, i, j):
             continue
         pi[kept] = i
         pj[kept] = j

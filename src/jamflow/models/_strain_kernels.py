@@ -29,7 +29,13 @@ from ..minimize._fire_kernels import (
 )
 from ..neighbors._cell_kernels import cell_pairs_into, pair_buffers
 from ..neighbors._verlet_kernels import _needs_rebuild
-from ._link_kernels import _det_inverse, gram_factor, gram_solve, strain_state
+from ._link_kernels import (
+    _det_inverse,
+    gram_factor,
+    gram_solve,
+    is_linked,
+    strain_state,
+)
 from .spheres._kernels import pair_forces
 
 
@@ -291,12 +297,7 @@ def sheared_list(y, h0, h0_inv, U, T, diameter, skin, adj_ptr, adj, buffers):
     for p in range(m):
         i = ci[p]
         j = cj[p]
-        linked = False
-        for k in range(adj_ptr[i], adj_ptr[i + 1]):
-            if adj[k] == j:
-                linked = True
-                break
-        if linked:
+        if is_linked(adj_ptr, adj, i, j):
             continue
         for a in range(d):
             t = 0.0
