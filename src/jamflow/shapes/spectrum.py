@@ -47,8 +47,8 @@ from ..state.packing import Packing
 from .counting import count_constraints, dofs_per_body, shape_model_of
 
 __all__ = ["ZERO_EIGENVALUE_RTOL", "QUARTIC_PRESSURE_RATIO", "REGION_GAP_MIN_RATIO", "SPECTRUM_FORCE_RATIO",
-           "FOURTH_DERIVATIVE_STEP", "FOURTH_AGREEMENT_RTOL", "FOURTH_TARGET_RTOL", "contact_signature",
-           "fourth_derivative_step", "fourth_derivative_along", "Spectrum", "quartic_check", "spectrum"]
+           "FOURTH_DERIVATIVE_STEP", "FOURTH_AGREEMENT_RTOL", "FOURTH_TARGET_RTOL", "FOURTH_ROUNDOFF_RTOL",
+           "FOURTH_STEP_STABILITY_RTOL", "contact_signature", "exact_line", "roundoff_of_form", "fourth_derivative_step", "fourth_derivative_along", "Spectrum", "quartic_check", "spectrum"]
 
 #: Eigenvalues with ``|lambda| <= ZERO_EIGENVALUE_RTOL * lambda_max`` are zero modes:
 #: LAPACK's eigenvalues err by ``O(eps ||M||) ~ 1e-16 lambda_max``; 1e-13 leaves a
@@ -99,11 +99,69 @@ FOURTH_TARGET_RTOL: float = 1e-3
 #: :data:`FOURTH_TARGET_RTOL` inside the smooth window (else NaN).
 FOURTH_AGREEMENT_RTOL: float = 0.05
 
+#: A pair of second differences counts only when the round-off bound of the finer one,
+#: ``4 eps_f / (h / 2)^2`` (``eps_f`` the measured round-off of ``v^T M v``,
+#: :func:`roundoff_of_form`), is at most this fraction of it: near disks ``eps_f`` is
+#: ~1e-9 of ``v^T M v`` and two round-off-dominated differences agreed to 1e-3 by
+#: chance, 1 % off the converged value
+#: (measured: docs/notes/shapes.md#fourth-derivatives-near-the-disk-limit).
+FOURTH_ROUNDOFF_RTOL: float = 1e-3
+
+#: Largest relative difference of two accepted estimates (e.g. from first steps ``h`` and
+#: ``4 h``): each returns the coarser difference of a pair that agrees to
+#: :data:`FOURTH_TARGET_RTOL`, so its truncation (``~ h^2``, 4/3 of the gap) is at most
+#: ``4/3 FOURTH_TARGET_RTOL`` and its round-off at most ``FOURTH_ROUNDOFF_RTOL / 4``.
+FOURTH_STEP_STABILITY_RTOL: float = 2.0 * (4.0 / 3.0 * FOURTH_TARGET_RTOL + FOURTH_ROUNDOFF_RTOL / 4.0)
+
+#: Configurations one unit in the last place away from the base point (random signs,
+#: this seed) whose spread of ``v^T M v`` is its round-off (:func:`roundoff_of_form`).
+FOURTH_ROUNDOFF_SAMPLES: int = 8
+FOURTH_ROUNDOFF_SEED: int = 0
+
 
 def fourth_derivative_step(min_overlap: float) -> float:
     """First step [length or rad] of the fourth derivative for a packing whose smallest overlap is ``min_overlap``."""
     return float(np.clip(FOURTH_STEP_OVERLAP_FRACTION * np.sqrt(max(min_overlap, 0.0)), FOURTH_DERIVATIVE_MIN_STEP,
                          1e-3))
+
+
+def exact_line(q: NDArray[np.float64], v: NDArray[np.float64], h: float,
+               max_step: float = FOURTH_DERIVATIVE_STEP) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """``q``, ``v`` and ``h`` moved onto a dyadic grid on which every ``q + s v`` is exact.
+
+    ``h`` becomes the power of two at or below it; ``q`` a multiple of ``g``, the unit in
+    the last place of the largest coordinate any sample reaches (``|q| + 4 max_step |v|``);
+    ``v`` a multiple of ``g / (h / 2)``. Then ``s v`` for ``s`` a multiple of ``h / 2`` and
+    ``q + s v`` are exact: the samples of a second difference lie on one straight line.
+    Rounded in floating point they stray from it by ~1 ulp of the coordinates, and
+    ``v^T M v`` changes across the line (~1e-5 k per unit length on the near-disk
+    ellipses) a million times faster than along a quartic mode, which made half of its
+    round-off there. ``q`` moves by at most ``g / 2``, ``v`` by ``g / h`` (~2e-10 at
+    ``h = 8e-6`` and coordinates below 8).
+
+    Returns
+    -------
+    q, v : ndarray, shape (n_dof,)
+    h : float
+    """
+    h = float(2.0 ** np.floor(np.log2(h)))
+    reach = float(np.max(np.abs(q)) + 4.0 * max_step * np.max(np.abs(v)))
+    grid = float(2.0 ** (np.ceil(np.log2(reach)) - 52))
+    return np.round(q / grid) * grid, np.round(v * (0.5 * h) / grid) * (grid / (0.5 * h)), h
+
+
+def roundoff_of_form(form: Callable[[NDArray[np.float64]], float], q: NDArray[np.float64]) -> float:
+    """Round-off of ``form(q)`` [its units]: the largest change when every coordinate moves by one ulp.
+
+    :data:`FOURTH_ROUNDOFF_SAMPLES` configurations with random signs
+    (:data:`FOURTH_ROUNDOFF_SEED`): they hold the evaluation's round-off and the form's
+    change under the rounding of a configuration, an upper bound on the noise of samples
+    on an :func:`exact_line`.
+    """
+    rng = np.random.default_rng(FOURTH_ROUNDOFF_SEED)
+    base = form(q)
+    return max(abs(form(np.nextafter(q, np.where(rng.random(q.size) < 0.5, -np.inf, np.inf))) - base)
+               for _ in range(FOURTH_ROUNDOFF_SAMPLES))
 
 
 def contact_signature(model, q: NDArray[np.float64]) -> frozenset:
@@ -183,7 +241,11 @@ def fourth_derivative_along(model, q: NDArray[np.float64], v: NDArray[np.float64
     a step far above the one that merely opens no contact), up to ``max_step`` or the
     step at which no stencil keeps the network. A jump of ``M`` (a contact opening or
     changing type between samples) spoils the stencils that straddle it, not the
-    others.
+    others. The samples lie exactly on the line (:func:`exact_line`, ``h`` rounded
+    down to a power of two); a pair counts only where the round-off of ``f``
+    (:func:`roundoff_of_form`) moves the finer difference by at most
+    :data:`FOURTH_ROUNDOFF_RTOL` of it, so that two differences dominated by round-off
+    cannot agree by chance.
 
     Parameters
     ----------
@@ -201,17 +263,23 @@ def fourth_derivative_along(model, q: NDArray[np.float64], v: NDArray[np.float64
     Returns
     -------
     float
-        The estimate at the accepted step, or NaN when no smooth stencil agrees to
+        The estimate at the accepted step, or NaN when no smooth stencil above round-off agrees to
         :data:`FOURTH_AGREEMENT_RTOL`.
     """
+    q, v, h = exact_line(q, v, h, max_step)
     reference = None if signature is None else signature(q)
     f: dict[float, float] = {}
     same: dict[float, bool] = {}
 
+    def form(x: NDArray[np.float64]) -> float:
+        return float(v @ (model.hessian(x) @ v))
+
     def sample(s: float) -> float:
         if s not in f:
-            f[s] = float(v @ (model.hessian(q + s * v) @ v))
+            f[s] = form(q + s * v)
         return f[s]
+
+    noise = roundoff_of_form(form, q)
 
     def smooth(*points: float) -> bool:
         for s in points:
@@ -230,6 +298,8 @@ def fourth_derivative_along(model, q: NDArray[np.float64], v: NDArray[np.float64
             found = True
             coarse = (sample(a * step) - 2.0 * sample(b * step) + sample(c * step)) / step**2
             fine = (sample(0.5 * a * step) - 2.0 * sample(0.5 * b * step) + sample(0.5 * c * step)) / (0.5 * step) ** 2
+            if 4.0 * noise / (0.5 * step) ** 2 > FOURTH_ROUNDOFF_RTOL * abs(fine):
+                continue
             gap = abs(coarse - fine) / max(abs(coarse), abs(fine), np.finfo(float).tiny)
             if gap < best_gap:
                 best, best_gap = coarse, gap
