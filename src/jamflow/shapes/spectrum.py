@@ -48,7 +48,8 @@ from .counting import count_constraints, dofs_per_body, shape_model_of
 
 __all__ = ["ZERO_EIGENVALUE_RTOL", "QUARTIC_PRESSURE_RATIO", "REGION_GAP_MIN_RATIO", "SPECTRUM_FORCE_RATIO",
            "FOURTH_DERIVATIVE_STEP", "FOURTH_AGREEMENT_RTOL", "FOURTH_TARGET_RTOL", "FOURTH_ROUNDOFF_RTOL",
-           "FOURTH_STEP_STABILITY_RTOL", "contact_signature", "exact_line", "roundoff_of_form", "fourth_derivative_step", "fourth_derivative_along", "Spectrum", "quartic_check", "spectrum"]
+           "FOURTH_STEP_STABILITY_RTOL", "contact_signature", "exact_line", "roundoff_of_form", "energy_quartic_fit",
+           "fourth_derivative_step", "fourth_derivative_along", "Spectrum", "quartic_check", "spectrum"]
 
 #: Eigenvalues with ``|lambda| <= ZERO_EIGENVALUE_RTOL * lambda_max`` are zero modes:
 #: LAPACK's eigenvalues err by ``O(eps ||M||) ~ 1e-16 lambda_max``; 1e-13 leaves a
@@ -117,6 +118,14 @@ FOURTH_STEP_STABILITY_RTOL: float = 2.0 * (4.0 / 3.0 * FOURTH_TARGET_RTOL + FOUR
 #: this seed) whose spread of ``v^T M v`` is its round-off (:func:`roundoff_of_form`).
 FOURTH_ROUNDOFF_SAMPLES: int = 8
 FOURTH_ROUNDOFF_SEED: int = 0
+
+#: Windows (dyadic, widest first) and odd number of points of :func:`energy_quartic_fit`:
+#: the energy's round-off (~1e-22 k on the near-disk ellipses) enters the fitted ``U^(4)``
+#: as ``~ 24 eps_U / w^4``: 1e-5 of it at ``w = 2^-6`` for ``alpha - 1 = 1e-4``, 1e-3 at
+#: ``2^-8``; some modes open a contact within ``2^-6``
+#: (measured: docs/notes/shapes.md#fourth-derivatives-near-the-disk-limit).
+ENERGY_FIT_WIDTHS: tuple[float, ...] = (2.0**-6, 2.0**-7, 2.0**-8, 2.0**-9)
+ENERGY_FIT_POINTS: int = 33
 
 
 def fourth_derivative_step(min_overlap: float) -> float:
@@ -309,6 +318,39 @@ def fourth_derivative_along(model, q: NDArray[np.float64], v: NDArray[np.float64
             break
         step *= 4.0
     return float(best) if best_gap <= FOURTH_AGREEMENT_RTOL else float("nan")
+
+
+def energy_quartic_fit(model, q: NDArray[np.float64], v: NDArray[np.float64],
+                       signature: Callable[[NDArray[np.float64]], frozenset],
+                       widths: tuple[float, ...] = ENERGY_FIT_WIDTHS) -> tuple[float, float, float, float]:
+    """``d^4 U / ds^4`` along ``v`` from the energy alone: a check independent of ``v^T M v``.
+
+    A least-squares polynomial of degrees 1 ... 6 through ``U(q + s v) - U(q)`` at
+    :data:`ENERGY_FIT_POINTS` points ``|s| <= w`` on an :func:`exact_line`, ``w`` the
+    first of ``widths`` whose points all keep the contact network (``signature``);
+    ``24`` times its ``s^4`` coefficient, with the standard error from the residual.
+
+    Returns
+    -------
+    d4, d4_error : float
+        [k]; NaN when every window changes the network.
+    eigenvalue : float
+        Twice the ``s^2`` coefficient [k].
+    w : float
+        The window [length or rad].
+    """
+    half = ENERGY_FIT_POINTS // 2
+    design = np.vander(np.arange(-half, half + 1) / half, 7, increasing=True)[:, 1:]
+    reference = signature(q)
+    for w in widths:
+        x, u, _ = exact_line(q, v, 2.0 * w / half, w)
+        s = np.arange(-half, half + 1) * (w / half)
+        if all(signature(x + t * u) == reference for t in s):
+            energy = np.array([model.evaluate(x + t * u).energy for t in s]) - model.evaluate(x).energy
+            coef, residual, *_ = np.linalg.lstsq(design, energy, rcond=None)
+            sigma = np.sqrt(residual[0] / (s.size - design.shape[1]) * np.linalg.inv(design.T @ design)[3, 3])
+            return 24.0 * coef[3] / w**4, 24.0 * sigma / w**4, 2.0 * coef[1] / w**2, w
+    return float("nan"), float("nan"), float("nan"), float("nan")
 
 
 def _auto_cutoff(lam: NDArray[np.float64], lambda_0: float, pressure: float) -> float:
