@@ -121,7 +121,7 @@ FOURTH_ROUNDOFF_SEED: int = 0
 
 #: Windows (dyadic, widest first) and odd number of points of :func:`energy_quartic_fit`:
 #: the energy's round-off (~1e-22 k on the near-disk ellipses) enters the fitted ``U^(4)``
-#: as ``~ 24 eps_U / w^4``: 1e-5 of it at ``w = 2^-6`` for ``alpha - 1 = 1e-4``, 1e-3 at
+#: as ``~ 24 eps_U / w^4``: 1e-5 of it at ``w = 2^-6`` for ``alpha - 1 = 1e-4``, 1e-3 ... 3e-3 at
 #: ``2^-8``; some modes open a contact within ``2^-6``
 #: (measured: docs/notes/shapes.md#fourth-derivatives-near-the-disk-limit).
 ENERGY_FIT_WIDTHS: tuple[float, ...] = (2.0**-6, 2.0**-7, 2.0**-8, 2.0**-9)
