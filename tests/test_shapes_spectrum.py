@@ -32,6 +32,7 @@ from jamflow.shapes.spectrum import (
     FOURTH_STEP_STABILITY_RTOL,
     contact_signature,
     energy_quartic_fit,
+    exact_line,
     fourth_derivative_along,
     fourth_derivative_step,
     spectrum,
@@ -325,6 +326,26 @@ def test_fourth_derivatives_of_near_disks_agree_with_a_quartic_fit_of_the_energy
         assert np.isfinite(fitted) and error < 1e-2 * d4, (k, w)
         assert abs(fitted - d4) <= 4.0 * error + FOURTH_STEP_STABILITY_RTOL * d4
         assert eigenvalue == pytest.approx(spec.eigenvalue[k], rel=1e-3)
+
+
+def test_exact_line_puts_every_sample_on_the_line():
+    """q + s v is exact for every node s = m h / 2 up to twice the largest step, and q, v move by at most
+    half a grid unit (the ulp of the largest coordinate reached) and g / h."""
+    rng = np.random.default_rng(3)
+    q = rng.uniform(-6.0, 6.0, 48)
+    v = rng.normal(size=48)
+    v /= np.linalg.norm(v)
+    x, u, h = exact_line(q, v, 1e-5, max_step=1e-2)
+    grid = 2.0**-49  # |q| + 4e-2 |v| < 8
+    assert h == 2.0**-17
+    assert np.max(np.abs(x - q)) <= grid / 2 and np.max(np.abs(u - v)) <= grid / h
+    s = np.concatenate([np.arange(-40, 41) * (h / 2), [2e-2 - h / 2, -(2e-2 - h / 2)]])
+    s = np.round(s / (h / 2)) * (h / 2)
+    for t in s:
+        point = x + t * u
+        # exact: subtracting the base point gives back the product, itself exact
+        np.testing.assert_array_equal(point - x, t * u)
+        assert np.all(np.round(point / grid) * grid == point)
 
 
 class _NoisyQuartic(_Quartic):

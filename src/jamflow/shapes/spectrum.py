@@ -30,7 +30,9 @@ first step opens no contact (:func:`fourth_derivative_step`); it grows while the
 contact network stays the same (:func:`contact_signature`) until two steps agree, central
 where the network is unchanged on both sides, else one-sided on the side where it is
 (:func:`fourth_derivative_along`): a contact at the verge of opening, or of changing type,
-makes ``M`` jump between two samples.
+makes ``M`` jump between two samples. The samples lie exactly on the line
+(:func:`exact_line`), and a step counts only where the measured round-off of
+``v^T M v`` (:func:`roundoff_of_form`) cannot pass for its curvature.
 """
 
 from __future__ import annotations
@@ -164,8 +166,9 @@ def roundoff_of_form(form: Callable[[NDArray[np.float64]], float], q: NDArray[np
 
     :data:`FOURTH_ROUNDOFF_SAMPLES` configurations with random signs
     (:data:`FOURTH_ROUNDOFF_SEED`): they hold the evaluation's round-off and the form's
-    change under the rounding of a configuration, an upper bound on the noise of samples
-    on an :func:`exact_line`.
+    change under the rounding of a configuration. On the near-disk ellipses it is 3 to 7
+    times the rms scatter of ``v^T M v`` on an :func:`exact_line` (1.3e-19 against
+    2e-20 for one mode), so it errs on the side of larger steps.
     """
     rng = np.random.default_rng(FOURTH_ROUNDOFF_SEED)
     base = form(q)
