@@ -104,8 +104,8 @@ FOURTH_AGREEMENT_RTOL: float = 0.05
 
 #: A pair of second differences counts only when the round-off bound of the finer one,
 #: ``4 eps_f / (h / 2)^2`` (``eps_f`` the measured round-off of ``v^T M v``,
-#: :func:`roundoff_of_form`), is at most this fraction of it: near disks ``eps_f`` is
-#: ~1e-9 of ``v^T M v`` and two round-off-dominated differences agreed to 1e-3 by
+#: :func:`roundoff_of_form`), is at most this fraction of it: near disks ``eps_f`` is 1e-9
+#: ... 4e-8 of ``v^T M v`` and two round-off-dominated differences agreed to 1e-3 by
 #: chance, 1 % off the converged value
 #: (measured: docs/notes/shapes.md#fourth-derivatives-near-the-disk-limit).
 FOURTH_ROUNDOFF_RTOL: float = 1e-3
