@@ -30,7 +30,9 @@ first step opens no contact (:func:`fourth_derivative_step`); it grows while the
 contact network stays the same (:func:`contact_signature`) until two steps agree, central
 where the network is unchanged on both sides, else one-sided on the side where it is
 (:func:`fourth_derivative_along`): a contact at the verge of opening, or of changing type,
-makes ``M`` jump between two samples.
+makes ``M`` jump between two samples. The samples lie exactly on the line
+(:func:`exact_line`), and a step counts only where the measured round-off of
+``v^T M v`` (:func:`roundoff_of_form`) cannot pass for its curvature.
 """
 
 from __future__ import annotations
@@ -47,7 +49,8 @@ from ..state.packing import Packing
 from .counting import count_constraints, dofs_per_body, shape_model_of
 
 __all__ = ["ZERO_EIGENVALUE_RTOL", "QUARTIC_PRESSURE_RATIO", "REGION_GAP_MIN_RATIO", "SPECTRUM_FORCE_RATIO",
-           "FOURTH_DERIVATIVE_STEP", "FOURTH_AGREEMENT_RTOL", "FOURTH_TARGET_RTOL", "contact_signature",
+           "FOURTH_DERIVATIVE_STEP", "FOURTH_AGREEMENT_RTOL", "FOURTH_TARGET_RTOL", "FOURTH_ROUNDOFF_RTOL",
+           "FOURTH_STEP_STABILITY_RTOL", "contact_signature", "exact_line", "roundoff_of_form", "energy_quartic_fit",
            "fourth_derivative_step", "fourth_derivative_along", "Spectrum", "quartic_check", "spectrum"]
 
 #: Eigenvalues with ``|lambda| <= ZERO_EIGENVALUE_RTOL * lambda_max`` are zero modes:
@@ -99,11 +102,78 @@ FOURTH_TARGET_RTOL: float = 1e-3
 #: :data:`FOURTH_TARGET_RTOL` inside the smooth window (else NaN).
 FOURTH_AGREEMENT_RTOL: float = 0.05
 
+#: A pair of second differences counts only when the round-off bound of the finer one,
+#: ``4 eps_f / (h / 2)^2`` (``eps_f`` the measured round-off of ``v^T M v``,
+#: :func:`roundoff_of_form`), is at most this fraction of it: near disks ``eps_f`` is 1e-9
+#: ... 4e-8 of ``v^T M v`` and two round-off-dominated differences agreed to 1e-3 by
+#: chance, 1 % off the converged value
+#: (measured: docs/notes/shapes.md#fourth-derivatives-near-the-disk-limit).
+FOURTH_ROUNDOFF_RTOL: float = 1e-3
+
+#: Largest relative difference of two accepted estimates (e.g. from first steps ``h`` and
+#: ``4 h``): each returns the coarser difference of a pair that agrees to
+#: :data:`FOURTH_TARGET_RTOL`, so its truncation (``~ h^2``, 4/3 of the gap) is at most
+#: ``4/3 FOURTH_TARGET_RTOL`` and its round-off at most ``FOURTH_ROUNDOFF_RTOL / 4``.
+FOURTH_STEP_STABILITY_RTOL: float = 2.0 * (4.0 / 3.0 * FOURTH_TARGET_RTOL + FOURTH_ROUNDOFF_RTOL / 4.0)
+
+#: Configurations one unit in the last place away from the base point (random signs,
+#: this seed) whose spread of ``v^T M v`` is its round-off (:func:`roundoff_of_form`).
+FOURTH_ROUNDOFF_SAMPLES: int = 8
+FOURTH_ROUNDOFF_SEED: int = 0
+
+#: Windows (dyadic, widest first) and odd number of points of :func:`energy_quartic_fit`:
+#: the energy's round-off (~1e-22 k on the near-disk ellipses) enters the fitted ``U^(4)``
+#: as ``~ 24 eps_U / w^4``: 1e-5 of it at ``w = 2^-6`` for ``alpha - 1 = 1e-4``, 1e-3 ... 3e-3 at
+#: ``2^-8``; some modes open a contact within ``2^-6``
+#: (measured: docs/notes/shapes.md#fourth-derivatives-near-the-disk-limit).
+ENERGY_FIT_WIDTHS: tuple[float, ...] = (2.0**-6, 2.0**-7, 2.0**-8, 2.0**-9)
+ENERGY_FIT_POINTS: int = 33
+
 
 def fourth_derivative_step(min_overlap: float) -> float:
     """First step [length or rad] of the fourth derivative for a packing whose smallest overlap is ``min_overlap``."""
     return float(np.clip(FOURTH_STEP_OVERLAP_FRACTION * np.sqrt(max(min_overlap, 0.0)), FOURTH_DERIVATIVE_MIN_STEP,
                          1e-3))
+
+
+def exact_line(q: NDArray[np.float64], v: NDArray[np.float64], h: float,
+               max_step: float = FOURTH_DERIVATIVE_STEP) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """``q``, ``v`` and ``h`` moved onto a dyadic grid on which every ``q + s v`` is exact.
+
+    ``h`` becomes the power of two at or below it; ``q`` a multiple of ``g``, the unit in
+    the last place of the largest coordinate any sample reaches (``|q| + 4 max_step |v|``);
+    ``v`` a multiple of ``g / (h / 2)``. Then ``s v`` for ``s`` a multiple of ``h / 2`` and
+    ``q + s v`` are exact: the samples of a second difference lie on one straight line.
+    Rounded in floating point they stray from it by ~1 ulp of the coordinates, and
+    ``v^T M v`` changes across the line (~1e-5 k per unit length on the near-disk
+    ellipses) a million times faster than along a quartic mode, which made half of its
+    round-off there. ``q`` moves by at most ``g / 2``, ``v`` by ``g / h`` (~2e-10 at
+    ``h = 8e-6`` and coordinates below 8).
+
+    Returns
+    -------
+    q, v : ndarray, shape (n_dof,)
+    h : float
+    """
+    h = float(2.0 ** np.floor(np.log2(h)))
+    reach = float(np.max(np.abs(q)) + 4.0 * max_step * np.max(np.abs(v)))
+    grid = float(2.0 ** (np.ceil(np.log2(reach)) - 52))
+    return np.round(q / grid) * grid, np.round(v * (0.5 * h) / grid) * (grid / (0.5 * h)), h
+
+
+def roundoff_of_form(form: Callable[[NDArray[np.float64]], float], q: NDArray[np.float64]) -> float:
+    """Round-off of ``form(q)`` [its units]: the largest change when every coordinate moves by one ulp.
+
+    :data:`FOURTH_ROUNDOFF_SAMPLES` configurations with random signs
+    (:data:`FOURTH_ROUNDOFF_SEED`): they hold the evaluation's round-off and the form's
+    change under the rounding of a configuration. On the near-disk ellipses it is 3 to 7
+    times the rms scatter of ``v^T M v`` on an :func:`exact_line` (1.3e-19 against
+    2e-20 for one mode), so it errs on the side of larger steps.
+    """
+    rng = np.random.default_rng(FOURTH_ROUNDOFF_SEED)
+    base = form(q)
+    return max(abs(form(np.nextafter(q, np.where(rng.random(q.size) < 0.5, -np.inf, np.inf))) - base)
+               for _ in range(FOURTH_ROUNDOFF_SAMPLES))
 
 
 def contact_signature(model, q: NDArray[np.float64]) -> frozenset:
@@ -183,7 +253,11 @@ def fourth_derivative_along(model, q: NDArray[np.float64], v: NDArray[np.float64
     a step far above the one that merely opens no contact), up to ``max_step`` or the
     step at which no stencil keeps the network. A jump of ``M`` (a contact opening or
     changing type between samples) spoils the stencils that straddle it, not the
-    others.
+    others. The samples lie exactly on the line (:func:`exact_line`, ``h`` rounded
+    down to a power of two); a pair counts only where the round-off of ``f``
+    (:func:`roundoff_of_form`) moves the finer difference by at most
+    :data:`FOURTH_ROUNDOFF_RTOL` of it, so that two differences dominated by round-off
+    cannot agree by chance.
 
     Parameters
     ----------
@@ -201,17 +275,23 @@ def fourth_derivative_along(model, q: NDArray[np.float64], v: NDArray[np.float64
     Returns
     -------
     float
-        The estimate at the accepted step, or NaN when no smooth stencil agrees to
+        The estimate at the accepted step, or NaN when no smooth stencil above round-off agrees to
         :data:`FOURTH_AGREEMENT_RTOL`.
     """
+    q, v, h = exact_line(q, v, h, max_step)
     reference = None if signature is None else signature(q)
     f: dict[float, float] = {}
     same: dict[float, bool] = {}
 
+    def form(x: NDArray[np.float64]) -> float:
+        return float(v @ (model.hessian(x) @ v))
+
     def sample(s: float) -> float:
         if s not in f:
-            f[s] = float(v @ (model.hessian(q + s * v) @ v))
+            f[s] = form(q + s * v)
         return f[s]
+
+    noise = roundoff_of_form(form, q)
 
     def smooth(*points: float) -> bool:
         for s in points:
@@ -230,6 +310,8 @@ def fourth_derivative_along(model, q: NDArray[np.float64], v: NDArray[np.float64
             found = True
             coarse = (sample(a * step) - 2.0 * sample(b * step) + sample(c * step)) / step**2
             fine = (sample(0.5 * a * step) - 2.0 * sample(0.5 * b * step) + sample(0.5 * c * step)) / (0.5 * step) ** 2
+            if 4.0 * noise / (0.5 * step) ** 2 > FOURTH_ROUNDOFF_RTOL * abs(fine):
+                continue
             gap = abs(coarse - fine) / max(abs(coarse), abs(fine), np.finfo(float).tiny)
             if gap < best_gap:
                 best, best_gap = coarse, gap
@@ -239,6 +321,39 @@ def fourth_derivative_along(model, q: NDArray[np.float64], v: NDArray[np.float64
             break
         step *= 4.0
     return float(best) if best_gap <= FOURTH_AGREEMENT_RTOL else float("nan")
+
+
+def energy_quartic_fit(model, q: NDArray[np.float64], v: NDArray[np.float64],
+                       signature: Callable[[NDArray[np.float64]], frozenset],
+                       widths: tuple[float, ...] = ENERGY_FIT_WIDTHS) -> tuple[float, float, float, float]:
+    """``d^4 U / ds^4`` along ``v`` from the energy alone: a check independent of ``v^T M v``.
+
+    A least-squares polynomial of degrees 1 ... 6 through ``U(q + s v) - U(q)`` at
+    :data:`ENERGY_FIT_POINTS` points ``|s| <= w`` on an :func:`exact_line`, ``w`` the
+    first of ``widths`` whose points all keep the contact network (``signature``);
+    ``24`` times its ``s^4`` coefficient, with the standard error from the residual.
+
+    Returns
+    -------
+    d4, d4_error : float
+        [k]; NaN when every window changes the network.
+    eigenvalue : float
+        Twice the ``s^2`` coefficient [k].
+    w : float
+        The window [length or rad].
+    """
+    half = ENERGY_FIT_POINTS // 2
+    design = np.vander(np.arange(-half, half + 1) / half, 7, increasing=True)[:, 1:]
+    reference = signature(q)
+    for w in widths:
+        x, u, _ = exact_line(q, v, 2.0 * w / half, w)
+        s = np.arange(-half, half + 1) * (w / half)
+        if all(signature(x + t * u) == reference for t in s):
+            energy = np.array([model.evaluate(x + t * u).energy for t in s]) - model.evaluate(x).energy
+            coef, residual, *_ = np.linalg.lstsq(design, energy, rcond=None)
+            sigma = np.sqrt(residual[0] / (s.size - design.shape[1]) * np.linalg.inv(design.T @ design)[3, 3])
+            return 24.0 * coef[3] / w**4, 24.0 * sigma / w**4, 2.0 * coef[1] / w**2, w
+    return float("nan"), float("nan"), float("nan"), float("nan")
 
 
 def _auto_cutoff(lam: NDArray[np.float64], lambda_0: float, pressure: float) -> float:
