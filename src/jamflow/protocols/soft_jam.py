@@ -85,6 +85,7 @@ def jam_to_pressure(
     fire_params: FireParameters = JammingSettings.fire_params,
     progress: Callable[[dict], None] | None = None,
     box_dof: str = JammingSettings.box_dof,
+    onset: str = JammingSettings.onset,
 ) -> JammingResult:
     """Bring a packing to the jamming onset at pressure ``P0`` (see module doc).
 
@@ -117,6 +118,10 @@ def jam_to_pressure(
         free; the box may tilt). See :func:`~jamflow.models.spheres.model.minimize_enthalpy`.
         With the full box free the backbone needs ``d (N_s - 1) + d (d + 1) / 2``
         contacts instead of ``d (N_s - 1) + 1`` (Dagois-Bohy et al., PRL 109, 095703).
+    onset : {"search", "bisection"}
+        How step 2 chooses its packing fractions (:mod:`jamflow.minimize.onset`): the
+        search that keeps the last minimum below ``P0`` (default), or O'Hern's
+        compress/decompress bisection with fixed first step ``delta_phi``.
 
     Returns
     -------
@@ -138,7 +143,7 @@ def jam_to_pressure(
     phi = particle_volume / box.volume
     model = SphereModel(box, D, potential, NeighborList(D))
     settings = JammingSettings(force_tol, pressure_rtol, delta_phi, bisection_rtol, bisection_force_factor,
-                               max_steps, fire_params, box_dof)
+                               max_steps, fire_params, box_dof, onset)
     model, final, history, steps = jam_model_to_pressure(model, x, phi, pressure, settings, progress)
     box = final.box
     fmax2 = final.max_force**2
@@ -153,11 +158,14 @@ def jam_to_pressure(
         "target_pressure": pressure,
         "fire_steps": steps,
         "converged": int(final.converged),
+        "onset_method": onset,
+        "onset_minimizations": len(history["phi"]),
     }
     params = {
         "pressure": pressure, "force_tol": force_tol, "pressure_rtol": pressure_rtol,
         "bisection_rtol": bisection_rtol, "bisection_force_factor": bisection_force_factor,
         "potential_exponent": potential.exponent, "fire": fire_params.as_dict(), "box_dof": box_dof,
+        "onset": onset, "delta_phi": delta_phi,
     }
     out = soft_packing(final.position, box, D, potential, packing, ">soft", params, attrs)
     return JammingResult(out, bool(final.converged), history, steps)
