@@ -197,8 +197,12 @@ class _Bracket:
     above :data:`JAMMED_PRESSURE_SHARE` ``P0`` and ``slope`` the ``dP/dphi`` they give.
     """
 
-    def __init__(self, pressure: float, step: float, max_strain: float, d: int, slope: float | None) -> None:
+    def __init__(self, pressure: float, rtol: float, step: float, max_strain: float, d: int,
+                 slope: float | None) -> None:
         self.pressure, self.step, self.max_strain, self.d, self.slope = pressure, step, max_strain, d, slope
+        # the secant aims into the lower half of the window |P - P0| <= rtol P0: a trial that
+        # lands below P0 becomes the kept minimum, close to the target
+        self.aim = pressure * (1.0 - 0.5 * rtol)
         self.lo: tuple[EnergyModel, MinimizeResult, float] | None = None
         self.hi: tuple[float, float] | None = None
         self.jammed: list[tuple[float, float]] = []
@@ -219,14 +223,12 @@ class _Bracket:
         self.below += 1
         if self.hi is not None and self.below > STALE_TRIALS:
             self.hi = None
-        if self.hi is None:
-            self.step *= 2.0
 
     def _secant(self, phi: float, pressure: float) -> float:
-        """``phi`` where the line through ``(phi, pressure)`` with the known slope reaches ``P0`` (NaN if none)."""
+        """``phi`` where the line through ``(phi, pressure)`` with the known slope reaches the aim (NaN if none)."""
         if self.slope is None or not pressure > JAMMED_PRESSURE_SHARE * self.pressure:
             return np.nan
-        return phi + (self.pressure - pressure) / self.slope
+        return phi + (self.aim - pressure) / self.slope
 
     def _capped(self, base: float, target: float) -> float:
         # at most max_strain of box length per step: phi ~ L^-d
@@ -244,7 +246,9 @@ class _Bracket:
             return self._capped(phi, target), False
         base = self.lo[2]
         target = base + self.step
-        if self.hi is not None:
+        if self.hi is None:
+            self.step *= 2.0
+        else:
             # interpolation towards a minimum above P0 (extrapolation from below
             # would crawl on a minimum that is not yet jammed, P ~ P0 / 2 not rising)
             secant = self._secant(*self.hi)
@@ -299,7 +303,7 @@ def search_to_pressure(
         ``dP/dphi`` (None if no two jammed minima were seen) and the FIRE steps taken.
     """
     d = model.box.d
-    bracket = _Bracket(pressure, delta_phi, max_strain, d, slope)
+    bracket = _Bracket(pressure, rtol, delta_phi, max_strain, d, slope)
     steps = 0
     x = position
     while True:
