@@ -43,7 +43,7 @@ EXPONENT = real(1.0, lo_open=True, need="an exponent w > 1 (2 harmonic, 2.5 Hert
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "soft-jam", _soft_jam,
-                    "soft-sphere jamming onset: compress/decompress bisection + enthalpy minimisation to P0 "
+                    "soft-sphere jamming onset: onset search (or bisection) + enthalpy minimisation to P0 "
                     "(linked packings: fixed-box bisection with constraint projection)",
                     reads=("input",), writes=("out",), packings=("out",))
     p.add_argument("input", help="input netCDF packing (overlaps allowed)")
