@@ -45,7 +45,7 @@ from jamflow.shapes import (
 
 OUT = Path(__file__).resolve().parent / "output"
 KINDS = ("disks 2D N=64", "spheres 3D N=64", "trimers fixed box K=50", "trimers shear-stab. K=50",
-         "chains of 4, 3D K=16", "ellipses N=32", "circulo-lines N=32")
+         "chains of 4, 3D K=32", "ellipses N=32", "circulo-lines N=32")
 
 
 def _run(kind: str, phi0: float, seed: int, onset: str, pressure: float) -> dict:
@@ -61,7 +61,7 @@ def _run(kind: str, phi0: float, seed: int, onset: str, pressure: float) -> dict
         nc, iso = c.n_contacts, c.isostatic_count
     elif kind.startswith(("trimers", "chains")):
         start = (linked_packing(2, 50, "trimer", rng, phi=phi0)[0] if kind.startswith("trimers")
-                 else linked_packing(3, 16, "chain", rng, chain_length=4, phi=phi0)[0])
+                 else linked_packing(3, 32, "chain", rng, chain_length=4, phi=phi0)[0])
         res = jam_linked(start, pressure, settings=s, shear_stabilize="shear" in kind)
         nc, iso = res.packing.attrs["n_contacts"], res.packing.attrs["isostatic_count"]
     else:
@@ -89,7 +89,7 @@ def main() -> None:
     names = ("minimizations", "cpu", "phi_J", "max_trial_pressure", "n_contacts", "isostatic_count", "converged")
     data = {k: np.full((len(args.kinds), len(phis), len(ONSET_METHODS), len(seeds)), np.nan) for k in names}
     for a, kind in enumerate(args.kinds):
-        _run(kind, 0.2, 99, "search", 1e-3)  # untimed: numba compiles this kind's kernels
+        _run(kind, 0.1, 99, "search", 1e-3)  # untimed: numba compiles this kind's kernels
         for b, phi0 in enumerate(phis):
             for m, onset in enumerate(ONSET_METHODS):
                 for k, seed in enumerate(seeds):
