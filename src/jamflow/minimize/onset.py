@@ -85,10 +85,10 @@ MAX_STRAIN_STEP: float = 0.05
 STALE_TRIALS: int = 3
 
 #: Largest relative change of the box length per step on the approach to jamming: the
-#: scout's steps (:data:`MAX_STRAIN_STEP`) jam a denser packing than slow compression (3D
-#: spheres N = 64 from phi = 0.1: phi_J 0.6376 +- 0.0024 against the bisection's
-#: 0.6285 +- 0.0020), steps of 0.5 % to 1 % from 0.8 phi_J on reach the bisection's
-#: (docs/notes/chains.md, "Dilute starts").
+#: scout's steps (:data:`MAX_STRAIN_STEP`) alone jam denser packings than the bisection's
+#: slow compression (3D spheres N = 64 from phi = 0.1: phi_J 0.6376 +- 0.0024 against
+#: 0.6285 +- 0.0020); with the return and this step the gap is 0.4-1.2 % of phi_J over 20
+#: seeds, at 40-60 minimisations (docs/notes/chains.md, "Dilute starts").
 APPROACH_STRAIN_STEP: float = 0.0075
 
 #: The approach starts from the last scouting minimum at or below ``(1 - RETURN_SHARE)``
