@@ -123,6 +123,24 @@ class JammingSettings:
             raise ValueError(f"max_strain_step must lie in (0, 1), got {self.max_strain_step}")
 
 
+def _minimum(model: EnergyModel, x: np.ndarray, phi: float, force_tol: float, budget: int,
+             fire_params: FireParameters, progress: Callable[[dict], None] | None, history: dict[str, list] | None,
+             info: dict) -> MinimizeResult:
+    """One fixed-box FIRE minimisation of step 2, recorded in ``history`` and reported to ``progress``
+    (with ``info``: ``delta_phi`` and the protocol's ``steps`` before it); raises when the budget runs out."""
+    res = minimize_fire(model, x, force_tol, budget, fire_params)
+    if history is not None:
+        history["phi"].append(phi)
+        history["pressure"].append(res.pressure)
+        history["steps"].append(res.steps)
+    if progress is not None:
+        progress({**info, "phi": phi, "pressure": res.pressure, "steps": info["steps"] + res.steps,
+                  "model": model, "position": res.position})
+    if not res.converged:
+        raise RuntimeError(f"FIRE step budget ({budget + info['steps']}) exhausted at phi = {phi:.10f}")
+    return res
+
+
 def bisect_to_pressure(
     model: EnergyModel,
     position: np.ndarray,
@@ -168,18 +186,10 @@ def bisect_to_pressure(
     steps = 0
     x = position
     while True:
-        res = minimize_fire(model, x, force_tol, max_steps - steps, fire_params)
+        res = _minimum(model, x, phi, force_tol, max_steps - steps, fire_params, progress, history,
+                       {"delta_phi": delta_phi, "steps": steps})
         steps += res.steps
         x = res.position
-        if history is not None:
-            history["phi"].append(phi)
-            history["pressure"].append(res.pressure)
-            history["steps"].append(res.steps)
-        if progress is not None:
-            progress({"phi": phi, "pressure": res.pressure, "delta_phi": delta_phi, "steps": steps,
-                      "model": model, "position": res.position})
-        if not res.converged:
-            raise RuntimeError(f"FIRE step budget ({max_steps}) exhausted at phi = {phi:.10f}")
         if abs(res.pressure - pressure) <= rtol * pressure:
             break
         new_direction = 1 if res.pressure < pressure else -1
@@ -350,17 +360,9 @@ def search_to_pressure(
     steps = 0
     x = position
     while True:
-        res = minimize_fire(model, x, force_tol, max_steps - steps, fire_params)
+        res = _minimum(model, x, phi, force_tol, max_steps - steps, fire_params, progress, history,
+                       {"delta_phi": bracket.step, "steps": steps})
         steps += res.steps
-        if history is not None:
-            history["phi"].append(phi)
-            history["pressure"].append(res.pressure)
-            history["steps"].append(res.steps)
-        if progress is not None:
-            progress({"phi": phi, "pressure": res.pressure, "delta_phi": bracket.step, "steps": steps,
-                      "model": model, "position": res.position})
-        if not res.converged:
-            raise RuntimeError(f"FIRE step budget ({max_steps}) exhausted at phi = {phi:.10f}")
         if abs(res.pressure - pressure) <= rtol * pressure:
             break
         bracket.record(model, res, phi)
