@@ -13,8 +13,9 @@ Protocol (O'Hern et al., PRE 68, 011306 (2003); VanderWerf et al., Sec. II):
      while the pressure stays below ``P0``, at most ``max_strain_step`` of box length per
      step, until it first passes ``P0``; the search then returns to the scout's minimum
      at ``RETURN_SHARE`` below and approaches in steps of at most
-     ``APPROACH_STRAIN_STEP`` (large steps near jamming jam denser packings than the
-     bisection's). A minimum above ``P0`` is discarded: it bounds ``phi`` from above, and the
+     ``APPROACH_STRAIN_STEP`` (the scout's steps alone jam denser packings). Even so its
+     ``phi_J`` from a dilute start lies 0.4-2 % above the bisection's, near O'Hern's
+     infinite-temperature quench (docs/notes/chains.md, "Dilute starts"). A minimum above ``P0`` is discarded: it bounds ``phi`` from above, and the
      next trial starts again from the kept minimum, at the secant estimate of
      ``P(phi) = P0`` inside the bracket (``P`` is linear in ``phi - phi_J`` for
      harmonic contacts) or at its midpoint. So the packing that is kept was never
@@ -246,6 +247,7 @@ class _Bracket:
         self.max_strain, self.step = APPROACH_STRAIN_STEP, np.inf
 
     def record(self, model: EnergyModel, res: MinimizeResult, phi: float) -> None:
+        """Take in the minimum ``res`` of a trial at ``phi`` (class doc)."""
         if res.pressure >= self.pressure:
             # the slope of the branch above P0 only: below it a minimum may be one that
             # is not yet jammed (P ~ P0 / 4 falling under compression) and P(phi) jumps
@@ -253,7 +255,6 @@ class _Bracket:
             (p1, y1), (p2, y2) = self.jammed[0], self.jammed[-1]
             if p1 != p2 and (y2 - y1) / (p2 - p1) > 0.0:
                 self.slope = (y2 - y1) / (p2 - p1)
-        if res.pressure >= self.pressure:
             if self.scouting and self.lo is not None:
                 self._return()
                 return
