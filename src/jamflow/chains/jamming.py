@@ -189,13 +189,14 @@ def jam_linked(
         "max_force_sq": final.max_force**2, "potential_exponent": potential.exponent,
         "fire_steps": steps, "converged": int(final.converged), "jamming_protocol": protocol,
         "box_dof": settings.box_dof,
-        **({"target_pressure": pressure} if protocol == "bisection" else {"energy_tol": energy_tol}),
+        **({"target_pressure": pressure, "onset_method": settings.onset,
+            "onset_minimizations": len(history["phi"])} if protocol == "bisection" else {"energy_tol": energy_tol}),
     }
     params = {"protocol": protocol, "force_tol": settings.force_tol, "delta_phi": settings.delta_phi,
               "potential_exponent": potential.exponent, "fire": settings.fire_params.as_dict(),
               "length_rtol": model.length_rtol,
               **({"pressure": pressure, "pressure_rtol": settings.pressure_rtol,
-                  "bisection_rtol": settings.bisection_rtol,
+                  "bisection_rtol": settings.bisection_rtol, "onset": settings.onset,
                   "bisection_force_factor": settings.bisection_force_factor}
                  if protocol == "bisection" else {"energy_tol": energy_tol, "energy_floor": ENERGY_FLOOR,
                                                    "energy_step_ratio": ENERGY_STEP_RATIO})}

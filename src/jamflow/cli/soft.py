@@ -13,7 +13,7 @@ from ..chains.compliance import compliance
 from ..chains.hessian import constrained_hessian
 from ..chains.jamming import DEFAULT_PROTOCOL, PROTOCOLS, jam_linked
 from ..io import new_dataset_attrs, read_packing, write_dataset, write_packing
-from ..minimize.onset import FORCE_TOL_VANDERWERF, JammingSettings
+from ..minimize.onset import FORCE_TOL_VANDERWERF, ONSET_METHODS, JammingSettings
 from ..models.spheres.hessian import (
     backbone_pairs,
     elastic_moduli,
@@ -43,7 +43,7 @@ EXPONENT = real(1.0, lo_open=True, need="an exponent w > 1 (2 harmonic, 2.5 Hert
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(sub, "soft-jam", _soft_jam,
-                    "soft-sphere jamming onset: compress/decompress bisection + enthalpy minimisation to P0 "
+                    "soft-sphere jamming onset: onset search (or bisection) + enthalpy minimisation to P0 "
                     "(linked packings: fixed-box bisection with constraint projection)",
                     reads=("input",), writes=("out",), packings=("out",))
     p.add_argument("input", help="input netCDF packing (overlaps allowed)")
@@ -58,7 +58,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help=f"final max per-particle |F| [epsilon / mean diameter] (default {FORCE_TOL_VANDERWERF:.3g}: F^2 <= 1e-26)")
     p.add_argument("--pressure-rtol", type=positive, default=1e-6, help="final |P - P0| / P0 (default 1e-6)")
     p.add_argument("--delta-phi", type=positive, default=1e-3,
-                   help="first bisection step in packing fraction (default 1e-3)")
+                   help="first step in packing fraction of the onset search or bisection (default 1e-3)")
+    p.add_argument("--onset", choices=ONSET_METHODS, default="search",
+                   help="how the compression to P0 chooses its packing fractions: 'search' (default) compresses the "
+                        "last minimum below P0 with steps that double and bisects once above; 'bisection' is "
+                        "O'Hern's compress/decompress bisection in steps of --delta-phi (docs/notes/chains.md)")
     p.add_argument("--exponent", type=EXPONENT, default=2.0, help="potential exponent w (2 harmonic, 2.5 Hertz)")
     p.add_argument("--box-dof", choices=["isotropic", "full"], default="isotropic",
                    help="final enthalpy minimisation over an isotropic box scale (default) or the whole box "
@@ -157,7 +161,7 @@ def _soft_jam_linked(args: argparse.Namespace, packing: Packing) -> int:
     if energy and args.pressure is not None:
         raise ValueError("--pressure is the bisection's target; --jam-protocol energy stops at --energy-tol instead")
     settings = JammingSettings(args.force_tol, args.pressure_rtol, args.delta_phi, max_steps=args.max_steps,
-                               box_dof=args.box_dof)
+                               box_dof=args.box_dof, onset=args.onset)
     result = jam_linked(packing, args.pressure, PowerLawPotential(exponent=args.exponent), settings, progress,
                         args.shear_stabilize, args.jam_protocol, args.energy_tol)
     bar.close()
@@ -184,6 +188,7 @@ def _soft_jam_linked(args: argparse.Namespace, packing: Packing) -> int:
                      f"removed whole, {a['n_danglers']} danglers with {a['free_dofs']} free motions)"),
         ("max |P F|", f"{a['max_force_sq'] ** 0.5:.3g} epsilon / mean diameter"),
         ("FIRE steps", result.steps),
+        ("onset", f"{'energy scaling' if energy else args.onset}, {len(result.history['phi'])} minimisations"),
     ])
     return 0
 
@@ -212,7 +217,7 @@ def _soft_jam(args: argparse.Namespace) -> int:
     result = jam_to_pressure(
         packing, args.pressure, PowerLawPotential(exponent=args.exponent), args.force_tol,
         args.pressure_rtol, args.delta_phi, max_steps=args.max_steps, progress=progress,
-        box_dof=args.box_dof,
+        box_dof=args.box_dof, onset=args.onset,
     )
     bar.close()
     if not result.converged:
@@ -230,6 +235,7 @@ def _soft_jam(args: argparse.Namespace) -> int:
         ("rattlers", s.n_rattlers),
         ("max |F|", f"{result.packing.attrs['max_force_sq'] ** 0.5:.3g} epsilon / mean diameter"),
         ("FIRE steps", result.steps),
+        ("onset", f"{args.onset}, {len(result.history['phi'])} minimisations to P0"),
     ])
     return 0
 
@@ -251,7 +257,7 @@ def _soft_jam_shapes(args: argparse.Namespace, packing: Packing) -> int:
         bar.set_postfix(phi=f"{info['phi']:.8f}", P=f"{info['pressure']:.3e}")
 
     settings = JammingSettings(force_tol=args.force_tol, pressure_rtol=args.pressure_rtol,
-                               delta_phi=args.delta_phi, max_steps=args.max_steps)
+                               delta_phi=args.delta_phi, max_steps=args.max_steps, onset=args.onset)
     result = jam_shapes(packing, args.pressure, settings, progress, rotations=not args.frozen_orientations)
     bar.close()
     if not result.converged:
@@ -269,6 +275,7 @@ def _soft_jam_shapes(args: argparse.Namespace, packing: Packing) -> int:
         ("max |F|", f"{out.attrs['max_force_sq'] ** 0.5:.3g} k length"),
         ("max |torque|", f"{out.attrs['max_torque_sq'] ** 0.5:.3g} k length^2"),
         ("FIRE steps", result.steps),
+        ("onset", f"{args.onset}, {len(result.history['phi'])} minimisations to P0"),
     ])
     return 0
 

@@ -1,16 +1,37 @@
-"""Jamming onset of soft spheres: compress/decompress bisection to a target pressure.
+"""Jamming onset of any model: compression to a target pressure, then enthalpy minimisation.
 
 Protocol (O'Hern et al., PRE 68, 011306 (2003); VanderWerf et al., Sec. II):
 
 1. lengths are rescaled so the mean diameter is 1 (the output's length unit);
-2. the box is scaled isotropically (centres affinely) in steps of packing fraction
-   ``delta_phi``, each followed by FIRE energy minimisation at fixed box to
-   ``max_i |F_i| <= bisection_force_factor * P0``; if the virial pressure is below
-   ``P0`` the next step compresses, above it decompresses, and ``delta_phi`` halves
-   whenever the direction reverses;
-3. when ``|P - P0| <= bisection_rtol * P0`` (or ``delta_phi`` underflows) the
-   enthalpy ``H = U + P0 V`` is minimised with centres and box scale as degrees of
-   freedom to ``max_i |F_i| <= force_tol`` and ``|P - P0| <= pressure_rtol * P0``.
+2. the box is scaled isotropically (centres affinely) to a new packing fraction, each
+   step followed by FIRE energy minimisation at fixed box to
+   ``max_i |F_i| <= bisection_force_factor * P0``. Two ways to choose the steps
+   (``JammingSettings.onset``):
+
+   - ``"search"`` (default, :func:`search_to_pressure`): every trial compresses the
+     last minimum found below ``P0`` (kept); a scout doubles the step from ``delta_phi``
+     while the pressure stays below ``P0``, at most ``max_strain_step`` of box length per
+     step, until it first passes ``P0``; the search then returns to the scout's minimum
+     at ``RETURN_SHARE`` below and approaches in steps of at most
+     ``APPROACH_STRAIN_STEP`` (the scout's steps alone jam denser packings). Even so its
+     ``phi_J`` from a dilute start lies 0.4-2 % above the bisection's, near O'Hern's
+     infinite-temperature quench (docs/notes/chains.md, "Dilute starts"). A minimum above ``P0`` is discarded: it bounds ``phi`` from above, and the
+     next trial starts again from the kept minimum, at the secant estimate of
+     ``P(phi) = P0`` inside the bracket (``P`` is linear in ``phi - phi_J`` for
+     harmonic contacts) or at its midpoint. So the packing that is kept was never
+     compressed above ``P0`` and decompressed: a pure compression, like the
+     bisection's first crossing of ``P0`` with small steps. A start above ``P0``
+     decompresses the same way until one minimum lies below it;
+   - ``"bisection"`` (:func:`bisect_to_pressure`, O'Hern's): steps of ``delta_phi``
+     from the current minimum, compressing below ``P0`` and decompressing above it,
+     ``delta_phi`` halved whenever the direction reverses. From a dilute start it
+     steps ``delta_phi`` at a time across the whole density range (docs/notes/chains.md,
+     "Dilute starts");
+3. when ``|P - P0| <= bisection_rtol * P0`` the enthalpy ``H = U + P0 V`` is
+   minimised with centres and box scale as degrees of freedom to
+   ``max_i |F_i| <= force_tol`` and ``|P - P0| <= pressure_rtol * P0`` (models with
+   box degrees of freedom), or step 2 continues at fixed box with ``force_tol``
+   until ``|P - P0| <= pressure_rtol * P0``.
 
 Units: energy ``epsilon`` (see :mod:`jamflow.models.spheres.potential`), length the mean
 diameter ``<D>``, pressure ``epsilon / <D>^d``, force ``epsilon / <D>``.
@@ -39,17 +60,51 @@ from .fire import (
 )
 from .model import EnergyModel
 
-__all__ = ["FORCE_TOL_VANDERWERF", "JammingSettings", "bisect_to_pressure", "jam_model_to_pressure"]
+__all__ = ["FORCE_TOL_VANDERWERF", "MAX_STRAIN_STEP", "ONSET_METHODS", "JammingSettings", "bisect_to_pressure",
+           "jam_model_to_pressure", "search_to_pressure"]
 
 
 #: Default final ``max_i |F_i|`` [epsilon / <D>]: VanderWerf et al.'s ``F_i^2 < 1e-25``
 #: with a factor ten to spare (see :data:`jamflow.tolerances.SOFT_FORCE_TOL`).
 FORCE_TOL_VANDERWERF: float = SOFT_FORCE_TOL
 
+#: The two ways of step 2 (module doc): the search that keeps the last minimum below
+#: ``P0``, and O'Hern's compress/decompress bisection with a fixed first step.
+ONSET_METHODS: tuple[str, ...] = ("search", "bisection")
+
+#: Largest relative change of the box length in one step of the search: an affine
+#: compression of a packing without overlaps creates overlaps of at most this fraction
+#: of the centre distances (5 % of a diameter for touching spheres and clusters), so
+#: links and rod cores cannot pass through each other in one step
+#: (docs/notes/chains.md, "Dilute starts").
+MAX_STRAIN_STEP: float = 0.05
+
+#: Trials in a row below ``P0`` after which the upper bound of the search is dropped: a
+#: minimum above ``P0`` reached by a long compression lies on another branch of ``P(phi)``
+#: (it jams at a lower ``phi``), so a shorter compression of the kept minimum may stay
+#: below ``P0`` up to that bound and past it (docs/notes/chains.md, "Dilute starts").
+STALE_TRIALS: int = 3
+
+#: Largest relative change of the box length per step on the approach to jamming: the
+#: scout's steps (:data:`MAX_STRAIN_STEP`) alone jam denser packings than the bisection's
+#: slow compression (3D spheres N = 64 from phi = 0.1: phi_J 0.6376 +- 0.0024 against
+#: 0.6285 +- 0.0020); with the return and this step the gap is 0.4-1.2 % of phi_J over 20
+#: seeds, at 40-60 minimisations (docs/notes/chains.md, "Dilute starts").
+APPROACH_STRAIN_STEP: float = 0.0075
+
+#: The approach starts from the last scouting minimum at or below ``(1 - RETURN_SHARE)``
+#: times the ``phi`` of the scout's last minimum below ``P0`` (same measurement).
+RETURN_SHARE: float = 0.15
+
 
 @dataclass(frozen=True)
 class JammingSettings:
-    """Tolerances and budget of the jamming protocol (see :func:`jam_to_pressure`)."""
+    """Tolerances and budget of the jamming protocol (module doc; :func:`jam_model_to_pressure`).
+
+    ``onset`` is one of :data:`ONSET_METHODS`; ``delta_phi`` is the first step in
+    packing fraction of either; ``max_strain_step`` caps the search's steps (relative
+    change of the box length).
+    """
 
     force_tol: float = FORCE_TOL_VANDERWERF
     pressure_rtol: float = 1e-6
@@ -59,6 +114,32 @@ class JammingSettings:
     max_steps: int = 20_000_000
     fire_params: FireParameters = DEFAULT_FIRE
     box_dof: str = "isotropic"
+    onset: str = "search"
+    max_strain_step: float = MAX_STRAIN_STEP
+
+    def __post_init__(self) -> None:
+        if self.onset not in ONSET_METHODS:
+            raise ValueError(f"onset must be one of {', '.join(ONSET_METHODS)}, got {self.onset!r}")
+        if not 0.0 < self.max_strain_step < 1.0:
+            raise ValueError(f"max_strain_step must lie in (0, 1), got {self.max_strain_step}")
+
+
+def _minimum(model: EnergyModel, x: np.ndarray, phi: float, force_tol: float, budget: int,
+             fire_params: FireParameters, progress: Callable[[dict], None] | None, history: dict[str, list] | None,
+             info: dict) -> MinimizeResult:
+    """One fixed-box FIRE minimisation of step 2, recorded in ``history`` and reported to ``progress``
+    (with ``info``: ``delta_phi`` and the protocol's ``steps`` before it); raises when the budget runs out."""
+    res = minimize_fire(model, x, force_tol, budget, fire_params)
+    if history is not None:
+        history["phi"].append(phi)
+        history["pressure"].append(res.pressure)
+        history["steps"].append(res.steps)
+    if progress is not None:
+        progress({**info, "phi": phi, "pressure": res.pressure, "steps": info["steps"] + res.steps,
+                  "model": model, "position": res.position})
+    if not res.converged:
+        raise RuntimeError(f"FIRE step budget ({budget + info['steps']}) exhausted at phi = {phi:.10f}")
+    return res
 
 
 def bisect_to_pressure(
@@ -106,18 +187,10 @@ def bisect_to_pressure(
     steps = 0
     x = position
     while True:
-        res = minimize_fire(model, x, force_tol, max_steps - steps, fire_params)
+        res = _minimum(model, x, phi, force_tol, max_steps - steps, fire_params, progress, history,
+                       {"delta_phi": delta_phi, "steps": steps})
         steps += res.steps
         x = res.position
-        if history is not None:
-            history["phi"].append(phi)
-            history["pressure"].append(res.pressure)
-            history["steps"].append(res.steps)
-        if progress is not None:
-            progress({"phi": phi, "pressure": res.pressure, "delta_phi": delta_phi, "steps": steps,
-                      "model": model, "position": res.position})
-        if not res.converged:
-            raise RuntimeError(f"FIRE step budget ({max_steps}) exhausted at phi = {phi:.10f}")
         if abs(res.pressure - pressure) <= rtol * pressure:
             break
         new_direction = 1 if res.pressure < pressure else -1
@@ -133,6 +206,177 @@ def bisect_to_pressure(
     return model, res, phi, delta_phi, direction, steps
 
 
+class _Bracket:
+    """Where the search for ``P(phi) = P0`` stands (module doc, step 2, ``"search"``).
+
+    While ``scouting`` the steps double up to ``max_strain`` and every minimum below
+    ``P0`` is kept; the first one above ``P0`` ends the scout: the search returns to the
+    kept minimum below ``(1 - RETURN_SHARE)`` of the last one's ``phi``, forgets the scout's bounds
+    (another branch of ``P(phi)``) and approaches in steps of at most
+    :data:`APPROACH_STRAIN_STEP` of box length.
+
+    ``lo`` is the kept minimum below ``P0`` (model, FIRE result, ``phi``); ``hi`` the
+    ``(phi, P)`` of the last trial above ``P0`` since then, dropped after
+    :data:`STALE_TRIALS` trials in a row below ``P0``; ``step`` the next compression of
+    ``lo`` (doubled after a trial below ``P0`` when no bound is known, halved to the
+    midpoint after one above). ``jammed`` holds the two last minima above ``P0`` and
+    ``slope`` the ``dP/dphi`` they give.
+    """
+
+    def __init__(self, pressure: float, rtol: float, step: float, max_strain: float, d: int,
+                 slope: float | None, scout: bool) -> None:
+        self.pressure, self.step, self.max_strain, self.d, self.slope = pressure, step, max_strain, d, slope
+        # the secant aims into the lower half of the window |P - P0| <= rtol P0: a trial that
+        # lands below P0 becomes the kept minimum, close to the target
+        self.aim = pressure * (1.0 - 0.5 * rtol)
+        self.lo: tuple[EnergyModel, MinimizeResult, float] | None = None
+        self.hi: tuple[float, float] | None = None
+        self.jammed: list[tuple[float, float]] = []
+        self.below = 0
+        self.scouting = scout
+        self.secant = False
+        self.kept: list[tuple[EnergyModel, MinimizeResult, float]] = []
+
+    def _return(self) -> None:
+        """End the scout that has just passed ``P0`` (class doc)."""
+        floor = (1.0 - RETURN_SHARE) * self.kept[-1][2]
+        below = [state for state in self.kept if state[2] <= floor]
+        self.lo = below[-1] if below else self.kept[0]
+        self.kept, self.scouting = [], False
+        self.hi, self.below, self.jammed = None, 0, []
+        self.max_strain, self.step = APPROACH_STRAIN_STEP, np.inf
+
+    def record(self, model: EnergyModel, res: MinimizeResult, phi: float) -> None:
+        """Take in the minimum ``res`` of a trial at ``phi`` (class doc)."""
+        if res.pressure >= self.pressure:
+            # the slope of the branch above P0 only: below it a minimum may be one that
+            # is not yet jammed (P ~ P0 / 4 falling under compression) and P(phi) jumps
+            self.jammed = [*self.jammed[-1:], (phi, res.pressure)]
+            (p1, y1), (p2, y2) = self.jammed[0], self.jammed[-1]
+            if p1 != p2 and (y2 - y1) / (p2 - p1) > 0.0:
+                self.slope = (y2 - y1) / (p2 - p1)
+            if self.scouting and self.lo is not None:
+                self._return()
+                return
+            self.scouting = False
+            if self.lo is not None:
+                self.step = 0.5 * (phi - self.lo[2])
+            self.hi, self.below = (phi, res.pressure), 0
+            return
+        self.lo = (model, res, phi)
+        if self.scouting:
+            self.kept.append(self.lo)
+        self.below += 1
+        if self.hi is not None and self.below > STALE_TRIALS:
+            self.hi = None
+
+    def _secant(self, phi: float, pressure: float) -> float:
+        """``phi`` where the line through ``(phi, pressure)`` with the known slope reaches the aim (NaN if none)."""
+        if self.slope is None:
+            return np.nan
+        return phi + (self.aim - pressure) / self.slope
+
+    def _capped(self, base: float, target: float) -> float:
+        # at most max_strain of box length per step: phi ~ L^-d
+        return float(np.clip(target, base * (1.0 + self.max_strain) ** -self.d,
+                             base * (1.0 - self.max_strain) ** -self.d))
+
+    def next_phi(self, phi: float, pressure: float) -> tuple[float, bool]:
+        """The next trial's ``phi`` after a minimum at ``phi`` with ``pressure``, and whether it starts
+        from the kept minimum below ``P0`` (else from this one: decompression of a start above ``P0``)."""
+        if self.lo is None:
+            target = self._secant(phi, pressure)
+            if np.isnan(target):
+                target = phi - self.step
+                self.step *= 2.0
+            return self._capped(phi, target), False
+        base = self.lo[2]
+        target = base + self.step
+        if self.hi is None:
+            self.step *= 2.0
+        else:
+            # interpolation towards a minimum above P0 (extrapolation from below
+            # would crawl on a minimum that is not yet jammed, P ~ P0 / 2 not rising);
+            # after a secant trial that stayed below P0 the midpoint, so the bracket shrinks
+            # from both sides where P(phi) jumps (a rearrangement between lo and hi)
+            secant = self._secant(*self.hi)
+            use = base < secant < self.hi[0] and not (self.secant and self.below)
+            target = secant if use else min(target, 0.5 * (base + self.hi[0]))
+            self.secant = use
+        return self._capped(base, target), True
+
+
+def search_to_pressure(
+    model: EnergyModel,
+    position: np.ndarray,
+    phi: float,
+    pressure: float,
+    force_tol: float,
+    rtol: float,
+    delta_phi: float,
+    max_strain: float,
+    max_steps: int,
+    fire_params: FireParameters = DEFAULT_FIRE,
+    progress: Callable[[dict], None] | None = None,
+    history: dict[str, list] | None = None,
+    slope: float | None = None,
+    scout: bool = True,
+) -> tuple[EnergyModel, MinimizeResult, float, float | None, int]:
+    """Fixed-box FIRE minima on a search for ``|P - P0| <= rtol P0`` that keeps the last minimum below ``P0``.
+
+    Module doc, step 2, ``"search"``: every trial is the kept minimum below ``P0``
+    scaled by ``model.rescaled`` to the next ``phi`` and minimised to ``force_tol``;
+    minima above ``P0`` only bound ``phi``. Stops also when the bracket shrinks to
+    round-off (returning its last minimum).
+
+    Parameters
+    ----------
+    model : EnergyModel
+        Needs ``rescaled(factor, position) -> (model, position)``.
+    position : ndarray, shape (N, d)
+    phi : float
+        Packing fraction of the start (``phi ~ 1 / V``).
+    delta_phi : float
+        First step in packing fraction; it doubles while the pressure stays below (a
+        start above ``P0``: above) ``P0`` and no slope is known.
+    max_strain : float
+        Largest relative change of the box length per step outside a bracket.
+    progress, history
+        As :func:`bisect_to_pressure` (every trial, kept or not, is one entry).
+    slope : float, optional
+        A known ``dP/dphi`` [pressure per packing fraction], e.g. of an earlier search
+        at a looser force tolerance, used until two minima above ``P0`` give their own.
+    scout : bool
+        Scout with steps up to ``max_strain`` and approach again from ``RETURN_SHARE``
+        below (:class:`_Bracket`); False for a start already close to ``P0``.
+
+    Returns
+    -------
+    model, result, phi, slope, steps
+        The model in the last box, its FIRE result and packing fraction, the last slope
+        ``dP/dphi`` (None if no two minima above ``P0`` were seen) and the FIRE steps taken.
+    """
+    d = model.box.d
+    bracket = _Bracket(pressure, rtol, delta_phi, max_strain, d, slope, scout)
+    steps = 0
+    x = position
+    while True:
+        res = _minimum(model, x, phi, force_tol, max_steps - steps, fire_params, progress, history,
+                       {"delta_phi": bracket.step, "steps": steps})
+        steps += res.steps
+        if abs(res.pressure - pressure) <= rtol * pressure:
+            break
+        bracket.record(model, res, phi)
+        new_phi, from_kept = bracket.next_phi(phi, res.pressure)
+        base_model, base_x, base_phi = (bracket.lo[0], bracket.lo[1].position, bracket.lo[2]) if from_kept \
+            else (model, res.position, phi)
+        if abs(new_phi - base_phi) < 4.0 * np.finfo(float).eps * base_phi:
+            break
+        model, x = base_model.rescaled((base_phi / new_phi) ** (1.0 / d), base_x)
+        phi = new_phi
+    return model, res, phi, bracket.slope, steps
+
+
 def jam_model_to_pressure(
     model: EnergyModel,
     position: np.ndarray,
@@ -143,9 +387,10 @@ def jam_model_to_pressure(
 ) -> tuple[EnergyModel, MinimizeResult, dict[str, list], int]:
     """Jamming onset of any model at pressure ``P0`` (the protocol of :func:`jam_to_pressure`).
 
-    Models with box degrees of freedom (``model.box_dofs``, e.g. soft spheres) end with the enthalpy
-    minimisation of step 3; any other model continues the bisection with fixed-box
-    FIRE to ``force_tol`` until ``|P - P0| <= pressure_rtol P0``.
+    Step 2 by ``settings.onset`` (module doc). Models with box degrees of freedom
+    (``model.box_dofs``, e.g. soft spheres) end with the enthalpy minimisation of step 3;
+    any other model continues step 2 with fixed-box FIRE to ``force_tol`` until
+    ``|P - P0| <= pressure_rtol P0`` (the search from the first stage's slope).
 
     Returns
     -------
@@ -155,14 +400,29 @@ def jam_model_to_pressure(
     """
     c = settings
     history: dict[str, list] = {"phi": [], "pressure": [], "steps": []}
-    model, res, phi, delta_phi, direction, steps = bisect_to_pressure(
-        model, position, phi, pressure, c.bisection_force_factor * pressure, c.bisection_rtol, c.delta_phi,
-        c.max_steps, c.fire_params, progress, history,
-    )
+    loose = c.bisection_force_factor * pressure
+    if c.onset == "search":
+        model, res, phi, slope, steps = search_to_pressure(
+            model, position, phi, pressure, loose, c.bisection_rtol, c.delta_phi, c.max_strain_step,
+            c.max_steps, c.fire_params, progress, history,
+        )
+    else:
+        model, res, phi, delta_phi, direction, steps = bisect_to_pressure(
+            model, position, phi, pressure, loose, c.bisection_rtol, c.delta_phi,
+            c.max_steps, c.fire_params, progress, history,
+        )
     if model.box_dofs:
         final = minimize_enthalpy_model(model, res.position, pressure, c.force_tol, c.pressure_rtol,
                                         c.max_steps - steps, c.fire_params, c.box_dof)
         return model, final, history, steps + final.steps
+    if c.onset == "search":
+        # first step: the pressure window of the loose stage, on its slope
+        step = c.bisection_rtol * pressure / slope if slope else c.delta_phi
+        model, final, _, _, more = search_to_pressure(
+            model, res.position, phi, pressure, c.force_tol, c.pressure_rtol, step, c.max_strain_step,
+            c.max_steps - steps, c.fire_params, progress, history, slope, scout=False,
+        )
+        return model, final, history, steps + more
     model, final, _, _, _, more = bisect_to_pressure(
         model, res.position, phi, pressure, c.force_tol, c.pressure_rtol, delta_phi, c.max_steps - steps,
         c.fire_params, progress, history, direction,

@@ -9,17 +9,25 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..box import Box
-from ..minimize.fire import FireParameters
+from ..minimize.fire import FireParameters, MinimizeResult, minimize_enthalpy_model
 from ..minimize.onset import JammingSettings, jam_model_to_pressure
 from ..models.spheres.model import SphereModel
 from ..models.spheres.potential import HARMONIC, PowerLawPotential, overlapping_pairs
 from ..neighbors.verlet import NeighborList
+from ..network import isostatic_count
 from ..network.spheres import find_rattlers
 from ..state.packing import Packing, sphere_volume
 
-__all__ = ["JammingResult", "soft_packing", "jam_to_pressure"]
+__all__ = ["JammingResult", "leave_saddle", "soft_packing", "jam_to_pressure"]
 
+#: Random displacement [mean diameter] that moves a hypostatic force-balanced state off
+#: its saddle before the enthalpy is minimised again: ten times the overlaps at
+#: ``P0 <= 1e-7`` (``~P0`` for harmonic contacts), a thousandth of a typical gap; the
+#: floppy mode then grows as FIRE descends (docs/notes/chains.md, "Dilute starts").
+SADDLE_KICK: float = 1e-6
 
+#: Kicks before a state that stays hypostatic is refused.
+SADDLE_KICKS: int = 3
 
 
 @dataclass(frozen=True)
@@ -72,6 +80,61 @@ def soft_packing(
     )
 
 
+def _backbone_shortfall(x: np.ndarray, box: Box, diameter: np.ndarray, potential: PowerLawPotential,
+                        box_dof: str) -> int:
+    """Backbone contacts missing to the isostatic count (``<= 0``: isostatic or hyperstatic, or no backbone)."""
+    pairs, _, _ = overlapping_pairs(box.wrap(x), box, diameter, potential)
+    contacts = np.stack([pairs.i, pairs.j], axis=1)
+    rattler = find_rattlers(len(x), box.d, contacts)
+    n_s = int((~rattler).sum())
+    if n_s == 0:
+        return 0
+    backbone = int(np.sum(~rattler[contacts[:, 0]] & ~rattler[contacts[:, 1]]))
+    # a free box shape adds d (d + 1) / 2 - 1 strain degrees of freedom (Dagois-Bohy et al.)
+    extra = box.d * (box.d + 1) // 2 - 1 if box_dof == "full" else 0
+    return isostatic_count(n_s, box.d, global_dofs=box.d) + extra - backbone
+
+
+def leave_saddle(
+    final: MinimizeResult, diameter: np.ndarray, potential: PowerLawPotential, pressure: float,
+    settings: JammingSettings, seed: int,
+) -> tuple[MinimizeResult, int, int]:
+    """The final enthalpy minimum, moved off a saddle if it is one.
+
+    A packing at ``P > 0`` with fewer backbone contacts than the isostatic count has a
+    floppy mode loaded by its contact forces: negative curvature ``~ -f / r`` (e.g. a
+    straight column of discs across the box), a saddle at which FIRE stops because the
+    force along that mode vanishes by symmetry. Such a state is kicked by
+    :data:`SADDLE_KICK` (Gaussian, seeded) and the enthalpy minimised again, up to
+    :data:`SADDLE_KICKS` times.
+
+    Returns
+    -------
+    final, steps, kicks
+        The minimum, the FIRE steps of the re-minimisations and the number of kicks.
+
+    Raises
+    ------
+    RuntimeError
+        Still hypostatic after :data:`SADDLE_KICKS` kicks.
+    """
+    steps = 0
+    rng = np.random.default_rng(seed)
+    for kick in range(SADDLE_KICKS + 1):
+        missing = _backbone_shortfall(final.position, final.box, diameter, potential, settings.box_dof)
+        if missing <= 0:
+            return final, steps, kick
+        if kick == SADDLE_KICKS:
+            break
+        model = SphereModel(final.box, diameter, potential, NeighborList(diameter))
+        x = final.position + SADDLE_KICK * rng.standard_normal(final.position.shape)
+        final = minimize_enthalpy_model(model, x, pressure, settings.force_tol, settings.pressure_rtol,
+                                        settings.max_steps, settings.fire_params, settings.box_dof)
+        steps += final.steps
+    raise RuntimeError(f"the jammed packing stays hypostatic ({missing} backbone contacts short of isostatic) "
+                       f"after {SADDLE_KICKS} kicks off the saddle: no stable packing at P0 = {pressure:g}")
+
+
 def jam_to_pressure(
     packing: Packing,
     pressure: float = 1e-7,
@@ -85,6 +148,7 @@ def jam_to_pressure(
     fire_params: FireParameters = JammingSettings.fire_params,
     progress: Callable[[dict], None] | None = None,
     box_dof: str = JammingSettings.box_dof,
+    onset: str = JammingSettings.onset,
 ) -> JammingResult:
     """Bring a packing to the jamming onset at pressure ``P0`` (see module doc).
 
@@ -117,6 +181,10 @@ def jam_to_pressure(
         free; the box may tilt). See :func:`~jamflow.models.spheres.model.minimize_enthalpy`.
         With the full box free the backbone needs ``d (N_s - 1) + d (d + 1) / 2``
         contacts instead of ``d (N_s - 1) + 1`` (Dagois-Bohy et al., PRL 109, 095703).
+    onset : {"search", "bisection"}
+        How step 2 chooses its packing fractions (:mod:`jamflow.minimize.onset`): the
+        search that keeps the last minimum below ``P0`` (default), or O'Hern's
+        compress/decompress bisection with fixed first step ``delta_phi``.
 
     Returns
     -------
@@ -138,8 +206,11 @@ def jam_to_pressure(
     phi = particle_volume / box.volume
     model = SphereModel(box, D, potential, NeighborList(D))
     settings = JammingSettings(force_tol, pressure_rtol, delta_phi, bisection_rtol, bisection_force_factor,
-                               max_steps, fire_params, box_dof)
+                               max_steps, fire_params, box_dof, onset)
     model, final, history, steps = jam_model_to_pressure(model, x, phi, pressure, settings, progress)
+    final, more, kicks = leave_saddle(final, D, potential, pressure, settings,
+                                       packing.seed if packing.seed is not None and packing.seed >= 0 else 0)
+    steps += more
     box = final.box
     fmax2 = final.max_force**2
     attrs = {
@@ -153,11 +224,15 @@ def jam_to_pressure(
         "target_pressure": pressure,
         "fire_steps": steps,
         "converged": int(final.converged),
+        "onset_method": onset,
+        "onset_minimizations": len(history["phi"]),
+        "saddle_kicks": kicks,
     }
     params = {
         "pressure": pressure, "force_tol": force_tol, "pressure_rtol": pressure_rtol,
         "bisection_rtol": bisection_rtol, "bisection_force_factor": bisection_force_factor,
         "potential_exponent": potential.exponent, "fire": fire_params.as_dict(), "box_dof": box_dof,
+        "onset": onset, "delta_phi": delta_phi,
     }
     out = soft_packing(final.position, box, D, potential, packing, ">soft", params, attrs)
     return JammingResult(out, bool(final.converged), history, steps)

@@ -97,8 +97,10 @@ def jam_shapes(packing: Packing, pressure: float, settings: JammingSettings = Ja
     c = settings
     params = {"pressure": pressure, "force_tol": c.force_tol, "pressure_rtol": c.pressure_rtol,
               "bisection_rtol": c.bisection_rtol, "bisection_force_factor": c.bisection_force_factor,
-              "fire": c.fire_params.as_dict(), "family": model.family, "rotations": int(rotations)}
-    attrs = {"steps": steps, "bisection_steps": len(history["phi"]), "converged": int(final.converged),
+              "fire": c.fire_params.as_dict(), "family": model.family, "rotations": int(rotations),
+              "onset": c.onset, "delta_phi": c.delta_phi}
+    attrs = {"steps": steps, "bisection_steps": len(history["phi"]), "onset_method": c.onset,
+             "converged": int(final.converged),
              "max_generalized_force": final.max_force}
     out = shape_packing(model, final.position, packing, params, attrs)
     return JammingResult(out, bool(final.converged), history, steps)
