@@ -48,7 +48,7 @@ def _lowest_hessian_eigenvalue(position: np.ndarray, box, diameter: np.ndarray) 
 
 @pytest.mark.parametrize("d, phi0", [(2, 0.1), (2, 0.2), (3, 0.1)])
 def test_spheres_from_dilute_start_reach_p0_isostatic_in_few_minimisations(d, phi0):
-    res = jam_to_pressure(random_packing(64, d, phi0, "bi", seed=1), P0)
+    res = jam_to_pressure(random_packing(64, d, phi0, "bi", seed=1), P0, onset="search")
     p = res.packing
     assert len(res.history["phi"]) <= MAX_MINIMIZATIONS
     assert p.attrs["onset_method"] == "search" and p.attrs["onset_minimizations"] == len(res.history["phi"])
@@ -64,8 +64,8 @@ def test_search_lands_on_the_bisections_packing_when_the_path_is_the_same():
     the measured dP/dphi ~ 0.2 of this packing: phi_J agrees to that.
     """
     start = random_packing(8, 2, 0.5, "bi", seed=1)
-    search = jam_to_pressure(start, P0)
-    bisection = jam_to_pressure(start, P0, onset="bisection")
+    search = jam_to_pressure(start, P0, onset="search")
+    bisection = jam_to_pressure(start, P0)
     assert bisection.packing.attrs["onset_method"] == "bisection"
     def backbone(p):
         c = p.contacts
@@ -107,7 +107,7 @@ def test_hypostatic_state_at_p0_is_a_saddle_fire_stops_at_and_the_guard_leaves()
 @pytest.mark.parametrize("phi0", [0.1, 0.2])
 def test_rigid_trimers_from_dilute_start_in_few_minimisations_isostatic_by_rank(phi0):
     start = linked_packing(2, 50, "trimer", np.random.default_rng(1), phi=phi0)[0]
-    res = jam_linked(start, 1e-6, settings=JammingSettings(force_tol=1e-12, pressure_rtol=1e-3))
+    res = jam_linked(start, 1e-6, settings=JammingSettings(force_tol=1e-12, pressure_rtol=1e-3, onset="search"))
     a = res.packing.attrs
     assert res.converged and len(res.history["phi"]) <= MAX_MINIMIZATIONS
     assert a["onset_method"] == "search"
@@ -117,7 +117,7 @@ def test_rigid_trimers_from_dilute_start_in_few_minimisations_isostatic_by_rank(
 @pytest.mark.slow
 def test_shear_stabilised_trimers_from_dilute_start_in_few_minimisations():
     start = linked_packing(2, 50, "trimer", np.random.default_rng(1), phi=0.2)[0]
-    res = jam_linked(start, 1e-6, settings=JammingSettings(force_tol=1e-12, pressure_rtol=1e-3),
+    res = jam_linked(start, 1e-6, settings=JammingSettings(force_tol=1e-12, pressure_rtol=1e-3, onset="search"),
                      shear_stabilize=True)
     a = res.packing.attrs
     assert res.converged and len(res.history["phi"]) <= MAX_MINIMIZATIONS
@@ -128,7 +128,7 @@ def test_shear_stabilised_trimers_from_dilute_start_in_few_minimisations():
 def test_shapes_from_dilute_start_in_few_minimisations(family):
     table = bidisperse_shapes(unit_shape(family, asphericity=1.1))
     res = jam_shapes(random_shape_packing(table, 16, 0.2, 1), 1e-6, JammingSettings(force_tol=1e-12,
-                                                                                     pressure_rtol=1e-3))
+                                                                                     pressure_rtol=1e-3, onset="search"))
     assert res.converged and len(res.history["phi"]) <= MAX_MINIMIZATIONS
     assert abs(res.packing.pressure - 1e-6) <= 1e-3 * 1e-6
     assert res.packing.attrs["onset_method"] == "search"

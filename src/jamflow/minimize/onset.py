@@ -8,7 +8,7 @@ Protocol (O'Hern et al., PRE 68, 011306 (2003); VanderWerf et al., Sec. II):
    ``max_i |F_i| <= bisection_force_factor * P0``. Two ways to choose the steps
    (``JammingSettings.onset``):
 
-   - ``"search"`` (default, :func:`search_to_pressure`): every trial compresses the
+   - ``"search"`` (:func:`search_to_pressure`): every trial compresses the
      last minimum found below ``P0`` (kept); a scout doubles the step from ``delta_phi``
      while the pressure stays below ``P0``, at most ``max_strain_step`` of box length per
      step, until it first passes ``P0``; the search then returns to the scout's minimum
@@ -22,7 +22,7 @@ Protocol (O'Hern et al., PRE 68, 011306 (2003); VanderWerf et al., Sec. II):
      compressed above ``P0`` and decompressed: a pure compression, like the
      bisection's first crossing of ``P0`` with small steps. A start above ``P0``
      decompresses the same way until one minimum lies below it;
-   - ``"bisection"`` (:func:`bisect_to_pressure`, O'Hern's): steps of ``delta_phi``
+   - ``"bisection"`` (default, :func:`bisect_to_pressure`, O'Hern's): steps of ``delta_phi``
      from the current minimum, compressing below ``P0`` and decompressing above it,
      ``delta_phi`` halved whenever the direction reverses. From a dilute start it
      steps ``delta_phi`` at a time across the whole density range (docs/notes/chains.md,
@@ -70,7 +70,7 @@ FORCE_TOL_VANDERWERF: float = SOFT_FORCE_TOL
 
 #: The two ways of step 2 (module doc): the search that keeps the last minimum below
 #: ``P0``, and O'Hern's compress/decompress bisection with a fixed first step.
-ONSET_METHODS: tuple[str, ...] = ("search", "bisection")
+ONSET_METHODS: tuple[str, ...] = ("bisection", "search")
 
 #: Largest relative change of the box length in one step of the search: an affine
 #: compression of a packing without overlaps creates overlaps of at most this fraction
@@ -114,7 +114,7 @@ class JammingSettings:
     max_steps: int = 20_000_000
     fire_params: FireParameters = DEFAULT_FIRE
     box_dof: str = "isotropic"
-    onset: str = "search"
+    onset: str = "bisection"
     max_strain_step: float = MAX_STRAIN_STEP
 
     def __post_init__(self) -> None:

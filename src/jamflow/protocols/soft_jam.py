@@ -181,10 +181,11 @@ def jam_to_pressure(
         free; the box may tilt). See :func:`~jamflow.models.spheres.model.minimize_enthalpy`.
         With the full box free the backbone needs ``d (N_s - 1) + d (d + 1) / 2``
         contacts instead of ``d (N_s - 1) + 1`` (Dagois-Bohy et al., PRL 109, 095703).
-    onset : {"search", "bisection"}
-        How step 2 chooses its packing fractions (:mod:`jamflow.minimize.onset`): the
-        search that keeps the last minimum below ``P0`` (default), or O'Hern's
-        compress/decompress bisection with fixed first step ``delta_phi``.
+    onset : {"bisection", "search"}
+        How step 2 chooses its packing fractions (:mod:`jamflow.minimize.onset`):
+        O'Hern's compress/decompress bisection with fixed first step ``delta_phi``
+        (default), or the search that keeps the last minimum below ``P0`` (far fewer
+        minimisations from a dilute start, and a 0.4-2 % denser ``phi_J`` from one).
 
     Returns
     -------
