@@ -229,3 +229,135 @@ class LammpsForces:
 
     def close(self) -> None:
         self.lmp.close()
+
+
+def compare_contacts(jam: JamflowForces, lmp: LammpsForces) -> dict:
+    """Both codes' view of the contacts at the configuration."""
+    ej, el = jam.body_energy(), lmp.body_energy()
+    q = jam.model.dofs(jam.y)
+    return {"listed_pairs": len(jam.model.nlist.i), "lammps_neighbors": lmp.neighbors(),
+            "contact_pairs": len(jam.model.pair_table(q)["i"]), "vertex_edge_terms": len(jam.model.contact_terms(q)["i"]),
+            "bodies_in_contact_jamflow": int((ej > 0).sum()), "bodies_in_contact_lammps": int((el > 0).sum()),
+            "bodies_in_contact_differ": int(((ej > 0) != (el > 0)).sum()),
+            "energy_jamflow": float(ej.sum()), "energy_lammps": float(el.sum())}
+
+
+def measure(sides: int, n: int, args, tmp: Path) -> dict:
+    """One case: the start, the contact comparison and the interleaved timings."""
+    model, conf, info = start(sides, n, args.asphericity, args.pressure, args.jam_steps, args.seed)
+    jam = JamflowForces(model, conf)
+    jam.run(2)  # compilation, not timed
+    lmp = LammpsForces(model, conf, tmp)
+    info |= compare_contacts(jam, lmp)
+    reps = max(100, int(args.work / n))
+    times = {"jamflow": [], "lammps": [], "lammps_pair": []}
+    for r in range(args.repeat):
+        wall, energy, _ = jam.run(reps)
+        times["jamflow"].append(wall)
+        wall_l, pair_l, energy_l = lmp.run(reps)
+        times["lammps"].append(wall_l)
+        times["lammps_pair"].append(pair_l)
+        print(f"  n = {sides} N = {n} run {r}: {reps} evaluations; jamflow {wall:.3f} s = "
+              f"{1e6 * wall / reps:.2f} us each; LAMMPS {wall_l:.3f} s = {1e6 * wall_l / reps:.2f} us each "
+              f"(Pair {1e6 * pair_l / reps:.2f} us); U jamflow {energy:.6e} LAMMPS {energy_l:.6e}", flush=True)
+    lmp.close()
+    info["evaluations"] = reps
+    info |= {key: np.array(v) for key, v in times.items()}
+    return info
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, nargs="+", default=[100, 480], help="bodies per packing (even)")
+    ap.add_argument("--sides", type=int, nargs="+", default=[2, 3, 5, 8], help="vertices per body (2: circulo-line)")
+    ap.add_argument("--asphericity", type=float, default=1.04)
+    ap.add_argument("--pressure", type=float, default=1e-3, help="P0 of the start [k / <D>] (default 1e-3)")
+    ap.add_argument("--jam-steps", type=int, default=20_000, help="FIRE steps at most towards P0 (default 20000)")
+    ap.add_argument("--repeat", type=int, default=3, help="runs per code and case, interleaved (default 3)")
+    ap.add_argument("--work", type=float, default=2e5,
+                    help="evaluations x N per run (default 2e5: 2000 evaluations at N = 100)")
+    ap.add_argument("--quick", action="store_true", help="N = 100, n = 5, 2 repeats, 2000 FIRE steps")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--out", type=Path, default=OUT, help=f"output folder (default {OUT})")
+    args = ap.parse_args()
+    if args.quick:
+        args.n, args.sides, args.repeat, args.jam_steps = [100], [5], 2, 2000
+    import jamflow
+
+    print("jamflow from", jamflow.__file__)
+    cases = [(s, n) for s in args.sides for n in args.n]
+    results = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for sides, n in cases:
+            out = measure(sides, n, args, Path(tmp))
+            print(f"n = {sides} N = {n}: phi {out['phi']:.4f} P {out['pressure']:.3e} (FIRE converged "
+                  f"{out['jam_converged']}, max force {out['jam_max_force']:.1e}); pairs listed jamflow "
+                  f"{out['listed_pairs']}, LAMMPS {out['lammps_neighbors']}; {out['contact_pairs']} contact pairs, "
+                  f"{out['vertex_edge_terms']} vertex-edge terms; bodies in contact jamflow "
+                  f"{out['bodies_in_contact_jamflow']}, LAMMPS {out['bodies_in_contact_lammps']}, differing "
+                  f"{out['bodies_in_contact_differ']}; U jamflow / U LAMMPS "
+                  f"{out['energy_jamflow'] / out['energy_lammps']:.6f}", flush=True)
+            results.append(out)
+    write(results, cases, args)
+
+
+def write(results: list[dict], cases: list[tuple[int, int]], args) -> None:
+    """Print the table of medians, write the netCDF and the plot."""
+    per_eval = np.array([[r[key] / r["evaluations"] for key in ("jamflow", "lammps", "lammps_pair")]
+                         for r in results])  # (case, code, run) [s]
+    median = np.median(per_eval, axis=2)
+    print("\nmedian us per force evaluation (interleaved runs, one thread, shared machine):")
+    print("  n  N      jamflow   LAMMPS  LAMMPS Pair  jamflow/LAMMPS  jamflow/LAMMPS Pair")
+    for c, (sides, n) in enumerate(cases):
+        print(f"  {sides}  {n:<5d} {1e6 * median[c, 0]:8.2f} {1e6 * median[c, 1]:8.2f} {1e6 * median[c, 2]:12.2f} "
+              f"{median[c, 0] / median[c, 1]:15.2f} {median[c, 0] / median[c, 2]:20.2f}")
+    dims = ("case", "code", "run")
+    scalars = ("phi", "pressure", "jam_converged", "jam_max_force", "listed_pairs", "lammps_neighbors",
+               "contact_pairs", "vertex_edge_terms", "bodies_in_contact_jamflow", "bodies_in_contact_lammps",
+               "bodies_in_contact_differ", "energy_jamflow", "energy_lammps", "evaluations")
+    codes = ["jamflow", "lammps", "lammps_pair"]
+    ds = xr.Dataset(
+        {
+            "time_per_evaluation": (dims, per_eval, {"units": "s", "long_name": "wall time per force evaluation; "
+                                                     "lammps_pair: the Pair share of LAMMPS's run"}),
+            "median_time_per_evaluation": (("case", "code"), median, {"units": "s",
+                                           "long_name": "median wall time per force evaluation"}),
+            **{key: ("case", np.array([float(r[key]) for r in results]), {"units": "1"}) for key in scalars},
+        },
+        coords={"case": [f"n={s} N={n}" for s, n in cases], "code": codes, "run": np.arange(args.repeat),
+                "sides": ("case", [s for s, _ in cases]), "n": ("case", [n for _, n in cases])},
+        attrs=new_dataset_attrs("shapes_vs_lammps", {"asphericity": args.asphericity, "pressure": args.pressure,
+                                "jam_steps": args.jam_steps, "seed": args.seed, "work": args.work},
+                                note="runs interleaved jamflow, LAMMPS, ...; medians over runs; one thread on a "
+                                     "shared machine; energies: jamflow weights a polygon's vertex-edge term by 2"),
+    )
+    for key in ("pressure", "jam_max_force", "energy_jamflow", "energy_lammps"):
+        ds[key].attrs["units"] = "k <D>^2" if key.startswith("energy") else ("k / <D>" if key == "pressure" else "k <D>")
+    write_dataset(ds, args.out / "shapes_vs_lammps.nc")
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(10, 4))
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for k, sides in enumerate(sorted({s for s, _ in cases})):
+        rows = [c for c, (s, _) in enumerate(cases) if s == sides]
+        n = [cases[c][1] for c in rows]
+        name = "circulo-line" if sides == 2 else f"{sides}-gon"
+        ax.plot(n, 1e6 * median[rows, 0], "o-", color=colors[k], label=f"{name} jamflow")
+        ax.plot(n, 1e6 * median[rows, 1], "s--", color=colors[k], label=f"{name} LAMMPS")
+        bx.plot(n, median[rows, 0] / median[rows, 1], "o-", color=colors[k], label=f"{name} whole step")
+        bx.plot(n, median[rows, 0] / median[rows, 2], "^:", color=colors[k], label=f"{name} LAMMPS Pair only")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("bodies N [1]")
+    ax.set_ylabel("wall time per force evaluation [us]")
+    ax.legend(fontsize=7)
+    bx.axhline(1.0, color="k", lw=0.8, ls="--")
+    bx.set_xscale("log")
+    bx.set_xlabel("bodies N [1]")
+    bx.set_ylabel("jamflow / LAMMPS time per evaluation [1]")
+    bx.set_ylim(0.0, max(1.2, 1.15 * float(np.nanmax(median[:, 0] / median[:, 2]))))
+    bx.legend(fontsize=7)
+    plots.save_figure(fig, args.out / "shapes_vs_lammps.png")
+    print("wrote", args.out / "shapes_vs_lammps.nc", "and .png")
+
+
+if __name__ == "__main__":
+    main()
