@@ -190,7 +190,9 @@ class LammpsForces:
         _data_file(data, model, conf)
         self.log = tmp / "log.lammps"
         nmax = int(model.shapes.n_vertices.max())
-        nmin = int(model.shapes.n_vertices.min())
+        # the body pool's smallest chunk is sized for nmin vertices with nmin edges, but a
+        # 2-vertex body stores one edge: nmin = 2 hands it no memory (LAMMPS crashes), so 1
+        nmin = 1
         lmp = _lammps()
         lmp.command(f"log {self.log}")
         lmp.commands_list([

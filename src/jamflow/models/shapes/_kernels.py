@@ -27,7 +27,7 @@ COMPLEX_STEP: float = 1e-30
 
 
 @njit(cache=True)
-def circulo_vertex_edge(dx0, dx1, ca, sa, cb, sb, pa, pb, k, g, oa, ob, record, out):
+def circulo_vertex_edge(dx0, dx1, ca, sa, cb, sb, pa, pb, k, g, oa, ob, out):
     """Vertices of body ``a`` (centre at 0) against the edges of body ``b`` (centre ``dx``).
 
     ``ca, sa`` and ``cb, sb`` are the cosines and sines of the two orientations
@@ -41,7 +41,7 @@ def circulo_vertex_edge(dx0, dx1, ca, sa, cb, sb, pa, pb, k, g, oa, ob, record, 
     Each overlapping term has energy ``(k/2) w (R_a + R_b - r)^2`` with ``w`` the
     number of edges of ``a`` that share the vertex (1 on a circulo-line, 2 on a
     polygon, App. A 2). Gradient slots: ``oa`` for ``a`` and ``ob`` for ``b`` in ``g``.
-    When ``record`` is true, one row per overlapping term is written to ``out``
+    When ``out`` is an array (not None), one row per overlapping term is written to it
     (rows: vertex, edge, r, delta, w, contact point x, y relative to ``a``'s centre,
     unit normal x, y from ``b`` to ``a``, foot parameter t) and the row count returned
     second.
@@ -97,7 +97,7 @@ def circulo_vertex_edge(dx0, dx1, ca, sa, cb, sb, pa, pb, k, g, oa, ob, record, 
             # the derivative at fixed t: that of two body-fixed points P and C
             u, r, delta, nx, ny = _point_term(px, py, cx, cy, dx0, dx1, sigma, k * w, g, oa, ob)
             energy += u
-            if record:
+            if out is not None:
                 out[rows, 0] = m
                 out[rows, 1] = e
                 out[rows, 2] = r.real
@@ -115,13 +115,14 @@ def circulo_vertex_edge(dx0, dx1, ca, sa, cb, sb, pa, pb, k, g, oa, ob, record, 
 @njit(cache=True)
 def circulo_pair(dx0, dx1, ti, tj, pi, pj, k, g):
     """Circulo-line / circulo-polygon pair (App. A): vertices of each against edges of the other."""
-    dummy = np.empty((0, 10))
-    ci = np.cos(ti)
-    si = np.sin(ti)
-    cj = np.cos(tj)
-    sj = np.sin(tj)
-    e1, _ = circulo_vertex_edge(dx0, dx1, ci, si, cj, sj, pi, pj, k, g, 0, 3, False, dummy)
-    e2, _ = circulo_vertex_edge(-dx0, -dx1, cj, sj, ci, si, pj, pi, k, g, 3, 0, False, dummy)
+    return circulo_pair_rotated(dx0, dx1, np.cos(ti), np.sin(ti), np.cos(tj), np.sin(tj), pi, pj, k, g)
+
+
+@njit(cache=True)
+def circulo_pair_rotated(dx0, dx1, ci, si, cj, sj, pi, pj, k, g):
+    """:func:`circulo_pair` from the cosines and sines of the orientations (a loop computes them once per body)."""
+    e1, _ = circulo_vertex_edge(dx0, dx1, ci, si, cj, sj, pi, pj, k, g, 0, 3, None)
+    e2, _ = circulo_vertex_edge(-dx0, -dx1, cj, sj, ci, si, pj, pi, k, g, 3, 0, None)
     return e1 + e2
 
 
@@ -388,10 +389,10 @@ def circulo_terms(i, j, dx, theta, params, k):
         for side in range(2):
             if side == 0:
                 _, n = circulo_vertex_edge(dx[p, 0], dx[p, 1], ci, si, cj, sj, params[a], params[b],
-                                           k, g, 0, 3, True, buf)
+                                           k, g, 0, 3, buf)
             else:
                 _, n = circulo_vertex_edge(-dx[p, 0], -dx[p, 1], cj, sj, ci, si, params[b], params[a],
-                                           k, g, 3, 0, True, buf)
+                                           k, g, 3, 0, buf)
             for r in range(n):
                 row = np.empty(12)
                 row[0] = p
