@@ -344,8 +344,8 @@ def write(results: list[dict], cases: list[tuple[int, int]], args) -> None:
         name = "circulo-line" if sides == 2 else f"{sides}-gon"
         ax.plot(n, 1e6 * median[rows, 0], "o-", color=colors[k], label=f"{name} jamflow")
         ax.plot(n, 1e6 * median[rows, 1], "s--", color=colors[k], label=f"{name} LAMMPS")
-        bx.plot(n, median[rows, 0] / median[rows, 1], "o-", color=colors[k], label=f"{name} whole step")
-        bx.plot(n, median[rows, 0] / median[rows, 2], "^:", color=colors[k], label=f"{name} LAMMPS Pair only")
+        bx.plot(n, median[rows, 0] / median[rows, 1], "o-", color=colors[k], label=f"{name} against LAMMPS's whole step")
+        bx.plot(n, median[rows, 0] / median[rows, 2], "^:", color=colors[k], label=f"{name} against LAMMPS's Pair time")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("bodies N [1]")

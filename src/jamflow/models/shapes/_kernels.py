@@ -26,7 +26,7 @@ from ..._numba import njit
 COMPLEX_STEP: float = 1e-30
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def circulo_vertex_edge(dx0, dx1, ca, sa, cb, sb, pa, pb, k, g, oa, ob, out):
     """Vertices of body ``a`` (centre at 0) against the edges of body ``b`` (centre ``dx``).
 
