@@ -25,7 +25,7 @@ from ...minimize._fire_kernels import (
     _mixed,
 )
 from ...neighbors._verlet_kernels import _inline_list, _list_buffers, _needs_rebuild
-from ._kernels import circulo_pair, dumbbell_pair, ellipse_terms, reuleaux_pair
+from ._kernels import circulo_pair_rotated, dumbbell_pair, ellipse_terms, reuleaux_pair
 
 #: Family codes of the loop (the order of :data:`jamflow.models.shapes.model.SHAPE_FAMILIES`).
 CIRCULO, ELLIPSE, REULEAUX, DUMBBELL = 0, 1, 2, 3
@@ -33,12 +33,13 @@ CIRCULO, ELLIPSE, REULEAUX, DUMBBELL = 0, 1, 2, 3
 
 @njit(cache=True, inline="always")
 def _pair(family, dx0, dx1, ti, tj, pa, pb, k, g, lam, p):
-    """Energy of one pair of the family, gradient added to ``g``; an ellipse pair updates ``lam[p]``."""
+    """Energy of one pair of a family other than circulo, gradient added to ``g``; an ellipse pair updates ``lam[p]``.
+
+    Circulo pairs take their bodies' cosines and sines instead (:func:`shape_forces`).
+    """
     if family == ELLIPSE:
         e, lam[p] = ellipse_terms(dx0, dx1, ti, tj, pa, pb, k, g, lam[p])
         return e
-    if family == CIRCULO:
-        return circulo_pair(dx0, dx1, ti, tj, pa, pb, k, g)
     if family == REULEAUX:
         return reuleaux_pair(dx0, dx1, ti, tj, pa, pb, k, g)
     return dumbbell_pair(dx0, dx1, ti, tj, pa, pb, k, g)
@@ -48,7 +49,8 @@ def _pair(family, dx0, dx1, ti, tj, pa, pb, k, g, lam, p):
 def shape_forces(y, s, offset, pi, pj, family, params, bound, lam, k, force, virial):
     """Energy, generalised forces ``-dU/d(x, y, theta)`` (N, 3) and virial of the listed pairs.
 
-    Pairs whose bounding circles (radii ``bound``) do not overlap are skipped. The
+    Pairs whose bounding circles (radii ``bound``) do not overlap are skipped;
+    circulo bodies have their orientations' cosines and sines computed once per body. The
     virial is ``-sum dU/dx_j[a] dx[b]`` (:func:`._kernels.pair_sum`). Returns the energy
     and the number of interacting pairs.
     """
@@ -60,6 +62,11 @@ def shape_forces(y, s, offset, pi, pj, family, params, bound, lam, k, force, vir
     energy = 0.0
     n_contact = 0
     g = np.zeros(6)
+    circulo = family == CIRCULO
+    trig = np.empty((force.shape[0] if circulo else 0, 2))
+    for i in range(trig.shape[0]):
+        trig[i, 0] = np.cos(y[i, 2])
+        trig[i, 1] = np.sin(y[i, 2])
     for p in range(pi.shape[0]):
         a = pi[p]
         b = pj[p]
@@ -69,7 +76,11 @@ def shape_forces(y, s, offset, pi, pj, family, params, bound, lam, k, force, vir
         if dx0 * dx0 + dx1 * dx1 >= reach * reach:
             continue
         g[:] = 0.0
-        e = _pair(family, dx0, dx1, y[a, 2], y[b, 2], params[a], params[b], k, g, lam, p)
+        if circulo:
+            e = circulo_pair_rotated(dx0, dx1, trig[a, 0], trig[a, 1], trig[b, 0], trig[b, 1], params[a], params[b],
+                                     k, g)
+        else:
+            e = _pair(family, dx0, dx1, y[a, 2], y[b, 2], params[a], params[b], k, g, lam, p)
         if e > 0.0:
             energy += e
             n_contact += 1

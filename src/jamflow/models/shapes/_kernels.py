@@ -26,9 +26,12 @@ from ..._numba import njit
 COMPLEX_STEP: float = 1e-30
 
 
-@njit(cache=True)
-def circulo_vertex_edge(dx0, dx1, ta, tb, pa, pb, k, g, oa, ob, record, out):
+@njit(cache=True, inline="always")
+def circulo_vertex_edge(dx0, dx1, ca, sa, cb, sb, pa, pb, k, g, oa, ob, out):
     """Vertices of body ``a`` (centre at 0) against the edges of body ``b`` (centre ``dx``).
+
+    ``ca, sa`` and ``cb, sb`` are the cosines and sines of the two orientations
+    (computed once per pair by the callers, for both sides).
 
     Parameters ``p = [R, n, v0x, v0y, v1x, v1y, ...]``: rounding radius, vertex
     count, body-frame vertices. Body ``a``'s vertex ``P`` meets edge ``[S0, S1]`` of
@@ -38,7 +41,7 @@ def circulo_vertex_edge(dx0, dx1, ta, tb, pa, pb, k, g, oa, ob, record, out):
     Each overlapping term has energy ``(k/2) w (R_a + R_b - r)^2`` with ``w`` the
     number of edges of ``a`` that share the vertex (1 on a circulo-line, 2 on a
     polygon, App. A 2). Gradient slots: ``oa`` for ``a`` and ``ob`` for ``b`` in ``g``.
-    When ``record`` is true, one row per overlapping term is written to ``out``
+    When ``out`` is an array (not None), one row per overlapping term is written to it
     (rows: vertex, edge, r, delta, w, contact point x, y relative to ``a``'s centre,
     unit normal x, y from ``b`` to ``a``, foot parameter t) and the row count returned
     second.
@@ -50,10 +53,13 @@ def circulo_vertex_edge(dx0, dx1, ta, tb, pa, pb, k, g, oa, ob, record, out):
     sigma = ra + rb
     w = 1.0 if na == 2 else 2.0
     n_edges = 1 if nb == 2 else nb
-    ca = np.cos(ta)
-    sa = np.sin(ta)
-    cb = np.cos(tb)
-    sb = np.sin(tb)
+    # every edge point of b lies within rho_b (its farthest vertex) of b's centre, so a
+    # vertex of a at least rho_b + sigma from that centre is at least sigma from every
+    # edge: its terms are all zero and it is skipped before the edge loop
+    rho2 = 0.0
+    for e in range(nb):
+        rho2 = max(rho2, pb[2 + 2 * e].real * pb[2 + 2 * e].real + pb[3 + 2 * e].real * pb[3 + 2 * e].real)
+    reach = np.sqrt(rho2) + sigma.real
     energy = 0.0 * dx0
     rows = 0
     for m in range(na):
@@ -61,10 +67,17 @@ def circulo_vertex_edge(dx0, dx1, ta, tb, pa, pb, k, g, oa, ob, record, out):
         vy = pa[3 + 2 * m]
         px = ca * vx - sa * vy
         py = sa * vx + ca * vy
+        wx = (px - dx0).real
+        wy = (py - dx1).real
+        if wx * wx + wy * wy >= reach * reach:
+            continue
+        # the end of edge e is the start of edge e + 1: one vertex of b rotated per edge
+        s1x = dx0 + cb * pb[2] - sb * pb[3]
+        s1y = dx1 + sb * pb[2] + cb * pb[3]
         for e in range(n_edges):
             f = (e + 1) % nb
-            s0x = dx0 + cb * pb[2 + 2 * e] - sb * pb[3 + 2 * e]
-            s0y = dx1 + sb * pb[2 + 2 * e] + cb * pb[3 + 2 * e]
+            s0x = s1x
+            s0y = s1y
             s1x = dx0 + cb * pb[2 + 2 * f] - sb * pb[3 + 2 * f]
             s1y = dx1 + sb * pb[2 + 2 * f] + cb * pb[3 + 2 * f]
             ex = s1x - s0x
@@ -84,7 +97,7 @@ def circulo_vertex_edge(dx0, dx1, ta, tb, pa, pb, k, g, oa, ob, record, out):
             # the derivative at fixed t: that of two body-fixed points P and C
             u, r, delta, nx, ny = _point_term(px, py, cx, cy, dx0, dx1, sigma, k * w, g, oa, ob)
             energy += u
-            if record:
+            if out is not None:
                 out[rows, 0] = m
                 out[rows, 1] = e
                 out[rows, 2] = r.real
@@ -102,9 +115,14 @@ def circulo_vertex_edge(dx0, dx1, ta, tb, pa, pb, k, g, oa, ob, record, out):
 @njit(cache=True)
 def circulo_pair(dx0, dx1, ti, tj, pi, pj, k, g):
     """Circulo-line / circulo-polygon pair (App. A): vertices of each against edges of the other."""
-    dummy = np.empty((0, 10))
-    e1, _ = circulo_vertex_edge(dx0, dx1, ti, tj, pi, pj, k, g, 0, 3, False, dummy)
-    e2, _ = circulo_vertex_edge(-dx0, -dx1, tj, ti, pj, pi, k, g, 3, 0, False, dummy)
+    return circulo_pair_rotated(dx0, dx1, np.cos(ti), np.sin(ti), np.cos(tj), np.sin(tj), pi, pj, k, g)
+
+
+@njit(cache=True)
+def circulo_pair_rotated(dx0, dx1, ci, si, cj, sj, pi, pj, k, g):
+    """:func:`circulo_pair` from the cosines and sines of the orientations (a loop computes them once per body)."""
+    e1, _ = circulo_vertex_edge(dx0, dx1, ci, si, cj, sj, pi, pj, k, g, 0, 3, None)
+    e2, _ = circulo_vertex_edge(-dx0, -dx1, cj, sj, ci, si, pj, pi, k, g, 3, 0, None)
     return e1 + e2
 
 
@@ -364,13 +382,17 @@ def circulo_terms(i, j, dx, theta, params, k):
     for p in range(i.size):
         a = i[p]
         b = j[p]
+        ci = np.cos(theta[a])
+        si = np.sin(theta[a])
+        cj = np.cos(theta[b])
+        sj = np.sin(theta[b])
         for side in range(2):
             if side == 0:
-                _, n = circulo_vertex_edge(dx[p, 0], dx[p, 1], theta[a], theta[b], params[a], params[b],
-                                           k, g, 0, 3, True, buf)
+                _, n = circulo_vertex_edge(dx[p, 0], dx[p, 1], ci, si, cj, sj, params[a], params[b],
+                                           k, g, 0, 3, buf)
             else:
-                _, n = circulo_vertex_edge(-dx[p, 0], -dx[p, 1], theta[b], theta[a], params[b], params[a],
-                                           k, g, 3, 0, True, buf)
+                _, n = circulo_vertex_edge(-dx[p, 0], -dx[p, 1], cj, sj, ci, si, params[b], params[a],
+                                           k, g, 3, 0, buf)
             for r in range(n):
                 row = np.empty(12)
                 row[0] = p
