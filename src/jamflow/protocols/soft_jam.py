@@ -14,7 +14,7 @@ from ..minimize.onset import JammingSettings, jam_model_to_pressure
 from ..models.spheres.model import SphereModel
 from ..models.spheres.potential import HARMONIC, PowerLawPotential, overlapping_pairs
 from ..neighbors.verlet import NeighborList
-from ..network import isostatic_count
+from ..network import count_bodies
 from ..network.spheres import find_rattlers
 from ..state.packing import Packing, sphere_volume
 
@@ -82,17 +82,14 @@ def soft_packing(
 
 def _backbone_shortfall(x: np.ndarray, box: Box, diameter: np.ndarray, potential: PowerLawPotential,
                         box_dof: str) -> int:
-    """Backbone contacts missing to the isostatic count (``<= 0``: isostatic or hyperstatic, or no backbone)."""
+    """Backbone contacts missing to the isostatic count (``<= 0``: isostatic or hyperstatic, or no backbone).
+
+    A free box shape adds the ``d (d + 1) / 2 - 1`` strain degrees of freedom at fixed
+    pressure (Dagois-Bohy et al.), the count of a shear-stabilised backbone.
+    """
     pairs, _, _ = overlapping_pairs(box.wrap(x), box, diameter, potential)
-    contacts = np.stack([pairs.i, pairs.j], axis=1)
-    rattler = find_rattlers(len(x), box.d, contacts)
-    n_s = int((~rattler).sum())
-    if n_s == 0:
-        return 0
-    backbone = int(np.sum(~rattler[contacts[:, 0]] & ~rattler[contacts[:, 1]]))
-    # a free box shape adds d (d + 1) / 2 - 1 strain degrees of freedom (Dagois-Bohy et al.)
-    extra = box.d * (box.d + 1) // 2 - 1 if box_dof == "full" else 0
-    return isostatic_count(n_s, box.d, global_dofs=box.d) + extra - backbone
+    count = count_bodies(np.stack([pairs.i, pairs.j], axis=1), len(x), box.d, shear_stabilized=box_dof == "full")
+    return count.isostatic_count - count.n_contacts if count.isostatic_count else 0
 
 
 def leave_saddle(
