@@ -109,9 +109,7 @@ def test_degenerate_links_are_removed_with_a_message():
 @pytest.fixture(scope="module")
 def jammed() -> Packing:
     start = random_packing(48, 2, 0.5, "bi", seed=11)
-    # the bisection's packing: in the onset search's one three discs touch in a triangle, so an
-    # angle-freezing link is also a contact and the count below does not apply
-    return jam_to_pressure(start, 1e-3, force_tol=1e-11, pressure_rtol=1e-3, onset="bisection").packing
+    return jam_to_pressure(start, 1e-3, force_tol=1e-11, pressure_rtol=1e-3).packing
 
 
 def test_cementing_turns_contacts_into_links_and_freezes_their_angles(jammed):

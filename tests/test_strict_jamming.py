@@ -179,9 +179,7 @@ def soft_jammed(request):
     """Soft harmonic packing jammed at P0 = 1e-4: overlapping pairs are its contacts."""
     d, n, dispersity = request.param
     p0 = random_packing(n, d, 0.3 if d == 2 else 0.2, dispersity, 1, 1.4, 0.5, 0.1)
-    # the bisection's packings: on the onset search's 3D one the warm primal solution of
-    # test_warm_primal_cone_solves_match_cold_solves reaches A y = -1.01e-9 against its -1e-9
-    res = jam_to_pressure(p0, pressure=1e-4, onset="bisection")
+    res = jam_to_pressure(p0, pressure=1e-4)
     assert res.converged
     return res.packing
 
