@@ -10,6 +10,7 @@ import pytest
 from jamflow.box import Box
 from jamflow.chains.builders import (
     BOND_ANGLE_RANGE,
+    _cross,
     cement,
     check_linked_start,
     cluster_extent,
@@ -86,6 +87,24 @@ def test_2d_placement_has_no_crossing_links_and_crossings_are_found():
     links = Links(np.array([0, 2, 1]), np.array([1, 3, 4]), np.array([1.0, 1.0, 2.83]))
     cross = crossing_links(links, x, box)
     assert [tuple(links.i[c]) for c in cross] == [(0, 2)]
+
+
+@pytest.mark.parametrize("tilt", [0.0, 0.37])
+def test_crossing_links_by_midpoint_pairs_agree_with_every_pair(tilt):
+    # chains with their spheres scattered by about a diameter cross many times; the midpoint pair
+    # query must find exactly the crossings of the test over every pair of links, also in a sheared box
+    p, _ = linked_packing(2, 40, "chain", np.random.default_rng(3), chain_length=5, free_angles=True, phi=0.5,
+                          no_overlap=False)
+    x = p.position + np.random.default_rng(4).normal(0.0, 0.7, p.position.shape)
+    h = np.array(p.box.matrix)
+    h[0, 1] = tilt * h[1, 1]
+    box = Box(h)
+    every = np.arange(len(p.links))
+    hit = _cross(p.links, every, every, x, box) & (every[None, :] > every[:, None])
+    expected = np.stack(np.nonzero(hit), axis=1)
+    found = crossing_links(p.links, x, box)
+    assert len(expected) > 20
+    assert np.array_equal(found[np.lexsort((found[:, 1], found[:, 0]))], expected)
 
 
 def test_degenerate_links_are_removed_with_a_message():

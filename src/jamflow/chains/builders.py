@@ -37,6 +37,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..box import Box
+from ..neighbors.pairs import pairs_within
 from ..protocols.initial import draw_diameters
 from ..state.bodies import Links
 from ..state.packing import Packing, linked_volume, sphere_volume
@@ -259,11 +260,22 @@ def crossing_links(links: Links, position: ArrayLike, box: Box) -> NDArray[np.in
     """Pairs of links whose segments cross (2D; minimum images), shape (P, 2), link indices ``a < b``.
 
     Links sharing a sphere never count as crossing. Two segments ``p + t r`` and
-    ``q + s w`` cross when the solution has ``0 < t < 1`` and ``0 < s < 1``.
+    ``q + s w`` cross when the solution has ``0 < t < 1`` and ``0 < s < 1``. Only
+    links whose midpoints lie within the longest link of each other are tested
+    (segments that cross meet within half their lengths of both midpoints), by a pair
+    query on the midpoints; a box narrower than twice the longest link tests every pair.
     """
     if box.d != 2:
         raise ValueError("crossing links are a 2D notion")
     x = np.asarray(position, dtype=np.float64)
+    if len(links) < 2:
+        return np.empty((0, 2), np.int64)
+    r = box.minimum_image(x[links.j] - x[links.i])
+    reach = float(np.sqrt(np.max(np.einsum("ka,ka->k", r, r))))
+    if reach < 0.5 * float(np.min(box.widths)):
+        near = pairs_within(x[links.i] + 0.5 * r, box, reach)
+        hit = _cross_pairs(links, near.i, near.j, r, x, box)
+        return np.stack([near.i[hit], near.j[hit]], axis=1)
     every = np.arange(len(links))
     out = [np.empty((0, 2), np.int64)]
     for start in range(0, len(links), 512):
@@ -277,9 +289,15 @@ def crossing_links(links: Links, position: ArrayLike, box: Box) -> NDArray[np.in
 def _cross(links: Links, a: NDArray[np.int64], b: NDArray[np.int64], x: NDArray[np.float64],
            box: Box) -> NDArray[np.bool_]:
     """Whether link ``a[p]`` crosses link ``b[q]``, shape (len(a), len(b)) (see :func:`crossing_links`)."""
+    r = box.minimum_image(x[links.j] - x[links.i])
+    return _cross_pairs(links, a[:, None], b[None, :], r, x, box)
+
+
+def _cross_pairs(links: Links, a: NDArray[np.int64], b: NDArray[np.int64], r: NDArray[np.float64],
+                 x: NDArray[np.float64], box: Box) -> NDArray[np.bool_]:
+    """Whether link ``a`` crosses link ``b``, element-wise over the broadcast of ``a`` and ``b``;
+    ``r`` (L, d) the minimum-image link vectors."""
     i, j = links.i, links.j
-    r = box.minimum_image(x[j] - x[i])
-    a, b = a[:, None], b[None, :]
     pq = box.minimum_image(x[i[b]] - x[i[a]])  # start of b relative to start of a
     ra, rb = r[a], r[b]
     den = ra[..., 0] * rb[..., 1] - ra[..., 1] * rb[..., 0]
