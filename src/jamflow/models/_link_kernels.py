@@ -147,20 +147,32 @@ def _block_solve(first, k0, m, base, chol, b):
 
 @njit(cache=True)
 def gram_solve(first, cptr, fptr, chol, rhs):
-    """``rhs <- G^-1 rhs`` in place, ``rhs`` (L, k) in cluster order."""
-    mmax = 0
-    for c in range(cptr.shape[0] - 1):
-        mmax = max(mmax, cptr[c + 1] - cptr[c])
-    b = np.empty(mmax)
+    """``rhs <- G^-1 rhs`` in place, ``rhs`` (L, k) in cluster order.
+
+    Every column takes the operations of :func:`_block_solve` in its order; the columns
+    are the inner loop, so a cluster's factor is read once for all of them.
+    """
+    ncol = rhs.shape[1]
     for c in range(cptr.shape[0] - 1):
         k0 = cptr[c]
         m = cptr[c + 1] - k0
-        for col in range(rhs.shape[1]):
-            for a in range(m):
-                b[a] = rhs[k0 + a, col]
-            _block_solve(first, k0, m, fptr[c], chol, b)
-            for a in range(m):
-                rhs[k0 + a, col] = b[a]
+        base = fptr[c]
+        for i in range(m):  # L z = b
+            f = first[k0 + i]
+            pivot = chol[base + i * m + i]
+            for col in range(ncol):
+                t = rhs[k0 + i, col]
+                for p in range(f, i):
+                    t -= chol[base + i * m + p] * rhs[k0 + p, col]
+                rhs[k0 + i, col] = t / pivot
+        for i in range(m - 1, -1, -1):  # L^T y = z, by columns
+            f = first[k0 + i]
+            pivot = chol[base + i * m + i]
+            for col in range(ncol):
+                t = rhs[k0 + i, col] / pivot
+                rhs[k0 + i, col] = t
+                for p in range(f, i):
+                    rhs[k0 + p, col] -= chol[base + i * m + p] * t
 
 
 @njit(cache=True)

@@ -134,19 +134,26 @@ def strain_solver(F, det, Finv, R0, u, li, lj, sign, first, cptr, fptr, chol, w,
             return bad, small, 1.0
     AiBe[:, :] = Be
     gram_solve(first, cptr, fptr, chol, AiBe)
+    S = np.zeros((m, m))
+    for k in range(L):  # one pass over the links; each sum in the order of k
+        for p in range(m):
+            for q in range(m):
+                S[p, q] += Be[k, p] * AiBe[k, q]
+    small += S
+    small = _det_inverse(small)[1]
+    # b = Be ce, so K^-1 b = AiBe (ce - small Be^T AiBe ce) = AiBe small ce (Woodbury): no solve
+    sce = np.zeros(m)
     for p in range(m):
         for q in range(m):
-            s = 0.0
-            for k in range(L):
-                s += Be[k, p] * AiBe[k, q]
-            small[p, q] += s
-    small = _det_inverse(small)[1]
+            sce[p] += small[p, q] * ce[q]
     for k in range(L):
         s = 0.0
+        t = 0.0
         for p in range(m):
             s += Be[k, p] * ce[p]
+            t += AiBe[k, p] * sce[p]
         b[k] = s
-    _k_solve(first, cptr, fptr, chol, Be, AiBe, small, b, Kib)
+        Kib[k] = t
     schur = ce @ ce - b @ Kib
     return -1, small, schur
 
@@ -180,19 +187,63 @@ def strain_subtract(w, Be, ce, li, lj, lam, nu, gy, ge):
 
 
 @njit(cache=True)
-def strain_project(w, Be, ce, li, lj, first, cptr, fptr, chol, AiBe, small, b, Kib, schur, fixed_volume, gy, ge,
-                   links, lam):
-    """``(gy, ge)`` projected in place onto the tangent space (Eq. 18), ``links``, ``lam`` (L,) work arrays."""
+def strain_project_pair(w, Be, ce, li, lj, first, cptr, fptr, chol, AiBe, small, b, Kib, schur, fixed_volume, gy, ge,
+                        vy, ve, links, t, t2):
+    """``(gy, ge)`` and ``(vy, ve)`` projected in place onto the tangent space (Eq. 18), the force and
+    the velocity of a step with one two-column solve; ``links`` (L, 2), ``t``, ``t2`` (m, 2) work arrays.
+
+    Per column: ``lam = K^-1 Gamma^T g`` by Woodbury (``A^-1`` by the Gram factors, then
+    ``- AiBe small Be^T``), the volume multiplier ``nu`` by the Schur complement, and
+    ``g -= Gamma (lam, nu)`` (:func:`strain_subtract`).
+    """
     d = w.shape[1]
-    for k in range(li.shape[0]):
+    m = Be.shape[1]
+    L = li.shape[0]
+    for k in range(L):
         s = 0.0
+        s2 = 0.0
         for a in range(d):
             s += w[k, a] * (gy[lj[k], a] - gy[li[k], a])
-        for p in range(Be.shape[1]):
+            s2 += w[k, a] * (vy[lj[k], a] - vy[li[k], a])
+        for p in range(m):
             s += Be[k, p] * ge[p]
-        links[k] = s
-    nu = strain_solve(first, cptr, fptr, chol, Be, AiBe, small, b, Kib, schur, fixed_volume, links, ce @ ge, lam)
-    strain_subtract(w, Be, ce, li, lj, lam, nu, gy, ge)
+            s2 += Be[k, p] * ve[p]
+        links[k, 0] = s
+        links[k, 1] = s2
+    gram_solve(first, cptr, fptr, chol, links)
+    t[:, :] = 0.0
+    t2[:, :] = 0.0
+    for k in range(L):
+        for p in range(m):
+            t[p, 0] += Be[k, p] * links[k, 0]
+            t[p, 1] += Be[k, p] * links[k, 1]
+    for p in range(m):
+        for q in range(m):
+            t2[p, 0] += small[p, q] * t[q, 0]
+            t2[p, 1] += small[p, q] * t[q, 1]
+    for k in range(L):
+        s = 0.0
+        s2 = 0.0
+        for p in range(m):
+            s += AiBe[k, p] * t2[p, 0]
+            s2 += AiBe[k, p] * t2[p, 1]
+        links[k, 0] -= s
+        links[k, 1] -= s2
+    nu = 0.0
+    nu2 = 0.0
+    if fixed_volume:
+        s = 0.0
+        s2 = 0.0
+        for k in range(L):
+            s += b[k] * links[k, 0]
+            s2 += b[k] * links[k, 1]
+        nu = (ce @ ge - s) / schur
+        nu2 = (ce @ ve - s2) / schur
+        for k in range(L):
+            links[k, 0] -= Kib[k] * nu
+            links[k, 1] -= Kib[k] * nu2
+    strain_subtract(w, Be, ce, li, lj, links[:, 0], nu, gy, ge)
+    strain_subtract(w, Be, ce, li, lj, links[:, 1], nu2, vy, ve)
 
 
 @njit(cache=True)
@@ -367,7 +418,7 @@ def strain_fire(
     links and volume (:func:`strain_reaffix`, chord sweeps with the last point's
     factorisation), the factorisation at the new point (:func:`strain_solver`), pair
     forces in the deformed box (:func:`strain_forces`) and the force and the velocity
-    projected (:func:`strain_project`). ``(y, e)`` must lie on the constraint manifold.
+    projected (:func:`strain_project_pair`). ``(y, e)`` must lie on the constraint manifold.
 
     The list lives in the deformed box (rotated frame, centres ``y T^T``): when
     displacements and the deformation since the build (``||U h_build^-1 - 1||_F``
@@ -399,7 +450,9 @@ def strain_fire(
     b = np.zeros(L)
     Kib = np.zeros(L)
     lam = np.zeros(L)
-    work = np.zeros(L)
+    work2 = np.zeros((L, 2))
+    t_m = np.zeros((m, 2))
+    t2_m = np.zeros((m, 2))
     force = np.zeros((n, d))
     xr = np.zeros((n, d))
     shifted = np.zeros((2 * pi.shape[0] + 1, d))
@@ -441,10 +494,8 @@ def strain_fire(
             shifted = np.empty((2 * pi.shape[0], d))
         energy, n_contact = strain_forces(y, Q, T, Finv, scale, offset, pi, pj, sigma, eps, w_exp, xr, shifted, force,
                                           fy, fe)
-        strain_project(w, Be, ce, li, lj, first, cptr, fptr, chol, AiBe, small, b, Kib, schur, fixed_volume, fy, fe,
-                       work, lam)
-        strain_project(w, Be, ce, li, lj, first, cptr, fptr, chol, AiBe, small, b, Kib, schur, fixed_volume, vy, ve,
-                       work, lam)
+        strain_project_pair(w, Be, ce, li, lj, first, cptr, fptr, chol, AiBe, small, b, Kib, schur, fixed_volume,
+                            fy, fe, vy, ve, work2, t_m, t2_m)
         fmax2 = max(_max_force_sq(fy), _dot1(fe, fe))
         if fmax2 <= force_tol * force_tol:
             status = CONVERGED
