@@ -34,21 +34,23 @@ import numpy as np
 from ..box import Box
 from ..minimize.fire import FireParameters, MinimizeResult, minimize_fire
 from ..minimize.model import EnergyModel
-from ..minimize.onset import JammingSettings, jam_model_to_pressure
+from ..minimize.onset import JammingSettings, bisect_to_pressure, jam_model_to_pressure
 from ..models.box import EnthalpyModel
 from ..models.links import LinkedSpheresModel
 from ..models.spheres.potential import HARMONIC, PowerLawPotential, overlapping_pairs
 from ..models.strain import ShearStabilizedModel
 from ..network import count_bodies
-from ..protocols.soft_jam import JammingResult
+from ..protocols.soft_jam import JammingResult, kick_off_saddle
 from ..state.bodies import Links
 from ..state.packing import Packing, linked_volume
 from ..tolerances import LINK_LENGTH_RTOL
 from .builders import check_linked_start
 from .dimers import dimer_report
 from .entanglement import check_untangled
+from .hessian import ZERO_MODE_RTOL, constrained_hessian
 
-__all__ = ["DEFAULT_PROTOCOL", "ENERGY_FLOOR", "PROTOCOLS", "jam_linked", "linked_soft_packing", "scale_to_energy"]
+__all__ = ["DEFAULT_PROTOCOL", "ENERGY_FLOOR", "PROTOCOLS", "jam_linked", "leave_linked_saddle", "linked_soft_packing",
+           "scale_to_energy"]
 
 #: Jamming protocols of :func:`jam_linked`.
 PROTOCOLS = ("bisection", "energy")
@@ -82,10 +84,7 @@ def linked_soft_packing(packing: Packing, model: LinkedSpheresModel, res: Minimi
     """
     box = res.box
     x = box.wrap(res.position)
-    pairs, _, f = overlapping_pairs(x, box, model.diameter, model.potential)
-    linked = model.links.contains(pairs.i, pairs.j)
-    contacts = np.stack([pairs.i, pairs.j], axis=1)[~linked]
-    count = count_bodies(contacts, len(x), box.d, model.links, x, box, shear_stabilized=shear_stabilized)
+    contacts, f, count = _linked_count(model, x, box, shear_stabilized)
     err = np.abs(model.links.length_errors(x, box))
     # total virial (pairs and link tensions) of the final configuration in its box
     W = LinkedSpheresModel(box, model.diameter, model.links, x, model.potential).evaluate(x.ravel()).virial
@@ -96,9 +95,77 @@ def linked_soft_packing(packing: Packing, model: LinkedSpheresModel, res: Minimi
              "stress_deviation": float(np.max(np.abs(W - p_virial * np.eye(box.d))) / p_virial) if p_virial else 0.0,
              "pressure_comment": "virial pressure of the contact forces and the link tensions"}
     return packing.evolve(position=x, box=box, diameter=model.diameter, links=model.links, contacts=contacts,
-                          force=f[~linked], rattler=count.rattler, pressure=res.pressure,
+                          force=f, rattler=count.rattler, pressure=res.pressure,
                           protocol=packing.protocol + protocol_suffix, parameters=parameters, attrs=attrs)
 
+
+def _linked_count(model: LinkedSpheresModel, x: np.ndarray, box: Box, shear_stabilized: bool):
+    """Contacts (overlapping pairs that are not linked) (P, 2), their forces (P,) and
+    :func:`~jamflow.network.count_bodies` of the centres ``x`` (wrapped) in ``box``."""
+    pairs, _, f = overlapping_pairs(x, box, model.diameter, model.potential)
+    free = ~model.links.contains(pairs.i, pairs.j)
+    contacts = np.stack([pairs.i, pairs.j], axis=1)[free]
+    return contacts, f[free], count_bodies(contacts, len(x), box.d, model.links, x, box,
+                                           shear_stabilized=shear_stabilized)
+
+
+def leave_linked_saddle(model: LinkedSpheresModel, final: MinimizeResult, template: Packing, pressure: float,
+                        settings: JammingSettings, shear_stabilized: bool, seed: int,
+                        progress: Callable[[dict], None] | None = None, history: dict[str, list] | None = None,
+                        ) -> tuple[LinkedSpheresModel, MinimizeResult, int, int]:
+    """The bisection's final minimum of linked spheres, moved off a saddle if it is one.
+
+    The guard of :func:`~jamflow.protocols.soft_jam.leave_saddle` for linked spheres. A
+    minimum whose backbone has fewer contacts than the isostatic count of its clusters
+    (:func:`~jamflow.network.count_bodies`, by rank; shear-stabilised with the strain
+    degrees of freedom) has a floppy mode of the contact network. For spheres its
+    prestress curvature is always negative (a saddle); for flexible clusters (the free
+    torsions of 3D chains) it can be positive, a stable minimum held at second order like
+    a hypostatic ellipse packing (docs/notes/chains.md, "Saddles of linked packings").
+    So a hypostatic minimum is a saddle only if its constrained Hessian
+    (:func:`~jamflow.chains.hessian.constrained_hessian`) has an eigenvalue below
+    ``-ZERO_MODE_RTOL`` times the largest; a saddle is kicked by
+    :data:`~jamflow.protocols.soft_jam.SADDLE_KICK` (Gaussian, seeded), its links
+    re-affixed by the minimiser, and brought back to ``|P - P0| <= pressure_rtol P0`` by
+    the bisection at fixed box shape from the kicked centres (first step
+    ``pressure_rtol * delta_phi``), up to :data:`~jamflow.protocols.soft_jam.SADDLE_KICKS`
+    times.
+
+    Parameters
+    ----------
+    template : Packing
+        The start in the model's length unit (metadata of the packing the Hessian is taken of).
+
+    Returns
+    -------
+    model, final, steps, kicks
+        The model in the final box, the minimum (``box`` set), the FIRE steps of the
+        re-minimisations and the number of kicks.
+    """
+    state = {"model": model}
+
+    def shortfall(res: MinimizeResult) -> int:
+        x = res.box.wrap(res.position)
+        contacts, f, count = _linked_count(model, x, res.box, shear_stabilized)
+        missing = count.isostatic_count - count.n_contacts if count.isostatic_count else 0
+        if missing <= 0:
+            return 0
+        at = template.evolve(position=x, box=res.box, diameter=model.diameter, links=model.links, contacts=contacts,
+                             force=f, rattler=count.rattler)
+        w = constrained_hessian(at, model.potential, strain=shear_stabilized).eigenvalues
+        return missing if w.min() < -ZERO_MODE_RTOL * np.abs(w).max() else 0
+
+    def reminimize(res: MinimizeResult, kick: np.ndarray) -> tuple[MinimizeResult, int]:
+        m, x = state["model"].rescaled(1.0, res.position + kick)
+        phi = linked_volume(m.box.d, m.diameter, m.links) / m.box.volume
+        m, out, _, _, _, steps = bisect_to_pressure(
+            m, x, phi, pressure, settings.force_tol, settings.pressure_rtol,
+            settings.pressure_rtol * settings.delta_phi, settings.max_steps, settings.fire_params, progress, history)
+        state["model"] = m
+        return replace(out, box=_current_box(m)), steps
+
+    final, steps, kicks = kick_off_saddle(final, shortfall, reminimize, seed, pressure)
+    return state["model"], final, steps, kicks
 
 def jam_linked(
     packing: Packing,
@@ -179,6 +246,12 @@ def jam_linked(
                                                  settings.max_steps, potential.exponent, settings.fire_params,
                                                  checked, history)
     final = replace(final, box=_current_box(model))
+    kicks = 0
+    if protocol == "bisection":
+        model, final, more, kicks = leave_linked_saddle(
+            model, final, scaled, pressure, settings, shear_stabilize,
+            packing.seed if packing.seed is not None and packing.seed >= 0 else 0, checked, history)
+        steps += more
     if full_box:
         model, final, more = _relax_box(model, final, pressure, settings, potential)
         steps += more
@@ -190,7 +263,8 @@ def jam_linked(
         "fire_steps": steps, "converged": int(final.converged), "jamming_protocol": protocol,
         "box_dof": settings.box_dof,
         **({"target_pressure": pressure, "onset_method": settings.onset,
-            "onset_minimizations": len(history["phi"])} if protocol == "bisection" else {"energy_tol": energy_tol}),
+            "onset_minimizations": len(history["phi"]), "saddle_kicks": kicks}
+           if protocol == "bisection" else {"energy_tol": energy_tol}),
     }
     params = {"protocol": protocol, "force_tol": settings.force_tol, "delta_phi": settings.delta_phi,
               "potential_exponent": potential.exponent, "fire": settings.fire_params.as_dict(),

@@ -18,7 +18,7 @@ from ..network import count_bodies
 from ..network.spheres import find_rattlers
 from ..state.packing import Packing, sphere_volume
 
-__all__ = ["JammingResult", "leave_saddle", "soft_packing", "jam_to_pressure"]
+__all__ = ["JammingResult", "kick_off_saddle", "leave_saddle", "soft_packing", "jam_to_pressure"]
 
 #: Random displacement [mean diameter] that moves a hypostatic force-balanced state off
 #: its saddle before the enthalpy is minimised again: ten times the overlaps at
@@ -92,18 +92,25 @@ def _backbone_shortfall(x: np.ndarray, box: Box, diameter: np.ndarray, potential
     return count.isostatic_count - count.n_contacts if count.isostatic_count else 0
 
 
-def leave_saddle(
-    final: MinimizeResult, diameter: np.ndarray, potential: PowerLawPotential, pressure: float,
-    settings: JammingSettings, seed: int,
+def kick_off_saddle(
+    final: MinimizeResult, shortfall: Callable[[MinimizeResult], int],
+    reminimize: Callable[[MinimizeResult, np.ndarray], tuple[MinimizeResult, int]], seed: int, pressure: float,
 ) -> tuple[MinimizeResult, int, int]:
-    """The final enthalpy minimum, moved off a saddle if it is one.
+    """The loop of :func:`leave_saddle` for any body kind.
 
-    A packing at ``P > 0`` with fewer backbone contacts than the isostatic count has a
-    floppy mode loaded by its contact forces: negative curvature ``~ -f / r`` (e.g. a
-    straight column of discs across the box), a saddle at which FIRE stops because the
-    force along that mode vanishes by symmetry. Such a state is kicked by
-    :data:`SADDLE_KICK` (Gaussian, seeded) and the enthalpy minimised again, up to
-    :data:`SADDLE_KICKS` times.
+    Parameters
+    ----------
+    final : MinimizeResult
+        A minimum at the target pressure.
+    shortfall : callable
+        Backbone contacts missing to the isostatic count of a minimum (``<= 0``: none).
+    reminimize : callable
+        ``(minimum, kick) -> (new minimum at the target pressure, FIRE steps)`` from the
+        centres ``minimum.position + kick``.
+    seed : int
+        Seed of the Gaussian kicks of :data:`SADDLE_KICK` (mean diameters).
+    pressure : float
+        The target pressure (named in the error).
 
     Returns
     -------
@@ -118,18 +125,52 @@ def leave_saddle(
     steps = 0
     rng = np.random.default_rng(seed)
     for kick in range(SADDLE_KICKS + 1):
-        missing = _backbone_shortfall(final.position, final.box, diameter, potential, settings.box_dof)
+        missing = shortfall(final)
         if missing <= 0:
             return final, steps, kick
         if kick == SADDLE_KICKS:
             break
-        model = SphereModel(final.box, diameter, potential, NeighborList(diameter))
-        x = final.position + SADDLE_KICK * rng.standard_normal(final.position.shape)
-        final = minimize_enthalpy_model(model, x, pressure, settings.force_tol, settings.pressure_rtol,
-                                        settings.max_steps, settings.fire_params, settings.box_dof)
-        steps += final.steps
+        final, more = reminimize(final, SADDLE_KICK * rng.standard_normal(final.position.shape))
+        steps += more
     raise RuntimeError(f"the jammed packing stays hypostatic ({missing} backbone contacts short of isostatic) "
                        f"after {SADDLE_KICKS} kicks off the saddle: no stable packing at P0 = {pressure:g}")
+
+
+def leave_saddle(
+    final: MinimizeResult, diameter: np.ndarray, potential: PowerLawPotential, pressure: float,
+    settings: JammingSettings, seed: int,
+) -> tuple[MinimizeResult, int, int]:
+    """The final enthalpy minimum, moved off a saddle if it is one.
+
+    A packing at ``P > 0`` with fewer backbone contacts than the isostatic count has a
+    floppy mode loaded by its contact forces: negative curvature ``~ -f / r`` (e.g. a
+    straight column of discs across the box), a saddle at which FIRE stops because the
+    force along that mode vanishes by symmetry. Such a state is kicked by
+    :data:`SADDLE_KICK` (Gaussian, seeded) and the enthalpy minimised again, up to
+    :data:`SADDLE_KICKS` times (:func:`kick_off_saddle`).
+
+    Returns
+    -------
+    final, steps, kicks
+        The minimum, the FIRE steps of the re-minimisations and the number of kicks.
+
+    Raises
+    ------
+    RuntimeError
+        Still hypostatic after :data:`SADDLE_KICKS` kicks.
+    """
+
+    def shortfall(res: MinimizeResult) -> int:
+        return _backbone_shortfall(res.position, res.box, diameter, potential, settings.box_dof)
+
+    def reminimize(res: MinimizeResult, kick: np.ndarray) -> tuple[MinimizeResult, int]:
+        model = SphereModel(res.box, diameter, potential, NeighborList(diameter))
+        out = minimize_enthalpy_model(model, res.position + kick, pressure, settings.force_tol,
+                                      settings.pressure_rtol, settings.max_steps, settings.fire_params,
+                                      settings.box_dof)
+        return out, out.steps
+
+    return kick_off_saddle(final, shortfall, reminimize, seed, pressure)
 
 
 def jam_to_pressure(

@@ -22,4 +22,8 @@ jamflow soft-jam "$tmp/t0.nc" swinging_trimer_2d.nc --pressure 1e-6 --pressure-r
 jamflow init-chains "$tmp/t1.nc" --d 2 --clusters 12 --cluster trimer --seed 5 --quiet
 jamflow soft-jam "$tmp/t1.nc" swinging_trimer_2d_shear.nc --pressure 1e-6 --pressure-rtol 1e-3 --force-tol 1e-13 \
     --delta-phi 1e-2 --shear-stabilize --quiet
+# 32 chains of four (3D, frozen angles), P0 = 1e-6: one contact short of the rank count, a minimum held by
+# its prestress, not a saddle (tests/test_chains_saddle.py); seed 3 is the short one of seeds 1-5 from phi = 0.1
+jamflow init-chains "$tmp/c0.nc" --d 3 --clusters 32 --cluster chain --chain-length 4 --phi 0.1 --seed 3 --quiet
+jamflow soft-jam "$tmp/c0.nc" hypostatic_chains4_3d.nc --pressure 1e-6 --pressure-rtol 1e-3 --force-tol 1e-12 --quiet
 rm -r "$tmp"
