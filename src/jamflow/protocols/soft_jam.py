@@ -147,17 +147,7 @@ def leave_saddle(
     straight column of discs across the box), a saddle at which FIRE stops because the
     force along that mode vanishes by symmetry. Such a state is kicked by
     :data:`SADDLE_KICK` (Gaussian, seeded) and the enthalpy minimised again, up to
-    :data:`SADDLE_KICKS` times (:func:`kick_off_saddle`).
-
-    Returns
-    -------
-    final, steps, kicks
-        The minimum, the FIRE steps of the re-minimisations and the number of kicks.
-
-    Raises
-    ------
-    RuntimeError
-        Still hypostatic after :data:`SADDLE_KICKS` kicks.
+    :data:`SADDLE_KICKS` times; returns and raises as :func:`kick_off_saddle`.
     """
 
     def shortfall(res: MinimizeResult) -> int:
