@@ -484,7 +484,9 @@ def strain_fire(
             x_build[:, :] = x
             h_build_inv[:, :] = np.linalg.inv(U)
             builds += 1
-        strain_links(y, F, li, lj, link_offset, length, R0, u, rl)
+        if step == 0:
+            # later steps: the re-affixing that ended the last step left the geometry of (y, e) in R0, u, rl
+            strain_links(y, F, li, lj, link_offset, length, R0, u, rl)
         bad, small, schur = strain_solver(F, det, Finv, R0, u, li, lj, sign, first, cptr, fptr, chol, w, Be, AiBe,
                                           ce, b, Kib, scale, rank_rtol)
         if bad >= 0:
