@@ -23,8 +23,9 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-#: PARDISO's matrix type: real and nonsymmetric.
-REAL_NONSYMMETRIC = 11
+#: PARDISO's matrix types: real and nonsymmetric (``W``), real symmetric positive
+#: definite (only the upper triangle is passed).
+REAL_NONSYMMETRIC, REAL_SPD = 11, 2
 
 #: ``mkl_set_threading_layer``'s code of the sequential layer.
 _MKL_THREADING_SEQUENTIAL = 1
@@ -98,21 +99,32 @@ class PardisoError(RuntimeError):
 class PardisoLU:
     """One PARDISO factorisation of a square matrix ``W`` (n, n) and its solves.
 
+    Parameters
+    ----------
+    matrix_type : int
+        :data:`REAL_NONSYMMETRIC`, or :data:`REAL_SPD` (pass the upper triangle).
+    options : dict, optional
+        ``iparm`` entries (0-based) that replace :func:`_iparm`'s, e.g. ``{12: 0}``
+        (no matching) or ``{7: 2}`` (two steps of iterative refinement in each solve).
+
     Attributes
     ----------
     fill : int
-        ``nnz(L + U)``.
+        ``nnz(L + U)`` (of ``L`` for :data:`REAL_SPD`).
     perturbed : int
         Pivots PARDISO perturbed; a factorisation with any is not of ``W``.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, matrix_type: int = REAL_NONSYMMETRIC, options: dict[int, int] | None = None) -> None:
         lib = library()
         if lib is None:
             raise ImportError("MKL PARDISO needs the mkl wheel: pip install 'jamflow[lp]'")
         self._lib = lib
         self._pt = np.zeros(64, dtype=np.int64)  # PARDISO's handle, zero before the first call
         self._iparm = _iparm()
+        for key, value in (options or {}).items():
+            self._iparm[key] = value
+        self._mtype = matrix_type
         self._perm = np.zeros(1, dtype=np.int32)
         self._n = 0
         self.fill = 0
@@ -124,7 +136,7 @@ class PardisoLU:
         err = ctypes.c_int32(0)
         one = ctypes.c_int32(1)
         self._lib.pardiso(self._pt.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)), ctypes.byref(one),
-                          ctypes.byref(one), ctypes.byref(ctypes.c_int32(REAL_NONSYMMETRIC)),
+                          ctypes.byref(one), ctypes.byref(ctypes.c_int32(self._mtype)),
                           ctypes.byref(ctypes.c_int32(phase)), ctypes.byref(ctypes.c_int32(self._n)),
                           self._a.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), self._ia.ctypes.data_as(i32),
                           self._ja.ctypes.data_as(i32), self._perm.ctypes.data_as(i32), ctypes.byref(one),
