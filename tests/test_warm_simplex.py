@@ -164,6 +164,19 @@ def test_the_two_lu_libraries_solve_a_working_set_alike():
     assert np.max(np.abs(answers["pardiso"] - answers["superlu"])) <= 1e-9 * np.max(np.abs(answers["superlu"]))
 
 
+def test_a_pardiso_lu_with_perturbed_pivots_is_redone_by_superlu():
+    # PARDISO factorises a singular matrix by perturbing a pivot instead of failing;
+    # that LU is not of W, so SuperLU redoes it (and here finds W singular)
+    f = simplex.factor.Factor(2, lu="pardiso")
+    with pytest.raises(simplex.factor.SingularWorkingSet):
+        f.factorise(sp.csr_matrix(np.ones((2, 2))))
+    assert f.superlu_fallbacks == 1 and not f.on_pardiso
+    f.factorise(sp.csr_matrix(np.array([[2.0, 1.0], [1.0, 3.0]])))
+    assert f.superlu_fallbacks == 1 and f.on_pardiso
+    assert np.allclose(f.ftran(np.array([3.0, 4.0])), [1.0, 1.0], rtol=0, atol=1e-15)
+    f.release()
+
+
 def test_the_lu_library_is_checked_and_auto_takes_pardiso_when_installed():
     with pytest.raises(ValueError, match="LU library"):
         simplex.factor.lu_library("umfpack")
