@@ -43,7 +43,8 @@ ORDERINGS: tuple[str, ...] = ("metis", "colamd")
 DENSE_COLUMN_FRACTION: float = 0.1
 
 #: Refactorisation rule: a factorisation costs about this many solves with its
-#: factors (measured: 0.86 s against 9.7 ms, CPU, on an N = 4096 working set). The
+#: factors (measured, CPU, on N = 4096 working sets: SuperLU 0.86 s against 9.7 ms,
+#: PARDISO 0.28 s against 3.2-4.5 ms; ``benchmarks/warm_lu.py``). The
 #: product form then adds ``2 k n`` operations to the pivot after ``k`` updates, so
 #: ``K`` updates between factorisations cost ``K^2 n`` and the optimum is
 #: ``K = sqrt(FACTOR_SOLVES * nnz(L + U) / n)`` (:meth:`Factor.factorise`).
