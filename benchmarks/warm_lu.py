@@ -35,6 +35,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
+import matplotlib.ticker
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
@@ -245,6 +246,7 @@ def plot(ds: xr.Dataset, path: Path) -> None:
         ax[1].plot(range(len(libs)), 1e3 * solve, marker, label=f"N = {n}")
     ax[0].set_xscale("log")
     ax[0].set_yscale("log")
+    ax[0].xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax[0].set_xlabel("fill nnz(L + U) (median)")
     ax[0].set_ylabel("factorisation CPU time [s] (median)")
     ax[0].set_title("each library's median over the working sets", fontsize=9)
