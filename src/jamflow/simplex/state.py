@@ -56,10 +56,11 @@ class Tolerances:
 
 @dataclass
 class Stats:
-    """What a solve did: the LU library (:data:`~jamflow.simplex.factor.LU_LIBRARIES`) and
-    how many of its factorisations were redone by SuperLU (PARDISO's perturbed pivots), pivots by kind, bound flips, factorisations, rounds of
-    primal simplex and dual repair, the fill ``nnz(L + U)`` of the last LU, and wall
-    seconds by part."""
+    """What a solve did: the LU library (``pardiso`` or ``superlu``,
+    :data:`~jamflow.simplex.factor.LU_LIBRARIES`) and how many of its factorisations
+    SuperLU redid (PARDISO's perturbed pivots), pivots by kind, bound flips,
+    factorisations, rounds of primal simplex and dual repair, the fill ``nnz(L + U)`` of
+    the last LU, and wall seconds by part."""
 
     lu: str = ""
     superlu_fallbacks: int = 0
