@@ -250,8 +250,8 @@ def compare(tags: list[str], max_lps: int, every: int, options: dict) -> xr.Data
             names.append(f"{tag}/{path.stem}")
             print(f"{names[-1]}: HiGHS {t_h:.3f} s (cpu {c_h:.3f}) {piv_h} pivots | ours {r.status} {t_o:.3f} s "
                   f"(cpu {c_o:.3f}) "
-                  f"{st.pivots} pivots ({st.dual_pivots} dual, {st.flips} flips; factor {st.seconds['factor']:.3f} s "
-                  f"x{st.factorisations}) | Gamma {row['gamma_rel']:.1e} active {row['active_diff']:.0f} "
+                  f"{st.pivots} pivots ({st.dual_pivots} dual, {st.flips} flips; {st.lu} factor "
+                  f"{st.seconds['factor']:.3f} s x{st.factorisations}, {st.superlu_fallbacks} by SuperLU) | Gamma {row['gamma_rel']:.1e} active {row['active_diff']:.0f} "
                   f"duals {row['dual_diff']:.1e} (residuals {row['dual_residual']:.1e} / {row['dual_residual_ref']:.1e})",
                   flush=True)
     data = {f: (("lp",), np.array([r[f] for r in rows], float), {"units": UNITS.get(f, "1")}) for f in FIELDS}
@@ -381,6 +381,7 @@ def main() -> None:
     cmp.add_argument("--every", type=int, default=1, help="take every k-th captured LP")
     cmp.add_argument("--ordering", default="metis")
     cmp.add_argument("--pricing", default="sketch")
+    cmp.add_argument("--lu", default="auto", choices=simplex.factor.LU_LIBRARIES, help="library of the LU")
     cmp.add_argument("--output", default="warm_lp.nc")
     swp = sub.add_parser("sweep", help="variants of jamflow.simplex's choices on a sample of captured LPs")
     swp.add_argument("--tags", nargs="+", required=True)
@@ -397,7 +398,8 @@ def main() -> None:
         write_dataset(sweep(args.tags, args.every, args.variants), OUT / args.output)
     if args.step == "compare":
         tags = args.tags or sorted(p.name for p in CAPTURE.iterdir() if p.is_dir())
-        ds = compare(tags, args.max_lps, args.every, {"ordering": args.ordering, "pricing": args.pricing})
+        ds = compare(tags, args.max_lps, args.every, {"ordering": args.ordering, "pricing": args.pricing,
+                                                         "lu": args.lu})
         write_dataset(ds, OUT / args.output)
         plot(ds)
     if args.step == "capture":

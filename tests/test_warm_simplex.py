@@ -111,10 +111,12 @@ def _agree(lp: dict, ours: simplex.Result, col_h: np.ndarray, dual_h: np.ndarray
     _kkt(lp, ours.col_value, ours.row_dual)
 
 
+@pytest.mark.parametrize("lu", ("pardiso", "superlu"))
 @pytest.mark.parametrize("name", LPS)
-def test_warm_lps_end_where_highs_ends_from_the_same_basis(name):
+def test_warm_lps_end_where_highs_ends_from_the_same_basis(name, lu):
     lp = _lp(name)
-    ours = _ours(lp)
+    ours = _ours(lp, lu=lu)
+    assert ours.stats.lu == lu and ours.stats.superlu_fallbacks == 0
     _agree(lp, ours, *_highs(lp))
     assert ours.stats.pivots > 0  # the carried basis is not optimal
     # the final basis names n constraints: M basic variables in all
@@ -128,7 +130,58 @@ def test_many_refactorisations_and_either_pricing_give_the_same_answer():
     assert often.stats.factorisations >= 5 and often.stats.pivots >= 10
     _agree(lp, often, col_h, dual_h)
     _agree(lp, _ours(lp, pricing="devex"), col_h, dual_h)
-    _agree(lp, _ours(lp, ordering="colamd"), col_h, dual_h)
+    _agree(lp, _ours(lp, ordering="colamd", lu="superlu"), col_h, dual_h)
+    _agree(lp, _ours(lp, max_etas=2, lu="superlu"), col_h, dual_h)
+
+
+def test_the_two_lu_libraries_solve_a_working_set_alike():
+    # the starting working set of a captured LP, factorised by each library: the solves
+    # W x = b and W^T y = c (dense, and sparse: a unit vector, a row of W) agree, and
+    # each has a backward error at rounding level
+    from jamflow.simplex.state import State
+
+    lp = _lp("n512_b")
+    st = State(lp["A"], lp["rhs"], lp["lower"], lp["upper"], _cost(lp["A"].shape[1]), TOL, None, "metis")
+    st.set_working_set(lp["col_status"], lp["row_status"])
+    W = st.working_matrix()
+    n = W.shape[0]
+    rng = np.random.default_rng(3)
+    b, k = rng.standard_normal(n), int(rng.integers(n))
+    unit = np.zeros(n)
+    unit[k] = 1.0
+    row_k = W[k].toarray().ravel()
+    answers = {}
+    for lu in ("pardiso", "superlu"):
+        f = simplex.factor.Factor(n, lu=lu)
+        f.factorise(W)
+        assert f.lu == lu and f.on_pardiso == (lu == "pardiso") and f.fill > W.nnz
+        x, y, d = f.ftran(b), f.btran(b), f.ftran(unit)
+        assert np.max(np.abs(W @ x - b)) <= 1e-12 * np.max(abs(W) @ np.abs(x))
+        assert np.max(np.abs(W.T @ y - b)) <= 1e-12 * np.max(abs(W.T) @ np.abs(y))
+        assert np.max(np.abs(f.btran(row_k) - unit)) <= 1e-12  # W^T e_k is row k of W
+        answers[lu] = np.concatenate([x, y, d])
+        f.release()
+    assert np.max(np.abs(answers["pardiso"] - answers["superlu"])) <= 1e-9 * np.max(np.abs(answers["superlu"]))
+
+
+def test_a_pardiso_lu_with_perturbed_pivots_is_redone_by_superlu():
+    # PARDISO factorises a singular matrix by perturbing a pivot instead of failing;
+    # that LU is not of W, so SuperLU redoes it (and here finds W singular)
+    f = simplex.factor.Factor(2, lu="pardiso")
+    with pytest.raises(simplex.factor.SingularWorkingSet):
+        f.factorise(sp.csr_matrix(np.ones((2, 2))))
+    assert f.superlu_fallbacks == 1 and not f.on_pardiso
+    f.factorise(sp.csr_matrix(np.array([[2.0, 1.0], [1.0, 3.0]])))
+    assert f.superlu_fallbacks == 1 and f.on_pardiso
+    assert np.allclose(f.ftran(np.array([3.0, 4.0])), [1.0, 1.0], rtol=0, atol=1e-15)
+    f.release()
+
+
+def test_the_lu_library_is_checked_and_auto_takes_pardiso_when_installed():
+    with pytest.raises(ValueError, match="LU library"):
+        simplex.factor.lu_library("umfpack")
+    assert simplex.factor.lu_library("auto") == "pardiso"  # the test extra installs mkl
+    assert simplex.factor.lu_library("superlu") == "superlu"
 
 
 def test_a_degenerate_crystal_lp_from_a_cold_basis():
@@ -162,9 +215,10 @@ def _tiny(rows, rhs, lower, upper, col_status, row_status) -> dict:
     # a working set of the wrong size
     (_tiny([[1.0, 1.0]], [1.0], [-np.inf] * 2, [np.inf] * 2, [1, 1], [2]), "singular"),
 ])
-def test_trouble_is_reported_not_answered(lp, status):
+@pytest.mark.parametrize("lu", ("pardiso", "superlu"))
+def test_trouble_is_reported_not_answered(lp, status, lu):
     res = simplex.solve(lp["A"], lp["rhs"], lp["lower"], lp["upper"], _cost(lp["A"].shape[1]), lp["col_status"],
-                        lp["row_status"], TOL)
+                        lp["row_status"], TOL, lu=lu)
     assert res.status == status and not res.optimal
 
 
@@ -189,6 +243,7 @@ def test_a_chain_with_the_jamflow_engine_ends_in_the_packing_of_highs():
     engines = ours.history["engine"].values[ours.history["warm_start"].values.astype(bool)]
     assert len(engines) > 0 and np.all(engines == "jamflow")
     assert ours.packing.attrs["warm_fallbacks"] == 0 and ours.converged
+    assert ours.packing.attrs["warm_lu"] == "pardiso" and highs.packing.attrs["warm_lu"] == "none"
     _same_packing(ours, highs)
 
 

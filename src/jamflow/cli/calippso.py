@@ -115,7 +115,7 @@ def _calippso(args: argparse.Namespace) -> int:
         ("LPs", f"{a['n_lps']} (converged {bool(result.converged)}; "
                 f"{'near-jamming start: near cutoff, interior point LPs without presolve' if a['near_start'] else 'far start'})"),
         ("warm LPs", (f"{a['warm_lps_jamflow']} by jamflow.simplex, {a['warm_fallbacks']} of its attempts re-solved "
-                      f"by HiGHS after trouble ({a['warm_fallback_reasons']})")),
+                      f"by HiGHS after trouble ({a['warm_fallback_reasons']}); LU by {a['warm_lu']}")),
         ("finish", f"{a['finish']} ({a['newton_attempts']} Newton attempt(s) in {a['newton_time']:.2f} s, "
                    f"{a['newton_rejections']} rejected, last because: {a['newton_last_rejection']})"),
         ("contacts N_c", f"{a['n_contacts']} (isostatic count d(N_s-1)+1 = {a['isostatic_count']}: {counting})"),

@@ -2,7 +2,8 @@
 rows than columns (CALiPPSO's jamming LPs): :func:`solve`.
 
 Depends on numpy, scipy (SuperLU) and numba; the nested-dissection ordering on
-``pymetis``.
+``pymetis``; the LU is Intel MKL PARDISO's when the ``mkl`` wheel is installed
+(``pip install 'jamflow[lp]'``), SuperLU's otherwise.
 """
 
 from .state import Stats, Tolerances

@@ -9,8 +9,9 @@ and the column of ``g``: a 3D-network matrix whose LU fills as ``N^(4/3)`` under
 nested-dissection ordering, against much more under a Markowitz ordering without a
 global view (``docs/notes/warm-simplex.md``).
 
-``W`` is factorised by SuperLU with a fill-reducing column ordering (:data:`ORDERINGS`);
-each pivot replaces one row of ``W`` and is kept as a row eta (product form): with
+``W`` is factorised by Intel MKL PARDISO when the ``mkl`` wheel is installed
+(:mod:`jamflow.simplex._pardiso`; about three times cheaper at N = 4096), else by SuperLU
+with a fill-reducing column ordering (:data:`ORDERINGS`): :data:`LU_LIBRARIES`. Each pivot replaces one row of ``W`` and is kept as a row eta (product form): with
 ``W_k = E_k ... E_1 W_0`` and ``E`` the identity with row ``p`` replaced by
 ``beta = W_{k-1}^-T w_new``, ``W_k^-1 = W_0^-1 E_1^-1 ... E_k^-1``.
 """
@@ -25,8 +26,14 @@ import scipy.sparse.linalg as sla
 from numpy.typing import NDArray
 
 from . import _kernels as k
+from . import _pardiso
 
-#: Column orderings of the working-set matrix: ``metis``, a nested dissection of the
+#: Libraries of the LU of ``W``: ``auto`` takes ``pardiso`` (MKL PARDISO, its own METIS
+#: order of ``W + W^T``) when the ``mkl`` wheel is installed and ``superlu`` otherwise.
+#: A PARDISO factorisation with perturbed pivots is redone by SuperLU.
+LU_LIBRARIES: tuple[str, ...] = ("auto", "pardiso", "superlu")
+
+#: Column orderings of the working-set matrix for SuperLU: ``metis``, a nested dissection of the
 #: column graph of ``W^T W`` without its dense columns (``pymetis``; COLAMD when it is
 #: not installed), or SuperLU's ``colamd``.
 ORDERINGS: tuple[str, ...] = ("metis", "colamd")
@@ -36,7 +43,8 @@ ORDERINGS: tuple[str, ...] = ("metis", "colamd")
 DENSE_COLUMN_FRACTION: float = 0.1
 
 #: Refactorisation rule: a factorisation costs about this many solves with its
-#: factors (measured: 0.86 s against 9.7 ms, CPU, on an N = 4096 working set). The
+#: factors (measured, CPU, on N = 4096 working sets: SuperLU 0.86 s against 9.7 ms,
+#: PARDISO 0.28 s against 3.2-4.5 ms; ``benchmarks/warm_lu.py``). The
 #: product form then adds ``2 k n`` operations to the pivot after ``k`` updates, so
 #: ``K`` updates between factorisations cost ``K^2 n`` and the optimum is
 #: ``K = sqrt(FACTOR_SOLVES * nnz(L + U) / n)`` (:meth:`Factor.factorise`).
@@ -59,8 +67,26 @@ def _have_pymetis() -> bool:
     return True
 
 
+def lu_library(lu: str = "auto") -> str:
+    """The library ``lu`` (one of :data:`LU_LIBRARIES`) resolves to on this installation.
+
+    Raises
+    ------
+    ValueError
+        ``lu`` is unknown.
+    ImportError
+        ``pardiso`` was asked for and the ``mkl`` wheel is not installed.
+    """
+    if lu not in LU_LIBRARIES:
+        raise ValueError(f"unknown LU library {lu!r}; choose one of {', '.join(LU_LIBRARIES)}")
+    have = _pardiso.library() is not None
+    if lu == "pardiso" and not have:
+        raise ImportError("lu='pardiso' needs MKL PARDISO: pip install 'jamflow[lp]' (the mkl wheel)")
+    return "pardiso" if lu == "pardiso" or (lu == "auto" and have) else "superlu"
+
+
 class SingularWorkingSet(RuntimeError):
-    """The working-set matrix is singular to SuperLU (a zero pivot)."""
+    """The working-set matrix is singular to the LU (a zero pivot)."""
 
 
 def nested_dissection(W: sp.csr_matrix) -> NDArray[np.int64]:
@@ -93,12 +119,18 @@ class Factor:
     max_etas : int, optional
         Row etas between factorisations; by default the rule of :data:`FACTOR_SOLVES`.
     ordering : str
-        One of :data:`ORDERINGS`.
+        One of :data:`ORDERINGS` (SuperLU's; PARDISO orders by its own METIS).
+    lu : str
+        One of :data:`LU_LIBRARIES`.
     """
 
-    def __init__(self, n: int, max_etas: int | None = None, ordering: str = "metis") -> None:
+    def __init__(self, n: int, max_etas: int | None = None, ordering: str = "metis", lu: str = "auto") -> None:
         if ordering not in ORDERINGS:
             raise ValueError(f"unknown ordering {ordering!r}; choose one of {', '.join(ORDERINGS)}")
+        self.lu = lu_library(lu)
+        self._pardiso = _pardiso.PardisoLU() if self.lu == "pardiso" else None
+        self.on_pardiso = False  # whether the current factors are PARDISO's
+        self.superlu_fallbacks = 0  # PARDISO factorisations with perturbed pivots, redone by SuperLU
         self.n = n
         self.ordering = ordering if ordering != "metis" or _have_pymetis() else "colamd"
         self.max_etas = max_etas
@@ -117,9 +149,12 @@ class Factor:
         Raises
         ------
         SingularWorkingSet
-            SuperLU found ``W`` singular.
+            The LU found ``W`` singular.
         """
         t0 = time.perf_counter()
+        if self._pardiso is not None and self._factorise_pardiso(W):
+            self._after_factorisation(t0)
+            return
         if self.ordering == "metis":
             q = nested_dissection(W)
             self.seconds_order += time.perf_counter() - t0
@@ -141,6 +176,26 @@ class Factor:
         perm_c[q] = lu.perm_c
         self.perm_c = perm_c
         self.fill = L.nnz + U.nnz
+        self._after_factorisation(t0)
+
+    def _factorise_pardiso(self, W: sp.csr_matrix) -> bool:
+        """PARDISO's LU of ``W``; False (SuperLU's turn) when it perturbed a pivot."""
+        try:
+            self._pardiso.factorise(W)
+        except _pardiso.PardisoError as exc:
+            if exc.code == _pardiso.ZERO_PIVOT:
+                raise SingularWorkingSet(str(exc)) from None
+            raise
+        self.on_pardiso = self._pardiso.perturbed == 0
+        if not self.on_pardiso:
+            self._pardiso.release()
+            self.superlu_fallbacks += 1
+            return False
+        self.fill = self._pardiso.fill
+        return True
+
+    def _after_factorisation(self, t0: float) -> None:
+        """Drop the etas and set the refactorisation interval from the new fill."""
         self.count = 0
         rule = int(np.ceil(np.sqrt(FACTOR_SOLVES * self.fill / self.n)))
         self.limit = self.max_etas or min(max(rule, MIN_ETAS), MAX_ETAS)
@@ -158,17 +213,29 @@ class Factor:
         """``W_k^-1 b``, shape (n,)."""
         v = np.array(b, dtype=np.float64)
         k.eta_forward(self.eta_slot, self.eta_beta, self.count, v)
+        if self.on_pardiso:
+            return self._pardiso.solve(v)
         x = np.empty(self.n)
         k.lu_solve(self.Lp, self.Li, self.Lx, self.Up, self.Ui, self.Ux, self.perm_r, self.perm_c, v, x)
         return x
 
     def btran(self, c: NDArray[np.float64]) -> NDArray[np.float64]:
         """``W_k^-T c``, shape (n,)."""
+        if self.on_pardiso:
+            y = self._pardiso.solve(c, transposed=True)
+            k.eta_backward(self.eta_slot, self.eta_beta, self.count, y)
+            return y
         y = np.empty(self.n)
         k.lu_solve_transposed(self.Lp, self.Li, self.Lx, self.Urp, self.Urj, self.Urx, self.perm_r, self.perm_c,
                               np.asarray(c, dtype=np.float64), y)
         k.eta_backward(self.eta_slot, self.eta_beta, self.count, y)
         return y
+
+    def release(self) -> None:
+        """Free the library's memory of the factors (PARDISO keeps them outside Python)."""
+        if self._pardiso is not None:
+            self._pardiso.release()
+            self.on_pardiso = False
 
     def replace(self, p: int, beta: NDArray[np.float64]) -> None:
         """Row ``p`` of ``W`` is replaced by ``w`` with ``beta = W^-T w`` (from :meth:`btran`)."""

@@ -56,10 +56,14 @@ class Tolerances:
 
 @dataclass
 class Stats:
-    """What a solve did: pivots by kind, bound flips, factorisations, rounds of
-    primal simplex and dual repair, the fill ``nnz(L + U)`` of the last LU, and wall
-    seconds by part."""
+    """What a solve did: the LU library (``pardiso`` or ``superlu``,
+    :data:`~jamflow.simplex.factor.LU_LIBRARIES`) and how many of its factorisations
+    SuperLU redid (PARDISO's perturbed pivots), pivots by kind, bound flips,
+    factorisations, rounds of primal simplex and dual repair, the fill ``nnz(L + U)`` of
+    the last LU, and wall seconds by part."""
 
+    lu: str = ""
+    superlu_fallbacks: int = 0
     primal_pivots: int = 0
     dual_pivots: int = 0
     flips: int = 0
@@ -95,7 +99,7 @@ class State:
     """
 
     def __init__(self, A: sp.spmatrix, b, lower, upper, c, tol: Tolerances, max_etas: int | None,
-                 ordering: str) -> None:
+                 ordering: str, lu: str = "auto") -> None:
         self.M, self.n = A.shape
         csr = sp.csr_matrix(A)
         csr.sort_indices()
@@ -105,8 +109,8 @@ class State:
         self.c = np.array(c, dtype=np.float64)
         self.tol = tol
         self.bw, self.lw, self.uw = self.b.copy(), self.lower.copy(), self.upper.copy()
-        self.factor = Factor(self.n, max_etas, ordering)
-        self.stats = Stats()
+        self.factor = Factor(self.n, max_etas, ordering, lu)
+        self.stats = Stats(lu=self.factor.lu)
         self.alpha = np.empty(self.M)
 
     # --- the working set -----------------------------------------------------------------

@@ -305,7 +305,7 @@ def solve(A: sp.spmatrix, rhs: NDArray[np.float64], col_lower: NDArray[np.float6
           col_upper: NDArray[np.float64], cost: NDArray[np.float64], col_status: NDArray[np.integer],
           row_status: NDArray[np.integer], tol: Tolerances | None = None, max_pivots: int | None = None,
           ordering: str = "metis", pricing: str = "sketch", perturbation: float = PERTURBATION,
-          max_etas: int | None = None, seed: int = 0) -> Result:
+          max_etas: int | None = None, seed: int = 0, lu: str = "auto") -> Result:
     """Solve ``min cost.z`` s.t. ``A z <= rhs``, ``col_lower <= z <= col_upper`` from a basis.
 
     Parameters
@@ -334,6 +334,8 @@ def solve(A: sp.spmatrix, rhs: NDArray[np.float64], col_lower: NDArray[np.float6
         :data:`jamflow.simplex.factor.FACTOR_SOLVES`.
     seed : int
         Seed of the perturbation and the sketch: the same input gives the same answer.
+    lu : str
+        Library of the LU (:data:`jamflow.simplex.factor.LU_LIBRARIES`).
 
     Returns
     -------
@@ -342,7 +344,7 @@ def solve(A: sp.spmatrix, rhs: NDArray[np.float64], col_lower: NDArray[np.float6
         solve the LP otherwise.
     """
     t0 = time.perf_counter()
-    st = State(A, rhs, col_lower, col_upper, cost, tol or Tolerances(), max_etas, ordering)
+    st = State(A, rhs, col_lower, col_upper, cost, tol or Tolerances(), max_etas, ordering, lu)
     weights = Weights(pricing)
     rng = np.random.default_rng(seed)
     limit = max_pivots if max_pivots is not None else 2**62
@@ -365,6 +367,9 @@ def solve(A: sp.spmatrix, rhs: NDArray[np.float64], col_lower: NDArray[np.float6
         status = "singular"
     except Trouble as trouble:
         status = str(trouble)
+    finally:
+        st.factor.release()
+    st.stats.superlu_fallbacks = st.factor.superlu_fallbacks
     st.stats.seconds["factor"] = st.factor.seconds_factor
     st.stats.seconds["order"] = st.factor.seconds_order
     st.stats.seconds["total"] = time.perf_counter() - t0

@@ -204,7 +204,7 @@ def _lp_record(it: int, lp: _LPSetup, sol: _Solution, step: _Step, accepted: boo
         cutoff=lp.ell / lp.sig_max, bound=lp.bound, min_active_dual=step.min_active_dual,
         max_inactive_dual=step.max_inactive_dual, accepted=accepted, warm_start=sol.warm,
         simplex_iterations=sol.simplex_iterations, ipm_iterations=sol.ipm_iterations, engine=sol.engine,
-        warm_fallback=sol.fallback)
+        warm_fallback=sol.fallback, warm_lu=sol.lu)
 
 
 def _failed_record(it: int, lp: _LPSetup, sol: _Solution) -> IterationRecord:
@@ -215,4 +215,4 @@ def _failed_record(it: int, lp: _LPSetup, sol: _Solution) -> IterationRecord:
         lp_time=sol.seconds, solver=sol.method, cutoff=lp.ell / lp.sig_max, bound=lp.bound,
         min_active_dual=np.nan, max_inactive_dual=np.nan, accepted=False, warm_start=sol.warm,
         simplex_iterations=sol.simplex_iterations, ipm_iterations=sol.ipm_iterations, engine=sol.engine,
-        warm_fallback=sol.fallback)
+        warm_fallback=sol.fallback, warm_lu=sol.lu)

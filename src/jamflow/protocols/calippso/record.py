@@ -70,6 +70,7 @@ class IterationRecord:
     newton_steps: int = 0  # Newton steps of a certified finish (its own record, solver "newton")
     engine: str = "highs"  # engine of the LP (highs or jamflow; interior point LPs are HiGHS's), or "newton"
     warm_fallback: str = ""  # the trouble jamflow.simplex reported before HiGHS solved the LP
+    warm_lu: str = ""  # jamflow.simplex's LU library on this LP (pardiso, superlu; "+superlu": a PARDISO LU redone)
 
 
 @dataclass(frozen=True)
@@ -208,6 +209,9 @@ def _history(records: list[IterationRecord]) -> xr.Dataset:
                                                                               "newton for the Newton finish"})
     data["warm_fallback"] = (("iteration",), col("warm_fallback").astype(str), {
         "long_name": "trouble jamflow.simplex reported on this warm LP before HiGHS solved it ('' = none)"})
+    data["warm_lu"] = (("iteration",), col("warm_lu").astype(str), {
+        "long_name": "LU library of jamflow.simplex on this warm LP: pardiso (MKL) or superlu; '+superlu': "
+                     "a PARDISO LU with perturbed pivots was redone by SuperLU ('' = not jamflow.simplex)"})
     return xr.Dataset(data, coords={"iteration": np.arange(1, len(records) + 1)})
 
 
@@ -277,6 +281,7 @@ def _result(packing: Packing, chain: _Chain, container: _Container, net: _Networ
         warm_lps_jamflow=sum(r.engine == "jamflow" for r in records),
         warm_fallbacks=sum(bool(r.warm_fallback) for r in records),
         warm_fallback_reasons=", ".join(sorted({r.warm_fallback for r in records if r.warm_fallback})) or "none",
+        warm_lu=", ".join(sorted({r.warm_lu for r in records if r.warm_lu})) or "none",
     )
     if container.walls:
         attrs["walls"] = "hard walls on every face of the orthogonal box [0, L_mu]; wall contacts in wall_contact_*"

@@ -56,6 +56,7 @@ class _Solution:
     ipm_iterations: int
     engine: str = "highs"  # which engine produced the answer (see WARM_ENGINES)
     fallback: str = ""  # jamflow.simplex's trouble on this LP, which HiGHS then solved
+    lu: str = ""  # jamflow.simplex's LU library; "+superlu" when a PARDISO LU was redone by SuperLU
 
 
 @dataclass
@@ -172,13 +173,15 @@ class _Solver:
                             simplex.Tolerances(primal=self.tol, dual=self.tol),
                             max_pivots=max(int(WARM_PIVOTS_PER_ROW * A.shape[0]), 1))
         seconds = res.stats.seconds["total"]
+        lu = res.stats.lu + ("+superlu" if res.stats.superlu_fallbacks else "")
         if not res.optimal:
             return _Solution(status=res.status, seconds=seconds, col=None, dual=None, warm=True, method="simplex",
-                             simplex_iterations=res.stats.pivots, ipm_iterations=0, engine="jamflow")
+                             simplex_iterations=res.stats.pivots, ipm_iterations=0, engine="jamflow", lu=lu)
         self.basis = _Basis(col=res.col_status, row=res.row_status)
         self.basis_rows = rows
         return _Solution(status="Optimal", seconds=seconds, col=res.col_value, dual=-res.row_dual, warm=True,
-                         method="simplex", simplex_iterations=res.stats.pivots, ipm_iterations=0, engine="jamflow")
+                         method="simplex", simplex_iterations=res.stats.pivots, ipm_iterations=0, engine="jamflow",
+                         lu=lu)
 
     def _iterations(self) -> tuple[int, int]:
         """Simplex pivots (crossover included) and interior point iterations of the last run."""
