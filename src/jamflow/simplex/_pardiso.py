@@ -7,6 +7,10 @@ supernodes; a pivot it cannot find is *perturbed* to ``1e-13`` of the matrix's n
 instead of failing. A factorisation with perturbed pivots is of a different matrix, so
 :class:`PardisoLU` reports it (``perturbed``) and the caller factorises by SuperLU
 instead. It runs on one thread (MKL's sequential layer), like the chain's HiGHS.
+Not through ``pypardiso``: its ``solve`` compares (or hashes) the whole matrix and
+re-indexes it on every call, and solves with ``W^T`` only by being handed a CSC copy,
+which it takes for a new matrix and factorises again; the simplex needs both
+solves of one factorisation, and the perturbed-pivot count, at every pivot.
 Measured against SuperLU with a METIS order on the working sets of captured CALiPPSO
 LPs: ``docs/notes/warm-simplex.md`` ("A cheaper factorisation").
 """
