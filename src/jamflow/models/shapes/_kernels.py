@@ -199,6 +199,12 @@ def perram_wertheim(dx0, dx1, ti, tj, pi, pj, lam0=-1.0):
     """
     axx, axy, ayy = _ellipse_matrix(pi[0], pi[1], ti)
     bxx, bxy, byy = _ellipse_matrix(pj[0], pj[1], tj)
+    return perram_wertheim_matrices(dx0, dx1, axx, axy, ayy, bxx, bxy, byy, lam0)
+
+
+@njit(cache=True, inline="always")
+def perram_wertheim_matrices(dx0, dx1, axx, axy, ayy, bxx, bxy, byy, lam0):
+    """:func:`perram_wertheim` from the two shape matrices ``A``, ``B`` (entries xx, xy, yy; :func:`_ellipse_matrix`)."""
     dxx = bxx - axx
     dxy = bxy - axy
     dyy = byy - ayy
@@ -252,13 +258,20 @@ def ellipse_terms(dx0, dx1, ti, tj, pi, pj, k, g, lam0):
     r = np.sqrt(dx0 * dx0 + dx1 * dx1)
     if r.real >= (pi[0] + pj[0]).real:
         return 0.0 * dx0, -1.0 + 0.0 * dx0
-    f, lam, s0, s1 = perram_wertheim(dx0, dx1, ti, tj, pi, pj, lam0)
+    axx, axy, ayy = _ellipse_matrix(pi[0], pi[1], ti)
+    bxx, bxy, byy = _ellipse_matrix(pj[0], pj[1], tj)
+    return ellipse_terms_matrices(dx0, dx1, r, axx, axy, ayy, bxx, bxy, byy, k, g, lam0)
+
+
+@njit(cache=True, inline="always")
+def ellipse_terms_matrices(dx0, dx1, r, axx, axy, ayy, bxx, bxy, byy, k, g, lam0):
+    """:func:`ellipse_terms` of a pair whose bounding circles overlap, from ``r = |dx|`` and the shape matrices
+    ``A``, ``B`` (:func:`_ellipse_matrix`; a loop computes them once per body)."""
+    f, lam, s0, s1 = perram_wertheim_matrices(dx0, dx1, axx, axy, ayy, bxx, bxy, byy, lam0)
     if f.real >= 1.0:
         return 0.0 * dx0, lam
     root = np.sqrt(f)
     delta = r / root - r
-    axx, axy, ayy = _ellipse_matrix(pi[0], pi[1], ti)
-    bxx, bxy, byy = _ellipse_matrix(pj[0], pj[1], tj)
     w = lam * (1.0 - lam)
     df0 = 2.0 * w * s0
     df1 = 2.0 * w * s1
