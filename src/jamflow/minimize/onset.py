@@ -46,7 +46,7 @@ below 1e-25; the default ``force_tol = 1e-13`` gives ``F^2 <= 1e-26``. With
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -55,10 +55,13 @@ from .fire import (
     DEFAULT_FIRE,
     FireParameters,
     MinimizeResult,
+    _fire,
+    _fire_engine,
     minimize_enthalpy_model,
     minimize_fire,
 )
 from .model import EnergyModel
+from .newton import polish_enthalpy
 
 __all__ = ["FORCE_TOL_VANDERWERF", "MAX_STRAIN_STEP", "ONSET_METHODS", "JammingSettings", "bisect_to_pressure",
            "jam_model_to_pressure", "search_to_pressure"]
@@ -97,13 +100,22 @@ APPROACH_STRAIN_STEP: float = 0.0075
 RETURN_SHARE: float = 0.15
 
 
+#: FIRE steps of the enthalpy stage between two tries of the Newton polish
+#: (``JammingSettings.newton_polish``): a failed try costs about as much as 100-300 steps
+#: (two Hessians and sparse solves), so the tries add at most ~15 % to the stage
+#: (docs/notes/shapes.md, "Newton polish of the enthalpy stage").
+POLISH_INTERVAL: int = 2000
+
+
 @dataclass(frozen=True)
 class JammingSettings:
     """Tolerances and budget of the jamming protocol (module doc; :func:`jam_model_to_pressure`).
 
     ``onset`` is one of :data:`ONSET_METHODS`; ``delta_phi`` is the first step in
     packing fraction of either; ``max_strain_step`` caps the search's steps (relative
-    change of the box length).
+    change of the box length). ``newton_polish`` lets the enthalpy stage end with Newton
+    iterations (:func:`jamflow.minimize.newton.polish_enthalpy`) once FIRE is close
+    enough, tried every :data:`POLISH_INTERVAL` steps, to the same tolerances.
     """
 
     force_tol: float = FORCE_TOL_VANDERWERF
@@ -116,6 +128,7 @@ class JammingSettings:
     box_dof: str = "isotropic"
     onset: str = "bisection"
     max_strain_step: float = MAX_STRAIN_STEP
+    newton_polish: bool = False
 
     def __post_init__(self) -> None:
         if self.onset not in ONSET_METHODS:
@@ -377,6 +390,27 @@ def search_to_pressure(
     return model, res, phi, bracket.slope, steps
 
 
+def _enthalpy_stage(model: EnergyModel, position: np.ndarray, pressure: float, c: JammingSettings,
+                    budget: int) -> MinimizeResult:
+    """Step 3: FIRE on ``U + P0 V``; with ``c.newton_polish`` the run pauses every :data:`POLISH_INTERVAL`
+    steps for a Newton polish and ends with the first one that succeeds (its ``steps`` are FIRE's)."""
+    if not c.newton_polish:
+        return minimize_enthalpy_model(model, position, pressure, c.force_tol, c.pressure_rtol, budget,
+                                       c.fire_params, c.box_dof)
+    engine = _fire_engine(model, model.dofs(position), c.fire_params, float(pressure), c.pressure_rtol, c.box_dof)
+    steps = 0
+    while True:
+        res = _fire(engine, c.force_tol, min(POLISH_INTERVAL, budget - steps))
+        steps += res.steps
+        if res.converged or steps >= budget:
+            return replace(res, steps=steps)
+        scale = (res.box.volume / model.box.volume) ** (1.0 / model.box.d)
+        scaled, _ = model.rescaled(scale, res.position)
+        polish = polish_enthalpy(scaled, res.position, pressure, c.force_tol, c.pressure_rtol)
+        if polish.result is not None:
+            return replace(polish.result, steps=steps)
+
+
 def jam_model_to_pressure(
     model: EnergyModel,
     position: np.ndarray,
@@ -412,8 +446,7 @@ def jam_model_to_pressure(
             c.max_steps, c.fire_params, progress, history,
         )
     if model.box_dofs:
-        final = minimize_enthalpy_model(model, res.position, pressure, c.force_tol, c.pressure_rtol,
-                                        c.max_steps - steps, c.fire_params, c.box_dof)
+        final = _enthalpy_stage(model, res.position, pressure, c, c.max_steps - steps)
         return model, final, history, steps + final.steps
     if c.onset == "search":
         # first step: the pressure window of the loose stage, on its slope

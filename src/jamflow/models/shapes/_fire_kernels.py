@@ -26,15 +26,15 @@ from ...minimize._fire_kernels import (
 )
 from ...neighbors._verlet_kernels import _inline_list, _list_buffers, _needs_rebuild
 from ._kernels import (
+    CIRCULO,
+    ELLIPSE,
+    REULEAUX,
     _ellipse_matrix,
     circulo_pair_rotated,
     dumbbell_pair,
     ellipse_terms_matrices,
     reuleaux_pair,
 )
-
-#: Family codes of the loop (the order of :data:`jamflow.models.shapes.model.SHAPE_FAMILIES`).
-CIRCULO, ELLIPSE, REULEAUX, DUMBBELL = 0, 1, 2, 3
 
 
 @njit(cache=True, inline="always")

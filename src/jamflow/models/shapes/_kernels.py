@@ -21,6 +21,12 @@ import numpy as np
 
 from ..._numba import njit
 
+#: Family codes of the compiled kernels (the order of :data:`jamflow.models.shapes.model.SHAPE_FAMILIES`).
+CIRCULO, ELLIPSE, REULEAUX, DUMBBELL = 0, 1, 2, 3
+
+#: Family code of each model family.
+FAMILY_CODES: dict[str, int] = {"circulo": CIRCULO, "ellipse": ELLIPSE, "reuleaux": REULEAUX, "dumbbell": DUMBBELL}
+
 #: Complex step [length or rad]: far below round-off of any coordinate, so the
 #: derivative carries no truncation error (the real part is untouched).
 COMPLEX_STEP: float = 1e-30
@@ -329,15 +335,28 @@ def pair_sum(pair, i, j, dx, theta, params, k, grad, virial):
     return energy, n
 
 
-# not cached: a cached kernel that takes a jitted function (the family's pair kernel) as
-# an argument corrupts numba's cache index across processes ("underlying object has
-# vanished", numba issue #2956); seen when two jamflow processes shared the cache
-@njit
-def pair_hessian_blocks(pair, i, j, dx, theta, params, k, h):
-    """Complex-step Hessian blocks ``d^2 U / dq dq`` of every listed pair, shape (P, 6, 6).
+@njit(cache=True, inline="always")
+def _family_pair(family, dx0, dx1, ti, tj, pi, pj, k, g):
+    """The pair kernel of a family code (:data:`FAMILY_CODES`)."""
+    if family == CIRCULO:
+        return circulo_pair(dx0, dx1, ti, tj, pi, pj, k, g)
+    if family == ELLIPSE:
+        return ellipse_pair(dx0, dx1, ti, tj, pi, pj, k, g)
+    if family == REULEAUX:
+        return reuleaux_pair(dx0, dx1, ti, tj, pi, pj, k, g)
+    return dumbbell_pair(dx0, dx1, ti, tj, pi, pj, k, g)
 
-    Local order ``(x_i, y_i, theta_i, x_j, y_j, theta_j)``; each column is
-    ``Im g(q + i h e_m) / h`` of the analytic pair gradient ``g``.
+
+# chosen by a family code, not by passing the pair kernel: a cached kernel that takes a
+# jitted function as an argument corrupts numba's cache index across processes (numba
+# issue #2956), and an uncached one compiles for seconds in every process
+@njit(cache=True)
+def pair_hessian_blocks(family, i, j, dx, theta, params, k, h):
+    """Complex-step Hessian blocks ``d^2 U / dq dq`` of every listed pair of a family, shape (P, 6, 6).
+
+    ``family`` is a code of :data:`FAMILY_CODES`. Local order ``(x_i, y_i, theta_i,
+    x_j, y_j, theta_j)``; each column is ``Im g(q + i h e_m) / h`` of the analytic pair
+    gradient ``g``.
     """
     out = np.zeros((i.size, 6, 6))
     g = np.zeros(6, dtype=np.complex128)
@@ -366,7 +385,7 @@ def pair_hessian_blocks(pair, i, j, dx, theta, params, k, h):
             else:
                 tb += 1j * h
             g[:] = 0.0
-            pair(d0, d1, ta, tb, pa, pb, k, g)
+            _family_pair(family, d0, d1, ta, tb, pa, pb, k, g)
             for c in range(6):
                 out[p, c, m] = g[c].imag / h
     return out

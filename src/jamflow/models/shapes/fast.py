@@ -11,15 +11,13 @@ from ...minimize import _fire_kernels
 from ...minimize.fire import FireParameters, MinimizeResult, _fire_params
 from ...minimize.model import pressure_of
 from . import _fire_kernels as _loop
+from ._kernels import FAMILY_CODES
 
 if TYPE_CHECKING:
     from .model import ShapeModel
 
 __all__ = ["FAMILY_CODES", "ShapeFire"]
 
-#: Family code of each model family in the compiled loop.
-FAMILY_CODES: dict[str, int] = {"circulo": _loop.CIRCULO, "ellipse": _loop.ELLIPSE, "reuleaux": _loop.REULEAUX,
-                                "dumbbell": _loop.DUMBBELL}
 
 
 class ShapeFire:

@@ -285,8 +285,8 @@ class ShapeModel(WithoutFastPaths):
     def hessian(self, q: NDArray[np.float64]) -> sp.csr_matrix:
         """``d^2 U / dq dq`` (complex-step of the analytic gradient), shape ``(3N, 3N)``."""
         i, j, dx, theta = self._pairs(q)
-        blocks = _kernels.pair_hessian_blocks(self._pair, i, j, dx, theta, self.params, self.k,
-                                              _kernels.COMPLEX_STEP)
+        blocks = _kernels.pair_hessian_blocks(_kernels.FAMILY_CODES[self.family], i, j, dx, theta, self.params,
+                                              self.k, _kernels.COMPLEX_STEP)
         n = self.n
         index = np.stack([2 * i, 2 * i + 1, 2 * n + i, 2 * j, 2 * j + 1, 2 * n + j], axis=1)
         rows = np.repeat(index, 6, axis=1).ravel()
