@@ -304,12 +304,25 @@ def ellipse_pair(dx0, dx1, ti, tj, pi, pj, k, g):
     return ellipse_terms(dx0, dx1, ti, tj, pi, pj, k, g, -1.0)[0]
 
 
-# not cached: a cached kernel that takes a jitted function (the family's pair kernel) as
-# an argument corrupts numba's cache index across processes ("underlying object has
-# vanished", numba issue #2956); seen when two jamflow processes shared the cache
-@njit
-def pair_sum(pair, i, j, dx, theta, params, k, grad, virial):
-    """Energy, gradient ``(N, 3)`` (x, y, theta) and virial of all listed pairs.
+@njit(cache=True, inline="always")
+def _family_pair(family, dx0, dx1, ti, tj, pi, pj, k, g):
+    """The pair kernel of a family code (:data:`FAMILY_CODES`)."""
+    if family == CIRCULO:
+        return circulo_pair(dx0, dx1, ti, tj, pi, pj, k, g)
+    if family == ELLIPSE:
+        return ellipse_pair(dx0, dx1, ti, tj, pi, pj, k, g)
+    if family == REULEAUX:
+        return reuleaux_pair(dx0, dx1, ti, tj, pi, pj, k, g)
+    return dumbbell_pair(dx0, dx1, ti, tj, pi, pj, k, g)
+
+
+# the pair kernel is chosen by a family code (_family_pair), not passed: a cached kernel that
+# takes a jitted function as an argument corrupts numba's cache index across processes
+# (numba issue #2956), and an uncached one compiles for seconds in every process
+@njit(cache=True)
+def pair_sum(family, i, j, dx, theta, params, k, grad, virial):
+    """Energy, gradient ``(N, 3)`` (x, y, theta) and virial of all listed pairs of a family (code of
+    :data:`FAMILY_CODES`).
 
     ``virial[a, b] = -sum dU/dx_j[a] dx[b]`` [energy]: ``sum f r_a r_b / r`` for
     central forces, so that the pressure is ``tr W / (2 V)``. Returns the energy and
@@ -322,7 +335,7 @@ def pair_sum(pair, i, j, dx, theta, params, k, grad, virial):
         a = i[p]
         b = j[p]
         g[:] = 0.0
-        e = pair(dx[p, 0], dx[p, 1], theta[a], theta[b], params[a], params[b], k, g)
+        e = _family_pair(family, dx[p, 0], dx[p, 1], theta[a], theta[b], params[a], params[b], k, g)
         if e > 0.0:
             n += 1
             energy += e
@@ -333,18 +346,6 @@ def pair_sum(pair, i, j, dx, theta, params, k, grad, virial):
                 for v in range(2):
                     virial[u, v] -= g[3 + u] * dx[p, v]
     return energy, n
-
-
-@njit(cache=True, inline="always")
-def _family_pair(family, dx0, dx1, ti, tj, pi, pj, k, g):
-    """The pair kernel of a family code (:data:`FAMILY_CODES`)."""
-    if family == CIRCULO:
-        return circulo_pair(dx0, dx1, ti, tj, pi, pj, k, g)
-    if family == ELLIPSE:
-        return ellipse_pair(dx0, dx1, ti, tj, pi, pj, k, g)
-    if family == REULEAUX:
-        return reuleaux_pair(dx0, dx1, ti, tj, pi, pj, k, g)
-    return dumbbell_pair(dx0, dx1, ti, tj, pi, pj, k, g)
 
 
 # chosen by a family code, not by passing the pair kernel: a cached kernel that takes a
@@ -507,17 +508,16 @@ def circulo_crossed_pairs(i, j, dx, theta, params):
     return out
 
 
-# not cached: a cached kernel that takes a jitted function (the family's pair kernel) as
-# an argument corrupts numba's cache index across processes ("underlying object has
-# vanished", numba issue #2956); seen when two jamflow processes shared the cache
-@njit
-def pair_table(pair, i, j, dx, theta, params, k):
-    """Energy and gradient ``(x_i, y_i, theta_i, x_j, y_j, theta_j)`` of every listed pair, shape (P, 7)."""
+@njit(cache=True)
+def pair_table(family, i, j, dx, theta, params, k):
+    """Energy and gradient ``(x_i, y_i, theta_i, x_j, y_j, theta_j)`` of every listed pair of a family
+    (code of :data:`FAMILY_CODES`), shape (P, 7)."""
     out = np.zeros((i.size, 7))
     g = np.zeros(6)
     for p in range(i.size):
         g[:] = 0.0
-        out[p, 0] = pair(dx[p, 0], dx[p, 1], theta[i[p]], theta[j[p]], params[i[p]], params[j[p]], k, g)
+        out[p, 0] = _family_pair(family, dx[p, 0], dx[p, 1], theta[i[p]], theta[j[p]], params[i[p]], params[j[p]],
+                                 k, g)
         out[p, 1:] = g
     return out
 
