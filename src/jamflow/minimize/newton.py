@@ -112,10 +112,21 @@ def _bordered_hessian(model: EnergyModel, x: NDArray[np.float64], q: NDArray[np.
 
 
 def _is_minimum(model: EnergyModel, x: NDArray[np.float64], q: NDArray[np.float64], pressure0: float) -> bool:
-    """Whether no eigenvalue of the bordered Hessian lies below ``-NEGATIVE_CURVATURE`` of its largest diagonal entry."""
-    a = _bordered_hessian(model, x, q, pressure0).toarray()
+    """Whether no eigenvalue of the bordered Hessian lies below ``-NEGATIVE_CURVATURE`` of its largest diagonal entry.
+
+    Sylvester's law of inertia: the bordered Hessian shifted up by that margin is factorised
+    ``P A P^T = L U`` with diagonal pivots only (sparse LU in symmetric mode); the number of
+    negative pivots is its number of negative eigenvalues. When the factorisation had to
+    pivot off the diagonal, the dense eigenvalues decide.
+    """
+    a = _bordered_hessian(model, x, q, pressure0)
     a = 0.5 * (a + a.T)
-    return bool(np.linalg.eigvalsh(a)[0] >= -NEGATIVE_CURVATURE * np.abs(np.diag(a)).max())
+    margin = NEGATIVE_CURVATURE * float(np.abs(a.diagonal()).max())
+    shifted = (a + margin * sp.identity(a.shape[0])).tocsc()
+    lu = sla.splu(shifted, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+    if np.array_equal(lu.perm_r, lu.perm_c):
+        return not bool(np.any(lu.U.diagonal() < 0.0))
+    return bool(np.linalg.eigvalsh(shifted.toarray())[0] >= 0.0)
 
 
 def polish_enthalpy(model: EnergyModel, config: NDArray[np.float64], pressure0: float, force_tol: float,
