@@ -100,11 +100,17 @@ APPROACH_STRAIN_STEP: float = 0.0075
 RETURN_SHARE: float = 0.15
 
 
-#: FIRE steps of the enthalpy stage between two tries of the Newton polish
-#: (``JammingSettings.newton_polish``): a failed try costs about as much as 100-300 steps
-#: (two Hessians and sparse solves), so the tries add at most ~15 % to the stage
+#: FIRE steps of the enthalpy stage before the first try of the Newton polish
+#: (``JammingSettings.newton_polish``); after each failed try the interval grows by
+#: :data:`POLISH_GROWTH`. A failed try costs as much as a few hundred steps (Hessians and
+#: sparse solves), and FIRE may reach Newton's basin only after 10^5 steps (N = 480), so
+#: a fixed interval spent more on tries than it saved; growing by 1.25 the tries take at
+#: most 25 % more FIRE steps than needed, in ~20 tries up to 10^5 steps
 #: (docs/notes/shapes.md, "Newton polish of the enthalpy stage").
 POLISH_INTERVAL: int = 2000
+
+#: Growth of the interval between two tries of the Newton polish [1].
+POLISH_GROWTH: float = 1.25
 
 
 @dataclass(frozen=True)
@@ -115,7 +121,7 @@ class JammingSettings:
     packing fraction of either; ``max_strain_step`` caps the search's steps (relative
     change of the box length). ``newton_polish`` lets the enthalpy stage end with Newton
     iterations (:func:`jamflow.minimize.newton.polish_enthalpy`) once FIRE is close
-    enough, tried every :data:`POLISH_INTERVAL` steps, to the same tolerances.
+    enough (tried after :data:`POLISH_INTERVAL` steps, then at growing intervals), to the same tolerances.
     """
 
     force_tol: float = FORCE_TOL_VANDERWERF
@@ -392,15 +398,17 @@ def search_to_pressure(
 
 def _enthalpy_stage(model: EnergyModel, position: np.ndarray, pressure: float, c: JammingSettings,
                     budget: int) -> MinimizeResult:
-    """Step 3: FIRE on ``U + P0 V``; with ``c.newton_polish`` the run pauses every :data:`POLISH_INTERVAL`
-    steps for a Newton polish and ends with the first one that succeeds (its ``steps`` are FIRE's)."""
+    """Step 3: FIRE on ``U + P0 V``; with ``c.newton_polish`` the run pauses after :data:`POLISH_INTERVAL`
+    steps, then at intervals growing by :data:`POLISH_GROWTH`, for a Newton polish and ends with the first
+    one that succeeds (its ``steps`` are FIRE's)."""
     if not c.newton_polish:
         return minimize_enthalpy_model(model, position, pressure, c.force_tol, c.pressure_rtol, budget,
                                        c.fire_params, c.box_dof)
     engine = _fire_engine(model, model.dofs(position), c.fire_params, float(pressure), c.pressure_rtol, c.box_dof)
     steps = 0
+    interval = float(POLISH_INTERVAL)
     while True:
-        res = _fire(engine, c.force_tol, min(POLISH_INTERVAL, budget - steps))
+        res = _fire(engine, c.force_tol, min(int(interval), budget - steps))
         steps += res.steps
         if res.converged or steps >= budget:
             return replace(res, steps=steps)
@@ -409,6 +417,7 @@ def _enthalpy_stage(model: EnergyModel, position: np.ndarray, pressure: float, c
         polish = polish_enthalpy(scaled, res.position, pressure, c.force_tol, c.pressure_rtol)
         if polish.result is not None:
             return replace(polish.result, steps=steps)
+        interval *= POLISH_GROWTH
 
 
 def jam_model_to_pressure(
