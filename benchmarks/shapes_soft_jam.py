@@ -117,7 +117,7 @@ def main() -> None:
     data = {name: np.full((len(kinds), len(args.n)), np.nan) for name in names}
     # untimed warm-up: numba compiles every kernel of the kinds on first use
     with tempfile.TemporaryDirectory() as tmp:
-        warm = argparse.Namespace(**{**vars(args), "pressure": 1e-3, "timeout": None})
+        warm = argparse.Namespace(**{**vars(args), "pressure": 1e-3})
         for kind in kinds:
             run_one(kind, 16, warm, Path(tmp))
     with tempfile.TemporaryDirectory() as tmp:
