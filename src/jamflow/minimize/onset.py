@@ -46,7 +46,7 @@ below 1e-25; the default ``force_tol = 1e-13`` gives ``F^2 <= 1e-26``. With
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -55,10 +55,13 @@ from .fire import (
     DEFAULT_FIRE,
     FireParameters,
     MinimizeResult,
+    _fire,
+    _fire_engine,
     minimize_enthalpy_model,
     minimize_fire,
 )
 from .model import EnergyModel
+from .newton import polish_enthalpy
 
 __all__ = ["FORCE_TOL_VANDERWERF", "MAX_STRAIN_STEP", "ONSET_METHODS", "JammingSettings", "bisect_to_pressure",
            "jam_model_to_pressure", "search_to_pressure"]
@@ -97,13 +100,28 @@ APPROACH_STRAIN_STEP: float = 0.0075
 RETURN_SHARE: float = 0.15
 
 
+#: FIRE steps of the enthalpy stage before the first try of the Newton polish
+#: (``JammingSettings.newton_polish``); after each failed try the interval grows by
+#: :data:`POLISH_GROWTH`. A failed try costs as much as a few hundred steps (Hessians and
+#: sparse solves), and FIRE may reach Newton's basin only after 10^5 steps (N = 480), so
+#: a fixed interval spent more on tries than it saved; growing by 1.25 the tries take at
+#: most 25 % more FIRE steps than needed, in ~20 tries up to 10^5 steps
+#: (docs/notes/shapes.md, "Newton polish of the enthalpy stage").
+POLISH_INTERVAL: int = 2000
+
+#: Growth of the interval between two tries of the Newton polish [1].
+POLISH_GROWTH: float = 1.25
+
+
 @dataclass(frozen=True)
 class JammingSettings:
     """Tolerances and budget of the jamming protocol (module doc; :func:`jam_model_to_pressure`).
 
     ``onset`` is one of :data:`ONSET_METHODS`; ``delta_phi`` is the first step in
     packing fraction of either; ``max_strain_step`` caps the search's steps (relative
-    change of the box length).
+    change of the box length). ``newton_polish`` lets the enthalpy stage end with Newton
+    iterations (:func:`jamflow.minimize.newton.polish_enthalpy`) once FIRE is close
+    enough (tried after :data:`POLISH_INTERVAL` steps, then at growing intervals), to the same tolerances.
     """
 
     force_tol: float = FORCE_TOL_VANDERWERF
@@ -116,6 +134,7 @@ class JammingSettings:
     box_dof: str = "isotropic"
     onset: str = "bisection"
     max_strain_step: float = MAX_STRAIN_STEP
+    newton_polish: bool = False
 
     def __post_init__(self) -> None:
         if self.onset not in ONSET_METHODS:
@@ -377,6 +396,30 @@ def search_to_pressure(
     return model, res, phi, bracket.slope, steps
 
 
+def _enthalpy_stage(model: EnergyModel, position: np.ndarray, pressure: float, c: JammingSettings,
+                    budget: int) -> MinimizeResult:
+    """Step 3: FIRE on ``U + P0 V``; with ``c.newton_polish`` the run pauses after :data:`POLISH_INTERVAL`
+    steps, then at intervals growing by :data:`POLISH_GROWTH`, for a Newton polish and ends with the first
+    one that succeeds (its ``steps`` are FIRE's)."""
+    if not c.newton_polish:
+        return minimize_enthalpy_model(model, position, pressure, c.force_tol, c.pressure_rtol, budget,
+                                       c.fire_params, c.box_dof)
+    engine = _fire_engine(model, model.dofs(position), c.fire_params, float(pressure), c.pressure_rtol, c.box_dof)
+    steps = 0
+    interval = float(POLISH_INTERVAL)
+    while True:
+        res = _fire(engine, c.force_tol, min(int(interval), budget - steps))
+        steps += res.steps
+        if res.converged or steps >= budget:
+            return replace(res, steps=steps)
+        scale = (res.box.volume / model.box.volume) ** (1.0 / model.box.d)
+        scaled, _ = model.rescaled(scale, res.position)
+        polish = polish_enthalpy(scaled, res.position, pressure, c.force_tol, c.pressure_rtol)
+        if polish.result is not None:
+            return replace(polish.result, steps=steps)
+        interval *= POLISH_GROWTH
+
+
 def jam_model_to_pressure(
     model: EnergyModel,
     position: np.ndarray,
@@ -412,8 +455,7 @@ def jam_model_to_pressure(
             c.max_steps, c.fire_params, progress, history,
         )
     if model.box_dofs:
-        final = minimize_enthalpy_model(model, res.position, pressure, c.force_tol, c.pressure_rtol,
-                                        c.max_steps - steps, c.fire_params, c.box_dof)
+        final = _enthalpy_stage(model, res.position, pressure, c, c.max_steps - steps)
         return model, final, history, steps + final.steps
     if c.onset == "search":
         # first step: the pressure window of the loose stage, on its slope

@@ -7,7 +7,10 @@ their moments of inertia), to within ``bisection_rtol`` of ``P0``; then the enth
 ``U + P0 V`` is minimised with an isotropic barostat (the compiled engine of
 :mod:`jamflow.models.shapes.fast`) until ``|P - P0| <= pressure_rtol P0`` with
 ``max_i sqrt(F_i^2 + (tau_i / l)^2) <= force_tol`` (``l`` the mean bounding diameter,
-:meth:`ShapeModel.max_force`). The box keeps its shape; shapes are never rescaled, so
+:meth:`ShapeModel.max_force`); that stage ends with Newton iterations on the enthalpy
+once FIRE is close enough (:mod:`jamflow.minimize.newton`: the quartic modes of
+hypostatic packings, stiffness ~ P0, cost FIRE most of its steps), to the same
+tolerances and only at a minimum. The box keeps its shape; shapes are never rescaled, so
 the packing fraction is the search variable.
 """
 
@@ -91,14 +94,15 @@ def jam_shapes(packing: Packing, pressure: float, settings: JammingSettings = Ja
     start = np.column_stack([packing.position, packing.orientation])
     model.check_cores(model.dofs(start))
     model, final, history, steps = jam_model_to_pressure(model, start, packing.packing_fraction, pressure,
-                                                         replace(settings, box_dof="isotropic"), progress)
+                                                         replace(settings, box_dof="isotropic", newton_polish=True),
+                                                         progress)
     # the enthalpy stage ends in a scaled box: the packing is that box's
     model = ShapeModel(final.box, model.shapes, model.shape_index, model.k, model.mass, rotations=rotations)
     c = settings
     params = {"pressure": pressure, "force_tol": c.force_tol, "pressure_rtol": c.pressure_rtol,
               "bisection_rtol": c.bisection_rtol, "bisection_force_factor": c.bisection_force_factor,
               "fire": c.fire_params.as_dict(), "family": model.family, "rotations": int(rotations),
-              "onset": c.onset, "delta_phi": c.delta_phi}
+              "onset": c.onset, "delta_phi": c.delta_phi, "newton_polish": 1}
     attrs = {"steps": steps, "bisection_steps": len(history["phi"]), "onset_method": c.onset,
              "converged": int(final.converged),
              "max_generalized_force": final.max_force}

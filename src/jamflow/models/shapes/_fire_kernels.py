@@ -25,24 +25,45 @@ from ...minimize._fire_kernels import (
     _mixed,
 )
 from ...neighbors._verlet_kernels import _inline_list, _list_buffers, _needs_rebuild
-from ._kernels import circulo_pair_rotated, dumbbell_pair, ellipse_terms, reuleaux_pair
-
-#: Family codes of the loop (the order of :data:`jamflow.models.shapes.model.SHAPE_FAMILIES`).
-CIRCULO, ELLIPSE, REULEAUX, DUMBBELL = 0, 1, 2, 3
+from ._kernels import (
+    CIRCULO,
+    ELLIPSE,
+    REULEAUX,
+    _ellipse_matrix,
+    circulo_pair_rotated,
+    dumbbell_pair,
+    ellipse_terms_matrices,
+    reuleaux_pair,
+)
 
 
 @njit(cache=True, inline="always")
-def _pair(family, dx0, dx1, ti, tj, pa, pb, k, g, lam, p):
-    """Energy of one pair of a family other than circulo, gradient added to ``g``; an ellipse pair updates ``lam[p]``.
+def _pair(family, dx0, dx1, ti, tj, pa, pb, k, g):
+    """Energy of one Reuleaux or dumbbell pair, gradient added to ``g``.
 
-    Circulo pairs take their bodies' cosines and sines instead (:func:`shape_forces`).
+    Circulo and ellipse pairs take per-body terms of their orientations instead (:func:`shape_forces`).
     """
-    if family == ELLIPSE:
-        e, lam[p] = ellipse_terms(dx0, dx1, ti, tj, pa, pb, k, g, lam[p])
-        return e
     if family == REULEAUX:
         return reuleaux_pair(dx0, dx1, ti, tj, pa, pb, k, g)
     return dumbbell_pair(dx0, dx1, ti, tj, pa, pb, k, g)
+
+
+@njit(cache=True)
+def _body_terms(y, family, params):
+    """Per-body functions of the orientation used by every pair of the body, shape (N, 3).
+
+    Circulo: ``cos, sin`` of the orientation; ellipse: the shape matrix ``R diag(a^2, b^2) R^T``
+    (entries xx, xy, yy); other families none (zero rows).
+    """
+    n = y.shape[0] if family == CIRCULO or family == ELLIPSE else 0
+    out = np.zeros((n, 3))
+    for i in range(n):
+        if family == CIRCULO:
+            out[i, 0] = np.cos(y[i, 2])
+            out[i, 1] = np.sin(y[i, 2])
+        else:
+            out[i, 0], out[i, 1], out[i, 2] = _ellipse_matrix(params[i, 0], params[i, 1], y[i, 2])
+    return out
 
 
 @njit(cache=True)
@@ -50,8 +71,9 @@ def shape_forces(y, s, offset, pi, pj, family, params, bound, lam, k, force, vir
     """Energy, generalised forces ``-dU/d(x, y, theta)`` (N, 3) and virial of the listed pairs.
 
     Pairs whose bounding circles (radii ``bound``) do not overlap are skipped;
-    circulo bodies have their orientations' cosines and sines computed once per body. The
-    virial is ``-sum dU/dx_j[a] dx[b]`` (:func:`._kernels.pair_sum`). Returns the energy
+    circulo and ellipse bodies have the terms of their orientations computed once per
+    body (:func:`_body_terms`); an ellipse pair updates its Perram–Wertheim multiplier
+    ``lam[p]``. The virial is ``-sum dU/dx_j[a] dx[b]`` (:func:`._kernels.pair_sum`). Returns the energy
     and the number of interacting pairs.
     """
     for i in range(force.shape[0]):
@@ -62,11 +84,7 @@ def shape_forces(y, s, offset, pi, pj, family, params, bound, lam, k, force, vir
     energy = 0.0
     n_contact = 0
     g = np.zeros(6)
-    circulo = family == CIRCULO
-    trig = np.empty((force.shape[0] if circulo else 0, 2))
-    for i in range(trig.shape[0]):
-        trig[i, 0] = np.cos(y[i, 2])
-        trig[i, 1] = np.sin(y[i, 2])
+    body = _body_terms(y, family, params)
     for p in range(pi.shape[0]):
         a = pi[p]
         b = pj[p]
@@ -76,11 +94,14 @@ def shape_forces(y, s, offset, pi, pj, family, params, bound, lam, k, force, vir
         if dx0 * dx0 + dx1 * dx1 >= reach * reach:
             continue
         g[:] = 0.0
-        if circulo:
-            e = circulo_pair_rotated(dx0, dx1, trig[a, 0], trig[a, 1], trig[b, 0], trig[b, 1], params[a], params[b],
+        if family == CIRCULO:
+            e = circulo_pair_rotated(dx0, dx1, body[a, 0], body[a, 1], body[b, 0], body[b, 1], params[a], params[b],
                                      k, g)
+        elif family == ELLIPSE:
+            e, lam[p] = ellipse_terms_matrices(dx0, dx1, np.sqrt(dx0 * dx0 + dx1 * dx1), body[a, 0], body[a, 1],
+                                               body[a, 2], body[b, 0], body[b, 1], body[b, 2], k, g, lam[p])
         else:
-            e = _pair(family, dx0, dx1, y[a, 2], y[b, 2], params[a], params[b], k, g, lam, p)
+            e = _pair(family, dx0, dx1, y[a, 2], y[b, 2], params[a], params[b], k, g)
         if e > 0.0:
             energy += e
             n_contact += 1

@@ -21,6 +21,12 @@ import numpy as np
 
 from ..._numba import njit
 
+#: Family codes of the compiled kernels (the order of :data:`jamflow.models.shapes.model.SHAPE_FAMILIES`).
+CIRCULO, ELLIPSE, REULEAUX, DUMBBELL = 0, 1, 2, 3
+
+#: Family code of each model family.
+FAMILY_CODES: dict[str, int] = {"circulo": CIRCULO, "ellipse": ELLIPSE, "reuleaux": REULEAUX, "dumbbell": DUMBBELL}
+
 #: Complex step [length or rad]: far below round-off of any coordinate, so the
 #: derivative carries no truncation error (the real part is untouched).
 COMPLEX_STEP: float = 1e-30
@@ -199,6 +205,12 @@ def perram_wertheim(dx0, dx1, ti, tj, pi, pj, lam0=-1.0):
     """
     axx, axy, ayy = _ellipse_matrix(pi[0], pi[1], ti)
     bxx, bxy, byy = _ellipse_matrix(pj[0], pj[1], tj)
+    return perram_wertheim_matrices(dx0, dx1, axx, axy, ayy, bxx, bxy, byy, lam0)
+
+
+@njit(cache=True, inline="always")
+def perram_wertheim_matrices(dx0, dx1, axx, axy, ayy, bxx, bxy, byy, lam0):
+    """:func:`perram_wertheim` from the two shape matrices ``A``, ``B`` (entries xx, xy, yy; :func:`_ellipse_matrix`)."""
     dxx = bxx - axx
     dxy = bxy - axy
     dyy = byy - ayy
@@ -252,13 +264,20 @@ def ellipse_terms(dx0, dx1, ti, tj, pi, pj, k, g, lam0):
     r = np.sqrt(dx0 * dx0 + dx1 * dx1)
     if r.real >= (pi[0] + pj[0]).real:
         return 0.0 * dx0, -1.0 + 0.0 * dx0
-    f, lam, s0, s1 = perram_wertheim(dx0, dx1, ti, tj, pi, pj, lam0)
+    axx, axy, ayy = _ellipse_matrix(pi[0], pi[1], ti)
+    bxx, bxy, byy = _ellipse_matrix(pj[0], pj[1], tj)
+    return ellipse_terms_matrices(dx0, dx1, r, axx, axy, ayy, bxx, bxy, byy, k, g, lam0)
+
+
+@njit(cache=True, inline="always")
+def ellipse_terms_matrices(dx0, dx1, r, axx, axy, ayy, bxx, bxy, byy, k, g, lam0):
+    """:func:`ellipse_terms` of a pair whose bounding circles overlap, from ``r = |dx|`` and the shape matrices
+    ``A``, ``B`` (:func:`_ellipse_matrix`; a loop computes them once per body)."""
+    f, lam, s0, s1 = perram_wertheim_matrices(dx0, dx1, axx, axy, ayy, bxx, bxy, byy, lam0)
     if f.real >= 1.0:
         return 0.0 * dx0, lam
     root = np.sqrt(f)
     delta = r / root - r
-    axx, axy, ayy = _ellipse_matrix(pi[0], pi[1], ti)
-    bxx, bxy, byy = _ellipse_matrix(pj[0], pj[1], tj)
     w = lam * (1.0 - lam)
     df0 = 2.0 * w * s0
     df1 = 2.0 * w * s1
@@ -285,12 +304,25 @@ def ellipse_pair(dx0, dx1, ti, tj, pi, pj, k, g):
     return ellipse_terms(dx0, dx1, ti, tj, pi, pj, k, g, -1.0)[0]
 
 
-# not cached: a cached kernel that takes a jitted function (the family's pair kernel) as
-# an argument corrupts numba's cache index across processes ("underlying object has
-# vanished", numba issue #2956); seen when two jamflow processes shared the cache
-@njit
-def pair_sum(pair, i, j, dx, theta, params, k, grad, virial):
-    """Energy, gradient ``(N, 3)`` (x, y, theta) and virial of all listed pairs.
+@njit(cache=True, inline="always")
+def _family_pair(family, dx0, dx1, ti, tj, pi, pj, k, g):
+    """The pair kernel of a family code (:data:`FAMILY_CODES`)."""
+    if family == CIRCULO:
+        return circulo_pair(dx0, dx1, ti, tj, pi, pj, k, g)
+    if family == ELLIPSE:
+        return ellipse_pair(dx0, dx1, ti, tj, pi, pj, k, g)
+    if family == REULEAUX:
+        return reuleaux_pair(dx0, dx1, ti, tj, pi, pj, k, g)
+    return dumbbell_pair(dx0, dx1, ti, tj, pi, pj, k, g)
+
+
+# the pair kernel is chosen by a family code (_family_pair), not passed: a cached kernel that
+# takes a jitted function as an argument corrupts numba's cache index across processes
+# (numba issue #2956), and an uncached one compiles for seconds in every process
+@njit(cache=True)
+def pair_sum(family, i, j, dx, theta, params, k, grad, virial):
+    """Energy, gradient ``(N, 3)`` (x, y, theta) and virial of all listed pairs of a family (code of
+    :data:`FAMILY_CODES`).
 
     ``virial[a, b] = -sum dU/dx_j[a] dx[b]`` [energy]: ``sum f r_a r_b / r`` for
     central forces, so that the pressure is ``tr W / (2 V)``. Returns the energy and
@@ -303,7 +335,7 @@ def pair_sum(pair, i, j, dx, theta, params, k, grad, virial):
         a = i[p]
         b = j[p]
         g[:] = 0.0
-        e = pair(dx[p, 0], dx[p, 1], theta[a], theta[b], params[a], params[b], k, g)
+        e = _family_pair(family, dx[p, 0], dx[p, 1], theta[a], theta[b], params[a], params[b], k, g)
         if e > 0.0:
             n += 1
             energy += e
@@ -316,15 +348,16 @@ def pair_sum(pair, i, j, dx, theta, params, k, grad, virial):
     return energy, n
 
 
-# not cached: a cached kernel that takes a jitted function (the family's pair kernel) as
-# an argument corrupts numba's cache index across processes ("underlying object has
-# vanished", numba issue #2956); seen when two jamflow processes shared the cache
-@njit
-def pair_hessian_blocks(pair, i, j, dx, theta, params, k, h):
-    """Complex-step Hessian blocks ``d^2 U / dq dq`` of every listed pair, shape (P, 6, 6).
+# chosen by a family code, not by passing the pair kernel: a cached kernel that takes a
+# jitted function as an argument corrupts numba's cache index across processes (numba
+# issue #2956), and an uncached one compiles for seconds in every process
+@njit(cache=True)
+def pair_hessian_blocks(family, i, j, dx, theta, params, k, h):
+    """Complex-step Hessian blocks ``d^2 U / dq dq`` of every listed pair of a family, shape (P, 6, 6).
 
-    Local order ``(x_i, y_i, theta_i, x_j, y_j, theta_j)``; each column is
-    ``Im g(q + i h e_m) / h`` of the analytic pair gradient ``g``.
+    ``family`` is a code of :data:`FAMILY_CODES`. Local order ``(x_i, y_i, theta_i,
+    x_j, y_j, theta_j)``; each column is ``Im g(q + i h e_m) / h`` of the analytic pair
+    gradient ``g``.
     """
     out = np.zeros((i.size, 6, 6))
     g = np.zeros(6, dtype=np.complex128)
@@ -353,7 +386,7 @@ def pair_hessian_blocks(pair, i, j, dx, theta, params, k, h):
             else:
                 tb += 1j * h
             g[:] = 0.0
-            pair(d0, d1, ta, tb, pa, pb, k, g)
+            _family_pair(family, d0, d1, ta, tb, pa, pb, k, g)
             for c in range(6):
                 out[p, c, m] = g[c].imag / h
     return out
@@ -475,17 +508,16 @@ def circulo_crossed_pairs(i, j, dx, theta, params):
     return out
 
 
-# not cached: a cached kernel that takes a jitted function (the family's pair kernel) as
-# an argument corrupts numba's cache index across processes ("underlying object has
-# vanished", numba issue #2956); seen when two jamflow processes shared the cache
-@njit
-def pair_table(pair, i, j, dx, theta, params, k):
-    """Energy and gradient ``(x_i, y_i, theta_i, x_j, y_j, theta_j)`` of every listed pair, shape (P, 7)."""
+@njit(cache=True)
+def pair_table(family, i, j, dx, theta, params, k):
+    """Energy and gradient ``(x_i, y_i, theta_i, x_j, y_j, theta_j)`` of every listed pair of a family
+    (code of :data:`FAMILY_CODES`), shape (P, 7)."""
     out = np.zeros((i.size, 7))
     g = np.zeros(6)
     for p in range(i.size):
         g[:] = 0.0
-        out[p, 0] = pair(dx[p, 0], dx[p, 1], theta[i[p]], theta[j[p]], params[i[p]], params[j[p]], k, g)
+        out[p, 0] = _family_pair(family, dx[p, 0], dx[p, 1], theta[i[p]], theta[j[p]], params[i[p]], params[j[p]],
+                                 k, g)
         out[p, 1:] = g
     return out
 

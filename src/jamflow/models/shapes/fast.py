@@ -11,15 +11,13 @@ from ...minimize import _fire_kernels
 from ...minimize.fire import FireParameters, MinimizeResult, _fire_params
 from ...minimize.model import pressure_of
 from . import _fire_kernels as _loop
+from ._kernels import FAMILY_CODES
 
 if TYPE_CHECKING:
     from .model import ShapeModel
 
 __all__ = ["FAMILY_CODES", "ShapeFire"]
 
-#: Family code of each model family in the compiled loop.
-FAMILY_CODES: dict[str, int] = {"circulo": _loop.CIRCULO, "ellipse": _loop.ELLIPSE, "reuleaux": _loop.REULEAUX,
-                                "dumbbell": _loop.DUMBBELL}
 
 
 class ShapeFire:
@@ -77,7 +75,7 @@ class ShapeFire:
         if self.pairs is None or rebuild:
             self._build()
         pi, pj, offset, lam = self.pairs
-        status, n, _, _, _, _, builds, pi, pj, offset, lam, self.s_build = _loop.shape_fire(
+        status, n, *last, builds, pi, pj, offset, lam, self.s_build = _loop.shape_fire(
             self.y, self.v, self.box_state, self.fire_state, self.fparams, self.inv_mass, offset, pi, pj, lam,
             self.family, m.params, self.bound, m.k, m.torque_arm, m.rotations, self.y_build, self.s_build,
             m.nlist.reach, m.nlist.skin, self.lengths, m.bounding_diameter, self.barostat, self.pressure0,
@@ -85,11 +83,30 @@ class ShapeFire:
         )
         self.pairs = (pi, pj, offset, lam)
         self.inline_builds += builds
+        if status != _fire_kernels.REBUILD:
+            # energy, interacting pairs, largest squared generalised force, pressure at the present state
+            self.last = tuple(last)
         return status, n
 
     def result(self, steps: int, calls: int, status: int) -> MinimizeResult:
-        """The run's outcome, energy, pressure and largest generalised force from one evaluation of the final state."""
+        """The run's outcome: energy, pressure and largest generalised force of the loop's last evaluation,
+        which is of the final state (the loop evaluates before it stops)."""
         s = float(self.box_state[2])
+        if status == _fire_kernels.REBUILD:
+            # the budget ran out at a rebuild, before the loop evaluated the state
+            return self._evaluated(s, steps, status)
+        config = self.y.copy()
+        config[:, :2] *= s
+        energy, n_contact, fmax2, pressure = self.last
+        return MinimizeResult(
+            position=config, box=self.model.box.scaled(s) if self.barostat else self.model.box, energy=float(energy),
+            pressure=float(pressure), max_force=float(np.sqrt(fmax2)), n_contacts=int(n_contact), steps=steps,
+            converged=status == _fire_kernels.CONVERGED,
+            rebuilds=self.model.nlist.builds - self.builds0 + self.inline_builds, evaluations=steps + 1,
+        )
+
+    def _evaluated(self, s: float, steps: int, status: int) -> MinimizeResult:
+        """:meth:`result` from one evaluation of the model at the present state."""
         model, config = self.model.rescaled(s, self.y) if self.barostat else (self.model, self.y.copy())
         q = model.dofs(config)
         ev = model.evaluate(q)

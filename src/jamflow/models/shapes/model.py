@@ -142,6 +142,7 @@ class ShapeModel(WithoutFastPaths):
         self.torque_arm = float(self.bounding_diameter.mean())
         self.time_unit = self.torque_arm * np.sqrt(self.mass / (self.k * self.torque_arm**2))
         self._pair = _PAIR[self.family]
+        self._code = _kernels.FAMILY_CODES[self.family]
         self.rotations = bool(rotations)
         self.constrained = not self.rotations
 
@@ -181,7 +182,7 @@ class ShapeModel(WithoutFastPaths):
         i, j, dx, theta = self._pairs(q)
         grad = np.zeros((self.n, 3))
         virial = np.zeros((2, 2))
-        energy, n = _kernels.pair_sum(self._pair, i, j, dx, theta, self.params, self.k, grad, virial)
+        energy, n = _kernels.pair_sum(self._code, i, j, dx, theta, self.params, self.k, grad, virial)
         return ModelEvaluation(float(energy), np.concatenate([grad[:, :2].ravel(), grad[:, 2]]), virial, int(n))
 
     def pair_table(self, q: NDArray[np.float64]) -> dict[str, NDArray]:
@@ -195,7 +196,7 @@ class ShapeModel(WithoutFastPaths):
             minimum-image ``x_j - x_i`` [length].
         """
         i, j, dx, theta = self._pairs(q)
-        table = _kernels.pair_table(self._pair, i, j, dx, theta, self.params, self.k)
+        table = _kernels.pair_table(self._code, i, j, dx, theta, self.params, self.k)
         keep = table[:, 0] > 0.0
         order = np.lexsort((j[keep], i[keep]))
         return {"i": i[keep][order], "j": j[keep][order], "energy": table[keep, 0][order],
@@ -285,7 +286,7 @@ class ShapeModel(WithoutFastPaths):
     def hessian(self, q: NDArray[np.float64]) -> sp.csr_matrix:
         """``d^2 U / dq dq`` (complex-step of the analytic gradient), shape ``(3N, 3N)``."""
         i, j, dx, theta = self._pairs(q)
-        blocks = _kernels.pair_hessian_blocks(self._pair, i, j, dx, theta, self.params, self.k,
+        blocks = _kernels.pair_hessian_blocks(self._code, i, j, dx, theta, self.params, self.k,
                                               _kernels.COMPLEX_STEP)
         n = self.n
         index = np.stack([2 * i, 2 * i + 1, 2 * n + i, 2 * j, 2 * j + 1, 2 * n + j], axis=1)

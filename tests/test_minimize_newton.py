@@ -1,0 +1,49 @@
+"""Newton polish of the enthalpy (jamflow.minimize.newton) against FIRE on the same shaped packing."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from jamflow.minimize.fire import DEFAULT_FIRE, _fire
+from jamflow.minimize.newton import polish_enthalpy
+from jamflow.models.shapes.model import ShapeModel
+from jamflow.shapes import bidisperse_shapes, random_shape_packing, unit_shape
+
+P0 = 1e-4
+
+
+def _squeezed(family):
+    p = random_shape_packing(bidisperse_shapes(unit_shape(family, asphericity=1.3)), 24, 0.4, 3)
+    return ShapeModel(p.box, p.shapes, p.shape_index).rescaled(0.75, np.column_stack([p.position, p.orientation]))
+
+
+@pytest.mark.parametrize("family", ["ellipse", "circulo-line"])
+def test_polish_ends_where_fire_ends(family):
+    """FIRE on U + P0 V to 1e-9, then Newton: the tolerances hold in a fresh model of the final box, and the
+    box, energy, configuration and contacts are those of FIRE run to the same tolerance from the same start."""
+    model, c = _squeezed(family)
+    q = model.dofs(c)
+    loose = _fire(model.fire_engine(q, DEFAULT_FIRE, P0, 1e-6), 1e-9, 500_000)
+    scale = (loose.box.volume / model.box.volume) ** 0.5
+    polished = polish_enthalpy(model.rescaled(scale, loose.position)[0], loose.position, P0, 1e-13, 1e-6)
+    assert polished.result is not None and 1 <= polished.iterations <= 8
+    res = polished.result
+    final = ShapeModel(res.box, model.shapes, model.shape_index)
+    ev = final.evaluate(final.dofs(res.position))
+    assert final.max_force(ev.gradient) <= 1e-13
+    assert abs(np.trace(ev.virial) / (2.0 * res.box.volume) - P0) <= 1e-6 * P0
+    fire = _fire(model.fire_engine(q, DEFAULT_FIRE, P0, 1e-6), 1e-13, 1_000_000)
+    assert fire.converged and ev.n_contacts == fire.n_contacts
+    # the same minimum (measured: volumes to 6e-13, energies to 6e-9, centres and angles to 4e-8)
+    assert abs(res.box.volume / fire.box.volume - 1.0) <= 1e-11
+    assert abs(ev.energy / fire.energy - 1.0) <= 1e-7
+    np.testing.assert_allclose(res.position, fire.position, rtol=0, atol=1e-6)
+
+
+def test_polish_leaves_a_state_far_from_the_minimum_alone():
+    """From the squeezed start (forces ~1e-1, P ~ 1e2 P0) Newton leaves the quadratic basin: no result."""
+    model, c = _squeezed("ellipse")
+    ev = model.evaluate(model.dofs(c))
+    assert model.max_force(ev.gradient) > 1e-3
+    assert polish_enthalpy(model, c, P0, 1e-13, 1e-6).result is None
