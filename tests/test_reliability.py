@@ -558,13 +558,19 @@ def test_ctrl_c_is_one_line_exit_130_and_no_output(tmp_path, after):
     start = tmp_path / "s.nc"
     write_packing(random_packing(2000, 3, 0.3, "mono", 3), start)
     out = tmp_path / "o.nc"
+    # Ctrl-C of a foreground command: a suite started in the background (`pytest &`, nohup)
+    # hands its children SIGINT ignored, which the command rightly keeps, so reset it here
     proc = subprocess.Popen([sys.executable, "-m", "jamflow", "ls", str(start), str(out), "--growth-rate", "1e-6",
-                             "--p-target", "1e12", "--quiet"], stderr=subprocess.PIPE, text=True)
-    while proc.poll() is None and not _started_its_kernels(proc.pid):
-        time.sleep(0.01)
-    time.sleep(after)
-    proc.send_signal(signal.SIGINT)
-    err = proc.communicate(timeout=600)[1]
+                             "--p-target", "1e12", "--quiet"], stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        while proc.poll() is None and not _started_its_kernels(proc.pid):
+            time.sleep(0.01)
+        time.sleep(after)
+        proc.send_signal(signal.SIGINT)
+        err = proc.communicate(timeout=600)[1]
+    finally:
+        proc.kill()
     assert proc.returncode == 130, err
     assert err.count("\n") == 1 and "interrupted (Ctrl-C)" in err and "Traceback" not in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.nc"]
