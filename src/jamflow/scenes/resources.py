@@ -51,9 +51,11 @@ COST: dict[str, Cost] = {
                                        "needs 44x more LPs (216 s against 4.9 s at N = 1024)"),
     "certify": Cost(1683.0, 4096, 3.0, "3D N = 4096 from soft jamming: 1683 s, the collective LP by dual simplex"),
     "soft-jam": Cost(1325.0, 4096, 2.0, "FIRE to P0 = 1e-8: 2D N = 1024 in 30 s, 3D N = 4096 in 1325 s; (d/3)^2"),
-    "soft-jam:shapes": Cost(60.0, 32, 2.0, "2D shapes to P0 = 1e-5..1e-7: ~1 CPU-min per N = 32 circulo-line "
-                                           "packing (vanderwerf-fig10-11), 2-4 min wall per N = 16 ellipse packing "
-                                           "on loaded cores (vanderwerf-fig5); the N^2 is assumed"),
+    "soft-jam:shapes": Cost(100.0, 480, 1.7, "2D shapes, whole soft-jam: N = 480 ellipses (A = 1.1) to P0 = 1e-9 "
+                                             "in 97 CPU-s; N^1.6-1.7 between N = 100 and 480 at P0 = 1e-6 "
+                                             "(ellipses 5.5 -> 68 s, circulo-lines 6.5 -> 93 s); circulo-polygons and "
+                                             "Reuleaux triangles at N = 100 ran over 73-126 s unfinished, so "
+                                             "theirs is a floor"),
     "soft-jam:linked": Cost(20.0, 150, 2.0, "projected FIRE bisection: 50 3D trimers (N = 150) in 33 s wall loaded "
                                             "(chains-fig2), 32 dimers in 17 s (vanderwerf-fig3b); the N^2 is assumed"),
     "minimize": Cost(300.0, 4096, 2.0, "a fixed-box FIRE minimisation: a quarter of soft-jam's bisection"),
