@@ -167,6 +167,7 @@ def leave_linked_saddle(model: LinkedSpheresModel, final: MinimizeResult, templa
     final, steps, kicks = kick_off_saddle(final, shortfall, reminimize, seed, pressure)
     return state["model"], final, steps, kicks
 
+
 def jam_linked(
     packing: Packing,
     pressure: float | None,
