@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from jamflow.minimize.fire import DEFAULT_FIRE, _fire
-from jamflow.minimize.newton import polish_enthalpy
+from jamflow.minimize.newton import polish_enthalpy, positive_semidefinite
 from jamflow.models.shapes.model import ShapeModel
 from jamflow.shapes import bidisperse_shapes, random_shape_packing, unit_shape
 
@@ -47,3 +48,17 @@ def test_polish_leaves_a_state_far_from_the_minimum_alone():
     ev = model.evaluate(model.dofs(c))
     assert model.max_force(ev.gradient) > 1e-3
     assert polish_enthalpy(model, c, P0, 1e-13, 1e-6).result is None
+
+
+def test_the_inertia_check_agrees_with_dense_eigenvalues_and_survives_a_zero_pivot():
+    # [[1, 1], [1, 1]] has eigenvalues 0 and 2 and a zero second pivot (SuperLU raises)
+    assert positive_semidefinite(sp.csc_matrix(np.ones((2, 2))))
+    assert not positive_semidefinite(sp.csc_matrix(np.array([[1.0, 2.0], [2.0, 1.0]])))
+    # sparse symmetric matrices whose lowest eigenvalue is +-1e-3 of an O(1) spectrum
+    rng = np.random.default_rng(0)
+    signs = rng.permutation(np.repeat([-1.0, 1.0], 20))
+    for sign in signs:
+        b = rng.standard_normal((12, 12)) * (rng.random((12, 12)) < 0.3)
+        g = b @ b.T
+        a = g - (np.linalg.eigvalsh(g)[0] - sign * 1e-3) * np.eye(12)
+        assert positive_semidefinite(sp.csc_matrix(a)) == (sign > 0)

@@ -34,7 +34,7 @@ from .fire import MinimizeResult
 from .model import EnergyModel, pressure_of
 
 __all__ = ["NEGATIVE_CURVATURE", "NEWTON_GROWTH", "NEWTON_ITERATIONS", "NEWTON_SHIFT", "SCALE_STEP", "NewtonPolish",
-           "polish_enthalpy"]
+           "polish_enthalpy", "positive_semidefinite"]
 
 #: Relative step of the box scale in the central differences of the border [1]: far
 #: below the overlaps of a packing at P0 >= 1e-12 relative to the centre distances, so no
@@ -112,21 +112,29 @@ def _bordered_hessian(model: EnergyModel, x: NDArray[np.float64], q: NDArray[np.
 
 
 def _is_minimum(model: EnergyModel, x: NDArray[np.float64], q: NDArray[np.float64], pressure0: float) -> bool:
-    """Whether no eigenvalue of the bordered Hessian lies below ``-NEGATIVE_CURVATURE`` of its largest diagonal entry.
-
-    Sylvester's law of inertia: the bordered Hessian shifted up by that margin is factorised
-    ``P A P^T = L U`` with diagonal pivots only (sparse LU in symmetric mode); the number of
-    negative pivots is its number of negative eigenvalues. When the factorisation had to
-    pivot off the diagonal, the dense eigenvalues decide.
-    """
+    """Whether no eigenvalue of the bordered Hessian lies below ``-NEGATIVE_CURVATURE`` of its
+    largest diagonal entry: the Hessian shifted up by that margin is :func:`positive_semidefinite`."""
     a = _bordered_hessian(model, x, q, pressure0)
     a = 0.5 * (a + a.T)
     margin = NEGATIVE_CURVATURE * float(np.abs(a.diagonal()).max())
-    shifted = (a + margin * sp.identity(a.shape[0])).tocsc()
-    lu = sla.splu(shifted, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
-    if np.array_equal(lu.perm_r, lu.perm_c):
+    return positive_semidefinite((a + margin * sp.identity(a.shape[0])).tocsc())
+
+
+def positive_semidefinite(a: sp.csc_matrix) -> bool:
+    """Whether the symmetric sparse matrix ``a`` has no negative eigenvalue.
+
+    Sylvester's law of inertia on ``P a P^T = L U`` with diagonal pivots only (SuperLU in
+    symmetric mode): the number of negative pivots is the number of negative eigenvalues.
+    When SuperLU pivots off the diagonal or meets an exactly zero pivot, the dense
+    eigenvalues decide.
+    """
+    try:
+        lu = sla.splu(a, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+    except RuntimeError:
+        lu = None
+    if lu is not None and np.array_equal(lu.perm_r, lu.perm_c):
         return not bool(np.any(lu.U.diagonal() < 0.0))
-    return bool(np.linalg.eigvalsh(shifted.toarray())[0] >= 0.0)
+    return bool(np.linalg.eigvalsh(a.toarray())[0] >= 0.0)
 
 
 def polish_enthalpy(model: EnergyModel, config: NDArray[np.float64], pressure0: float, force_tol: float,
