@@ -145,14 +145,15 @@ def leave_linked_saddle(model: LinkedSpheresModel, final: MinimizeResult, templa
     state = {"model": model}
 
     def shortfall(res: MinimizeResult) -> int:
+        m = state["model"]
         x = res.box.wrap(res.position)
-        contacts, f, count = _linked_count(model, x, res.box, shear_stabilized)
+        contacts, f, count = _linked_count(m, x, res.box, shear_stabilized)
         missing = count.isostatic_count - count.n_contacts if count.isostatic_count else 0
         if missing <= 0:
             return 0
-        at = template.evolve(position=x, box=res.box, diameter=model.diameter, links=model.links, contacts=contacts,
+        at = template.evolve(position=x, box=res.box, diameter=m.diameter, links=m.links, contacts=contacts,
                              force=f, rattler=count.rattler)
-        w = constrained_hessian(at, model.potential, strain=shear_stabilized).eigenvalues
+        w = constrained_hessian(at, m.potential, strain=shear_stabilized).eigenvalues
         return missing if w.min() < -ZERO_MODE_RTOL * np.abs(w).max() else 0
 
     def reminimize(res: MinimizeResult, kick: np.ndarray) -> tuple[MinimizeResult, int]:
