@@ -16,7 +16,9 @@ code  meaning
 
 Ctrl-C during start-up is one line too: until :func:`main` runs, the handler that
 ``jamflow/__init__.py`` installs for the command line ends the process; inside it the
-imports of the command's modules and the compilation of kernels are covered.
+imports of the command's modules and the compilation of kernels are covered, and a
+Ctrl-C that a compiled extension's callback swallows is raised again
+(:mod:`jamflow.cli.ctrl_c`).
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ from ..presets import preset_options
 from ..provenance import jamflow_version
 from ..stages import STAGES, refusal
 from .common import path_arguments
+from .ctrl_c import catching_ctrl_c
 from .types import UsageError
 
 #: Topic modules of this package that contribute subcommands.
@@ -157,7 +160,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     name = f"jamflow {words[0]}" if words and words[0] in COMMAND_MODULE else "jamflow"
     _restore_ctrl_c()
     try:
-        return _run(build_parser(words[0] if words else None), argv)
+        with catching_ctrl_c():
+            return _run(build_parser(words[0] if words else None), argv)
     except UsageError as exc:
         print(f"{name}: error: {_one_line(exc)} (see {name} --help)", file=sys.stderr)
         return 2
