@@ -141,6 +141,20 @@ def test_aspect_ratio_10_in_a_box_too_small_is_refused_in_one_line(tmp_path, cap
     assert not out.exists()
 
 
+def test_aspect_ratio_10_whose_box_shrinks_below_the_bodies_is_refused_in_one_line(tmp_path, capsys):
+    """32 ellipses of aspect ratio 10 fit at phi = 0.3 (box 9.28 against bounding diameters up to
+    3.69), but compression shrinks the box below twice that long before jamming: soft-jam stops in
+    one line as soon as it does (a few compression steps), nothing written."""
+    src, out = tmp_path / "s.nc", tmp_path / "j.nc"
+    assert main(["init-shapes", str(src), "--shape", "ellipse", "--aspect-ratio", "10", "--n", "32", "--seed", "1",
+                 "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["soft-jam", str(src), str(out), "--pressure", "1e-4", "--delta-phi", "1e-2", "--quiet"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "box too small for the largest particles" in err[0]
+    assert not out.exists()
+
+
 @pytest.fixture(scope="module")
 def ellipse_sweep():
     """16 ellipses of A = 1.1 (the start of tests/test_shapes_jamming.py) jammed to every P0 of the sweep."""
