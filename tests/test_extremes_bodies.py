@@ -83,9 +83,11 @@ def check_shapes(result, p0: float, settings: JammingSettings, quartic: bool = T
 
 
 def check_linked(result, p0: float, settings: JammingSettings, shear_stabilized: bool = False,
-                 below_excess: bool = True) -> dict:
+                 below_excess: bool = True, chain_length: int = 30) -> dict:
     """The physics of a jammed linked packing (module doc); ``below_excess``: ``P0`` low enough
-    for no excess contact, so the packing is isostatic or hypostatic and stable."""
+    for no excess contact, so the packing is isostatic or hypostatic and stable; ``chain_length``:
+    the packing is of flexible chains of that many spheres, whose isostatic count is checked
+    against its closed form (0: not checked)."""
     p = result.packing
     assert result.converged
     assert abs(p.pressure - p0) <= settings.pressure_rtol * p0
@@ -106,6 +108,13 @@ def check_linked(result, p0: float, settings: JammingSettings, shear_stabilized:
     assert f[free].max() <= ENTANGLED_FORCE_RATIO * f_p
     count = count_bodies(p.contacts, p.n, p.d, p.links, p.position, p.box, shear_stabilized=shear_stabilized)
     assert count.n_contacts == p.attrs["n_contacts"] and count.isostatic_count == p.attrs["isostatic_count"]
+    if chain_length:
+        # flexible chains of M spheres: f_c = d M - (M - 1) per chain in the backbone, minus free
+        # motions and the d translations, plus the pressure (or the strain at fixed volume)
+        chains = p.n // chain_length - int(count.removed.sum())
+        extra = p.d * (p.d + 1) // 2 - 1 if shear_stabilized else 0
+        f_c = p.d * chain_length - (chain_length - 1)
+        assert count.isostatic_count == f_c * chains - int(count.free_dofs.sum()) - p.d + 1 + extra
     missing = count.isostatic_count - count.n_contacts
     if below_excess:
         # N P0^(1/2) << 1: no finite-pressure excess contact expected (O'Hern et al.)

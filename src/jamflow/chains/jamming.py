@@ -68,12 +68,13 @@ ENERGY_FLOOR: float = 1e-4
 
 #: A hypostatic linked minimum is a saddle when its constrained Hessian has an eigenvalue
 #: below ``-SADDLE_CURVATURE_RATIO f_mean`` [epsilon / <D>^2] (``f_mean`` the mean contact
-#: force [epsilon / <D>]; a floppy mode's prestress curvature is ``~ -f / r`` with ``r ~ <D>``),
-#: unless ``ZERO_MODE_RTOL`` times the largest eigenvalue is smaller: that relative bound alone
-#: is ~6e-10 for chains, above every prestress curvature once ``P0 <~ 1e-9``. Measured on 4 chains of
-#: 30 in 3D at ``P0 = 1e-12`` (docs/notes/extremes.md, "Bodies"): the saddle's eigenvalues
-#: -2.3e-12 ... -3.8e-12 at ``f_mean = 1.1e-12``; round-off and residual forces leave the
-#: zero modes within 2e-14 (``force_tol = 1e-13``) and 1.1e-15 (``1e-15``).
+#: force [epsilon / <D>]; a floppy mode's prestress curvature is ``~ -f / r``, ``r ~ <D>``),
+#: unless ``ZERO_MODE_RTOL`` times the largest eigenvalue is smaller: that relative bound
+#: alone is ~6e-10 for chains, above every prestress curvature once ``P0 <~ 1e-9``.
+#: Measured on 4 chains of 30 in 3D at ``P0 = 1e-12``: the saddle's eigenvalues -2.3e-12
+#: ... -3.8e-12 at ``f_mean = 1.1e-12``; round-off and residual forces leave the zero modes
+#: within 2e-14 (``force_tol = 1e-13``) and 1.1e-15 (``1e-15``)
+#: (docs/notes/extremes.md, "Failures found and fixed").
 SADDLE_CURVATURE_RATIO: float = 0.1
 
 #: Largest reduction of the distance to the estimated phi_J in one decompression
