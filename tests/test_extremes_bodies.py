@@ -241,6 +241,20 @@ def chains_of_30(tmp_path_factory, d: int):
     return read_packing(path, None)
 
 
+@pytest.mark.slow
+def test_one_chain_of_30_in_2d_that_cannot_fit_in_half_its_box_is_refused_in_one_line(tmp_path, capsys):
+    """One chain of 30 at the dilute phi = 0.2 has a box of 10.85: the growth walk must fit it
+    within half the box (5.43), i.e. 30 discs in a 5.43 x 5.43 window at an area fraction of 0.8,
+    which a random walk does not find; init-chains gives up in one line (after its restarts),
+    nothing written. Four chains of 30 fit (the box is twice as wide)."""
+    out = tmp_path / "one.nc"
+    assert main(["init-chains", str(out), "--d", "2", "--clusters", "1", "--cluster", "chain", "--chain-length",
+                 "30", "--free-angles", "--seed", "1", "--quiet"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "could not grow chain 0 of 30 spheres" in err[0]
+    assert not out.exists()
+
+
 @pytest.fixture(scope="module")
 def chains_3d(tmp_path_factory):
     return chains_of_30(tmp_path_factory, 3)
