@@ -26,4 +26,21 @@ jamflow soft-jam "$tmp/t1.nc" swinging_trimer_2d_shear.nc --pressure 1e-6 --pres
 # its prestress, not a saddle (tests/test_chains_saddle.py); seed 3 is the short one of seeds 1-5 from phi = 0.1
 jamflow init-chains "$tmp/c0.nc" --d 3 --clusters 32 --cluster chain --chain-length 4 --phi 0.1 --seed 3 --quiet
 jamflow soft-jam "$tmp/c0.nc" hypostatic_chains4_3d.nc --pressure 1e-6 --pressure-rtol 1e-3 --force-tol 1e-12 --quiet
+# 4 flexible chains of 30 (3D, bidisperse by chain), P0 = 1e-12 at force_tol 1e-13: the bisection's final
+# minimum, a saddle 4 contacts short (tests/test_extremes_bodies.py). soft-jam now refuses it, so it is written
+# with the saddle guard's former bound, ZERO_MODE_RTOL times the largest eigenvalue alone
+jamflow init-chains "$tmp/c30.nc" --d 3 --clusters 4 --cluster chain --chain-length 30 --free-angles \
+    --dispersity bi --ratio 1.4 --seed 1 --quiet
+python - "$tmp/c30.nc" <<'PY'
+import sys
+
+import jamflow.chains.jamming as jamming
+from jamflow.io import read_packing, write_packing
+from jamflow.minimize.onset import JammingSettings
+
+jamming.SADDLE_CURVATURE_RATIO = float("inf")
+settings = JammingSettings(force_tol=1e-13, pressure_rtol=1e-3, delta_phi=1e-2)
+result = jamming.jam_linked(read_packing(sys.argv[1], None), 1e-12, settings=settings)
+write_packing(result.packing, "saddle_chains30_3d_p1e-12.nc")
+PY
 rm -r "$tmp"
