@@ -398,12 +398,15 @@ def search_to_pressure(
 
 def _enthalpy_stage(model: EnergyModel, position: np.ndarray, pressure: float, c: JammingSettings,
                     budget: int) -> MinimizeResult:
-    """Step 3: FIRE on ``U + P0 V``; with ``c.newton_polish`` the run pauses after :data:`POLISH_INTERVAL`
-    steps, then at intervals growing by :data:`POLISH_GROWTH`, for a Newton polish and ends with the first
-    one that succeeds (its ``steps`` are FIRE's)."""
+    """Step 3: FIRE on ``U + P0 V``; with ``c.newton_polish`` a trust-region Newton polish is tried from the
+    stage's start, then FIRE runs :data:`POLISH_INTERVAL` steps, then intervals growing by :data:`POLISH_GROWTH`,
+    between tries; the stage ends with the first try that succeeds (its ``steps`` are FIRE's)."""
     if not c.newton_polish:
         return minimize_enthalpy_model(model, position, pressure, c.force_tol, c.pressure_rtol, budget,
                                        c.fire_params, c.box_dof)
+    polish = polish_enthalpy(model, np.asarray(position, dtype=np.float64), pressure, c.force_tol, c.pressure_rtol)
+    if polish.result is not None:
+        return polish.result
     engine = _fire_engine(model, model.dofs(position), c.fire_params, float(pressure), c.pressure_rtol, c.box_dof)
     steps = 0
     interval = float(POLISH_INTERVAL)
