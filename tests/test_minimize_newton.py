@@ -7,8 +7,8 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
-from jamflow.minimize.fire import DEFAULT_FIRE, _fire
 from jamflow.minimize import newton
+from jamflow.minimize.fire import DEFAULT_FIRE, _fire
 from jamflow.minimize.newton import polish_enthalpy, positive_semidefinite
 from jamflow.models.shapes.model import ShapeModel
 from jamflow.shapes import bidisperse_shapes, random_shape_packing, unit_shape

@@ -60,10 +60,10 @@ SCALE_STEP: float = 1e-9
 #: ``shift / (lambda + shift)``, at most 1e-4 per iteration for ``lambda >= 1e-10 K_max``.
 NEWTON_SHIFT: float = 1e-14
 
-#: Largest number of trial steps (accepted or rejected) of one polish [1]: from states
-#: in reach it lands in 5-55 (N = 100 and 480 ellipses and circulo-lines, P0 = 1e-6;
+#: Largest number of trial steps (accepted or rejected) of one polish [1]: from the states
+#: it lands from it takes 5-90 (N = 100 and 480 ellipses and circulo-lines, P0 = 1e-6;
 #: docs/notes/shapes.md, "Trust-region Newton for the enthalpy stage").
-NEWTON_ITERATIONS: int = 60
+NEWTON_ITERATIONS: int = 100
 
 #: Starting Levenberg shift of a polish relative to the largest diagonal entry of the
 #: Hessian, in the mass metric [1]: about the stiffness of the soft modes at P0 ~ 1e-6 ...

@@ -100,14 +100,13 @@ APPROACH_STRAIN_STEP: float = 0.0075
 RETURN_SHARE: float = 0.15
 
 
-#: FIRE steps of the enthalpy stage before the first try of the Newton polish
-#: (``JammingSettings.newton_polish``); after each failed try the interval grows by
-#: :data:`POLISH_GROWTH`. A failed try costs as much as a few hundred steps (Hessians and
-#: sparse solves), and FIRE may reach Newton's basin only after 10^5 steps (N = 480), so
-#: a fixed interval spent more on tries than it saved; growing by 1.25 the tries take at
-#: most 25 % more FIRE steps than needed, in ~20 tries up to 10^5 steps
-#: (docs/notes/shapes.md, "Newton polish of the enthalpy stage").
-POLISH_INTERVAL: int = 2000
+#: FIRE steps of the enthalpy stage after a failed try of the trust-region Newton polish
+#: (``JammingSettings.newton_polish``; the first try is at the stage's start), growing by
+#: :data:`POLISH_GROWTH` after each further failed try. A failed try (100 trial steps) costs
+#: as much as ~10^4 FIRE steps at N = 480; the polish lands from the stage's start at
+#: N = 100, from ~8 10^4 stage steps (circulo-lines) and ~2 10^5 (ellipses) at N = 480
+#: (docs/notes/shapes.md, "Trust-region Newton for the enthalpy stage").
+POLISH_INTERVAL: int = 40000
 
 #: Growth of the interval between two tries of the Newton polish [1].
 POLISH_GROWTH: float = 1.25
