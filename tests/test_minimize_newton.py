@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
+import scipy.sparse.linalg as sla
 
+from jamflow.minimize import newton
 from jamflow.minimize.fire import DEFAULT_FIRE, _fire
 from jamflow.minimize.newton import polish_enthalpy, positive_semidefinite
 from jamflow.models.shapes.model import ShapeModel
@@ -17,6 +21,15 @@ P0 = 1e-4
 def _squeezed(family):
     p = random_shape_packing(bidisperse_shapes(unit_shape(family, asphericity=1.3)), 24, 0.4, 3)
     return ShapeModel(p.box, p.shapes, p.shape_index).rescaled(0.75, np.column_stack([p.position, p.orientation]))
+
+
+@functools.cache
+def _fire_minimum(family):
+    """FIRE on U + P0 V from the squeezed start to the stage's tolerances (shared by the tests)."""
+    model, c = _squeezed(family)
+    fire = _fire(model.fire_engine(model.dofs(c), DEFAULT_FIRE, P0, 1e-6), 1e-13, 1_000_000)
+    assert fire.converged
+    return fire
 
 
 @pytest.mark.parametrize("family", ["ellipse", "circulo-line"])
@@ -34,20 +47,72 @@ def test_polish_ends_where_fire_ends(family):
     ev = final.evaluate(final.dofs(res.position))
     assert final.max_force(ev.gradient) <= 1e-13
     assert abs(np.trace(ev.virial) / (2.0 * res.box.volume) - P0) <= 1e-6 * P0
-    fire = _fire(model.fire_engine(q, DEFAULT_FIRE, P0, 1e-6), 1e-13, 1_000_000)
-    assert fire.converged and ev.n_contacts == fire.n_contacts
+    fire = _fire_minimum(family)
+    assert ev.n_contacts == fire.n_contacts
     # the same minimum (measured: volumes to 6e-13, energies to 6e-9, centres and angles to 4e-8)
     assert abs(res.box.volume / fire.box.volume - 1.0) <= 1e-11
     assert abs(ev.energy / fire.energy - 1.0) <= 1e-7
     np.testing.assert_allclose(res.position, fire.position, rtol=0, atol=1e-6)
 
 
-def test_polish_leaves_a_state_far_from_the_minimum_alone():
-    """From the squeezed start (forces ~1e-1, P ~ 1e2 P0) Newton leaves the quadratic basin: no result."""
-    model, c = _squeezed("ellipse")
+def _enthalpy(model, c):
+    return model.evaluate(model.dofs(c)).energy + P0 * model.box.volume
+
+
+@pytest.mark.parametrize("family", ["ellipse", "circulo-line"])
+def test_trust_region_lands_where_the_full_newton_step_overshoots(family):
+    """From FIRE's state at force 1e-6 the full Newton step on U + P0 V raises the enthalpy (it leaves the
+    region where the Hessian describes H); the trust-region polish lands on FIRE's minimum to 1e-13."""
+    model, c = _squeezed(family)
+    q = model.dofs(c)
+    early = _fire(model.fire_engine(q, DEFAULT_FIRE, P0, 1e-6), 1e-6, 500_000)
+    start, x = model.rescaled((early.box.volume / model.box.volume) ** 0.5, early.position)[0], early.position
+    s = start.dofs(x)
+    ev = start.evaluate(s)
+    dhds = 2.0 * start.box.volume * (P0 - np.trace(ev.virial) / (2.0 * start.box.volume))
+    system = newton._bordered_hessian(start, x, s, P0)
+    shift = newton.NEWTON_SHIFT * float(np.abs(system.diagonal()[:-1]).max())
+    system = system + sp.diags(np.r_[np.full(system.shape[0] - 1, shift), 0.0])
+    full = sla.spsolve(system.tocsc(), -np.concatenate([ev.gradient, [dhds]]))
+    after, y = start.rescaled(1.0 + full[-1], start.positions(s + full[:-1]))
+    assert _enthalpy(after, y) > _enthalpy(start, x)
+    polished = polish_enthalpy(start, x, P0, 1e-13, 1e-6)
+    res = polished.result
+    assert res is not None
+    final = ShapeModel(res.box, model.shapes, model.shape_index)
+    fev = final.evaluate(final.dofs(res.position))
+    assert final.max_force(fev.gradient) <= 1e-13
+    assert abs(np.trace(fev.virial) / (2.0 * res.box.volume) - P0) <= 1e-6 * P0
+    fire = _fire_minimum(family)
+    assert fev.n_contacts == fire.n_contacts
+    # measured: volumes to 6e-13, centres and angles to 2e-8
+    assert abs(res.box.volume / fire.box.volume - 1.0) <= 1e-11
+    np.testing.assert_allclose(res.position, fire.position, rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("family", ["ellipse", "circulo-line"])
+def test_polish_from_far_away_returns_a_minimum_at_tolerance_or_nothing(family):
+    """From the squeezed start (forces ~1e-1, P ~ 1e2 P0): no result, or one at both tolerances whose bordered
+    Hessian has no negative eigenvalue (dense) and whose circulo cores do not cross, with H below the start's."""
+    model, c = _squeezed(family)
     ev = model.evaluate(model.dofs(c))
     assert model.max_force(ev.gradient) > 1e-3
-    assert polish_enthalpy(model, c, P0, 1e-13, 1e-6).result is None
+    polished = polish_enthalpy(model, c, P0, 1e-13, 1e-6)
+    if polished.descended:
+        moved, y = model.rescaled((polished.box.volume / model.box.volume) ** 0.5, c)[0], polished.position
+        assert _enthalpy(moved, y) < _enthalpy(model, c)
+    res = polished.result
+    if res is None:
+        return
+    final = ShapeModel(res.box, model.shapes, model.shape_index)
+    q = final.dofs(res.position)
+    fev = final.evaluate(q)
+    assert final.max_force(fev.gradient) <= 1e-13
+    assert abs(np.trace(fev.virial) / (2.0 * res.box.volume) - P0) <= 1e-6 * P0
+    final.check_cores(q)
+    a = newton._bordered_hessian(final, res.position, q, P0).toarray()
+    a = 0.5 * (a + a.T)
+    assert np.linalg.eigvalsh(a)[0] >= -newton.NEGATIVE_CURVATURE * np.abs(np.diag(a)).max()
 
 
 def test_the_inertia_check_agrees_with_dense_eigenvalues_and_survives_a_zero_pivot():

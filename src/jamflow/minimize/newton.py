@@ -1,24 +1,35 @@
-"""Newton polish of the enthalpy ``H = U + P0 V`` near its minimum (any model with a Hessian).
+"""Trust-region Newton polish of the enthalpy ``H = U + P0 V`` (any model with a Hessian).
 
 FIRE relaxes a mode of stiffness ``lambda`` in ``~ 1 / (dt sqrt(lambda))`` steps; the
 quartic modes of hypostatic packings have ``lambda`` of order ``P0`` and below, so
 the last decades of force balance cost FIRE most of its steps. Newton's method on
 the degrees of freedom ``q`` and the isotropic box scale ``s`` (centres ``s x``,
-``V = s^d V_ref``, shapes unchanged) reaches round-off in a few solves from a state
-FIRE has brought close enough. Each iteration solves the bordered system
+``V = s^d V_ref``, shapes unchanged) reaches round-off in a few solves near the
+minimum. Each iteration solves the bordered, shifted system
 
-``[[K, b], [b^T, c]] [dq, ds] = -[g, dH/ds]``
+``([[K, b], [b^T, c]] + mu M) [dq, ds] = -[g, dH/ds]``
 
 with ``K`` the model's Hessian (:meth:`EnergyModel.hessian`), ``g`` the gradient,
 ``dH/ds = d V (P0 - P)`` and the border ``b = d g / ds``, ``c = d^2 H / ds^2``
 from central differences of the model in the boxes scaled by ``1 +- h``
-(:data:`SCALE_STEP`). Zero modes (rattlers, global translations) carry no force;
-a shift of :data:`NEWTON_SHIFT` times the largest diagonal entry of ``K`` keeps the
-system regular without moving them. A run is accepted only when every iteration
-keeps the largest force below :data:`NEWTON_GROWTH` times the start's, the last one
-meets both tolerances and the bordered Hessian there has no negative eigenvalue (a
-minimum, not a saddle); otherwise the caller keeps its state (a failed polish changes
-nothing).
+(:data:`SCALE_STEP`); ``M`` is FIRE's mass metric (and a squared neighbour distance
+for ``s``), ``mu`` a Levenberg–Marquardt shift (never below :data:`NEWTON_SHIFT`,
+which keeps the zero modes of rattlers and global translations regular).
+
+Far from the minimum the full Newton step leaves the region the Hessian describes:
+along the soft modes it closes pairs at small gaps, which the Hessian does not see,
+and the enthalpy rises. So the step is globalised (Nielsen's update of ``mu`` on the
+ratio of the actual to the predicted decrease of ``H``): a step is tried at full
+length, then at quarter lengths (:data:`TRUST_BACKTRACK`, which stops short of a
+closing pair) and kept when it decreases ``H`` by at least :data:`TRUST_ACCEPT` of the
+quadratic prediction; else ``mu`` grows. Only a shifted matrix with positive
+pivots (a descent direction) is used, and no body moves by more than
+:data:`TRUST_MOVE` of a neighbour distance in one step. Below the round-off of the
+enthalpy (:data:`ENTHALPY_ROUNDOFF`) a step is kept when the largest force falls.
+A run is accepted only when both tolerances hold and the bordered Hessian there has
+no negative eigenvalue (a minimum, not a saddle); otherwise the caller keeps its own
+state (a failed polish changes nothing; the last state it reached, of lower ``H``,
+is reported).
 """
 
 from __future__ import annotations
@@ -30,11 +41,12 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 from numpy.typing import NDArray
 
+from ..box import Box
 from .fire import MinimizeResult
 from .model import EnergyModel, pressure_of
 
-__all__ = ["NEGATIVE_CURVATURE", "NEWTON_GROWTH", "NEWTON_ITERATIONS", "NEWTON_SHIFT", "SCALE_STEP", "NewtonPolish",
-           "polish_enthalpy", "positive_semidefinite"]
+__all__ = ["ENTHALPY_ROUNDOFF", "NEGATIVE_CURVATURE", "NEWTON_ITERATIONS", "NEWTON_SHIFT", "SCALE_STEP", "TRUST_ACCEPT",
+           "TRUST_BACKTRACK", "TRUST_MOVE", "TRUST_SHIFT", "NewtonPolish", "polish_enthalpy", "positive_semidefinite"]
 
 #: Relative step of the box scale in the central differences of the border [1]: far
 #: below the overlaps of a packing at P0 >= 1e-12 relative to the centre distances, so no
@@ -48,15 +60,34 @@ SCALE_STEP: float = 1e-9
 #: ``shift / (lambda + shift)``, at most 1e-4 per iteration for ``lambda >= 1e-10 K_max``.
 NEWTON_SHIFT: float = 1e-14
 
-#: Largest number of Newton iterations of one polish: from a state in the quadratic
-#: basin two to four reach round-off; more means the state was not in it.
-NEWTON_ITERATIONS: int = 8
+#: Largest number of trial steps (accepted or rejected) of one polish [1]: from the states
+#: it lands from it takes 5-90 (N = 100 and 480 ellipses and circulo-lines, P0 = 1e-6;
+#: docs/notes/shapes.md, "Trust-region Newton for the enthalpy stage").
+NEWTON_ITERATIONS: int = 100
 
-#: Growth of the largest force over the start's beyond which a polish gives up [1]: the
-#: first full step along the soft modes may raise it by ~1e3 before the second lands
-#: (docs/notes/shapes.md, "Newton polish of the enthalpy stage"); more means the state
-#: was outside the quadratic basin (contacts opening).
-NEWTON_GROWTH: float = 1e4
+#: Starting Levenberg shift of a polish relative to the largest diagonal entry of the
+#: Hessian, in the mass metric [1]: about the stiffness of the soft modes at P0 ~ 1e-6 ...
+#: 1e-8, so the first step is short along them; Nielsen's update takes it to Newton's step.
+TRUST_SHIFT: float = 1e-8
+
+#: Smallest ratio of the actual to the predicted decrease of ``H`` for which a step is
+#: kept [1]: any clear decrease (a step that stops just short of a closing pair decreases
+#: ``H`` by less than the quadratic model says, and is still progress).
+TRUST_ACCEPT: float = 1e-4
+
+#: Largest displacement of a body's surface in one trial step, relative to the mean
+#: distance between neighbours [1]: a step that would move a body further is treated as
+#: rejected, so no step can carry a body through another's core.
+TRUST_MOVE: float = 0.05
+
+#: Round-off of an enthalpy difference in units of ``eps tr W`` (virial trace ``tr W = d P V``) [1]:
+#: a predicted decrease below it is judged by the largest force instead. Measured: predicted
+#: and actual differences agree to 1e-19 at ``tr W = 8.6e-4`` (N = 480 circulo-lines, P0 = 1e-6).
+ENTHALPY_ROUNDOFF: float = 4.0
+
+#: Fractions of a rejected step tried along its direction before the shift grows [1]:
+#: a step that closes a contact the Hessian does not see overshoots, a part of it does not.
+TRUST_BACKTRACK: tuple[float, ...] = tuple(0.25**k for k in range(12))
 
 #: Eigenvalues of the bordered enthalpy Hessian below ``-NEGATIVE_CURVATURE`` times its
 #: largest diagonal entry mark a saddle [1]: far above the round-off of a dense
@@ -67,10 +98,14 @@ NEGATIVE_CURVATURE: float = 1e-13
 
 @dataclass(frozen=True)
 class NewtonPolish:
-    """Outcome of :func:`polish_enthalpy`: the final state (or None) and the iterations spent."""
+    """Outcome of :func:`polish_enthalpy`: the final state (or None), the trial steps spent and the last
+    state reached (``position`` in ``box``; ``descended`` when a step was kept, so its ``H`` is below the start's)."""
 
     result: MinimizeResult | None
     iterations: int
+    position: NDArray[np.float64] | None = None
+    box: Box | None = None
+    descended: bool = False
 
 
 def _state(model: EnergyModel, config: NDArray[np.float64], pressure0: float) -> tuple:
@@ -80,7 +115,7 @@ def _state(model: EnergyModel, config: NDArray[np.float64], pressure0: float) ->
     g = model.project(ev.gradient, q)
     p = pressure_of(ev, model.box)
     d = model.box.d
-    return q, g, d * model.box.volume * (pressure0 - p), model.max_force(g), p, ev
+    return q, g, d * model.box.volume * (pressure0 - p), model.max_force(g), p, ev, model, config
 
 
 def _scaled_gradient(model: EnergyModel, config: NDArray[np.float64], pressure0: float,
@@ -111,6 +146,10 @@ def _bordered_hessian(model: EnergyModel, x: NDArray[np.float64], q: NDArray[np.
     return sp.bmat([[k, border[:, None]], [border[None, :], np.array([[corner]])]], format="csc")
 
 
+def _symmetric(a: sp.csc_matrix) -> sp.csc_matrix:
+    return (0.5 * (a + a.T)).tocsc()
+
+
 def _is_minimum(model: EnergyModel, x: NDArray[np.float64], q: NDArray[np.float64], pressure0: float) -> bool:
     """Whether no eigenvalue of the bordered Hessian lies below ``-NEGATIVE_CURVATURE`` of its
     largest diagonal entry: the Hessian shifted up by that margin is :func:`positive_semidefinite`."""
@@ -137,9 +176,35 @@ def positive_semidefinite(a: sp.csc_matrix) -> bool:
     return bool(np.linalg.eigvalsh(a.toarray())[0] >= 0.0)
 
 
+def _shifted_solve(a: sp.csc_matrix, metric: NDArray[np.float64], shift: float,
+                   rhs: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """``(a + shift diag(metric))^-1 rhs`` when that matrix is positive definite (all diagonal pivots of a
+    symmetric-mode SuperLU positive, Sylvester's inertia), else None."""
+    try:
+        lu = sla.splu((a + sp.diags(shift * metric)).tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                      options={"SymmetricMode": True})
+    except RuntimeError:
+        return None
+    if not np.array_equal(lu.perm_r, lu.perm_c) or not np.all(lu.U.diagonal() > 0.0):
+        return None
+    step = lu.solve(rhs)
+    return step if np.all(np.isfinite(step)) else None
+
+
+def _largest_move(model: EnergyModel, step: NDArray[np.float64], arm: float, spacing: float) -> float:
+    """Largest displacement of a body's surface under ``step = (dq, ds)``: centre plus ``arm`` times its
+    orientation change, plus the change ``spacing * |ds|`` of a contact distance with the box [length]."""
+    d, n = model.box.d, model.positions(step[:-1]).shape[0]
+    move = np.sqrt(np.sum(step[: n * d].reshape(n, d) ** 2, axis=1))
+    rot = step[n * d: -1]
+    if rot.size == n:
+        move = move + arm * np.abs(rot)
+    return float(move.max()) + spacing * abs(float(step[-1]))
+
+
 def polish_enthalpy(model: EnergyModel, config: NDArray[np.float64], pressure0: float, force_tol: float,
                     pressure_rtol: float, max_iterations: int = NEWTON_ITERATIONS) -> NewtonPolish:
-    """Newton iterations on ``H = U + P0 V`` (module doc) from ``config`` in ``model``'s box.
+    """Levenberg–Marquardt trust-region Newton on ``H = U + P0 V`` (module doc) from ``config`` in ``model``'s box.
 
     Parameters
     ----------
@@ -152,37 +217,71 @@ def polish_enthalpy(model: EnergyModel, config: NDArray[np.float64], pressure0: 
     pressure0, force_tol, pressure_rtol : float
         Target pressure, and the tolerances of the result (largest projected force
         :meth:`EnergyModel.max_force`, ``|P - P0| <= pressure_rtol P0``).
+    max_iterations : int
+        Largest number of trial steps (accepted or not; each backtracking length is one
+        evaluation of the model, each accepted step one Hessian).
 
     Returns
     -------
     NewtonPolish
         ``result`` holds the polished state (box scaled, ``steps = 0``) when the tolerances
-        were met within ``max_iterations`` without the largest force growing past
-        :data:`NEWTON_GROWTH` times the start's, at a minimum (no eigenvalue of the bordered
-        Hessian below ``-NEGATIVE_CURVATURE`` of its largest diagonal entry); else None.
+        were met within ``max_iterations`` trial steps at a minimum (no eigenvalue of the
+        bordered Hessian below ``-NEGATIVE_CURVATURE`` of its largest diagonal entry); else None.
     """
     if getattr(model, "constrained", False):
         return NewtonPolish(None, 0)
     x = np.array(config, dtype=np.float64)
-    q, g, dhds, fmax, p, ev = _state(model, x, pressure0)
-    fmax0 = fmax
+    q, g, dhds, fmax, p, ev, _, _ = _state(model, x, pressure0)
+    d = model.box.d
+    spacing = (model.box.volume / model.positions(q).shape[0]) ** (1.0 / d)
+    arm = float(getattr(model, "torque_arm", spacing))
+    mu = TRUST_SHIFT
+    evaluations = 1
+    nu = 2.0
+    system = None
+    descended = False
     for it in range(1, max_iterations + 1):
-        system = _bordered_hessian(model, x, q, pressure0)
-        shift = NEWTON_SHIFT * float(np.abs(system.diagonal()[:-1]).max())
-        system = system + sp.diags(np.r_[np.full(system.shape[0] - 1, shift), 0.0], format="csc")
-        step = sla.spsolve(system, -np.concatenate([g, [dhds]]))
-        if not np.all(np.isfinite(step)):
-            return NewtonPolish(None, it)
-        trial_model, trial_x = model.rescaled(1.0 + float(step[-1]), model.positions(q + step[:-1]))
-        tq, tg, tdhds, tfmax, tp, tev = _state(trial_model, trial_x, pressure0)
-        if not tfmax < NEWTON_GROWTH * fmax0:
-            return NewtonPolish(None, it)
+        if system is None:
+            system = _symmetric(_bordered_hessian(model, x, q, pressure0))
+            kmax = float(np.abs(system.diagonal()[:-1]).max())
+            # the mass metric of FIRE, and for the box scale the square of a contact distance
+            metric = kmax * np.r_[1.0 / model.inverse_mass, spacing**2]
+            rhs = -np.concatenate([g, [dhds]])
+        mu = max(mu, NEWTON_SHIFT)
+        step = _shifted_solve(system, metric, mu, rhs)
+        if step is None or _largest_move(model, step, arm, spacing) > TRUST_MOVE * spacing:
+            mu, nu = mu * nu, 2.0 * nu
+            continue
+        gain, curvature = float(rhs @ step), float(step @ (system @ step))
+        # below the round-off of the energy sums the enthalpy cannot judge a step; the force does
+        resolution = ENTHALPY_ROUNDOFF * np.finfo(float).eps * abs(p) * d * model.box.volume
+        for length in TRUST_BACKTRACK:
+            predicted = length * gain - 0.5 * length**2 * curvature
+            trial = _state(*model.rescaled(1.0 + length * float(step[-1]), model.positions(q + length * step[:-1])),
+                           pressure0)
+            tq, tg, tdhds, tfmax, tp, tev, trial_model, trial_x = trial
+            evaluations += 1
+            actual = ev.energy - tev.energy \
+                - pressure0 * model.box.volume * np.expm1(d * np.log1p(length * float(step[-1])))
+            rho = actual / predicted if predicted > resolution else 0.0
+            accepted = rho >= TRUST_ACCEPT if predicted > resolution else tfmax < fmax
+            if accepted:
+                break
+        if not accepted:
+            mu, nu = mu * nu, 2.0 * nu
+            continue
+        if length == 1.0:
+            mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3) if predicted > resolution else 1.0 / 3.0
+            nu = 2.0
         model, x, q, g, dhds, fmax, p, ev = trial_model, trial_x, tq, tg, tdhds, tfmax, tp, tev
+        system = None
+        descended = True
+        evaluations += 2
         if fmax <= force_tol and abs(p - pressure0) <= pressure_rtol * pressure0:
             if not _is_minimum(model, x, q, pressure0):
-                return NewtonPolish(None, it)
+                return NewtonPolish(None, it, x, model.box, True)
             return NewtonPolish(MinimizeResult(
                 position=np.array(x), box=model.box, energy=ev.energy, pressure=p, max_force=fmax,
-                n_contacts=ev.n_contacts, steps=0, converged=True, rebuilds=0, evaluations=3 * it + 1,
-            ), it)
-    return NewtonPolish(None, max_iterations)
+                n_contacts=ev.n_contacts, steps=0, converged=True, rebuilds=0, evaluations=evaluations,
+            ), it, x, model.box, True)
+    return NewtonPolish(None, max_iterations, x, model.box, descended)

@@ -100,14 +100,21 @@ APPROACH_STRAIN_STEP: float = 0.0075
 RETURN_SHARE: float = 0.15
 
 
-#: FIRE steps of the enthalpy stage before the first try of the Newton polish
-#: (``JammingSettings.newton_polish``); after each failed try the interval grows by
-#: :data:`POLISH_GROWTH`. A failed try costs as much as a few hundred steps (Hessians and
-#: sparse solves), and FIRE may reach Newton's basin only after 10^5 steps (N = 480), so
-#: a fixed interval spent more on tries than it saved; growing by 1.25 the tries take at
-#: most 25 % more FIRE steps than needed, in ~20 tries up to 10^5 steps
-#: (docs/notes/shapes.md, "Newton polish of the enthalpy stage").
-POLISH_INTERVAL: int = 2000
+#: FIRE steps of the enthalpy stage between two looks at its largest force for a try of the
+#: trust-region Newton polish (``JammingSettings.newton_polish``) [1].
+POLISH_CHECK: int = 2000
+
+#: A try is made when FIRE's largest force is at most this many times the force tolerance
+#: [1]: at P0 = 1e-6 (force_tol 1e-13) the polish lands from FIRE states with largest force
+#: 1e-12 ... 7e-11 at N = 480 and fails from most at 1e-10 ... 3e-8 (at N = 100 it lands from
+#: the stage's start, 9e-9); a failed try (100 trial steps) costs ~10^4 FIRE steps at N = 480
+#: (docs/notes/shapes.md, "Trust-region Newton for the enthalpy stage").
+POLISH_FORCE: float = 1e3
+
+#: Least FIRE steps between two tries of the polish [1], growing by :data:`POLISH_GROWTH`
+#: after each further failed try: FIRE's largest force fluctuates, so without it a state that
+#: failed would be followed by near copies of itself.
+POLISH_INTERVAL: int = 20000
 
 #: Growth of the interval between two tries of the Newton polish [1].
 POLISH_GROWTH: float = 1.25
@@ -121,7 +128,7 @@ class JammingSettings:
     packing fraction of either; ``max_strain_step`` caps the search's steps (relative
     change of the box length). ``newton_polish`` lets the enthalpy stage end with Newton
     iterations (:func:`jamflow.minimize.newton.polish_enthalpy`) once FIRE is close
-    enough (tried after :data:`POLISH_INTERVAL` steps, then at growing intervals), to the same tolerances.
+    enough (tried when its largest force is within :data:`POLISH_FORCE` of the tolerance), to the same tolerances.
     """
 
     force_tol: float = FORCE_TOL_VANDERWERF
@@ -398,26 +405,31 @@ def search_to_pressure(
 
 def _enthalpy_stage(model: EnergyModel, position: np.ndarray, pressure: float, c: JammingSettings,
                     budget: int) -> MinimizeResult:
-    """Step 3: FIRE on ``U + P0 V``; with ``c.newton_polish`` the run pauses after :data:`POLISH_INTERVAL`
-    steps, then at intervals growing by :data:`POLISH_GROWTH`, for a Newton polish and ends with the first
-    one that succeeds (its ``steps`` are FIRE's)."""
+    """Step 3: FIRE on ``U + P0 V``; with ``c.newton_polish`` FIRE pauses every :data:`POLISH_CHECK` steps and
+    tries a trust-region Newton polish when its largest force is within :data:`POLISH_FORCE` of ``c.force_tol``
+    and at least :data:`POLISH_INTERVAL` steps (growing by :data:`POLISH_GROWTH` after each failed try) have
+    passed since the last try; the stage ends with the first try that succeeds (its ``steps`` are FIRE's)."""
     if not c.newton_polish:
         return minimize_enthalpy_model(model, position, pressure, c.force_tol, c.pressure_rtol, budget,
                                        c.fire_params, c.box_dof)
     engine = _fire_engine(model, model.dofs(position), c.fire_params, float(pressure), c.pressure_rtol, c.box_dof)
-    steps = 0
+    steps, last_try = 0, None
     interval = float(POLISH_INTERVAL)
     while True:
-        res = _fire(engine, c.force_tol, min(int(interval), budget - steps))
+        res = _fire(engine, c.force_tol, min(POLISH_CHECK, budget - steps))
         steps += res.steps
         if res.converged or steps >= budget:
             return replace(res, steps=steps)
+        if res.max_force > POLISH_FORCE * c.force_tol or (last_try is not None and steps - last_try < interval):
+            continue
         scale = (res.box.volume / model.box.volume) ** (1.0 / model.box.d)
         scaled, _ = model.rescaled(scale, res.position)
         polish = polish_enthalpy(scaled, res.position, pressure, c.force_tol, c.pressure_rtol)
         if polish.result is not None:
             return replace(polish.result, steps=steps)
-        interval *= POLISH_GROWTH
+        if last_try is not None:
+            interval *= POLISH_GROWTH
+        last_try = steps
 
 
 def jam_model_to_pressure(
