@@ -191,7 +191,8 @@ def leave_linked_saddle(model: LinkedSpheresModel, final: MinimizeResult, templa
         state["model"] = m
         return replace(out, box=_current_box(m)), steps
 
-    final, steps, kicks = kick_off_saddle(final, shortfall, reminimize, seed, pressure)
+    final, steps, kicks = kick_off_saddle(final, shortfall, reminimize, seed, pressure,
+                                          settings.force_tol)
     return state["model"], final, steps, kicks
 
 

@@ -95,6 +95,7 @@ def _backbone_shortfall(x: np.ndarray, box: Box, diameter: np.ndarray, potential
 def kick_off_saddle(
     final: MinimizeResult, shortfall: Callable[[MinimizeResult], int],
     reminimize: Callable[[MinimizeResult, np.ndarray], tuple[MinimizeResult, int]], seed: int, pressure: float,
+    force_tol: float,
 ) -> tuple[MinimizeResult, int, int]:
     """The loop of :func:`leave_saddle` for any body kind.
 
@@ -109,8 +110,8 @@ def kick_off_saddle(
         centres ``minimum.position + kick``.
     seed : int
         Seed of the Gaussian kicks of :data:`SADDLE_KICK` (mean diameters).
-    pressure : float
-        The target pressure (named in the error).
+    pressure, force_tol : float
+        The target pressure and the minimisations' force tolerance (named in the error).
 
     Returns
     -------
@@ -133,7 +134,9 @@ def kick_off_saddle(
         final, more = reminimize(final, SADDLE_KICK * rng.standard_normal(final.position.shape))
         steps += more
     raise RuntimeError(f"the jammed packing stays hypostatic ({missing} backbone contacts short of isostatic) "
-                       f"after {SADDLE_KICKS} kicks off the saddle: no stable packing at P0 = {pressure:g}")
+                       f"after {SADDLE_KICKS} kicks off the saddle: no stable packing at P0 = {pressure:g} with force "
+                       f"tolerance {force_tol:g}; a smaller --force-tol (small against the contact forces, "
+                       f"of order P0) may reach one")
 
 
 def leave_saddle(
@@ -160,7 +163,7 @@ def leave_saddle(
                                       settings.box_dof)
         return out, out.steps
 
-    return kick_off_saddle(final, shortfall, reminimize, seed, pressure)
+    return kick_off_saddle(final, shortfall, reminimize, seed, pressure, settings.force_tol)
 
 
 def jam_to_pressure(
