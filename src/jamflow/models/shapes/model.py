@@ -19,7 +19,9 @@ per shape family:
 
 Masses are equal (``mass``, default 1); the moment of inertia of body ``i`` is
 ``mass * gyration_squared`` of its shape (uniform density), entering as the inverse
-mass of its orientation, so FIRE's time step means the same for rotations.
+mass of its orientation, so FIRE's time step means the same for rotations; the time
+unit is ``sqrt(mass / (w k))`` with ``w`` the largest weight of a pair term's spring
+(2 on circulo-polygon vertices, else 1).
 The Hessian is the complex-step derivative of the analytic pair gradients
 (:func:`._kernels.pair_hessian_blocks`), exact to round-off.
 """
@@ -93,6 +95,13 @@ def _shape_parameters(shapes: ShapeTable, family: str) -> NDArray[np.float64]:
     return out
 
 
+def _term_weight(shapes: ShapeTable, shape_index: NDArray[np.int64], family: str) -> float:
+    """Largest weight of one pair term's spring [1]: 2 for a circulo-polygon vertex (App. A 2), else 1."""
+    if family != "circulo":
+        return 1.0
+    return 2.0 if int(shapes.n_vertices[np.unique(shape_index)].max()) >= 3 else 1.0
+
+
 class ShapeModel(WithoutFastPaths):
     """Soft shaped bodies in 2D with translations and rotations (see the module doc).
 
@@ -140,7 +149,11 @@ class ShapeModel(WithoutFastPaths):
         self.inverse_mass = np.concatenate([np.full(2 * self.n, 1.0 / self.mass), 1.0 / inertia])
         #: length that turns a torque into a force in :meth:`max_force` [length]
         self.torque_arm = float(self.bounding_diameter.mean())
-        self.time_unit = self.torque_arm * np.sqrt(self.mass / (self.k * self.torque_arm**2))
+        # FIRE's time steps are in periods of the stiffest pair term, whose spring is w k: a
+        # polygon vertex carries w = 2 (App. A), and at the disks' dt_max the FIRE of polygon
+        # packings restarts every few tens of steps and never balances forces to 1e-13
+        # (docs/notes/shapes.md, "Circulo-polygons and Reuleaux triangles at N = 100")
+        self.time_unit = float(np.sqrt(self.mass / (self.k * _term_weight(shapes, self.shape_index, self.family))))
         self._pair = _PAIR[self.family]
         self._code = _kernels.FAMILY_CODES[self.family]
         self.rotations = bool(rotations)
