@@ -103,19 +103,20 @@ def test_polygon_vertex_counts_twice():
 
 
 
-@pytest.mark.parametrize("shapes, conf", [
-    # a triangle's vertex on the middle of a line (w = 2) and a line's end on another's middle (w = 1)
-    ((2, 0), [[2.0, 2.0, 0.0], [2.0 + 0.4 + 0.3 - 0.05, 2.0 - 1e-3, np.pi / 2]]),
-    ((0, 1), [[2.0, 2.0, 0.0], [2.0 + 0.5 + 0.35 - 0.05, 2.0 - 1e-3, np.pi / 2]]),
-])
-def test_time_unit_is_the_period_of_the_stiffest_term(shapes, conf):
-    """FIRE's time unit ``sqrt(m / (w k))``: one end-middle term along its normal has curvature ``w k``."""
-    m = model(shapes)
-    q = m.dofs(conf)
-    assert len(m.contact_terms(q)["delta"]) == 1
-    # body 1 moves along x, the term's normal: d^2 U / dx^2 = w k
-    curvature = m.hessian(q).toarray()[2, 2]
-    np.testing.assert_allclose(curvature * m.time_unit**2 / m.mass, 1.0, rtol=1e-9)
+def test_time_unit_is_the_period_of_a_face_contact():
+    """FIRE's time unit ``sqrt(m / (K k))``: a polygon's face on a line (two vertex terms of weight 2) has
+    normal curvature ``4 k`` (``K`` of polygons), a line's end on another's middle ``k`` (``K = 1``)."""
+    long_line = dict(kind="circulo_line", vertices=[(-1.0, 0.0), (1.0, 0.0)], radius=0.2)
+    table = ShapeTable.from_shapes([_regular(3, 0.4, 0.1), long_line, LINE, SHORT])
+    cases = [((0, 1), [[2.0, 2.0, 0.0], [2.0 - 0.2 - 0.3 + 0.05, 2.0, np.pi / 2]], 2),
+             ((2, 3), [[2.0, 2.0, 0.0], [2.0 + 0.5 + 0.35 - 0.05, 2.0 - 1e-3, np.pi / 2]], 1)]
+    for index, conf, n_terms in cases:
+        m = ShapeModel(BOX, table, list(index))
+        q = m.dofs(conf)
+        assert len(m.contact_terms(q)["delta"]) == n_terms
+        # body 1 moves along x, the terms' normal
+        curvature = m.hessian(q).toarray()[2, 2]
+        np.testing.assert_allclose(curvature * m.time_unit**2 / m.mass, 1.0, rtol=1e-9)
 
 # scans through contact-type boundaries: (shapes, start, end, label); the pair moves
 # linearly in (x, y, theta) from start to end
