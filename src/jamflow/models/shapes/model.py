@@ -55,10 +55,10 @@ POINT_TERM_FAMILIES = ("reuleaux", "dumbbell")
 
 #: Stiffness of the time unit of circulo-polygon packings over ``k`` [1]: the normal
 #: curvature of a face-to-face contact (two vertex-edge terms of weight 2, App. A 2).
-#: FIRE ran without restarts at ``dt_max`` up to about ``1 / omega_max`` (disks: 0.3);
-#: polygon packings reach ``omega_max`` 5.2-6.6, and with the disks' unit FIRE restarted
-#: every few tens of steps and stalled (docs/notes/shapes.md, "Circulo-polygons and
-#: Reuleaux triangles at N = 100").
+#: FIRE ran freely at ``dt_max omega_max <= 1.1`` and restarted every few tens of steps,
+#: stalling, at ``>= 1.4``; disks run at 0.76 (``omega_max`` 2.5), polygon packings reach
+#: ``omega_max`` 5.2-6.6, so their ``dt_max`` is 0.15 (0.77-0.98) (docs/notes/shapes.md,
+#: "Circulo-polygons and Reuleaux triangles at N = 100").
 POLYGON_STIFFNESS: float = 4.0
 
 _PAIR = {"circulo": _kernels.circulo_pair, "ellipse": _kernels.ellipse_pair, "reuleaux": _kernels.reuleaux_pair,
