@@ -102,6 +102,22 @@ def test_polygon_vertex_counts_twice():
     np.testing.assert_allclose(m.evaluate(q).energy, terms["delta"][0] ** 2, rtol=1e-12)
 
 
+
+def test_time_unit_is_the_period_of_a_face_contact():
+    """FIRE's time unit ``sqrt(m / (K k))``: a polygon's face on a line (two vertex terms of weight 2) has
+    normal curvature ``4 k`` (``K`` of polygons), a line's end on another's middle ``k`` (``K = 1``)."""
+    long_line = dict(kind="circulo_line", vertices=[(-1.0, 0.0), (1.0, 0.0)], radius=0.2)
+    table = ShapeTable.from_shapes([_regular(3, 0.4, 0.1), long_line, LINE, SHORT])
+    cases = [((0, 1), [[2.0, 2.0, 0.0], [2.0 - 0.2 - 0.3 + 0.05, 2.0, np.pi / 2]], 2),
+             ((2, 3), [[2.0, 2.0, 0.0], [2.0 + 0.5 + 0.35 - 0.05, 2.0 - 1e-3, np.pi / 2]], 1)]
+    for index, conf, n_terms in cases:
+        m = ShapeModel(BOX, table, list(index))
+        q = m.dofs(conf)
+        assert len(m.contact_terms(q)["delta"]) == n_terms
+        # body 1 moves along x, the terms' normal
+        curvature = m.hessian(q).toarray()[2, 2]
+        np.testing.assert_allclose(curvature * m.time_unit**2 / m.mass, 1.0, rtol=1e-9)
+
 # scans through contact-type boundaries: (shapes, start, end, label); the pair moves
 # linearly in (x, y, theta) from start to end
 SCANS = [

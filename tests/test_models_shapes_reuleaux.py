@@ -87,3 +87,20 @@ def test_continuous_from_arc_arc_to_vertex_arc():
         jumps.append((np.max(np.abs(np.diff(u))), np.max(np.abs(np.diff(g, axis=0)))))
     for coarse, fine in zip(*jumps):
         assert fine < coarse / 5.0, jumps
+
+
+def test_corners_crossing_tip_to_tip_cost_their_small_overlap():
+    """Two corners whose tips cross by ``eps`` overlap by ``O(eps)``: the energy stays of order ``k eps^2``
+    (an arc-arc term of the two arcs centred on the tips would add ``(k/2) (s_i + s_j - eps)^2``)."""
+    m = ShapeModel(BOX, TABLE, [0, 1])
+    rng = np.random.default_rng(11)
+    tip_i = TABLE.vertex_list(0)[0]
+    for _ in range(40):
+        tilt = rng.uniform(-0.3, 0.3)
+        c, s_ = np.cos(np.pi + tilt), np.sin(np.pi + tilt)
+        rot = np.array([[c, -s_], [s_, c]])
+        # the tip of j (its vertex 0, pointing back at i) placed eps inside i's tip
+        gap = rng.uniform(-1e-3, 1e-3, 2)
+        centre = np.array([3.0, 3.0]) + tip_i + gap - rot @ TABLE.vertex_list(1)[0]
+        ev = m.evaluate(m.dofs([[3.0, 3.0, 0.0], [*centre, np.pi + tilt]]))
+        assert ev.energy <= 4.0 * float(gap @ gap), (tilt, gap, ev.energy)

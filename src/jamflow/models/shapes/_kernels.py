@@ -590,7 +590,9 @@ def reuleaux_terms(dx0, dx1, ti, tj, pi, pj, k, g, record, out):
 
     - arc-arc: ``r`` = distance of the two arc centres, ``sigma = s_i + s_j``, valid
       when the contact point (on the line of centres, ``s`` from each centre) lies on
-      both arcs;
+      both arcs and ``r > max(s_i, s_j)`` (an overlap shallower than the larger side;
+      deeper, an arc centre lies in the other body's sector: crossed corners, whose
+      overlap the vertex-arc terms carry);
     - vertex-arc: ``r`` = distance from the arc's centre to the other body's vertex,
       ``sigma`` = the arc's radius, valid when the vertex lies in the arc's angle and
       the contact normal lies in the vertex's normal cone (between the normals of the
@@ -621,7 +623,11 @@ def reuleaux_terms(dx0, dx1, ti, tj, pi, pj, k, g, record, out):
             ux = vj[n, 0] - vi[m, 0]
             uy = vj[n, 1] - vi[m, 1]
             r = np.sqrt(ux * ux + uy * uy)
-            if r.real < (si + sj).real:
+            # an arc-arc overlap deeper than the larger side is no contact of the two arcs:
+            # an arc centre (a vertex) then lies in the other body's sector, as when two
+            # corners cross tip to tip (their vertex-arc terms carry that overlap), and the
+            # term would jump in at delta ~ s_i + s_j
+            if max(si.real, sj.real) < r.real < (si + sj).real:
                 ok_i = _in_arc(ux.real, uy.real, (vi[m1, 0] - vi[m, 0]).real, (vi[m1, 1] - vi[m, 1]).real,
                                (vi[m2, 0] - vi[m, 0]).real, (vi[m2, 1] - vi[m, 1]).real)
                 ok_j = _in_arc(-ux.real, -uy.real, (vj[n1, 0] - vj[n, 0]).real, (vj[n1, 1] - vj[n, 1]).real,

@@ -19,7 +19,9 @@ per shape family:
 
 Masses are equal (``mass``, default 1); the moment of inertia of body ``i`` is
 ``mass * gyration_squared`` of its shape (uniform density), entering as the inverse
-mass of its orientation, so FIRE's time step means the same for rotations.
+mass of its orientation, so FIRE's time step means the same for rotations; the time
+unit is ``sqrt(mass / k)``, for circulo-polygons ``sqrt(mass / (4 k))`` (the curvature of a
+face-to-face contact, :data:`POLYGON_STIFFNESS`).
 The Hessian is the complex-step derivative of the analytic pair gradients
 (:func:`._kernels.pair_hessian_blocks`), exact to round-off.
 """
@@ -50,6 +52,14 @@ SHAPE_FAMILIES: dict[str, tuple[str, ...]] = {
 
 #: Families whose pair terms are distances of two body-fixed points (:meth:`ShapeModel.point_terms`).
 POINT_TERM_FAMILIES = ("reuleaux", "dumbbell")
+
+#: Stiffness of the time unit of circulo-polygon packings over ``k`` [1]: the normal
+#: curvature of a face-to-face contact (two vertex-edge terms of weight 2, App. A 2).
+#: FIRE ran freely at ``dt_max omega_max <= 1.1`` and restarted every few tens of steps,
+#: stalling, at ``>= 1.4``; disks run at 0.76 (``omega_max`` 2.5), polygon packings reach
+#: ``omega_max`` 5.2-6.6, so their ``dt_max`` is 0.15 (0.77-0.98) (docs/notes/shapes.md,
+#: "Circulo-polygons and Reuleaux triangles at N = 100").
+POLYGON_STIFFNESS: float = 4.0
 
 _PAIR = {"circulo": _kernels.circulo_pair, "ellipse": _kernels.ellipse_pair, "reuleaux": _kernels.reuleaux_pair,
          "dumbbell": _kernels.dumbbell_pair}
@@ -91,6 +101,14 @@ def _shape_parameters(shapes: ShapeTable, family: str) -> NDArray[np.float64]:
         out[k, 1] = len(v)
         out[k, 2: 2 + 2 * len(v)] = v.ravel()
     return out
+
+
+def _time_stiffness(shapes: ShapeTable, shape_index: NDArray[np.int64], family: str) -> float:
+    """Spring constant over ``k`` that sets FIRE's time unit ``sqrt(m / (K k))`` [1]: :data:`POLYGON_STIFFNESS`
+    with a circulo-polygon present, else 1."""
+    if family == "circulo" and int(shapes.n_vertices[np.unique(shape_index)].max()) >= 3:
+        return POLYGON_STIFFNESS
+    return 1.0
 
 
 class ShapeModel(WithoutFastPaths):
@@ -140,7 +158,9 @@ class ShapeModel(WithoutFastPaths):
         self.inverse_mass = np.concatenate([np.full(2 * self.n, 1.0 / self.mass), 1.0 / inertia])
         #: length that turns a torque into a force in :meth:`max_force` [length]
         self.torque_arm = float(self.bounding_diameter.mean())
-        self.time_unit = self.torque_arm * np.sqrt(self.mass / (self.k * self.torque_arm**2))
+        # FIRE's time steps are in periods of the stiffest common contact (POLYGON_STIFFNESS)
+        self.time_unit = float(np.sqrt(self.mass / (self.k * _time_stiffness(shapes, self.shape_index,
+                                                                            self.family))))
         self._pair = _PAIR[self.family]
         self._code = _kernels.FAMILY_CODES[self.family]
         self.rotations = bool(rotations)
