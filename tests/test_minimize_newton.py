@@ -127,3 +127,16 @@ def test_the_inertia_check_agrees_with_dense_eigenvalues_and_survives_a_zero_piv
         g = b @ b.T
         a = g - (np.linalg.eigvalsh(g)[0] - sign * 1e-3) * np.eye(12)
         assert positive_semidefinite(sp.csc_matrix(a)) == (sign > 0)
+
+
+def test_a_polish_whose_every_step_is_refused_gives_up_before_its_shift_overflows(monkeypatch):
+    """No step may move a body (TRUST_MOVE = 0): the shift grows after every refusal, and the polish must
+    stop once it exceeds TRUST_SHIFT_MAX (the step is then below round-off) without a float overflow,
+    within far fewer trial steps than its budget."""
+    monkeypatch.setattr(newton, "TRUST_MOVE", 0.0)
+    model, c = _squeezed("ellipse")
+    with np.errstate(over="raise", invalid="raise"):
+        polished = polish_enthalpy(model, c, P0, 1e-13, 1e-6)
+    assert polished.result is None and not polished.descended
+    # the shift starts at TRUST_SHIFT and grows by 2, 4, 8, ...: past 1 / eps after about 10 refusals
+    assert polished.iterations < 20

@@ -75,6 +75,12 @@ TRUST_SHIFT: float = 1e-8
 #: ``H`` by less than the quadratic model says, and is still progress).
 TRUST_ACCEPT: float = 1e-4
 
+#: Largest Levenberg shift relative to the largest diagonal entry of the Hessian [1]: the
+#: step is then below ``eps |g| / K_max``, under the round-off of the configuration, so a
+#: polish whose shift grew this far has no step left and gives up (the shift doubles its
+#: growth after each rejection and would otherwise overflow within the trial budget).
+TRUST_SHIFT_MAX: float = 1.0 / float(np.finfo(np.float64).eps)
+
 #: Largest displacement of a body's surface in one trial step, relative to the mean
 #: distance between neighbours [1]: a step that would move a body further is treated as
 #: rejected, so no step can carry a body through another's core.
@@ -251,6 +257,8 @@ def polish_enthalpy(model: EnergyModel, config: NDArray[np.float64], pressure0: 
         step = _shifted_solve(system, metric, mu, rhs)
         if step is None or _largest_move(model, step, arm, spacing) > TRUST_MOVE * spacing:
             mu, nu = mu * nu, 2.0 * nu
+            if mu > TRUST_SHIFT_MAX:
+                break
             continue
         gain, curvature = float(rhs @ step), float(step @ (system @ step))
         # below the round-off of the energy sums the enthalpy cannot judge a step; the force does
@@ -269,6 +277,8 @@ def polish_enthalpy(model: EnergyModel, config: NDArray[np.float64], pressure0: 
                 break
         if not accepted:
             mu, nu = mu * nu, 2.0 * nu
+            if mu > TRUST_SHIFT_MAX:
+                break
             continue
         if length == 1.0:
             mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3) if predicted > resolution else 1.0 / 3.0
@@ -284,4 +294,4 @@ def polish_enthalpy(model: EnergyModel, config: NDArray[np.float64], pressure0: 
                 position=np.array(x), box=model.box, energy=ev.energy, pressure=p, max_force=fmax,
                 n_contacts=ev.n_contacts, steps=0, converged=True, rebuilds=0, evaluations=evaluations,
             ), it, x, model.box, True)
-    return NewtonPolish(None, max_iterations, x, model.box, descended)
+    return NewtonPolish(None, it, x, model.box, descended)
