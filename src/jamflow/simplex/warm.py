@@ -224,6 +224,62 @@ def _primal(st: State, weights: Weights, rng: np.random.Generator, limit: int) -
             st.refactor()
 
 
+def _push(st: State, weights: Weights, limit: int) -> None:
+    """Columns held at a value (side ``FREE``) that have a finite bound move to a vertex:
+    each moves towards its nearer finite bound, the other members staying tight, until
+    its bound (the member then stays, at the bound) or a blocking constraint (which
+    enters in its place). At the primal simplex's end their multipliers are within
+    ``tol.dual`` of zero, so the objective does not change beyond that."""
+    lower, upper = st.lower, st.upper
+    e = np.zeros(st.n)
+    while True:
+        slots = np.flatnonzero((st.kind == 1) & (st.side == FREE))
+        j_held = st.idx[slots]
+        slots = slots[np.isfinite(lower[j_held]) | np.isfinite(upper[j_held])]
+        if not len(slots):
+            return
+        if st.stats.pivots + st.stats.flips >= limit:
+            raise Trouble("iteration limit")
+        p = int(slots[0])
+        j = int(st.idx[p])
+        up_gap, low_gap = upper[j] - st.z[j], st.z[j] - lower[j]
+        sigma = 1.0 if up_gap <= low_gap else -1.0
+        own = up_gap if sigma > 0 else low_gap
+        e[p] = sigma
+        d = st.ftran(e)
+        e[p] = 0.0
+        st.matvec(d, st.alpha)
+        t0 = time.perf_counter()
+        kind, q, t = k.primal_ratio(st.alpha, st.s, st.row_slot, d, st.z, st.lw, st.uw, st.col_slot,
+                                    st.tol.primal, st.tol.pivot)
+        st.stats.seconds["ratio"] += time.perf_counter() - t0
+        if kind < 0 or own <= t:
+            t = max(own, 0.0)
+            st.z += t * d
+            st.s -= t * st.alpha
+            st.side[p] = UPPER if sigma > 0 else LOWER_SIDE
+            st.r[p] = upper[j] if sigma > 0 else lower[j]
+            st.z[j] = st.r[p]
+            st.stats.flips += 1
+            continue
+        pivot = st.alpha[q] if kind == 0 else d[q]
+        beta = st.btran(st.normal(0 if kind == 0 else 1, q))
+        if not _agree(st, beta[p], sigma * pivot):
+            continue
+        st.z += t * d
+        st.s -= t * st.alpha
+        value, side = _enter(st, kind, q)
+        ratio = st.y[p] / beta[p]
+        st.y -= ratio * beta
+        st.y[p] = ratio
+        if weights.weight is not None:
+            weights.update(p, beta)
+        st.swap(p, 0 if kind == 0 else 1, q, side, value, beta)
+        st.stats.primal_pivots += 1
+        if st.factor.full:
+            st.refactor()
+
+
 # --- step 3: shifts removed, the dual simplex repairs --------------------------------------
 
 
@@ -356,6 +412,7 @@ def solve(A: sp.spmatrix, rhs: NDArray[np.float64], col_lower: NDArray[np.float6
         for _ in range(MAX_ROUNDS):
             st.stats.rounds += 1
             _primal(st, weights, rng, limit)
+            _push(st, weights, limit)
             _restore(st)
             _dual(st, limit)
             st.refine()
