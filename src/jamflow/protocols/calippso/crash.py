@@ -63,19 +63,19 @@ def _crash_basis(A: sp.csc_matrix, rhs: NDArray[np.float64], col_lower: NDArray[
     held = (repaired_col != _BASIC) & (col == _BASIC)
     held[-1] = False
     col[held] = _ZERO
-    extra = _row_for_g(A, rhs, row, held)
+    extra = _row_for_g(rhs, row)
     if extra < 0:
         return None
     row[extra] = _UPPER
     return col, row
 
 
-def _row_for_g(A: sp.csc_matrix, rhs: NDArray[np.float64], row: NDArray[np.int8], held: NDArray[np.bool_]) -> int:
-    """The row with the smallest right-hand side outside the working set whose
-    displacement columns are all free to move (none held), or -1."""
+def _row_for_g(rhs: NDArray[np.float64], row: NDArray[np.int8]) -> int:
+    """The row with the smallest right-hand side outside the working set, or -1. With
+    the held columns' unit rows it eliminates, it makes the working set square; it is
+    singular only if the row's displacement part is the combination of the working
+    rows whose ``g`` coefficients sum to one, which the LU reports as trouble."""
     outside = np.flatnonzero(row == _BASIC)
-    touches_held = np.asarray(abs(A[outside][:, np.flatnonzero(held)]).sum(axis=1)).ravel() > 0
-    candidates = outside[~touches_held]
-    if not len(candidates):
+    if not len(outside):
         return -1
-    return int(candidates[np.argmin(rhs[candidates])])
+    return int(outside[np.argmin(rhs[outside])])
