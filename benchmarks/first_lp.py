@@ -29,6 +29,7 @@ import numpy as np
 import xarray as xr
 
 from jamflow import simplex
+from jamflow.highs import new_highs
 from jamflow.io import new_dataset_attrs, read_packing, write_dataset
 from jamflow.protocols.calippso import CONTACT_DUAL_REL_TOL, SOLVER_TOL
 from jamflow.protocols.calippso.chain import _Chain, _Container
@@ -42,7 +43,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from calippso import OUT
 
 METHODS = ("ipm-nox", "ipm", "crash")
-UNITS = {"cpu": "s", "crash_cpu": "s"}
+UNITS = {"cpu": "s", "basis_cpu": "s"}
 
 
 def first_lp(start: Path):
@@ -74,10 +75,10 @@ def highs(lp, method: str) -> dict:
 
 def crash(lp) -> dict:
     c0 = time.process_time()
-    basis = _crash_basis(lp.A, lp.geo.rhs, lp.col_lower, lp.col_upper)
+    basis = _crash_basis(new_highs(1), lp.A, lp.geo.rhs, lp.col_lower, lp.col_upper)
     crash_cpu = time.process_time() - c0
     if basis is None:
-        return dict(cpu=crash_cpu, crash_cpu=crash_cpu, status="no crash basis", ipm_its=0, pivots=0, dual_pivots=0,
+        return dict(cpu=crash_cpu, basis_cpu=crash_cpu, status="no crash basis", ipm_its=0, pivots=0, dual_pivots=0,
                     flips=0, factorisations=0, held=0, crash_rows=0, col=np.full(lp.A.shape[1], np.nan),
                     dual=np.full(lp.A.shape[0], np.nan))
     col, row = basis
@@ -86,7 +87,7 @@ def crash(lp) -> dict:
     res = simplex.solve(lp.A, lp.geo.rhs, lp.col_lower, lp.col_upper, cost, col, row,
                         simplex.Tolerances(primal=SOLVER_TOL, dual=SOLVER_TOL))
     st = res.stats
-    return dict(cpu=time.process_time() - c0, crash_cpu=crash_cpu, status=res.status, ipm_its=0,
+    return dict(cpu=time.process_time() - c0, basis_cpu=crash_cpu, status=res.status, ipm_its=0,
                 pivots=st.pivots, dual_pivots=st.dual_pivots, flips=st.flips, factorisations=st.factorisations,
                 held=int(np.sum(col == 3)), crash_rows=int(np.sum(row != 1)), col=res.col_value, dual=-res.row_dual)
 
@@ -105,7 +106,7 @@ def main() -> None:
     ap.add_argument("--output", default="first_lp.nc")
     args = ap.parse_args()
     fields = ["N", "rows"] + [f"{m}_{k}" for m in METHODS for k in ("cpu", "pivots", "ipm_its")] + [
-        "crash_cpu", "crash_rows", "held", "dual_pivots", "flips", "factorisations", "gamma_rel", "active_diff",
+        "basis_cpu", "crash_rows", "held", "dual_pivots", "flips", "factorisations", "gamma_rel", "active_diff",
         "dual_diff", "contacts", "crash_optimal"]
     rows = []
     for k, start in enumerate(args.starts):
@@ -115,13 +116,13 @@ def main() -> None:
         row = dict(N=p.n, rows=lp.A.shape[0], crash_optimal=float(runs["crash"]["status"] == "optimal"))
         for m in METHODS:
             row.update({f"{m}_{q}": runs[m][q] for q in ("cpu", "pivots", "ipm_its")})
-        row.update({q: runs["crash"][q] for q in ("crash_cpu", "crash_rows", "held", "dual_pivots", "flips",
+        row.update({q: runs["crash"][q] for q in ("basis_cpu", "crash_rows", "held", "dual_pivots", "flips",
                                                    "factorisations")})
         row.update(agreement(runs["crash"], runs["ipm"]))
         rows.append(row)
         print(f"{start.name}: IPX {row['ipm-nox_cpu']:.2f} s ({row['ipm-nox_ipm_its']} its) | IPX + crossover "
               f"{row['ipm_cpu']:.2f} s ({row['ipm_ipm_its']} its, {row['ipm_pivots']} crossover pivots) | crash "
-              f"{runs['crash']['status']} {row['crash_cpu']:.2f} s (basis {row['crash_cpu']:.2f} s, "
+              f"{runs['crash']['status']} {row['crash_cpu']:.2f} s (basis {row['basis_cpu']:.2f} s, "
               f"{row['crash_rows']} rows, {row['held']} held; {row['crash_pivots']} pivots, {row['dual_pivots']} dual, "
               f"{row['flips']} flips, {row['factorisations']} LUs) | HiGHS/crash {row['ipm_cpu'] / row['crash_cpu']:.2f} "
               f"| Gamma {row['gamma_rel']:.1e} active {row['active_diff']:.0f} of {row['contacts']:.0f} duals "

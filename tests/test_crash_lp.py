@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from jamflow import simplex
+from jamflow.highs import new_highs
 from jamflow.io import read_packing
 from jamflow.protocols.calippso import (
     CONTACT_DUAL_REL_TOL,
@@ -55,7 +56,7 @@ def solved(request):
     h.run()
     assert h.getModelStatus() == highspy.HighsModelStatus.kOptimal
     sol = h.getSolution()
-    crash = _crash_basis(lp["A"], lp["rhs"], lp["lower"], lp["upper"])
+    crash = _crash_basis(new_highs(1), lp["A"], lp["rhs"], lp["lower"], lp["upper"])
     assert crash is not None
     cost = np.zeros(lp["A"].shape[1])
     cost[-1] = -1.0

@@ -18,7 +18,6 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from ...highs import new_highs
 from .lp import _highs_lp
 
 #: Rows whose scaled right-hand side ``(r^2 - sigma^2) / sigma^2`` (about twice the
@@ -31,11 +30,12 @@ _BASIC, _UPPER, _ZERO = (int(highspy.HighsBasisStatus.kBasic), int(highspy.Highs
                          int(highspy.HighsBasisStatus.kZero))
 
 
-def _crash_basis(A: sp.csc_matrix, rhs: NDArray[np.float64], col_lower: NDArray[np.float64],
+def _crash_basis(h: highspy.Highs, A: sp.csc_matrix, rhs: NDArray[np.float64], col_lower: NDArray[np.float64],
                  col_upper: NDArray[np.float64]) -> tuple[NDArray[np.int8], NDArray[np.int8]] | None:
     """The crash basis of the LP ``min -g`` s.t. ``A z <= rhs`` (``g`` the last column):
     column and row statuses as HiGHS codes, held columns ``kZero``; None when no row is
-    below :data:`CRASH_GAP` or no row is left for ``g``."""
+    below :data:`CRASH_GAP` or no row is left for ``g``. ``h`` (the chain's HiGHS
+    instance; its model is replaced) repairs the rank."""
     M, n = A.shape
     chosen = rhs < CRASH_GAP
     if not chosen.any():
@@ -47,7 +47,7 @@ def _crash_basis(A: sp.csc_matrix, rhs: NDArray[np.float64], col_lower: NDArray[
     # rank repair on the displacement columns only (g's column zeroed), so that it is
     # never the column HiGHS holds
     displacement = sp.hstack([A[:, :-1], sp.csc_matrix((M, 1))], format="csc")
-    h = new_highs(1)
+    h.clearSolver()
     h.passModel(_highs_lp(displacement, rhs, col_lower, col_upper))
     h.setOptionValue("simplex_scale_strategy", 0)
     alien = highspy.HighsBasis()

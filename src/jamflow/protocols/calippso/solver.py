@@ -202,7 +202,7 @@ class _Solver:
         geometry (:mod:`.crash`); on trouble (no crash basis, or the simplex's) the
         solution has no columns and its status names the trouble."""
         t0 = time.perf_counter()
-        crash = _crash_basis(A, rhs, col_lower, col_upper)
+        crash = _crash_basis(self.h, A, rhs, col_lower, col_upper)
         if crash is None:
             return _Solution(status="no crash basis", seconds=time.perf_counter() - t0, col=None, dual=None,
                              warm=False, method="crash", simplex_iterations=0, ipm_iterations=0, engine="jamflow")
