@@ -18,6 +18,7 @@ import pytest
 from jamflow import simplex
 from jamflow.highs import new_highs
 from jamflow.io import read_packing
+from jamflow.io.formats import read_dat
 from jamflow.protocols.calippso import (
     CONTACT_DUAL_REL_TOL,
     CRASH_MIN_COLUMNS,
@@ -143,3 +144,10 @@ def test_the_first_lp_option_is_checked_and_auto_follows_the_lp_size():
         calippso(start, first_lp="gurobi")
     assert _crash_first("auto", CRASH_MIN_COLUMNS) and not _crash_first("auto", CRASH_MIN_COLUMNS - 1)
     assert _crash_first("crash", 3) and not _crash_first("highs", CRASH_MIN_COLUMNS)
+
+
+def test_no_crash_basis_where_the_gaps_do_not_separate():
+    """The authors' d = 3 LS example: a third of its columns have a row below CRASH_GAP."""
+    lp = jamming_lp(read_dat(DATA / "calippso-ls" / "Centers-after-LS--N-1024--d-3.dat"), cutoff=DEFAULT_CUTOFF_NEAR)
+    assert np.sum(lp.rhs < crash_module.CRASH_GAP) < crash_module.CRASH_MIN_TIGHT * lp.A.shape[1]
+    assert _crash_basis(new_highs(1), lp.A, lp.rhs, lp.col_lower, lp.col_upper) is None

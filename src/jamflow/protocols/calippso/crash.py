@@ -26,6 +26,14 @@ from .lp import _highs_lp
 #: (measured: docs/notes/warm-simplex.md#the-first-lp-from-a-crash-basis).
 CRASH_GAP: float = 1e-5
 
+#: The crash is tried only when at least this fraction of the columns has a row below
+#: :data:`CRASH_GAP`, between the measured cases: near starts at p = 1e7 (3D) and the
+#: authors' d = 4, 5 LS examples have 0.93-0.99, a 2D LS packing at p = 1e6 0.85, the
+#: d = 3 LS example 0.33 (its gaps do not separate; from its crash working set
+#: jamflow.simplex met an unstable pivot)
+#: (measured: docs/notes/warm-simplex.md#the-first-lp-from-a-crash-basis).
+CRASH_MIN_TIGHT: float = 0.5
+
 _BASIC, _UPPER, _ZERO = (int(highspy.HighsBasisStatus.kBasic), int(highspy.HighsBasisStatus.kUpper),
                          int(highspy.HighsBasisStatus.kZero))
 
@@ -33,12 +41,12 @@ _BASIC, _UPPER, _ZERO = (int(highspy.HighsBasisStatus.kBasic), int(highspy.Highs
 def _crash_basis(h: highspy.Highs, A: sp.csc_matrix, rhs: NDArray[np.float64], col_lower: NDArray[np.float64],
                  col_upper: NDArray[np.float64]) -> tuple[NDArray[np.int8], NDArray[np.int8]] | None:
     """The crash basis of the LP ``min -g`` s.t. ``A z <= rhs`` (``g`` the last column):
-    column and row statuses as HiGHS codes, held columns ``kZero``; None when no row is
-    below :data:`CRASH_GAP` or no row is left for ``g``. ``h`` (the chain's HiGHS
+    column and row statuses as HiGHS codes, held columns ``kZero``; None when fewer than
+    :data:`CRASH_MIN_TIGHT` ``n`` rows are below :data:`CRASH_GAP` or no row is left for ``g``. ``h`` (the chain's HiGHS
     instance; its model is replaced) repairs the rank."""
     M, n = A.shape
     chosen = rhs < CRASH_GAP
-    if not chosen.any():
+    if chosen.sum() < CRASH_MIN_TIGHT * n:
         return None
     fixed = col_lower == col_upper
     col = np.where(fixed, int(highspy.HighsBasisStatus.kLower), _BASIC).astype(np.int8)

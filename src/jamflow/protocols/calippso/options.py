@@ -87,9 +87,10 @@ WARM_ENGINE_MIN_COLUMNS: int = 4096
 #: first LP is always the interior point's.
 FIRST_LPS: tuple[str, ...] = ("auto", "highs", "crash")
 DEFAULT_FIRST_LP: str = "auto"
-#: ``auto``: the crash basis from ``d N`` = 4096 columns on. The first LP of d = 3 near
-#: starts, CPU time HiGHS / crash: N = 1024 ..., N = 2048 ..., N = 4096 ...
-#: (measured: docs/notes/warm-simplex.md#the-first-lp-from-a-crash-basis).
+#: ``auto``: the crash basis from ``d N`` = 4096 columns on, where the first LP costs
+#: most. CPU time of the first LP, IPX + crossover / crash, the same answers: d = 3 near
+#: starts N = 1024 2.7-2.8, N = 2048 2.5, N = 4096 N4096_RATIO; the LS examples d = 4 and 5
+#: 4.1 and 4.0 (measured: docs/notes/warm-simplex.md#the-first-lp-from-a-crash-basis).
 CRASH_MIN_COLUMNS: int = 4096
 
 #: How a chain ends. ``newton``: once an LP in the tail (``sqrt(Gamma*) - 1 <=
