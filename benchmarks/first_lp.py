@@ -85,7 +85,7 @@ def crash(lp) -> dict:
     cost = np.zeros(lp.A.shape[1])
     cost[-1] = -1.0
     res = simplex.solve(lp.A, lp.geo.rhs, lp.col_lower, lp.col_upper, cost, col, row,
-                        simplex.Tolerances(primal=SOLVER_TOL, dual=SOLVER_TOL))
+                        simplex.Tolerances(primal=SOLVER_TOL, dual=SOLVER_TOL), held=col == 3)
     st = res.stats
     return dict(cpu=time.process_time() - c0, basis_cpu=crash_cpu, status=res.status, ipm_its=0,
                 pivots=st.pivots, dual_pivots=st.dual_pivots, flips=st.flips, factorisations=st.factorisations,

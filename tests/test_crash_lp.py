@@ -61,7 +61,8 @@ def solved(request):
     assert crash is not None
     cost = np.zeros(lp["A"].shape[1])
     cost[-1] = -1.0
-    ours = simplex.solve(lp["A"], lp["rhs"], lp["lower"], lp["upper"], cost, crash[0], crash[1], TOL)
+    ours = simplex.solve(lp["A"], lp["rhs"], lp["lower"], lp["upper"], cost, crash[0], crash[1], TOL,
+                         held=crash[0] == ZERO)
     return request.param, lp, crash, np.asarray(sol.col_value), np.asarray(sol.row_dual), ours
 
 

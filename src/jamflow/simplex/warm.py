@@ -361,7 +361,8 @@ def solve(A: sp.spmatrix, rhs: NDArray[np.float64], col_lower: NDArray[np.float6
           col_upper: NDArray[np.float64], cost: NDArray[np.float64], col_status: NDArray[np.integer],
           row_status: NDArray[np.integer], tol: Tolerances | None = None, max_pivots: int | None = None,
           ordering: str = "metis", pricing: str = "sketch", perturbation: float = PERTURBATION,
-          max_etas: int | None = None, seed: int = 0, lu: str = "auto") -> Result:
+          max_etas: int | None = None, seed: int = 0, lu: str = "auto",
+          held: NDArray[np.bool_] | None = None) -> Result:
     """Solve ``min cost.z`` s.t. ``A z <= rhs``, ``col_lower <= z <= col_upper`` from a basis.
 
     Parameters
@@ -392,6 +393,9 @@ def solve(A: sp.spmatrix, rhs: NDArray[np.float64], col_lower: NDArray[np.float6
         Seed of the perturbation and the sketch: the same input gives the same answer.
     lu : str
         Library of the LU (:data:`jamflow.simplex.factor.LU_LIBRARIES`).
+    held : ndarray of bool, shape (n,), optional
+        Nonbasic columns held at zero between their bounds at the start (a crash basis);
+        the answer has them at a vertex.
 
     Returns
     -------
@@ -406,7 +410,7 @@ def solve(A: sp.spmatrix, rhs: NDArray[np.float64], col_lower: NDArray[np.float6
     limit = max_pivots if max_pivots is not None else 2**62
     status = "optimal"
     try:
-        st.set_working_set(np.asarray(col_status, np.int64), np.asarray(row_status, np.int64))
+        st.set_working_set(np.asarray(col_status, np.int64), np.asarray(row_status, np.int64), held)
         st.refactor()
         _shift_and_perturb(st, rng, perturbation)
         for _ in range(MAX_ROUNDS):

@@ -173,7 +173,7 @@ class _Solver:
                          pivots, ipm_its, fallback=fallback)
 
     def _solve_jamflow(self, A: sp.csc_matrix, rhs, col_lower, col_upper, carried: _Basis,
-                       rows: _Rows) -> _Solution:
+                       rows: _Rows, held: NDArray[np.bool_] | None = None) -> _Solution:
         """The warm LP by :mod:`jamflow.simplex` from the carried basis, at HiGHS's
         tolerances and pivot limit; on trouble the solution has no columns and its status
         names the trouble."""
@@ -185,7 +185,7 @@ class _Solver:
         col, row = carried.statuses()
         res = simplex.solve(A, rhs, col_lower, col_upper, cost, col, row,
                             simplex.Tolerances(primal=self.tol, dual=self.tol),
-                            max_pivots=max(int(WARM_PIVOTS_PER_ROW * A.shape[0]), 1))
+                            max_pivots=max(int(WARM_PIVOTS_PER_ROW * A.shape[0]), 1), held=held)
         seconds = res.stats.seconds["total"]
         lu = res.stats.lu + ("+superlu" if res.stats.superlu_fallbacks else "")
         if not res.optimal:
@@ -206,7 +206,9 @@ class _Solver:
         if crash is None:
             return _Solution(status="no crash basis", seconds=time.perf_counter() - t0, col=None, dual=None,
                              warm=False, method="crash", simplex_iterations=0, ipm_iterations=0, engine="jamflow")
-        sol = self._solve_jamflow(A, rhs, col_lower, col_upper, _Basis(col=crash[0], row=crash[1]), rows)
+        col, row = crash
+        sol = self._solve_jamflow(A, rhs, col_lower, col_upper, _Basis(col=col, row=row), rows,
+                                  held=col == int(highspy.HighsBasisStatus.kZero))
         return replace(sol, seconds=time.perf_counter() - t0, warm=False, method="crash")
 
     def _iterations(self) -> tuple[int, int]:
