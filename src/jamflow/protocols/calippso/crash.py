@@ -21,8 +21,8 @@ from numpy.typing import NDArray
 from .lp import _highs_lp
 
 #: Rows whose scaled right-hand side ``(r^2 - sigma^2) / sigma^2`` (about twice the
-#: relative gap) is below this start in the crash working set. The LS starts at
-#: p = 1e7 have a gap between 3e-6 (the contacts) and 1e-4 (the first shell)
+#: relative gap) is below this start in the crash working set. In the LS starts at
+#: p = 1e7, 90 % of the d N smallest lie below 1.5e-6, and the (d N)-th is 1e-3
 #: (measured: docs/notes/warm-simplex.md#the-first-lp-from-a-crash-basis).
 CRASH_GAP: float = 1e-5
 
