@@ -86,11 +86,14 @@ WARM_ENGINE_MIN_COLUMNS: int = 4096
 #: ``auto`` takes ``crash`` from :data:`CRASH_MIN_COLUMNS` columns on. A far start's
 #: first LP is always the interior point's.
 FIRST_LPS: tuple[str, ...] = ("auto", "highs", "crash")
-DEFAULT_FIRST_LP: str = "auto"
-#: ``auto``: the crash basis from ``d N`` = 4096 columns on, where the first LP costs
-#: most. CPU time of the first LP, IPX + crossover / crash, the same answers: d = 3 near
-#: starts N = 1024 2.7-2.8, N = 2048 2.5, N = 4096 N4096_RATIO; the LS examples d = 4 and 5
-#: 4.1 and 4.0 (measured: docs/notes/warm-simplex.md#the-first-lp-from-a-crash-basis).
+#: ``highs`` by default: CPU time of the first LP, IPX + crossover / crash, with the same
+#: answers, is 2.5-3.1 at d = 3, N = 2048 and 4.0-4.1 on the LS examples d = 4 and 5, but
+#: 1.89 at N = 4096 (one start), under the 2x its adoption asked for, and the crash's
+#: pivots grow faster with N than IPX's time; a different first vertex also changes the
+#: chain's path (measured: docs/notes/warm-simplex.md#the-first-lp-from-a-crash-basis).
+DEFAULT_FIRST_LP: str = "highs"
+#: ``auto``: the crash basis from ``d N`` = 4096 columns on (the LS examples d = 4 and 5,
+#: d = 3 from N = 2048; at d = 3, N = 1024 the first LP is 2 s of CPU).
 CRASH_MIN_COLUMNS: int = 4096
 
 #: How a chain ends. ``newton``: once an LP in the tail (``sqrt(Gamma*) - 1 <=
