@@ -180,6 +180,29 @@ def _flip(st: State, p: int, t: float, d: NDArray[np.float64]) -> bool:
     return True
 
 
+def _pivot(st: State, weights: Weights, p: int, sigma: float, kind: int, q: int, t: float,
+           d: NDArray[np.float64]) -> None:
+    """Member ``p`` leaves along ``d`` (direction ``sigma``) by step ``t``; the blocking
+    constraint ``q`` (kind 0 row, 1 lower bound, 2 upper bound) enters in its slot. A
+    pivot element the row eta does not confirm refactorises instead (:func:`_agree`)."""
+    pivot = st.alpha[q] if kind == 0 else d[q]
+    beta = st.btran(st.normal(0 if kind == 0 else 1, q))
+    if not _agree(st, beta[p], sigma * pivot):
+        return
+    st.z += t * d
+    st.s -= t * st.alpha
+    value, side = _enter(st, kind, q)
+    ratio = st.y[p] / beta[p]
+    st.y -= ratio * beta
+    st.y[p] = ratio
+    if weights.weight is not None:
+        weights.update(p, beta)
+    st.swap(p, 0 if kind == 0 else 1, q, side, value, beta)
+    st.stats.primal_pivots += 1
+    if st.factor.full:
+        st.refactor()
+
+
 def _primal(st: State, weights: Weights, rng: np.random.Generator, limit: int) -> None:
     """Primal simplex pivots until no member is dual infeasible beyond ``tol.dual``."""
     tol, n = st.tol, st.n
@@ -207,21 +230,7 @@ def _primal(st: State, weights: Weights, rng: np.random.Generator, limit: int) -
             continue
         if kind < 0:
             raise Trouble("unbounded")
-        pivot = st.alpha[q] if kind == 0 else d[q]
-        beta = st.btran(st.normal(0 if kind == 0 else 1, q))
-        if not _agree(st, beta[p], sigma * pivot):
-            continue
-        st.z += t * d
-        st.s -= t * st.alpha
-        value, side = _enter(st, kind, q)
-        ratio = st.y[p] / beta[p]
-        st.y -= ratio * beta
-        st.y[p] = ratio
-        weights.update(p, beta)
-        st.swap(p, 0 if kind == 0 else 1, q, side, value, beta)
-        st.stats.primal_pivots += 1
-        if st.factor.full:
-            st.refactor()
+        _pivot(st, weights, p, sigma, kind, q, t, d)
 
 
 def _push(st: State, weights: Weights, limit: int) -> None:
@@ -262,22 +271,7 @@ def _push(st: State, weights: Weights, limit: int) -> None:
             st.z[j] = st.r[p]
             st.stats.flips += 1
             continue
-        pivot = st.alpha[q] if kind == 0 else d[q]
-        beta = st.btran(st.normal(0 if kind == 0 else 1, q))
-        if not _agree(st, beta[p], sigma * pivot):
-            continue
-        st.z += t * d
-        st.s -= t * st.alpha
-        value, side = _enter(st, kind, q)
-        ratio = st.y[p] / beta[p]
-        st.y -= ratio * beta
-        st.y[p] = ratio
-        if weights.weight is not None:
-            weights.update(p, beta)
-        st.swap(p, 0 if kind == 0 else 1, q, side, value, beta)
-        st.stats.primal_pivots += 1
-        if st.factor.full:
-            st.refactor()
+        _pivot(st, weights, p, sigma, kind, q, t, d)
 
 
 # --- step 3: shifts removed, the dual simplex repairs --------------------------------------
