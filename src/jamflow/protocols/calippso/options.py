@@ -88,9 +88,10 @@ WARM_ENGINE_MIN_COLUMNS: int = 4096
 FIRST_LPS: tuple[str, ...] = ("auto", "highs", "crash")
 #: ``highs`` by default: CPU time of the first LP, IPX + crossover / crash, with the same
 #: answers, is 2.5-3.1 at d = 3, N = 2048 and 4.0-4.1 on the LS examples d = 4 and 5, but
-#: 1.89 at N = 4096 (one start), under the 2x its adoption asked for, and the crash's
-#: pivots grow faster with N than IPX's time; a different first vertex also changes the
-#: chain's path (measured: docs/notes/warm-simplex.md#the-first-lp-from-a-crash-basis).
+#: 1.89 at N = 4096 s1 (s2: about 2.3 against IPX alone), not the 2x on every start its
+#: adoption asked for, and the crash's pivots grow faster with N than IPX's time; a
+#: different first vertex also changes the chain's path
+#: (measured: docs/notes/warm-simplex.md#the-first-lp-from-a-crash-basis).
 DEFAULT_FIRST_LP: str = "highs"
 #: ``auto``: the crash basis from ``d N`` = 4096 columns on (the LS examples d = 4 and 5,
 #: d = 3 from N = 2048; at d = 3, N = 1024 the first LP is 2 s of CPU).
