@@ -7,9 +7,11 @@ import os
 
 from ..io import read_packing, write_dataset
 from ..protocols.calippso import (
+    CRASH_MIN_COLUMNS,
     DEFAULT_CUTOFF,
     DEFAULT_CUTOFF_NEAR,
     DEFAULT_FINISH,
+    DEFAULT_FIRST_LP,
     DEFAULT_INTERIOR,
     DEFAULT_MAX_ITERATIONS,
     DEFAULT_SOLVER,
@@ -17,6 +19,7 @@ from ..protocols.calippso import (
     DEFAULT_TOL_S,
     DEFAULT_WARM_ENGINE,
     FINISHES,
+    FIRST_LPS,
     INTERIOR_POINTS,
     NEAR_START_GAP,
     SOLVER_TOL,
@@ -80,6 +83,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="engine of the warm simplex LPs: highs, or jamflow (a simplex on a nested-dissection "
                         "sparse LU; HiGHS solves any LP it reports trouble on); auto takes jamflow from "
                         f"d N = {WARM_ENGINE_MIN_COLUMNS} on (default {DEFAULT_WARM_ENGINE})")
+    p.add_argument("--first-lp", choices=FIRST_LPS, default=DEFAULT_FIRST_LP,
+                   help="first LP of a start near jamming: highs (interior point with crossover), or crash "
+                        "(jamflow.simplex from the start's smallest gaps; the interior point solves it after any "
+                        f"trouble); auto takes crash from d N = {CRASH_MIN_COLUMNS} on (default {DEFAULT_FIRST_LP})")
     p.add_argument("--finish", choices=FINISHES, default=DEFAULT_FINISH,
                    help="newton: once the network is isostatic in the chain's tail, solve its square system by "
                         "Newton and keep it only if certified (positive forces, no overlap, same geometric "
@@ -95,7 +102,10 @@ def _calippso(args: argparse.Namespace) -> int:
         kwargs["bound"] = ((5e-4, args.bound[0]), (1e-5, args.bound[1]))
     with progress_bar(args.quiet, desc="calippso", unit=" LP") as bar:
         def progress(rec) -> None:
-            if rec.warm_fallback:
+            if rec.warm_fallback and rec.solver == "crash>ipm":
+                bar.write(f"LP {rec.iteration}: jamflow.simplex from the crash basis reported {rec.warm_fallback!r}; "
+                          "HiGHS's interior point solved it")
+            elif rec.warm_fallback:
                 bar.write(f"LP {rec.iteration}: jamflow.simplex reported {rec.warm_fallback!r}; HiGHS solved it "
                           "from the same basis")
             bar.update(1)
@@ -105,7 +115,8 @@ def _calippso(args: argparse.Namespace) -> int:
         result = calippso(
             packing, tol_s=args.tol_s, tol_gamma=args.tol_gamma, solver=args.solver, solver_tol=args.solver_tol, cutoff=args.cutoff,
             cutoff_near=args.cutoff_near, relax=args.relax, walls=args.walls,
-            max_iterations=args.max_iterations, threads=args.threads, finish=args.finish, interior=args.interior, warm_engine=args.warm_engine, progress=progress, **kwargs,
+            max_iterations=args.max_iterations, threads=args.threads, finish=args.finish, interior=args.interior, warm_engine=args.warm_engine,
+            first_lp=args.first_lp, progress=progress, **kwargs,
         )
     write_dataset(result_to_dataset(result, stage_parameters(args, "packing", "out")), args.out)
     a = result.packing.attrs
@@ -116,6 +127,7 @@ def _calippso(args: argparse.Namespace) -> int:
                 f"{'near-jamming start: near cutoff, interior point LPs without presolve' if a['near_start'] else 'far start'})"),
         ("warm LPs", (f"{a['warm_lps_jamflow']} by jamflow.simplex, {a['warm_fallbacks']} of its attempts re-solved "
                       f"by HiGHS after trouble ({a['warm_fallback_reasons']}); LU by {a['warm_lu']}")),
+        ("first LP", f"{a['first_lp']} ({a['first_lp_fallbacks']} crash attempt(s) re-solved by the interior point)"),
         ("finish", f"{a['finish']} ({a['newton_attempts']} Newton attempt(s) in {a['newton_time']:.2f} s, "
                    f"{a['newton_rejections']} rejected, last because: {a['newton_last_rejection']})"),
         ("contacts N_c", f"{a['n_contacts']} (isostatic count d(N_s-1)+1 = {a['isostatic_count']}: {counting})"),

@@ -115,10 +115,14 @@ class State:
 
     # --- the working set -----------------------------------------------------------------
 
-    def set_working_set(self, col_status: NDArray[np.int64], row_status: NDArray[np.int64]) -> None:
+    def set_working_set(self, col_status: NDArray[np.int64], row_status: NDArray[np.int64],
+                        held: NDArray[np.bool_] | None = None) -> None:
         """Members from HiGHS statuses: the nonbasic rows, and the nonbasic columns at the
         bound their status names when it is finite, else at their finite bound, else
-        held at zero (HiGHS's value of a nonbasic free column)."""
+        held at zero (HiGHS's value of a nonbasic free column). Nonbasic columns marked
+        in ``held`` (shape (n,)) are held at zero whatever their bounds (a crash basis's
+        columns that no chosen row fixes); :func:`jamflow.simplex.warm.solve` moves them
+        to a vertex."""
         rows = np.flatnonzero(row_status != BASIC)
         cols = np.flatnonzero(col_status != BASIC)
         if len(rows) + len(cols) != self.n:
@@ -128,6 +132,8 @@ class State:
         lo, up = self.lower[cols], self.upper[cols]
         side = np.where(np.isfinite(lo), LOWER_SIDE, np.where(np.isfinite(up), UPPER, FREE))
         side = np.where((col_status[cols] == UPPER_STATUS) & np.isfinite(up), UPPER, side)
+        if held is not None:
+            side = np.where(held[cols], FREE, side)
         side = np.where(lo == up, FIXED, side)
         self.side = np.concatenate([np.full(len(rows), UPPER), side]).astype(np.int8)
         self.row_slot = np.full(self.M, -1, dtype=np.int64)

@@ -180,6 +180,29 @@ def _flip(st: State, p: int, t: float, d: NDArray[np.float64]) -> bool:
     return True
 
 
+def _pivot(st: State, weights: Weights, p: int, sigma: float, kind: int, q: int, t: float,
+           d: NDArray[np.float64]) -> None:
+    """Member ``p`` leaves along ``d`` (direction ``sigma``) by step ``t``; the blocking
+    constraint ``q`` (kind 0 row, 1 lower bound, 2 upper bound) enters in its slot. A
+    pivot element the row eta does not confirm refactorises instead (:func:`_agree`)."""
+    pivot = st.alpha[q] if kind == 0 else d[q]
+    beta = st.btran(st.normal(0 if kind == 0 else 1, q))
+    if not _agree(st, beta[p], sigma * pivot):
+        return
+    st.z += t * d
+    st.s -= t * st.alpha
+    value, side = _enter(st, kind, q)
+    ratio = st.y[p] / beta[p]
+    st.y -= ratio * beta
+    st.y[p] = ratio
+    if weights.weight is not None:
+        weights.update(p, beta)
+    st.swap(p, 0 if kind == 0 else 1, q, side, value, beta)
+    st.stats.primal_pivots += 1
+    if st.factor.full:
+        st.refactor()
+
+
 def _primal(st: State, weights: Weights, rng: np.random.Generator, limit: int) -> None:
     """Primal simplex pivots until no member is dual infeasible beyond ``tol.dual``."""
     tol, n = st.tol, st.n
@@ -207,21 +230,48 @@ def _primal(st: State, weights: Weights, rng: np.random.Generator, limit: int) -
             continue
         if kind < 0:
             raise Trouble("unbounded")
-        pivot = st.alpha[q] if kind == 0 else d[q]
-        beta = st.btran(st.normal(0 if kind == 0 else 1, q))
-        if not _agree(st, beta[p], sigma * pivot):
+        _pivot(st, weights, p, sigma, kind, q, t, d)
+
+
+def _push(st: State, weights: Weights, limit: int) -> None:
+    """Columns held at a value (side ``FREE``) that have a finite bound move to a vertex:
+    each moves towards its nearer finite bound, the other members staying tight, until
+    its bound (the member then stays, at the bound) or a blocking constraint (which
+    enters in its place). At the primal simplex's end their multipliers are within
+    ``tol.dual`` of zero, so the objective does not change beyond that."""
+    lower, upper = st.lower, st.upper
+    e = np.zeros(st.n)
+    while True:
+        slots = np.flatnonzero((st.kind == 1) & (st.side == FREE))
+        j_held = st.idx[slots]
+        slots = slots[np.isfinite(lower[j_held]) | np.isfinite(upper[j_held])]
+        if not len(slots):
+            return
+        if st.stats.pivots + st.stats.flips >= limit:
+            raise Trouble("iteration limit")
+        p = int(slots[0])
+        j = int(st.idx[p])
+        up_gap, low_gap = upper[j] - st.z[j], st.z[j] - lower[j]
+        sigma = 1.0 if up_gap <= low_gap else -1.0
+        own = up_gap if sigma > 0 else low_gap
+        e[p] = sigma
+        d = st.ftran(e)
+        e[p] = 0.0
+        st.matvec(d, st.alpha)
+        t0 = time.perf_counter()
+        kind, q, t = k.primal_ratio(st.alpha, st.s, st.row_slot, d, st.z, st.lw, st.uw, st.col_slot,
+                                    st.tol.primal, st.tol.pivot)
+        st.stats.seconds["ratio"] += time.perf_counter() - t0
+        if kind < 0 or own <= t:
+            t = max(own, 0.0)
+            st.z += t * d
+            st.s -= t * st.alpha
+            st.side[p] = UPPER if sigma > 0 else LOWER_SIDE
+            st.r[p] = upper[j] if sigma > 0 else lower[j]
+            st.z[j] = st.r[p]
+            st.stats.flips += 1
             continue
-        st.z += t * d
-        st.s -= t * st.alpha
-        value, side = _enter(st, kind, q)
-        ratio = st.y[p] / beta[p]
-        st.y -= ratio * beta
-        st.y[p] = ratio
-        weights.update(p, beta)
-        st.swap(p, 0 if kind == 0 else 1, q, side, value, beta)
-        st.stats.primal_pivots += 1
-        if st.factor.full:
-            st.refactor()
+        _pivot(st, weights, p, sigma, kind, q, t, d)
 
 
 # --- step 3: shifts removed, the dual simplex repairs --------------------------------------
@@ -305,7 +355,8 @@ def solve(A: sp.spmatrix, rhs: NDArray[np.float64], col_lower: NDArray[np.float6
           col_upper: NDArray[np.float64], cost: NDArray[np.float64], col_status: NDArray[np.integer],
           row_status: NDArray[np.integer], tol: Tolerances | None = None, max_pivots: int | None = None,
           ordering: str = "metis", pricing: str = "sketch", perturbation: float = PERTURBATION,
-          max_etas: int | None = None, seed: int = 0, lu: str = "auto") -> Result:
+          max_etas: int | None = None, seed: int = 0, lu: str = "auto",
+          held: NDArray[np.bool_] | None = None) -> Result:
     """Solve ``min cost.z`` s.t. ``A z <= rhs``, ``col_lower <= z <= col_upper`` from a basis.
 
     Parameters
@@ -336,6 +387,9 @@ def solve(A: sp.spmatrix, rhs: NDArray[np.float64], col_lower: NDArray[np.float6
         Seed of the perturbation and the sketch: the same input gives the same answer.
     lu : str
         Library of the LU (:data:`jamflow.simplex.factor.LU_LIBRARIES`).
+    held : ndarray of bool, shape (n,), optional
+        Nonbasic columns held at zero between their bounds at the start (a crash basis);
+        the answer has them at a vertex.
 
     Returns
     -------
@@ -350,12 +404,13 @@ def solve(A: sp.spmatrix, rhs: NDArray[np.float64], col_lower: NDArray[np.float6
     limit = max_pivots if max_pivots is not None else 2**62
     status = "optimal"
     try:
-        st.set_working_set(np.asarray(col_status, np.int64), np.asarray(row_status, np.int64))
+        st.set_working_set(np.asarray(col_status, np.int64), np.asarray(row_status, np.int64), held)
         st.refactor()
         _shift_and_perturb(st, rng, perturbation)
         for _ in range(MAX_ROUNDS):
             st.stats.rounds += 1
             _primal(st, weights, rng, limit)
+            _push(st, weights, limit)
             _restore(st)
             _dual(st, limit)
             st.refine()

@@ -145,7 +145,7 @@ Modules
 ``chain`` (:func:`calippso` and the loop of Algorithm 1), ``steps`` (its lines: set-up,
 solution, update, convergence; :func:`jamming_lp`), ``lp`` (rows, geometry, matrix,
 bounds, :class:`JammingLP`), ``solver`` (HiGHS, and :mod:`jamflow.simplex` for the warm
-simplex LPs, :data:`WARM_ENGINES`), ``newton`` (the Newton finish),
+simplex LPs, :data:`WARM_ENGINES`), ``crash`` (the first LP's crash basis, :data:`FIRST_LPS`), ``newton`` (the Newton finish),
 ``recovery`` (bound schedule, recoveries, stalls), ``network`` (the converged network
 and its final checks), ``container`` (periodic box or walls), ``options`` (defaults and
 checks), ``record`` (history, :class:`CalippsoResult`), ``state`` (what the chain carries).
@@ -153,6 +153,7 @@ checks), ``record`` (history, :class:`CalippsoResult`), ``state`` (what the chai
 
 from .chain import calippso
 from .container import FACE_KEY_STRIDE, LOWER, UPPER
+from .crash import CRASH_GAP
 from .lp import CONTACT_DUAL_REL_TOL, FAR_GROWTH, MIN_CUTOFF, NEAR_START_GAP, JammingLP
 from .newton import (
     NEWTON_CONTRACTION,
@@ -165,10 +166,12 @@ from .newton import (
     RATTLER_PUSHES,
 )
 from .options import (
+    CRASH_MIN_COLUMNS,
     DEFAULT_BOUND_SCHEDULE,
     DEFAULT_CUTOFF,
     DEFAULT_CUTOFF_NEAR,
     DEFAULT_FINISH,
+    DEFAULT_FIRST_LP,
     DEFAULT_INTERIOR,
     DEFAULT_MAX_ITERATIONS,
     DEFAULT_SOLVER,
@@ -176,6 +179,7 @@ from .options import (
     DEFAULT_TOL_S,
     DEFAULT_WARM_ENGINE,
     FINISHES,
+    FIRST_LPS,
     INTERIOR_POINTS,
     MAX_SOLVER_TOL,
     MIN_SOLVER_TOL,
@@ -220,10 +224,13 @@ __all__ = [
     "CUTOFF_GROWTH",
     "CalippsoDiagnostics",
     "CalippsoResult",
+    "CRASH_GAP",
+    "CRASH_MIN_COLUMNS",
     "DEFAULT_BOUND_SCHEDULE",
     "DEFAULT_CUTOFF",
     "DEFAULT_CUTOFF_NEAR",
     "DEFAULT_FINISH",
+    "DEFAULT_FIRST_LP",
     "DEFAULT_INTERIOR",
     "DEFAULT_MAX_ITERATIONS",
     "DEFAULT_SOLVER",
@@ -236,6 +243,7 @@ __all__ = [
     "FAR_GROWTH",
     "FINAL_RECOVERY_METHODS",
     "FINISHES",
+    "FIRST_LPS",
     "FORCE_ASSIGNMENTS",
     "HYBRID_SWITCH",
     "INTERIOR_POINTS",

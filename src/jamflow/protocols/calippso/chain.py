@@ -19,6 +19,7 @@ from .options import (
     DEFAULT_CUTOFF,
     DEFAULT_CUTOFF_NEAR,
     DEFAULT_FINISH,
+    DEFAULT_FIRST_LP,
     DEFAULT_INTERIOR,
     DEFAULT_MAX_ITERATIONS,
     DEFAULT_SOLVER,
@@ -26,6 +27,7 @@ from .options import (
     DEFAULT_TOL_S,
     DEFAULT_WARM_ENGINE,
     SOLVER_TOL,
+    _crash_first,
     _engine_of_warm_lps,
     _Options,
 )
@@ -60,6 +62,7 @@ def calippso(
     finish: str = DEFAULT_FINISH,
     interior: str = DEFAULT_INTERIOR,
     warm_engine: str = DEFAULT_WARM_ENGINE,
+    first_lp: str = DEFAULT_FIRST_LP,
     progress: Callable[[IterationRecord], None] | None = None,
 ) -> CalippsoResult:
     """Jam ``packing`` by CALiPPSO (Algorithm 1), see :mod:`jamflow.protocols.calippso`.
@@ -109,6 +112,8 @@ def calippso(
         HiGHS interior point method of the interior point LPs, see :data:`INTERIOR_POINTS`.
     warm_engine : {"auto", "highs", "jamflow"}
         Engine of the warm simplex LPs, see :data:`WARM_ENGINES`.
+    first_lp : {"auto", "highs", "crash"}
+        The first LP of a start near jamming, see :data:`FIRST_LPS`.
     progress : callable, optional
         Called with each :class:`IterationRecord`.
 
@@ -128,7 +133,7 @@ def calippso(
     opt = _Options(tol_s=tol_s, tol_gamma=tol_gamma, solver=solver, solver_tol=solver_tol, cutoff=cutoff,
                    cutoff_near=cutoff_near, bound=bound, relax=relax, walls=walls or packing.body_kind == "walls",
                    max_iterations=max_iterations, require_isostatic=require_isostatic, threads=threads,
-                   finish=finish, interior=interior, warm_engine=warm_engine)
+                   finish=finish, interior=interior, warm_engine=warm_engine, first_lp=first_lp)
     opt.check(packing)
     t_start = time.perf_counter()
     container = _Container(packing.box, opt.walls)
@@ -139,6 +144,7 @@ def calippso(
     chain.near_start = _near_start(chain.x, chain.D, container)
     if chain.near_start:
         lp_solver.ipm_presolve = NEAR_START_PRESOLVE
+        lp_solver.crash_first = _crash_first(first_lp, packing.d * packing.n)
     network, converged = _run_chain(chain, lp_solver, container, opt, packing, progress)
     total = time.perf_counter() - t_start
     if network is None:

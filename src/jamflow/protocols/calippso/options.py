@@ -79,6 +79,24 @@ DEFAULT_WARM_ENGINE: str = "auto"
 #: jamflow at one N = 4096 start, fewer at one N = 2048 start): the note's "Whole chains".
 WARM_ENGINE_MIN_COLUMNS: int = 4096
 
+#: The first LP of a start near jamming (:data:`~.lp.NEAR_START_GAP`): ``highs`` (the
+#: interior point with crossover, like every interior point LP) or ``crash`` (:mod:`.crash`:
+#: :mod:`jamflow.simplex` from a working set of the start's smallest gaps; an LP on which
+#: it reports trouble is solved by the interior point, counted in ``first_lp_fallbacks``).
+#: ``auto`` takes ``crash`` from :data:`CRASH_MIN_COLUMNS` columns on. A far start's
+#: first LP is always the interior point's.
+FIRST_LPS: tuple[str, ...] = ("auto", "highs", "crash")
+#: ``highs`` by default: CPU time of the first LP, IPX + crossover / crash, with the same
+#: answers, is 2.5-3.1 at d = 3, N = 2048 and 4.0-4.1 on the LS examples d = 4 and 5, but
+#: 1.89 at N = 4096 s1 (s2: about 2.3 against IPX alone), not the 2x on every start its
+#: adoption asked for, and the crash's pivots grow faster with N than IPX's time; a
+#: different first vertex also changes the chain's path
+#: (measured: docs/notes/warm-simplex.md#the-first-lp-from-a-crash-basis).
+DEFAULT_FIRST_LP: str = "highs"
+#: ``auto``: the crash basis from ``d N`` = 4096 columns on (the LS examples d = 4 and 5,
+#: d = 3 from N = 2048; at d = 3, N = 1024 the first LP is 2 s of CPU).
+CRASH_MIN_COLUMNS: int = 4096
+
 #: How a chain ends. ``newton``: once an LP in the tail (``sqrt(Gamma*) - 1 <=
 #: NEWTON_FROM``) gives an isostatic network, the square system of that network is
 #: solved by Newton's method and certified; a rejected finish leaves the chain to the
@@ -113,10 +131,12 @@ class _Options:
     finish: str
     interior: str
     warm_engine: str
+    first_lp: str
 
     def settings(self) -> dict[str, Any]:
         """The options as the stage parameters stored with the result."""
-        return dict(finish=self.finish, interior=self.interior, warm_engine=self.warm_engine, tol_s=self.tol_s, tol_gamma=self.tol_gamma,
+        return dict(finish=self.finish, interior=self.interior, warm_engine=self.warm_engine, first_lp=self.first_lp,
+                    tol_s=self.tol_s, tol_gamma=self.tol_gamma,
                     solver=self.solver, solver_tol=self.solver_tol, cutoff=self.cutoff,
                     cutoff_near=self.cutoff_near, bound=[list(b) for b in self.bound], relax=self.relax,
                     walls=self.walls, max_iterations=self.max_iterations, threads=self.threads)
@@ -132,6 +152,8 @@ class _Options:
             raise ValueError(f"unknown finish {self.finish!r}; choose one of {', '.join(FINISHES)}")
         if self.warm_engine not in WARM_ENGINES:
             raise ValueError(f"unknown warm engine {self.warm_engine!r}; choose one of {', '.join(WARM_ENGINES)}")
+        if self.first_lp not in FIRST_LPS:
+            raise ValueError(f"unknown first LP {self.first_lp!r}; choose one of {', '.join(FIRST_LPS)}")
 
 
 def _engine_of_warm_lps(warm_engine: str, columns: int) -> str:
@@ -140,6 +162,15 @@ def _engine_of_warm_lps(warm_engine: str, columns: int) -> str:
     if warm_engine == "auto":
         return "jamflow" if columns >= WARM_ENGINE_MIN_COLUMNS else "highs"
     return warm_engine
+
+
+def _crash_first(first_lp: str, columns: int) -> bool:
+    """Whether the first LP of a near start is tried from a crash basis: ``first_lp``
+    (checked by :class:`_Options`), with ``auto`` resolved by the column count ``columns``
+    (``d N``, :data:`CRASH_MIN_COLUMNS`)."""
+    if first_lp == "auto":
+        return columns >= CRASH_MIN_COLUMNS
+    return first_lp == "crash"
 
 
 def _check_options(packing, tol_s, tol_gamma, solver, cutoff, bound, relax, walls, max_iterations) -> None:

@@ -278,8 +278,10 @@ def _result(packing: Packing, chain: _Chain, container: _Container, net: _Networ
         total_time=total,
         peak_memory=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024.0,
         lp_time_total=float(np.nansum(history["lp_time"].values)),
-        warm_lps_jamflow=sum(r.engine == "jamflow" for r in records),
-        warm_fallbacks=sum(bool(r.warm_fallback) for r in records),
+        warm_lps_jamflow=sum(r.engine == "jamflow" and r.solver != "crash" for r in records),
+        first_lp=records[0].solver if records else "none",
+        first_lp_fallbacks=sum(r.solver == "crash>ipm" for r in records),
+        warm_fallbacks=sum(bool(r.warm_fallback) and r.solver != "crash>ipm" for r in records),
         warm_fallback_reasons=", ".join(sorted({r.warm_fallback for r in records if r.warm_fallback})) or "none",
         warm_lu=", ".join(sorted({r.warm_lu for r in records if r.warm_lu})) or "none",
     )

@@ -5,7 +5,7 @@ to the next."""
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import highspy
 import numpy as np
@@ -13,6 +13,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from ...highs import new_highs
+from .crash import _crash_basis
 from .lp import _highs_lp, _Rows
 from .options import DEFAULT_INTERIOR, INTERIOR_POINTS, SOLVER_TOL, WARM_ENGINES
 
@@ -118,6 +119,8 @@ class _Solver:
         self.cold_simplex_as_ipm = False
         #: HiGHS presolve of the interior point LPs (see NEAR_START_PRESOLVE)
         self.ipm_presolve = _HIGHS_PRESOLVE
+        #: the first interior point LP is tried from a crash basis (:mod:`.crash`) first
+        self.crash_first = False
 
     def solve(self, A: sp.csc_matrix, rhs, col_lower, col_upper, method: str, rows: _Rows) -> _Solution:
         """Solve the LP ``min -g`` s.t. ``A z <= rhs``, ``col_lower <= z <= col_upper``."""
@@ -131,11 +134,22 @@ class _Solver:
             if sol.col is not None:
                 return sol
             fallback = sol.status
+        crashed = False
+        if method == "ipm" and self.crash_first and self.basis is None:
+            self.crash_first = False
+            crashed = True
+            sol = self._solve_crash(A, rhs, col_lower, col_upper, rows)
+            if sol.col is not None:
+                return sol
+            fallback = sol.status
         lp = _highs_lp(A, rhs, col_lower, col_upper)
         if method == "simplex" and not warm and not cold and self.cold_simplex_as_ipm:
             method = "ipm"
         status, elapsed = self._run(lp, method, carried.for_highs() if warm else None)
         pivots, ipm_its = self._iterations()
+        if crashed:
+            elapsed += sol.seconds
+            method = "crash>ipm"
         if warm and status == highspy.HighsModelStatus.kIterationLimit:
             warm = False
             method = "simplex>ipm"
@@ -159,7 +173,7 @@ class _Solver:
                          pivots, ipm_its, fallback=fallback)
 
     def _solve_jamflow(self, A: sp.csc_matrix, rhs, col_lower, col_upper, carried: _Basis,
-                       rows: _Rows) -> _Solution:
+                       rows: _Rows, held: NDArray[np.bool_] | None = None) -> _Solution:
         """The warm LP by :mod:`jamflow.simplex` from the carried basis, at HiGHS's
         tolerances and pivot limit; on trouble the solution has no columns and its status
         names the trouble."""
@@ -171,7 +185,7 @@ class _Solver:
         col, row = carried.statuses()
         res = simplex.solve(A, rhs, col_lower, col_upper, cost, col, row,
                             simplex.Tolerances(primal=self.tol, dual=self.tol),
-                            max_pivots=max(int(WARM_PIVOTS_PER_ROW * A.shape[0]), 1))
+                            max_pivots=max(int(WARM_PIVOTS_PER_ROW * A.shape[0]), 1), held=held)
         seconds = res.stats.seconds["total"]
         lu = res.stats.lu + ("+superlu" if res.stats.superlu_fallbacks else "")
         if not res.optimal:
@@ -182,6 +196,20 @@ class _Solver:
         return _Solution(status="Optimal", seconds=seconds, col=res.col_value, dual=-res.row_dual, warm=True,
                          method="simplex", simplex_iterations=res.stats.pivots, ipm_iterations=0, engine="jamflow",
                          lu=lu)
+
+    def _solve_crash(self, A: sp.csc_matrix, rhs, col_lower, col_upper, rows: _Rows) -> _Solution:
+        """The first LP by :mod:`jamflow.simplex` from the crash basis of the start's
+        geometry (:mod:`.crash`); on trouble (no crash basis, or the simplex's) the
+        solution has no columns and its status names the trouble."""
+        t0 = time.perf_counter()
+        crash = _crash_basis(self.h, A, rhs, col_lower, col_upper)
+        if crash is None:
+            return _Solution(status="no crash basis", seconds=time.perf_counter() - t0, col=None, dual=None,
+                             warm=False, method="crash", simplex_iterations=0, ipm_iterations=0, engine="jamflow")
+        col, row = crash
+        sol = self._solve_jamflow(A, rhs, col_lower, col_upper, _Basis(col=col, row=row), rows,
+                                  held=col == int(highspy.HighsBasisStatus.kZero))
+        return replace(sol, seconds=time.perf_counter() - t0, warm=False, method="crash")
 
     def _iterations(self) -> tuple[int, int]:
         """Simplex pivots (crossover included) and interior point iterations of the last run."""
