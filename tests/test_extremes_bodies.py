@@ -250,6 +250,7 @@ def chains_3d(tmp_path_factory):
 LINKED = JammingSettings(force_tol=1e-13, pressure_rtol=1e-3, delta_phi=1e-2)
 
 
+@pytest.mark.slow
 def test_chains_of_30_in_3d_jam_isostatic(chains_3d):
     """N = 120 at P0 = 1e-6 (N P0^(1/2) = 0.12): links held, projected forces balanced, isostatic by rank."""
     out = check_linked(jam_linked(chains_3d, 1e-6, settings=LINKED), 1e-6, LINKED)
