@@ -218,19 +218,28 @@ def _primal(st: State, weights: Weights, rng: np.random.Generator, limit: int) -
             weights.start(n, st.A, st.btran, rng)
         p = k.devex_price(infeas, weights.weight, tol.dual)
         sigma = 1.0 if st.y[p] > 0.0 else -1.0
-        e[p] = sigma
-        d = st.ftran(e)
-        e[p] = 0.0
-        st.matvec(d, st.alpha)
-        t0 = time.perf_counter()
-        kind, q, t = k.primal_ratio(st.alpha, st.s, st.row_slot, d, st.z, st.lw, st.uw, st.col_slot,
-                                    tol.primal, tol.pivot)
-        st.stats.seconds["ratio"] += time.perf_counter() - t0
+        d, kind, q, t = _move_out(st, e, p, sigma, tol)
         if _flip(st, p, t, d):
             continue
         if kind < 0:
             raise Trouble("unbounded")
         _pivot(st, weights, p, sigma, kind, q, t, d)
+
+
+def _move_out(st: State, e: NDArray[np.float64], p: int, sigma: float,
+              tol: Tolerances) -> tuple[NDArray[np.float64], int, int, float]:
+    """The edge along which working-set member ``p`` leaves its constraint (direction ``sigma``):
+    the step ``d`` in ``z`` (``st.alpha`` set to ``A d``) and the bounded ratio test's blocking
+    kind, member and step length. ``e`` is a zero work vector of length ``n`` (left zero)."""
+    e[p] = sigma
+    d = st.ftran(e)
+    e[p] = 0.0
+    st.matvec(d, st.alpha)
+    t0 = time.perf_counter()
+    kind, q, t = k.primal_ratio(st.alpha, st.s, st.row_slot, d, st.z, st.lw, st.uw, st.col_slot,
+                                tol.primal, tol.pivot)
+    st.stats.seconds["ratio"] += time.perf_counter() - t0
+    return d, kind, q, t
 
 
 def _push(st: State, weights: Weights, limit: int) -> None:
@@ -254,14 +263,7 @@ def _push(st: State, weights: Weights, limit: int) -> None:
         up_gap, low_gap = upper[j] - st.z[j], st.z[j] - lower[j]
         sigma = 1.0 if up_gap <= low_gap else -1.0
         own = up_gap if sigma > 0 else low_gap
-        e[p] = sigma
-        d = st.ftran(e)
-        e[p] = 0.0
-        st.matvec(d, st.alpha)
-        t0 = time.perf_counter()
-        kind, q, t = k.primal_ratio(st.alpha, st.s, st.row_slot, d, st.z, st.lw, st.uw, st.col_slot,
-                                    st.tol.primal, st.tol.pivot)
-        st.stats.seconds["ratio"] += time.perf_counter() - t0
+        d, kind, q, t = _move_out(st, e, p, sigma, st.tol)
         if kind < 0 or own <= t:
             t = max(own, 0.0)
             st.z += t * d
