@@ -10,7 +10,7 @@ set (rows with a dual above ``CONTACT_DUAL_REL_TOL`` of the largest) and the dua
 (largest difference over the largest dual). Writes ``OUT/first_lp.nc`` and
 ``OUT/first_lp.png``.
 
-Run: ``python benchmarks/first_lp.py --starts /work/cache/lp-output/calippso_start_ls_p1e+07_N2048_s1.nc ...``
+Run: ``python benchmarks/first_lp.py --starts benchmarks/output/calippso_start_ls_p1e+07_N2048_s1.nc ...``
 (near starts of ``benchmarks/calippso.py``'s ``near_start``).
 """
 
