@@ -54,8 +54,7 @@ COST: dict[str, Cost] = {
     "soft-jam:shapes": Cost(100.0, 480, 1.7, "2D shapes, whole soft-jam: N = 480 ellipses (A = 1.1) to P0 = 1e-9 "
                                              "in 97 CPU-s; N^1.6-1.7 between N = 100 and 480 at P0 = 1e-6 "
                                              "(ellipses 5.5 -> 68 s, circulo-lines 6.5 -> 93 s); circulo-polygons and "
-                                             "Reuleaux triangles at N = 100 ran over 73-126 s unfinished, so "
-                                             "theirs is a floor"),
+                                             "Reuleaux triangles take up to 4x this row (10-29 s at N = 100)"),
     "soft-jam:linked": Cost(20.0, 150, 2.0, "projected FIRE bisection: 50 3D trimers (N = 150) in 33 s wall loaded "
                                             "(chains-fig2), 32 dimers in 17 s (vanderwerf-fig3b); the N^2 is assumed"),
     "minimize": Cost(300.0, 4096, 2.0, "a fixed-box FIRE minimisation: a quarter of soft-jam's bisection"),
