@@ -92,7 +92,9 @@ def test_strain_engine_with_rigid_bodies_reaches_the_flat_fire_minimum(strain_mi
     assert a.converged and b.converged and b.energy > 0.0
     assert max(a.max_force, b.max_force) <= 1e-12
     assert abs(a.energy - b.energy) <= 1e-12 * b.energy
-    np.testing.assert_allclose(a.box.matrix, b.box.matrix, rtol=0, atol=1e-8)
+    # the strain itself (the flat FIRE's result reports the reference box)
+    np.testing.assert_allclose(ea.e, eb.q[-3:], rtol=0, atol=1e-8)
+    np.testing.assert_allclose(a.box.matrix, mb.current_box(eb.q).matrix, rtol=0, atol=1e-8)
     np.testing.assert_allclose(a.position, b.position, rtol=0, atol=1e-8)
     assert abs(a.pressure - b.pressure) <= 1e-9 * b.pressure
     assert np.abs(ma.link_errors(ea.q())).max() <= LINK_LENGTH_RTOL
