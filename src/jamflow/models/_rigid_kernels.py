@@ -34,8 +34,9 @@ from .._numba import njit
 
 
 @njit(cache=True)
-def rigid_place(y, Finv, body, rptr, members, shift, ref):
-    """Reference centres ``y_s = Y + F^-1 R(theta) ref_s - shift_s`` of every body's spheres, in place."""
+def rigid_place(y, Finv, body, rptr, members, shift, ref, r):
+    """Reference centres ``y_s = Y + F^-1 r_s - shift_s`` of every body's spheres, in place, and their
+    real-space offsets ``r_s = R(theta) ref_s`` into ``r`` (M, 2) (for :func:`rigid_forces` at this point)."""
     for c in range(rptr.shape[0] - 1):
         cos = np.cos(body[c, 2])
         sin = np.sin(body[c, 2])
@@ -43,17 +44,19 @@ def rigid_place(y, Finv, body, rptr, members, shift, ref):
             s = members[k]
             rx = cos * ref[k, 0] - sin * ref[k, 1]
             ry = sin * ref[k, 0] + cos * ref[k, 1]
+            r[k, 0] = rx
+            r[k, 1] = ry
             y[s, 0] = body[c, 0] + Finv[0, 0] * rx + Finv[0, 1] * ry - shift[k, 0]
             y[s, 1] = body[c, 1] + Finv[1, 0] * rx + Finv[1, 1] * ry - shift[k, 1]
 
 
 @njit(cache=True)
-def rigid_forces(Finv, body, rptr, members, ref, scale, fy, fe, fb):
+def rigid_forces(Finv, rptr, members, r, scale, fy, fe, fb):
     """Body forces ``fb`` (C, 3) from the sphere forces ``fy`` (N, 2); ``fe`` (3,) made the strain force at fixed bodies.
 
     ``fy`` of the bodies' spheres is zeroed (they are not degrees of freedom);
     ``fe -= `` the strain components of ``C = sum_s f_s rho_s^T`` with ``f_s = F^-T fy_s``,
-    ``rho_s = F^-1 r_s`` (module doc).
+    ``rho_s = F^-1 r_s`` (module doc); ``r`` the offsets of :func:`rigid_place`.
     """
     if rptr.shape[0] < 2:
         return
@@ -62,15 +65,13 @@ def rigid_forces(Finv, body, rptr, members, ref, scale, fy, fe, fb):
     C10 = 0.0
     C11 = 0.0
     for c in range(rptr.shape[0] - 1):
-        cos = np.cos(body[c, 2])
-        sin = np.sin(body[c, 2])
         tx = 0.0
         ty = 0.0
         tau = 0.0
         for k in range(rptr[c], rptr[c + 1]):
             s = members[k]
-            rx = cos * ref[k, 0] - sin * ref[k, 1]
-            ry = sin * ref[k, 0] + cos * ref[k, 1]
+            rx = r[k, 0]
+            ry = r[k, 1]
             gx = fy[s, 0]
             gy = fy[s, 1]
             fx = Finv[0, 0] * gx + Finv[1, 0] * gy
@@ -96,21 +97,17 @@ def rigid_forces(Finv, body, rptr, members, ref, scale, fy, fe, fb):
 
 
 @njit(cache=True)
-def rigid_max_force_sq(body, rptr, ref, inv_mass, fb):
+def rigid_max_force_sq(rptr, r, inv_mass, fb):
     """Largest squared per-sphere force of the bodies: ``|F / n + (tau / I) e_z x r_s|^2`` (the rigid-motion
     projection of the sphere forces, as :func:`jamflow.models._link_kernels.rigid_project_2d`)."""
     out = 0.0
     for c in range(rptr.shape[0] - 1):
-        cos = np.cos(body[c, 2])
-        sin = np.sin(body[c, 2])
         ax = fb[c, 0] * inv_mass[c, 0]
         ay = fb[c, 1] * inv_mass[c, 1]
         omega = fb[c, 2] * inv_mass[c, 2]
         for k in range(rptr[c], rptr[c + 1]):
-            rx = cos * ref[k, 0] - sin * ref[k, 1]
-            ry = sin * ref[k, 0] + cos * ref[k, 1]
-            gx = ax - omega * ry
-            gy = ay + omega * rx
+            gx = ax - omega * r[k, 1]
+            gy = ay + omega * r[k, 0]
             out = max(out, gx * gx + gy * gy)
     return out
 

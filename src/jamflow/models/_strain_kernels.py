@@ -473,6 +473,7 @@ def strain_fire(
     moved = np.zeros((n, d))
     small = np.eye(m)
     schur = 1.0
+    r_body = np.empty_like(ref)
     h0_inv = np.linalg.inv(h0)
     buffers = pair_buffers(n, d)
     builds = 0
@@ -486,7 +487,7 @@ def strain_fire(
     while True:
         # evaluation at (y, e): a valid list, the factorisation, forces and velocity projected
         F, Q, T, U, det, Finv = strain_state(e, h0, scale)
-        rigid_place(y, Finv, body, rptr, members, shift, ref)
+        rigid_place(y, Finv, body, rptr, members, shift, ref, r_body)
         dev = _deformed(y, T, U @ h_build_inv, x_build, x, moved)
         if _needs_rebuild(x, moved, 1.0, 1.0, reach, skin, dev * reach):
             ok, pi_, pj_, offset_, sigma_, buffers = sheared_list(y, h0, h0_inv, U, T, diameter, skin, adj_ptr, adj,
@@ -510,10 +511,10 @@ def strain_fire(
             shifted = np.empty((2 * pi.shape[0], d))
         energy, n_contact = strain_forces(y, Q, T, Finv, scale, offset, pi, pj, sigma, eps, w_exp, xr, shifted, force,
                                           fy, fe)
-        rigid_forces(Finv, body, rptr, members, ref, scale, fy, fe, fb)
+        rigid_forces(Finv, rptr, members, r_body, scale, fy, fe, fb)
         strain_project_pair(w, Be, ce, li, lj, first, cptr, fptr, chol, AiBe, small, b, Kib, schur, fixed_volume,
                             fy, fe, vy, ve, work2, t_m, t2_m)
-        fmax2 = max(_max_force_sq(fy), _dot1(fe, fe), rigid_max_force_sq(body, rptr, ref, inv_mass, fb))
+        fmax2 = max(_max_force_sq(fy), _dot1(fe, fe), rigid_max_force_sq(rptr, r_body, inv_mass, fb))
         if fmax2 <= force_tol * force_tol:
             status = CONVERGED
             break
