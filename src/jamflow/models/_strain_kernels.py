@@ -36,6 +36,12 @@ from ._link_kernels import (
     is_linked,
     strain_state,
 )
+from ._rigid_kernels import (
+    body_power_norms,
+    rigid_forces,
+    rigid_max_force_sq,
+    rigid_place,
+)
 from .spheres._kernels import pair_forces
 
 
@@ -409,7 +415,7 @@ def strain_reaffix(y, e, h0, scale, fixed_volume, li, lj, offset, length, sign, 
 def strain_fire(
     y, vy, e, ve, fire_state, fire_params, h0, scale, fixed_volume,
     offset, pi, pj, sigma, eps, w_exp, x_build, h_build_inv, reach, skin, diameter, adj_ptr, adj,
-    li, lj, link_offset, length, sign, first, cptr, fptr, chol,
+    li, lj, link_offset, length, sign, first, cptr, fptr, chol, rptr, members, shift, ref, body, vb, fb, inv_mass,
     length_rtol, max_sweeps, rank_rtol, force_tol, max_steps, fy, fe,
 ):
     """FIRE 2.0 of shear-stabilised linked spheres in one compiled loop (the steps of :class:`~jamflow.minimize.fire._ModelFire`).
@@ -419,6 +425,13 @@ def strain_fire(
     factorisation), the factorisation at the new point (:func:`strain_solver`), pair
     forces in the deformed box (:func:`strain_forces`) and the force and the velocity
     projected (:func:`strain_project_pair`). ``(y, e)`` must lie on the constraint manifold.
+    Rigid 2D clusters are rigid bodies (:mod:`._rigid_kernels`: rows ``body`` (C, 3) of
+    reference centre and angle, velocities ``vb``, forces ``fb``, inverse masses
+    ``inv_mass``; spheres ``members[rptr[c]:rptr[c+1]]`` with shifts ``shift`` and
+    shape ``ref``): their links are not among ``li``, ``lj``, their spheres' ``y`` are
+    placed from the bodies and the strain at every evaluation (:func:`rigid_place`) and
+    their forces gathered on the bodies (:func:`rigid_forces`); only the other links and
+    the volume are constraints.
 
     The list lives in the deformed box (rotated frame, centres ``y T^T``): when
     displacements and the deformation since the build (``||U h_build^-1 - 1||_F``
@@ -460,6 +473,7 @@ def strain_fire(
     moved = np.zeros((n, d))
     small = np.eye(m)
     schur = 1.0
+    r_body = np.empty_like(ref)
     h0_inv = np.linalg.inv(h0)
     buffers = pair_buffers(n, d)
     builds = 0
@@ -473,6 +487,7 @@ def strain_fire(
     while True:
         # evaluation at (y, e): a valid list, the factorisation, forces and velocity projected
         F, Q, T, U, det, Finv = strain_state(e, h0, scale)
+        rigid_place(y, Finv, body, rptr, members, shift, ref, r_body)
         dev = _deformed(y, T, U @ h_build_inv, x_build, x, moved)
         if _needs_rebuild(x, moved, 1.0, 1.0, reach, skin, dev * reach):
             ok, pi_, pj_, offset_, sigma_, buffers = sheared_list(y, h0, h0_inv, U, T, diameter, skin, adj_ptr, adj,
@@ -496,27 +511,22 @@ def strain_fire(
             shifted = np.empty((2 * pi.shape[0], d))
         energy, n_contact = strain_forces(y, Q, T, Finv, scale, offset, pi, pj, sigma, eps, w_exp, xr, shifted, force,
                                           fy, fe)
+        rigid_forces(Finv, rptr, members, r_body, scale, fy, fe, fb)
         strain_project_pair(w, Be, ce, li, lj, first, cptr, fptr, chol, AiBe, small, b, Kib, schur, fixed_volume,
                             fy, fe, vy, ve, work2, t_m, t2_m)
-        fmax2 = max(_max_force_sq(fy), _dot1(fe, fe))
+        fmax2 = max(_max_force_sq(fy), _dot1(fe, fe), rigid_max_force_sq(rptr, r_body, inv_mass, fb))
         if fmax2 <= force_tol * force_tol:
             status = CONVERGED
             break
         if step >= max_steps:
             break
-        power = _dot(fy, vy) + _dot1(fe, ve)
+        power = _dot(fy, vy) + _dot1(fe, ve) + body_power_norms(fb, vb, inv_mass)[0]
         npos, dt, alpha = _fire_adapt(
             power, done + step, npos, dt, alpha, n_delay, f_inc, f_dec, f_alpha, alpha0, dt_max, dt_min,
             initial_delay,
         )
         if not power > 0.0:
-            for i in range(n):
-                for a in range(d):
-                    y[i, a] -= 0.5 * dt * vy[i, a]
-                    vy[i, a] = 0.0
-            for p in range(m):
-                e[p] -= 0.5 * dt * ve[p]
-                ve[p] = 0.0
+            _strain_step_back(y, vy, e, ve, body, vb, dt)
             k_, err, bad, small, schur = strain_reaffix(
                 y, e, h0, scale, fixed_volume, li, lj, link_offset, length, sign, first, cptr, fptr, chol, R0, u, rl,
                 w, Be, AiBe, ce, b, Kib, small, schur, lam, length_rtol, max_sweeps, rank_rtol, True)
@@ -524,23 +534,7 @@ def strain_fire(
             if k_ < 0 or bad >= 0:
                 status = STALLED
                 break
-        for i in range(n):
-            for a in range(d):
-                vy[i, a] += dt * fy[i, a]
-        for p in range(m):
-            ve[p] += dt * fe[p]
-        vnorm = np.sqrt(_dot(vy, vy) + _dot1(ve, ve))
-        fnorm = np.sqrt(_dot(fy, fy) + _dot1(fe, fe))
-        keep, mix = _fire_mixing(alpha, vnorm, fnorm)
-        for i in range(n):
-            for a in range(d):
-                vi = _mixed(keep, vy[i, a], mix, fy[i, a])
-                vy[i, a] = vi
-                y[i, a] += dt * vi
-        for p in range(m):
-            vi = _mixed(keep, ve[p], mix, fe[p])
-            ve[p] = vi
-            e[p] += dt * vi
+        _strain_move(y, vy, fy, e, ve, fe, body, vb, fb, inv_mass, dt, alpha)
         step += 1
         k_, err, bad, small, schur = strain_reaffix(
             y, e, h0, scale, fixed_volume, li, lj, link_offset, length, sign, first, cptr, fptr, chol, R0, u, rl,
@@ -551,6 +545,54 @@ def strain_fire(
             break
     fire_state[0], fire_state[1], fire_state[2], fire_state[3] = dt, alpha, npos, done + step
     return status, step, energy, n_contact, fmax2, sweeps, bad, builds, pi, pj, offset, sigma
+
+
+@njit(cache=True)
+def _strain_step_back(y, vy, e, ve, body, vb, dt):
+    """FIRE's step back on an uphill step: half a step back along the velocity, which is zeroed (every group)."""
+    for i in range(y.shape[0]):
+        for a in range(y.shape[1]):
+            y[i, a] -= 0.5 * dt * vy[i, a]
+            vy[i, a] = 0.0
+    for p in range(e.shape[0]):
+        e[p] -= 0.5 * dt * ve[p]
+        ve[p] = 0.0
+    for c in range(body.shape[0]):
+        for a in range(3):
+            body[c, a] -= 0.5 * dt * vb[c, a]
+            vb[c, a] = 0.0
+
+
+@njit(cache=True)
+def _strain_move(y, vy, fy, e, ve, fe, body, vb, fb, inv_mass, dt, alpha):
+    """FIRE's semi-implicit Euler step of centres, strain (unit masses) and bodies (inverse masses ``inv_mass``):
+    ``v += dt M^-1 F``, mixing with ``|v|_M`` and ``|F|_M^-1`` (the unit-mass FIRE of ``M^(1/2) q``), move."""
+    for i in range(y.shape[0]):
+        for a in range(y.shape[1]):
+            vy[i, a] += dt * fy[i, a]
+    for p in range(e.shape[0]):
+        ve[p] += dt * fe[p]
+    for c in range(body.shape[0]):
+        for a in range(3):
+            vb[c, a] += dt * fb[c, a] * inv_mass[c, a]
+    _, vb2, fb2 = body_power_norms(fb, vb, inv_mass)
+    vnorm = np.sqrt(_dot(vy, vy) + _dot1(ve, ve) + vb2)
+    fnorm = np.sqrt(_dot(fy, fy) + _dot1(fe, fe) + fb2)
+    keep, mix = _fire_mixing(alpha, vnorm, fnorm)
+    for i in range(y.shape[0]):
+        for a in range(y.shape[1]):
+            vi = _mixed(keep, vy[i, a], mix, fy[i, a])
+            vy[i, a] = vi
+            y[i, a] += dt * vi
+    for p in range(e.shape[0]):
+        vi = _mixed(keep, ve[p], mix, fe[p])
+        ve[p] = vi
+        e[p] += dt * vi
+    for c in range(body.shape[0]):
+        for a in range(3):
+            vi = _mixed(keep, vb[c, a], mix, fb[c, a] * inv_mass[c, a])
+            vb[c, a] = vi
+            body[c, a] += dt * vi
 
 
 @njit(cache=True)

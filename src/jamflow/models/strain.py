@@ -52,7 +52,12 @@ from ..neighbors.verlet import NeighborList
 from ..state.bodies import Links
 from ..tolerances import LINK_LENGTH_RTOL, LINK_RANK_RTOL
 from . import _link_kernels, _strain_kernels
-from .links import LINK_NEWTON_MAX_ITERATIONS, ClusterGram, LinkedSpheresModel
+from .links import (
+    LINK_NEWTON_MAX_ITERATIONS,
+    ClusterGram,
+    LinkedSpheresModel,
+    _rigid_clusters,
+)
 from .spheres import _kernels
 from .spheres.potential import HARMONIC, PowerLawPotential
 
@@ -361,6 +366,12 @@ class StrainFire:
     deformed (sheared) box itself (:func:`._strain_kernels.sheared_list`) and returns
     here for a build only in a box too sheared for it; the state persists across calls. Links in the cluster order of the model's
     :class:`~jamflow.models.links.ClusterGram`, with factors of its own.
+
+    Rigid 2D clusters are rigid bodies, reference centre and angle (:mod:`._rigid_kernels`,
+    :func:`_rigid_bodies`): no Gram factor, Woodbury column or re-affixing for them; the
+    other clusters and the volume keep the constraint path. In the mass metric of unit
+    sphere masses (centre mass ``n``, moment of inertia ``sum |r_s|^2``), which is the
+    flat FIRE's on the bodies' motions at zero strain; the strain's mass stays 1.
     """
 
     def __init__(self, model: ShearStabilizedModel, q: NDArray[np.float64], params: FireParameters) -> None:
@@ -377,10 +388,11 @@ class StrainFire:
         unit = model.time_unit
         self.fire_state = np.array([params.dt * unit, params.alpha0, 0.0, 0.0])
         self.fparams = _fire_params(params, unit)
-        g = model.gram
-        self.link_offset = np.ascontiguousarray(model.link_offset[g.order])
-        self.length = np.ascontiguousarray(model.links.length[g.order])
-        self.chol = np.zeros_like(g.chol)
+        self.rigid, self.gram = _rigid_bodies(model, self.y, self.e)
+        self.vb = np.zeros_like(self.rigid["body"])
+        self.fb = np.zeros_like(self.vb)
+        self.tol_scale = 1.0  # the loop's tolerance over the asked one (:meth:`advance`)
+        self.chol = np.zeros_like(self.gram["sign"])
         self.adj_ptr = np.concatenate([[0], np.cumsum(np.bincount(model.links.i, minlength=model.n))]).astype(np.int64)
         # the list in use (i, j, reference offset, sigma), its build centres (rotated frame) and box
         self.pairs: tuple[NDArray, ...] | None = None
@@ -396,9 +408,27 @@ class StrainFire:
         """At most ``budget`` steps; returns ``(status, steps)``.
 
         Lists are rebuilt inside the loop; in a box too sheared or small for that
-        (``REBUILD``) the next call builds one here.
+        (``REBUILD``) the next call builds one here. With rigid bodies the loop measures
+        their forces as rigid-motion fields in their own metric
+        (:func:`._rigid_kernels.rigid_max_force_sq`), not as the model's flat
+        projection (:meth:`ShearStabilizedModel.max_force`, which :meth:`result` reports):
+        a state the loop calls converged is checked against the model's measure, and the
+        loop goes on with its tolerance scaled down until both hold.
         """
-        m, g = self.model, self.model.gram
+        status, n = self._steps(force_tol * self.tol_scale, budget, rebuild)
+        while status == _fire_kernels.CONVERGED and len(self.vb):
+            q = self.q()
+            flat = self.model.max_force(self.model.project(self.model.evaluate(q).gradient, q))
+            if flat <= force_tol:
+                break
+            self.tol_scale *= 0.9 * force_tol / flat
+            status, k = self._steps(force_tol * self.tol_scale, budget - n, False)
+            n += k
+        return status, n
+
+    def _steps(self, force_tol: float, budget: int, rebuild: bool) -> tuple[int, int]:
+        """At most ``budget`` steps of the compiled loop to its own ``force_tol``; returns ``(status, steps)``."""
+        m, g, rigid = self.model, self.gram, self.rigid
         if self.pairs is None or rebuild:
             q = self.q()
             _, _, T, U, _, _ = m._strain_state(q)
@@ -412,15 +442,16 @@ class StrainFire:
         status, n, _, _, _, _, bad, builds, *pairs = _strain_kernels.strain_fire(
             self.y, self.vy, self.e, self.ve, self.fire_state, self.fparams, m._h0, m.strain_scale, m.fixed_volume,
             offset, pi, pj, sigma, m.potential.epsilon, m.potential.exponent, self.x_build, self.h_build_inv,
-            nl.reach, nl.skin, m.diameter, self.adj_ptr, m.links.j, g.ci, g.cj, self.link_offset, self.length,
-            g.sign, g.first, g.cptr, g.fptr, self.chol, m.length_rtol, LINK_NEWTON_MAX_ITERATIONS, LINK_RANK_RTOL,
-            float(force_tol), int(budget), self.fy, self.fe,
+            nl.reach, nl.skin, m.diameter, self.adj_ptr, m.links.j, g["ci"], g["cj"], g["offset"], g["length"],
+            g["sign"], g["first"], g["cptr"], g["fptr"], self.chol, rigid["rptr"], rigid["members"], rigid["shift"],
+            rigid["ref"], rigid["body"], self.vb, self.fb, rigid["inv_mass"], m.length_rtol,
+            LINK_NEWTON_MAX_ITERATIONS, LINK_RANK_RTOL, float(force_tol), int(budget), self.fy, self.fe,
         )
         self.pairs = (pairs[0], pairs[1], pairs[2], pairs[3])
         self.inline_builds += builds
         if status == _fire_kernels.STALLED:
             if bad >= 0:
-                raise g.degenerate(bad)
+                raise m.gram.degenerate(int(g["cluster"][bad]))
             raise RuntimeError(f"Newton re-affixing of links and volume stalled (asked a relative error "
                                f"{m.length_rtol:.3g}) after {LINK_NEWTON_MAX_ITERATIONS} sweeps")
         return status, n
@@ -437,3 +468,28 @@ class StrainFire:
             converged=status == _fire_kernels.CONVERGED, rebuilds=m.nlist.builds - self.builds0 + self.inline_builds,
             evaluations=steps + 2,
         )
+
+
+def _rigid_bodies(model: ShearStabilizedModel, y: NDArray[np.float64], e: NDArray[np.float64]) -> tuple[dict, dict]:
+    """The rigid 2D clusters of :class:`StrainFire` as bodies at ``(y, e)`` (on the manifold), and the other clusters' Gram blocks.
+
+    Bodies (:mod:`._rigid_kernels`): reference centre ``Y`` the mean of the unwrapped
+    reference centres, angle 0, shape ``ref = F (y_s + shift_s - Y)`` (real space),
+    inverse masses ``(1 / n, 1 / n, 1 / I)`` with ``I = sum |ref_s|^2``. The periodic
+    shifts and the other clusters' blocks are those of :func:`.links._rigid_clusters` in
+    the reference box.
+    """
+    rigid, gram = _rigid_clusters(model, y)
+    rptr, members = rigid["rptr"], rigid["members"]
+    sizes = np.diff(rptr)
+    F = _link_kernels.strain_state(np.ascontiguousarray(e), model._h0, model.strain_scale)[0]
+    offset = rigid["ref"]  # reference offsets from the reference centroid
+    ref = np.ascontiguousarray(offset @ F.T)
+    body = np.zeros((len(sizes), 3))
+    inv_mass = np.ones((len(sizes), 3))
+    if len(sizes):
+        body[:, :2] = (y[members] + rigid["shift"] - offset)[rptr[:-1]]
+        inv_mass[:, :2] = 1.0 / sizes[:, None]
+        inv_mass[:, 2] = 1.0 / np.add.reduceat(np.sum(ref**2, axis=1), rptr[:-1])
+    rigid.update(ref=ref, body=body, inv_mass=inv_mass)
+    return rigid, gram
