@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -9,6 +11,7 @@ from jamflow.box import Box
 from jamflow.chains.builders import linked_packing
 from jamflow.chains.jamming import linked_volume
 from jamflow.minimize.fire import DEFAULT_FIRE, _fire, _ModelFire
+from jamflow.models.box import EnthalpyModel
 from jamflow.models.links import LinkedFire, LinkedSpheresModel
 from jamflow.models.shapes import _fire_kernels
 from jamflow.models.shapes.fast import FAMILY_CODES, ShapeFire
@@ -92,9 +95,8 @@ def test_strain_engine_with_rigid_bodies_reaches_the_flat_fire_minimum(strain_mi
     assert a.converged and b.converged and b.energy > 0.0
     assert max(a.max_force, b.max_force) <= 1e-12
     assert abs(a.energy - b.energy) <= 1e-12 * b.energy
-    # the strain itself (the flat FIRE's result reports the reference box)
     np.testing.assert_allclose(ea.e, eb.q[-3:], rtol=0, atol=1e-8)
-    np.testing.assert_allclose(a.box.matrix, mb.current_box(eb.q).matrix, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(a.box.matrix, b.box.matrix, rtol=0, atol=1e-8)
     np.testing.assert_allclose(a.position, b.position, rtol=0, atol=1e-8)
     assert abs(a.pressure - b.pressure) <= 1e-9 * b.pressure
     assert np.abs(ma.link_errors(ea.q())).max() <= LINK_LENGTH_RTOL
@@ -102,6 +104,29 @@ def test_strain_engine_with_rigid_bodies_reaches_the_flat_fire_minimum(strain_mi
     assert abs(ma.volume(ea.q()) - ma.box.volume) <= LINK_LENGTH_RTOL * ma.box.volume
     if not flexible:
         assert abs(_body_pressure(ma, a) - a.pressure) <= 1e-9 * a.pressure
+
+
+def test_flat_fire_reports_the_deformed_box_of_a_strained_minimum(strain_minima):
+    """A minimiser's result carries the box of its final state: the deformed box of a shear-stabilised minimum,
+    not the model's reference box."""
+    flexible, (_, (b, mb, eb)), _, flat = strain_minima
+    reference = _compressed_trimers(ShearStabilizedModel, 0.86, flexible)[0].box
+    # the fixture's flat run from the squeezed start strained its box; mb was built on that run's last box
+    assert np.abs(flat.box.matrix - reference.matrix).max() > 1e-3
+    np.testing.assert_array_equal(flat.box.matrix, mb.box.matrix)
+    np.testing.assert_array_equal(b.box.matrix, mb.current_box(eb.q).matrix)
+
+
+def test_flat_fire_of_the_enthalpy_reports_the_pressure_of_its_own_box():
+    """Flat FIRE on the enthalpy U + P0 V of free-volume shear-stabilised trimers: at force balance the box
+    stress is P0, and the result's pressure (virial over the final box's volume) is P0 to the force tolerance."""
+    model, x = _compressed_trimers(functools.partial(ShearStabilizedModel, fixed_volume=False), 0.86)
+    p0 = 1e-2
+    res = _fire(_ModelFire(EnthalpyModel(model, p0), model.dofs(x), DEFAULT_FIRE), 1e-12, 200_000)
+    assert res.converged
+    assert abs(res.box.volume - model.box.volume) > 1e-3 * model.box.volume
+    assert res.box.volume == pytest.approx(model.last_box().volume, rel=1e-15)
+    assert abs(res.pressure - p0) <= 1e-6 * p0
 
 
 def test_strain_engine_from_the_squeezed_start_reaches_a_valid_minimum(strain_minima):

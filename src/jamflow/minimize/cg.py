@@ -45,9 +45,10 @@ def minimize_cg(
     fmax = model.max_force(model.project(ev.gradient, qf))
     if fmax > force_tol:
         polished = minimize_fire(model, model.positions(qf), force_tol, max_steps)
-        return MinimizeResult(polished.position, model.box, polished.energy, polished.pressure,
+        return MinimizeResult(polished.position, polished.box, polished.energy, polished.pressure,
                               polished.max_force, polished.n_contacts, count[0] + polished.steps,
                               polished.converged, model.neighbor_builds - builds0,
                               count[0] + 1 + polished.evaluations)
-    return MinimizeResult(model.positions(qf), model.box, ev.energy, pressure_of(ev, model.box), fmax,
+    box = model.current_box(qf)
+    return MinimizeResult(model.positions(qf), box, ev.energy, pressure_of(ev, box), fmax,
                           ev.n_contacts, count[0], True, model.neighbor_builds - builds0, count[0] + 1)

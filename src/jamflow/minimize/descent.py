@@ -54,5 +54,6 @@ def minimize_sd(
         force = -model.project(ev.gradient, q)
         fmax = model.max_force(force)
         step += 1
-    return MinimizeResult(np.array(model.positions(q)), model.box, ev.energy, pressure_of(ev, model.box), fmax,
+    box = model.current_box(q)
+    return MinimizeResult(np.array(model.positions(q)), box, ev.energy, pressure_of(ev, box), fmax,
                           ev.n_contacts, step, fmax <= force_tol, model.neighbor_builds - builds0, step + 1)

@@ -166,9 +166,10 @@ class _ModelFire:
 
     def result(self, steps: int, calls: int, status: int) -> MinimizeResult:
         model, ev = self.model, self.ev
+        box = model.current_box(self.q)
         return MinimizeResult(
-            position=np.array(model.positions(self.q)), box=model.box, energy=ev.energy,
-            pressure=pressure_of(ev, model.box), max_force=self.fmax, n_contacts=ev.n_contacts, steps=steps,
+            position=np.array(model.positions(self.q)), box=box, energy=ev.energy,
+            pressure=pressure_of(ev, box), max_force=self.fmax, n_contacts=ev.n_contacts, steps=steps,
             converged=status == _fire_kernels.CONVERGED, rebuilds=model.neighbor_builds - self.builds0,
             evaluations=steps + 1,
         )

@@ -133,6 +133,10 @@ class EnergyModel(Protocol):
         """The model in its box scaled by ``factor`` and the matching start (jamming bisection)."""
         ...
 
+    def current_box(self, q: NDArray[np.float64]) -> Box:
+        """The box of the state ``q``: :attr:`box`, or the deformed box of a model whose strain is a degree of freedom."""
+        ...
+
     def fire_engine(self, q: NDArray[np.float64], params: Any, pressure0: float | None = None,
                     pressure_rtol: float = 0.0, box_dof: str = "isotropic") -> Any:
         """The model's compiled FIRE engine from ``q`` (a :class:`~jamflow.minimize.fire.FireEngine`), or None.
@@ -153,6 +157,9 @@ class WithoutFastPaths:
     """What a model without compiled minimisers or box degrees of freedom answers (mix in)."""
 
     box_dofs: bool = False
+
+    def current_box(self, q: NDArray[np.float64]) -> Box:
+        return self.box
 
     def fire_engine(self, q: NDArray[np.float64], params: Any, pressure0: float | None = None,
                     pressure_rtol: float = 0.0, box_dof: str = "isotropic") -> None:

@@ -246,6 +246,18 @@ class ShearStabilizedModel(LinkedSpheresModel):
         """Least-squares multipliers ``(mu, nu)`` of ``g`` on the constraint gradients (link tensions, volume)."""
         return self._gram_solve(q, *self._gamma_t(q, g))
 
+    def _centre_tensions(self, g: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Link tensions from the centres' rows alone, ``mu = A^-1 B_y g_y`` (L,).
+
+        With a free volume the model's own strain row is not stationary (the enthalpy's
+        ``P0 V`` balances it), so the least squares over every row would pass the
+        unbalanced pair stress on to the rods; at a minimum of ``U + P0 V`` these are the
+        tensions of ``g_y = B_y^T mu``, which the centres' rows fix alone.
+        """
+        c = self._solver(q)
+        gy, _ = self._split(np.asarray(g, dtype=np.float64))
+        return self._a_inverse(self.gram.apply(c["w"], np.ascontiguousarray(gy)))
+
     def project(self, g: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
         lam, nu = self.constraint_multipliers(g, q)
         return np.asarray(g, dtype=np.float64) - self._gamma(q, lam, nu)
@@ -301,7 +313,7 @@ class ShearStabilizedModel(LinkedSpheresModel):
         gradient = np.concatenate([-(force @ T).ravel(), strain_components(-W @ F_inv, self.strain_scale)])
         if len(self.links):
             r = self.link_vectors(q)
-            mu = self.multipliers(gradient, q)
+            mu = self.multipliers(gradient, q) if self.fixed_volume else self._centre_tensions(gradient, q)
             W = W + np.einsum("k,ka,kb->ab", mu / np.linalg.norm(r, axis=1), r, r)
         self._last_q = np.array(q)
         return ModelEvaluation(float(energy), gradient, Q.T @ W @ Q, int(n_contacts))
