@@ -37,8 +37,8 @@ STIFFNESS_ANGLES: int = 64
 SAMPLE_OVERLAP: float = 1e-8
 
 #: Halvings of the bisection for the touching distance along a direction [1]: it ends
-#: within ``2^-50`` of the bounding radii, far below :data:`SAMPLE_OVERLAP`.
-CONTACT_BISECTIONS: int = 50
+#: within ``2^-36`` (1.5e-11) of the bounding radii, below :data:`SAMPLE_OVERLAP`.
+CONTACT_BISECTIONS: int = 36
 
 
 def contact_stiffness(code: int, params: NDArray[np.float64], gyration_squared: NDArray[np.float64],
@@ -47,8 +47,7 @@ def contact_stiffness(code: int, params: NDArray[np.float64], gyration_squared: 
 
     Every pair of the shapes (each with itself too) is put at every one of
     ``STIFFNESS_ANGLES^2`` relative orientations and centre-line directions, touching with
-    an overlap :data:`SAMPLE_OVERLAP` of their bounding radii (bisection on the direction,
-    crossed circulo cores counting as overlapping); the largest eigenvalue of
+    an overlap :data:`SAMPLE_OVERLAP` of their bounding radii (:func:`_touching`); the largest eigenvalue of
     ``M^-1/2 H M^-1/2`` of the pair's ``6 x 6`` Hessian (:func:`._kernels.pair_hessian_blocks`,
     masses ``m``, moments of inertia ``m gyration_squared``) is taken over all of them.
 
@@ -103,8 +102,28 @@ def _pair_stiffness(code: int, pa: NDArray[np.float64], pb: NDArray[np.float64],
     params[i] = pa
     params[j] = pb
     unit = np.column_stack([np.cos(direction), np.sin(direction)])
-    # the overlap is an interval [0, r_c) of centre distances along a direction (convex shapes)
-    inside, outside = np.zeros(ns), np.full(ns, reach)
+    touch = _touching(code, i, j, unit, theta, params, reach)
+    dx = np.ascontiguousarray((touch - SAMPLE_OVERLAP * reach)[:, None] * unit)
+    h = _kernels.pair_hessian_blocks(code, i, j, dx, theta, params, 1.0, _kernels.COMPLEX_STEP)
+    rot = 1.0 if rotations else 0.0
+    w = np.array([1.0, 1.0, rot / np.sqrt(ga), 1.0, 1.0, rot / np.sqrt(gb)])
+    return float(np.linalg.eigvalsh(h * w[None, :, None] * w[None, None, :])[:, -1].max() / 2.0)
+
+
+def _touching(code: int, i: NDArray[np.int64], j: NDArray[np.int64], unit: NDArray[np.float64],
+              theta: NDArray[np.float64], params: NDArray[np.float64], reach: float) -> NDArray[np.float64]:
+    """Centre distance at which each listed pair touches along its direction ``unit`` (P, 2) [length].
+
+    Ellipses: ``U = (k / 2) (sigma - r)^2`` at any ``r < sigma``, so one evaluation inside the
+    sum of the semi-minor axes gives ``sigma``. Other families: bisection on ``(0, reach)``, on
+    which the overlap is an interval ``[0, r_c)`` (convex shapes; crossed circulo cores overlap),
+    ending on the side without overlap.
+    """
+    if code == _kernels.ELLIPSE:
+        r = 0.5 * (params[i, 1] + params[j, 1])
+        energy = _kernels.pair_table(code, i, j, np.ascontiguousarray(r[:, None] * unit), theta, params, 1.0)[:, 0]
+        return r + np.sqrt(2.0 * energy)
+    inside, outside = np.zeros(len(i)), np.full(len(i), reach)
     for _ in range(CONTACT_BISECTIONS):
         mid = 0.5 * (inside + outside)
         dx = np.ascontiguousarray(mid[:, None] * unit)
@@ -113,8 +132,4 @@ def _pair_stiffness(code: int, pa: NDArray[np.float64], pb: NDArray[np.float64],
             overlap |= _kernels.circulo_crossed_pairs(i, j, dx, theta, params)
         inside = np.where(overlap, mid, inside)
         outside = np.where(overlap, outside, mid)
-    dx = np.ascontiguousarray((outside - SAMPLE_OVERLAP * reach)[:, None] * unit)
-    h = _kernels.pair_hessian_blocks(code, i, j, dx, theta, params, 1.0, _kernels.COMPLEX_STEP)
-    rot = 1.0 if rotations else 0.0
-    w = np.array([1.0, 1.0, rot / np.sqrt(ga), 1.0, 1.0, rot / np.sqrt(gb)])
-    return float(np.linalg.eigvalsh(h * w[None, :, None] * w[None, None, :])[:, -1].max() / 2.0)
+    return outside
