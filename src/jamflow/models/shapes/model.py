@@ -23,7 +23,8 @@ mass of its orientation, so FIRE's time step means the same for rotations; the t
 unit is ``sqrt(mass / (K k))``: ``K = 1`` for Reuleaux triangles and dumbbells, for
 circulo-polygons 4 (the curvature of a face-to-face contact, :data:`POLYGON_STIFFNESS`), for
 ellipses and circulo-lines the curvature of their stiffest contact in the mass metric
-(:func:`.time_unit.contact_stiffness`: 2.7, 19, 79 for ellipses of aspect ratio 2, 5, 10).
+(:func:`.time_unit.contact_stiffness`: 2.7, 19, 79 for ellipses of aspect ratio 2, 5, 10)
+where it exceeds :data:`FREE_STIFFNESS`, else 1.
 The Hessian is the complex-step derivative of the analytic pair gradients
 (:func:`._kernels.pair_hessian_blocks`), exact to round-off.
 """
@@ -110,14 +111,22 @@ def _shape_parameters(shapes: ShapeTable, family: str) -> NDArray[np.float64]:
 #: edge, so two round circulo-lines (length 0) touch with ``contact_stiffness`` 2, not the disks' 1.
 END_END_TERMS: int = 2
 
+#: Contact stiffness (over the disks') up to which ellipses and circulo-lines keep the disks' time
+#: unit [1]: disks run at ``dt_max omega_max = 0.76``, contacts at most twice as stiff at most
+#: ``0.76 sqrt(2) = 1.07``, below the ~1.1 at which FIRE still runs without restarts (``POLYGON_STIFFNESS``);
+#: stiffer contacts set the unit themselves, back at the disks' 0.76 (ellipses of aspect ratio 10
+#: ran at 4.7 and circulo-lines at 1.4 with the disks' unit, restarting and stalling: docs/notes/shapes.md,
+#: "Aspect ratio 10: the time unit of long bodies").
+FREE_STIFFNESS: float = 2.0
+
 
 def _time_stiffness(shapes: ShapeTable, shape_index: NDArray[np.int64], family: str, rotations: bool) -> float:
     """Spring constant over ``k`` that sets FIRE's time unit ``sqrt(m / (K k))`` [1].
 
-    Ellipses: their :func:`.time_unit.contact_stiffness` (1 for disks). Circulo: the
-    circulo-lines' contact stiffness over :data:`END_END_TERMS` (1 for round ones), at least
-    :data:`POLYGON_STIFFNESS` with a circulo-polygon present. Reuleaux triangles and
-    dumbbells: 1. Never below 1.
+    Ellipses: their :func:`.time_unit.contact_stiffness` (1 for disks); circulo-lines: theirs over
+    :data:`END_END_TERMS` (1 for round ones); either only above :data:`FREE_STIFFNESS`, else 1.
+    With a circulo-polygon present at least :data:`POLYGON_STIFFNESS`. Reuleaux triangles and
+    dumbbells: 1.
     """
     present = np.unique(shape_index)
     stiff = 1.0
@@ -126,13 +135,15 @@ def _time_stiffness(shapes: ShapeTable, shape_index: NDArray[np.int64], family: 
                                   shapes.gyration_squared[present], shapes.bounding_radius[present], rotations)
     elif family == "circulo":
         lines = present[shapes.n_vertices[present] == 2]
-        if len(lines) < len(present):
-            stiff = POLYGON_STIFFNESS
         if len(lines):
-            lines_stiff = contact_stiffness(_kernels.CIRCULO, _shape_parameters(shapes, family)[lines],
-                                            shapes.gyration_squared[lines], shapes.bounding_radius[lines], rotations)
-            stiff = max(stiff, lines_stiff / END_END_TERMS)
-    return max(1.0, stiff)
+            stiff = contact_stiffness(_kernels.CIRCULO, _shape_parameters(shapes, family)[lines],
+                                      shapes.gyration_squared[lines], shapes.bounding_radius[lines],
+                                      rotations) / END_END_TERMS
+    if stiff <= FREE_STIFFNESS:
+        stiff = 1.0
+    if family == "circulo" and int(shapes.n_vertices[present].max()) >= 3:
+        stiff = max(stiff, POLYGON_STIFFNESS)
+    return stiff
 
 
 class ShapeModel(WithoutFastPaths):
