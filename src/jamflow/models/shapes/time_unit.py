@@ -129,7 +129,8 @@ def _touching(code: int, i: NDArray[np.int64], j: NDArray[np.int64], unit: NDArr
         dx = np.ascontiguousarray(mid[:, None] * unit)
         overlap = _kernels.pair_table(code, i, j, dx, theta, params, 1.0)[:, 0] > 0.0
         if code == _kernels.CIRCULO:
-            overlap |= _kernels.circulo_crossed_pairs(i, j, dx, theta, params)
+            apart = np.flatnonzero(~overlap)
+            overlap[apart] = _kernels.circulo_crossed_pairs(i[apart], j[apart], dx[apart], theta, params)
         inside = np.where(overlap, mid, inside)
         outside = np.where(overlap, outside, mid)
     return outside
