@@ -10,9 +10,10 @@ by ``~ alpha / 2`` per unit of sideways displacement (``alpha`` the aspect ratio
 contact at the tip of a long body turns it with a lever of half its length against a
 moment of inertia ``~ m (length / 2)^2 / 3``. :func:`contact_stiffness` is the largest
 such curvature over the relative orientations and centre-line directions of two shapes,
-in units of ``2 k / m``: 1 for disks, and FIRE's time unit of the family is
-``sqrt(m / (K k))`` with ``K`` that stiffness (docs/notes/shapes.md, "Aspect ratio 10:
-the time unit of long bodies").
+in units of ``2 k / m``: 1 for disks. :attr:`ShapeModel.time_unit` is ``sqrt(m / (K k))`` with
+``K`` that stiffness (circulo-lines: over the two terms of their end-end contact) where it
+exceeds ``FREE_STIFFNESS`` (:mod:`.model`; docs/notes/shapes.md, "Aspect ratio 10: the time
+unit of long bodies").
 """
 
 from __future__ import annotations
@@ -114,13 +115,13 @@ def _touching(code: int, i: NDArray[np.int64], j: NDArray[np.int64], unit: NDArr
               theta: NDArray[np.float64], params: NDArray[np.float64], reach: float) -> NDArray[np.float64]:
     """Centre distance at which each listed pair touches along its direction ``unit`` (P, 2) [length].
 
-    Ellipses: ``U = (k / 2) (sigma - r)^2`` at any ``r < sigma``, so one evaluation inside the
-    sum of the semi-minor axes gives ``sigma``. Other families: bisection on ``(0, reach)``, on
+    Ellipses: ``U = (k / 2) (sigma - r)^2`` at any ``r < sigma``, so one evaluation at half the
+    sum of the semi-minor axes (``sigma`` is at least that sum) gives ``sigma``. Other families: bisection on ``(0, reach)``, on
     which the overlap is an interval ``[0, r_c)`` (convex shapes; crossed circulo cores overlap),
     ending on the side without overlap.
     """
     if code == _kernels.ELLIPSE:
-        r = 0.5 * (params[i, 1] + params[j, 1])
+        r = 0.5 * (params[i, 1] + params[j, 1])  # semi-axes (a, b), a >= b
         energy = _kernels.pair_table(code, i, j, np.ascontiguousarray(r[:, None] * unit), theta, params, 1.0)[:, 0]
         return r + np.sqrt(2.0 * energy)
     inside, outside = np.zeros(len(i)), np.full(len(i), reach)
