@@ -164,6 +164,35 @@ def test_aspect_ratio_10_whose_box_shrinks_below_the_bodies_is_refused_in_one_li
     assert not out.exists()
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["ellipse", "circulo-line"])
+def test_aspect_ratio_10_jams_at_n_64(kind):
+    """64 bodies of aspect ratio 10 (the start of ``init-shapes --aspect-ratio 10 --n 64 --seed 1``)
+    at P0 = 1e-4: forces, torques, pressure and overlaps as every case here, no crossed cores, and
+    a stable minimum, hypostatic by rank (contacts counted twice): the dynamical matrix has only
+    the two translations as zero modes and no negative eigenvalue. Ellipses: exactly
+    ``N_c^0 - N_c`` eigenvalues lie below ``sqrt(P0 k)`` (the band held by the pressure, ~P0,
+    against the contacts' ~k; measured 0.16 ... 46 P0, the next 372 P0), so ``N_c = N_c^0 - N_1``
+    (Sec. III B). Circulo-lines (3 short, eigenvalues from 3.5 P0 rising without a gap through
+    ``sqrt(P0 k)``) have no band the spectrum can split at this P0. Measured: docs/extremes.md
+    ("Bodies")."""
+    p0 = 1e-4
+    start = random_shape_packing(bidisperse_shapes(unit_shape(kind, aspect_ratio=10.0)), 64, 0.3, 1)
+    settings = JammingSettings(force_tol=1e-12, pressure_rtol=1e-3, delta_phi=1e-2)
+    result = jam_shapes(start, p0, settings)
+    check_shapes(result, p0, settings, quartic=False)
+    model, q = shape_model_of(result.packing)
+    model.check_cores(q)
+    counting, *_ = count_constraints(result.packing, "twice")
+    spec = spectrum(result.packing, lambda_c=float(np.sqrt(p0 * model.k)), fourth=False)
+    assert spec.balanced
+    assert counting.counting == "hypostatic"
+    assert spec.n_zero == 2 + 3 * counting.n_rattlers + counting.n_sliders
+    assert np.sort(spec.eigenvalue)[spec.n_zero] > 0.0
+    if kind == "ellipse":
+        assert counting.n_contacts == counting.isostatic_count - spec.n_quartic
+
+
 @pytest.fixture(scope="module")
 def ellipse_sweep():
     """16 ellipses of A = 1.1 (the start of tests/test_shapes_jamming.py) jammed to every P0 of the sweep."""

@@ -177,11 +177,17 @@ def test_shape_engine_forces_and_minimum_match_the_model(family):
         assert abs(energy - ev.energy) <= 1e-13 * ev.energy
         np.testing.assert_allclose(force, -g, rtol=0, atol=1e-13 * np.abs(g).max())
         np.testing.assert_allclose(virial, ev.virial, rtol=0, atol=1e-13 * np.abs(ev.virial).max())
+    # the same steps: after 400 of them both engines are at the same state up to amplified round-off
+    # (warm-started Perram-Wertheim solves); later FIRE's restart decisions amplify it (the
+    # ellipses differ by 2e-14 after 200 steps, 1e-11 after 400, 1e-7 after 900), so the steps to
+    # force_tol may differ, but not the minimum
+    a = _fire(ShapeFire(model, q, DEFAULT_FIRE, None, 0.0), 1e-12, 400)
+    b = _fire(_ModelFire(model, q, DEFAULT_FIRE), 1e-12, 400)
+    assert a.steps == b.steps == 400 and a.max_force > 1e-6
+    np.testing.assert_allclose(a.position, b.position, rtol=0, atol=1e-9)
     a = _fire(ShapeFire(model, q, DEFAULT_FIRE, None, 0.0), 1e-12, 200_000)
     b = _fire(_ModelFire(model, q, DEFAULT_FIRE), 1e-12, 200_000)
-    # the same steps: round-off (warm-started Perram-Wertheim solves) may move the crossing of
-    # force_tol by a step
-    assert a.converged and b.converged and abs(a.steps - b.steps) <= 2
+    assert a.converged and b.converged
     np.testing.assert_allclose(a.position, b.position, rtol=0, atol=1e-8)
     assert b.energy > 0.0 and abs(a.energy - b.energy) <= 1e-12 * b.energy
 

@@ -20,8 +20,11 @@ per shape family:
 Masses are equal (``mass``, default 1); the moment of inertia of body ``i`` is
 ``mass * gyration_squared`` of its shape (uniform density), entering as the inverse
 mass of its orientation, so FIRE's time step means the same for rotations; the time
-unit is ``sqrt(mass / k)``, for circulo-polygons ``sqrt(mass / (4 k))`` (the curvature of a
-face-to-face contact, :data:`POLYGON_STIFFNESS`).
+unit is ``sqrt(mass / (K k))``: ``K = 1`` for Reuleaux triangles and dumbbells, for
+circulo-polygons 4 (the curvature of a face-to-face contact, :data:`POLYGON_STIFFNESS`), for
+ellipses and circulo-lines the curvature of their stiffest contact in the mass metric
+(:func:`.time_unit.contact_stiffness`: 2.7, 19, 79 for ellipses of aspect ratio 2, 5, 10)
+where it exceeds :data:`FREE_STIFFNESS`, else 1.
 The Hessian is the complex-step derivative of the analytic pair gradients
 (:func:`._kernels.pair_hessian_blocks`), exact to round-off.
 """
@@ -39,6 +42,7 @@ from ...neighbors.verlet import DEFAULT_SKIN, NeighborList
 from ...state.bodies import ShapeTable
 from . import _kernels
 from .fast import ShapeFire
+from .time_unit import contact_stiffness
 
 __all__ = ["POINT_TERM_FAMILIES", "SHAPE_FAMILIES", "ShapeModel", "shape_family"]
 
@@ -103,12 +107,43 @@ def _shape_parameters(shapes: ShapeTable, family: str) -> NDArray[np.float64]:
     return out
 
 
-def _time_stiffness(shapes: ShapeTable, shape_index: NDArray[np.int64], family: str) -> float:
-    """Spring constant over ``k`` that sets FIRE's time unit ``sqrt(m / (K k))`` [1]: :data:`POLYGON_STIFFNESS`
-    with a circulo-polygon present, else 1."""
-    if family == "circulo" and int(shapes.n_vertices[np.unique(shape_index)].max()) >= 3:
-        return POLYGON_STIFFNESS
-    return 1.0
+#: Vertex-edge terms of an end-end contact of two circulo-lines [1]: each end against the other's
+#: edge, so two round circulo-lines (length 0) touch with ``contact_stiffness`` 2, not the disks' 1.
+END_END_TERMS: int = 2
+
+#: Contact stiffness (over the disks') up to which ellipses and circulo-lines keep the disks' time
+#: unit [1]: disks run at ``dt_max omega_max = 0.76``, contacts at most twice as stiff at most
+#: ``0.76 sqrt(2) = 1.07``, below the ~1.1 at which FIRE still runs without restarts (``POLYGON_STIFFNESS``);
+#: stiffer contacts set the unit themselves, back at the disks' 0.76 (ellipses of aspect ratio 10
+#: ran at 4.7 and circulo-lines at 1.4 with the disks' unit, restarting and stalling: docs/notes/shapes.md,
+#: "Aspect ratio 10: the time unit of long bodies").
+FREE_STIFFNESS: float = 2.0
+
+
+def _time_stiffness(shapes: ShapeTable, shape_index: NDArray[np.int64], family: str, rotations: bool) -> float:
+    """Spring constant over ``k`` that sets FIRE's time unit ``sqrt(m / (K k))`` [1].
+
+    Ellipses: their :func:`.time_unit.contact_stiffness` (1 for disks); circulo-lines: theirs over
+    :data:`END_END_TERMS` (1 for round ones); either only above :data:`FREE_STIFFNESS`, else 1.
+    With a circulo-polygon present at least :data:`POLYGON_STIFFNESS`. Reuleaux triangles and
+    dumbbells: 1.
+    """
+    present = np.unique(shape_index)
+    stiff = 1.0
+    if family == "ellipse":
+        stiff = contact_stiffness(_kernels.ELLIPSE, _shape_parameters(shapes, family)[present],
+                                  shapes.gyration_squared[present], shapes.bounding_radius[present], rotations)
+    elif family == "circulo":
+        lines = present[shapes.n_vertices[present] == 2]
+        if len(lines):
+            stiff = contact_stiffness(_kernels.CIRCULO, _shape_parameters(shapes, family)[lines],
+                                      shapes.gyration_squared[lines], shapes.bounding_radius[lines],
+                                      rotations) / END_END_TERMS
+    if stiff <= FREE_STIFFNESS:
+        stiff = 1.0
+    if family == "circulo" and int(shapes.n_vertices[present].max()) >= 3:
+        stiff = max(stiff, POLYGON_STIFFNESS)
+    return stiff
 
 
 class ShapeModel(WithoutFastPaths):
@@ -158,13 +193,20 @@ class ShapeModel(WithoutFastPaths):
         self.inverse_mass = np.concatenate([np.full(2 * self.n, 1.0 / self.mass), 1.0 / inertia])
         #: length that turns a torque into a force in :meth:`max_force` [length]
         self.torque_arm = float(self.bounding_diameter.mean())
-        # FIRE's time steps are in periods of the stiffest common contact (POLYGON_STIFFNESS)
-        self.time_unit = float(np.sqrt(self.mass / (self.k * _time_stiffness(shapes, self.shape_index,
-                                                                            self.family))))
         self._pair = _PAIR[self.family]
         self._code = _kernels.FAMILY_CODES[self.family]
         self.rotations = bool(rotations)
         self.constrained = not self.rotations
+        self._time_unit: float | None = None
+
+    @property
+    def time_unit(self) -> float:
+        """FIRE's time unit ``sqrt(m / (K k))`` [time]: periods of the stiffest contact (module doc;
+        computed on first use, as the contact sampling of long bodies costs a fraction of a second once)."""
+        if self._time_unit is None:
+            stiff = _time_stiffness(self.shapes, self.shape_index, self.family, self.rotations)
+            self._time_unit = float(np.sqrt(self.mass / (self.k * stiff)))
+        return self._time_unit
 
     @property
     def neighbor_builds(self) -> int:
