@@ -171,31 +171,29 @@ def _block_solve_inv(first, k0, m, base, chol, pinv, b):
 def gram_solve(first, cptr, fptr, chol, rhs):
     """``rhs <- G^-1 rhs`` in place, ``rhs`` (L, k) in cluster order.
 
-    Every column takes the operations of :func:`_block_solve_inv` in its order; the
-    columns are the inner loop, so a cluster's factor is read once for all of them,
-    and its pivots' reciprocals are formed once (multiplied, not divided, per column).
+    A forward and a back substitution per column, dividing by the pivots (the
+    shear-stabilised engine's solves; :func:`_block_solve_inv` multiplies by their
+    reciprocals, which measured no faster here and would change this path's round-off);
+    the columns are the inner loop, so a cluster's factor is read once for all of them.
     """
     ncol = rhs.shape[1]
-    mmax = 0
-    for c in range(cptr.shape[0] - 1):
-        mmax = max(mmax, cptr[c + 1] - cptr[c])
-    pinv = np.empty(mmax)
     for c in range(cptr.shape[0] - 1):
         k0 = cptr[c]
         m = cptr[c + 1] - k0
         base = fptr[c]
-        _pivots_inverse(chol, base, m, pinv)
         for i in range(m):  # L z = b
             f = first[k0 + i]
+            pivot = chol[base + i * m + i]
             for col in range(ncol):
                 t = rhs[k0 + i, col]
                 for p in range(f, i):
                     t -= chol[base + i * m + p] * rhs[k0 + p, col]
-                rhs[k0 + i, col] = t * pinv[i]
+                rhs[k0 + i, col] = t / pivot
         for i in range(m - 1, -1, -1):  # L^T y = z, by columns
             f = first[k0 + i]
+            pivot = chol[base + i * m + i]
             for col in range(ncol):
-                t = rhs[k0 + i, col] * pinv[i]
+                t = rhs[k0 + i, col] / pivot
                 rhs[k0 + i, col] = t
                 for p in range(f, i):
                     rhs[k0 + p, col] -= chol[base + i * m + p] * t
