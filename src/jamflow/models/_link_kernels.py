@@ -45,22 +45,36 @@ from .spheres._kernels import pair_forces
 
 
 @njit(cache=True)
-def link_geometry(x, li, lj, offset, length, u, r):
-    """Unit link vectors ``u`` (L, d) and lengths ``r`` (L,) of centres ``x`` (N, d); returns ``max |r - l| / l``."""
+def _link_lengths(x, li, lj, offset, length, v, r):
+    """Link vectors ``v`` (L, d) and lengths ``r`` (L,) of centres ``x`` (N, d), not normalised; returns ``max |r - l| / l``."""
     d = x.shape[1]
     err = 0.0
     for k in range(li.shape[0]):
         s = 0.0
         for a in range(d):
-            v = x[lj[k], a] - x[li[k], a] + offset[k, a]
-            u[k, a] = v
-            s += v * v
+            t = x[lj[k], a] - x[li[k], a] + offset[k, a]
+            v[k, a] = t
+            s += t * t
         rk = np.sqrt(s)
         r[k] = rk
-        for a in range(d):
-            u[k, a] /= rk
-        e = abs(rk / length[k] - 1.0)
-        err = max(err, e)
+        err = max(err, abs(rk - length[k]) / length[k])
+    return err
+
+
+@njit(cache=True, inline="always")
+def _unit_rows(v, r, w):
+    """Rows ``w`` (L, d) set to the unit vectors of the link vectors ``v`` of lengths ``r``."""
+    for k in range(v.shape[0]):
+        s = 1.0 / r[k]
+        for a in range(v.shape[1]):
+            w[k, a] = v[k, a] * s
+
+
+@njit(cache=True)
+def link_geometry(x, li, lj, offset, length, u, r):
+    """Unit link vectors ``u`` (L, d) and lengths ``r`` (L,) of centres ``x`` (N, d); returns ``max |r - l| / l``."""
+    err = _link_lengths(x, li, lj, offset, length, u, r)
+    _unit_rows(u, r, u)
     return err
 
 
@@ -411,32 +425,6 @@ def gram_project_pair(w, li, lj, first, cptr, fptr, chol, g, v):
                 t = bv[k] * w[k, e]
                 v[lj[k], e] -= t
                 v[li[k], e] += t
-
-
-@njit(cache=True)
-def _link_lengths(x, li, lj, offset, length, v, r):
-    """Link vectors ``v`` (L, d) and lengths ``r`` (L,) of centres ``x`` (N, d), not normalised; returns ``max |r - l| / l``."""
-    d = x.shape[1]
-    err = 0.0
-    for k in range(li.shape[0]):
-        s = 0.0
-        for a in range(d):
-            t = x[lj[k], a] - x[li[k], a] + offset[k, a]
-            v[k, a] = t
-            s += t * t
-        rk = np.sqrt(s)
-        r[k] = rk
-        err = max(err, abs(rk - length[k]) / length[k])
-    return err
-
-
-@njit(cache=True, inline="always")
-def _unit_rows(v, r, w):
-    """Rows ``w`` (L, d) set to the unit vectors of the link vectors ``v`` of lengths ``r``."""
-    for k in range(v.shape[0]):
-        s = 1.0 / r[k]
-        for a in range(v.shape[1]):
-            w[k, a] = v[k, a] * s
 
 
 @njit(cache=True)
