@@ -206,12 +206,12 @@ def whole_runs(sizes: list[tuple[int, int]], seeds: int, pressure: float, rtol: 
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        # untimed warm-up: a run of every engine, the spheres' too, loads (or compiles) the kernels into
-        # the on-disk cache
+        # untimed warm-up: a run of every engine (spheres too) loads (or compiles) the kernels into the on-disk cache
         for d, n in sizes[:1] + [(3, 128)]:
             start = _whole_start(tmp, d, n if d == 2 else 128, 1)
-            write_packing(read_packing(start).evolve(links=None), tmp / "w_spheres.nc")
-            for src, extra in ((start, []), (start, ["--shear-stabilize"]), (tmp / "w_spheres.nc", [])):
+            unlinked = tmp / "w_spheres.nc"
+            write_packing(read_packing(start).evolve(links=None), unlinked)
+            for src, extra in ((start, []), (start, ["--shear-stabilize"]), (unlinked, [])):
                 subprocess.run(jam + [str(src), str(tmp / "w.nc"), "--in-place", *extra], check=True,
                                stdout=subprocess.DEVNULL)
         for d, n in sizes:

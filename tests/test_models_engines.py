@@ -11,6 +11,7 @@ from jamflow.box import Box
 from jamflow.chains.builders import linked_packing
 from jamflow.chains.jamming import linked_volume
 from jamflow.minimize.fire import DEFAULT_FIRE, _fire, _ModelFire
+from jamflow.models import _link_kernels
 from jamflow.models.box import EnthalpyModel
 from jamflow.models.links import LinkedFire, LinkedSpheresModel
 from jamflow.models.shapes import _fire_kernels
@@ -20,7 +21,7 @@ from jamflow.models.spheres.model import SphereModel
 from jamflow.models.strain import ShearStabilizedModel, StrainFire
 from jamflow.shapes import bidisperse_shapes, random_shape_packing, unit_shape
 from jamflow.state.bodies import Links
-from jamflow.tolerances import LINK_LENGTH_RTOL
+from jamflow.tolerances import LINK_LENGTH_RTOL, LINK_RANK_RTOL
 
 
 def _compressed_trimers(kind, phi, flexible=False):
@@ -202,3 +203,58 @@ def test_shape_barostat_reaches_the_target_pressure_in_force_balance():
     final = ShapeModel(res.box, p.shapes, p.shape_index)
     ev = final.evaluate(final.dofs(res.position))
     assert final.max_force(ev.gradient) <= 1e-12
+
+
+def _chain_engine(clusters, chain_length, seed, phi=None):
+    """A 3D linked engine of chains with frozen angles (dilute start) and its cluster-order link arrays."""
+    p = linked_packing(3, clusters, "chain", np.random.default_rng(seed), chain_length=chain_length, phi=phi)[0]
+    model = LinkedSpheresModel(p.box, p.diameter, p.links, p.position)
+    engine = LinkedFire(model, model.dofs(p.position), DEFAULT_FIRE)
+    return model, engine
+
+
+@pytest.mark.parametrize("chain_length", [4, 30])
+def test_paired_projection_is_the_single_projection_bit_for_bit(chain_length):
+    """The engine's projection of force and velocity together (flat loops, two solves side by side)
+    takes each vector through the operations of the single projection: the same bits; the result
+    is tangent (``Omega P g`` at round-off)."""
+    model, e = _chain_engine(8, 4, 3) if chain_length == 4 else _chain_engine(4, 30, 3, phi=0.02)
+    g = e.gram
+    _link_kernels.gram_factor(e.w, g["sign"], g["first"], g["cptr"], g["fptr"], e.chol, LINK_RANK_RTOL)
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(size=e.x.shape), rng.normal(size=e.x.shape)
+    single = [a.copy(), b.copy()]
+    for v in single:
+        _link_kernels.gram_project(e.w, g["ci"], g["cj"], g["first"], g["cptr"], g["fptr"], e.chol, v,
+                                   np.empty(len(g["ci"])))
+    _link_kernels.gram_project_pair(e.w, g["ci"], g["cj"], g["first"], g["cptr"], g["fptr"], e.chol, a, b)
+    assert np.array_equal(a, single[0]) and np.array_equal(b, single[1])
+    rows = np.empty(len(g["ci"]))
+    _link_kernels.omega_apply(e.w, g["ci"], g["cj"], a, rows)
+    assert np.abs(rows).max() <= 1e-14 * np.abs(a).max()
+
+
+@pytest.mark.parametrize("size", [1e-4, 3e-2])
+def test_engine_reaffixing_lands_on_the_manifold_next_to_newton(size):
+    """The engine's re-affixing (chord sweeps on the last point's factors, Newton when a sweep does
+    not quarter the error) after a tangent step of ``size``: links to LINK_LENGTH_RTOL, the Gram
+    factors of the result, and the point of the flat model's Newton re-affixing to O(size^2)."""
+    model, e = _chain_engine(8, 4, 5)
+    g = e.gram
+    _link_kernels.gram_factor(e.w, g["sign"], g["first"], g["cptr"], g["fptr"], e.chol, LINK_RANK_RTOL)
+    step = np.random.default_rng(1).normal(size=e.x.shape)
+    _link_kernels.gram_project(e.w, g["ci"], g["cj"], g["first"], g["cptr"], g["fptr"], e.chol, step,
+                               np.empty(len(g["ci"])))
+    x = e.x + size * step / np.abs(step).max()
+    newton = model.positions(model.reproject(x.ravel()))
+    sweeps, bad = _link_kernels.reaffix(x, g["ci"], g["cj"], g["offset"], g["length"], g["sign"], g["first"],
+                                        g["cptr"], g["fptr"], e.chol, e.w, e.r, LINK_LENGTH_RTOL, 50, LINK_RANK_RTOL)
+    assert bad == -1 and 1 <= sweeps <= 8
+    assert np.abs(model.link_errors(x.ravel())).max() <= LINK_LENGTH_RTOL
+    assert np.abs(x - newton).max() <= 10 * size**2
+    w, r, chol = np.empty_like(e.w), np.empty_like(e.r), np.zeros_like(e.chol)
+    _link_kernels.link_geometry(x, g["ci"], g["cj"], g["offset"], g["length"], w, r)
+    np.testing.assert_allclose(e.w, w, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(e.r, r, rtol=1e-15, atol=0)
+    _link_kernels.gram_factor(e.w, g["sign"], g["first"], g["cptr"], g["fptr"], chol, LINK_RANK_RTOL)
+    assert np.array_equal(e.chol, chol)

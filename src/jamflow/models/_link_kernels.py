@@ -45,22 +45,36 @@ from .spheres._kernels import pair_forces
 
 
 @njit(cache=True)
-def link_geometry(x, li, lj, offset, length, u, r):
-    """Unit link vectors ``u`` (L, d) and lengths ``r`` (L,) of centres ``x`` (N, d); returns ``max |r - l| / l``."""
+def _link_lengths(x, li, lj, offset, length, v, r):
+    """Link vectors ``v`` (L, d) and lengths ``r`` (L,) of centres ``x`` (N, d), not normalised; returns ``max |r - l| / l``."""
     d = x.shape[1]
     err = 0.0
     for k in range(li.shape[0]):
         s = 0.0
         for a in range(d):
-            v = x[lj[k], a] - x[li[k], a] + offset[k, a]
-            u[k, a] = v
-            s += v * v
+            t = x[lj[k], a] - x[li[k], a] + offset[k, a]
+            v[k, a] = t
+            s += t * t
         rk = np.sqrt(s)
         r[k] = rk
-        for a in range(d):
-            u[k, a] /= rk
-        e = abs(rk / length[k] - 1.0)
-        err = max(err, e)
+        err = max(err, abs(rk - length[k]) / length[k])
+    return err
+
+
+@njit(cache=True, inline="always")
+def _unit_rows(v, r, w):
+    """Rows ``w`` (L, d) set to the unit vectors of the link vectors ``v`` of lengths ``r``."""
+    for k in range(v.shape[0]):
+        s = 1.0 / r[k]
+        for a in range(v.shape[1]):
+            w[k, a] = v[k, a] * s
+
+
+@njit(cache=True)
+def link_geometry(x, li, lj, offset, length, u, r):
+    """Unit link vectors ``u`` (L, d) and lengths ``r`` (L,) of centres ``x`` (N, d); returns ``max |r - l| / l``."""
+    err = _link_lengths(x, li, lj, offset, length, u, r)
+    _unit_rows(u, r, u)
     return err
 
 
@@ -90,6 +104,39 @@ def gram_structure(li, lj, cptr, fptr, sign, first):
                     first[ka] = b
 
 
+@njit(cache=True, inline="always")
+def _factor_block(w, sign, first, k0, m, base, chol, rank_rtol):
+    """Cholesky factor of one cluster's Gram block (links ``k0:k0+m``) into ``chol[base:]``; whether it has full rank.
+
+    Full rank: every pivot positive and the smallest at least ``rank_rtol`` of the largest.
+    """
+    d = w.shape[1]
+    lmax = 0.0
+    lmin = np.inf
+    for a in range(m):
+        fa = first[k0 + a]
+        for b in range(fa, a + 1):
+            fb = first[k0 + b]
+            t = 0.0
+            s = sign[base + a * m + b]
+            if s != 0.0:
+                for e in range(d):
+                    t += w[k0 + a, e] * w[k0 + b, e]
+                t *= s
+            for p in range(max(fa, fb), b):
+                t -= chol[base + a * m + p] * chol[base + b * m + p]
+            if b < a:
+                chol[base + a * m + b] = t / chol[base + b * m + b]
+            else:
+                if not t > 0.0:
+                    return False
+                laa = np.sqrt(t)
+                chol[base + a * m + a] = laa
+                lmax = max(lmax, laa)
+                lmin = min(lmin, laa)
+    return not lmin < rank_rtol * lmax
+
+
 @njit(cache=True)
 def gram_factor(w, sign, first, cptr, fptr, chol, rank_rtol):
     """Cholesky factors of every cluster's Gram block (rows ``w`` in cluster order) in ``chol``.
@@ -97,49 +144,38 @@ def gram_factor(w, sign, first, cptr, fptr, chol, rank_rtol):
     Returns the first degenerate cluster (smallest pivot below ``rank_rtol`` of the
     largest, or not positive) or -1.
     """
-    d = w.shape[1]
     for c in range(cptr.shape[0] - 1):
-        k0 = cptr[c]
-        m = cptr[c + 1] - k0
-        base = fptr[c]
-        lmax = 0.0
-        lmin = np.inf
-        for a in range(m):
-            fa = first[k0 + a]
-            for b in range(fa, a + 1):
-                fb = first[k0 + b]
-                t = 0.0
-                s = sign[base + a * m + b]
-                if s != 0.0:
-                    for e in range(d):
-                        t += w[k0 + a, e] * w[k0 + b, e]
-                    t *= s
-                for p in range(max(fa, fb), b):
-                    t -= chol[base + a * m + p] * chol[base + b * m + p]
-                if b < a:
-                    chol[base + a * m + b] = t / chol[base + b * m + b]
-                else:
-                    if not t > 0.0:
-                        return c
-                    laa = np.sqrt(t)
-                    chol[base + a * m + a] = laa
-                    lmax = max(lmax, laa)
-                    lmin = min(lmin, laa)
-        if lmin < rank_rtol * lmax:
+        if not _factor_block(w, sign, first, cptr[c], cptr[c + 1] - cptr[c], fptr[c], chol, rank_rtol):
             return c
     return -1
 
 
 @njit(cache=True, inline="always")
-def _block_solve(first, k0, m, base, chol, b):
-    """``b <- G_c^-1 b`` for one cluster's local vector ``b`` (m,), through its envelope factor."""
-    for i in range(m):  # L z = b
+def _pivots_inverse(chol, base, m, out):
+    """Reciprocals of the pivots of one cluster's factor into ``out[:m]``."""
+    for a in range(m):
+        out[a] = 1.0 / chol[base + a * m + a]
+
+
+@njit(cache=True, inline="always")
+def _all_pivots_inverse(cptr, fptr, chol, pinv):
+    """The reciprocal pivots of every cluster's factor into ``pinv`` (L,), cluster order."""
+    for c in range(cptr.shape[0] - 1):
+        _pivots_inverse(chol, fptr[c], cptr[c + 1] - cptr[c], pinv[cptr[c]:])
+
+
+@njit(cache=True, inline="always")
+def _block_solve_inv(first, k0, m, base, chol, pinv, b):
+    """``b <- G_c^-1 b`` for one cluster's local vector ``b`` (m,), through its envelope factor and the
+    reciprocals ``pinv`` of its pivots (multiplied, not divided: the solves of small blocks are
+    chains of dependent operations, and a division is the slowest link)."""
+    for i in range(m):
         t = b[i]
         for p in range(first[k0 + i], i):
             t -= chol[base + i * m + p] * b[p]
-        b[i] = t / chol[base + i * m + i]
-    for i in range(m - 1, -1, -1):  # L^T y = z, by columns
-        t = b[i] / chol[base + i * m + i]
+        b[i] = t * pinv[i]
+    for i in range(m - 1, -1, -1):
+        t = b[i] * pinv[i]
         b[i] = t
         for p in range(first[k0 + i], i):
             b[p] -= chol[base + i * m + p] * t
@@ -149,8 +185,10 @@ def _block_solve(first, k0, m, base, chol, b):
 def gram_solve(first, cptr, fptr, chol, rhs):
     """``rhs <- G^-1 rhs`` in place, ``rhs`` (L, k) in cluster order.
 
-    Every column takes the operations of :func:`_block_solve` in its order; the columns
-    are the inner loop, so a cluster's factor is read once for all of them.
+    A forward and a back substitution per column, dividing by the pivots (the
+    shear-stabilised engine's solves; :func:`_block_solve_inv` multiplies by their
+    reciprocals, which measured no faster here and would change this path's round-off);
+    the columns are the inner loop, so a cluster's factor is read once for all of them.
     """
     ncol = rhs.shape[1]
     for c in range(cptr.shape[0] - 1):
@@ -291,11 +329,13 @@ def gram_project(w, li, lj, first, cptr, fptr, chol, g, lam):
     for c in range(cptr.shape[0] - 1):
         mmax = max(mmax, cptr[c + 1] - cptr[c])
     b = np.empty(mmax)
+    pinv = np.empty(mmax)
     for k in range(lam.shape[0]):
         lam[k] = 0.0
     for c in range(cptr.shape[0] - 1):
         k0 = cptr[c]
         m = cptr[c + 1] - k0
+        _pivots_inverse(chol, fptr[c], m, pinv)
         for _ in range(2):
             for a in range(m):
                 k = k0 + a
@@ -303,7 +343,7 @@ def gram_project(w, li, lj, first, cptr, fptr, chol, g, lam):
                 for e in range(d):
                     s += w[k, e] * (g[lj[k], e] - g[li[k], e])
                 b[a] = s
-            _block_solve(first, k0, m, fptr[c], chol, b)
+            _block_solve_inv(first, k0, m, fptr[c], chol, pinv, b)
             for a in range(m):
                 k = k0 + a
                 lam[k] += b[a]
@@ -324,47 +364,119 @@ def same(a, b):
     return True
 
 
-@njit(cache=True)
-def reaffix(x, li, lj, offset, length, sign, first, cptr, fptr, chol, w, u, r, lam, length_rtol, max_sweeps,
-            rank_rtol, chord):
-    """Newton re-affixing of ``x`` (N, d) in place, links in cluster order.
+@njit(cache=True, inline="always")
+def _block_solve_pair(first, k0, m, base, chol, pinv, b, c):
+    """``b <- G_c^-1 b`` and ``c <- G_c^-1 c`` side by side (:func:`_block_solve_inv` twice, interleaved)."""
+    for i in range(m):
+        t = b[i]
+        s = c[i]
+        for p in range(first[k0 + i], i):
+            f = chol[base + i * m + p]
+            t -= f * b[p]
+            s -= f * c[p]
+        b[i] = t * pinv[i]
+        c[i] = s * pinv[i]
+    for i in range(m - 1, -1, -1):
+        t = b[i] * pinv[i]
+        s = c[i] * pinv[i]
+        b[i] = t
+        c[i] = s
+        for p in range(first[k0 + i], i):
+            f = chol[base + i * m + p]
+            b[p] -= f * t
+            c[p] -= f * s
 
-    Minimum-norm sweeps ``x -= Omega_w^T G_w^-1 (r - l)`` until
-    ``max |r - l| / l <= length_rtol``. With ``chord`` the sweeps start with the rows
-    ``w`` and factors ``chol`` of a nearby point (a minimiser's last point, one step
-    away: convergence at the rate ``|step| / l``, no factorisation) as long as each sweep
-    at least quarters the error; otherwise, and without ``chord``, every sweep first
+
+@njit(cache=True)
+def gram_project_pair(w, li, lj, first, cptr, fptr, chol, g, v):
+    """``g`` and ``v`` (N, d) projected in place onto the tangent space, links in cluster order.
+
+    The projection of :func:`gram_project` (two passes) applied to both vectors of a
+    FIRE step at once, each pass in flat loops over all links (``Omega g``, ``Omega v``),
+    all clusters (the two solves side by side) and all links again (the subtraction).
+    Clusters share no spheres, so every vector takes :func:`gram_project`'s operations
+    in its order: the same bits. A cluster's solve is a chain of dependent operations;
+    flat loops and two interleaved solves keep independent work in flight
+    (docs/notes/chains.md, "3D chains: the cost of a linked step").
+    """
+    d = w.shape[1]
+    L = li.shape[0]
+    b = np.empty(L)
+    bv = np.empty(L)
+    pinv = np.empty(L)
+    _all_pivots_inverse(cptr, fptr, chol, pinv)
+    for _ in range(2):
+        for k in range(L):
+            s = 0.0
+            s2 = 0.0
+            for e in range(d):
+                s += w[k, e] * (g[lj[k], e] - g[li[k], e])
+                s2 += w[k, e] * (v[lj[k], e] - v[li[k], e])
+            b[k] = s
+            bv[k] = s2
+        for c in range(cptr.shape[0] - 1):
+            k0 = cptr[c]
+            _block_solve_pair(first, k0, cptr[c + 1] - k0, fptr[c], chol, pinv[k0:], b[k0:], bv[k0:])
+        for k in range(L):
+            for e in range(d):
+                t = b[k] * w[k, e]
+                g[lj[k], e] -= t
+                g[li[k], e] += t
+                t = bv[k] * w[k, e]
+                v[lj[k], e] -= t
+                v[li[k], e] += t
+
+
+@njit(cache=True)
+def reaffix(x, li, lj, offset, length, sign, first, cptr, fptr, chol, w, r, length_rtol, max_sweeps, rank_rtol):
+    """Newton re-affixing of ``x`` (N, d) in place, and the Gram factors of the result.
+
+    Links in cluster order. On entry ``w`` (L, d) and ``chol`` are the rows and factors
+    of a nearby point (a minimiser's last point, one step away). Minimum-norm sweeps
+    ``x -= Omega_w^T G_w^-1 (r - l)`` until ``max |r - l| / l <= length_rtol``: chord
+    sweeps on the entry factors (convergence at the rate ``|step| / l``, no
+    factorisation) as long as each at least quarters the error, else every sweep first
     factorises at the iterate (``w <- u``: Newton). Any fixed point lies on the
     constraint manifold; the chord changes only which nearby point of it is reached,
-    by the square of the step. On return ``u``, ``r`` hold the geometry of ``x``.
+    by the square of the step. Every sweep runs over all links and clusters in flat
+    loops (independent iterations: a sweep cluster by cluster is a chain of dependent
+    square roots and solves, measured slower). On return ``w`` holds the unit link
+    vectors of ``x``, ``r`` their lengths and ``chol`` their factors.
 
     Returns
     -------
-    sweeps, err, bad
+    sweeps, bad
         ``sweeps`` -1 when ``max_sweeps`` did not suffice; ``bad`` the first degenerate
         cluster or -1.
     """
-    err = 0.0
+    v = np.empty_like(w)
+    lam = np.empty(li.shape[0])
+    pinv = np.empty(li.shape[0])
+    _all_pivots_inverse(cptr, fptr, chol, pinv)
+    chord = True
     previous = np.inf
     for sweep in range(max_sweeps + 1):
-        err = link_geometry(x, li, lj, offset, length, u, r)
+        err = _link_lengths(x, li, lj, offset, length, v, r)
         if err <= length_rtol:
-            return sweep, err, -1
+            _unit_rows(v, r, w)
+            return sweep, gram_factor(w, sign, first, cptr, fptr, chol, rank_rtol)
         if sweep == max_sweeps:
             break
         chord = chord and err <= 0.25 * previous
         if not chord:
-            w[:, :] = u
+            _unit_rows(v, r, w)
             bad = gram_factor(w, sign, first, cptr, fptr, chol, rank_rtol)
             if bad >= 0:
-                return sweep, err, bad
+                return sweep, bad
+            _all_pivots_inverse(cptr, fptr, chol, pinv)
         previous = err
         for k in range(lam.shape[0]):
             lam[k] = r[k] - length[k]
         for c in range(cptr.shape[0] - 1):
-            _block_solve(first, cptr[c], cptr[c + 1] - cptr[c], fptr[c], chol, lam[cptr[c]:cptr[c + 1]])
+            k0 = cptr[c]
+            _block_solve_inv(first, k0, cptr[c + 1] - k0, fptr[c], chol, pinv[k0:], lam[k0:])
         omega_t_subtract(w, li, lj, lam, x)
-    return -1, err, -1
+    return -1, -1
 
 
 @njit(cache=True, inline="always")
@@ -479,20 +591,22 @@ def unlinked_pairs(pi, pj, offset, sigma, adj_ptr, adj):
 def linked_fire(
     x, v, fire_state, fire_params,
     offset, pi, pj, sigma, eps, w_exp, x_build, reach, skin, lengths, diameter, adj_ptr, adj,
-    li, lj, link_offset, length, sign, first, cptr, fptr, chol, w, u, r, rptr, members, shift, ref,
+    li, lj, link_offset, length, sign, first, cptr, fptr, chol, w, r, rptr, members, shift, ref,
     length_rtol, max_sweeps, rank_rtol, force_tol, max_steps, force,
 ):
     """FIRE 2.0 of linked spheres at fixed box in one compiled loop (the steps of :class:`~jamflow.minimize.fire._ModelFire`).
 
     Unit masses; links in cluster order. Every step: FIRE control
-    (:mod:`jamflow.minimize._fire_kernels`), move, re-affixing (:func:`reaffix`, chord
-    sweeps with the last point's factors), the Gram factors at the new point, pair
-    forces of the unlinked listed pairs (exponent ``w_exp``), and the force and the
-    velocity projected onto the tangent space (:func:`gram_project`). Rigid 2D
+    (:mod:`jamflow.minimize._fire_kernels`), move, re-affixing and the Gram factors at
+    the new point (:func:`reaffix`, cluster by cluster, chord sweeps with the last
+    point's factors), pair forces of the unlinked listed pairs (exponent ``w_exp``),
+    and the force and the velocity projected onto the tangent space
+    (:func:`gram_project_pair`). Rigid 2D
     clusters (``rptr``, ``members``, ``shift``, ``ref`` of :func:`rigid_place_2d`; their
     links are not among ``li``, ``lj``) are projected onto their rigid motions
     (:func:`rigid_project_2d`) and placed rigidly instead. ``x`` (N, d)
-    must lie on the constraint manifold with ``u``, ``r`` its link geometry on entry;
+    must lie on the constraint manifold with ``w``, ``r`` its link geometry (unit
+    vectors, lengths) on entry;
     the velocity is projected at ``x`` on entry (after a return for a rebuild it was
     not yet).
 
@@ -509,7 +623,8 @@ def linked_fire(
     status, steps, energy, n_contact, max_force_sq, sweeps, bad, builds, pi, pj, offset, sigma
         ``status`` of :mod:`jamflow.minimize._fire_kernels` (``STALLED``: re-affixing did
         not converge, or the links of cluster ``bad`` are degenerate); ``sweeps`` the
-        re-affixing sweeps and ``builds`` the lists built in the call; the list in use.
+        re-affixing sweeps (per re-affixing the most any cluster took) and ``builds``
+        the lists built in the call; the list in use.
     """
     d = x.shape[1]
     dt, alpha, npos = fire_state[0], fire_state[1], int(fire_state[2])
@@ -519,7 +634,6 @@ def linked_fire(
     initial_delay = fire_params[7] > 0.0
     links = li.shape[0] > 0
     rigid = rptr.shape[0] > 1
-    lam = np.empty(li.shape[0])
     virial = np.zeros((d, d))
     shortest = np.inf if lengths.shape[0] else 0.0
     for a in range(lengths.shape[0]):
@@ -533,8 +647,12 @@ def linked_fire(
     bad = -1
     status = MAX_STEPS
     step = 0
-    while True:
-        # evaluation at x: a valid list, the Gram factors, forces and velocity projected
+    if links:
+        bad = gram_factor(w, sign, first, cptr, fptr, chol, rank_rtol)
+        if bad >= 0:
+            status = STALLED
+    while status != STALLED:
+        # evaluation at x (re-affixing left its Gram factors): a valid list, forces and velocity projected
         if _needs_rebuild(x, x_build, 1.0, 1.0, reach, skin, 0.0):
             if not reach < 0.5 * shortest:
                 status = REBUILD
@@ -544,16 +662,9 @@ def linked_fire(
             pi, pj, offset, sigma = pi[:kept], pj[:kept], offset[:kept], sigma[:kept]
             x_build[:, :] = x
             builds += 1
-        if links:
-            w[:, :] = u
-            bad = gram_factor(w, sign, first, cptr, fptr, chol, rank_rtol)
-            if bad >= 0:
-                status = STALLED
-                break
         energy, n_contact = pair_forces(x, 1.0, offset, pi, pj, sigma, eps, w_exp, force, virial, False)
         if links:
-            gram_project(w, li, lj, first, cptr, fptr, chol, force, lam)
-            gram_project(w, li, lj, first, cptr, fptr, chol, v, lam)
+            gram_project_pair(w, li, lj, first, cptr, fptr, chol, force, v)
         if rigid:
             rigid_project_2d(x, rptr, members, shift, force)
             rigid_project_2d(x, rptr, members, shift, v)
@@ -573,8 +684,8 @@ def linked_fire(
             if rigid:
                 rigid_place_2d(x, rptr, members, shift, ref)
             if links:
-                n, err, bad = reaffix(x, li, lj, link_offset, length, sign, first, cptr, fptr, chol, w, u, r, lam,
-                                      length_rtol, max_sweeps, rank_rtol, True)
+                n, bad = reaffix(x, li, lj, link_offset, length, sign, first, cptr, fptr, chol, w, r, length_rtol,
+                                 max_sweeps, rank_rtol)
                 sweeps += max(n, 0)
                 if n < 0 or bad >= 0:
                     status = STALLED
@@ -588,8 +699,8 @@ def linked_fire(
         if rigid:
             rigid_place_2d(x, rptr, members, shift, ref)
         if links:
-            n, err, bad = reaffix(x, li, lj, link_offset, length, sign, first, cptr, fptr, chol, w, u, r, lam,
-                                  length_rtol, max_sweeps, rank_rtol, True)
+            n, bad = reaffix(x, li, lj, link_offset, length, sign, first, cptr, fptr, chol, w, r, length_rtol,
+                             max_sweeps, rank_rtol)
             sweeps += max(n, 0)
             if n < 0 or bad >= 0:
                 status = STALLED

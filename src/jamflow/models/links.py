@@ -394,8 +394,8 @@ class LinkedFire:
 
     The steps of the flat-vector FIRE (:class:`~jamflow.minimize.fire._ModelFire`) on
     this model, in numba: move, re-affixing, Gram factors, pair forces and projections
-    fused; re-affixing starts with chord sweeps on the last point's factors
-    (:func:`._link_kernels.reaffix`). The loop rebuilds its neighbour list itself in
+    fused; re-affixing runs cluster by cluster, starting with chord sweeps on the last
+    point's factors (:func:`._link_kernels.reaffix`). The loop rebuilds its neighbour list itself in
     an orthogonal box and returns to Python for the build otherwise; the state
     persists across calls. It keeps its own link geometry and factors (links in
     the cluster order of :class:`ClusterGram`), so the model's caches stay valid.
@@ -412,11 +412,11 @@ class LinkedFire:
         self.fparams = _fire_params(params, unit)
         self.rigid, self.gram = _rigid_clusters(model, self.x)
         g = self.gram
-        self.u = np.zeros((len(g["ci"]), model.d))
-        self.w = np.zeros_like(self.u)
+        # the link geometry (unit vectors, lengths) of x and its Gram factors, kept up to date by the loop
+        self.w = np.zeros((len(g["ci"]), model.d))
         self.r = np.zeros(len(g["ci"]))
         self.chol = np.zeros_like(g["sign"])
-        _link_kernels.link_geometry(self.x, g["ci"], g["cj"], g["offset"], g["length"], self.u, self.r)
+        _link_kernels.link_geometry(self.x, g["ci"], g["cj"], g["offset"], g["length"], self.w, self.r)
         # the list in use (i, j, offset, sigma) and its build positions; the loop rebuilds it in an orthogonal box
         self.pairs: tuple[NDArray, ...] | None = None
         self.x_build = np.empty((0, model.d))
@@ -439,7 +439,7 @@ class LinkedFire:
             self.x, self.v, self.fire_state, self.fparams, self.pairs[2], self.pairs[0], self.pairs[1], self.pairs[3],
             m.potential.epsilon, m.potential.exponent, self.x_build, nl.reach, nl.skin, self.lengths, m.diameter,
             self.adj_ptr, m.links.j, g["ci"], g["cj"], g["offset"], g["length"], g["sign"], g["first"], g["cptr"],
-            g["fptr"], self.chol, self.w, self.u, self.r, rigid["rptr"], rigid["members"], rigid["shift"], rigid["ref"],
+            g["fptr"], self.chol, self.w, self.r, rigid["rptr"], rigid["members"], rigid["shift"], rigid["ref"],
             m.length_rtol, LINK_NEWTON_MAX_ITERATIONS, LINK_RANK_RTOL, float(force_tol), int(budget), self.force,
         )
         self.pairs = (pairs[0], pairs[1], pairs[2], pairs[3])
