@@ -21,6 +21,7 @@ Both apply Lees–Edwards simple shear (flow axis 0, gradient axis 1,
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -228,10 +229,13 @@ def tentative_network_stress(
     Nmat = (S @ S.T).tocsc()
     f = None
     try:
-        f = spla.spsolve(Nmat, -b)
+        with warnings.catch_warnings():
+            # a singular N (a floppy tentative network) is answered by least squares below
+            warnings.simplefilter("error", spla.MatrixRankWarning)
+            f = spla.spsolve(Nmat, -b)
         if not np.all(np.isfinite(f)) or np.linalg.norm(Nmat @ f + b) > 1e-8 * (np.linalg.norm(b) + 1e-300):
             f = None
-    except RuntimeError:
+    except (RuntimeError, spla.MatrixRankWarning):
         f = None
     if f is None:
         f = spla.lsqr(Nmat, -b, atol=1e-14, btol=1e-14, iter_lim=100 * nc)[0]
