@@ -78,7 +78,8 @@ def _make(box: Box, positions: NDArray[np.float64], i: NDArray, j: NDArray) -> P
 
 
 def _checked_positions(positions: ArrayLike, box: Box) -> NDArray[np.float64]:
-    x = np.asarray(positions, dtype=np.float64)
+    # contiguous: numba compiles the cell kernels once more for every other layout
+    x = np.ascontiguousarray(positions, dtype=np.float64)
     if x.ndim != 2 or x.shape[1] != box.d:
         raise ValueError(f"positions must have shape (N, {box.d}), got {x.shape}")
     return x

@@ -91,9 +91,10 @@ def prune_rattlers(
     z_wall = (np.zeros(n_bodies, dtype=np.int64) if wall_contacts is None
               else np.bincount(np.asarray(wall_contacts, dtype=np.int64), minlength=n_bodies))
     if compiled:
+        from .._numba import read_only
         from ._graph_kernels import peel
 
-        rattler = peel(np.ascontiguousarray(pairs, dtype=np.int64), n_bodies, dofs_per_body + 1, z_wall)
+        rattler = peel(read_only(np.ascontiguousarray(pairs, dtype=np.int64)), n_bodies, dofs_per_body + 1, z_wall)
         return rattler if active is None else rattler & active
     rattler = np.zeros(n_bodies, dtype=bool)
     alive = np.ones(len(pairs), dtype=bool)

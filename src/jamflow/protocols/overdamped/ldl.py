@@ -23,7 +23,7 @@ import qdldl
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from ..._numba import njit
+from ..._numba import njit, read_only
 from ...network._graph_kernels import incidence
 
 __all__ = ["CARRY_FILL", "CarriedOrder", "SingularNetworkError", "TriangularFactor", "locate"]
@@ -320,6 +320,7 @@ class TriangularFactor:
             A pivot is exactly zero.
         """
         m = len(pairs)
+        pairs = read_only(pairs)
         ptr, incident = incidence(pairs, n)
         if order is None:
             Ap, Ai, Ax = _upper(pairs, unit, ptr, incident, np.arange(m))

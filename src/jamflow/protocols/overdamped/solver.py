@@ -22,7 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from ..._numba import njit
+from ..._numba import njit, read_only
 from ...network import pair_rows
 from ...network._graph_kernels import incidence
 from .ldl import (
@@ -422,7 +422,7 @@ def _border_blocks(W, Q, G, Y, pos_c, ends, units, cond_limit):  # pragma: no co
         for a in range(nq):
             for b in range(nq):
                 WQQ[a, b] = W[Q[a], b]
-        WQQ_inv = np.linalg.inv(WQQ)
+        WQQ_inv = np.ascontiguousarray(np.linalg.inv(WQQ))  # C like every Border array: one compiled _pcg
         if npp:
             # M^-1 of the couplings with the removed pairs' rows cut, then M_CC^-1 by capacitance
             Y = Y - W @ np.ascontiguousarray(G[Q])
@@ -440,7 +440,7 @@ def _border_blocks(W, Q, G, Y, pos_c, ends, units, cond_limit):  # pragma: no co
             T[e, f] = _pair_coupling(ends[e, 0], ends[e, 1], units[e], ends[f, 0], ends[f, 1], units[f]) - T[e, f]
         if T[e, e] <= _pair_coupling(ends[e, 0], ends[e, 1], units[e], ends[e, 0], ends[e, 1], units[e]) / cond_limit:
             return False, WQQ_inv, NCP, B, T
-    return True, WQQ_inv, NCP, B, np.linalg.inv(T)
+    return True, WQQ_inv, NCP, B, np.ascontiguousarray(np.linalg.inv(T))
 
 
 @njit(cache=True)
@@ -661,6 +661,7 @@ def solve_contact_system(
     ------
     SingularNetworkError
     """
+    pairs = read_only(pairs)
     key, codes = cache.network(pairs, n) if cache is not None else (None, pairs[:, 0] * n + pairs[:, 1])
     sols = None
     if cache is not None and not check_pivots and cache.lu is not None:
