@@ -206,10 +206,11 @@ def test_shape_barostat_reaches_the_target_pressure_in_force_balance():
 
 
 def _chain_engine(clusters, chain_length, seed, phi=None):
-    """A 3D linked engine of chains with frozen angles (dilute start) and its cluster-order link arrays."""
+    """A 3D linked engine of chains with frozen angles (dilute start) and its cluster-order link arrays
+    (every cluster on the Gram path: chains of four would otherwise be hinged bodies)."""
     p = linked_packing(3, clusters, "chain", np.random.default_rng(seed), chain_length=chain_length, phi=phi)[0]
     model = LinkedSpheresModel(p.box, p.diameter, p.links, p.position)
-    engine = LinkedFire(model, model.dofs(p.position), DEFAULT_FIRE)
+    engine = LinkedFire(model, model.dofs(p.position), DEFAULT_FIRE, hinged=False)
     return model, engine
 
 
