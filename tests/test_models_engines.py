@@ -295,21 +295,26 @@ def test_hinge_projection_is_the_gram_projection():
 
 
 def test_hinge_moves_hold_the_links_and_follow_the_tangent_step():
-    """A move of the generalised coordinates by ``h P v`` is ``x + h P v`` to O(h^2) (the Gram path's step
-    before re-affixing), and 3000 random moves keep every link to round-off (no drift)."""
+    """A move of the generalised coordinates by ``h P v`` is ``x + h P v`` to O(h^2), with no tangential
+    term at that order (O(h^3), as the closest-point re-affixing of the Gram path), and 3000 random
+    moves keep every link to round-off (no drift)."""
     model, e = _chain_engine(8, 4, 5, hinged=True)
     h = e.hinge
     rng = np.random.default_rng(1)
     v = rng.normal(size=e.x.shape)
     pv = v.copy()
     _hinge_kernels.hinge_project(h["spheres"], h["geo"], pv)
-    misses = []
+    misses, tangential = [], []
     for size in (1e-2, 1e-3):
         x, state, geo = e.x.copy(), h["state"].copy(), h["geo"].copy()
         _hinge_kernels.hinge_advance(h["spheres"], geo, state, v, size)
         _hinge_kernels.hinge_place(x, h["spheres"], h["shift"], h["body"], state, geo)
-        misses.append(np.abs(x - e.x - size * pv).max())
+        miss = x - e.x - size * pv
+        misses.append(np.abs(miss).max())
+        _hinge_kernels.hinge_project(h["spheres"], h["geo"], miss)
+        tangential.append(np.abs(miss).max())
     assert misses[1] <= 1e-4 * np.abs(pv).max() and misses[1] <= 0.02 * misses[0]  # O(h^2): 0.01 per decade
+    assert tangential[1] <= 0.002 * tangential[0] and tangential[1] <= 0.02 * misses[1]  # O(h^3): 0.001 per decade
     x, state, geo = e.x.copy(), h["state"].copy(), h["geo"].copy()
     for _ in range(3000):
         _hinge_kernels.hinge_advance(h["spheres"], geo, state, rng.normal(size=x.shape), 0.05)

@@ -36,7 +36,7 @@ point of the manifold a step reaches), as the chord sweeps of :func:`reaffix` do
 
 Geometry at the current point, ``geo`` rows of 32: centroid (3), offsets ``r_s`` (12), the
 inverse inertia (6: xx, yy, zz, xy, xz, yz), the rigid part of ``T``: velocity ``V_T`` (3)
-and angular velocity ``omega_T`` (3), the tip's ``T_t`` (3), ``1 / |T~|^2`` (1), unused (1).
+and angular velocity ``omega_T`` (3), the tip's ``T_t`` (3), ``1 / |T~|^2`` (1) and the unit axis ``e`` (3).
 All kernels are single-threaded and cached.
 """
 
@@ -47,7 +47,7 @@ import numpy as np
 from .._numba import njit
 
 #: Widths of the rows of ``state``, ``body`` and ``geo`` (module doc).
-STATE_WIDTH, BODY_WIDTH, GEO_WIDTH = 9, 18, 32
+STATE_WIDTH, BODY_WIDTH, GEO_WIDTH = 9, 18, 34
 
 
 @njit(cache=True, inline="always")
@@ -129,6 +129,7 @@ def hinge_place(x, spheres, shift, body, state, geo):
         px, py, pz = y[3, 0] - y[1, 0], y[3, 1] - y[1, 1], y[3, 2] - y[1, 2]
         tx, ty, tz = ey * pz - ez * py, ez * px - ex * pz, ex * py - ey * px
         G[27], G[28], G[29] = tx, ty, tz
+        G[31], G[32], G[33] = ex, ey, ez
         vx, vy, vz = 0.25 * tx, 0.25 * ty, 0.25 * tz
         rx, ry, rz = G[12], G[13], G[14]
         wx, wy, wz = _inverse_apply(geo, h, ry * tz - rz * ty, rz * tx - rx * tz, rx * ty - ry * tx)
@@ -148,13 +149,13 @@ def hinge_place(x, spheres, shift, body, state, geo):
 
 
 @njit(cache=True, inline="always")
-def _decompose(geo, h, spheres, g):
-    """``P g`` of hinged cluster ``h`` as ``(V, omega, theta)``: ``P g = V + omega x r_s + theta T~_s``."""
+def _decompose(geo, h, u):
+    """``P u`` of hinged cluster ``h`` (``u`` (4, 3): its spheres' rows) as ``(V, omega, theta)``:
+    ``P u = V + omega x r_s + theta T~_s``."""
     G = geo[h]
     fx = fy = fz = tx = ty = tz = dot = 0.0
     for s in range(4):
-        i = spheres[h, s]
-        gx, gy, gz = g[i, 0], g[i, 1], g[i, 2]
+        gx, gy, gz = u[s, 0], u[s, 1], u[s, 2]
         rx, ry, rz = G[3 + 3 * s], G[4 + 3 * s], G[5 + 3 * s]
         fx += gx
         fy += gy
@@ -174,19 +175,31 @@ def _decompose(geo, h, spheres, g):
     return 0.25 * fx, 0.25 * fy, 0.25 * fz, wx, wy, wz, dot * G[30]
 
 
+@njit(cache=True, inline="always")
+def _gather(spheres, h, g, u):
+    """Rows of hinged cluster ``h``'s spheres of ``g`` (N, 3) into ``u`` (4, 3)."""
+    for s in range(4):
+        i = spheres[h, s]
+        u[s, 0], u[s, 1], u[s, 2] = g[i, 0], g[i, 1], g[i, 2]
+
+
+@njit(cache=True, inline="always")
+def _rates(geo, h, u):
+    """``(V, omega, theta)`` of the move ``V + omega x r_s + theta T_s`` (``T`` on the tip alone) that is ``P u``."""
+    vx, vy, vz, wx, wy, wz, theta = _decompose(geo, h, u)
+    G = geo[h]
+    return (vx - theta * G[21], vy - theta * G[22], vz - theta * G[23],
+            wx - theta * G[24], wy - theta * G[25], wz - theta * G[26], theta)
+
+
 @njit(cache=True)
 def hinge_project(spheres, geo, g):
     """``g`` (N, 3) projected in place onto the tangent space of every hinged cluster (module doc)."""
+    u = np.empty((4, 3))
     for h in range(spheres.shape[0]):
-        vx, vy, vz, wx, wy, wz, theta = _decompose(geo, h, spheres, g)
+        _gather(spheres, h, g, u)
+        vx, vy, vz, wx, wy, wz, theta = _rates(geo, h, u)
         G = geo[h]
-        # rigid part of the torsion mode folded in: V - theta V_T, omega - theta omega_T, and theta T on the tip
-        vx -= theta * G[21]
-        vy -= theta * G[22]
-        vz -= theta * G[23]
-        wx -= theta * G[24]
-        wy -= theta * G[25]
-        wz -= theta * G[26]
         for s in range(4):
             i = spheres[h, s]
             rx, ry, rz = G[3 + 3 * s], G[4 + 3 * s], G[5 + 3 * s]
@@ -203,19 +216,32 @@ def hinge_project(spheres, geo, g):
 def hinge_advance(spheres, geo, state, v, step):
     """Every hinged cluster's ``state`` moved by ``step * P v`` (``v`` (N, 3) at the point of ``geo``; module doc).
 
-    The spheres are not placed: :func:`hinge_place` does that (after the caller's
-    move of the other spheres).
+    The rates are corrected at second order, ``P v - (step / 2) P a`` with ``a`` the
+    acceleration of the move along its rotations (``omega x (omega x r_s)``, and on the
+    tip ``theta^2 e x T + 2 theta omega x T``): the move is then ``x + step P v`` plus a
+    normal term at second order, as the closest-point re-affixing of the Gram path
+    (which has no tangential term at that order). The spheres are not placed:
+    :func:`hinge_place` does that (after the caller's move of the other spheres).
     """
+    u = np.empty((4, 3))
     for h in range(spheres.shape[0]):
-        vx, vy, vz, wx, wy, wz, theta = _decompose(geo, h, spheres, v)
+        _gather(spheres, h, v, u)
+        vx, vy, vz, wx, wy, wz, theta = _rates(geo, h, u)
         G = geo[h]
         S = state[h]
-        vx -= theta * G[21]
-        vy -= theta * G[22]
-        vz -= theta * G[23]
-        wx -= theta * G[24]
-        wy -= theta * G[25]
-        wz -= theta * G[26]
+        for s in range(4):
+            rx, ry, rz = G[3 + 3 * s], G[4 + 3 * s], G[5 + 3 * s]
+            cx, cy, cz = wy * rz - wz * ry, wz * rx - wx * rz, wx * ry - wy * rx
+            u[s, 0], u[s, 1], u[s, 2] = wy * cz - wz * cy, wz * cx - wx * cz, wx * cy - wy * cx
+        tx, ty, tz, ex, ey, ez = G[27], G[28], G[29], G[31], G[32], G[33]
+        u[3, 0] += theta * (theta * (ey * tz - ez * ty) + 2.0 * (wy * tz - wz * ty))
+        u[3, 1] += theta * (theta * (ez * tx - ex * tz) + 2.0 * (wz * tx - wx * tz))
+        u[3, 2] += theta * (theta * (ex * ty - ey * tx) + 2.0 * (wx * ty - wy * tx))
+        ax, ay, az, bx, by, bz, phi = _rates(geo, h, u)
+        half = 0.5 * step
+        vx, vy, vz = vx - half * ax, vy - half * ay, vz - half * az
+        wx, wy, wz = wx - half * bx, wy - half * by, wz - half * bz
+        theta -= half * phi
         # torsion: (cos + i sin) (1 + i theta step) / |.|
         a = theta * step
         cs = S[7] - a * S[8]
