@@ -169,13 +169,13 @@ class ClusterGram:
             k = self.order[self.cptr[c]:self.cptr[c + 1]]
             ends = np.stack([self.i[k], self.j[k]], axis=1)
             nodes, degree = np.unique(ends, return_counts=True)
-            if len(nodes) != 4 or len({tuple(sorted(e)) for e in ends.tolist()}) != 5:
+            link_of = {frozenset(e): int(q) for e, q in zip(ends.tolist(), k)}
+            if len(nodes) != 4 or len(link_of) != 5:
                 continue
             tips, axis = nodes[degree == 2], nodes[degree == 3]
             b, cc = int(axis[0]), int(axis[1])
             row = [int(tips[0]), b, cc, int(tips[1])]
-            own = [int(k[np.flatnonzero(((ends[:, 0] == b) & (ends[:, 1] == s)) | ((ends[:, 0] == s) & (ends[:, 1] == b)))[0]])
-                   for s in (row[0], cc, row[3])]
+            own = [link_of[frozenset((b, s))] for s in (row[0], cc, row[3])]
             hinge[c] = True
             rows.append(row)
             anchor.append(own)
