@@ -20,7 +20,7 @@ against the same start with the links dropped (bidisperse spheres), the three ru
 start alternating, ``--seeds`` starts per size; writes ``chains_whole.nc`` and ``.png``.
 
 Usage: ``python benchmarks/chains.py [--sizes 2:150 3:256 ...] [--hessian-sizes 30 60 120]
-[--pressure 1e-4] [--pressure-rtol 1e-3] [--whole [--seeds 3]]``; the defaults are the issue's sizes (2D rigid
+[--pressure 1e-4] [--pressure-rtol 1e-3] [--whole [--seeds 3] [--boxes fixed shear]]``; the defaults are the issue's sizes (2D rigid
 trimers N = 150 and 600 spheres, 3D chains N = 256 and 1024). Each linked run is timed
 without a profiler and repeated under cProfile for the shares (cumulative times of
 ``project``, ``reproject``, ``evaluate`` (energy, link tensions and the factorisation at
@@ -199,8 +199,9 @@ def _child_cpu(cmd: list[str]) -> float:
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
-def whole_runs(sizes: list[tuple[int, int]], seeds: int, pressure: float, rtol: float) -> list[dict]:
-    """``jamflow soft-jam`` of linked starts (fixed box, shear-stabilised) and of the same starts without links."""
+def whole_runs(sizes: list[tuple[int, int]], seeds: int, pressure: float, rtol: float,
+               boxes: tuple[str, ...] = ("fixed", "shear")) -> list[dict]:
+    """``jamflow soft-jam`` of linked starts (``boxes``: fixed box, shear-stabilised) and of the same starts without links."""
     jam = [JAMFLOW, "soft-jam", "--quiet", "--pressure", f"{pressure:g}", "--force-tol",
            "1e-12", "--pressure-rtol", f"{rtol:g}", "--delta-phi", "1e-2"]
     rows = []
@@ -211,7 +212,8 @@ def whole_runs(sizes: list[tuple[int, int]], seeds: int, pressure: float, rtol: 
             start = _whole_start(tmp, d, n if d == 2 else 128, 1)
             unlinked = tmp / "w_spheres.nc"
             write_packing(read_packing(start).evolve(links=None), unlinked)
-            for src, extra in ((start, []), (start, ["--shear-stabilize"]), (unlinked, [])):
+            for src, extra in [(start, [])] * ("fixed" in boxes) + [(start, ["--shear-stabilize"])] * ("shear" in boxes) \
+                    + [(unlinked, [])]:
                 subprocess.run(jam + [str(src), str(tmp / "w.nc"), "--in-place", *extra], check=True,
                                stdout=subprocess.DEVNULL)
         for d, n in sizes:
@@ -220,12 +222,12 @@ def whole_runs(sizes: list[tuple[int, int]], seeds: int, pressure: float, rtol: 
                 spheres = tmp / "spheres.nc"
                 write_packing(read_packing(linked).evolve(links=None), spheres)
                 cpu, attrs = {}, {}
-                for case, src, extra in (("spheres", spheres, []), ("fixed", linked, []),
-                                         ("shear", linked, ["--shear-stabilize"])):
+                cases = [("spheres", spheres, []), ("fixed", linked, []), ("shear", linked, ["--shear-stabilize"])]
+                for case, src, extra in [c for c in cases if c[0] in ("spheres", *boxes)]:
                     out = tmp / f"{case}_out.nc"
                     cpu[case] = _child_cpu(jam + [str(src), str(out), "--in-place", *extra])
                     attrs[case] = read_dataset(out).attrs
-                for shear, case in ((0, "fixed"), (1, "shear")):
+                for shear, case in [(s, c) for s, c in ((0, "fixed"), (1, "shear")) if c in boxes]:
                     a, b = attrs[case], attrs["spheres"]
                     rows.append({"d": d, "n": n, "seed": seed, "shear": shear, "cpu_s": cpu[case],
                                  "sphere_cpu_s": cpu["spheres"], "cpu_ratio": cpu[case] / cpu["spheres"],
@@ -243,7 +245,7 @@ def whole_runs(sizes: list[tuple[int, int]], seeds: int, pressure: float, rtol: 
                           f"{r['sphere_phi']:.5f}, N_c {r['n_contacts']} / iso {r['isostatic_count']}, "
                           f"link error {r['max_link_error']:.1e}", flush=True)
     for d, n in sizes:
-        for shear in (0, 1):
+        for shear in [s for s, c in ((0, "fixed"), (1, "shear")) if c in boxes]:
             sel = [r for r in rows if r["d"] == d and r["n"] == n and r["shear"] == shear]
             ratio = sum(r["cpu_s"] for r in sel) / sum(r["sphere_cpu_s"] for r in sel)
             per_step = [1e6 * r["cpu_s"] / r["steps"] for r in sel]
@@ -306,10 +308,12 @@ def main() -> None:
     ap.add_argument("--whole", action="store_true",
                     help="only the whole soft-jam command against spheres (bidisperse starts, CPU of each process)")
     ap.add_argument("--seeds", type=int, default=2, help="starts per size of --whole")
+    ap.add_argument("--boxes", nargs="+", choices=("fixed", "shear"), default=["fixed", "shear"],
+                    help="linked cells of --whole: fixed box, shear-stabilised")
     args = ap.parse_args()
     sizes = [tuple(int(v) for v in s.split(":")) for s in args.sizes]
     if args.whole:
-        whole_output(whole_runs(sizes, args.seeds, args.pressure, args.pressure_rtol), args)
+        whole_output(whole_runs(sizes, args.seeds, args.pressure, args.pressure_rtol, tuple(args.boxes)), args)
         return
     jam = [] if args.skip_jamming else jamming_runs(sizes, args.pressure, args.pressure_rtol, args.seed)
     proto_sizes = [tuple(int(v) for v in s.split(":")) for s in args.protocol_sizes]

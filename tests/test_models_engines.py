@@ -11,9 +11,9 @@ from jamflow.box import Box
 from jamflow.chains.builders import linked_packing
 from jamflow.chains.jamming import linked_volume
 from jamflow.minimize.fire import DEFAULT_FIRE, _fire, _ModelFire
-from jamflow.models import _link_kernels
+from jamflow.models import _hinge_kernels, _link_kernels
 from jamflow.models.box import EnthalpyModel
-from jamflow.models.links import LinkedFire, LinkedSpheresModel
+from jamflow.models.links import LinkedFire, LinkedSpheresModel, _rigid_clusters
 from jamflow.models.shapes import _fire_kernels
 from jamflow.models.shapes.fast import FAMILY_CODES, ShapeFire
 from jamflow.models.shapes.model import ShapeModel
@@ -205,11 +205,12 @@ def test_shape_barostat_reaches_the_target_pressure_in_force_balance():
     assert final.max_force(ev.gradient) <= 1e-12
 
 
-def _chain_engine(clusters, chain_length, seed, phi=None):
-    """A 3D linked engine of chains with frozen angles (dilute start) and its cluster-order link arrays."""
+def _chain_engine(clusters, chain_length, seed, phi=None, hinged=False):
+    """A 3D linked engine of chains with frozen angles (dilute start) and its cluster-order link arrays
+    (every cluster on the Gram path unless ``hinged``: then chains of four are hinged bodies)."""
     p = linked_packing(3, clusters, "chain", np.random.default_rng(seed), chain_length=chain_length, phi=phi)[0]
     model = LinkedSpheresModel(p.box, p.diameter, p.links, p.position)
-    engine = LinkedFire(model, model.dofs(p.position), DEFAULT_FIRE)
+    engine = LinkedFire(model, model.dofs(p.position), DEFAULT_FIRE, hinged=hinged)
     return model, engine
 
 
@@ -258,3 +259,90 @@ def test_engine_reaffixing_lands_on_the_manifold_next_to_newton(size):
     np.testing.assert_allclose(e.r, r, rtol=1e-15, atol=0)
     _link_kernels.gram_factor(e.w, g["sign"], g["first"], g["cptr"], g["fptr"], chol, LINK_RANK_RTOL)
     assert np.array_equal(e.chol, chol)
+
+
+def test_hinge_layout_finds_chains_of_four_with_frozen_angles():
+    """Chains of four with frozen angles are hinged clusters ``(a, b, c, t)``: ``b - c`` the shared edge
+    (linked to all three others), ``a`` and ``t`` the unlinked tips; free angles or longer chains are not."""
+    model, e = _chain_engine(8, 4, 3, hinged=True)
+    s = e.hinge["spheres"]
+    assert s.shape == (8, 4) and len(e.gram["ci"]) == 0
+    links = {tuple(sorted(k)) for k in zip(model.links.i.tolist(), model.links.j.tolist())}
+    for a, b, c, t in s.tolist():
+        assert {(min(p, q), max(p, q)) for p, q in ((a, b), (a, c), (b, c), (b, t), (c, t))} <= links
+        assert (min(a, t), max(a, t)) not in links
+    for kind in ({"free_angles": True}, {"chain_length": 5}):
+        p = linked_packing(3, 4, "chain", np.random.default_rng(3), **{"chain_length": 4, **kind})[0]
+        assert not len(LinkedSpheresModel(p.box, p.diameter, p.links, p.position).gram.hinge_layout["spheres"])
+
+
+def test_hinge_projection_is_the_gram_projection():
+    """The closed-form projection of hinged clusters (rigid motions and the torsion) is the Gram
+    path's projection of the same links to round-off, for a force-like and a random vector."""
+    model, e = _chain_engine(8, 4, 3, hinged=True)
+    _, g = _rigid_clusters(model, e.x)
+    w, r, chol = np.empty((len(g["ci"]), 3)), np.empty(len(g["ci"])), np.zeros_like(g["sign"])
+    _link_kernels.link_geometry(e.x, g["ci"], g["cj"], g["offset"], g["length"], w, r)
+    _link_kernels.gram_factor(w, g["sign"], g["first"], g["cptr"], g["fptr"], chol, LINK_RANK_RTOL)
+    rng = np.random.default_rng(0)
+    for vector in (rng.normal(size=e.x.shape), np.cross(e.x, rng.normal(size=3)) + rng.normal(size=3)):
+        gram, hinge = vector.copy(), vector.copy()
+        _link_kernels.gram_project(w, g["ci"], g["cj"], g["first"], g["cptr"], g["fptr"], chol, gram,
+                                   np.empty(len(g["ci"])))
+        _hinge_kernels.hinge_project(e.hinge["spheres"], e.hinge["geo"], hinge)
+        assert np.abs(gram - hinge).max() <= 1e-14 * np.abs(vector).max()
+        assert np.abs(gram).max() >= 0.1 * np.abs(vector).max()
+
+
+def test_hinge_moves_hold_the_links_and_follow_the_tangent_step():
+    """A move of the generalised coordinates by ``h P v`` is ``x + h P v`` to O(h^2), with no tangential
+    term at that order (O(h^3), as the closest-point re-affixing of the Gram path), and 3000 random
+    moves keep every link to round-off (no drift)."""
+    model, e = _chain_engine(8, 4, 5, hinged=True)
+    h = e.hinge
+    rng = np.random.default_rng(1)
+    v = rng.normal(size=e.x.shape)
+    pv = v.copy()
+    _hinge_kernels.hinge_project(h["spheres"], h["geo"], pv)
+    misses, tangential = [], []
+    for size in (1e-2, 1e-3):
+        x, state, geo = e.x.copy(), h["state"].copy(), h["geo"].copy()
+        _hinge_kernels.hinge_advance(h["spheres"], geo, state, v, size)
+        _hinge_kernels.hinge_place(x, h["spheres"], h["shift"], h["body"], state, geo)
+        miss = x - e.x - size * pv
+        misses.append(np.abs(miss).max())
+        _hinge_kernels.hinge_project(h["spheres"], h["geo"], miss)
+        tangential.append(np.abs(miss).max())
+    assert misses[1] <= 1e-4 * np.abs(pv).max() and misses[1] <= 0.02 * misses[0]  # O(h^2): 0.01 per decade
+    assert tangential[1] <= 0.002 * tangential[0] and tangential[1] <= 0.02 * misses[1]  # O(h^3): 0.001 per decade
+    x, state, geo = e.x.copy(), h["state"].copy(), h["geo"].copy()
+    for _ in range(3000):
+        _hinge_kernels.hinge_advance(h["spheres"], geo, state, rng.normal(size=x.shape), 0.05)
+        _hinge_kernels.hinge_place(x, h["spheres"], h["shift"], h["body"], state, geo)
+    assert np.abs(x - e.x).max() > 1.0
+    assert np.abs(model.link_errors(x.ravel())).max() <= 1e-14
+
+
+@pytest.mark.parametrize("mixed", [False, True], ids=["hinged", "mixed"])
+def test_hinged_engine_reaches_the_gram_engine_minimum(mixed):
+    """32 chains of four squeezed to phi = 0.66 (``mixed``: every second chain without its first angle
+    link, a flexible chain on the Gram path beside the hinged ones): from a start near the Gram engine's
+    minimum (moved by 1e-3 per coordinate) the hinged engine reaches the same minimum (energy to 1e-12,
+    centres to 1e-7), converged by the model's own projection, links to LINK_LENGTH_RTOL."""
+    p = linked_packing(3, 32, "chain", np.random.default_rng(2), chain_length=4)[0]
+    links = p.links
+    if mixed:
+        keep = ~((links.i % 8 == 0) & (links.j == links.i + 2))
+        links = Links(links.i[keep], links.j[keep], links.length[keep])
+    f = (linked_volume(3, p.diameter, links) / p.box.volume / 0.66) ** (1 / 3)
+    model = LinkedSpheresModel(p.box.scaled(f), p.diameter, links, p.position * f)
+    hinges = len(model.gram.hinge_layout["spheres"])
+    assert hinges == (16 if mixed else 32)
+    ref = _fire(LinkedFire(model, model.dofs(p.position * f), DEFAULT_FIRE, hinged=False), 1e-12, 200_000)
+    q = model.reproject(ref.position.ravel() + 1e-3 * np.random.default_rng(4).normal(size=ref.position.size))
+    runs = [_fire(LinkedFire(model, q, DEFAULT_FIRE, hinged=h), 1e-12, 200_000) for h in (True, False)]
+    (a, b) = runs
+    assert ref.converged and a.converged and b.converged and b.energy > 0.0
+    assert a.max_force <= 1e-12 and np.abs(model.link_errors(a.position.ravel())).max() <= LINK_LENGTH_RTOL
+    assert abs(a.energy - b.energy) <= 1e-12 * b.energy
+    np.testing.assert_allclose(a.position, b.position, rtol=0, atol=1e-7)

@@ -41,6 +41,7 @@ from ..minimize._fire_kernels import (
     _mix_and_move,
 )
 from ..neighbors._verlet_kernels import _inline_list, _list_buffers, _needs_rebuild
+from ._hinge_kernels import hinge_advance, hinge_place, hinge_project
 from .spheres._kernels import pair_forces
 
 
@@ -592,6 +593,7 @@ def linked_fire(
     x, v, fire_state, fire_params,
     offset, pi, pj, sigma, eps, w_exp, x_build, reach, skin, lengths, diameter, adj_ptr, adj,
     li, lj, link_offset, length, sign, first, cptr, fptr, chol, w, r, rptr, members, shift, ref,
+    hinge_spheres, hinge_shift, hinge_body, hinge_state, hinge_geo,
     length_rtol, max_sweeps, rank_rtol, force_tol, max_steps, force,
 ):
     """FIRE 2.0 of linked spheres at fixed box in one compiled loop (the steps of :class:`~jamflow.minimize.fire._ModelFire`).
@@ -604,7 +606,11 @@ def linked_fire(
     (:func:`gram_project_pair`). Rigid 2D
     clusters (``rptr``, ``members``, ``shift``, ``ref`` of :func:`rigid_place_2d`; their
     links are not among ``li``, ``lj``) are projected onto their rigid motions
-    (:func:`rigid_project_2d`) and placed rigidly instead. ``x`` (N, d)
+    (:func:`rigid_project_2d`) and placed rigidly instead. Hinged 3D clusters
+    (``hinge_*``: the arrays of :mod:`._hinge_kernels`, their links not among ``li``, ``lj``,
+    ``hinge_geo`` set at ``x`` on entry) are projected in closed form
+    (:func:`~._hinge_kernels.hinge_project`) and moved in their generalised coordinates
+    (:func:`~._hinge_kernels.hinge_advance`, :func:`~._hinge_kernels.hinge_place`). ``x`` (N, d)
     must lie on the constraint manifold with ``w``, ``r`` its link geometry (unit
     vectors, lengths) on entry;
     the velocity is projected at ``x`` on entry (after a return for a rebuild it was
@@ -634,6 +640,7 @@ def linked_fire(
     initial_delay = fire_params[7] > 0.0
     links = li.shape[0] > 0
     rigid = rptr.shape[0] > 1
+    hinged = hinge_spheres.shape[0] > 0
     virial = np.zeros((d, d))
     shortest = np.inf if lengths.shape[0] else 0.0
     for a in range(lengths.shape[0]):
@@ -668,6 +675,9 @@ def linked_fire(
         if rigid:
             rigid_project_2d(x, rptr, members, shift, force)
             rigid_project_2d(x, rptr, members, shift, v)
+        if hinged:
+            hinge_project(hinge_spheres, hinge_geo, force)
+            hinge_project(hinge_spheres, hinge_geo, v)
         fmax2 = _max_force_sq(force)
         if fmax2 <= force_tol * force_tol:
             status = CONVERGED
@@ -680,7 +690,11 @@ def linked_fire(
             initial_delay,
         )
         if not power > 0.0:
+            if hinged:
+                hinge_advance(hinge_spheres, hinge_geo, hinge_state, v, -0.5 * dt)
             _fire_step_back(x, v, dt)
+            if hinged:
+                hinge_place(x, hinge_spheres, hinge_shift, hinge_body, hinge_state, hinge_geo)
             if rigid:
                 rigid_place_2d(x, rptr, members, shift, ref)
             if links:
@@ -696,6 +710,9 @@ def linked_fire(
         keep, mix = _fire_mixing(alpha, vnorm, fnorm)
         _mix_and_move(v, force, keep, mix, x, dt)
         step += 1
+        if hinged:
+            hinge_advance(hinge_spheres, hinge_geo, hinge_state, v, dt)
+            hinge_place(x, hinge_spheres, hinge_shift, hinge_body, hinge_state, hinge_geo)
         if rigid:
             rigid_place_2d(x, rptr, members, shift, ref)
         if links:

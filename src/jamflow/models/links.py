@@ -52,7 +52,7 @@ from ..neighbors import _verlet_kernels
 from ..neighbors.verlet import NeighborList
 from ..state.bodies import Links
 from ..tolerances import LINK_LENGTH_RTOL, LINK_RANK_RTOL
-from . import _link_kernels
+from . import _hinge_kernels, _link_kernels
 from .spheres import _kernels
 from .spheres.model import SphereBodies
 from .spheres.potential import HARMONIC, PowerLawPotential
@@ -115,15 +115,27 @@ class ClusterGram:
         other.chol = np.zeros_like(self.chol)
         return other
 
+    def _other_blocks(self, body: NDArray[np.bool_]) -> dict:
+        """Cluster-order indices of the links and factor entries of the clusters not marked in ``body``, and their blocks.
+
+        Keys ``links``, ``factor``, ``cptr``, ``fptr`` and ``cluster`` (their index among all blocks).
+        """
+        m = np.diff(self.cptr)
+        keep = np.flatnonzero(~body)
+        return {"links": np.concatenate([np.arange(self.cptr[c], self.cptr[c + 1]) for c in keep]
+                                        or [np.empty(0, np.int64)]).astype(np.int64),
+                "factor": np.concatenate([np.arange(self.fptr[c], self.fptr[c + 1]) for c in keep]
+                                         or [np.empty(0, np.int64)]).astype(np.int64),
+                "cptr": np.concatenate([[0], np.cumsum(m[keep])]).astype(np.int64),
+                "fptr": np.concatenate([[0], np.cumsum(m[keep] ** 2)]).astype(np.int64), "cluster": keep}
+
     @functools.cached_property
     def rigid_layout(self) -> dict:
         """Which clusters are rigid in 2D, their spheres, and the Gram blocks of the others (:class:`LinkedFire`).
 
         A 2D cluster of ``n`` spheres with ``2 n - 3`` independent links has only rigid
         motions (two translations, one rotation). Keys: ``rptr``, ``members`` (the rigid
-        clusters' spheres, cluster by cluster), ``links`` and ``factor`` (cluster-order
-        indices of the other clusters' links and factor entries), ``cptr``, ``fptr``
-        (their blocks) and ``cluster`` (their index among all blocks).
+        clusters' spheres, cluster by cluster) and those of :meth:`_other_blocks`.
         """
         m = np.diff(self.cptr)
         if not len(m):
@@ -136,14 +148,40 @@ class ClusterGram:
         starts = np.searchsorted(self.labels[order], self.clusters)
         members = np.concatenate([order[a:a + n] for a, n in zip(starts[rigid], spheres[rigid])]
                                  or [np.empty(0, np.int64)]).astype(np.int64)
-        keep = np.flatnonzero(~rigid)
         return {"rptr": np.concatenate([[0], np.cumsum(spheres[rigid])]).astype(np.int64), "members": members,
-                "links": np.concatenate([np.arange(self.cptr[c], self.cptr[c + 1]) for c in keep]
-                                        or [np.empty(0, np.int64)]).astype(np.int64),
-                "factor": np.concatenate([np.arange(self.fptr[c], self.fptr[c + 1]) for c in keep]
-                                         or [np.empty(0, np.int64)]).astype(np.int64),
-                "cptr": np.concatenate([[0], np.cumsum(m[keep])]).astype(np.int64),
-                "fptr": np.concatenate([[0], np.cumsum(m[keep] ** 2)]).astype(np.int64), "cluster": keep}
+                **self._other_blocks(rigid)}
+
+    @functools.cached_property
+    def hinge_layout(self) -> dict:
+        """The hinged 3D clusters and the Gram blocks of the others (:class:`LinkedFire`, :mod:`._hinge_kernels`).
+
+        A hinged cluster is four spheres with five distinct links, every pair but one
+        (two rigid triangles sharing an edge; a chain of four with frozen angles). Keys:
+        ``spheres`` (H, 4) ``(a, b, c, t)`` with ``b -> c`` the shared edge and ``t`` the
+        tip turned by the torsion, ``anchor`` (H, 3) the links (own order) from ``b`` to
+        ``a``, ``c``, ``t`` with their signs ``+1`` when ``b`` is the link's first end,
+        and those of :meth:`_other_blocks`.
+        """
+        m = np.diff(self.cptr)
+        hinge = np.zeros(len(m), bool)
+        rows, anchor, signs = [], [], []
+        for c in np.flatnonzero(m == 5) if self.d == 3 else []:
+            k = self.order[self.cptr[c]:self.cptr[c + 1]]
+            ends = np.stack([self.i[k], self.j[k]], axis=1)
+            nodes, degree = np.unique(ends, return_counts=True)
+            link_of = {frozenset(e): int(q) for e, q in zip(ends.tolist(), k)}
+            if len(nodes) != 4 or len(link_of) != 5:
+                continue
+            tips, axis = nodes[degree == 2], nodes[degree == 3]
+            b, cc = int(axis[0]), int(axis[1])
+            row = [int(tips[0]), b, cc, int(tips[1])]
+            own = [link_of[frozenset((b, s))] for s in (row[0], cc, row[3])]
+            hinge[c] = True
+            rows.append(row)
+            anchor.append(own)
+            signs.append([1.0 if self.i[q] == b else -1.0 for q in own])
+        return {"spheres": np.array(rows, np.int64).reshape(-1, 4), "anchor": np.array(anchor, np.int64).reshape(-1, 3),
+                "anchor_sign": np.array(signs).reshape(-1, 3), **self._other_blocks(hinge)}
 
     def degenerate(self, c: int) -> ValueError:
         """The error for the degenerate links of cluster ``c`` (an index into the factor blocks)."""
@@ -399,19 +437,33 @@ class LinkedFire:
     an orthogonal box and returns to Python for the build otherwise; the state
     persists across calls. It keeps its own link geometry and factors (links in
     the cluster order of :class:`ClusterGram`), so the model's caches stay valid.
+
+    Hinged 3D clusters (:attr:`ClusterGram.hinge_layout`: chains of four with frozen
+    angles) move in generalised coordinates (:mod:`._hinge_kernels`): the same projection
+    as the Gram path to round-off, no factorisation and no re-affixing, links held at
+    every step to the start's error; another retraction, so another path at second order
+    in the step (docs/notes/chains.md, "Hinged 3D clusters in generalised coordinates").
+    ``hinged=False`` keeps them on the Gram path.
     """
 
-    def __init__(self, model: LinkedSpheresModel, q: NDArray[np.float64], params: FireParameters) -> None:
+    def __init__(self, model: LinkedSpheresModel, q: NDArray[np.float64], params: FireParameters,
+                 hinged: bool = True) -> None:
         self.model = model
         self.builds0 = model.nlist.builds
-        self.x = np.ascontiguousarray(model.positions(model.reproject(np.array(q, dtype=np.float64))), dtype=np.float64)
+        q = model.reproject(np.array(q, dtype=np.float64))
+        self.x = np.ascontiguousarray(model.positions(q), dtype=np.float64)
         self.v = np.zeros_like(self.x)
         self.force = np.zeros_like(self.x)
         unit = model.time_unit
         self.fire_state = np.array([params.dt * unit, params.alpha0, 0.0, 0.0])
         self.fparams = _fire_params(params, unit)
-        self.rigid, self.gram = _rigid_clusters(model, self.x)
+        self.rigid, self.gram = _rigid_clusters(model, self.x, hinged)
         g = self.gram
+        self.hinge = _hinge_bodies(model, self.x, hinged)
+        h = self.hinge
+        if len(h["spheres"]):
+            model._factorise(q)  # degenerate links (a straight hinge) raise here: the Gram path's rank test
+            _hinge_kernels.hinge_place(self.x, h["spheres"], h["shift"], h["body"], h["state"], h["geo"])
         # the link geometry (unit vectors, lengths) of x and its Gram factors, kept up to date by the loop
         self.w = np.zeros((len(g["ci"]), model.d))
         self.r = np.zeros(len(g["ci"]))
@@ -430,7 +482,7 @@ class LinkedFire:
         Lists are rebuilt inside the loop in an orthogonal box; else (``REBUILD``) the
         next call builds one here.
         """
-        m, g, rigid = self.model, self.gram, self.rigid
+        m, g, rigid, h = self.model, self.gram, self.rigid, self.hinge
         if self.pairs is None or rebuild:
             self.pairs = m.listed_pairs(self.x)
             self.x_build = np.array(m.nlist.x_build)
@@ -440,7 +492,7 @@ class LinkedFire:
             m.potential.epsilon, m.potential.exponent, self.x_build, nl.reach, nl.skin, self.lengths, m.diameter,
             self.adj_ptr, m.links.j, g["ci"], g["cj"], g["offset"], g["length"], g["sign"], g["first"], g["cptr"],
             g["fptr"], self.chol, self.w, self.r, rigid["rptr"], rigid["members"], rigid["shift"], rigid["ref"],
-            m.length_rtol, LINK_NEWTON_MAX_ITERATIONS, LINK_RANK_RTOL, float(force_tol), int(budget), self.force,
+            h["spheres"], h["shift"], h["body"], h["state"], h["geo"], m.length_rtol, LINK_NEWTON_MAX_ITERATIONS, LINK_RANK_RTOL, float(force_tol), int(budget), self.force,
         )
         self.pairs = (pairs[0], pairs[1], pairs[2], pairs[3])
         self.inline_builds += builds
@@ -466,17 +518,19 @@ class LinkedFire:
         )
 
 
-def _rigid_clusters(model: LinkedSpheresModel, x: NDArray[np.float64]) -> tuple[dict, dict]:
+def _rigid_clusters(model: LinkedSpheresModel, x: NDArray[np.float64], hinged: bool = False) -> tuple[dict, dict]:
     """The clusters of :class:`LinkedFire` at centres ``x`` (on the manifold): rigid 2D clusters and the Gram blocks of the others.
 
     Rigid clusters (:attr:`ClusterGram.rigid_layout`) are projected and placed rigidly
     (:func:`._link_kernels.rigid_project_2d`, :func:`._link_kernels.rigid_place_2d`),
     with their spheres' periodic shifts relative to each cluster's first sphere and
     their shapes (offsets from the centroid) taken from ``x``. The other clusters keep
-    their Gram blocks (links in cluster order, sliced from ``model.gram``).
+    their Gram blocks (links in cluster order, sliced from ``model.gram``); ``hinged``
+    leaves out the hinged 3D clusters too (:attr:`ClusterGram.hinge_layout`, :func:`_hinge_bodies`).
     """
     g = model.gram
     lay = g.rigid_layout
+    blocks = g.hinge_layout if hinged and model.d == 3 else lay
     rptr, members = lay["rptr"], lay["members"]
     sizes = np.diff(rptr)
     anchor = np.repeat(members[rptr[:-1]], sizes)
@@ -484,9 +538,40 @@ def _rigid_clusters(model: LinkedSpheresModel, x: NDArray[np.float64]) -> tuple[
     shift = model.box.minimum_image(raw) - raw if len(members) else np.zeros((0, model.d))
     y = x[members] + shift
     centroid = np.add.reduceat(y, rptr[:-1], axis=0) / sizes[:, None] if len(members) else y
-    links, factor = lay["links"], lay["factor"]
+    links, factor = blocks["links"], blocks["factor"]
     gram = {"ci": g.ci[links], "cj": g.cj[links], "offset": np.ascontiguousarray(model.link_offset[g.order[links]]),
             "length": np.ascontiguousarray(model.links.length[g.order[links]]), "sign": g.sign[factor],
-            "first": g.first[links], "cptr": lay["cptr"], "fptr": lay["fptr"], "cluster": lay["cluster"]}
+            "first": g.first[links], "cptr": blocks["cptr"], "fptr": blocks["fptr"], "cluster": blocks["cluster"]}
     return ({"rptr": rptr, "members": members, "shift": np.ascontiguousarray(shift),
              "ref": np.ascontiguousarray(y - np.repeat(centroid, sizes, axis=0))}, gram)
+
+
+def _hinge_bodies(model: LinkedSpheresModel, x: NDArray[np.float64], hinged: bool = True) -> dict:
+    """The hinged 3D clusters of :class:`LinkedFire` at centres ``x`` (on the manifold) in the layout of :mod:`._hinge_kernels`.
+
+    Body frame and origin from ``x``: the origin ``Y`` at sphere ``b``, no rotation, torsion
+    angle 0; periodic shifts of ``a``, ``c``, ``t`` from the links to ``b``. Keys ``spheres``,
+    ``shift`` (H, 4, 3), ``body``, ``state`` and ``geo`` (the geometry of the placement, set
+    by :func:`._hinge_kernels.hinge_place`, which also puts the spheres back at ``x`` to round-off).
+    None of them with ``hinged`` false or outside 3D.
+    """
+    lay = model.gram.hinge_layout
+    H = len(lay["spheres"]) if hinged and model.d == 3 else 0
+    spheres = lay["spheres"][:H]
+    if not H:
+        return {"spheres": spheres, "shift": np.zeros((0, 4, 3)), "body": np.zeros((0, _hinge_kernels.BODY_WIDTH)),
+                "state": np.zeros((0, _hinge_kernels.STATE_WIDTH)), "geo": np.zeros((0, _hinge_kernels.GEO_WIDTH))}
+    shift = np.zeros((H, 4, 3))
+    shift[:, [0, 2, 3]] = model.link_offset[lay["anchor"]] * lay["anchor_sign"][..., None]
+    y = x[spheres] + shift
+    ref = y - y[:, 1:2]
+    axis = ref[:, 2] / np.linalg.norm(ref[:, 2], axis=1)[:, None]
+    p = ref[:, 3]
+    along = np.sum(p * axis, axis=1)[:, None] * axis
+    body = np.ascontiguousarray(np.concatenate([ref[:, 0], ref[:, 2], axis, along, p - along, np.cross(axis, p)],
+                                               axis=1).reshape(H, _hinge_kernels.BODY_WIDTH))
+    state = np.zeros((H, _hinge_kernels.STATE_WIDTH))
+    state[:, :3] = y[:, 1]
+    state[:, 3] = state[:, 7] = 1.0
+    geo = np.zeros((H, _hinge_kernels.GEO_WIDTH))
+    return {"spheres": spheres, "shift": shift, "body": body, "state": state, "geo": geo}
