@@ -34,7 +34,7 @@ exactly orthogonal). To first order in ``h`` this is ``x + h P v``, the step of 
 path before its re-affixing; the two retractions differ at second order (which nearby
 point of the manifold a step reaches), as the chord sweeps of :func:`reaffix` do.
 
-Geometry at the current point, ``geo`` rows of 32: centroid (3), offsets ``r_s`` (12), the
+Geometry at the current point, ``geo`` rows of 34: centroid (3), offsets ``r_s`` (12), the
 inverse inertia (6: xx, yy, zz, xy, xz, yz), the rigid part of ``T``: velocity ``V_T`` (3)
 and angular velocity ``omega_T`` (3), the tip's ``T_t`` (3), ``1 / |T~|^2`` (1) and the unit axis ``e`` (3).
 All kernels are single-threaded and cached.
