@@ -98,6 +98,20 @@ def save(path: Path, lp: highspy.HighsLp, basis, h: highspy.Highs, status, secon
              pivots=int(info.simplex_iteration_count), seconds=seconds, alien=bool(basis.alien))
 
 
+def save_ours(path: Path, A: sp.spmatrix, rhs, col_lower, col_upper, col_status, row_status,
+              r: simplex.Result, seconds: float) -> None:
+    """A warm LP as the chain hands it to :func:`jamflow.simplex.solve`, in :func:`save`'s
+    format, with jamflow.simplex's answer in place of HiGHS's (``compare`` solves it by
+    HiGHS afresh)."""
+    a = sp.csc_matrix(A)
+    np.savez(path, indptr=a.indptr, indices=a.indices, data=a.data, shape=np.array(a.shape), rhs=np.asarray(rhs),
+             col_lower=np.asarray(col_lower), col_upper=np.asarray(col_upper),
+             col_status=np.asarray(col_status, np.int8), row_status=np.asarray(row_status, np.int8),
+             status="Optimal" if r.optimal else r.status, col_value=r.col_value, row_dual=r.row_dual,
+             col_dual=r.col_dual, opt_col_status=r.col_status, opt_row_status=r.row_status, pivots=r.stats.pivots,
+             seconds=seconds, alien=False)
+
+
 def load(path: Path) -> WarmLP:
     z = np.load(path)
     m, n = (int(v) for v in z["shape"])
@@ -108,6 +122,46 @@ def load(path: Path) -> WarmLP:
                   float(z["seconds"]), bool(z["alien"]) if "alien" in z else False, path)
 
 
+class Enough(Exception):
+    """Enough warm LPs were captured: the chain stops."""
+
+
+def capture_ours(start: Path, tag: str, max_warm: int) -> int:
+    """Run the chain on ``start`` with ``warm_engine="jamflow"``; save the first ``max_warm``
+    warm LPs that jamflow.simplex solves (with its answer, :func:`save_ours`) under
+    ``CAPTURE/tag``. No HiGHS warm LP runs: for N where HiGHS's chain is slow. Returns how
+    many were saved."""
+    folder = CAPTURE / tag
+    folder.mkdir(parents=True, exist_ok=True)
+    solve = simplex.solve
+    count = [0]
+
+    def capturing_solve(A, rhs, col_lower, col_upper, cost, col_status, row_status, *args, **kw):
+        t0 = time.process_time()
+        r = solve(A, rhs, col_lower, col_upper, cost, col_status, row_status, *args, **kw)
+        if kw.get("held") is None:
+            count[0] += 1
+            save_ours(folder / f"lp_{count[0]:04d}.npz", A, rhs, col_lower, col_upper, col_status, row_status, r,
+                      time.process_time() - t0)
+            print(f"{tag}: warm LP {count[0]}: {r.status}, {r.stats.pivots} pivots, "
+                  f"{time.process_time() - t0:.1f} s CPU", flush=True)
+            if count[0] >= max_warm:
+                raise Enough
+        return r
+
+    simplex.solve = capturing_solve
+    t0 = time.perf_counter()
+    try:
+        res = calippso(read_packing(start), warm_engine="jamflow")
+        print(f"{tag}: chain of {res.iterations} LPs done in {time.perf_counter() - t0:.1f} s, {count[0]} warm LPs",
+              flush=True)
+    except Enough:
+        print(f"{tag}: stopped after {count[0]} warm LPs ({time.perf_counter() - t0:.1f} s)", flush=True)
+    finally:
+        simplex.solve = solve
+    return count[0]
+
+
 def capture(start: Path, tag: str, max_warm: int) -> int:
     """Run the chain on ``start``; save its first ``max_warm`` warm simplex LPs under
     ``CAPTURE/tag``. Returns how many were saved."""
@@ -115,9 +169,6 @@ def capture(start: Path, tag: str, max_warm: int) -> int:
     folder.mkdir(parents=True, exist_ok=True)
     run = cal_solver._Solver._run
     count = [0]
-
-    class Enough(Exception):
-        pass
 
     def capturing_run(self, lp, method, basis):
         status, seconds = run(self, lp, method, basis)
@@ -375,6 +426,9 @@ def main() -> None:
     cap.add_argument("--seeds", type=int, nargs="+", default=[1])
     cap.add_argument("--ls", type=int, nargs="*", default=[], help="dimensions of the authors' LS examples")
     cap.add_argument("--max-warm", type=int, default=10**6, help="warm LPs per chain")
+    cap.add_argument("--engine", choices=("highs", "jamflow"), default="highs",
+                     help="whose warm LPs: HiGHS's chain (with HiGHS's answers) or jamflow.simplex's "
+                          "(tags prefixed 'ours_')")
     cmp = sub.add_parser("compare", help="HiGHS against jamflow.simplex on the captured LPs")
     cmp.add_argument("--tags", nargs="+", default=None, help="captured chains (default: all)")
     cmp.add_argument("--max-lps", type=int, default=10**6, help="LPs per chain")
@@ -407,7 +461,10 @@ def main() -> None:
             capture(ls_example(d), f"ls_d{d}", args.max_warm)
         for n in args.sizes:
             for s in args.seeds:
-                capture(near_start(n, s), f"near_N{n}_s{s}", args.max_warm)
+                if args.engine == "jamflow":
+                    capture_ours(near_start(n, s), f"ours_near_N{n}_s{s}", args.max_warm)
+                else:
+                    capture(near_start(n, s), f"near_N{n}_s{s}", args.max_warm)
 
 
 if __name__ == "__main__":

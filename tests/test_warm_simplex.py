@@ -164,6 +164,38 @@ def test_the_two_lu_libraries_solve_a_working_set_alike():
     assert np.max(np.abs(answers["pardiso"] - answers["superlu"])) <= 1e-9 * np.max(np.abs(answers["superlu"]))
 
 
+@pytest.mark.parametrize("lu", ("pardiso", "superlu"))
+def test_a_block_of_transposed_solves_is_the_column_by_column_one(lu):
+    # btran_many (the pricing sketch's start: PARDISO solves the block in one pass) equals
+    # btran column by column, on fresh factors and after three row etas, and solves W_k^T Y = C;
+    # PARDISO's block kernels round differently, so "equal" is to its accuracy (backward
+    # errors up to 1e-11 on working sets, docs/notes/warm-simplex.md)
+    from jamflow.simplex.state import State
+
+    lp = _lp("n512_b")
+    st = State(lp["A"], lp["rhs"], lp["lower"], lp["upper"], _cost(lp["A"].shape[1]), TOL, None, "metis", lu)
+    st.set_working_set(lp["col_status"], lp["row_status"])
+    f = st.factor
+    f.factorise(st.working_matrix())
+    n = st.n
+    C = np.random.default_rng(5).standard_normal((n, 6))
+    free_rows = np.flatnonzero(st.row_slot < 0)
+    for count in (0, 3):
+        Y = f.btran_many(C)
+        assert Y.shape == (n, 6) and f.count == count
+        for j in range(6):
+            assert np.max(np.abs(Y[:, j] - f.btran(C[:, j]))) <= 1e-10 * np.max(np.abs(Y[:, j]))
+        W = st.working_matrix()
+        assert np.max(np.abs(W.T @ Y - C)) <= 1e-9 * np.max(abs(W.T) @ np.abs(Y))
+        if count == 0:
+            for p, i in zip((3, 40, 200), free_rows[:3]):  # three rows of A replace three members
+                beta = f.btran(st.normal(0, i))
+                if abs(beta[p]) > 1e-3:
+                    st.swap(p, 0, i, 1, st.b[i], beta)
+            assert f.count == 3
+    f.release()
+
+
 def test_a_pardiso_lu_with_perturbed_pivots_is_redone_by_superlu():
     # PARDISO factorises a singular matrix by perturbing a pivot instead of failing;
     # that LU is not of W, so SuperLU redoes it (and here finds W singular)

@@ -209,6 +209,13 @@ class State:
         self.stats.seconds["btran"] += time.perf_counter() - t0
         return y
 
+    def btran_many(self, C: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``W^-T C`` for the columns of ``C`` (n, k)."""
+        t0 = time.perf_counter()
+        Y = self.factor.btran_many(C)
+        self.stats.seconds["btran"] += time.perf_counter() - t0
+        return Y
+
     def matvec(self, x: NDArray[np.float64], out: NDArray[np.float64]) -> NDArray[np.float64]:
         """``out = A x``."""
         t0 = time.perf_counter()

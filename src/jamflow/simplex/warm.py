@@ -215,7 +215,7 @@ def _primal(st: State, weights: Weights, rng: np.random.Generator, limit: int) -
         if st.stats.pivots + st.stats.flips >= limit:
             raise Trouble("iteration limit")
         if weights.weight is None:  # only an LP that pivots pays for its weights
-            weights.start(n, st.A, st.btran, rng)
+            weights.start(n, st.A, st.btran_many, rng)
         p = k.devex_price(infeas, weights.weight, tol.dual)
         sigma = 1.0 if st.y[p] > 0.0 else -1.0
         d, kind, q, t = _move_out(st, e, p, sigma, tol)
