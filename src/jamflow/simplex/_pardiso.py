@@ -5,8 +5,8 @@ PARDISO orders ``W + W^T`` by METIS nested dissection, scales and permutes ``W``
 maximum weighted matching and factorises it supernodally with pivoting inside the
 supernodes; a pivot it cannot find is *perturbed* to ``1e-13`` of the matrix's norm
 instead of failing. A factorisation with perturbed pivots is of a different matrix, so
-:class:`PardisoLU` reports it (``perturbed``) and the caller factorises by SuperLU
-instead. It runs on one thread (MKL's sequential layer), like the chain's HiGHS.
+:class:`PardisoLU` reports it (``perturbed``) and the caller factorises otherwise
+(:meth:`jamflow.simplex.factor.Factor.factorise`: ``W^T`` by PARDISO, then SuperLU). It runs on one thread (MKL's sequential layer), like the chain's HiGHS.
 Not through ``pypardiso``: its ``solve`` compares (or hashes) the whole matrix and
 re-indexes it on every call, and solves with ``W^T`` only by being handed a CSC copy,
 which it takes for a new matrix and factorises again; the simplex needs both

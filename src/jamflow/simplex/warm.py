@@ -427,6 +427,7 @@ def solve(A: sp.spmatrix, rhs: NDArray[np.float64], col_lower: NDArray[np.float6
     finally:
         st.factor.release()
     st.stats.superlu_fallbacks = st.factor.superlu_fallbacks
+    st.stats.transposed_lus = st.factor.transposed_lus
     st.stats.seconds["factor"] = st.factor.seconds_factor
     st.stats.seconds["order"] = st.factor.seconds_order
     st.stats.seconds["total"] = time.perf_counter() - t0
