@@ -60,6 +60,16 @@ def _ours(lp: dict, **options) -> simplex.Result:
                          lp["row_status"], TOL, **options)
 
 
+def _starting_state(name: str, lu: str = "auto"):
+    """The solver's state of a captured LP at its carried working set, not factorised."""
+    from jamflow.simplex.state import State
+
+    lp = _lp(name)
+    st = State(lp["A"], lp["rhs"], lp["lower"], lp["upper"], _cost(lp["A"].shape[1]), TOL, None, "metis", lu)
+    st.set_working_set(lp["col_status"], lp["row_status"])
+    return st
+
+
 def _highs(lp: dict, warm: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """HiGHS's columns and row duals: the primal simplex from the carried basis, set up as
     the chain's warm LPs (unscaled, the chain's tolerances), or cold."""
@@ -138,12 +148,7 @@ def test_the_two_lu_libraries_solve_a_working_set_alike():
     # the starting working set of a captured LP, factorised by each library: the solves
     # W x = b and W^T y = c (dense, and sparse: a unit vector, a row of W) agree, and
     # each has a backward error at rounding level
-    from jamflow.simplex.state import State
-
-    lp = _lp("n512_b")
-    st = State(lp["A"], lp["rhs"], lp["lower"], lp["upper"], _cost(lp["A"].shape[1]), TOL, None, "metis")
-    st.set_working_set(lp["col_status"], lp["row_status"])
-    W = st.working_matrix()
+    W = _starting_state("n512_b").working_matrix()
     n = W.shape[0]
     rng = np.random.default_rng(3)
     b, k = rng.standard_normal(n), int(rng.integers(n))
@@ -169,11 +174,7 @@ def test_a_block_of_transposed_solves_is_the_column_by_column_one():
     # btran column by column, on fresh factors and after three row etas, and solves W_k^T Y = C;
     # PARDISO's block kernels round differently, so "equal" is to its accuracy (backward
     # errors up to 1e-11 on working sets, docs/notes/warm-simplex.md)
-    from jamflow.simplex.state import State
-
-    lp = _lp("n512_b")
-    st = State(lp["A"], lp["rhs"], lp["lower"], lp["upper"], _cost(lp["A"].shape[1]), TOL, None, "metis", "pardiso")
-    st.set_working_set(lp["col_status"], lp["row_status"])
+    st = _starting_state("n512_b", "pardiso")
     f = st.factor
     f.factorise(st.working_matrix())
     n = st.n
@@ -213,12 +214,7 @@ def _perturbing_every_other_lu(monkeypatch):
 def test_a_perturbed_pardiso_lu_is_redone_on_the_transpose_and_solves_alike(monkeypatch):
     # the factors of W^T serve both solves with their roles swapped: the same x, y and
     # block of y as from the factors of W (to PARDISO's accuracy), with backward errors at rounding level
-    from jamflow.simplex.state import State
-
-    lp = _lp("n512_b")
-    st = State(lp["A"], lp["rhs"], lp["lower"], lp["upper"], _cost(lp["A"].shape[1]), TOL, None, "metis")
-    st.set_working_set(lp["col_status"], lp["row_status"])
-    W = st.working_matrix()
+    W = _starting_state("n512_b").working_matrix()
     n = W.shape[0]
     rng = np.random.default_rng(4)
     b, C = rng.standard_normal(n), rng.standard_normal((n, 3))
