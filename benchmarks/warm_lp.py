@@ -98,6 +98,20 @@ def save(path: Path, lp: highspy.HighsLp, basis, h: highspy.Highs, status, secon
              pivots=int(info.simplex_iteration_count), seconds=seconds, alien=bool(basis.alien))
 
 
+def save_ours(path: Path, A: sp.spmatrix, rhs, col_lower, col_upper, col_status, row_status,
+              r: simplex.Result, seconds: float) -> None:
+    """A warm LP as the chain hands it to :func:`jamflow.simplex.solve`, in :func:`save`'s
+    format, with jamflow.simplex's answer in place of HiGHS's (``compare`` solves it by
+    HiGHS afresh)."""
+    a = sp.csc_matrix(A)
+    np.savez(path, indptr=a.indptr, indices=a.indices, data=a.data, shape=np.array(a.shape), rhs=np.asarray(rhs),
+             col_lower=np.asarray(col_lower), col_upper=np.asarray(col_upper),
+             col_status=np.asarray(col_status, np.int8), row_status=np.asarray(row_status, np.int8),
+             status="Optimal" if r.optimal else r.status, col_value=r.col_value, row_dual=r.row_dual,
+             col_dual=r.col_dual, opt_col_status=r.col_status, opt_row_status=r.row_status, pivots=r.stats.pivots,
+             seconds=seconds, alien=False)
+
+
 def load(path: Path) -> WarmLP:
     z = np.load(path)
     m, n = (int(v) for v in z["shape"])
@@ -108,6 +122,46 @@ def load(path: Path) -> WarmLP:
                   float(z["seconds"]), bool(z["alien"]) if "alien" in z else False, path)
 
 
+class Enough(Exception):
+    """Enough warm LPs were captured: the chain stops."""
+
+
+def capture_ours(start: Path, tag: str, max_warm: int) -> int:
+    """Run the chain on ``start`` with ``warm_engine="jamflow"``; save the first ``max_warm``
+    warm LPs that jamflow.simplex solves (with its answer, :func:`save_ours`) under
+    ``CAPTURE/tag``. No HiGHS warm LP runs: for N where HiGHS's chain is slow. Returns how
+    many were saved."""
+    folder = CAPTURE / tag
+    folder.mkdir(parents=True, exist_ok=True)
+    solve = simplex.solve
+    count = [0]
+
+    def capturing_solve(A, rhs, col_lower, col_upper, cost, col_status, row_status, *args, **kw):
+        t0 = time.process_time()
+        r = solve(A, rhs, col_lower, col_upper, cost, col_status, row_status, *args, **kw)
+        if kw.get("held") is None:
+            count[0] += 1
+            save_ours(folder / f"lp_{count[0]:04d}.npz", A, rhs, col_lower, col_upper, col_status, row_status, r,
+                      time.process_time() - t0)
+            print(f"{tag}: warm LP {count[0]}: {r.status}, {r.stats.pivots} pivots, "
+                  f"{time.process_time() - t0:.1f} s CPU", flush=True)
+            if count[0] >= max_warm:
+                raise Enough
+        return r
+
+    simplex.solve = capturing_solve
+    t0 = time.perf_counter()
+    try:
+        res = calippso(read_packing(start), warm_engine="jamflow")
+        print(f"{tag}: chain of {res.iterations} LPs done in {time.perf_counter() - t0:.1f} s, {count[0]} warm LPs",
+              flush=True)
+    except Enough:
+        print(f"{tag}: stopped after {count[0]} warm LPs ({time.perf_counter() - t0:.1f} s)", flush=True)
+    finally:
+        simplex.solve = solve
+    return count[0]
+
+
 def capture(start: Path, tag: str, max_warm: int) -> int:
     """Run the chain on ``start``; save its first ``max_warm`` warm simplex LPs under
     ``CAPTURE/tag``. Returns how many were saved."""
@@ -115,9 +169,6 @@ def capture(start: Path, tag: str, max_warm: int) -> int:
     folder.mkdir(parents=True, exist_ok=True)
     run = cal_solver._Solver._run
     count = [0]
-
-    class Enough(Exception):
-        pass
 
     def capturing_run(self, lp, method, basis):
         status, seconds = run(self, lp, method, basis)
@@ -251,7 +302,7 @@ def compare(tags: list[str], max_lps: int, every: int, options: dict) -> xr.Data
             print(f"{names[-1]}: HiGHS {t_h:.3f} s (cpu {c_h:.3f}) {piv_h} pivots | ours {r.status} {t_o:.3f} s "
                   f"(cpu {c_o:.3f}) "
                   f"{st.pivots} pivots ({st.dual_pivots} dual, {st.flips} flips; {st.lu} factor "
-                  f"{st.seconds['factor']:.3f} s x{st.factorisations}, {st.superlu_fallbacks} by SuperLU) | Gamma {row['gamma_rel']:.1e} active {row['active_diff']:.0f} "
+                  f"{st.seconds['factor']:.3f} s x{st.factorisations}, {st.transposed_lus} of W^T, {st.superlu_fallbacks} by SuperLU) | Gamma {row['gamma_rel']:.1e} active {row['active_diff']:.0f} "
                   f"duals {row['dual_diff']:.1e} (residuals {row['dual_residual']:.1e} / {row['dual_residual_ref']:.1e})",
                   flush=True)
     data = {f: (("lp",), np.array([r[f] for r in rows], float), {"units": UNITS.get(f, "1")}) for f in FIELDS}
@@ -322,6 +373,132 @@ def carried(tags: list[str]) -> xr.Dataset:
         "CALiPPSO warm LPs: feasibility of the carried basis", {"tags": tags}))
 
 
+#: ``profile``: the leaf calls of jamflow.simplex timed by CPU, by part: (module, name, part).
+#: Kernels are looked up through each module's ``k``; PARDISO's calls are methods.
+PROFILED = (("factor", "eta_forward", "eta_forward"), ("factor", "eta_backward", "eta_backward"),
+            ("factor", "lu_solve", "superlu_solve"), ("factor", "lu_solve_transposed", "superlu_solve"),
+            ("state", "csr_matvec", "matvec"), ("warm", "primal_ratio", "ratio"), ("warm", "dual_ratio", "ratio"),
+            ("warm", "most_violated", "ratio"), ("state", "most_violated", "ratio"),
+            ("warm", "dual_infeasibility", "pricing"), ("state", "dual_infeasibility", "pricing"),
+            ("warm", "devex_price", "pricing"), ("pricing", "sketch_update", "pricing"),
+            ("pricing", "devex_update", "pricing"))
+PARTS = ("factorise", "solve_N", "solve_T", "superlu_solve", "eta_forward", "eta_backward", "matvec", "ratio",
+         "pricing", "other")
+
+
+def _profiled(seconds: dict, calls: dict):
+    """Patch jamflow.simplex's leaf calls with CPU timers adding into ``seconds`` and
+    ``calls`` (by part); returns the undo."""
+    import types
+
+    from jamflow.simplex import _kernels, _pardiso, factor, pricing, state, warm
+
+    mods = {"factor": factor, "state": state, "warm": warm, "pricing": pricing}
+    saved = [(m, m.k) for m in mods.values()]
+    spaces = {name: types.SimpleNamespace(**{f: getattr(_kernels, f) for f in dir(_kernels) if not f.startswith("_")})
+              for name in mods}
+
+    def timed(part, f):
+        def g(*args, **kw):
+            c0 = time.process_time()
+            try:
+                return f(*args, **kw)
+            finally:
+                seconds[part] += time.process_time() - c0
+                calls[part] += 1
+        return g
+
+    for mod, fname, part in PROFILED:
+        setattr(spaces[mod], fname, timed(part, getattr(_kernels, fname)))
+    for name, m in mods.items():
+        m.k = spaces[name]
+    solve, fact = _pardiso.PardisoLU.solve, _pardiso.PardisoLU.factorise
+    sl_fact = factor.Factor.factorise
+
+    def psolve(self, b, transposed=False):
+        return timed("solve_T" if transposed else "solve_N", solve)(self, b, transposed)
+
+    _pardiso.PardisoLU.solve = psolve
+    factor.Factor.factorise = timed("factorise", sl_fact)
+
+    def undo():
+        for m, kk in saved:
+            m.k = kk
+        _pardiso.PardisoLU.solve, _pardiso.PardisoLU.factorise = solve, fact
+        factor.Factor.factorise = sl_fact
+    return undo
+
+
+def profile(tags: list[str], max_lps: int, every: int) -> xr.Dataset:
+    """CPU time of :mod:`jamflow.simplex` on captured LPs split by part (:data:`PARTS`):
+    the factorisations (PARDISO's analysis and factorisation, or SuperLU's with its
+    ordering), PARDISO's solves with ``W`` and ``W^T`` (a block of right-hand sides
+    counts as one call), SuperLU's numba solves, the product-form eta passes, ``A d``,
+    the ratio tests, the pricing (dual infeasibilities, choice, weight updates) and
+    the rest; with the pivots, solves and etas applied per transposed solve."""
+    from collections import Counter, defaultdict
+
+    ours_solve(load(captured(tags[0])[0]))  # loads the compiled kernels outside the timings
+    rows, names = [], []
+    for tag in tags:
+        for path in captured(tag)[:max_lps:every]:
+            w = load(path)
+            seconds, calls = defaultdict(float), Counter()
+            undo = _profiled(seconds, calls)
+            try:
+                _, cpu, r = ours_solve(w)
+            finally:
+                undo()
+            st = r.stats
+            row = {part: seconds[part] for part in PARTS[:-1]}
+            row["other"] = cpu - sum(row.values())
+            row.update(N=particles(tag), cpu=cpu, pivots=st.pivots, factorisations=st.factorisations, fill=st.fill,
+                       transposed_lus=getattr(st, "transposed_lus", 0), superlu_lus=st.superlu_fallbacks,
+                       solves_N=calls["solve_N"], solves_T=calls["solve_T"], optimal=float(r.optimal))
+            rows.append(row)
+            names.append(f"{tag}/{path.stem}")
+            print(f"{names[-1]}: {r.status} {st.pivots} pivots, {st.factorisations} LUs ({getattr(st, 'transposed_lus', 0)} of W^T, "
+                  f"{st.superlu_fallbacks} by SuperLU), CPU {cpu:.3f} s: " +
+                  ", ".join(f"{k} {row[k]:.3f}" for k in PARTS) +
+                  f" | per solve N {1e3 * row['solve_N'] / max(calls['solve_N'], 1):.2f} ms, "
+                  f"T {1e3 * row['solve_T'] / max(calls['solve_T'], 1):.2f} ms", flush=True)
+    fields = (*PARTS, "N", "cpu", "pivots", "factorisations", "transposed_lus", "superlu_lus", "fill", "solves_N",
+              "solves_T", "optimal")
+    data = {f: (("lp",), np.array([r[f] for r in rows], float), {"units": "s" if f in PARTS or f == "cpu" else "1"})
+            for f in fields}
+    return xr.Dataset(data, coords={"lp": names}, attrs=new_dataset_attrs(
+        "jamflow.simplex on captured CALiPPSO warm LPs: CPU time by part", {"tags": tags, "every": every}))
+
+
+def plot_profile(ds: xr.Dataset, path: Path) -> None:
+    """CPU per LP by part (mean over the LPs of each N) and CPU per pivot of the per-pivot parts."""
+    sizes = np.unique(ds["N"].values)
+    fig, ax = plt.subplots(1, 2, figsize=(11, 4.2))
+    x = np.arange(len(sizes))
+    bottom = np.zeros(len(sizes))
+    for part in PARTS:
+        v = np.array([float(ds[part].where(ds["N"] == n, drop=True).mean()) for n in sizes])
+        ax[0].bar(x, v, bottom=bottom, label=part)
+        bottom += v
+    ax[0].set_xticks(x, [f"{n:.0f}" for n in sizes])
+    ax[0].set_xlabel("particles N (3D near starts)")
+    ax[0].set_ylabel("CPU per warm LP [s] (mean)")
+    ax[0].legend(fontsize=7)
+    per_pivot = ("solve_N", "solve_T", "eta_backward", "matvec", "ratio", "pricing")
+    width = 0.8 / len(per_pivot)
+    for i, part in enumerate(per_pivot):
+        v = [1e3 * float(ds[part].where(ds["N"] == n, drop=True).sum() / ds["pivots"].where(ds["N"] == n, drop=True).sum())
+             for n in sizes]
+        ax[1].bar(x + (i - len(per_pivot) / 2 + 0.5) * width, v, width, label=part)
+    ax[1].set_xticks(x, [f"{n:.0f}" for n in sizes])
+    ax[1].set_xlabel("particles N (3D near starts)")
+    ax[1].set_ylabel("CPU per pivot [ms] (all of the LP's calls / its pivots)")
+    ax[1].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    print(f"wrote {path}")
+
+
 #: ``sweep``: the variants of jamflow.simplex's measured choices, each against the default
 VARIANTS: dict[str, dict] = {
     "default": {},
@@ -375,6 +552,9 @@ def main() -> None:
     cap.add_argument("--seeds", type=int, nargs="+", default=[1])
     cap.add_argument("--ls", type=int, nargs="*", default=[], help="dimensions of the authors' LS examples")
     cap.add_argument("--max-warm", type=int, default=10**6, help="warm LPs per chain")
+    cap.add_argument("--engine", choices=("highs", "jamflow"), default="highs",
+                     help="whose warm LPs: HiGHS's chain (with HiGHS's answers) or jamflow.simplex's "
+                          "(tags prefixed 'ours_')")
     cmp = sub.add_parser("compare", help="HiGHS against jamflow.simplex on the captured LPs")
     cmp.add_argument("--tags", nargs="+", default=None, help="captured chains (default: all)")
     cmp.add_argument("--max-lps", type=int, default=10**6, help="LPs per chain")
@@ -388,10 +568,19 @@ def main() -> None:
     swp.add_argument("--every", type=int, default=1, help="take every k-th captured LP")
     swp.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
     swp.add_argument("--output", default="warm_lp_sweep.nc")
+    prf = sub.add_parser("profile", help="jamflow.simplex's CPU time by part on captured LPs")
+    prf.add_argument("--tags", nargs="+", required=True)
+    prf.add_argument("--max-lps", type=int, default=10**6, help="LPs per chain")
+    prf.add_argument("--every", type=int, default=1, help="take every k-th captured LP")
+    prf.add_argument("--output", default="warm_lp_profile.nc")
     car = sub.add_parser("carried", help="feasibility of the carried bases of the captured LPs")
     car.add_argument("--tags", nargs="+", required=True)
     car.add_argument("--output", default="warm_lp_carried.nc")
     args = ap.parse_args()
+    if args.step == "profile":
+        ds = profile(args.tags, args.max_lps, args.every)
+        write_dataset(ds, OUT / args.output)
+        plot_profile(ds, (OUT / args.output).with_suffix(".png"))
     if args.step == "carried":
         write_dataset(carried(args.tags), OUT / args.output)
     if args.step == "sweep":
@@ -407,7 +596,10 @@ def main() -> None:
             capture(ls_example(d), f"ls_d{d}", args.max_warm)
         for n in args.sizes:
             for s in args.seeds:
-                capture(near_start(n, s), f"near_N{n}_s{s}", args.max_warm)
+                if args.engine == "jamflow":
+                    capture_ours(near_start(n, s), f"ours_near_N{n}_s{s}", args.max_warm)
+                else:
+                    capture(near_start(n, s), f"near_N{n}_s{s}", args.max_warm)
 
 
 if __name__ == "__main__":

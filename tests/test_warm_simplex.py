@@ -60,6 +60,16 @@ def _ours(lp: dict, **options) -> simplex.Result:
                          lp["row_status"], TOL, **options)
 
 
+def _starting_state(name: str, lu: str = "auto"):
+    """The solver's state of a captured LP at its carried working set, not factorised."""
+    from jamflow.simplex.state import State
+
+    lp = _lp(name)
+    st = State(lp["A"], lp["rhs"], lp["lower"], lp["upper"], _cost(lp["A"].shape[1]), TOL, None, "metis", lu)
+    st.set_working_set(lp["col_status"], lp["row_status"])
+    return st
+
+
 def _highs(lp: dict, warm: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """HiGHS's columns and row duals: the primal simplex from the carried basis, set up as
     the chain's warm LPs (unscaled, the chain's tolerances), or cold."""
@@ -138,12 +148,7 @@ def test_the_two_lu_libraries_solve_a_working_set_alike():
     # the starting working set of a captured LP, factorised by each library: the solves
     # W x = b and W^T y = c (dense, and sparse: a unit vector, a row of W) agree, and
     # each has a backward error at rounding level
-    from jamflow.simplex.state import State
-
-    lp = _lp("n512_b")
-    st = State(lp["A"], lp["rhs"], lp["lower"], lp["upper"], _cost(lp["A"].shape[1]), TOL, None, "metis")
-    st.set_working_set(lp["col_status"], lp["row_status"])
-    W = st.working_matrix()
+    W = _starting_state("n512_b").working_matrix()
     n = W.shape[0]
     rng = np.random.default_rng(3)
     b, k = rng.standard_normal(n), int(rng.integers(n))
@@ -162,6 +167,82 @@ def test_the_two_lu_libraries_solve_a_working_set_alike():
         answers[lu] = np.concatenate([x, y, d])
         f.release()
     assert np.max(np.abs(answers["pardiso"] - answers["superlu"])) <= 1e-9 * np.max(np.abs(answers["superlu"]))
+
+
+def test_a_block_of_transposed_solves_is_the_column_by_column_one():
+    # btran_many (the pricing sketch's start: PARDISO solves the block in one pass) equals
+    # btran column by column, on fresh factors and after three row etas, and solves W_k^T Y = C;
+    # PARDISO's block kernels round differently, so "equal" is to its accuracy (backward
+    # errors up to 1e-11 on working sets, docs/notes/warm-simplex.md)
+    st = _starting_state("n512_b", "pardiso")
+    f = st.factor
+    f.factorise(st.working_matrix())
+    n = st.n
+    C = np.random.default_rng(5).standard_normal((n, 6))
+    free_rows = np.flatnonzero(st.row_slot < 0)
+    for count in (0, 3):
+        Y = f.btran_many(C)
+        assert Y.shape == (n, 6) and f.count == count
+        for j in range(6):
+            assert np.max(np.abs(Y[:, j] - f.btran(C[:, j]))) <= 1e-10 * np.max(np.abs(Y[:, j]))
+        W = st.working_matrix()
+        assert np.max(np.abs(W.T @ Y - C)) <= 1e-9 * np.max(abs(W.T) @ np.abs(Y))
+        if count == 0:
+            for p, i in zip((3, 40, 200), free_rows[:3]):  # three rows of A replace three members
+                beta = f.btran(st.normal(0, i))
+                if abs(beta[p]) > 1e-3:
+                    st.swap(p, 0, i, 1, st.b[i], beta)
+            assert f.count == 3
+    f.release()
+
+
+def _perturbing_every_other_lu(monkeypatch):
+    """PARDISO reports a perturbed pivot on its 1st, 3rd, ... factorisation: each LU of W
+    is then redone on W^T, which is not perturbed."""
+    from jamflow.simplex import _pardiso
+
+    factorise, calls = _pardiso.PardisoLU.factorise, [0]
+
+    def perturbing(self, W):
+        factorise(self, W)
+        calls[0] += 1
+        if calls[0] % 2 == 1:
+            self.perturbed = 1
+    monkeypatch.setattr(_pardiso.PardisoLU, "factorise", perturbing)
+
+
+def test_a_perturbed_pardiso_lu_is_redone_on_the_transpose_and_solves_alike(monkeypatch):
+    # the factors of W^T serve both solves with their roles swapped: the same x, y and
+    # block of y as from the factors of W (to PARDISO's accuracy), with backward errors at rounding level
+    W = _starting_state("n512_b").working_matrix()
+    n = W.shape[0]
+    rng = np.random.default_rng(4)
+    b, C = rng.standard_normal(n), rng.standard_normal((n, 3))
+    plain = simplex.factor.Factor(n, lu="pardiso")
+    plain.factorise(W)
+    assert not plain.pardiso_transposed and plain.transposed_lus == 0
+    expected = np.concatenate([plain.ftran(b), plain.btran(b), plain.btran_many(C).ravel()])
+    plain.release()
+    _perturbing_every_other_lu(monkeypatch)
+    f = simplex.factor.Factor(n, lu="pardiso")
+    f.factorise(W)
+    assert f.on_pardiso and f.pardiso_transposed and f.transposed_lus == 1 and f.superlu_fallbacks == 0
+    x, y, Y = f.ftran(b), f.btran(b), f.btran_many(C)
+    assert np.max(np.abs(W @ x - b)) <= 1e-12 * np.max(abs(W) @ np.abs(x))
+    assert np.max(np.abs(W.T @ y - b)) <= 1e-12 * np.max(abs(W.T) @ np.abs(y))
+    got = np.concatenate([x, y, Y.ravel()])
+    assert np.max(np.abs(got - expected)) <= 1e-10 * np.max(np.abs(expected))
+    f.release()
+
+
+def test_a_warm_lp_on_transposed_lus_ends_where_highs_ends(monkeypatch):
+    lp = _lp("n512_a")
+    col_h, dual_h = _highs(lp)
+    _perturbing_every_other_lu(monkeypatch)
+    ours = _ours(lp, max_etas=8)
+    assert ours.stats.factorisations >= 2 and ours.stats.transposed_lus == ours.stats.factorisations
+    assert ours.stats.superlu_fallbacks == 0
+    _agree(lp, ours, col_h, dual_h)
 
 
 def test_a_pardiso_lu_with_perturbed_pivots_is_redone_by_superlu():

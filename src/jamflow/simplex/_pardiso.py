@@ -5,8 +5,8 @@ PARDISO orders ``W + W^T`` by METIS nested dissection, scales and permutes ``W``
 maximum weighted matching and factorises it supernodally with pivoting inside the
 supernodes; a pivot it cannot find is *perturbed* to ``1e-13`` of the matrix's norm
 instead of failing. A factorisation with perturbed pivots is of a different matrix, so
-:class:`PardisoLU` reports it (``perturbed``) and the caller factorises by SuperLU
-instead. It runs on one thread (MKL's sequential layer), like the chain's HiGHS.
+:class:`PardisoLU` reports it (``perturbed``) and the caller factorises otherwise
+(:meth:`jamflow.simplex.factor.Factor.factorise`: ``W^T`` by PARDISO, then SuperLU). It runs on one thread (MKL's sequential layer), like the chain's HiGHS.
 Not through ``pypardiso``: its ``solve`` compares (or hashes) the whole matrix and
 re-indexes it on every call, and solves with ``W^T`` only by being handed a CSC copy,
 which it takes for a new matrix and factorises again; the simplex needs both
@@ -135,15 +135,17 @@ class PardisoLU:
         self.perturbed = 0
 
     def _call(self, phase: int, b: NDArray[np.float64]) -> NDArray[np.float64]:
+        """One PARDISO call; ``b`` is (n,) or (n, k) in column-major order (k right-hand sides)."""
         i32 = ctypes.POINTER(ctypes.c_int32)
         x = np.zeros_like(b)
         err = ctypes.c_int32(0)
         one = ctypes.c_int32(1)
+        nrhs = ctypes.c_int32(1 if b.ndim == 1 else b.shape[1])
         self._lib.pardiso(self._pt.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)), ctypes.byref(one),
                           ctypes.byref(one), ctypes.byref(ctypes.c_int32(self._mtype)),
                           ctypes.byref(ctypes.c_int32(phase)), ctypes.byref(ctypes.c_int32(self._n)),
                           self._a.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), self._ia.ctypes.data_as(i32),
-                          self._ja.ctypes.data_as(i32), self._perm.ctypes.data_as(i32), ctypes.byref(one),
+                          self._ja.ctypes.data_as(i32), self._perm.ctypes.data_as(i32), ctypes.byref(nrhs),
                           self._iparm.ctypes.data_as(i32), ctypes.byref(ctypes.c_int32(0)),
                           b.ctypes.data_as(ctypes.POINTER(ctypes.c_double)),
                           x.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), ctypes.byref(err))
@@ -169,9 +171,10 @@ class PardisoLU:
         self.perturbed = int(self._iparm[13])
 
     def solve(self, b: NDArray[np.float64], transposed: bool = False) -> NDArray[np.float64]:
-        """``W^-1 b``, or ``W^-T b`` when ``transposed``; shape (n,)."""
+        """``W^-1 b``, or ``W^-T b`` when ``transposed``; ``b`` of shape (n,), or (n, k) for
+        k right-hand sides in one pass over the factors (returned in column-major order)."""
         self._iparm[11] = 2 if transposed else 0
-        return self._call(_SOLVE, np.ascontiguousarray(b, dtype=np.float64))
+        return self._call(_SOLVE, np.asfortranarray(b, dtype=np.float64))
 
     def release(self) -> None:
         """Free PARDISO's memory of this factorisation (no-op when there is none)."""

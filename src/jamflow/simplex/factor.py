@@ -10,8 +10,9 @@ nested-dissection ordering, against much more under a Markowitz ordering without
 global view (``docs/notes/warm-simplex.md``).
 
 ``W`` is factorised by Intel MKL PARDISO when the ``mkl`` wheel is installed
-(:mod:`jamflow.simplex._pardiso`; about three times cheaper at N = 4096), else by SuperLU
-with a fill-reducing column ordering (:data:`ORDERINGS`): :data:`LU_LIBRARIES`. Each pivot replaces one row of ``W`` and is kept as a row eta (product form): with
+(:mod:`jamflow.simplex._pardiso`; about three times cheaper at N = 4096; ``W^T`` when the
+LU of ``W`` perturbed a pivot), else by SuperLU with a fill-reducing column ordering
+(:data:`ORDERINGS`): :data:`LU_LIBRARIES`. Each pivot replaces one row of ``W`` and is kept as a row eta (product form): with
 ``W_k = E_k ... E_1 W_0`` and ``E`` the identity with row ``p`` replaced by
 ``beta = W_{k-1}^-T w_new``, ``W_k^-1 = W_0^-1 E_1^-1 ... E_k^-1``.
 """
@@ -30,7 +31,7 @@ from . import _pardiso
 
 #: Libraries of the LU of ``W``: ``auto`` takes ``pardiso`` (MKL PARDISO, its own METIS
 #: order of ``W + W^T``) when the ``mkl`` wheel is installed and ``superlu`` otherwise.
-#: A PARDISO factorisation with perturbed pivots is redone by SuperLU.
+#: A PARDISO factorisation with perturbed pivots is redone by PARDISO on ``W^T``, then by SuperLU.
 LU_LIBRARIES: tuple[str, ...] = ("auto", "pardiso", "superlu")
 
 #: Column orderings of the working-set matrix for SuperLU: ``metis``, a nested dissection of the
@@ -130,6 +131,8 @@ class Factor:
         self.lu = lu_library(lu)
         self._pardiso = _pardiso.PardisoLU() if self.lu == "pardiso" else None
         self.on_pardiso = False  # whether the current factors are PARDISO's
+        self.pardiso_transposed = False  # whether they are PARDISO's factors of W^T
+        self.transposed_lus = 0  # PARDISO LUs of W with perturbed pivots, redone by PARDISO on W^T
         self.superlu_fallbacks = 0  # PARDISO factorisations with perturbed pivots, redone by SuperLU
         self.n = n
         self.ordering = ordering if ordering != "metis" or _have_pymetis() else "colamd"
@@ -179,20 +182,26 @@ class Factor:
         self._after_factorisation(t0)
 
     def _factorise_pardiso(self, W: sp.csr_matrix) -> bool:
-        """PARDISO's LU of ``W``; False (SuperLU's turn) when it perturbed a pivot."""
-        try:
-            self._pardiso.factorise(W)
-        except _pardiso.PardisoError as exc:
-            if exc.code == _pardiso.ZERO_PIVOT:
-                raise SingularWorkingSet(str(exc)) from None
-            raise
-        self.on_pardiso = self._pardiso.perturbed == 0
-        if not self.on_pardiso:
+        """PARDISO's LU of ``W``, or, when that perturbed a pivot, of ``W^T`` (its matching,
+        and so its pivots, are another: it rescued the perturbed sets measured in
+        ``docs/notes/warm-simplex.md``, "Per pivot"); False (SuperLU's turn) when both
+        perturbed a pivot."""
+        for transposed in (False, True):
+            try:
+                self._pardiso.factorise(W.T.tocsr() if transposed else W)
+            except _pardiso.PardisoError as exc:
+                if exc.code == _pardiso.ZERO_PIVOT:
+                    raise SingularWorkingSet(str(exc)) from None
+                raise
+            if self._pardiso.perturbed == 0:
+                self.on_pardiso, self.pardiso_transposed = True, transposed
+                self.transposed_lus += int(transposed)
+                self.fill = self._pardiso.fill
+                return True
             self._pardiso.release()
-            self.superlu_fallbacks += 1
-            return False
-        self.fill = self._pardiso.fill
-        return True
+        self.on_pardiso = False
+        self.superlu_fallbacks += 1
+        return False
 
     def _after_factorisation(self, t0: float) -> None:
         """Drop the etas and set the refactorisation interval from the new fill."""
@@ -214,7 +223,7 @@ class Factor:
         v = np.array(b, dtype=np.float64)
         k.eta_forward(self.eta_slot, self.eta_beta, self.count, v)
         if self.on_pardiso:
-            return self._pardiso.solve(v)
+            return self._pardiso.solve(v, transposed=self.pardiso_transposed)
         x = np.empty(self.n)
         k.lu_solve(self.Lp, self.Li, self.Lx, self.Up, self.Ui, self.Ux, self.perm_r, self.perm_c, v, x)
         return x
@@ -222,7 +231,7 @@ class Factor:
     def btran(self, c: NDArray[np.float64]) -> NDArray[np.float64]:
         """``W_k^-T c``, shape (n,)."""
         if self.on_pardiso:
-            y = self._pardiso.solve(c, transposed=True)
+            y = self._pardiso.solve(c, transposed=not self.pardiso_transposed)
             k.eta_backward(self.eta_slot, self.eta_beta, self.count, y)
             return y
         y = np.empty(self.n)
@@ -230,6 +239,17 @@ class Factor:
                               np.asarray(c, dtype=np.float64), y)
         k.eta_backward(self.eta_slot, self.eta_beta, self.count, y)
         return y
+
+    def btran_many(self, C: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``W_k^-T C`` for the k columns of ``C`` (n, k), shape (n, k): on PARDISO in one pass
+        over the factors, which costs about a third of k single solves for k = 16
+        (``docs/notes/warm-simplex.md``, "Per pivot")."""
+        if not self.on_pardiso:
+            return np.stack([self.btran(C[:, j]) for j in range(C.shape[1])], axis=1)
+        Y = self._pardiso.solve(C, transposed=not self.pardiso_transposed)
+        for j in range(Y.shape[1]):
+            k.eta_backward(self.eta_slot, self.eta_beta, self.count, Y[:, j])
+        return Y
 
     def release(self) -> None:
         """Free the library's memory of the factors (PARDISO keeps them outside Python)."""

@@ -51,14 +51,14 @@ class Weights:
         self.weight: NDArray[np.float64] | None = None
         self.sketch: NDArray[np.float64] | None = None
 
-    def start(self, n: int, A: sp.csr_matrix, btran, rng: np.random.Generator) -> None:
-        """Initial weights; ``btran(c)`` solves ``W^T y = c``."""
+    def start(self, n: int, A: sp.csr_matrix, btran_many, rng: np.random.Generator) -> None:
+        """Initial weights; ``btran_many(C)`` solves ``W^T Y = C`` for the columns of ``C`` (n, m)."""
         if self.rule == "devex":
             self.weight = np.ones(n)
             return
         m = SKETCH_ROWS
         G = rng.standard_normal((m, n)) + (A.T @ rng.standard_normal((A.shape[0], m))).T
-        self.sketch = np.ascontiguousarray(np.stack([btran(G[i]) for i in range(m)], axis=1))
+        self.sketch = np.ascontiguousarray(btran_many(G.T))
         self.weight = np.maximum((self.sketch**2).sum(axis=1) / m, 1e-300)
 
     def update(self, p: int, beta: NDArray[np.float64]) -> None:

@@ -57,12 +57,13 @@ class Tolerances:
 @dataclass
 class Stats:
     """What a solve did: the LU library (``pardiso`` or ``superlu``,
-    :data:`~jamflow.simplex.factor.LU_LIBRARIES`) and how many of its factorisations
-    SuperLU redid (PARDISO's perturbed pivots), pivots by kind, bound flips,
-    factorisations, rounds of primal simplex and dual repair, the fill ``nnz(L + U)`` of
+    :data:`~jamflow.simplex.factor.LU_LIBRARIES`), how many of its factorisations PARDISO
+    redid on ``W^T`` and how many SuperLU redid (PARDISO's perturbed pivots), pivots by
+    kind, bound flips, factorisations, rounds of primal simplex and dual repair, the fill ``nnz(L + U)`` of
     the last LU, and wall seconds by part."""
 
     lu: str = ""
+    transposed_lus: int = 0
     superlu_fallbacks: int = 0
     primal_pivots: int = 0
     dual_pivots: int = 0
@@ -208,6 +209,13 @@ class State:
         y = self.factor.btran(c)
         self.stats.seconds["btran"] += time.perf_counter() - t0
         return y
+
+    def btran_many(self, C: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``W^-T C`` for the columns of ``C`` (n, k)."""
+        t0 = time.perf_counter()
+        Y = self.factor.btran_many(C)
+        self.stats.seconds["btran"] += time.perf_counter() - t0
+        return Y
 
     def matvec(self, x: NDArray[np.float64], out: NDArray[np.float64]) -> NDArray[np.float64]:
         """``out = A x``."""

@@ -215,7 +215,7 @@ def _primal(st: State, weights: Weights, rng: np.random.Generator, limit: int) -
         if st.stats.pivots + st.stats.flips >= limit:
             raise Trouble("iteration limit")
         if weights.weight is None:  # only an LP that pivots pays for its weights
-            weights.start(n, st.A, st.btran, rng)
+            weights.start(n, st.A, st.btran_many, rng)
         p = k.devex_price(infeas, weights.weight, tol.dual)
         sigma = 1.0 if st.y[p] > 0.0 else -1.0
         d, kind, q, t = _move_out(st, e, p, sigma, tol)
@@ -427,6 +427,7 @@ def solve(A: sp.spmatrix, rhs: NDArray[np.float64], col_lower: NDArray[np.float6
     finally:
         st.factor.release()
     st.stats.superlu_fallbacks = st.factor.superlu_fallbacks
+    st.stats.transposed_lus = st.factor.transposed_lus
     st.stats.seconds["factor"] = st.factor.seconds_factor
     st.stats.seconds["order"] = st.factor.seconds_order
     st.stats.seconds["total"] = time.perf_counter() - t0
