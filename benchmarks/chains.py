@@ -17,7 +17,7 @@ Writes ``benchmarks/output/chains.nc`` and ``chains.png`` and prints the numbers
 of the child, start-up included) of bidisperse linked starts (size ratio 1.4, half the
 clusters large; ``jamflow init-chains --dispersity bi``) at fixed box and shear-stabilised
 against the same start with the links dropped (bidisperse spheres), the three runs of a
-start alternating, ``--seeds`` starts per size; writes ``chains_whole.nc`` and ``.png``.
+start alternating (``--cases shear`` runs only the shear-stabilised cells), ``--seeds`` starts per size; writes ``chains_whole.nc`` and ``.png``.
 
 Usage: ``python benchmarks/chains.py [--sizes 2:150 3:256 ...] [--hessian-sizes 30 60 120]
 [--pressure 1e-4] [--pressure-rtol 1e-3] [--whole [--seeds 3]]``; the defaults are the issue's sizes (2D rigid
@@ -199,8 +199,9 @@ def _child_cpu(cmd: list[str]) -> float:
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
-def whole_runs(sizes: list[tuple[int, int]], seeds: int, pressure: float, rtol: float) -> list[dict]:
-    """``jamflow soft-jam`` of linked starts (fixed box, shear-stabilised) and of the same starts without links."""
+def whole_runs(sizes: list[tuple[int, int]], seeds: int, pressure: float, rtol: float,
+               cases: tuple[str, ...] = ("fixed", "shear")) -> list[dict]:
+    """``jamflow soft-jam`` of linked starts (``cases``: fixed box, shear-stabilised) and of the same starts without links."""
     jam = [JAMFLOW, "soft-jam", "--quiet", "--pressure", f"{pressure:g}", "--force-tol",
            "1e-12", "--pressure-rtol", f"{rtol:g}", "--delta-phi", "1e-2"]
     rows = []
@@ -211,7 +212,8 @@ def whole_runs(sizes: list[tuple[int, int]], seeds: int, pressure: float, rtol: 
             start = _whole_start(tmp, d, n if d == 2 else 128, 1)
             unlinked = tmp / "w_spheres.nc"
             write_packing(read_packing(start).evolve(links=None), unlinked)
-            for src, extra in ((start, []), (start, ["--shear-stabilize"]), (unlinked, [])):
+            for src, extra in [(start, [])] * ("fixed" in cases) + [(start, ["--shear-stabilize"])] * ("shear" in cases) \
+                    + [(unlinked, [])]:
                 subprocess.run(jam + [str(src), str(tmp / "w.nc"), "--in-place", *extra], check=True,
                                stdout=subprocess.DEVNULL)
         for d, n in sizes:
@@ -222,10 +224,14 @@ def whole_runs(sizes: list[tuple[int, int]], seeds: int, pressure: float, rtol: 
                 cpu, attrs = {}, {}
                 for case, src, extra in (("spheres", spheres, []), ("fixed", linked, []),
                                          ("shear", linked, ["--shear-stabilize"])):
+                    if case not in ("spheres", *cases):
+                        continue
                     out = tmp / f"{case}_out.nc"
                     cpu[case] = _child_cpu(jam + [str(src), str(out), "--in-place", *extra])
                     attrs[case] = read_dataset(out).attrs
                 for shear, case in ((0, "fixed"), (1, "shear")):
+                    if case not in cases:
+                        continue
                     a, b = attrs[case], attrs["spheres"]
                     rows.append({"d": d, "n": n, "seed": seed, "shear": shear, "cpu_s": cpu[case],
                                  "sphere_cpu_s": cpu["spheres"], "cpu_ratio": cpu[case] / cpu["spheres"],
@@ -243,7 +249,7 @@ def whole_runs(sizes: list[tuple[int, int]], seeds: int, pressure: float, rtol: 
                           f"{r['sphere_phi']:.5f}, N_c {r['n_contacts']} / iso {r['isostatic_count']}, "
                           f"link error {r['max_link_error']:.1e}", flush=True)
     for d, n in sizes:
-        for shear in (0, 1):
+        for shear in [s for s, case in ((0, "fixed"), (1, "shear")) if case in cases]:
             sel = [r for r in rows if r["d"] == d and r["n"] == n and r["shear"] == shear]
             ratio = sum(r["cpu_s"] for r in sel) / sum(r["sphere_cpu_s"] for r in sel)
             per_step = [1e6 * r["cpu_s"] / r["steps"] for r in sel]
@@ -306,10 +312,12 @@ def main() -> None:
     ap.add_argument("--whole", action="store_true",
                     help="only the whole soft-jam command against spheres (bidisperse starts, CPU of each process)")
     ap.add_argument("--seeds", type=int, default=2, help="starts per size of --whole")
+    ap.add_argument("--cases", nargs="+", choices=["fixed", "shear"], default=["fixed", "shear"],
+                    help="linked cells of --whole: fixed box, shear-stabilised (the spheres always run)")
     args = ap.parse_args()
     sizes = [tuple(int(v) for v in s.split(":")) for s in args.sizes]
     if args.whole:
-        whole_output(whole_runs(sizes, args.seeds, args.pressure, args.pressure_rtol), args)
+        whole_output(whole_runs(sizes, args.seeds, args.pressure, args.pressure_rtol, tuple(args.cases)), args)
         return
     jam = [] if args.skip_jamming else jamming_runs(sizes, args.pressure, args.pressure_rtol, args.seed)
     proto_sizes = [tuple(int(v) for v in s.split(":")) for s in args.protocol_sizes]
