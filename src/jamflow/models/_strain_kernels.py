@@ -1,4 +1,4 @@
-"""Numba kernels of shear-stabilised linked spheres: the constraint solve with strain columns and the FIRE loop.
+"""Numba kernels of shear-stabilised linked spheres: link geometry, forces, list, re-affixing and the FIRE loop.
 
 The model is :class:`jamflow.models.strain.ShearStabilizedModel` (its module doc has
 the equations): degrees of freedom are reference centres ``y`` (N, d) and the scaled
@@ -7,8 +7,8 @@ gradient ``w_k = F^T u_k`` on its ends and ``Be_k`` on the strain, the volume
 ``ce = strain components of det F F^-T``. ``Gamma^T Gamma`` is solved with the
 per-cluster Cholesky factors of ``A = B_y B_y^T`` (:mod:`._link_kernels`), Woodbury
 for the rank-``m`` strain coupling ``K = A + Be Be^T`` and a Schur complement for the
-volume row. Links are in the cluster order of :class:`~jamflow.models.links.ClusterGram`.
-All kernels are single-threaded and cached.
+volume row (:mod:`._woodbury_kernels`). Links are in the cluster order of
+:class:`~jamflow.models.links.ClusterGram`. All kernels are single-threaded and cached.
 """
 
 from __future__ import annotations
@@ -29,9 +29,6 @@ from ..minimize._fire_kernels import (
 )
 from ..neighbors._cell_kernels import cell_pairs_into, pair_buffers
 from ._link_kernels import (
-    _all_pivots_inverse,
-    _det_inverse,
-    gram_factor,
     is_linked,
     strain_state,
 )
@@ -40,6 +37,14 @@ from ._rigid_kernels import (
     rigid_forces,
     rigid_max_force_sq,
     rigid_place,
+)
+from ._woodbury_kernels import (
+    _strain_multipliers,
+    omega_t_subtract_pair,
+    strain_project_pair,
+    strain_solver,
+    woodbury_back,
+    woodbury_forward,
 )
 from .spheres._kernels import _pair_magnitude, pair_forces_affine
 
@@ -56,6 +61,8 @@ def _component(G, a, b, scale):
 def strain_links(y, F, li, lj, offset, length, R0, u, rl):
     """Reference link vectors ``R0``, unit current vectors ``u`` of ``F R0`` and lengths ``rl``; returns ``max |r - l| / l``."""
     d = y.shape[1]
+    if d == 3:
+        return _strain_links_3d(y, F, li, lj, offset, length, R0, u, rl)
     err = 0.0
     for k in range(li.shape[0]):
         s = 0.0
@@ -77,196 +84,32 @@ def strain_links(y, F, li, lj, offset, length, R0, u, rl):
 
 
 @njit(cache=True)
-def strain_solver(F, det, Finv, R0, u, sign, first, cptr, fptr, chol, pinv, w, Be, Z, S, ce, sce, scale, rank_rtol):
-    """The factorisation of ``Gamma^T Gamma`` at a point (geometry ``R0``, ``u`` of :func:`strain_links`).
-
-    Fills ``w`` (rows ``F^T u``), ``Be``, the Gram factors ``chol`` (``A = L L^T``) and the
-    reciprocals ``pinv`` of their pivots, ``Z = L^-1 Be`` (forward substitution only),
-    ``S = Z^T Z = Be^T A^-1 Be`` (accumulated in the same pass), ``ce`` and ``sce = small ce``.
-    Returns ``(bad, small, schur)``: the first degenerate cluster or -1, the capacitance
-    inverse ``small = (1 + S)^-1`` of the Woodbury identity and the volume row's Schur
-    complement ``ce . ce - b . K^-1 b = ce . small ce`` (``b = Be ce``,
-    ``Be^T K^-1 Be = 1 - small``): no vector of link length beyond ``Z``.
-    """
-    d = F.shape[0]
-    L = w.shape[0]
-    m = Be.shape[1]
-    on = 1.0 / scale  # the weights of the components, multiplied per link (no division per link)
-    off = 1.0 / (np.sqrt(2.0) * scale)
-    for k in range(L):
-        for a in range(d):
-            t = 0.0
-            for c in range(d):
-                t += F[c, a] * u[k, c]
-            w[k, a] = t
-        p = 0
-        for a in range(d):
-            for c in range(a, d):
-                if a == c:
-                    Be[k, p] = u[k, a] * R0[k, a] * on
-                else:
-                    Be[k, p] = (u[k, a] * R0[k, c] + u[k, c] * R0[k, a]) * off
-                p += 1
-    p = 0
-    for a in range(d):
-        for c in range(a, d):
-            # G = det F F^-T: G[a, c] = det Finv[c, a]
-            if a == c:
-                ce[p] = det * Finv[a, a] / scale
-            else:
-                ce[p] = det * (Finv[c, a] + Finv[a, c]) / (np.sqrt(2.0) * scale)
-            p += 1
-    small = np.eye(m)
-    S[:, :] = 0.0
-    if L:
-        bad = gram_factor(w, sign, first, cptr, fptr, chol, rank_rtol)
-        if bad >= 0:
-            return bad, small, 1.0
-        _all_pivots_inverse(cptr, fptr, chol, pinv)
-    for c in range(cptr.shape[0] - 1):
-        k0 = cptr[c]
-        mc = cptr[c + 1] - k0
-        base = fptr[c]
-        for i in range(mc):
-            k = k0 + i
-            for col in range(m):
-                t = Be[k, col]
-                for p in range(first[k], i):
-                    t -= chol[base + i * mc + p] * Z[k0 + p, col]
-                Z[k, col] = t * pinv[k]
-            for a in range(m):
-                za = Z[k, a]
-                for b in range(a, m):
-                    S[a, b] += za * Z[k, b]
-    for a in range(m):
-        for b in range(a):
-            S[a, b] = S[b, a]
-    small += S
-    small = _det_inverse(small)[1]
-    schur = 0.0
-    for a in range(m):
-        t = 0.0
-        for b in range(m):
-            t += small[a, b] * ce[b]
-        sce[a] = t
-        schur += ce[a] * t
-    return -1, small, schur
-
-
-@njit(cache=True)
-def _forward(first, cptr, fptr, chol, pinv, Z, z, t, ncol):
-    """``z <- L^-1 z`` (first ``ncol`` columns of ``z`` (L, 2)) and ``t = Z^T z`` (m, 2), cluster by cluster."""
-    m = Z.shape[1]
-    t[:, :] = 0.0
-    for c in range(cptr.shape[0] - 1):
-        k0 = cptr[c]
-        mc = cptr[c + 1] - k0
-        base = fptr[c]
-        for i in range(mc):
-            k = k0 + i
-            for col in range(ncol):
-                s = z[k, col]
-                for p in range(first[k], i):
-                    s -= chol[base + i * mc + p] * z[k0 + p, col]
-                s *= pinv[k]
-                z[k, col] = s
-                for a in range(m):
-                    t[a, col] += Z[k, a] * s
-
-
-@njit(cache=True)
-def _back(first, cptr, fptr, chol, pinv, Z, z, q, ncol):
-    """``z <- L^-T (z - Z q)`` (first ``ncol`` columns; ``q`` (m, 2)), cluster by cluster."""
-    m = Z.shape[1]
-    for c in range(cptr.shape[0] - 1):
-        k0 = cptr[c]
-        mc = cptr[c + 1] - k0
-        base = fptr[c]
-        for i in range(mc):
-            k = k0 + i
-            for col in range(ncol):
-                s = z[k, col]
-                for a in range(m):
-                    s -= Z[k, a] * q[a, col]
-                z[k, col] = s
-        for i in range(mc - 1, -1, -1):
-            k = k0 + i
-            for col in range(ncol):
-                s = z[k, col] * pinv[k]
-                z[k, col] = s
-                for p in range(first[k], i):
-                    z[k0 + p, col] -= chol[base + i * mc + p] * s
-
-
-@njit(cache=True)
-def _strain_multipliers(small, ce, sce, schur, fixed_volume, t, r_vol, ge, q, col):
-    """The strain and volume part of one column's solve: ``q = s + nu sce`` (``s = small t``), the strain
-    correction, with ``nu = (r_vol - ce . s) / schur`` (0 with a free volume); ``ge -= q``; returns ``nu``.
-
-    ``s = Be^T K^-1 r`` and ``ce . s = b . K^-1 r`` (Woodbury), so ``Be^T lam + ce nu = q`` for
-    ``lam = K^-1 r - nu K^-1 b`` and ``K^-1 r - nu K^-1 b = L^-T (L^-1 r - Z q)``.
-    """
-    m = small.shape[0]
-    cs = 0.0
-    for a in range(m):
-        s = 0.0
-        for b in range(m):
-            s += small[a, b] * t[b, col]
-        q[a, col] = s
-        cs += ce[a] * s
-    nu = (r_vol - cs) / schur if fixed_volume else 0.0
-    for a in range(m):
-        q[a, col] += nu * sce[a]
-        ge[a] -= q[a, col]
-    return nu
-
-
-@njit(cache=True)
-def strain_project_pair(w, Z, S, small, ce, sce, schur, fixed_volume, li, lj, first, cptr, fptr, chol, pinv,
-                        gy, ge, vy, ve, z, t, q):
-    """``(gy, ge)`` and ``(vy, ve)`` projected in place onto the tangent space (Eq. 18), the force and
-    the velocity of a step with one two-column solve; ``z`` (L, 2), ``t``, ``q`` (m, 2) work arrays.
-
-    Per column ``g``: the multipliers ``(lam, nu)`` of ``Gamma^T Gamma (lam, nu) = Gamma^T g`` by
-    Woodbury on the factors of :func:`strain_solver`: ``z = L^-1 Omega_w g_y``,
-    ``t = Z^T z + S g_e`` (``= Be^T A^-1 (Omega_w g_y + Be g_e)``), the strain correction ``q``
-    (:func:`_strain_multipliers`), ``lam = L^-T (z - Z (q - g_e))``; then ``g_y -= Omega_w^T lam``
-    and ``g_e -= q``. Two passes over the links, no ``A^-1 Be`` and no vector of link length for the volume.
-    """
-    d = w.shape[1]
-    m = Z.shape[1]
-    L = li.shape[0]
-    for k in range(L):
-        s = 0.0
-        s2 = 0.0
-        for a in range(d):
-            s += w[k, a] * (gy[lj[k], a] - gy[li[k], a])
-            s2 += w[k, a] * (vy[lj[k], a] - vy[li[k], a])
-        z[k, 0] = s
-        z[k, 1] = s2
-    _forward(first, cptr, fptr, chol, pinv, Z, z, t, 2)
-    rg = 0.0
-    rv = 0.0
-    for a in range(m):
-        for b in range(m):
-            t[a, 0] += S[a, b] * ge[b]
-            t[a, 1] += S[a, b] * ve[b]
-        rg += ce[a] * ge[a]
-        rv += ce[a] * ve[a]
-    _strain_multipliers(small, ce, sce, schur, fixed_volume, t, rg, ge, q, 0)
-    _strain_multipliers(small, ce, sce, schur, fixed_volume, t, rv, ve, q, 1)
-    for a in range(m):  # q - g_e of the entry g_e is minus the corrected g_e
-        q[a, 0] = -ge[a]
-        q[a, 1] = -ve[a]
-    _back(first, cptr, fptr, chol, pinv, Z, z, q, 2)
-    for k in range(L):
-        for a in range(d):
-            v = z[k, 0] * w[k, a]
-            gy[lj[k], a] -= v
-            gy[li[k], a] += v
-            v = z[k, 1] * w[k, a]
-            vy[lj[k], a] -= v
-            vy[li[k], a] += v
+def _strain_links_3d(y, F, li, lj, offset, length, R0, u, rl):
+    """:func:`strain_links` for d = 3 with ``F`` and a link in registers (the same operations in the same order)."""
+    f00, f01, f02 = F[0, 0], F[0, 1], F[0, 2]
+    f10, f11, f12 = F[1, 0], F[1, 1], F[1, 2]
+    f20, f21, f22 = F[2, 0], F[2, 1], F[2, 2]
+    err = 0.0
+    for k in range(li.shape[0]):
+        i = li[k]
+        j = lj[k]
+        r0 = y[j, 0] - y[i, 0] + offset[k, 0]
+        r1 = y[j, 1] - y[i, 1] + offset[k, 1]
+        r2 = y[j, 2] - y[i, 2] + offset[k, 2]
+        R0[k, 0] = r0
+        R0[k, 1] = r1
+        R0[k, 2] = r2
+        t0 = f00 * r0 + f01 * r1 + f02 * r2
+        t1 = f10 * r0 + f11 * r1 + f12 * r2
+        t2 = f20 * r0 + f21 * r1 + f22 * r2
+        r = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+        rl[k] = r
+        inv = 1.0 / r
+        u[k, 0] = t0 * inv
+        u[k, 1] = t1 * inv
+        u[k, 2] = t2 * inv
+        err = max(err, abs(r / length[k] - 1.0))
+    return err
 
 
 @njit(cache=True, inline="always")
@@ -475,7 +318,6 @@ def strain_reaffix(y, e, h0, scale, fixed_volume, li, lj, offset, length, sign, 
     """
     previous = np.inf
     err = 0.0
-    d = y.shape[1]
     for sweep in range(max_sweeps + 1):
         F, _, _, _, det, Finv = strain_state(e, h0, scale)
         err = strain_links(y, F, li, lj, offset, length, R0, u, rl)
@@ -494,14 +336,10 @@ def strain_reaffix(y, e, h0, scale, fixed_volume, li, lj, offset, length, sign, 
         previous = err
         for k in range(li.shape[0]):
             z[k, 0] = rl[k] - length[k]
-        _forward(first, cptr, fptr, chol, pinv, Z, z, t, 1)
+        woodbury_forward(first, cptr, fptr, chol, pinv, Z, z, t, 1)
         _strain_multipliers(small, ce, sce, schur, fixed_volume, t, c_vol, e, q, 0)
-        _back(first, cptr, fptr, chol, pinv, Z, z, q, 1)
-        for k in range(li.shape[0]):
-            for a in range(d):
-                v = z[k, 0] * w[k, a]
-                y[lj[k], a] -= v
-                y[li[k], a] += v
+        woodbury_back(first, cptr, fptr, chol, pinv, Z, z, q, 1)
+        omega_t_subtract_pair(w, li, lj, z, y, y, 1)
     return -1, err, -1, small, schur
 
 
@@ -699,13 +537,23 @@ def _rebuild_due(y, T, A, y_build, reach, skin):
             dev += t * t
     m1 = 0.0
     m2 = 0.0
+    three = d == 3
     for i in range(y.shape[0]):
-        d2 = 0.0
-        for a in range(d):
-            t = 0.0
-            for c in range(a, d):
-                t += T[a, c] * (y[i, c] - y_build[i, c])
-            d2 += t * t
+        if three:  # the loop below unrolled: the same operations in the same order
+            e0 = y[i, 0] - y_build[i, 0]
+            e1 = y[i, 1] - y_build[i, 1]
+            e2 = y[i, 2] - y_build[i, 2]
+            t0 = T[0, 0] * e0 + T[0, 1] * e1 + T[0, 2] * e2
+            t1 = T[1, 1] * e1 + T[1, 2] * e2
+            t2 = T[2, 2] * e2
+            d2 = t0 * t0 + t1 * t1 + t2 * t2
+        else:
+            d2 = 0.0
+            for a in range(d):
+                t = 0.0
+                for c in range(a, d):
+                    t += T[a, c] * (y[i, c] - y_build[i, c])
+                d2 += t * t
         if d2 > m1:
             m1, m2 = d2, m1
         elif d2 > m2:
