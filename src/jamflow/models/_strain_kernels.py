@@ -60,9 +60,15 @@ def _component(G, a, b, scale):
 @njit(cache=True)
 def strain_links(y, F, li, lj, offset, length, R0, u, rl):
     """Reference link vectors ``R0``, unit current vectors ``u`` of ``F R0`` and lengths ``rl``; returns ``max |r - l| / l``."""
-    d = y.shape[1]
-    if d == 3:
+    if y.shape[1] == 3:
         return _strain_links_3d(y, F, li, lj, offset, length, R0, u, rl)
+    return _strain_links(y, F, li, lj, offset, length, R0, u, rl)
+
+
+@njit(cache=True)
+def _strain_links(y, F, li, lj, offset, length, R0, u, rl):
+    """:func:`strain_links` in any dimension."""
+    d = y.shape[1]
     err = 0.0
     for k in range(li.shape[0]):
         s = 0.0
