@@ -123,6 +123,17 @@ def _rows_3d(F, R0, u, on, off, w, Be):
         Be[k, 5] = u2 * r2 * on
 
 
+@njit(cache=True, inline="always")
+def _forward_entry(first, chol, pinv, X, k0, i, mc, base, col):
+    """Row ``i`` of one cluster's forward substitution ``L_c x = b`` in column ``col`` of ``X`` (rows above solved,
+    row ``i`` holding ``b``): the solved entry, by the reciprocal pivot."""
+    k = k0 + i
+    s = X[k, col]
+    for p in range(first[k], i):
+        s -= chol[base + i * mc + p] * X[k0 + p, col]
+    return s * pinv[k]
+
+
 @njit(cache=True)
 def _z_rows(first, cptr, fptr, chol, pinv, Be, Z, S):
     """``Z = L^-1 Be`` (L, m) cluster by cluster and the upper triangle of ``S = Z^T Z`` (m, m), summed in link order."""
@@ -135,10 +146,8 @@ def _z_rows(first, cptr, fptr, chol, pinv, Be, Z, S):
         for i in range(mc):
             k = k0 + i
             for col in range(m):
-                t = Be[k, col]
-                for p in range(first[k], i):
-                    t -= chol[base + i * mc + p] * Z[k0 + p, col]
-                Z[k, col] = t * pinv[k]
+                Z[k, col] = Be[k, col]
+                Z[k, col] = _forward_entry(first, chol, pinv, Z, k0, i, mc, base, col)
             for a in range(m):
                 za = Z[k, a]
                 for b in range(a, m):
@@ -243,10 +252,7 @@ def _forward(first, cptr, fptr, chol, pinv, Z, z, t, ncol):
         for i in range(mc):
             k = k0 + i
             for col in range(ncol):
-                s = z[k, col]
-                for p in range(first[k], i):
-                    s -= chol[base + i * mc + p] * z[k0 + p, col]
-                s *= pinv[k]
+                s = _forward_entry(first, chol, pinv, z, k0, i, mc, base, col)
                 z[k, col] = s
                 for a in range(m):
                     t[a, col] += Z[k, a] * s
@@ -408,11 +414,7 @@ def _forward_6(first, cptr, fptr, chol, pinv, Z, z, t, ncol):
         base = fptr[c]
         for i in range(mc):
             k = k0 + i
-            f0 = first[k]
-            s = z[k, 0]
-            for p in range(f0, i):
-                s -= chol[base + i * mc + p] * z[k0 + p, 0]
-            s *= pinv[k]
+            s = _forward_entry(first, chol, pinv, z, k0, i, mc, base, 0)
             z[k, 0] = s
             t0 += Z[k, 0] * s
             t1 += Z[k, 1] * s
@@ -421,10 +423,7 @@ def _forward_6(first, cptr, fptr, chol, pinv, Z, z, t, ncol):
             t4 += Z[k, 4] * s
             t5 += Z[k, 5] * s
             if two:
-                s = z[k, 1]
-                for p in range(f0, i):
-                    s -= chol[base + i * mc + p] * z[k0 + p, 1]
-                s *= pinv[k]
+                s = _forward_entry(first, chol, pinv, z, k0, i, mc, base, 1)
                 z[k, 1] = s
                 v0 += Z[k, 0] * s
                 v1 += Z[k, 1] * s
