@@ -1,4 +1,4 @@
-"""Numba kernels of shear-stabilised linked spheres: the constraint solve with strain columns and the FIRE loop.
+"""Numba kernels of shear-stabilised linked spheres: link geometry, forces, list, re-affixing and the FIRE loop.
 
 The model is :class:`jamflow.models.strain.ShearStabilizedModel` (its module doc has
 the equations): degrees of freedom are reference centres ``y`` (N, d) and the scaled
@@ -7,8 +7,8 @@ gradient ``w_k = F^T u_k`` on its ends and ``Be_k`` on the strain, the volume
 ``ce = strain components of det F F^-T``. ``Gamma^T Gamma`` is solved with the
 per-cluster Cholesky factors of ``A = B_y B_y^T`` (:mod:`._link_kernels`), Woodbury
 for the rank-``m`` strain coupling ``K = A + Be Be^T`` and a Schur complement for the
-volume row. Links are in the cluster order of :class:`~jamflow.models.links.ClusterGram`.
-All kernels are single-threaded and cached.
+volume row (:mod:`._woodbury_kernels`). Links are in the cluster order of
+:class:`~jamflow.models.links.ClusterGram`. All kernels are single-threaded and cached.
 """
 
 from __future__ import annotations
@@ -28,11 +28,7 @@ from ..minimize._fire_kernels import (
     _mixed,
 )
 from ..neighbors._cell_kernels import cell_pairs_into, pair_buffers
-from ..neighbors._verlet_kernels import _needs_rebuild
 from ._link_kernels import (
-    _det_inverse,
-    gram_factor,
-    gram_solve,
     is_linked,
     strain_state,
 )
@@ -42,7 +38,15 @@ from ._rigid_kernels import (
     rigid_max_force_sq,
     rigid_place,
 )
-from .spheres._kernels import pair_forces
+from ._woodbury_kernels import (
+    _strain_multipliers,
+    omega_t_subtract_pair,
+    strain_project_pair,
+    strain_solver,
+    woodbury_back,
+    woodbury_forward,
+)
+from .spheres._kernels import _pair_magnitude, pair_forces_affine
 
 
 @njit(cache=True, inline="always")
@@ -56,6 +60,14 @@ def _component(G, a, b, scale):
 @njit(cache=True)
 def strain_links(y, F, li, lj, offset, length, R0, u, rl):
     """Reference link vectors ``R0``, unit current vectors ``u`` of ``F R0`` and lengths ``rl``; returns ``max |r - l| / l``."""
+    if y.shape[1] == 3:
+        return _strain_links_3d(y, F, li, lj, offset, length, R0, u, rl)
+    return _strain_links(y, F, li, lj, offset, length, R0, u, rl)
+
+
+@njit(cache=True)
+def _strain_links(y, F, li, lj, offset, length, R0, u, rl):
+    """:func:`strain_links` in any dimension."""
     d = y.shape[1]
     err = 0.0
     for k in range(li.shape[0]):
@@ -70,212 +82,131 @@ def strain_links(y, F, li, lj, offset, length, R0, u, rl):
             s += t * t
         r = np.sqrt(s)
         rl[k] = r
+        inv = 1.0 / r
         for a in range(d):
-            u[k, a] /= r
+            u[k, a] *= inv
         err = max(err, abs(r / length[k] - 1.0))
     return err
 
 
 @njit(cache=True)
-def _k_solve(first, cptr, fptr, chol, Be, AiBe, small, rhs, out):
-    """``out = K^-1 rhs`` by Woodbury: ``A^-1 rhs - AiBe small Be^T A^-1 rhs``."""
-    m = Be.shape[1]
-    out[:] = rhs
-    gram_solve(first, cptr, fptr, chol, out.reshape(out.shape[0], 1))
-    t = np.zeros(m)
-    for k in range(out.shape[0]):
-        for p in range(m):
-            t[p] += Be[k, p] * out[k]
-    t2 = np.zeros(m)
-    for p in range(m):
-        for q in range(m):
-            t2[p] += small[p, q] * t[q]
-    for k in range(out.shape[0]):
-        s = 0.0
-        for p in range(m):
-            s += AiBe[k, p] * t2[p]
-        out[k] -= s
-
-
-@njit(cache=True)
-def strain_solver(F, det, Finv, R0, u, li, lj, sign, first, cptr, fptr, chol, w, Be, AiBe, ce, b, Kib, scale,
-                  rank_rtol):
-    """The factorisation of ``Gamma^T Gamma`` at a point (geometry ``R0``, ``u`` of :func:`strain_links`).
-
-    Fills ``w`` (rows ``F^T u``), ``Be``, the Gram factors ``chol``, ``AiBe = A^-1 Be``,
-    ``ce``, ``b = Be ce`` and ``Kib = K^-1 b``. Returns ``(bad, small, schur)``: the first
-    degenerate cluster or -1, ``(1 + Be^T A^-1 Be)^-1`` and the volume row's Schur
-    complement ``ce . ce - b . K^-1 b``.
-    """
-    d = F.shape[0]
-    L = li.shape[0]
-    m = Be.shape[1]
-    for k in range(L):
-        for a in range(d):
-            t = 0.0
-            for c in range(d):
-                t += F[c, a] * u[k, c]
-            w[k, a] = t
-        p = 0
-        for a in range(d):
-            for c in range(a, d):
-                if a == c:
-                    Be[k, p] = u[k, a] * R0[k, a] / scale
-                else:
-                    Be[k, p] = (u[k, a] * R0[k, c] + u[k, c] * R0[k, a]) / (np.sqrt(2.0) * scale)
-                p += 1
-    p = 0
-    for a in range(d):
-        for c in range(a, d):
-            # G = det F F^-T: G[a, c] = det Finv[c, a]
-            if a == c:
-                ce[p] = det * Finv[a, a] / scale
-            else:
-                ce[p] = det * (Finv[c, a] + Finv[a, c]) / (np.sqrt(2.0) * scale)
-            p += 1
-    small = np.eye(m)
-    if L:
-        bad = gram_factor(w, sign, first, cptr, fptr, chol, rank_rtol)
-        if bad >= 0:
-            return bad, small, 1.0
-    AiBe[:, :] = Be
-    gram_solve(first, cptr, fptr, chol, AiBe)
-    S = np.zeros((m, m))
-    for k in range(L):  # one pass over the links; each sum in the order of k
-        for p in range(m):
-            for q in range(m):
-                S[p, q] += Be[k, p] * AiBe[k, q]
-    small += S
-    small = _det_inverse(small)[1]
-    # b = Be ce, so K^-1 b = AiBe (ce - small Be^T AiBe ce) = AiBe small ce (Woodbury): no solve
-    sce = np.zeros(m)
-    for p in range(m):
-        for q in range(m):
-            sce[p] += small[p, q] * ce[q]
-    for k in range(L):
-        s = 0.0
-        t = 0.0
-        for p in range(m):
-            s += Be[k, p] * ce[p]
-            t += AiBe[k, p] * sce[p]
-        b[k] = s
-        Kib[k] = t
-    schur = ce @ ce - b @ Kib
-    return -1, small, schur
-
-
-@njit(cache=True)
-def strain_solve(first, cptr, fptr, chol, Be, AiBe, small, b, Kib, schur, fixed_volume, r_links, r_vol, lam):
-    """``(lam, nu)`` of ``Gamma^T Gamma (lam, nu) = (r_links, r_vol)`` into ``lam``; returns ``nu``."""
-    _k_solve(first, cptr, fptr, chol, Be, AiBe, small, r_links, lam)
-    if not fixed_volume:
-        return 0.0
-    nu = (r_vol - b @ lam) / schur
-    for k in range(lam.shape[0]):
-        lam[k] -= Kib[k] * nu
-    return nu
-
-
-@njit(cache=True)
-def strain_subtract(w, Be, ce, li, lj, lam, nu, gy, ge):
-    """``(gy, ge) -= Gamma (lam, nu)``: ``Omega_w^T lam`` on the centres, ``Be^T lam + ce nu`` on the strain."""
-    d = w.shape[1]
-    m = Be.shape[1]
+def _strain_links_3d(y, F, li, lj, offset, length, R0, u, rl):
+    """:func:`strain_links` for d = 3 with ``F`` and a link in registers (the same operations in the same order)."""
+    f00, f01, f02 = F[0, 0], F[0, 1], F[0, 2]
+    f10, f11, f12 = F[1, 0], F[1, 1], F[1, 2]
+    f20, f21, f22 = F[2, 0], F[2, 1], F[2, 2]
+    err = 0.0
     for k in range(li.shape[0]):
-        for a in range(d):
-            v = lam[k] * w[k, a]
-            gy[lj[k], a] -= v
-            gy[li[k], a] += v
-        for p in range(m):
-            ge[p] -= Be[k, p] * lam[k]
-    for p in range(m):
-        ge[p] -= ce[p] * nu
+        i = li[k]
+        j = lj[k]
+        r0 = y[j, 0] - y[i, 0] + offset[k, 0]
+        r1 = y[j, 1] - y[i, 1] + offset[k, 1]
+        r2 = y[j, 2] - y[i, 2] + offset[k, 2]
+        R0[k, 0] = r0
+        R0[k, 1] = r1
+        R0[k, 2] = r2
+        t0 = f00 * r0 + f01 * r1 + f02 * r2
+        t1 = f10 * r0 + f11 * r1 + f12 * r2
+        t2 = f20 * r0 + f21 * r1 + f22 * r2
+        r = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+        rl[k] = r
+        inv = 1.0 / r
+        u[k, 0] = t0 * inv
+        u[k, 1] = t1 * inv
+        u[k, 2] = t2 * inv
+        err = max(err, abs(r / length[k] - 1.0))
+    return err
 
 
-@njit(cache=True)
-def strain_project_pair(w, Be, ce, li, lj, first, cptr, fptr, chol, AiBe, small, b, Kib, schur, fixed_volume, gy, ge,
-                        vy, ve, links, t, t2):
-    """``(gy, ge)`` and ``(vy, ve)`` projected in place onto the tangent space (Eq. 18), the force and
-    the velocity of a step with one two-column solve; ``links`` (L, 2), ``t``, ``t2`` (m, 2) work arrays.
+@njit(cache=True, inline="always")
+def _affine_pair_loop(y, T, offset, pi, pj, sigma, eps, w, force, virial, three):
+    """Pair forces of centres ``T y`` (``T`` upper triangular) for d = 2 (``three`` False) or 3, unrolled.
 
-    Per column: ``lam = K^-1 Gamma^T g`` by Woodbury (``A^-1`` by the Gram factors, then
-    ``- AiBe small Be^T``), the volume multiplier ``nu`` by the Schur complement, and
-    ``g -= Gamma (lam, nu)`` (:func:`strain_subtract`).
+    The pair vector is formed in the deformed frame straight from the reference one,
+    ``T (y_j - y_i + offset)`` (no rotated copy of the centres or of the images); forces
+    ``-dU/dx`` (N, d) and the virial as :func:`jamflow.models.spheres._kernels.pair_forces`.
     """
-    d = w.shape[1]
-    m = Be.shape[1]
-    L = li.shape[0]
-    for k in range(L):
-        s = 0.0
-        s2 = 0.0
-        for a in range(d):
-            s += w[k, a] * (gy[lj[k], a] - gy[li[k], a])
-            s2 += w[k, a] * (vy[lj[k], a] - vy[li[k], a])
-        for p in range(m):
-            s += Be[k, p] * ge[p]
-            s2 += Be[k, p] * ve[p]
-        links[k, 0] = s
-        links[k, 1] = s2
-    gram_solve(first, cptr, fptr, chol, links)
-    t[:, :] = 0.0
-    t2[:, :] = 0.0
-    for k in range(L):
-        for p in range(m):
-            t[p, 0] += Be[k, p] * links[k, 0]
-            t[p, 1] += Be[k, p] * links[k, 1]
-    for p in range(m):
-        for q in range(m):
-            t2[p, 0] += small[p, q] * t[q, 0]
-            t2[p, 1] += small[p, q] * t[q, 1]
-    for k in range(L):
-        s = 0.0
-        s2 = 0.0
-        for p in range(m):
-            s += AiBe[k, p] * t2[p, 0]
-            s2 += AiBe[k, p] * t2[p, 1]
-        links[k, 0] -= s
-        links[k, 1] -= s2
-    nu = 0.0
-    nu2 = 0.0
-    if fixed_volume:
-        s = 0.0
-        s2 = 0.0
-        for k in range(L):
-            s += b[k] * links[k, 0]
-            s2 += b[k] * links[k, 1]
-        nu = (ce @ ge - s) / schur
-        nu2 = (ce @ ve - s2) / schur
-        for k in range(L):
-            links[k, 0] -= Kib[k] * nu
-            links[k, 1] -= Kib[k] * nu2
-    strain_subtract(w, Be, ce, li, lj, links[:, 0], nu, gy, ge)
-    strain_subtract(w, Be, ce, li, lj, links[:, 1], nu2, vy, ve)
+    energy = 0.0
+    n_contact = 0
+    harmonic = w == 2.0
+    t00, t01, t11 = T[0, 0], T[0, 1], T[1, 1]
+    t02 = T[0, 2] if three else 0.0
+    t12 = T[1, 2] if three else 0.0
+    t22 = T[2, 2] if three else 0.0
+    for p in range(pi.shape[0]):
+        i = pi[p]
+        j = pj[p]
+        r0 = y[j, 0] - y[i, 0] + offset[p, 0]
+        r1 = y[j, 1] - y[i, 1] + offset[p, 1]
+        if three:
+            r2 = y[j, 2] - y[i, 2] + offset[p, 2]
+            dx0 = t00 * r0 + t01 * r1 + t02 * r2
+            dx1 = t11 * r1 + t12 * r2
+            dx2 = t22 * r2
+        else:
+            dx0 = t00 * r0 + t01 * r1
+            dx1 = t11 * r1
+            dx2 = 0.0
+        rr = dx0 * dx0 + dx1 * dx1 + dx2 * dx2
+        sig = sigma[p]
+        if rr < sig * sig:
+            e, fmag, inv_r = _pair_magnitude(rr, sig, eps, w, harmonic)
+            energy += e
+            n_contact += 1
+            c = fmag * inv_r
+            f0 = c * dx0
+            f1 = c * dx1
+            force[j, 0] += f0
+            force[i, 0] -= f0
+            force[j, 1] += f1
+            force[i, 1] -= f1
+            virial[0, 0] += f0 * dx0
+            virial[0, 1] += f0 * dx1
+            virial[1, 1] += f1 * dx1
+            if three:
+                f2 = c * dx2
+                force[j, 2] += f2
+                force[i, 2] -= f2
+                virial[0, 2] += f0 * dx2
+                virial[1, 2] += f1 * dx2
+                virial[2, 2] += f2 * dx2
+    virial[1, 0] = virial[0, 1]
+    if three:
+        virial[2, 0] = virial[0, 2]
+        virial[2, 1] = virial[1, 2]
+    return energy, n_contact
 
 
 @njit(cache=True)
-def strain_forces(y, Q, T, Finv, scale, offset, pi, pj, sigma, eps, w_exp, x, shifted, force, fy, fe):
+def _affine_pairs_2d(y, T, offset, pi, pj, sigma, eps, w, force, virial):
+    return _affine_pair_loop(y, T, offset, pi, pj, sigma, eps, w, force, virial, False)
+
+
+@njit(cache=True)
+def _affine_pairs_3d(y, T, offset, pi, pj, sigma, eps, w, force, virial):
+    return _affine_pair_loop(y, T, offset, pi, pj, sigma, eps, w, force, virial, True)
+
+
+@njit(cache=True)
+def strain_forces(y, Q, T, Finv, scale, offset, pi, pj, sigma, eps, w_exp, force, fy, fe):
     """Energy, contacts and generalised forces ``-dU/dy`` (N, d) into ``fy`` and ``-dU/de`` (m,) into ``fe``.
 
-    The pair forces are those of the centres ``x = T y`` (rotated frame) with the
-    images ``T offset`` (:func:`jamflow.models.spheres._kernels.pair_forces`, its loops
-    unrolled for d = 2 and 3); ``x`` (N, d), ``shifted`` (at least (P, d)) and ``force``
-    (N, d) are work space.
+    The pair forces are those of the centres ``x = T y`` (rotated frame, ``T`` upper
+    triangular) with the images ``T offset``, each pair vector formed in that frame from
+    its reference vector (:func:`_affine_pair_loop` for d = 2 and 3,
+    :func:`jamflow.models.spheres._kernels.pair_forces_affine` otherwise); ``force``
+    (N, d) is work space (``-dU/dx``).
     """
     d = y.shape[1]
-    for i in range(y.shape[0]):
-        for a in range(d):
-            t = 0.0
-            for c in range(a, d):
-                t += T[a, c] * y[i, c]
-            x[i, a] = t
-    for p in range(pi.shape[0]):
-        for a in range(d):
-            t = 0.0
-            for c in range(a, d):
-                t += T[a, c] * offset[p, c]
-            shifted[p, a] = t
     virial = np.zeros((d, d))
-    energy, n_contact = pair_forces(x, 1.0, shifted[:pi.shape[0]], pi, pj, sigma, eps, w_exp, force, virial, True)
+    if d == 2 or d == 3:
+        force[:, :] = 0.0
+        if d == 3:
+            energy, n_contact = _affine_pairs_3d(y, T, offset, pi, pj, sigma, eps, w_exp, force, virial)
+        else:
+            energy, n_contact = _affine_pairs_2d(y, T, offset, pi, pj, sigma, eps, w_exp, force, virial)
+    else:
+        energy, n_contact = pair_forces_affine(y, T, offset, pi, pj, sigma, eps, w_exp, force, virial)
     for i in range(y.shape[0]):
         for c in range(d):
             t = 0.0
@@ -378,14 +309,18 @@ def sheared_list(y, h0, h0_inv, U, T, diameter, skin, adj_ptr, adj, buffers):
 
 
 @njit(cache=True)
-def strain_reaffix(y, e, h0, scale, fixed_volume, li, lj, offset, length, sign, first, cptr, fptr, chol, R0, u, rl,
-                   w, Be, AiBe, ce, b, Kib, small, schur, lam, length_rtol, max_sweeps, rank_rtol, chord):
+def strain_reaffix(y, e, h0, scale, fixed_volume, li, lj, offset, length, sign, first, cptr, fptr, chol, pinv, R0, u,
+                   rl, w, Be, Z, S, ce, sce, small, schur, z, t, q, length_rtol, max_sweeps, rank_rtol, chord):
     """Newton re-affixing of links and ``det F = 1`` in place (:meth:`ShearStabilizedModel.reproject`).
 
-    Chord sweeps with the given factorisation as long as each sweep at least halves
-    the error, else the solver is refactorised at the iterate. On return ``R0``,
-    ``u``, ``rl`` hold the geometry of the result. Returns
-    ``(sweeps, err, bad, small, schur)`` (``sweeps`` -1 when ``max_sweeps`` did not suffice).
+    A sweep is the minimum-norm step ``(y, e) -= Gamma (lam, nu)`` with
+    ``Gamma^T Gamma (lam, nu) = (r - l, det F - 1)``, solved as in
+    :func:`strain_project_pair` (``z = L^-1 (r - l)``, ``t = Z^T z``, the strain
+    correction ``q``, ``lam = L^-T (z - Z q)``). Chord sweeps with the given factorisation
+    as long as each sweep at least halves the error, else the solver is refactorised at
+    the iterate. On return ``R0``, ``u``, ``rl`` hold the geometry of the result; ``z``
+    (L, 2), ``t``, ``q`` (m, 2) are work arrays. Returns ``(sweeps, err, bad, small,
+    schur)`` (``sweeps`` -1 when ``max_sweeps`` did not suffice).
     """
     previous = np.inf
     err = 0.0
@@ -400,21 +335,24 @@ def strain_reaffix(y, e, h0, scale, fixed_volume, li, lj, offset, length, sign, 
             break
         chord = chord and err <= 0.5 * previous
         if not chord:
-            bad, small, schur = strain_solver(F, det, Finv, R0, u, li, lj, sign, first, cptr, fptr, chol, w, Be,
-                                              AiBe, ce, b, Kib, scale, rank_rtol)
+            bad, small, schur = strain_solver(F, det, Finv, R0, u, sign, first, cptr, fptr, chol, pinv, w, Be, Z, S,
+                                              ce, sce, scale, rank_rtol)
             if bad >= 0:
                 return sweep, err, bad, small, schur
         previous = err
-        c_links = rl - length
-        nu = strain_solve(first, cptr, fptr, chol, Be, AiBe, small, b, Kib, schur, fixed_volume, c_links, c_vol, lam)
-        strain_subtract(w, Be, ce, li, lj, lam, nu, y, e)
+        for k in range(li.shape[0]):
+            z[k, 0] = rl[k] - length[k]
+        woodbury_forward(first, cptr, fptr, chol, pinv, Z, z, t, 1)
+        _strain_multipliers(small, ce, sce, schur, fixed_volume, t, c_vol, e, q, 0)
+        woodbury_back(first, cptr, fptr, chol, pinv, Z, z, q, 1)
+        omega_t_subtract_pair(w, li, lj, z, y, y, 1)
     return -1, err, -1, small, schur
 
 
 @njit(cache=True)
 def strain_fire(
     y, vy, e, ve, fire_state, fire_params, h0, scale, fixed_volume,
-    offset, pi, pj, sigma, eps, w_exp, x_build, h_build_inv, reach, skin, diameter, adj_ptr, adj,
+    offset, pi, pj, sigma, eps, w_exp, y_build, h_build_inv, reach, skin, diameter, adj_ptr, adj,
     li, lj, link_offset, length, sign, first, cptr, fptr, chol, rptr, members, shift, ref, body, vb, fb, inv_mass,
     length_rtol, max_sweeps, rank_rtol, force_tol, max_steps, fy, fe,
 ):
@@ -435,8 +373,9 @@ def strain_fire(
 
     The list lives in the deformed box (rotated frame, centres ``y T^T``): when
     displacements and the deformation since the build (``||U h_build^-1 - 1||_F``
-    times the reach) use up the skin, it is rebuilt before the forces are evaluated
-    (:func:`sheared_list`; ``x_build`` and ``h_build_inv`` updated in place), or, in a
+    times the reach) use up the skin (:func:`_rebuild_due`), it is rebuilt before the
+    forces are evaluated (:func:`sheared_list`; the build's reference centres ``y_build``
+    and ``h_build_inv`` updated in place), or, in a
     box too sheared or small for it, the loop returns ``REBUILD`` for the caller's
     build.
 
@@ -458,19 +397,15 @@ def strain_fire(
     rl = np.zeros(L)
     w = np.zeros((L, d))
     Be = np.zeros((L, m))
-    AiBe = np.zeros((L, m))
+    Z = np.zeros((L, m))
+    S = np.zeros((m, m))
     ce = np.zeros(m)
-    b = np.zeros(L)
-    Kib = np.zeros(L)
-    lam = np.zeros(L)
-    work2 = np.zeros((L, 2))
+    sce = np.zeros(m)
+    pinv = np.zeros(L)
+    z = np.zeros((L, 2))
     t_m = np.zeros((m, 2))
-    t2_m = np.zeros((m, 2))
+    q_m = np.zeros((m, 2))
     force = np.zeros((n, d))
-    xr = np.zeros((n, d))
-    shifted = np.zeros((2 * pi.shape[0] + 1, d))
-    x = np.zeros((n, d))
-    moved = np.zeros((n, d))
     small = np.eye(m)
     schur = 1.0
     r_body = np.empty_like(ref)
@@ -488,32 +423,28 @@ def strain_fire(
         # evaluation at (y, e): a valid list, the factorisation, forces and velocity projected
         F, Q, T, U, det, Finv = strain_state(e, h0, scale)
         rigid_place(y, Finv, body, rptr, members, shift, ref, r_body)
-        dev = _deformed(y, T, U @ h_build_inv, x_build, x, moved)
-        if _needs_rebuild(x, moved, 1.0, 1.0, reach, skin, dev * reach):
+        if _rebuild_due(y, T, U @ h_build_inv, y_build, reach, skin):
             ok, pi_, pj_, offset_, sigma_, buffers = sheared_list(y, h0, h0_inv, U, T, diameter, skin, adj_ptr, adj,
                                                                  buffers)
             if not ok:
                 status = REBUILD
                 break
             pi, pj, offset, sigma = pi_, pj_, offset_, sigma_
-            x_build[:, :] = x
+            y_build[:, :] = y
             h_build_inv[:, :] = np.linalg.inv(U)
             builds += 1
         if step == 0:
             # later steps: the re-affixing that ended the last step left the geometry of (y, e) in R0, u, rl
             strain_links(y, F, li, lj, link_offset, length, R0, u, rl)
-        bad, small, schur = strain_solver(F, det, Finv, R0, u, li, lj, sign, first, cptr, fptr, chol, w, Be, AiBe,
-                                          ce, b, Kib, scale, rank_rtol)
+        bad, small, schur = strain_solver(F, det, Finv, R0, u, sign, first, cptr, fptr, chol, pinv, w, Be, Z, S, ce,
+                                          sce, scale, rank_rtol)
         if bad >= 0:
             status = STALLED
             break
-        if shifted.shape[0] < pi.shape[0]:
-            shifted = np.empty((2 * pi.shape[0], d))
-        energy, n_contact = strain_forces(y, Q, T, Finv, scale, offset, pi, pj, sigma, eps, w_exp, xr, shifted, force,
-                                          fy, fe)
+        energy, n_contact = strain_forces(y, Q, T, Finv, scale, offset, pi, pj, sigma, eps, w_exp, force, fy, fe)
         rigid_forces(Finv, rptr, members, r_body, scale, fy, fe, fb)
-        strain_project_pair(w, Be, ce, li, lj, first, cptr, fptr, chol, AiBe, small, b, Kib, schur, fixed_volume,
-                            fy, fe, vy, ve, work2, t_m, t2_m)
+        strain_project_pair(w, Z, S, small, ce, sce, schur, fixed_volume, li, lj, first, cptr, fptr, chol, pinv,
+                            fy, fe, vy, ve, z, t_m, q_m)
         fmax2 = max(_max_force_sq(fy), _dot1(fe, fe), rigid_max_force_sq(rptr, r_body, inv_mass, fb))
         if fmax2 <= force_tol * force_tol:
             status = CONVERGED
@@ -528,8 +459,8 @@ def strain_fire(
         if not power > 0.0:
             _strain_step_back(y, vy, e, ve, body, vb, dt)
             k_, err, bad, small, schur = strain_reaffix(
-                y, e, h0, scale, fixed_volume, li, lj, link_offset, length, sign, first, cptr, fptr, chol, R0, u, rl,
-                w, Be, AiBe, ce, b, Kib, small, schur, lam, length_rtol, max_sweeps, rank_rtol, True)
+                y, e, h0, scale, fixed_volume, li, lj, link_offset, length, sign, first, cptr, fptr, chol, pinv, R0, u,
+                rl, w, Be, Z, S, ce, sce, small, schur, z, t_m, q_m, length_rtol, max_sweeps, rank_rtol, True)
             sweeps += max(k_, 0)
             if k_ < 0 or bad >= 0:
                 status = STALLED
@@ -537,8 +468,8 @@ def strain_fire(
         _strain_move(y, vy, fy, e, ve, fe, body, vb, fb, inv_mass, dt, alpha)
         step += 1
         k_, err, bad, small, schur = strain_reaffix(
-            y, e, h0, scale, fixed_volume, li, lj, link_offset, length, sign, first, cptr, fptr, chol, R0, u, rl,
-            w, Be, AiBe, ce, b, Kib, small, schur, lam, length_rtol, max_sweeps, rank_rtol, True)
+            y, e, h0, scale, fixed_volume, li, lj, link_offset, length, sign, first, cptr, fptr, chol, pinv, R0, u,
+            rl, w, Be, Z, S, ce, sce, small, schur, z, t_m, q_m, length_rtol, max_sweeps, rank_rtol, True)
         sweeps += max(k_, 0)
         if k_ < 0 or bad >= 0:
             status = STALLED
@@ -596,25 +527,44 @@ def _strain_move(y, vy, fy, e, ve, fe, body, vb, fb, inv_mass, dt, alpha):
 
 
 @njit(cache=True)
-def _deformed(y, T, A, x_build, x, moved):
-    """Centres ``x = y T^T`` in the deformed box, build centres ``moved = x_build A^T`` carried
-    by the deformation ``A`` since the build; returns ``||A - 1||_F``."""
+def _rebuild_due(y, T, A, y_build, reach, skin):
+    """Verlet test of the deformed-box list (:func:`jamflow.neighbors._verlet_kernels._needs_rebuild` fused).
+
+    The build centres carried by the deformation ``A = U h_build^-1`` since the build are
+    ``T y_build`` (``T = U h0^-1``), so a centre's displacement in the deformed box is
+    ``T (y - y_build)``: the two largest, plus ``||A - 1||_F`` (``>= ||A - 1||_2``, no SVD
+    per step) times the reach, against the skin. No copy of the centres.
+    """
     d = y.shape[1]
     dev = 0.0
     for a in range(d):
         for c in range(d):
             t = A[a, c] - (1.0 if a == c else 0.0)
             dev += t * t
+    m1 = 0.0
+    m2 = 0.0
+    three = d == 3
     for i in range(y.shape[0]):
-        for a in range(d):
-            t = 0.0
-            t2 = 0.0
-            for c in range(d):
-                t += T[a, c] * y[i, c]
-                t2 += A[a, c] * x_build[i, c]
-            x[i, a] = t
-            moved[i, a] = t2
-    return np.sqrt(dev)
+        if three:  # the loop below unrolled: the same operations in the same order
+            e0 = y[i, 0] - y_build[i, 0]
+            e1 = y[i, 1] - y_build[i, 1]
+            e2 = y[i, 2] - y_build[i, 2]
+            t0 = T[0, 0] * e0 + T[0, 1] * e1 + T[0, 2] * e2
+            t1 = T[1, 1] * e1 + T[1, 2] * e2
+            t2 = T[2, 2] * e2
+            d2 = t0 * t0 + t1 * t1 + t2 * t2
+        else:
+            d2 = 0.0
+            for a in range(d):
+                t = 0.0
+                for c in range(a, d):
+                    t += T[a, c] * (y[i, c] - y_build[i, c])
+                d2 += t * t
+        if d2 > m1:
+            m1, m2 = d2, m1
+        elif d2 > m2:
+            m2 = d2
+    return np.sqrt(m1) + np.sqrt(m2) + np.sqrt(dev) * reach >= skin
 
 
 @njit(cache=True)

@@ -406,9 +406,9 @@ class StrainFire:
         self.tol_scale = 1.0  # the loop's tolerance over the asked one (:meth:`advance`)
         self.chol = np.zeros_like(self.gram["sign"])
         self.adj_ptr = np.concatenate([[0], np.cumsum(np.bincount(model.links.i, minlength=model.n))]).astype(np.int64)
-        # the list in use (i, j, reference offset, sigma), its build centres (rotated frame) and box
+        # the list in use (i, j, reference offset, sigma), its build centres (reference frame) and box
         self.pairs: tuple[NDArray, ...] | None = None
-        self.x_build = np.empty((0, model.d))
+        self.y_build = np.empty((0, model.d))
         self.h_build_inv = np.eye(model.d)
         self.inline_builds = 0
 
@@ -447,13 +447,14 @@ class StrainFire:
             m._update_strained_list(np.ascontiguousarray(self.y @ T.T), U)
             m._pairs()
             self.pairs = (m._pi, m._pj, m._offset, m._sigma)
-            self.x_build = np.array(m.nlist.x_build)
             self.h_build_inv = np.linalg.inv(m.nlist.h_build)
+            # reference centres of the build: x_build = T_b y_build with T_b = h_build h0^-1
+            self.y_build = np.ascontiguousarray(m.nlist.x_build @ (m._h0 @ self.h_build_inv).T)
         nl = m.nlist
         pi, pj, offset, sigma = self.pairs
         status, n, _, _, _, _, bad, builds, *pairs = _strain_kernels.strain_fire(
             self.y, self.vy, self.e, self.ve, self.fire_state, self.fparams, m._h0, m.strain_scale, m.fixed_volume,
-            offset, pi, pj, sigma, m.potential.epsilon, m.potential.exponent, self.x_build, self.h_build_inv,
+            offset, pi, pj, sigma, m.potential.epsilon, m.potential.exponent, self.y_build, self.h_build_inv,
             nl.reach, nl.skin, m.diameter, self.adj_ptr, m.links.j, g["ci"], g["cj"], g["offset"], g["length"],
             g["sign"], g["first"], g["cptr"], g["fptr"], self.chol, rigid["rptr"], rigid["members"], rigid["shift"],
             rigid["ref"], rigid["body"], self.vb, self.fb, rigid["inv_mass"], m.length_rtol,
