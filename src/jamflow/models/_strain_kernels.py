@@ -46,7 +46,7 @@ from ._woodbury_kernels import (
     woodbury_back,
     woodbury_forward,
 )
-from .spheres._kernels import _pair_magnitude, pair_forces_affine
+from .spheres._kernels import pair_forces_affine
 
 
 @njit(cache=True, inline="always")
@@ -118,95 +118,18 @@ def _strain_links_3d(y, F, li, lj, offset, length, R0, u, rl):
     return err
 
 
-@njit(cache=True, inline="always")
-def _affine_pair_loop(y, T, offset, pi, pj, sigma, eps, w, force, virial, three):
-    """Pair forces of centres ``T y`` (``T`` upper triangular) for d = 2 (``three`` False) or 3, unrolled.
-
-    The pair vector is formed in the deformed frame straight from the reference one,
-    ``T (y_j - y_i + offset)`` (no rotated copy of the centres or of the images); forces
-    ``-dU/dx`` (N, d) and the virial as :func:`jamflow.models.spheres._kernels.pair_forces`.
-    """
-    energy = 0.0
-    n_contact = 0
-    harmonic = w == 2.0
-    t00, t01, t11 = T[0, 0], T[0, 1], T[1, 1]
-    t02 = T[0, 2] if three else 0.0
-    t12 = T[1, 2] if three else 0.0
-    t22 = T[2, 2] if three else 0.0
-    for p in range(pi.shape[0]):
-        i = pi[p]
-        j = pj[p]
-        r0 = y[j, 0] - y[i, 0] + offset[p, 0]
-        r1 = y[j, 1] - y[i, 1] + offset[p, 1]
-        if three:
-            r2 = y[j, 2] - y[i, 2] + offset[p, 2]
-            dx0 = t00 * r0 + t01 * r1 + t02 * r2
-            dx1 = t11 * r1 + t12 * r2
-            dx2 = t22 * r2
-        else:
-            dx0 = t00 * r0 + t01 * r1
-            dx1 = t11 * r1
-            dx2 = 0.0
-        rr = dx0 * dx0 + dx1 * dx1 + dx2 * dx2
-        sig = sigma[p]
-        if rr < sig * sig:
-            e, fmag, inv_r = _pair_magnitude(rr, sig, eps, w, harmonic)
-            energy += e
-            n_contact += 1
-            c = fmag * inv_r
-            f0 = c * dx0
-            f1 = c * dx1
-            force[j, 0] += f0
-            force[i, 0] -= f0
-            force[j, 1] += f1
-            force[i, 1] -= f1
-            virial[0, 0] += f0 * dx0
-            virial[0, 1] += f0 * dx1
-            virial[1, 1] += f1 * dx1
-            if three:
-                f2 = c * dx2
-                force[j, 2] += f2
-                force[i, 2] -= f2
-                virial[0, 2] += f0 * dx2
-                virial[1, 2] += f1 * dx2
-                virial[2, 2] += f2 * dx2
-    virial[1, 0] = virial[0, 1]
-    if three:
-        virial[2, 0] = virial[0, 2]
-        virial[2, 1] = virial[1, 2]
-    return energy, n_contact
-
-
-@njit(cache=True)
-def _affine_pairs_2d(y, T, offset, pi, pj, sigma, eps, w, force, virial):
-    return _affine_pair_loop(y, T, offset, pi, pj, sigma, eps, w, force, virial, False)
-
-
-@njit(cache=True)
-def _affine_pairs_3d(y, T, offset, pi, pj, sigma, eps, w, force, virial):
-    return _affine_pair_loop(y, T, offset, pi, pj, sigma, eps, w, force, virial, True)
-
-
 @njit(cache=True)
 def strain_forces(y, Q, T, Finv, scale, offset, pi, pj, sigma, eps, w_exp, force, fy, fe):
     """Energy, contacts and generalised forces ``-dU/dy`` (N, d) into ``fy`` and ``-dU/de`` (m,) into ``fe``.
 
     The pair forces are those of the centres ``x = T y`` (rotated frame, ``T`` upper
-    triangular) with the images ``T offset``, each pair vector formed in that frame from
-    its reference vector (:func:`_affine_pair_loop` for d = 2 and 3,
-    :func:`jamflow.models.spheres._kernels.pair_forces_affine` otherwise); ``force``
-    (N, d) is work space (``-dU/dx``).
+    triangular) with the images ``T offset``
+    (:func:`jamflow.models.spheres._kernels.pair_forces_affine`); ``force`` (N, d) is
+    work space (``-dU/dx``).
     """
     d = y.shape[1]
     virial = np.zeros((d, d))
-    if d == 2 or d == 3:
-        force[:, :] = 0.0
-        if d == 3:
-            energy, n_contact = _affine_pairs_3d(y, T, offset, pi, pj, sigma, eps, w_exp, force, virial)
-        else:
-            energy, n_contact = _affine_pairs_2d(y, T, offset, pi, pj, sigma, eps, w_exp, force, virial)
-    else:
-        energy, n_contact = pair_forces_affine(y, T, offset, pi, pj, sigma, eps, w_exp, force, virial)
+    energy, n_contact = pair_forces_affine(y, T, offset, pi, pj, sigma, eps, w_exp, force, virial)
     for i in range(y.shape[0]):
         for c in range(d):
             t = 0.0

@@ -375,11 +375,25 @@ def steepest_descent(y, pairs, potential, built, dt, stop, force, virial, energi
 def pair_forces_affine(y, A, offset, pi, pj, sigma, eps, w, force, virial):
     """:func:`pair_forces` for centres ``x = A y`` with a general (upper-triangular) ``A``.
 
-    Pair vectors are ``A (y_j - y_i + offset)``; ``force`` is ``-dU/dx`` (N, d).
+    Pair vectors are ``A (y_j - y_i + offset)``, each formed in the deformed frame from
+    its reference vector (no transformed copy of the centres or images); ``force`` is
+    ``-dU/dx`` (N, d); the virial's upper triangle is summed and mirrored. d = 2 and 3 run
+    with the coordinates unrolled (:func:`_affine_pair_loop`), the same operations in the
+    same order.
     """
-    d = y.shape[1]
     force[:, :] = 0.0
     virial[:, :] = 0.0
+    if y.shape[1] == 3:
+        return _affine_pair_loop(y, A, offset, pi, pj, sigma, eps, w, force, virial, True)
+    if y.shape[1] == 2:
+        return _affine_pair_loop(y, A, offset, pi, pj, sigma, eps, w, force, virial, False)
+    return _affine_pairs_generic(y, A, offset, pi, pj, sigma, eps, w, force, virial)
+
+
+@njit(cache=True)
+def _affine_pairs_generic(y, A, offset, pi, pj, sigma, eps, w, force, virial):
+    """:func:`pair_forces_affine` in any d, adding to ``force`` and ``virial``."""
+    d = y.shape[1]
     energy = 0.0
     n_contact = 0
     ref = np.empty(d)
@@ -398,8 +412,77 @@ def pair_forces_affine(y, A, offset, pi, pj, sigma, eps, w, force, virial):
             dx[a] = acc
             r2 += acc * acc
         if r2 < sigma[p] * sigma[p]:
-            energy += _add_pair(i, j, dx, r2, sigma[p], eps, w, harmonic, force, virial)
+            e, fmag, inv_r = _pair_magnitude(r2, sigma[p], eps, w, harmonic)
+            energy += e
             n_contact += 1
+            c = fmag * inv_r
+            for a in range(d):
+                fa = c * dx[a]
+                force[j, a] += fa
+                force[i, a] -= fa
+                for b in range(a, d):
+                    virial[a, b] += fa * dx[b]
+    _mirror(virial)
+    return energy, n_contact
+
+
+@njit(cache=True, inline="always")
+def _mirror(virial):
+    """The lower triangle of ``virial`` set from the upper one (the pair virial is symmetric)."""
+    for a in range(virial.shape[0]):
+        for b in range(a):
+            virial[a, b] = virial[b, a]
+
+
+@njit(cache=True, inline="always")
+def _affine_pair_loop(y, A, offset, pi, pj, sigma, eps, w, force, virial, three):
+    """:func:`_affine_pairs_generic` for d = 2 (``three`` False) or 3 with the coordinates unrolled:
+    the generic loop's operations in its order (``0.0 + a == a`` exactly), so the same bits."""
+    energy = 0.0
+    n_contact = 0
+    harmonic = w == 2.0
+    a00, a01, a11 = A[0, 0], A[0, 1], A[1, 1]
+    a02 = A[0, 2] if three else 0.0
+    a12 = A[1, 2] if three else 0.0
+    a22 = A[2, 2] if three else 0.0
+    for p in range(pi.shape[0]):
+        i = pi[p]
+        j = pj[p]
+        r0 = y[j, 0] - y[i, 0] + offset[p, 0]
+        r1 = y[j, 1] - y[i, 1] + offset[p, 1]
+        if three:
+            r2 = y[j, 2] - y[i, 2] + offset[p, 2]
+            dx0 = a00 * r0 + a01 * r1 + a02 * r2
+            dx1 = a11 * r1 + a12 * r2
+            dx2 = a22 * r2
+        else:
+            dx0 = a00 * r0 + a01 * r1
+            dx1 = a11 * r1
+            dx2 = 0.0
+        rr = dx0 * dx0 + dx1 * dx1 + dx2 * dx2
+        sig = sigma[p]
+        if rr < sig * sig:
+            e, fmag, inv_r = _pair_magnitude(rr, sig, eps, w, harmonic)
+            energy += e
+            n_contact += 1
+            c = fmag * inv_r
+            f0 = c * dx0
+            f1 = c * dx1
+            force[j, 0] += f0
+            force[i, 0] -= f0
+            force[j, 1] += f1
+            force[i, 1] -= f1
+            virial[0, 0] += f0 * dx0
+            virial[0, 1] += f0 * dx1
+            virial[1, 1] += f1 * dx1
+            if three:
+                f2 = c * dx2
+                force[j, 2] += f2
+                force[i, 2] -= f2
+                virial[0, 2] += f0 * dx2
+                virial[1, 2] += f1 * dx2
+                virial[2, 2] += f2 * dx2
+    _mirror(virial)
     return energy, n_contact
 
 
