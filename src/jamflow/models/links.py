@@ -492,7 +492,8 @@ class LinkedFire:
             m.potential.epsilon, m.potential.exponent, self.x_build, nl.reach, nl.skin, self.lengths, m.diameter,
             self.adj_ptr, m.links.j, g["ci"], g["cj"], g["offset"], g["length"], g["sign"], g["first"], g["cptr"],
             g["fptr"], self.chol, self.w, self.r, rigid["rptr"], rigid["members"], rigid["shift"], rigid["ref"],
-            h["spheres"], h["shift"], h["body"], h["state"], h["geo"], m.length_rtol, LINK_NEWTON_MAX_ITERATIONS, LINK_RANK_RTOL, float(force_tol), int(budget), self.force,
+            h["spheres"], h["shift"], h["body"], h["state"], h["geo"], m.length_rtol, LINK_NEWTON_MAX_ITERATIONS,
+            LINK_RANK_RTOL, float(force_tol), int(budget), self.force,
         )
         self.pairs = (pairs[0], pairs[1], pairs[2], pairs[3])
         self.inline_builds += builds
