@@ -97,7 +97,8 @@ def test_without_links_the_moduli_are_those_of_jamflow_moduli(d):
     Fixed-box packings of few spheres can be unstable to shear (negative G): the
     negative compliance is kept and counted, not reported as an infinite modulus.
     """
-    start = random_packing(64, d, 0.5 if d == 2 else 0.3, "bi", seed=3)
+    # starts whose jammed packings are unstable to simple shear (a property of their path)
+    start = random_packing(64, d, 0.5 if d == 2 else 0.3, "bi", seed=3 if d == 2 else 8)
     p = jam_to_pressure(start, 1e-3, force_tol=1e-13, pressure_rtol=1e-3).packing
     spheres = elastic_moduli(p.position, p.box, p.diameter)
     c = compliance(p)

@@ -8,10 +8,11 @@ from __future__ import annotations
 
 from .._numba import njit
 
-__all__ = ["CONVERGED", "REBUILD", "MAX_STEPS", "STALLED"]
+__all__ = ["BELOW", "CONVERGED", "REBUILD", "MAX_STEPS", "STALLED"]
 
-#: Status codes returned by the iterative kernels.
-CONVERGED, REBUILD, MAX_STEPS, STALLED = 0, 1, 2, 3
+#: Status codes returned by the iterative kernels; ``BELOW``: a fixed-box run stopped
+#: because its energy ``U + K`` fell below the floor it was given (``minimize_fire``'s ``energy_floor``).
+CONVERGED, REBUILD, MAX_STEPS, STALLED, BELOW = 0, 1, 2, 3, 4
 
 
 @njit(cache=True)

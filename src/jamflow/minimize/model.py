@@ -152,6 +152,15 @@ class EnergyModel(Protocol):
         """Steepest descent from ``q`` in a compiled loop (a :class:`~jamflow.minimize.fire.MinimizeResult`), or None."""
         ...
 
+    def energy_floor(self, pressure: float) -> float:
+        """An energy [epsilon] below which no force-balanced state in :attr:`box` has a pressure of ``pressure`` or more.
+
+        0 when the model knows no such bound. A fixed-box minimisation whose energy
+        ``U + K`` has fallen below it can end early with the verdict "below ``pressure``"
+        (:func:`jamflow.minimize.fire.minimize_fire`, ``energy_floor``).
+        """
+        ...
+
 
 class WithoutFastPaths:
     """What a model without compiled minimisers or box degrees of freedom answers (mix in)."""
@@ -167,3 +176,6 @@ class WithoutFastPaths:
 
     def descent_fast_path(self, q: NDArray[np.float64], dt: float, force_tol: float, max_steps: int) -> None:
         return None
+
+    def energy_floor(self, pressure: float) -> float:
+        return 0.0

@@ -26,12 +26,20 @@ Protocol (O'Hern et al., PRE 68, 011306 (2003); VanderWerf et al., Sec. II):
      from the current minimum, compressing below ``P0`` and decompressing above it,
      ``delta_phi`` halved whenever the direction reverses. From a dilute start it
      steps ``delta_phi`` at a time across the whole density range (docs/notes/chains.md,
-     "Dilute starts");
+     "Dilute starts").
+
+   Either way a minimisation whose energy ``U + K`` falls below the model's floor
+   (:meth:`~jamflow.minimize.model.EnergyModel.energy_floor`) for ``VERDICT_SHARE
+   (1 - rtol) P0`` stops there: no minimum it can still reach has a pressure in the
+   window or above it, so the verdict "below ``P0``" is the one its minimum would give
+   (:data:`VERDICT_SHARE`);
 3. when ``|P - P0| <= bisection_rtol * P0`` the enthalpy ``H = U + P0 V`` is
    minimised with centres and box scale as degrees of freedom to
    ``max_i |F_i| <= force_tol`` and ``|P - P0| <= pressure_rtol * P0`` (models with
    box degrees of freedom), or step 2 continues at fixed box with ``force_tol``
-   until ``|P - P0| <= pressure_rtol * P0``.
+   until ``|P - P0| <= pressure_rtol * P0``; the bisection then shortens a step to
+   the secant estimate of ``P(phi) = P0`` when that is shorter (``secant`` of
+   :func:`bisect_to_pressure`; the search has its own secant).
 
 Units: energy ``epsilon`` (see :mod:`jamflow.models.spheres.potential`), length the mean
 diameter ``<D>``, pressure ``epsilon / <D>^d``, force ``epsilon / <D>``.
@@ -100,6 +108,15 @@ APPROACH_STRAIN_STEP: float = 0.0075
 RETURN_SHARE: float = 0.15
 
 
+#: A fixed-box minimisation of step 2 stops early, with the verdict "below ``P0``", once its
+#: energy ``U + K`` falls under the model's floor (:meth:`EnergyModel.energy_floor`) for the
+#: pressure ``VERDICT_SHARE (1 - rtol) P0``: every minimum it can still reach lies below that,
+#: outside the window ``|P - P0| <= rtol P0``. The share covers the energy error of FIRE's
+#: steps (``U + K`` is not strictly monotone; the bound on ``P`` grows as ``sqrt(U)`` for
+#: harmonic contacts, so the energy may grow fourfold before a verdict could be wrong);
+#: measured against the full minimisations in docs/notes/chains.md, "The energy verdict".
+VERDICT_SHARE: float = 0.5
+
 #: FIRE steps of the enthalpy stage between two looks at its largest force for a try of the
 #: trust-region Newton polish (``JammingSettings.newton_polish``) [1].
 POLISH_CHECK: int = 2000
@@ -152,10 +169,17 @@ class JammingSettings:
 
 def _minimum(model: EnergyModel, x: np.ndarray, phi: float, force_tol: float, budget: int,
              fire_params: FireParameters, progress: Callable[[dict], None] | None, history: dict[str, list] | None,
-             info: dict) -> MinimizeResult:
+             info: dict, pressure: float, rtol: float) -> MinimizeResult:
     """One fixed-box FIRE minimisation of step 2, recorded in ``history`` and reported to ``progress``
-    (with ``info``: ``delta_phi`` and the protocol's ``steps`` before it); raises when the budget runs out."""
-    res = minimize_fire(model, x, force_tol, budget, fire_params)
+    (with ``info``: ``delta_phi`` and the protocol's ``steps`` before it); raises when the budget runs out.
+
+    It stops early on the energy verdict (:data:`VERDICT_SHARE`); its ``pressure`` is then
+    the least of the state's and the verdict's bound ``VERDICT_SHARE (1 - rtol) P0``, and
+    ``below`` is set."""
+    ceiling = VERDICT_SHARE * (1.0 - rtol) * pressure
+    res = minimize_fire(model, x, force_tol, budget, fire_params, model.energy_floor(ceiling))
+    if res.below:
+        res = replace(res, pressure=min(res.pressure, ceiling))
     if history is not None:
         history["phi"].append(phi)
         history["pressure"].append(res.pressure)
@@ -163,7 +187,7 @@ def _minimum(model: EnergyModel, x: np.ndarray, phi: float, force_tol: float, bu
     if progress is not None:
         progress({**info, "phi": phi, "pressure": res.pressure, "steps": info["steps"] + res.steps,
                   "model": model, "position": res.position})
-    if not res.converged:
+    if not (res.converged or res.below):
         raise RuntimeError(f"FIRE step budget ({budget + info['steps']}) exhausted at phi = {phi:.10f}")
     return res
 
@@ -181,12 +205,20 @@ def bisect_to_pressure(
     progress: Callable[[dict], None] | None = None,
     history: dict[str, list] | None = None,
     direction: int = 0,
+    secant: bool = False,
 ) -> tuple[EnergyModel, MinimizeResult, float, float, int, int]:
     """Compress/decompress bisection of any model to ``|P - P0| <= rtol P0`` (module doc, step 2).
 
     After each fixed-box FIRE minimisation to ``force_tol`` the box is scaled by
     ``model.rescaled`` to the next packing fraction ``phi +- delta_phi``; ``delta_phi``
-    halves when the direction reverses. Stops also when ``delta_phi`` underflows.
+    halves when the direction reverses. Stops also when the step underflows.
+
+    With ``secant`` a step is shortened to the secant estimate ``|P0 - P| / (dP/dphi)``
+    when that is shorter, the slope taken from the last two minima with ``P > 0`` (if
+    it is positive): ``P`` is linear in ``phi - phi_J`` on one contact network for
+    harmonic contacts, so near ``P0`` the bisection's halvings shrink to a few
+    Newton steps, each still from the last minimum; a rearrangement between two minima
+    gives a wrong slope for one step, which the next pair replaces.
 
     Parameters
     ----------
@@ -203,6 +235,8 @@ def bisect_to_pressure(
         ``phi``, ``pressure``, ``steps`` are appended per bisection step.
     direction : int
         Direction of the previous step (0: none), to resume a bisection.
+    secant : bool
+        Secant steps when shorter (above).
 
     Returns
     -------
@@ -212,20 +246,28 @@ def bisect_to_pressure(
     d = model.box.d
     steps = 0
     x = position
+    last: tuple[float, float] | None = None
+    slope: float | None = None
     while True:
         res = _minimum(model, x, phi, force_tol, max_steps - steps, fire_params, progress, history,
-                       {"delta_phi": delta_phi, "steps": steps})
+                       {"delta_phi": delta_phi, "steps": steps}, pressure, rtol)
         steps += res.steps
         x = res.position
         if abs(res.pressure - pressure) <= rtol * pressure:
             break
+        if secant and res.pressure > 0.0 and not res.below:
+            if last is not None and phi != last[0]:
+                rise = (res.pressure - last[1]) / (phi - last[0])
+                slope = rise if rise > 0.0 else None
+            last = (phi, res.pressure)
         new_direction = 1 if res.pressure < pressure else -1
         if direction and new_direction != direction:
             delta_phi *= 0.5
         direction = new_direction
-        if delta_phi < 4.0 * np.finfo(float).eps * phi:
+        step = delta_phi if slope is None else min(delta_phi, abs(pressure - res.pressure) / slope)
+        if step < 4.0 * np.finfo(float).eps * phi:
             break
-        new_phi = phi + direction * delta_phi
+        new_phi = phi + direction * step
         factor = (phi / new_phi) ** (1.0 / d)
         model, x = model.rescaled(factor, x)
         phi = new_phi
@@ -388,7 +430,7 @@ def search_to_pressure(
     x = position
     while True:
         res = _minimum(model, x, phi, force_tol, max_steps - steps, fire_params, progress, history,
-                       {"delta_phi": bracket.step, "steps": steps})
+                       {"delta_phi": bracket.step, "steps": steps}, pressure, rtol)
         steps += res.steps
         if abs(res.pressure - pressure) <= rtol * pressure:
             break
@@ -479,6 +521,6 @@ def jam_model_to_pressure(
         return model, final, history, steps + more
     model, final, _, _, _, more = bisect_to_pressure(
         model, res.position, phi, pressure, c.force_tol, c.pressure_rtol, delta_phi, c.max_steps - steps,
-        c.fire_params, progress, history, direction,
+        c.fire_params, progress, history, direction, secant=True,
     )
     return model, final, history, steps + more

@@ -28,6 +28,7 @@ import numpy as np
 
 from .._numba import njit
 from ..minimize._fire_kernels import (
+    BELOW,
     CONVERGED,
     MAX_STEPS,
     REBUILD,
@@ -594,7 +595,7 @@ def linked_fire(
     offset, pi, pj, sigma, eps, w_exp, x_build, reach, skin, lengths, diameter, adj_ptr, adj,
     li, lj, link_offset, length, sign, first, cptr, fptr, chol, w, r, rptr, members, shift, ref,
     hinge_spheres, hinge_shift, hinge_body, hinge_state, hinge_geo,
-    length_rtol, max_sweeps, rank_rtol, force_tol, max_steps, force,
+    length_rtol, max_sweeps, rank_rtol, force_tol, max_steps, energy_floor, force,
 ):
     """FIRE 2.0 of linked spheres at fixed box in one compiled loop (the steps of :class:`~jamflow.minimize.fire._ModelFire`).
 
@@ -622,7 +623,8 @@ def linked_fire(
     call of :class:`~jamflow.neighbors.verlet.NeighborList`, without the linked pairs
     of ``adj_ptr``, ``adj``; :func:`unlinked_pairs`), else by returning ``REBUILD``
     (``lengths`` empty, or a box too small for the reach) for the caller's build and
-    re-entry. ``x_build`` is updated in place.
+    re-entry. ``x_build`` is updated in place. ``energy_floor`` > 0 stops the run
+    (``BELOW``) once the pair energy plus the kinetic energy is at or below it.
 
     Returns
     -------
@@ -681,6 +683,10 @@ def linked_fire(
         fmax2 = _max_force_sq(force)
         if fmax2 <= force_tol * force_tol:
             status = CONVERGED
+            break
+        # unit masses: the kinetic energy of the projected velocity
+        if energy_floor > 0.0 and energy + 0.5 * _dot(v, v) <= energy_floor:
+            status = BELOW
             break
         if step >= max_steps:
             break

@@ -82,5 +82,8 @@ class EnthalpyModel:
     def descent_fast_path(self, q: NDArray[np.float64], dt: float, force_tol: float, max_steps: int) -> None:
         return None
 
+    def energy_floor(self, pressure: float) -> float:
+        return 0.0
+
     def current_box(self, q: NDArray[np.float64]) -> Box:
         return self.model.current_box(q)

@@ -291,6 +291,16 @@ class LinkedSpheresModel(SphereBodies):
         self._err = 0.0
         self._pair_build = -1
 
+    @functools.cached_property
+    def lever(self) -> float:
+        """Largest ratio of a contact's lever arm in the virial to its contact distance (:func:`.spheres.potential.energy_floor`).
+
+        At force balance the link tensions turn the virial into a sum over contacts of
+        ``f`` times the distance of the two clusters' centroids, at most the contact
+        distance plus twice :meth:`~jamflow.state.bodies.Links.centroid_reach`.
+        """
+        return 1.0 + 2.0 * self.links.centroid_reach(self.n) / float(self.diameter.min())
+
     def link_vectors(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         """``x_ij`` of every link, shape (L, d) [length]."""
         x = self.positions(q)
@@ -476,7 +486,7 @@ class LinkedFire:
         self.adj_ptr = np.concatenate([[0], np.cumsum(np.bincount(model.links.i, minlength=model.n))]).astype(np.int64)
         self.inline_builds = 0
 
-    def advance(self, force_tol: float, budget: int, rebuild: bool) -> tuple[int, int]:
+    def advance(self, force_tol: float, budget: int, rebuild: bool, energy_floor: float = 0.0) -> tuple[int, int]:
         """At most ``budget`` steps; returns ``(status, steps)``.
 
         Lists are rebuilt inside the loop in an orthogonal box; else (``REBUILD``) the
@@ -493,7 +503,7 @@ class LinkedFire:
             self.adj_ptr, m.links.j, g["ci"], g["cj"], g["offset"], g["length"], g["sign"], g["first"], g["cptr"],
             g["fptr"], self.chol, self.w, self.r, rigid["rptr"], rigid["members"], rigid["shift"], rigid["ref"],
             h["spheres"], h["shift"], h["body"], h["state"], h["geo"], m.length_rtol, LINK_NEWTON_MAX_ITERATIONS,
-            LINK_RANK_RTOL, float(force_tol), int(budget), self.force,
+            LINK_RANK_RTOL, float(force_tol), int(budget), float(energy_floor), self.force,
         )
         self.pairs = (pairs[0], pairs[1], pairs[2], pairs[3])
         self.inline_builds += builds
@@ -515,7 +525,7 @@ class LinkedFire:
             position=self.x.copy(), box=m.box, energy=ev.energy, pressure=pressure_of(ev, m.box),
             max_force=max_force, n_contacts=ev.n_contacts, steps=steps,
             converged=status == _fire_kernels.CONVERGED, rebuilds=m.nlist.builds - self.builds0 + self.inline_builds,
-            evaluations=steps + 2,
+            evaluations=steps + 2, below=status == _fire_kernels.BELOW,
         )
 
 

@@ -45,7 +45,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..box import Box
 from ..minimize import _fire_kernels
-from ..minimize.fire import FireParameters, MinimizeResult, _fire_params
+from ..minimize.fire import (
+    FireParameters,
+    MinimizeResult,
+    _fire_params,
+    no_energy_floor,
+)
 from ..minimize.model import ModelEvaluation, pressure_of
 from ..neighbors import _verlet_kernels
 from ..neighbors.verlet import NeighborList
@@ -119,6 +124,10 @@ class ShearStabilizedModel(LinkedSpheresModel):
         self._strain_key: bytes | None = None
         self._h0 = np.ascontiguousarray(self.box.matrix)
         self._h_build_key: NDArray[np.float64] | None = None
+
+    def energy_floor(self, pressure: float) -> float:
+        """0: the shear-stabilised engine (:class:`StrainFire`) does not stop on an energy floor."""
+        return 0.0
 
     # --- degrees of freedom -----------------------------------------------------------
     def dofs(self, position: ArrayLike) -> NDArray[np.float64]:
@@ -416,8 +425,8 @@ class StrainFire:
         """The present degree-of-freedom vector."""
         return np.concatenate([self.y.ravel(), self.e])
 
-    def advance(self, force_tol: float, budget: int, rebuild: bool) -> tuple[int, int]:
-        """At most ``budget`` steps; returns ``(status, steps)``.
+    def advance(self, force_tol: float, budget: int, rebuild: bool, energy_floor: float = 0.0) -> tuple[int, int]:
+        """At most ``budget`` steps; returns ``(status, steps)``; no energy floor (the box is free).
 
         Lists are rebuilt inside the loop; in a box too sheared or small for that
         (``REBUILD``) the next call builds one here. With rigid bodies the loop measures
@@ -427,6 +436,7 @@ class StrainFire:
         a state the loop calls converged is checked against the model's measure, and the
         loop goes on with its tolerance scaled down until both hold.
         """
+        no_energy_floor(self, energy_floor)
         status, n = self._steps(force_tol * self.tol_scale, budget, rebuild)
         while status == _fire_kernels.CONVERGED and len(self.vb):
             q = self.q()

@@ -44,7 +44,7 @@ from numpy.typing import ArrayLike, NDArray
 if TYPE_CHECKING:
     from ..box import Box
 from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
+from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 from scipy.special import ellipe
 
 __all__ = ["SHAPE_KINDS", "Links", "ShapeTable", "SHAPE_GEOMETRY_RTOL"]
@@ -142,6 +142,22 @@ class Links:
         relabel = np.empty(first.size, np.int64)
         relabel[np.argsort(first)] = np.arange(first.size)
         return relabel[labels]
+
+    def centroid_reach(self, n: int) -> float:
+        """An upper bound on the distance [length] of a particle from its cluster's centroid, links held.
+
+        ``|x_s - X| <= (1/m) sum_t |x_s - x_t|`` over the cluster's ``m`` particles, and
+        ``|x_s - x_t|`` is at most the links' path between them, at most the total length
+        ``Lambda`` of a spanning tree of the cluster: so ``(m - 1) Lambda / m``, the
+        largest over the clusters (0 without links).
+        """
+        if not len(self):
+            return 0.0
+        labels = self.clusters(n)
+        tree = minimum_spanning_tree(coo_matrix((self.length, (self.i, self.j)), shape=(n, n))).tocoo()
+        spans = np.bincount(labels[tree.row], weights=tree.data, minlength=labels.max() + 1)
+        sizes = np.bincount(labels)
+        return float(np.max((sizes - 1) / sizes * spans))
 
 
 @dataclass(frozen=True, eq=False)

@@ -8,7 +8,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...minimize import _fire_kernels
-from ...minimize.fire import FireParameters, MinimizeResult, _fire_params
+from ...minimize.fire import (
+    FireParameters,
+    MinimizeResult,
+    _fire_params,
+    no_energy_floor,
+)
 from ...minimize.model import pressure_of
 from . import _fire_kernels as _loop
 from ._kernels import FAMILY_CODES
@@ -69,8 +74,9 @@ class ShapeFire:
         self.y_build = np.array(self.y[:, :2])
         self.s_build = s
 
-    def advance(self, force_tol: float, budget: int, rebuild: bool) -> tuple[int, int]:
+    def advance(self, force_tol: float, budget: int, rebuild: bool, energy_floor: float = 0.0) -> tuple[int, int]:
         """At most ``budget`` steps; returns ``(status, steps)`` (status of :mod:`jamflow.minimize._fire_kernels`)."""
+        no_energy_floor(self, energy_floor)
         m = self.model
         if self.pairs is None or rebuild:
             self._build()

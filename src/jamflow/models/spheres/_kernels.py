@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 
 from ..._numba import njit
 from ...minimize._fire_kernels import (
+    BELOW,
     CONVERGED,
     MAX_STEPS,
     REBUILD,
@@ -78,11 +79,14 @@ class Enthalpy(NamedTuple):
 
 class Stop(NamedTuple):
     """When a run stops: the largest force ``force_tol`` [energy / length], the relative
-    tolerance ``rtol`` of the pressure (or stress) to ``P0``, and the step budget ``max_steps``."""
+    tolerance ``rtol`` of the pressure (or stress) to ``P0``, the step budget ``max_steps``,
+    and at a fixed box the energy floor [energy] (``U + K`` at or below it stops the run
+    with ``BELOW``; 0: never)."""
 
     force_tol: float
     rtol: float
     max_steps: int
+    energy_floor: float
 
 
 @njit(cache=True, inline="always")
@@ -229,7 +233,8 @@ def fire(y, v, box_state, fire_state, fire_params, pairs, potential, built, s_bu
         With ``on``, minimise the enthalpy ``H = U + P0 V`` with ``q`` as a degree of
         freedom, whose generalised force is ``d V (P - P0) / q_scale``.
     stop : Stop
-        ``rtol`` bounds ``|P - P0| / P0`` (with ``enthalpy.on``).
+        ``rtol`` bounds ``|P - P0| / P0`` (with ``enthalpy.on``); ``energy_floor`` is
+        used at a fixed box only, tested after the list test.
     force, virial : (N, d), (d, d) work arrays, the last evaluation's on return.
     lengths : (d,) or (0,)
         Sides of an orthogonal reference box: the list is rebuilt inside the loop
@@ -250,7 +255,8 @@ def fire(y, v, box_state, fire_state, fire_params, pairs, potential, built, s_bu
     eps, w = potential
     y_build, reach, skin, slack = built
     barostat, pressure0, volume_ref, q_scale = enthalpy
-    force_tol, pressure_rtol, max_steps = stop
+    force_tol, pressure_rtol, max_steps, energy_floor = stop
+    floor = energy_floor if not barostat else 0.0
     d = y.shape[1]
     dt, alpha, npos = fire_state[0], fire_state[1], int(fire_state[2])
     # steps of the run before this call: the initial delay counts from the run's start,
@@ -294,6 +300,10 @@ def fire(y, v, box_state, fire_state, fire_params, pairs, potential, built, s_bu
             pressure = np.trace(virial) / (d * volume)
             fmax2 = _max_force_sq(force)
             continue
+        # the energy of a valid list (the test above) and the kinetic energy of unit masses
+        if floor > 0.0 and energy + 0.5 * _dot(v, v) <= floor:
+            status = BELOW
+            break
         fq = d * volume * (pressure - pressure0) / q_scale if barostat else 0.0
         power = s * _dot(force, v) + fq * vq
         npos, dt, alpha = _fire_adapt(
@@ -346,7 +356,7 @@ def steepest_descent(y, pairs, potential, built, dt, stop, force, virial, energi
     offset, pi, pj, sigma = pairs
     eps, w = potential
     y_build, reach, skin, slack = built
-    force_tol, _, max_steps = stop
+    force_tol, _, max_steps, _ = stop
     energy, n_contact = pair_forces(y, 1.0, offset, pi, pj, sigma, eps, w, force, virial, False)
     fmax2 = _max_force_sq(force)
     status = MAX_STEPS
@@ -523,7 +533,7 @@ def fire_stress(y, v, A, vA, fire_state, fire_params, pairs, potential, built, A
     eps, w = potential
     y_build, reach, skin, slack = built
     _, pressure0, volume_ref, q_scale = enthalpy
-    force_tol, stress_tol, max_steps = stop
+    force_tol, stress_tol, max_steps, _ = stop
     d = y.shape[1]
     dt, alpha, npos = fire_state[0], fire_state[1], int(fire_state[2])
     # steps of the run before this call: the initial delay counts from the run's start,

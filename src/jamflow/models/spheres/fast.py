@@ -11,7 +11,12 @@ from numpy.typing import ArrayLike, NDArray
 from ...box import Box
 from ...minimize import _fire_kernels
 from ...minimize.descent import DescentResult
-from ...minimize.fire import FireParameters, MinimizeResult, _fire_params
+from ...minimize.fire import (
+    FireParameters,
+    MinimizeResult,
+    _fire_params,
+    no_energy_floor,
+)
 from ...neighbors.verlet import NeighborList
 from . import _kernels
 from .potential import HARMONIC, PowerLawPotential
@@ -81,7 +86,7 @@ class SphereFire:
         self.lengths = np.diag(model.box.matrix).copy() if model.box.is_orthogonal else np.empty(0)
         self.inline_builds = 0
 
-    def advance(self, force_tol: float, budget: int, rebuild: bool) -> tuple[int, int]:
+    def advance(self, force_tol: float, budget: int, rebuild: bool, energy_floor: float = 0.0) -> tuple[int, int]:
         """At most ``budget`` steps; returns ``(status, steps)`` (status of :mod:`._kernels`)."""
         nlist, potential, h_ref = self.nlist, self.model.potential, self.model.box
         s = self.box_state[2]
@@ -98,8 +103,8 @@ class SphereFire:
             _kernels.Potential(potential.epsilon, potential.exponent),
             _kernels.ListBuild(affine / s, nlist.reach, nlist.skin, slack), s,
             _kernels.Enthalpy(self.barostat, self.pressure0, h_ref.volume, self.q_scale),
-            _kernels.Stop(float(force_tol), self.pressure_rtol, int(budget)), self.force, self.virial,
-            self.lengths, nlist.diameter,
+            _kernels.Stop(float(force_tol), self.pressure_rtol, int(budget), float(energy_floor)), self.force,
+            self.virial, self.lengths, nlist.diameter,
         )
         if builds:
             nlist.adopt(i, j, image.astype(np.float64), s_build * y_build, h_ref.scaled(s_build), builds)
@@ -117,7 +122,7 @@ class SphereFire:
             position=position, box=box.scaled(s) if self.barostat else box, energy=float(energy),
             pressure=float(pressure), max_force=float(np.sqrt(fmax2)), n_contacts=int(n_contacts),
             steps=steps, converged=status == _fire_kernels.CONVERGED, rebuilds=self.nlist.builds - self.builds0,
-            evaluations=steps + calls + self.inline_builds,
+            evaluations=steps + calls + self.inline_builds, below=status == _fire_kernels.BELOW,
         )
 
 
@@ -141,7 +146,8 @@ class SphereFireFullBox:
         self.force = np.zeros_like(self.y)
         self.virial = np.zeros((d, d))
 
-    def advance(self, force_tol: float, budget: int, rebuild: bool) -> tuple[int, int]:
+    def advance(self, force_tol: float, budget: int, rebuild: bool, energy_floor: float = 0.0) -> tuple[int, int]:
+        no_energy_floor(self, energy_floor)
         nlist, potential, h_ref = self.model.nlist, self.model.potential, self.model.box
         A = self.A
         current = Box(A @ h_ref.matrix)
@@ -158,7 +164,7 @@ class SphereFireFullBox:
             _kernels.Potential(potential.epsilon, potential.exponent),
             _kernels.ListBuild(affine @ A_inv.T, nlist.reach, nlist.skin, slack), A_inv,
             _kernels.Enthalpy(True, self.pressure0, h_ref.volume, self.q_scale),
-            _kernels.Stop(float(force_tol), self.stress_rtol, int(budget)), self.force, self.virial,
+            _kernels.Stop(float(force_tol), self.stress_rtol, int(budget), 0.0), self.force, self.virial,
         )
         return status, n
 
@@ -223,7 +229,7 @@ def steepest_descent(
             y, _kernels.PairList(nlist.offsets(box), nlist.i, nlist.j, nlist.sigma),
             _kernels.Potential(potential.epsilon, potential.exponent),
             _kernels.ListBuild(affine, nlist.reach, nlist.skin, slack), float(dt),
-            _kernels.Stop(float(force_tol), 0.0, int(max_steps - steps)), force, virial, buf,
+            _kernels.Stop(float(force_tol), 0.0, int(max_steps - steps), 0.0), force, virial, buf,
         )
         if record > steps:
             traces.append(buf[: min(n + 1, record - steps)] if status != _fire_kernels.REBUILD else buf[:n])

@@ -27,7 +27,7 @@ from ...neighbors.verlet import NeighborList
 from ...tolerances import MINIMIZE_FORCE_TOL
 from .fast import SphereFire, SphereFireFullBox, steepest_descent
 from .hessian import hessian
-from .potential import HARMONIC, PowerLawPotential, evaluate
+from .potential import HARMONIC, PowerLawPotential, energy_floor, evaluate
 
 __all__ = ["SphereBodies", "SphereModel", "conjugate_gradient", "fire", "minimize_enthalpy"]
 
@@ -82,6 +82,14 @@ class SphereBodies(WithoutFastPaths):
 
     def max_force(self, g: NDArray[np.float64]) -> float:
         return float(np.sqrt(np.max(np.sum(g.reshape(self.n, self.d) ** 2, axis=1))))
+
+    #: Largest ratio of a contact's lever arm in the virial to its contact distance
+    #: (:func:`.potential.energy_floor`): 1 for free spheres.
+    lever: float = 1.0
+
+    def energy_floor(self, pressure: float) -> float:
+        """The energy of :func:`.potential.energy_floor` in this box (see :meth:`EnergyModel.energy_floor`)."""
+        return energy_floor(self.potential, self.diameter, self.box.volume, self.d, pressure, self.lever)
 
 
 class SphereModel(SphereBodies):

@@ -35,7 +35,8 @@ from ...neighbors.pairs import PairList, pairs_within
 from ...neighbors.verlet import NeighborList
 from . import _kernels
 
-__all__ = ["HARMONIC", "Evaluation", "PowerLawPotential", "evaluate", "overlapping_pairs"]
+__all__ = ["HARMONIC", "Evaluation", "PowerLawPotential", "energy_floor", "evaluate", "max_contacts",
+           "overlapping_pairs"]
 
 
 @dataclass(frozen=True)
@@ -81,6 +82,78 @@ class PowerLawPotential:
 
 #: The one-sided harmonic potential with ``epsilon = 1`` (the default everywhere).
 HARMONIC = PowerLawPotential()
+
+
+def max_contacts(d: int, diameter: ArrayLike, overlap: float = 0.0) -> int:
+    """An upper bound on the overlapping pairs of ``N`` spheres whose relative overlaps are at most ``overlap``.
+
+    Seen from a sphere, two of its neighbours are at least ``sigma_min (1 - overlap)``
+    apart and at most ``(D_max + D_min) / 2`` away, so their directions differ by at
+    least ``2 beta`` with ``sin beta = sigma_min (1 - overlap) / (D_max + D_min)``: caps of
+    angular radius ``beta`` around them do not overlap on the unit sphere ``S^(d-1)``, whose
+    area they share (a cap covers ``I_(sin^2 beta)((d - 1) / 2, 1 / 2) / 2`` of it). Each sphere
+    then has at most ``z = ceil(1 / that share)`` neighbours (d = 3, size ratio 1.4: 22), and the
+    pairs number at most ``N z / 2``.
+
+    Parameters
+    ----------
+    d : int
+    diameter : array_like, shape (N,)
+        Diameters [length].
+    overlap : float
+        Largest relative overlap ``1 - r / sigma_ij`` of a pair, in [0, 1).
+    """
+    from scipy.special import betainc
+
+    diameter = np.asarray(diameter, dtype=np.float64)
+    if not 0.0 <= overlap < 1.0:
+        raise ValueError(f"overlap must lie in [0, 1), got {overlap}")
+    small, large = float(diameter.min()), float(diameter.max())
+    beta = np.arcsin(small * (1.0 - overlap) / (large + small))
+    share = 0.5 * betainc(0.5 * (d - 1), 0.5, np.sin(beta) ** 2)
+    # ceil, not floor: equality (six touching disks around one) must not round down
+    return int(len(diameter) * np.ceil(1.0 / share) // 2)
+
+
+def energy_floor(potential: PowerLawPotential, diameter: ArrayLike, volume: float, d: int, pressure: float,
+                 lever: float = 1.0) -> float:
+    """An energy [epsilon] below which no force-balanced state has a virial pressure of ``pressure`` or more.
+
+    Every contact carries ``f r <= epsilon xi^(w - 1)``; for bodies, whose link tensions
+    enter the virial, a contact's lever arm ``r`` is replaced at force balance by the
+    distance of the two bodies' centroids, at most ``lever`` times the contact distance.
+    With ``n`` contacts (:func:`max_contacts`) Hölder's inequality gives
+    ``sum xi^(w-1) <= n^(1/w) (w U / epsilon)^(1 - 1/w)``, so
+    ``P <= lever epsilon n^(1/w) (w U / epsilon)^(1 - 1/w) / (d V)``. The returned energy
+    makes that bound equal to ``pressure``; the largest overlap it allows sets ``n``
+    (0 when it would allow overlaps of a whole diameter).
+
+    Parameters
+    ----------
+    potential : PowerLawPotential
+    diameter : array_like, shape (N,)
+        Diameters [length].
+    volume : float
+        Box volume [length^d].
+    d : int
+    pressure : float
+        The pressure to stay below [epsilon / length^d], > 0.
+    lever : float
+        Largest ratio of a contact's lever arm in the virial to its contact distance (>= 1).
+    """
+    if not pressure > 0.0 or not lever >= 1.0:
+        raise ValueError(f"pressure must be > 0 and lever >= 1, got {pressure}, {lever}")
+    eps, w = potential.epsilon, potential.exponent
+    overlap = 0.0
+    # the floor shrinks as the contact bound grows, so the overlap of the first pass bounds the second's
+    for _ in range(2):
+        n = max(max_contacts(d, diameter, overlap), 1)
+        floor = eps / w * (pressure * d * volume / (lever * eps * n ** (1.0 / w))) ** (w / (w - 1.0))
+        overlap = (w * floor / eps) ** (1.0 / w)
+        if overlap >= 1.0:
+            # spheres could pass through each other: no bound on the contacts, no floor
+            return 0.0
+    return float(floor)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,162 @@
+"""The onset's energy verdict (a bound on the pressure of any minimum below an energy) and its secant steps."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.special import betainc
+
+from jamflow.box import Box
+from jamflow.chains.builders import linked_packing
+from jamflow.chains.jamming import linked_volume
+from jamflow.minimize.fire import DEFAULT_FIRE, minimize_fire
+from jamflow.minimize.onset import VERDICT_SHARE, bisect_to_pressure
+from jamflow.models.links import LinkedSpheresModel
+from jamflow.models.spheres.model import SphereModel
+from jamflow.models.spheres.potential import (
+    HARMONIC,
+    PowerLawPotential,
+    energy_floor,
+    evaluate,
+    max_contacts,
+)
+from jamflow.state.bodies import Links
+
+P0 = 1e-4
+
+
+def _disks(phi: float, n: int = 64, seed: int = 3):
+    """Bidisperse disks (1 : 1.4, mean diameter 1) at random in a square box of packing fraction ``phi``."""
+    rng = np.random.default_rng(seed)
+    D = np.where(np.arange(n) % 2 == 0, 1.0, 1.4)
+    D /= D.mean()
+    side = np.sqrt(np.pi / 4 * np.sum(D**2) / phi)
+    return SphereModel(Box(side * np.eye(2)), D), rng.random((n, 2)) * side
+
+
+def _trimers(phi: float, flexible: bool):
+    """16 rigid 2D trimers (``flexible``: chains of 3 without the angle link) squeezed to ``phi``."""
+    p = linked_packing(2, 16, "trimer", np.random.default_rng(2))[0]
+    s = p.in_units(float(p.diameter.mean()))
+    links = s.links
+    if flexible:
+        keep = links.j == links.i + 1
+        links = Links(links.i[keep], links.j[keep], links.length[keep])
+    box = Box(s.box.matrix)
+    f = (linked_volume(2, s.diameter, links) / box.volume / phi) ** 0.5
+    return LinkedSpheresModel(box.scaled(f), s.diameter, links, s.position * f), s.position * f
+
+
+def test_max_contacts_is_the_cap_bound_and_covers_the_kissing_numbers():
+    """The cap share by the incomplete beta function against its closed forms in d = 2 (beta / pi) and
+    d = 3 ((1 - cos beta) / 2); six neighbours per disk exactly, at least the twelve of spheres."""
+    D = np.r_[np.ones(50), 1.4 * np.ones(50)]
+    beta = np.arcsin(1.0 / 2.4)
+    assert max_contacts(2, D) == 100 * int(np.ceil(np.pi / beta)) // 2
+    assert max_contacts(3, D) == 100 * int(np.ceil(2.0 / (1.0 - np.cos(beta)))) // 2
+    assert 0.5 * betainc(1.0, 0.5, np.sin(beta) ** 2) == pytest.approx((1.0 - np.cos(beta)) / 2, rel=1e-14)
+    assert max_contacts(2, np.ones(10)) == 30
+    assert 12 * 10 // 2 <= max_contacts(3, np.ones(10)) <= 15 * 10 // 2
+    # overlaps let neighbours sit closer: more of them
+    assert max_contacts(3, D, overlap=0.2) > max_contacts(3, D)
+
+
+@pytest.mark.parametrize("potential", [HARMONIC, PowerLawPotential(exponent=2.5)], ids=["harmonic", "hertz"])
+def test_energy_floor_is_tight_on_a_compressed_triangular_crystal(potential):
+    """Every disk of a compressed triangular crystal overlaps its six neighbours by the same ``xi``: Hölder's
+    inequality is an equality there, so the floor lies just below the crystal's energy (the contact bound
+    may count a seventh neighbour, and ``f r = epsilon xi^(w-1) (1 - xi)``)."""
+    rows, cols, xi = 8, 8, 1e-3
+    a = 1.0 - xi
+    x = np.array([[(c + 0.5 * (r % 2)) * a, r * a * np.sqrt(3) / 2] for r in range(rows) for c in range(cols)])
+    box = Box(np.diag([cols * a, rows * a * np.sqrt(3) / 2]))
+    D = np.ones(len(x))
+    ev = evaluate(x, box, D, potential)
+    assert ev.n_contacts == 3 * len(x)
+    floor = energy_floor(potential, D, box.volume, 2, ev.pressure)
+    assert floor < ev.energy
+    assert energy_floor(potential, D, box.volume, 2, ev.pressure * (7 / 6) / (1.0 - xi)) >= ev.energy
+
+
+@pytest.mark.parametrize("flexible", [False, True], ids=["rigid-trimers", "chains-of-3"])
+def test_linked_minimum_pressure_is_the_centroid_virial_within_the_lever(flexible):
+    """At a force-balanced linked minimum the pressure with link tensions equals the contacts' virial with the
+    clusters' centroid distances as lever arms (1e-9), every such arm is within ``lever`` times the contact
+    distance, and the energy lies above the floor of that pressure."""
+    model, x = _trimers(0.86, flexible)
+    res = minimize_fire(model, x, 1e-12, 200_000)
+    assert res.converged and res.pressure > 0.0
+    labels = model.links.clusters(model.n)
+    # each cluster unwrapped about its first sphere (clusters are far smaller than the box), then centroids
+    first = np.array([np.flatnonzero(labels == c)[0] for c in range(labels.max() + 1)])
+    y = res.position[first[labels]] + model.box.minimum_image(res.position - res.position[first[labels]])
+    to_centroid = np.array([y[labels == c].mean(axis=0) for c in range(labels.max() + 1)])[labels] - y
+    nl = SphereModel(model.box, model.diameter).nlist
+    nl.update(res.position, model.box)
+    keep = ~model.links.contains(nl.i, nl.j)
+    i, j, sigma = nl.i[keep], nl.j[keep], nl.sigma[keep]
+    rij = res.position[j] - res.position[i] + nl.image[keep] @ model.box.matrix.T
+    r = np.linalg.norm(rij, axis=1)
+    on = r < sigma
+    i, j, rij, r, sigma = i[on], j[on], rij[on], r[on], sigma[on]
+    f = (1.0 - r / sigma) / sigma
+    arm = rij + to_centroid[j] - to_centroid[i]
+    virial = np.sum(f / r * np.sum(rij * arm, axis=1))
+    assert virial / (2 * model.box.volume) == pytest.approx(res.pressure, rel=1e-9)
+    assert np.max(np.linalg.norm(arm, axis=1) / sigma) <= model.lever
+    assert res.energy > model.energy_floor(res.pressure)
+
+
+def test_centroid_reach_of_known_clusters():
+    """A dimer's spheres lie half a link from its centroid (the bound is exact); a straight chain of four
+    reaches 1.5 links, within the bound 3 x 3 / 4; random chains of four stay within it."""
+    assert Links([0], [1], [2.0]).centroid_reach(2) == pytest.approx(1.0, rel=1e-15)
+    chain = Links([0, 1, 2], [1, 2, 3], [1.0, 1.0, 1.0])
+    assert chain.centroid_reach(4) == pytest.approx(2.25, rel=1e-15)
+    rng = np.random.default_rng(4)
+    for _ in range(200):
+        steps = rng.standard_normal((3, 3))
+        x = np.vstack([np.zeros(3), np.cumsum(steps / np.linalg.norm(steps, axis=1, keepdims=True), axis=0)])
+        assert np.max(np.linalg.norm(x - x.mean(axis=0), axis=1)) <= chain.centroid_reach(4)
+
+
+@pytest.mark.parametrize("case", ["disks-unjammed", "trimers-unjammed", "disks-jammed"])
+def test_energy_verdict_agrees_with_the_full_minimisation(case):
+    """A minimisation stopped by the verdict ends, when continued to its minimum, below the verdict's pressure;
+    one whose minimum lies above it never stops early."""
+    if case == "disks-unjammed":
+        model, x = _disks(0.80)
+    elif case == "trimers-unjammed":
+        model, x = _trimers(0.70, flexible=False)
+    else:
+        model, x = _disks(0.90)
+    ceiling = VERDICT_SHARE * (1.0 - 0.1) * P0
+    floor = model.energy_floor(ceiling)
+    assert floor > 0.0
+    early = minimize_fire(model, x, 1e-2 * P0, 1_000_000, DEFAULT_FIRE, floor)
+    full = minimize_fire(model, x, 1e-2 * P0, 1_000_000, DEFAULT_FIRE)
+    assert full.converged
+    if case == "disks-jammed":
+        assert full.pressure > P0 and early.converged and not early.below
+        assert early.steps == full.steps and early.energy == full.energy
+        return
+    assert early.below and not early.converged and early.steps < full.steps
+    assert early.energy <= floor
+    assert full.pressure < ceiling
+
+
+def test_secant_steps_reach_the_window_in_fewer_minimisations():
+    """The fixed-box stage at the final force tolerance: with secant steps the same window ``|P - P0| <= 1e-3 P0``
+    and force balance, in fewer minimisations than the halving bisection from the same loose minimum."""
+    model, x = _disks(0.86)
+    loose = bisect_to_pressure(model, x, 0.86, P0, 1e-2 * P0, 0.1, 1e-2, 1_000_000)
+    model1, res1, phi1, delta, direction, _ = loose
+    runs = {}
+    for secant in (False, True):
+        history = {"phi": [], "pressure": [], "steps": []}
+        m, res, phi, *_ = bisect_to_pressure(model1, res1.position, phi1, P0, 1e-12, 1e-3, delta, 2_000_000,
+                                             history=history, direction=direction, secant=secant)
+        assert res.converged and res.max_force <= 1e-12
+        assert abs(res.pressure - P0) <= 1e-3 * P0
+        runs[secant] = len(history["phi"])
+    assert runs[True] < runs[False]
