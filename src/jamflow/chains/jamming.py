@@ -154,7 +154,7 @@ def leave_linked_saddle(model: LinkedSpheresModel, final: MinimizeResult, templa
     :data:`~jamflow.protocols.soft_jam.SADDLE_KICK` (Gaussian, seeded), its links
     re-affixed by the minimiser, and brought back to ``|P - P0| <= pressure_rtol P0`` by
     the bisection at fixed box shape from the kicked centres (first step
-    ``pressure_rtol * delta_phi``), up to :data:`~jamflow.protocols.soft_jam.SADDLE_KICKS`
+    ``pressure_rtol * delta_phi``, secant steps as the onset's final stage), up to :data:`~jamflow.protocols.soft_jam.SADDLE_KICKS`
     times.
 
     Parameters
@@ -187,7 +187,8 @@ def leave_linked_saddle(model: LinkedSpheresModel, final: MinimizeResult, templa
         phi = linked_volume(m.box.d, m.diameter, m.links) / m.box.volume
         m, out, _, _, _, steps = bisect_to_pressure(
             m, x, phi, pressure, settings.force_tol, settings.pressure_rtol,
-            settings.pressure_rtol * settings.delta_phi, settings.max_steps, settings.fire_params, progress, history)
+            settings.pressure_rtol * settings.delta_phi, settings.max_steps, settings.fire_params, progress, history,
+            secant=True)
         state["model"] = m
         return replace(out, box=_current_box(m)), steps
 

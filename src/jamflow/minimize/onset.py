@@ -114,7 +114,7 @@ RETURN_SHARE: float = 0.15
 #: outside the window ``|P - P0| <= rtol P0``. The share covers the energy error of FIRE's
 #: steps (``U + K`` is not strictly monotone; the bound on ``P`` grows as ``sqrt(U)`` for
 #: harmonic contacts, so the energy may grow fourfold before a verdict could be wrong);
-#: measured against the full minimisations in docs/notes/chains.md, "The energy verdict".
+#: measured against the full minimisations in docs/notes/chains.md, "The onset's energy verdict and secant steps".
 VERDICT_SHARE: float = 0.5
 
 #: FIRE steps of the enthalpy stage between two looks at its largest force for a try of the
