@@ -12,6 +12,7 @@ from jamflow.chains.jamming import linked_volume
 from jamflow.minimize.fire import DEFAULT_FIRE, minimize_fire
 from jamflow.minimize.onset import VERDICT_SHARE, bisect_to_pressure
 from jamflow.models.links import LinkedSpheresModel
+from jamflow.models.shapes.model import ShapeModel
 from jamflow.models.spheres.model import SphereModel
 from jamflow.models.spheres.potential import (
     HARMONIC,
@@ -20,6 +21,7 @@ from jamflow.models.spheres.potential import (
     evaluate,
     max_contacts,
 )
+from jamflow.shapes import bidisperse_shapes, random_shape_packing, unit_shape
 from jamflow.state.bodies import Links
 
 P0 = 1e-4
@@ -32,6 +34,15 @@ def _disks(phi: float, n: int = 64, seed: int = 3):
     D /= D.mean()
     side = np.sqrt(np.pi / 4 * np.sum(D**2) / phi)
     return SphereModel(Box(side * np.eye(2)), D), rng.random((n, 2)) * side
+
+
+def _shapes(family: str, phi: float):
+    """24 bidisperse bodies (asphericity 1.1) placed at phi 0.4, squeezed affinely to ``phi``."""
+    p = random_shape_packing(bidisperse_shapes(unit_shape(family, asphericity=1.1)), 24, 0.4, 1)
+    model = ShapeModel(p.box, p.shapes, p.shape_index)
+    f = (0.4 / phi) ** 0.5
+    model, start = model.rescaled(f, np.column_stack([p.position, p.orientation]))
+    return model, start
 
 
 def _trimers(phi: float, flexible: bool):
@@ -120,7 +131,28 @@ def test_centroid_reach_of_known_clusters():
         assert np.max(np.linalg.norm(x - x.mean(axis=0), axis=1)) <= chain.centroid_reach(4)
 
 
-@pytest.mark.parametrize("case", ["disks-unjammed", "trimers-unjammed", "disks-jammed"])
+@pytest.mark.parametrize("family", ["ellipse", "circulo-line"])
+def test_shape_energy_floor_lies_below_the_energy_of_minima_near_jamming(family):
+    """Minima of a shape packing decompressed in steps towards jamming: each one's energy lies above the floor of
+    its own pressure (where the bound applies, pressures below ~1e-2 here)."""
+    model, x = _shapes(family, 0.95)
+    x = minimize_fire(model, x, 1e-10, 200_000).position
+    phi, checked = 0.95, 0
+    for new in np.arange(0.90, 0.86, -0.002):
+        model, x = model.rescaled((phi / new) ** 0.5, x)
+        phi = new
+        res = minimize_fire(model, x, 1e-10, 200_000)
+        x = res.position
+        if res.pressure <= 0.0:
+            break
+        floor = model.energy_floor(res.pressure)
+        assert res.energy > floor >= 0.0
+        checked += floor > 0.0
+    assert checked >= 2
+
+
+@pytest.mark.parametrize("case", ["disks-unjammed", "trimers-unjammed", "ellipses-unjammed",
+                                  "circulo-lines-unjammed", "disks-jammed"])
 def test_energy_verdict_agrees_with_the_full_minimisation(case):
     """A minimisation stopped by the verdict ends, when continued to its minimum, below the verdict's pressure;
     one whose minimum lies above it never stops early."""
@@ -128,6 +160,10 @@ def test_energy_verdict_agrees_with_the_full_minimisation(case):
         model, x = _disks(0.80)
     elif case == "trimers-unjammed":
         model, x = _trimers(0.70, flexible=False)
+    elif case == "ellipses-unjammed":
+        model, x = _shapes("ellipse", 0.86)
+    elif case == "circulo-lines-unjammed":
+        model, x = _shapes("circulo-line", 0.86)
     else:
         model, x = _disks(0.90)
     ceiling = VERDICT_SHARE * (1.0 - 0.1) * P0

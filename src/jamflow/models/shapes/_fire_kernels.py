@@ -15,6 +15,7 @@ import numpy as np
 
 from ..._numba import njit
 from ...minimize._fire_kernels import (
+    BELOW,
     CONVERGED,
     MAX_STEPS,
     REBUILD,
@@ -125,12 +126,22 @@ def _max_generalized_sq(force, torque_arm):
     return m
 
 
+@njit(cache=True, inline="always")
+def _kinetic(v, inv_mass):
+    """``2 K = sum v^2 / inv_mass`` over every degree of freedom."""
+    twice = 0.0
+    for i in range(v.shape[0]):
+        for c in range(v.shape[1]):
+            twice += v[i, c] * v[i, c] / inv_mass[i, c]
+    return twice
+
+
 @njit(cache=True)
 def shape_fire(
     y, v, box_state, fire_state, fire_params, inv_mass,
     offset, pi, pj, lam, family, params, bound, k, torque_arm, rotations,
     y_build, s_build, reach, skin, lengths, diameter,
-    barostat, pressure0, volume_ref, q_scale, force_tol, pressure_rtol, max_steps, force, virial,
+    barostat, pressure0, volume_ref, q_scale, force_tol, pressure_rtol, max_steps, energy_floor, force, virial,
 ):
     """FIRE 2.0 of shaped bodies in the mass metric (the steps of :class:`~jamflow.minimize.fire._ModelFire`).
 
@@ -151,6 +162,9 @@ def shape_fire(
     barostat : bool
         Minimise ``H = U + P0 V`` with ``q`` (unit mass) as one more degree of freedom,
         generalised force ``d V (P - P0) / q_scale``.
+    energy_floor : float
+        At a fixed box, ``U + K`` (kinetic energy in the mass metric) at or below it stops
+        the run with ``BELOW`` (0: never).
 
     The generalised force on reference centres is ``s F`` (chain rule); the step is
     the unit-mass FIRE of ``M^(1/2) q`` as in :class:`~jamflow.minimize.fire._ModelFire`.
@@ -207,6 +221,9 @@ def shape_fire(
             not barostat or abs(pressure - pressure0) <= pressure_rtol * pressure0
         ):
             status = CONVERGED
+            break
+        if energy_floor > 0.0 and not barostat and energy + 0.5 * _kinetic(v, inv_mass) <= energy_floor:
+            status = BELOW
             break
         if step >= max_steps:
             break

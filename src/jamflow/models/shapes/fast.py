@@ -76,7 +76,8 @@ class ShapeFire:
 
     def advance(self, force_tol: float, budget: int, rebuild: bool, energy_floor: float = 0.0) -> tuple[int, int]:
         """At most ``budget`` steps; returns ``(status, steps)`` (status of :mod:`jamflow.minimize._fire_kernels`)."""
-        no_energy_floor(self, energy_floor)
+        if self.barostat:
+            no_energy_floor(self, energy_floor)
         m = self.model
         if self.pairs is None or rebuild:
             self._build()
@@ -85,7 +86,8 @@ class ShapeFire:
             self.y, self.v, self.box_state, self.fire_state, self.fparams, self.inv_mass, offset, pi, pj, lam,
             self.family, m.params, self.bound, m.k, m.torque_arm, m.rotations, self.y_build, self.s_build,
             m.nlist.reach, m.nlist.skin, self.lengths, m.bounding_diameter, self.barostat, self.pressure0,
-            m.box.volume, self.q_scale, float(force_tol), self.pressure_rtol, int(budget), self.force, self.virial,
+            m.box.volume, self.q_scale, float(force_tol), self.pressure_rtol, int(budget), float(energy_floor),
+            self.force, self.virial,
         )
         self.pairs = (pi, pj, offset, lam)
         self.inline_builds += builds
@@ -109,6 +111,7 @@ class ShapeFire:
             pressure=float(pressure), max_force=float(np.sqrt(fmax2)), n_contacts=int(n_contact), steps=steps,
             converged=status == _fire_kernels.CONVERGED,
             rebuilds=self.model.nlist.builds - self.builds0 + self.inline_builds, evaluations=steps + 1,
+            below=status == _fire_kernels.BELOW,
         )
 
     def _evaluated(self, s: float, steps: int, status: int) -> MinimizeResult:

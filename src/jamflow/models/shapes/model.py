@@ -239,6 +239,45 @@ class ShapeModel(WithoutFastPaths):
         dx = np.ascontiguousarray(x[j] - x[i] + self.nlist.offsets(self.box))
         return i, j, dx, np.ascontiguousarray(q[2 * self.n:])
 
+    def energy_floor(self, pressure: float) -> float:
+        """An energy [energy] below which no state in :attr:`box` has a virial pressure of ``pressure`` or more.
+
+        Ellipses and circulo-shapes (0 for the other families). A term of energy
+        ``(k/2) w delta^2`` pushes along a unit normal (circulo) or gives ``f . dx = k delta r``
+        (ellipses: the Perram–Wertheim distance does not change along ``dx``), so each
+        pair's ``F . dx <= l k sum_t w_t delta_t`` with ``l = 2 b_max`` (the largest centre
+        distance of two overlapping bodies, ``b`` the bounding radii). Over terms of total
+        weight ``W``, Hölder gives ``P <= l k sqrt(W) sqrt(2 U / k) / (d V)``. ``W`` counts
+        every vertex-edge term of a pair (``w`` = 1 on circulo-lines, 2 on polygons) times
+        the pairs: each body touches at most ``z`` others, which with it lie inside the disk
+        of radius ``3 b_max`` about its centre and overlap each other by at most
+        ``2 b_max delta_max`` of area, so ``(z + 1)(A_min - z b_max delta_max) <= 9 pi b_max^2``.
+        """
+        if not pressure > 0.0:
+            raise ValueError(f"pressure must be > 0, got {pressure}")
+        if self.family not in ("ellipse", "circulo"):
+            return 0.0
+        kinds = np.unique(self.shape_index)
+        b_max = float(self.shapes.bounding_radius[kinds].max())
+        area_min = float(self.shapes.area[kinds].min())
+        if self.family == "ellipse":
+            per_pair = 1.0
+        else:
+            nv = self.shapes.n_vertices[kinds]
+            edges, weight = np.where(nv == 2, 1, nv), np.where(nv == 2, 1.0, 2.0)
+            per_pair = float(2 * nv.max() * edges.max() * weight.max())
+        lever = 2.0 * b_max
+        disk = 9.0 * np.pi * b_max**2
+        scale = (pressure * self.d * self.box.volume) ** 2 / (self.k * lever**2 * per_pair * self.n)
+        # without overlaps z <= disk / A_min - 1; that floor is the largest, so its overlap bounds the final one's
+        delta = np.sqrt(2.0 * scale / max(np.floor(disk / area_min) - 1.0, 1.0) / self.k)
+        # the overlaps among z + 1 <= 2 disk / A_min bodies cost at most half a body's area here
+        z_cap = 2.0 * disk / area_min
+        if z_cap * b_max * delta > 0.5 * area_min:
+            return 0.0
+        z = np.floor(disk / (area_min - z_cap * b_max * delta)) - 1.0
+        return float(scale / z)
+
     def evaluate(self, q: NDArray[np.float64]) -> ModelEvaluation:
         """Energy, gradient ``(3N,)`` and virial (``-sum dU/dx_j dx``, see :mod:`._kernels`)."""
         i, j, dx, theta = self._pairs(q)
