@@ -364,7 +364,7 @@ def strain_fire(
     offset, pi, pj, sigma, eps, w_exp, y_build, h_build_inv, reach, skin, diameter, adj_ptr, adj,
     li, lj, link_offset, length, sign, first, cptr, fptr, chol, rptr, members, shift, ref, body, vb, fb, inv_mass,
     hinge_spheres, hinge_local, hinge_shift, hinge_zero, hinge_body, hinge_state, hinge_geo, hinge_origin, hinge_r,
-    vh, fh, length_rtol, max_sweeps, rank_rtol, force_tol, max_steps, fy, fe,
+    vh, fh, free, length_rtol, max_sweeps, rank_rtol, force_tol, max_steps, fy, fe,
 ):
     """FIRE 2.0 of shear-stabilised linked spheres in one compiled loop (the steps of :class:`~jamflow.minimize.fire._ModelFire`).
 
@@ -387,6 +387,8 @@ def strain_fire(
     :func:`hinge_strain_advance`): FIRE moves them by real-space sphere velocities at fixed
     strain ``vh`` (4 H, 3), kept tangent by :func:`~._hinge_kernels.hinge_project`, with the
     projected real forces ``fh`` (unit sphere masses: the fixed-box hinged path's metric).
+    ``free`` are the spheres outside bodies: the FIRE sums and moves of ``y`` skip the bodies'
+    spheres, whose forces and velocities there are zero (the same bits).
 
     The list lives in the deformed box (rotated frame, centres ``y T^T``): when
     displacements and the deformation since the build (``||U h_build^-1 - 1||_F``
@@ -468,14 +470,14 @@ def strain_fire(
             hinge_project(hinge_local, hinge_geo, vh)
         strain_project_pair(w, Z, S, small, ce, sce, schur, fixed_volume, li, lj, first, cptr, fptr, chol, pinv,
                             fy, fe, vy, ve, z, t_m, q_m)
-        fmax2 = max(_max_force_sq(fy), _dot1(fe, fe), rigid_max_force_sq(rptr, r_body, inv_mass, fb),
+        fmax2 = max(_free_max_sq(fy, free), _dot1(fe, fe), rigid_max_force_sq(rptr, r_body, inv_mass, fb),
                     _max_force_sq(fh))
         if fmax2 <= force_tol * force_tol:
             status = CONVERGED
             break
         if step >= max_steps:
             break
-        power = _dot(fy, vy) + _dot1(fe, ve) + body_power_norms(fb, vb, inv_mass)[0] + _dot(fh, vh)
+        power = _free_dot(fy, vy, free) + _dot1(fe, ve) + body_power_norms(fb, vb, inv_mass)[0] + _dot(fh, vh)
         npos, dt, alpha = _fire_adapt(
             power, done + step, npos, dt, alpha, n_delay, f_inc, f_dec, f_alpha, alpha0, dt_max, dt_min,
             initial_delay,
@@ -484,7 +486,7 @@ def strain_fire(
             if hinged:
                 hinge_strain_advance(hinge_local, hinge_geo, hinge_state, hinge_origin, hinge_r, hinge_zero,
                                      hinge_body, Finv, vh, -0.5 * dt)
-            _strain_step_back(y, vy, e, ve, body, vb, vh, dt)
+            _strain_step_back(y, vy, e, ve, body, vb, vh, free, dt)
             k_, err, bad, small, schur = strain_reaffix(
                 y, e, h0, scale, fixed_volume, li, lj, link_offset, length, sign, first, cptr, fptr, chol, pinv, R0, u,
                 rl, w, Be, Z, S, ce, sce, small, schur, z, t_m, q_m, length_rtol, max_sweeps, rank_rtol, True)
@@ -492,7 +494,7 @@ def strain_fire(
             if k_ < 0 or bad >= 0:
                 status = STALLED
                 break
-        _strain_move(y, vy, fy, e, ve, fe, body, vb, fb, inv_mass, vh, fh, dt, alpha)
+        _strain_move(y, vy, fy, e, ve, fe, body, vb, fb, inv_mass, vh, fh, free, dt, alpha)
         step += 1
         if hinged:
             hinge_strain_advance(hinge_local, hinge_geo, hinge_state, hinge_origin, hinge_r, hinge_zero, hinge_body,
@@ -509,9 +511,9 @@ def strain_fire(
 
 
 @njit(cache=True)
-def _strain_step_back(y, vy, e, ve, body, vb, vh, dt):
+def _strain_step_back(y, vy, e, ve, body, vb, vh, free, dt):
     """FIRE's step back on an uphill step: half a step back along the velocity, which is zeroed (every group)."""
-    for i in range(y.shape[0]):
+    for i in free:
         for a in range(y.shape[1]):
             y[i, a] -= 0.5 * dt * vy[i, a]
             vy[i, a] = 0.0
@@ -526,12 +528,13 @@ def _strain_step_back(y, vy, e, ve, body, vb, vh, dt):
 
 
 @njit(cache=True)
-def _strain_move(y, vy, fy, e, ve, fe, body, vb, fb, inv_mass, vh, fh, dt, alpha):
+def _strain_move(y, vy, fy, e, ve, fe, body, vb, fb, inv_mass, vh, fh, free, dt, alpha):
     """FIRE's semi-implicit Euler step of centres, strain (unit masses) and bodies (inverse masses ``inv_mass``):
     ``v += dt M^-1 F``, mixing with ``|v|_M`` and ``|F|_M^-1`` (the unit-mass FIRE of ``M^(1/2) q``), move.
     The hinged spheres' velocities ``vh`` (unit masses, forces ``fh``) are updated and mixed; their move is
-    :func:`hinge_strain_advance`."""
-    for i in range(y.shape[0]):
+    :func:`hinge_strain_advance`. Centres ``y`` of the spheres ``free`` alone (the others' forces and velocities
+    are zero)."""
+    for i in free:
         for a in range(y.shape[1]):
             vy[i, a] += dt * fy[i, a]
     for p in range(e.shape[0]):
@@ -543,13 +546,13 @@ def _strain_move(y, vy, fy, e, ve, fe, body, vb, fb, inv_mass, vh, fh, dt, alpha
         for a in range(3):
             vh[k, a] += dt * fh[k, a]
     _, vb2, fb2 = body_power_norms(fb, vb, inv_mass)
-    vnorm = np.sqrt(_dot(vy, vy) + _dot1(ve, ve) + vb2 + _dot(vh, vh))
-    fnorm = np.sqrt(_dot(fy, fy) + _dot1(fe, fe) + fb2 + _dot(fh, fh))
+    vnorm = np.sqrt(_free_dot(vy, vy, free) + _dot1(ve, ve) + vb2 + _dot(vh, vh))
+    fnorm = np.sqrt(_free_dot(fy, fy, free) + _dot1(fe, fe) + fb2 + _dot(fh, fh))
     keep, mix = _fire_mixing(alpha, vnorm, fnorm)
     for k in range(vh.shape[0]):
         for a in range(3):
             vh[k, a] = _mixed(keep, vh[k, a], mix, fh[k, a])
-    for i in range(y.shape[0]):
+    for i in free:
         for a in range(y.shape[1]):
             vi = _mixed(keep, vy[i, a], mix, fy[i, a])
             vy[i, a] = vi
@@ -604,6 +607,28 @@ def _rebuild_due(y, T, A, y_build, reach, skin):
         elif d2 > m2:
             m2 = d2
     return np.sqrt(m1) + np.sqrt(m2) + np.sqrt(dev) * reach >= skin
+
+
+@njit(cache=True)
+def _free_dot(a, b, rows):
+    """``sum a_i . b_i`` over the ``rows`` of two (N, d) arrays."""
+    s = 0.0
+    for i in rows:
+        for k in range(a.shape[1]):
+            s += a[i, k] * b[i, k]
+    return s
+
+
+@njit(cache=True)
+def _free_max_sq(a, rows):
+    """Largest ``|a_i|^2`` over the ``rows`` of ``a`` (N, d)."""
+    out = 0.0
+    for i in rows:
+        s = 0.0
+        for k in range(a.shape[1]):
+            s += a[i, k] * a[i, k]
+        out = max(out, s)
+    return out
 
 
 @njit(cache=True)

@@ -416,6 +416,10 @@ class StrainFire:
         self.hinge = _strain_hinges(model, q, self.y, self.e, hinged)
         self.vh = np.zeros_like(self.hinge["r"])
         self.fh = np.zeros_like(self.vh)
+        in_body = np.zeros(model.n, bool)
+        in_body[self.rigid["members"]] = True
+        in_body[self.hinge["spheres"].ravel()] = True
+        self.free = np.flatnonzero(~in_body).astype(np.int64)  # the spheres that are degrees of freedom
         self.tol_scale = 1.0  # the loop's tolerance over the asked one (:meth:`advance`)
         self.chol = np.zeros_like(self.gram["sign"])
         self.adj_ptr = np.concatenate([[0], np.cumsum(np.bincount(model.links.i, minlength=model.n))]).astype(np.int64)
@@ -472,7 +476,7 @@ class StrainFire:
             nl.reach, nl.skin, m.diameter, self.adj_ptr, m.links.j, g["ci"], g["cj"], g["offset"], g["length"],
             g["sign"], g["first"], g["cptr"], g["fptr"], self.chol, rigid["rptr"], rigid["members"], rigid["shift"],
             rigid["ref"], rigid["body"], self.vb, self.fb, rigid["inv_mass"], h["spheres"], h["local"], h["shift"],
-            h["zero"], h["body"], h["state"], h["geo"], h["origin"], h["r"], self.vh, self.fh, m.length_rtol,
+            h["zero"], h["body"], h["state"], h["geo"], h["origin"], h["r"], self.vh, self.fh, self.free, m.length_rtol,
             LINK_NEWTON_MAX_ITERATIONS, LINK_RANK_RTOL, float(force_tol), int(budget), self.fy, self.fe,
         )
         self.pairs = (pairs[0], pairs[1], pairs[2], pairs[3])
