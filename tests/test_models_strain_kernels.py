@@ -359,3 +359,14 @@ def test_affine_pair_forces_unrolled_are_the_generic_loop_bit_for_bit(d):
     assert c0 == on.sum() and e0 == pytest.approx(0.5 * np.sum((1.0 - r[on] / sigma[on]) ** 2), rel=1e-12)
     np.testing.assert_allclose(f0, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
     np.testing.assert_allclose(v0, f.T @ dx[on], rtol=0, atol=1e-12 * np.abs(v0).max())
+
+
+def test_a_straight_hinge_is_refused_as_degenerate():
+    """A chain of four on a line with both angle links (a hinged cluster whose links are redundant) is refused
+    with the Gram path's rank error before the engine moves it as a body."""
+    x = np.array([[1.0, 1, 1], [2, 1, 1], [3, 1, 1], [4, 1, 1], [1, 4, 4], [2, 4, 4]])
+    links = Links(np.array([0, 1, 2, 0, 1]), np.array([1, 2, 3, 2, 3]), np.array([1.0, 1, 1, 2, 2]))
+    model = ShearStabilizedModel(Box(7.0 * np.eye(3)), np.ones(6), links, x)
+    assert model.gram.hinge_layout["spheres"].tolist() == [[0, 1, 2, 3]]
+    with pytest.raises(ValueError, match="degenerate"):
+        StrainFire(model, model.dofs(x), DEFAULT_FIRE)
