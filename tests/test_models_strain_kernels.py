@@ -7,10 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from chain_starts import squeezed_chains
 
 from jamflow.box import Box
-from jamflow.chains.builders import linked_packing
-from jamflow.chains.jamming import linked_volume
 from jamflow.io import read_packing
 from jamflow.minimize.fire import DEFAULT_FIRE, _fire, _ModelFire
 from jamflow.models import _hinge_kernels as hk
@@ -295,14 +294,8 @@ def test_hinged_engine_reaches_the_flat_fire_minimum(mixed):
     minimum moved by 1e-3 per coordinate and 1e-4 in strain) the engine with hinged bodies reaches the flat
     FIRE's minimum: energy, strain, box, pressure, and the centres up to a common translation (a zero mode,
     which another metric moves along); links and volume held."""
-    p = linked_packing(3, 32, "chain", np.random.default_rng(2), chain_length=4)[0]
-    links = p.links
-    if mixed:
-        keep = ~((links.i % 8 == 0) & (links.j == links.i + 2))
-        links = Links(links.i[keep], links.j[keep], links.length[keep])
-    f = (linked_volume(3, p.diameter, links) / p.box.volume / 0.66) ** (1 / 3)
-    model = ShearStabilizedModel(p.box.scaled(f), p.diameter, links, p.position * f)
-    start = _fire(StrainFire(model, model.dofs(p.position * f), DEFAULT_FIRE), 1e-12, 200_000)
+    model, x = squeezed_chains(ShearStabilizedModel, mixed)
+    start = _fire(StrainFire(model, model.dofs(x), DEFAULT_FIRE), 1e-12, 200_000)
     rng = np.random.default_rng(5)
     near, x = model.rescaled(1.0, start.position)
     q = near.dofs(x)
