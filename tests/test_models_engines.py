@@ -6,6 +6,7 @@ import functools
 
 import numpy as np
 import pytest
+from chain_starts import squeezed_chains
 
 from jamflow.box import Box
 from jamflow.chains.builders import linked_packing
@@ -329,16 +330,10 @@ def test_hinged_engine_reaches_the_gram_engine_minimum(mixed):
     link, a flexible chain on the Gram path beside the hinged ones): from a start near the Gram engine's
     minimum (moved by 1e-3 per coordinate) the hinged engine reaches the same minimum (energy to 1e-12,
     centres to 1e-7), converged by the model's own projection, links to LINK_LENGTH_RTOL."""
-    p = linked_packing(3, 32, "chain", np.random.default_rng(2), chain_length=4)[0]
-    links = p.links
-    if mixed:
-        keep = ~((links.i % 8 == 0) & (links.j == links.i + 2))
-        links = Links(links.i[keep], links.j[keep], links.length[keep])
-    f = (linked_volume(3, p.diameter, links) / p.box.volume / 0.66) ** (1 / 3)
-    model = LinkedSpheresModel(p.box.scaled(f), p.diameter, links, p.position * f)
+    model, x = squeezed_chains(LinkedSpheresModel, mixed)
     hinges = len(model.gram.hinge_layout["spheres"])
     assert hinges == (16 if mixed else 32)
-    ref = _fire(LinkedFire(model, model.dofs(p.position * f), DEFAULT_FIRE, hinged=False), 1e-12, 200_000)
+    ref = _fire(LinkedFire(model, model.dofs(x), DEFAULT_FIRE, hinged=False), 1e-12, 200_000)
     q = model.reproject(ref.position.ravel() + 1e-3 * np.random.default_rng(4).normal(size=ref.position.size))
     runs = [_fire(LinkedFire(model, q, DEFAULT_FIRE, hinged=h), 1e-12, 200_000) for h in (True, False)]
     (a, b) = runs

@@ -28,6 +28,7 @@ from ..minimize._fire_kernels import (
     _mixed,
 )
 from ..neighbors._cell_kernels import cell_pairs_into, pair_buffers
+from ._hinge_kernels import hinge_advance, hinge_place, hinge_project
 from ._link_kernels import (
     is_linked,
     strain_state,
@@ -155,6 +156,91 @@ def strain_forces(y, Q, T, Finv, scale, offset, pi, pj, sigma, eps, w_exp, force
 
 
 @njit(cache=True)
+def hinge_strain_place(y, Finv, spheres, shift, origin, r):
+    """Reference centres ``y_s = Y + F^-1 r_s - shift_s`` of every hinged cluster's spheres, in place.
+
+    ``origin`` (H, 3) the reference centres ``Y`` of the spheres ``b`` (unwrapped), ``r`` (4 H, 3)
+    the real-space (unrotated frame) offsets from ``b`` placed by
+    :func:`~._hinge_kernels.hinge_place` (cluster ``h``'s at rows ``4 h ... 4 h + 3``), ``shift``
+    (H, 4, 3) the periodic shifts in the reference box.
+    """
+    for h in range(spheres.shape[0]):
+        ox, oy, oz = origin[h, 0], origin[h, 1], origin[h, 2]
+        for s in range(4):
+            k = 4 * h + s
+            i = spheres[h, s]
+            rx, ry, rz = r[k, 0], r[k, 1], r[k, 2]
+            y[i, 0] = ox + Finv[0, 0] * rx + Finv[0, 1] * ry + Finv[0, 2] * rz - shift[h, s, 0]
+            y[i, 1] = oy + Finv[1, 0] * rx + Finv[1, 1] * ry + Finv[1, 2] * rz - shift[h, s, 1]
+            y[i, 2] = oz + Finv[2, 0] * rx + Finv[2, 1] * ry + Finv[2, 2] * rz - shift[h, s, 2]
+
+
+@njit(cache=True)
+def hinge_strain_forces(Finv, spheres, r, scale, fy, fe, fh):
+    """Real-space forces ``fh`` (4 H, 3) of the hinged spheres from ``fy`` (N, 3); ``fe`` made the strain force at fixed bodies.
+
+    ``fh_s = f_s = F^-T fy_s`` (unrotated frame, rows as ``r`` of :func:`hinge_strain_place`);
+    ``fy`` of those spheres is zeroed (they are not degrees of freedom); ``fe -= `` the strain
+    components of ``C = sum_s f_s rho_s^T`` with ``rho_s = F^-1 r_s`` (at fixed bodies a sphere
+    moves with ``dF (Y - shift_s)``, not with ``dF y_s``; as :func:`~._rigid_kernels.rigid_forces`).
+    """
+    if spheres.shape[0] == 0:
+        return
+    C = np.zeros((3, 3))
+    for h in range(spheres.shape[0]):
+        for s in range(4):
+            k = 4 * h + s
+            i = spheres[h, s]
+            gx, gy, gz = fy[i, 0], fy[i, 1], fy[i, 2]
+            fx = Finv[0, 0] * gx + Finv[1, 0] * gy + Finv[2, 0] * gz
+            fyr = Finv[0, 1] * gx + Finv[1, 1] * gy + Finv[2, 1] * gz
+            fz = Finv[0, 2] * gx + Finv[1, 2] * gy + Finv[2, 2] * gz
+            rx, ry, rz = r[k, 0], r[k, 1], r[k, 2]
+            px = Finv[0, 0] * rx + Finv[0, 1] * ry + Finv[0, 2] * rz
+            py = Finv[1, 0] * rx + Finv[1, 1] * ry + Finv[1, 2] * rz
+            pz = Finv[2, 0] * rx + Finv[2, 1] * ry + Finv[2, 2] * rz
+            C[0, 0] += fx * px
+            C[0, 1] += fx * py
+            C[0, 2] += fx * pz
+            C[1, 0] += fyr * px
+            C[1, 1] += fyr * py
+            C[1, 2] += fyr * pz
+            C[2, 0] += fz * px
+            C[2, 1] += fz * py
+            C[2, 2] += fz * pz
+            fh[k, 0], fh[k, 1], fh[k, 2] = fx, fyr, fz
+            fy[i, 0] = 0.0
+            fy[i, 1] = 0.0
+            fy[i, 2] = 0.0
+    p = 0
+    for a in range(3):
+        for b in range(a, 3):
+            fe[p] -= _component(C, a, b, scale)
+            p += 1
+
+
+@njit(cache=True)
+def hinge_strain_advance(local, geo, state, origin, r, zero, body, Finv, v, step):
+    """Every hinged cluster moved by ``step * P v`` (``v`` (4 H, 3) real-space velocities at fixed strain) and placed.
+
+    :func:`~._hinge_kernels.hinge_advance` on body origins kept at zero leaves the real-space
+    displacement of ``b`` in ``state[:, :3]``; it moves the reference origin,
+    ``Y += F^-1 d`` (so the move is ``F Y + r_s`` + ``step P v`` to first order at this strain),
+    and :func:`~._hinge_kernels.hinge_place` sets the offsets ``r`` and the geometry ``geo`` of
+    the new state (``local`` the rows ``4 h + s`` of ``r``, ``zero`` shifts of zero).
+    """
+    hinge_advance(local, geo, state, v, step)
+    for h in range(local.shape[0]):
+        dx, dy, dz = state[h, 0], state[h, 1], state[h, 2]
+        for a in range(3):
+            origin[h, a] += Finv[a, 0] * dx + Finv[a, 1] * dy + Finv[a, 2] * dz
+        state[h, 0] = 0.0
+        state[h, 1] = 0.0
+        state[h, 2] = 0.0
+    hinge_place(r, local, zero, body, state, geo)
+
+
+@njit(cache=True)
 def sheared_list(y, h0, h0_inv, U, T, diameter, skin, adj_ptr, adj, buffers):
     """The Verlet list of the deformed box ``U`` (centres ``T y``), built with the orthogonal cell search.
 
@@ -277,7 +363,8 @@ def strain_fire(
     y, vy, e, ve, fire_state, fire_params, h0, scale, fixed_volume,
     offset, pi, pj, sigma, eps, w_exp, y_build, h_build_inv, reach, skin, diameter, adj_ptr, adj,
     li, lj, link_offset, length, sign, first, cptr, fptr, chol, rptr, members, shift, ref, body, vb, fb, inv_mass,
-    length_rtol, max_sweeps, rank_rtol, force_tol, max_steps, fy, fe,
+    hinge_spheres, hinge_local, hinge_shift, hinge_zero, hinge_body, hinge_state, hinge_geo, hinge_origin, hinge_r,
+    vh, fh, free, length_rtol, max_sweeps, rank_rtol, force_tol, max_steps, fy, fe,
 ):
     """FIRE 2.0 of shear-stabilised linked spheres in one compiled loop (the steps of :class:`~jamflow.minimize.fire._ModelFire`).
 
@@ -292,7 +379,16 @@ def strain_fire(
     shape ``ref``): their links are not among ``li``, ``lj``, their spheres' ``y`` are
     placed from the bodies and the strain at every evaluation (:func:`rigid_place`) and
     their forces gathered on the bodies (:func:`rigid_forces`); only the other links and
-    the volume are constraints.
+    the volume are constraints. Hinged 3D clusters likewise (``hinge_*``: reference origins
+    ``hinge_origin`` (H, 3) of their spheres ``b`` following the strain affinely, rotation and
+    torsion in the real frame in the arrays of :mod:`._hinge_kernels` with body origins kept at
+    zero, so ``hinge_place`` puts the real offsets ``hinge_r`` (4 H, 3) from ``b`` at rows
+    ``hinge_local``; :func:`hinge_strain_place`, :func:`hinge_strain_forces`,
+    :func:`hinge_strain_advance`): FIRE moves them by real-space sphere velocities at fixed
+    strain ``vh`` (4 H, 3), kept tangent by :func:`~._hinge_kernels.hinge_project`, with the
+    projected real forces ``fh`` (unit sphere masses: the fixed-box hinged path's metric).
+    ``free`` are the spheres outside bodies: the FIRE sums and moves of ``y`` skip the bodies'
+    spheres, whose forces and velocities there are zero (the same bits).
 
     The list lives in the deformed box (rotated frame, centres ``y T^T``): when
     displacements and the deformation since the build (``||U h_build^-1 - 1||_F``
@@ -332,6 +428,7 @@ def strain_fire(
     small = np.eye(m)
     schur = 1.0
     r_body = np.empty_like(ref)
+    hinged = hinge_spheres.shape[0] > 0
     h0_inv = np.linalg.inv(h0)
     buffers = pair_buffers(n, d)
     builds = 0
@@ -346,6 +443,7 @@ def strain_fire(
         # evaluation at (y, e): a valid list, the factorisation, forces and velocity projected
         F, Q, T, U, det, Finv = strain_state(e, h0, scale)
         rigid_place(y, Finv, body, rptr, members, shift, ref, r_body)
+        hinge_strain_place(y, Finv, hinge_spheres, hinge_shift, hinge_origin, hinge_r)
         if _rebuild_due(y, T, U @ h_build_inv, y_build, reach, skin):
             ok, pi_, pj_, offset_, sigma_, buffers = sheared_list(y, h0, h0_inv, U, T, diameter, skin, adj_ptr, adj,
                                                                  buffers)
@@ -366,21 +464,29 @@ def strain_fire(
             break
         energy, n_contact = strain_forces(y, Q, T, Finv, scale, offset, pi, pj, sigma, eps, w_exp, force, fy, fe)
         rigid_forces(Finv, rptr, members, r_body, scale, fy, fe, fb)
+        if hinged:
+            hinge_strain_forces(Finv, hinge_spheres, hinge_r, scale, fy, fe, fh)
+            hinge_project(hinge_local, hinge_geo, fh)
+            hinge_project(hinge_local, hinge_geo, vh)
         strain_project_pair(w, Z, S, small, ce, sce, schur, fixed_volume, li, lj, first, cptr, fptr, chol, pinv,
                             fy, fe, vy, ve, z, t_m, q_m)
-        fmax2 = max(_max_force_sq(fy), _dot1(fe, fe), rigid_max_force_sq(rptr, r_body, inv_mass, fb))
+        fmax2 = max(_free_max_sq(fy, free), _dot1(fe, fe), rigid_max_force_sq(rptr, r_body, inv_mass, fb),
+                    _max_force_sq(fh))
         if fmax2 <= force_tol * force_tol:
             status = CONVERGED
             break
         if step >= max_steps:
             break
-        power = _dot(fy, vy) + _dot1(fe, ve) + body_power_norms(fb, vb, inv_mass)[0]
+        power = _free_dot(fy, vy, free) + _dot1(fe, ve) + body_power_norms(fb, vb, inv_mass)[0] + _dot(fh, vh)
         npos, dt, alpha = _fire_adapt(
             power, done + step, npos, dt, alpha, n_delay, f_inc, f_dec, f_alpha, alpha0, dt_max, dt_min,
             initial_delay,
         )
         if not power > 0.0:
-            _strain_step_back(y, vy, e, ve, body, vb, dt)
+            if hinged:
+                hinge_strain_advance(hinge_local, hinge_geo, hinge_state, hinge_origin, hinge_r, hinge_zero,
+                                     hinge_body, Finv, vh, -0.5 * dt)
+            _strain_step_back(y, vy, e, ve, body, vb, vh, free, dt)
             k_, err, bad, small, schur = strain_reaffix(
                 y, e, h0, scale, fixed_volume, li, lj, link_offset, length, sign, first, cptr, fptr, chol, pinv, R0, u,
                 rl, w, Be, Z, S, ce, sce, small, schur, z, t_m, q_m, length_rtol, max_sweeps, rank_rtol, True)
@@ -388,8 +494,11 @@ def strain_fire(
             if k_ < 0 or bad >= 0:
                 status = STALLED
                 break
-        _strain_move(y, vy, fy, e, ve, fe, body, vb, fb, inv_mass, dt, alpha)
+        _strain_move(y, vy, fy, e, ve, fe, body, vb, fb, inv_mass, vh, fh, free, dt, alpha)
         step += 1
+        if hinged:
+            hinge_strain_advance(hinge_local, hinge_geo, hinge_state, hinge_origin, hinge_r, hinge_zero, hinge_body,
+                                 Finv, vh, dt)
         k_, err, bad, small, schur = strain_reaffix(
             y, e, h0, scale, fixed_volume, li, lj, link_offset, length, sign, first, cptr, fptr, chol, pinv, R0, u,
             rl, w, Be, Z, S, ce, sce, small, schur, z, t_m, q_m, length_rtol, max_sweeps, rank_rtol, True)
@@ -402,9 +511,9 @@ def strain_fire(
 
 
 @njit(cache=True)
-def _strain_step_back(y, vy, e, ve, body, vb, dt):
+def _strain_step_back(y, vy, e, ve, body, vb, vh, free, dt):
     """FIRE's step back on an uphill step: half a step back along the velocity, which is zeroed (every group)."""
-    for i in range(y.shape[0]):
+    for i in free:
         for a in range(y.shape[1]):
             y[i, a] -= 0.5 * dt * vy[i, a]
             vy[i, a] = 0.0
@@ -415,13 +524,17 @@ def _strain_step_back(y, vy, e, ve, body, vb, dt):
         for a in range(3):
             body[c, a] -= 0.5 * dt * vb[c, a]
             vb[c, a] = 0.0
+    vh[:, :] = 0.0
 
 
 @njit(cache=True)
-def _strain_move(y, vy, fy, e, ve, fe, body, vb, fb, inv_mass, dt, alpha):
+def _strain_move(y, vy, fy, e, ve, fe, body, vb, fb, inv_mass, vh, fh, free, dt, alpha):
     """FIRE's semi-implicit Euler step of centres, strain (unit masses) and bodies (inverse masses ``inv_mass``):
-    ``v += dt M^-1 F``, mixing with ``|v|_M`` and ``|F|_M^-1`` (the unit-mass FIRE of ``M^(1/2) q``), move."""
-    for i in range(y.shape[0]):
+    ``v += dt M^-1 F``, mixing with ``|v|_M`` and ``|F|_M^-1`` (the unit-mass FIRE of ``M^(1/2) q``), move.
+    The hinged spheres' velocities ``vh`` (unit masses, forces ``fh``) are updated and mixed; their move is
+    :func:`hinge_strain_advance`. Centres ``y`` of the spheres ``free`` alone (the others' forces and velocities
+    are zero)."""
+    for i in free:
         for a in range(y.shape[1]):
             vy[i, a] += dt * fy[i, a]
     for p in range(e.shape[0]):
@@ -429,11 +542,17 @@ def _strain_move(y, vy, fy, e, ve, fe, body, vb, fb, inv_mass, dt, alpha):
     for c in range(body.shape[0]):
         for a in range(3):
             vb[c, a] += dt * fb[c, a] * inv_mass[c, a]
+    for k in range(vh.shape[0]):
+        for a in range(3):
+            vh[k, a] += dt * fh[k, a]
     _, vb2, fb2 = body_power_norms(fb, vb, inv_mass)
-    vnorm = np.sqrt(_dot(vy, vy) + _dot1(ve, ve) + vb2)
-    fnorm = np.sqrt(_dot(fy, fy) + _dot1(fe, fe) + fb2)
+    vnorm = np.sqrt(_free_dot(vy, vy, free) + _dot1(ve, ve) + vb2 + _dot(vh, vh))
+    fnorm = np.sqrt(_free_dot(fy, fy, free) + _dot1(fe, fe) + fb2 + _dot(fh, fh))
     keep, mix = _fire_mixing(alpha, vnorm, fnorm)
-    for i in range(y.shape[0]):
+    for k in range(vh.shape[0]):
+        for a in range(3):
+            vh[k, a] = _mixed(keep, vh[k, a], mix, fh[k, a])
+    for i in free:
         for a in range(y.shape[1]):
             vi = _mixed(keep, vy[i, a], mix, fy[i, a])
             vy[i, a] = vi
@@ -488,6 +607,28 @@ def _rebuild_due(y, T, A, y_build, reach, skin):
         elif d2 > m2:
             m2 = d2
     return np.sqrt(m1) + np.sqrt(m2) + np.sqrt(dev) * reach >= skin
+
+
+@njit(cache=True)
+def _free_dot(a, b, rows):
+    """``sum a_i . b_i`` over the ``rows`` of two (N, d) arrays."""
+    s = 0.0
+    for i in rows:
+        for k in range(a.shape[1]):
+            s += a[i, k] * b[i, k]
+    return s
+
+
+@njit(cache=True)
+def _free_max_sq(a, rows):
+    """Largest ``|a_i|^2`` over the ``rows`` of ``a`` (N, d)."""
+    out = 0.0
+    for i in rows:
+        s = 0.0
+        for k in range(a.shape[1]):
+            s += a[i, k] * a[i, k]
+        out = max(out, s)
+    return out
 
 
 @njit(cache=True)

@@ -557,14 +557,17 @@ def _rigid_clusters(model: LinkedSpheresModel, x: NDArray[np.float64], hinged: b
              "ref": np.ascontiguousarray(y - np.repeat(centroid, sizes, axis=0))}, gram)
 
 
-def _hinge_bodies(model: LinkedSpheresModel, x: NDArray[np.float64], hinged: bool = True) -> dict:
+def _hinge_bodies(model: LinkedSpheresModel, x: NDArray[np.float64], hinged: bool = True,
+                  deformation: NDArray[np.float64] | None = None) -> dict:
     """The hinged 3D clusters of :class:`LinkedFire` at centres ``x`` (on the manifold) in the layout of :mod:`._hinge_kernels`.
 
     Body frame and origin from ``x``: the origin ``Y`` at sphere ``b``, no rotation, torsion
     angle 0; periodic shifts of ``a``, ``c``, ``t`` from the links to ``b``. Keys ``spheres``,
     ``shift`` (H, 4, 3), ``body``, ``state`` and ``geo`` (the geometry of the placement, set
     by :func:`._hinge_kernels.hinge_place`, which also puts the spheres back at ``x`` to round-off).
-    None of them with ``hinged`` false or outside 3D.
+    None of them with ``hinged`` false or outside 3D. With a ``deformation`` ``F`` (d, d), ``x``
+    are reference centres and the body frame is taken from the deformed offsets ``F (y_s - y_b)``
+    (the shear-stabilised engine, :class:`jamflow.models.strain.StrainFire`).
     """
     lay = model.gram.hinge_layout
     H = len(lay["spheres"]) if hinged and model.d == 3 else 0
@@ -575,7 +578,7 @@ def _hinge_bodies(model: LinkedSpheresModel, x: NDArray[np.float64], hinged: boo
     shift = np.zeros((H, 4, 3))
     shift[:, [0, 2, 3]] = model.link_offset[lay["anchor"]] * lay["anchor_sign"][..., None]
     y = x[spheres] + shift
-    ref = y - y[:, 1:2]
+    ref = y - y[:, 1:2] if deformation is None else (y - y[:, 1:2]) @ deformation.T
     axis = ref[:, 2] / np.linalg.norm(ref[:, 2], axis=1)[:, None]
     p = ref[:, 3]
     along = np.sum(p * axis, axis=1)[:, None] * axis

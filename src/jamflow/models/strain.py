@@ -56,11 +56,12 @@ from ..neighbors import _verlet_kernels
 from ..neighbors.verlet import NeighborList
 from ..state.bodies import Links
 from ..tolerances import LINK_LENGTH_RTOL, LINK_RANK_RTOL
-from . import _link_kernels, _strain_kernels
+from . import _hinge_kernels, _link_kernels, _strain_kernels
 from .links import (
     LINK_NEWTON_MAX_ITERATIONS,
     ClusterGram,
     LinkedSpheresModel,
+    _hinge_bodies,
     _rigid_clusters,
 )
 from .spheres import _kernels
@@ -393,9 +394,18 @@ class StrainFire:
     other clusters and the volume keep the constraint path. In the mass metric of unit
     sphere masses (centre mass ``n``, moment of inertia ``sum |r_s|^2``), which is the
     flat FIRE's on the bodies' motions at zero strain; the strain's mass stays 1.
+
+    Hinged 3D clusters (chains of four with frozen angles, :attr:`ClusterGram.hinge_layout`)
+    are bodies too (:func:`_strain_hinges`): the reference centre of their sphere ``b`` follows
+    the strain affinely, their rotation (quaternion) and torsion live in the real frame
+    (:mod:`._hinge_kernels`), so their links hold for every strain; they move by the real-space
+    sphere velocities at fixed strain (unit sphere masses, the fixed-box hinged path's metric).
+    ``hinged=False`` keeps them on the Gram/Woodbury path (docs/notes/chains.md, "Hinged 3D
+    bodies in the shear-stabilised engine").
     """
 
-    def __init__(self, model: ShearStabilizedModel, q: NDArray[np.float64], params: FireParameters) -> None:
+    def __init__(self, model: ShearStabilizedModel, q: NDArray[np.float64], params: FireParameters,
+                 hinged: bool = True) -> None:
         self.model = model
         self.builds0 = model.nlist.builds
         q = model.reproject(np.array(q, dtype=np.float64))
@@ -409,9 +419,16 @@ class StrainFire:
         unit = model.time_unit
         self.fire_state = np.array([params.dt * unit, params.alpha0, 0.0, 0.0])
         self.fparams = _fire_params(params, unit)
-        self.rigid, self.gram = _rigid_bodies(model, self.y, self.e)
+        self.rigid, self.gram = _rigid_bodies(model, self.y, self.e, hinged)
         self.vb = np.zeros_like(self.rigid["body"])
         self.fb = np.zeros_like(self.vb)
+        self.hinge = _strain_hinges(model, q, self.y, self.e, hinged)
+        self.vh = np.zeros_like(self.hinge["r"])
+        self.fh = np.zeros_like(self.vh)
+        in_body = np.zeros(model.n, bool)
+        in_body[self.rigid["members"]] = True
+        in_body[self.hinge["spheres"].ravel()] = True
+        self.free = np.flatnonzero(~in_body).astype(np.int64)  # the spheres that are degrees of freedom
         self.tol_scale = 1.0  # the loop's tolerance over the asked one (:meth:`advance`)
         self.chol = np.zeros_like(self.gram["sign"])
         self.adj_ptr = np.concatenate([[0], np.cumsum(np.bincount(model.links.i, minlength=model.n))]).astype(np.int64)
@@ -434,11 +451,12 @@ class StrainFire:
         (:func:`._rigid_kernels.rigid_max_force_sq`), not as the model's flat
         projection (:meth:`ShearStabilizedModel.max_force`, which :meth:`result` reports):
         a state the loop calls converged is checked against the model's measure, and the
-        loop goes on with its tolerance scaled down until both hold.
+        loop goes on with its tolerance scaled down until both hold. Hinged bodies likewise (the
+        loop measures their real-space forces projected onto their motions at fixed strain).
         """
         no_energy_floor(self, energy_floor)
         status, n = self._steps(force_tol * self.tol_scale, budget, rebuild)
-        while status == _fire_kernels.CONVERGED and len(self.vb):
+        while status == _fire_kernels.CONVERGED and (len(self.vb) or len(self.vh)):
             q = self.q()
             flat = self.model.max_force(self.model.project(self.model.evaluate(q).gradient, q))
             if flat <= force_tol:
@@ -450,7 +468,7 @@ class StrainFire:
 
     def _steps(self, force_tol: float, budget: int, rebuild: bool) -> tuple[int, int]:
         """At most ``budget`` steps of the compiled loop to its own ``force_tol``; returns ``(status, steps)``."""
-        m, g, rigid = self.model, self.gram, self.rigid
+        m, g, rigid, h = self.model, self.gram, self.rigid, self.hinge
         if self.pairs is None or rebuild:
             q = self.q()
             _, _, T, U, _, _ = m._strain_state(q)
@@ -467,7 +485,8 @@ class StrainFire:
             offset, pi, pj, sigma, m.potential.epsilon, m.potential.exponent, self.y_build, self.h_build_inv,
             nl.reach, nl.skin, m.diameter, self.adj_ptr, m.links.j, g["ci"], g["cj"], g["offset"], g["length"],
             g["sign"], g["first"], g["cptr"], g["fptr"], self.chol, rigid["rptr"], rigid["members"], rigid["shift"],
-            rigid["ref"], rigid["body"], self.vb, self.fb, rigid["inv_mass"], m.length_rtol,
+            rigid["ref"], rigid["body"], self.vb, self.fb, rigid["inv_mass"], h["spheres"], h["local"], h["shift"],
+            h["zero"], h["body"], h["state"], h["geo"], h["origin"], h["r"], self.vh, self.fh, self.free, m.length_rtol,
             LINK_NEWTON_MAX_ITERATIONS, LINK_RANK_RTOL, float(force_tol), int(budget), self.fy, self.fe,
         )
         self.pairs = (pairs[0], pairs[1], pairs[2], pairs[3])
@@ -493,16 +512,17 @@ class StrainFire:
         )
 
 
-def _rigid_bodies(model: ShearStabilizedModel, y: NDArray[np.float64], e: NDArray[np.float64]) -> tuple[dict, dict]:
+def _rigid_bodies(model: ShearStabilizedModel, y: NDArray[np.float64], e: NDArray[np.float64],
+                  hinged: bool = False) -> tuple[dict, dict]:
     """The rigid 2D clusters of :class:`StrainFire` as bodies at ``(y, e)`` (on the manifold), and the other clusters' Gram blocks.
 
     Bodies (:mod:`._rigid_kernels`): reference centre ``Y`` the mean of the unwrapped
     reference centres, angle 0, shape ``ref = F (y_s + shift_s - Y)`` (real space),
     inverse masses ``(1 / n, 1 / n, 1 / I)`` with ``I = sum |ref_s|^2``. The periodic
     shifts and the other clusters' blocks are those of :func:`.links._rigid_clusters` in
-    the reference box.
+    the reference box (``hinged``: without the hinged 3D clusters, :func:`_strain_hinges`).
     """
-    rigid, gram = _rigid_clusters(model, y)
+    rigid, gram = _rigid_clusters(model, y, hinged)
     rptr, members = rigid["rptr"], rigid["members"]
     sizes = np.diff(rptr)
     F = _link_kernels.strain_state(np.ascontiguousarray(e), model._h0, model.strain_scale)[0]
@@ -516,3 +536,30 @@ def _rigid_bodies(model: ShearStabilizedModel, y: NDArray[np.float64], e: NDArra
         inv_mass[:, 2] = 1.0 / np.add.reduceat(np.sum(ref**2, axis=1), rptr[:-1])
     rigid.update(ref=ref, body=body, inv_mass=inv_mass)
     return rigid, gram
+
+
+def _strain_hinges(model: ShearStabilizedModel, q: NDArray[np.float64], y: NDArray[np.float64],
+                   e: NDArray[np.float64], hinged: bool = True) -> dict:
+    """The hinged 3D clusters of :class:`StrainFire` at ``(y, e)`` (on the manifold; ``q`` the same point).
+
+    The arrays of :func:`.links._hinge_bodies` with the body frame from the deformed offsets
+    ``F (y_s + shift_s - y_b)``, body origins at zero (``state``), and: ``origin`` (H, 3) the
+    reference centres of the spheres ``b``, ``local`` (H, 4) the rows ``4 h + s`` of the real
+    offsets ``r`` (4 H, 3) from ``b``, and ``zero`` shifts (placed here by
+    :func:`._hinge_kernels.hinge_place` with the geometry ``geo``). Degenerate links (a straight
+    hinge) raise the Gram path's rank error.
+    """
+    F = _link_kernels.strain_state(np.ascontiguousarray(e), model._h0, model.strain_scale)[0]
+    h = _hinge_bodies(model, y, hinged, deformation=F)
+    spheres = h["spheres"]
+    H = len(spheres)
+    h["origin"] = np.ascontiguousarray(y[spheres[:, 1]])
+    h["state"][:, :3] = 0.0
+    h["local"] = np.arange(4 * H, dtype=np.int64).reshape(H, 4)
+    h["zero"] = np.zeros((H, 4, 3))
+    h["r"] = np.zeros((4 * H, 3))
+    if H:
+        r = model.link_vectors(q)
+        model.gram.fresh().factorise(r / np.linalg.norm(r, axis=1)[:, None])  # not the model's cached factors
+        _hinge_kernels.hinge_place(h["r"], h["local"], h["zero"], h["body"], h["state"], h["geo"])
+    return h
