@@ -17,6 +17,7 @@ import numpy as np
 
 from .._numba import njit
 from ..minimize._fire_kernels import (
+    BELOW,
     CONVERGED,
     MAX_STEPS,
     REBUILD,
@@ -364,7 +365,7 @@ def strain_fire(
     offset, pi, pj, sigma, eps, w_exp, y_build, h_build_inv, reach, skin, diameter, adj_ptr, adj,
     li, lj, link_offset, length, sign, first, cptr, fptr, chol, rptr, members, shift, ref, body, vb, fb, inv_mass,
     hinge_spheres, hinge_local, hinge_shift, hinge_zero, hinge_body, hinge_state, hinge_geo, hinge_origin, hinge_r,
-    vh, fh, free, length_rtol, max_sweeps, rank_rtol, force_tol, max_steps, fy, fe,
+    vh, fh, free, length_rtol, max_sweeps, rank_rtol, force_tol, max_steps, energy_floor, fy, fe,
 ):
     """FIRE 2.0 of shear-stabilised linked spheres in one compiled loop (the steps of :class:`~jamflow.minimize.fire._ModelFire`).
 
@@ -396,7 +397,8 @@ def strain_fire(
     forces are evaluated (:func:`sheared_list`; the build's reference centres ``y_build``
     and ``h_build_inv`` updated in place), or, in a
     box too sheared or small for it, the loop returns ``REBUILD`` for the caller's
-    build.
+    build. ``energy_floor`` > 0 stops the run (``BELOW``) once the pair energy plus the
+    kinetic energy of FIRE's metric is at or below it.
 
     Returns
     -------
@@ -474,6 +476,11 @@ def strain_fire(
                     _max_force_sq(fh))
         if fmax2 <= force_tol * force_tol:
             status = CONVERGED
+            break
+        # the kinetic energy of FIRE's metric (unit masses; the bodies' own)
+        if energy_floor > 0.0 and energy + 0.5 * (_free_dot(vy, vy, free) + _dot1(ve, ve) + _dot(vh, vh)
+                                                  + body_power_norms(fb, vb, inv_mass)[1]) <= energy_floor:
+            status = BELOW
             break
         if step >= max_steps:
             break

@@ -127,8 +127,8 @@ class ShearStabilizedModel(LinkedSpheresModel):
         self._h_build_key: NDArray[np.float64] | None = None
 
     def energy_floor(self, pressure: float) -> float:
-        """0: the shear-stabilised engine (:class:`StrainFire`) does not stop on an energy floor."""
-        return 0.0
+        """The linked spheres' floor at fixed volume (the box's shape changes, its volume not); 0 with the volume free."""
+        return super().energy_floor(pressure) if self.fixed_volume else 0.0
 
     # --- degrees of freedom -----------------------------------------------------------
     def dofs(self, position: ArrayLike) -> NDArray[np.float64]:
@@ -443,7 +443,7 @@ class StrainFire:
         return np.concatenate([self.y.ravel(), self.e])
 
     def advance(self, force_tol: float, budget: int, rebuild: bool, energy_floor: float = 0.0) -> tuple[int, int]:
-        """At most ``budget`` steps; returns ``(status, steps)``; no energy floor (the box is free).
+        """At most ``budget`` steps; returns ``(status, steps)``; ``energy_floor`` at fixed volume only.
 
         Lists are rebuilt inside the loop; in a box too sheared or small for that
         (``REBUILD``) the next call builds one here. With rigid bodies the loop measures
@@ -454,19 +454,20 @@ class StrainFire:
         loop goes on with its tolerance scaled down until both hold. Hinged bodies likewise (the
         loop measures their real-space forces projected onto their motions at fixed strain).
         """
-        no_energy_floor(self, energy_floor)
-        status, n = self._steps(force_tol * self.tol_scale, budget, rebuild)
+        if not self.model.fixed_volume:
+            no_energy_floor(self, energy_floor)
+        status, n = self._steps(force_tol * self.tol_scale, budget, rebuild, energy_floor)
         while status == _fire_kernels.CONVERGED and (len(self.vb) or len(self.vh)):
             q = self.q()
             flat = self.model.max_force(self.model.project(self.model.evaluate(q).gradient, q))
             if flat <= force_tol:
                 break
             self.tol_scale *= 0.9 * force_tol / flat
-            status, k = self._steps(force_tol * self.tol_scale, budget - n, False)
+            status, k = self._steps(force_tol * self.tol_scale, budget - n, False, energy_floor)
             n += k
         return status, n
 
-    def _steps(self, force_tol: float, budget: int, rebuild: bool) -> tuple[int, int]:
+    def _steps(self, force_tol: float, budget: int, rebuild: bool, energy_floor: float) -> tuple[int, int]:
         """At most ``budget`` steps of the compiled loop to its own ``force_tol``; returns ``(status, steps)``."""
         m, g, rigid, h = self.model, self.gram, self.rigid, self.hinge
         if self.pairs is None or rebuild:
@@ -487,7 +488,8 @@ class StrainFire:
             g["sign"], g["first"], g["cptr"], g["fptr"], self.chol, rigid["rptr"], rigid["members"], rigid["shift"],
             rigid["ref"], rigid["body"], self.vb, self.fb, rigid["inv_mass"], h["spheres"], h["local"], h["shift"],
             h["zero"], h["body"], h["state"], h["geo"], h["origin"], h["r"], self.vh, self.fh, self.free, m.length_rtol,
-            LINK_NEWTON_MAX_ITERATIONS, LINK_RANK_RTOL, float(force_tol), int(budget), self.fy, self.fe,
+            LINK_NEWTON_MAX_ITERATIONS, LINK_RANK_RTOL, float(force_tol), int(budget), float(energy_floor), self.fy,
+            self.fe,
         )
         self.pairs = (pairs[0], pairs[1], pairs[2], pairs[3])
         self.inline_builds += builds
@@ -508,7 +510,7 @@ class StrainFire:
             position=np.array(m.positions(q)), box=box, energy=ev.energy, pressure=pressure_of(ev, box),
             max_force=m.max_force(m.project(ev.gradient, q)), n_contacts=ev.n_contacts, steps=steps,
             converged=status == _fire_kernels.CONVERGED, rebuilds=m.nlist.builds - self.builds0 + self.inline_builds,
-            evaluations=steps + 2,
+            evaluations=steps + 2, below=status == _fire_kernels.BELOW,
         )
 
 
