@@ -413,19 +413,11 @@ def strain_fire(
     dt_max, dt_min, f_inc, f_dec = fire_params[0], fire_params[1], fire_params[2], fire_params[3]
     alpha0, f_alpha, n_delay = fire_params[4], fire_params[5], int(fire_params[6])
     initial_delay = fire_params[7] > 0.0
-    R0 = np.zeros((L, d))
-    u = np.zeros((L, d))
-    rl = np.zeros(L)
-    w = np.zeros((L, d))
-    Be = np.zeros((L, m))
-    Z = np.zeros((L, m))
-    S = np.zeros((m, m))
-    ce = np.zeros(m)
-    sce = np.zeros(m)
-    pinv = np.zeros(L)
-    z = np.zeros((L, 2))
-    t_m = np.zeros((m, 2))
-    q_m = np.zeros((m, 2))
+    R0, u, w = np.zeros((L, d)), np.zeros((L, d)), np.zeros((L, d))
+    rl, pinv = np.zeros(L), np.zeros(L)
+    Be, Z, S = np.zeros((L, m)), np.zeros((L, m)), np.zeros((m, m))
+    ce, sce = np.zeros(m), np.zeros(m)
+    z, t_m, q_m = np.zeros((L, 2)), np.zeros((m, 2)), np.zeros((m, 2))
     force = np.zeros((n, d))
     small = np.eye(m)
     schur = 1.0
@@ -477,9 +469,7 @@ def strain_fire(
         if fmax2 <= force_tol * force_tol:
             status = CONVERGED
             break
-        # the kinetic energy of FIRE's metric (unit masses; the bodies' own)
-        if energy_floor > 0.0 and energy + 0.5 * (_free_dot(vy, vy, free) + _dot1(ve, ve) + _dot(vh, vh)
-                                                  + body_power_norms(fb, vb, inv_mass)[1]) <= energy_floor:
+        if energy_floor > 0.0 and energy + 0.5 * _speed_sq(vy, ve, vb, vh, inv_mass, free) <= energy_floor:
             status = BELOW
             break
         if step >= max_steps:
@@ -552,9 +542,8 @@ def _strain_move(y, vy, fy, e, ve, fe, body, vb, fb, inv_mass, vh, fh, free, dt,
     for k in range(vh.shape[0]):
         for a in range(3):
             vh[k, a] += dt * fh[k, a]
-    _, vb2, fb2 = body_power_norms(fb, vb, inv_mass)
-    vnorm = np.sqrt(_free_dot(vy, vy, free) + _dot1(ve, ve) + vb2 + _dot(vh, vh))
-    fnorm = np.sqrt(_free_dot(fy, fy, free) + _dot1(fe, fe) + fb2 + _dot(fh, fh))
+    vnorm = np.sqrt(_speed_sq(vy, ve, vb, vh, inv_mass, free))
+    fnorm = np.sqrt(_free_dot(fy, fy, free) + _dot1(fe, fe) + body_power_norms(fb, vb, inv_mass)[2] + _dot(fh, fh))
     keep, mix = _fire_mixing(alpha, vnorm, fnorm)
     for k in range(vh.shape[0]):
         for a in range(3):
@@ -573,6 +562,14 @@ def _strain_move(y, vy, fy, e, ve, fe, body, vb, fb, inv_mass, vh, fh, free, dt,
             vi = _mixed(keep, vb[c, a], mix, fb[c, a] * inv_mass[c, a])
             vb[c, a] = vi
             body[c, a] += dt * vi
+
+
+@njit(cache=True, inline="always")
+def _speed_sq(vy, ve, vb, vh, inv_mass, free):
+    """``|v|_M^2`` in FIRE's metric: centres ``free`` and strain (unit masses), bodies (``1 / inv_mass``), hinged
+    spheres (unit masses); twice the kinetic energy. (``body_power_norms`` with ``vb`` in the force slot: only its
+    ``|v|_M^2`` is used.)"""
+    return _free_dot(vy, vy, free) + _dot1(ve, ve) + body_power_norms(vb, vb, inv_mass)[1] + _dot(vh, vh)
 
 
 @njit(cache=True)
