@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.special import betainc
 
 from ...box import Box
 from ...neighbors.pairs import PairList, pairs_within
@@ -103,8 +104,6 @@ def max_contacts(d: int, diameter: ArrayLike, overlap: float = 0.0) -> int:
     overlap : float
         Largest relative overlap ``1 - r / sigma_ij`` of a pair, in [0, 1).
     """
-    from scipy.special import betainc
-
     diameter = np.asarray(diameter, dtype=np.float64)
     if not 0.0 <= overlap < 1.0:
         raise ValueError(f"overlap must lie in [0, 1), got {overlap}")
