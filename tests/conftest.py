@@ -8,6 +8,30 @@ import numpy as np
 import pytest
 from ls_data import LS_DIMENSIONS, ls_dat
 
+#: Test modules that run the shear-stabilised engine (``StrainFire``): one xdist work unit, so
+#: that one worker compiles its kernels on a clean checkout (26-39 CPU-s, the largest
+#: compile of the suite) instead of both at once; docs/notes/test-times.md.
+STRAIN_ENGINE_MODULES = frozenset({
+    "test_chains_certify", "test_chains_compliance", "test_chains_entanglement", "test_chains_hessian",
+    "test_chains_shear", "test_chains_swinging", "test_extremes_bodies", "test_models_engines",
+    "test_models_strain_kernels", "test_onset_search", "test_onset_verdict",
+})
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log):
+    """``--dist loadfile`` with :data:`STRAIN_ENGINE_MODULES` as one unit (other modes unchanged)."""
+    if config.getoption("dist") != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class SharedKernelScheduling(LoadFileScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            scope = super()._split_scope(nodeid)
+            return "strain-engine" if Path(scope).stem in STRAIN_ENGINE_MODULES else scope
+
+    return SharedKernelScheduling(config, log)
+
 
 @pytest.fixture(params=LS_DIMENSIONS, ids=lambda d: f"Centers-after-LS--N-1024--d-{d}")
 def calippso_ls_file(request: pytest.FixtureRequest) -> Path:
