@@ -69,7 +69,7 @@ from .fire import (
     minimize_fire,
 )
 from .model import EnergyModel
-from .newton import polish_enthalpy
+from .newton import polish_constrained, polish_enthalpy
 
 __all__ = ["FORCE_TOL_VANDERWERF", "MAX_STRAIN_STEP", "ONSET_METHODS", "JammingSettings", "bisect_to_pressure",
            "jam_model_to_pressure", "search_to_pressure"]
@@ -133,6 +133,11 @@ POLISH_FORCE: float = 1e3
 #: failed would be followed by near copies of itself.
 POLISH_INTERVAL: int = 20000
 
+#: Least FIRE steps between two tries of the constrained Newton polish in a fixed-box minimisation of
+#: the final stage (:func:`_polished_fire`) [1], growing by :data:`POLISH_GROWTH` after each further
+#: failed try.
+LINKED_POLISH_INTERVAL: int = 2000
+
 #: Growth of the interval between two tries of the Newton polish [1].
 POLISH_GROWTH: float = 1.25
 
@@ -167,17 +172,50 @@ class JammingSettings:
             raise ValueError(f"max_strain_step must lie in (0, 1), got {self.max_strain_step}")
 
 
+def _polished_fire(model: EnergyModel, x: np.ndarray, force_tol: float, budget: int, fire_params: FireParameters,
+                   floor: float) -> tuple[EnergyModel, MinimizeResult]:
+    """Fixed-box FIRE that pauses every :data:`POLISH_CHECK` steps and, when its largest force is within
+    :data:`POLISH_FORCE` of ``force_tol`` and :data:`LINKED_POLISH_INTERVAL` steps (growing by
+    :data:`POLISH_GROWTH` after each further failed try) have passed since the last try, tries the
+    constrained Newton polish (:func:`~jamflow.minimize.newton.polish_constrained`) from its state; the
+    first try that succeeds ends the run (its ``steps`` are FIRE's), a failed one changes nothing.
+    Returns the model of the result (rebased on the polished state when the polish ended it)."""
+    engine = _fire_engine(model, model.dofs(x), fire_params)
+    steps, last_try = 0, None
+    interval = float(LINKED_POLISH_INTERVAL)
+    while True:
+        res = _fire(engine, force_tol, min(POLISH_CHECK, budget - steps), floor)
+        steps += res.steps
+        if res.converged or res.below or steps >= budget:
+            return model, replace(res, steps=steps)
+        if res.max_force > POLISH_FORCE * force_tol or (last_try is not None and steps - last_try < interval):
+            continue
+        base, start = model.rescaled(1.0, res.position)
+        polish = polish_constrained(base, start, force_tol)
+        if polish.result is not None:
+            return polish.model, replace(polish.result, steps=steps)
+        if last_try is not None:
+            interval *= POLISH_GROWTH
+        last_try = steps
+
+
 def _minimum(model: EnergyModel, x: np.ndarray, phi: float, force_tol: float, budget: int,
              fire_params: FireParameters, progress: Callable[[dict], None] | None, history: dict[str, list] | None,
-             info: dict, pressure: float, rtol: float) -> MinimizeResult:
+             info: dict, pressure: float, rtol: float, polish: bool = False) -> tuple[EnergyModel, MinimizeResult]:
     """One fixed-box FIRE minimisation of step 2, recorded in ``history`` and reported to ``progress``
     (with ``info``: ``delta_phi`` and the protocol's ``steps`` before it); raises when the budget runs out.
 
     It stops early on the energy verdict (:data:`VERDICT_SHARE`); its ``pressure`` is then
     the least of the state's and the verdict's bound ``VERDICT_SHARE (1 - rtol) P0``, and
-    ``below`` is set."""
+    ``below`` is set. With ``polish`` it may end with the constrained Newton polish
+    (:func:`_polished_fire`; models without ``tangent_newton`` run FIRE alone). Returns the
+    model of the result (the polish rebases it on its state) and the result."""
     ceiling = VERDICT_SHARE * (1.0 - rtol) * pressure
-    res = minimize_fire(model, x, force_tol, budget, fire_params, model.energy_floor(ceiling))
+    floor = model.energy_floor(ceiling)
+    if polish and getattr(model, "tangent_newton", None) is not None:
+        model, res = _polished_fire(model, x, force_tol, budget, fire_params, floor)
+    else:
+        res = minimize_fire(model, x, force_tol, budget, fire_params, floor)
     if res.below:
         res = replace(res, pressure=min(res.pressure, ceiling))
     if history is not None:
@@ -189,7 +227,7 @@ def _minimum(model: EnergyModel, x: np.ndarray, phi: float, force_tol: float, bu
                   "model": model, "position": res.position})
     if not (res.converged or res.below):
         raise RuntimeError(f"FIRE step budget ({budget + info['steps']}) exhausted at phi = {phi:.10f}")
-    return res
+    return model, res
 
 
 def bisect_to_pressure(
@@ -206,6 +244,7 @@ def bisect_to_pressure(
     history: dict[str, list] | None = None,
     direction: int = 0,
     secant: bool = False,
+    polish: bool = False,
 ) -> tuple[EnergyModel, MinimizeResult, float, float, int, int]:
     """Compress/decompress bisection of any model to ``|P - P0| <= rtol P0`` (module doc, step 2).
 
@@ -237,6 +276,8 @@ def bisect_to_pressure(
         Direction of the previous step (0: none), to resume a bisection.
     secant : bool
         Secant steps when shorter (above).
+    polish : bool
+        Let each minimisation end with the constrained Newton polish (:func:`_polished_fire`).
 
     Returns
     -------
@@ -249,8 +290,8 @@ def bisect_to_pressure(
     last: tuple[float, float] | None = None
     slope: float | None = None
     while True:
-        res = _minimum(model, x, phi, force_tol, max_steps - steps, fire_params, progress, history,
-                       {"delta_phi": delta_phi, "steps": steps}, pressure, rtol)
+        model, res = _minimum(model, x, phi, force_tol, max_steps - steps, fire_params, progress, history,
+                              {"delta_phi": delta_phi, "steps": steps}, pressure, rtol, polish)
         steps += res.steps
         x = res.position
         if abs(res.pressure - pressure) <= rtol * pressure:
@@ -389,6 +430,7 @@ def search_to_pressure(
     history: dict[str, list] | None = None,
     slope: float | None = None,
     scout: bool = True,
+    polish: bool = False,
 ) -> tuple[EnergyModel, MinimizeResult, float, float | None, int]:
     """Fixed-box FIRE minima on a search for ``|P - P0| <= rtol P0`` that keeps the last minimum below ``P0``.
 
@@ -417,6 +459,8 @@ def search_to_pressure(
     scout : bool
         Scout with steps up to ``max_strain`` and approach again from ``RETURN_SHARE``
         below (:class:`_Bracket`); False for a start already close to ``P0``.
+    polish : bool
+        As :func:`bisect_to_pressure`.
 
     Returns
     -------
@@ -429,8 +473,8 @@ def search_to_pressure(
     steps = 0
     x = position
     while True:
-        res = _minimum(model, x, phi, force_tol, max_steps - steps, fire_params, progress, history,
-                       {"delta_phi": bracket.step, "steps": steps}, pressure, rtol)
+        model, res = _minimum(model, x, phi, force_tol, max_steps - steps, fire_params, progress, history,
+                              {"delta_phi": bracket.step, "steps": steps}, pressure, rtol, polish)
         steps += res.steps
         if abs(res.pressure - pressure) <= rtol * pressure:
             break
@@ -516,11 +560,11 @@ def jam_model_to_pressure(
         step = c.bisection_rtol * pressure / slope if slope else c.delta_phi
         model, final, _, _, more = search_to_pressure(
             model, res.position, phi, pressure, c.force_tol, c.pressure_rtol, step, c.max_strain_step,
-            c.max_steps - steps, c.fire_params, progress, history, slope, scout=False,
+            c.max_steps - steps, c.fire_params, progress, history, slope, scout=False, polish=c.newton_polish,
         )
         return model, final, history, steps + more
     model, final, _, _, _, more = bisect_to_pressure(
         model, res.position, phi, pressure, c.force_tol, c.pressure_rtol, delta_phi, c.max_steps - steps,
-        c.fire_params, progress, history, direction, secant=True,
+        c.fire_params, progress, history, direction, secant=True, polish=c.newton_polish,
     )
     return model, final, history, steps + more
