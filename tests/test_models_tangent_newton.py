@@ -153,7 +153,8 @@ def test_polish_does_not_accept_a_saddle():
 @pytest.mark.parametrize("strain", [False, True], ids=["fixed-box", "shear-stabilized"])
 def test_jamming_with_the_polish_ends_in_the_window_isostatic_by_rank(strain, start, monkeypatch):
     # small packings converge within POLISH_CHECK steps: look every 50 so the polish ends minimisations
-    monkeypatch.setattr(onset, "POLISH_CHECK", 50)
+    monkeypatch.setattr(onset, "LINKED_POLISH_AFTER", 50)
+    monkeypatch.setattr(onset, "LINKED_POLISH_CHECK", 50)
     monkeypatch.setattr(onset, "LINKED_POLISH_INTERVAL", 50)
     tries = []
     original = onset.polish_constrained

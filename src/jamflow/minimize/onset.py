@@ -133,10 +133,27 @@ POLISH_FORCE: float = 1e3
 #: failed would be followed by near copies of itself.
 POLISH_INTERVAL: int = 20000
 
+#: FIRE steps of a fixed-box minimisation of the final stage before the constrained Newton polish
+#: is first considered (:func:`_polished_fire`) [1]: a minimisation that has not converged by then
+#: is held up by soft modes, where the polish pays; at 3D chains of four, N = 1024, P0 = 1e-4 a try
+#: from FIRE's largest force ~1e-9 (after ~2e4 steps) costs ~0.3 s of CPU, ~2000 FIRE steps, and
+#: ends 3000-5000 steps early, while minimisations of N = 256 converge in 1000-2500 steps, fewer
+#: than a try costs (docs/notes/chains.md, "A Newton polish for the last linked minimisations").
+LINKED_POLISH_AFTER: int = 5000
+
+#: FIRE steps between two looks at the largest force of a fixed-box minimisation of the final stage [1]
+#: (each look is one evaluation; the force falls by about a decade per 2000 steps there, same notes).
+LINKED_POLISH_CHECK: int = 500
+
 #: Least FIRE steps between two tries of the constrained Newton polish in a fixed-box minimisation of
 #: the final stage (:func:`_polished_fire`) [1], growing by :data:`POLISH_GROWTH` after each further
 #: failed try.
 LINKED_POLISH_INTERVAL: int = 2000
+
+#: Trial steps of one try of the constrained polish [1]: from FIRE's states at largest force 1e-9 ...
+#: 2e-8 it lands in 1-5 (N = 1024, same notes); a failed try stops there (each trial step costs
+#: ~0.1 s at N = 1024, a sparse factorisation and a Hessian).
+LINKED_NEWTON_ITERATIONS: int = 8
 
 #: Growth of the interval between two tries of the Newton polish [1].
 POLISH_GROWTH: float = 1.25
@@ -174,9 +191,10 @@ class JammingSettings:
 
 def _polished_fire(model: EnergyModel, x: np.ndarray, force_tol: float, budget: int, fire_params: FireParameters,
                    floor: float) -> tuple[EnergyModel, MinimizeResult]:
-    """Fixed-box FIRE that pauses every :data:`POLISH_CHECK` steps and, when its largest force is within
-    :data:`POLISH_FORCE` of ``force_tol`` and :data:`LINKED_POLISH_INTERVAL` steps (growing by
-    :data:`POLISH_GROWTH` after each further failed try) have passed since the last try, tries the
+    """Fixed-box FIRE that pauses every :data:`LINKED_POLISH_CHECK` steps after the first
+    :data:`LINKED_POLISH_AFTER` and, when its largest force is within :data:`POLISH_FORCE` of
+    ``force_tol`` and :data:`LINKED_POLISH_INTERVAL` steps (growing by :data:`POLISH_GROWTH` after each
+    further failed try) have passed since the last try, tries (:data:`LINKED_NEWTON_ITERATIONS` trial steps) the
     constrained Newton polish (:func:`~jamflow.minimize.newton.polish_constrained`) from its state; the
     first try that succeeds ends the run (its ``steps`` are FIRE's), a failed one changes nothing.
     Returns the model of the result (rebased on the polished state when the polish ended it)."""
@@ -184,14 +202,15 @@ def _polished_fire(model: EnergyModel, x: np.ndarray, force_tol: float, budget: 
     steps, last_try = 0, None
     interval = float(LINKED_POLISH_INTERVAL)
     while True:
-        res = _fire(engine, force_tol, min(POLISH_CHECK, budget - steps), floor)
+        chunk = max(LINKED_POLISH_AFTER - steps, LINKED_POLISH_CHECK)
+        res = _fire(engine, force_tol, min(chunk, budget - steps), floor)
         steps += res.steps
         if res.converged or res.below or steps >= budget:
             return model, replace(res, steps=steps)
         if res.max_force > POLISH_FORCE * force_tol or (last_try is not None and steps - last_try < interval):
             continue
         base, start = model.rescaled(1.0, res.position)
-        polish = polish_constrained(base, start, force_tol)
+        polish = polish_constrained(base, start, force_tol, LINKED_NEWTON_ITERATIONS)
         if polish.result is not None:
             return polish.model, replace(polish.result, steps=steps)
         if last_try is not None:

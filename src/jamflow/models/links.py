@@ -439,16 +439,18 @@ class LinkedSpheresModel(SphereBodies):
         raise NotImplementedError("the Hessian on the links' manifold is tangent_newton(q); the unconstrained one "
                                   "is not a Hessian of this model")
 
-    def _contact_hessian(self, x: NDArray[np.float64], strain_jacobian: NDArray[np.float64] | None = None
-                         ) -> sp.csr_matrix:
-        """Hessian of the pair energy of the listed unlinked pairs at centres ``x`` (the list of the last
-        :meth:`evaluate` at ``x``; reference centres at zero strain in strain coordinates)."""
+    def _lagrangian_pairs(self, x: NDArray[np.float64], R_links: NDArray[np.float64], tensions: NDArray[np.float64]
+                          ) -> tuple[NDArray[np.float64], ...]:
+        """Pair functions of the Lagrangian ``U - sum_k mu_k c_k`` at centres ``x`` (:func:`.tangent.pair_hessian`
+        arguments ``i, j, R, phi', phi''``): the overlapping listed unlinked pairs (the list of the last
+        :meth:`evaluate` at ``x``) and the links ``R_links`` as ``phi = -mu |r|``."""
         R = x[self._pj] - x[self._pi] + self._offset
         xi = 1.0 - np.linalg.norm(R, axis=1) / self._sigma
         c = xi > 0.0
         sigma = self._sigma[c]
-        return pair_hessian(self.n, self.d, self._pi[c], self._pj[c], R[c], -self.potential.force(xi[c], sigma),
-                            self.potential.stiffness(xi[c], sigma), strain_jacobian)
+        return (np.concatenate([self._pi[c], self.links.i]), np.concatenate([self._pj[c], self.links.j]),
+                np.concatenate([R[c], R_links]), np.concatenate([-self.potential.force(xi[c], sigma), -tensions]),
+                np.concatenate([self.potential.stiffness(xi[c], sigma), np.zeros(len(self.links))]))
 
     def tangent_newton(self, q: NDArray[np.float64]) -> TangentNewton:
         """The Newton system on the links' manifold at ``q`` (:class:`~jamflow.minimize.newton.TangentNewton`).
@@ -458,11 +460,9 @@ class LinkedSpheresModel(SphereBodies):
         :meth:`reproject` is the retraction.
         """
         ev = self.evaluate(q)
-        H = self._contact_hessian(np.ascontiguousarray(self.positions(q)))
         R = self.link_vectors(q)
-        if len(self.links):
-            H = H - pair_hessian(self.n, self.d, self.links.i, self.links.j, R, self.multipliers(ev.gradient, q),
-                                 np.zeros(len(self.links)))
+        H = pair_hessian(self.n, self.d, *self._lagrangian_pairs(np.ascontiguousarray(self.positions(q)), R,
+                                                                  self.multipliers(ev.gradient, q)))
         T = cluster_tangent_basis(self.gram.labels, self.links.i, self.links.j,
                                   R / np.linalg.norm(R, axis=1)[:, None])
         n, d = self.n, self.d

@@ -407,11 +407,10 @@ class ShearStabilizedModel(LinkedSpheresModel):
             raise ValueError("tangent_newton is taken at zero strain: rebase the model with rescaled(1.0, positions)")
         ev = self.evaluate(q)
         J = strain_jacobian(self.d, self.strain_scale)
-        H = self._contact_hessian(np.ascontiguousarray(q[:nd].reshape(self.n, self.d)), J)
         mu, nu = self.constraint_multipliers(ev.gradient, q)
         R = self._reference_links(q)
-        if len(self.links):
-            H = H - pair_hessian(self.n, self.d, self.links.i, self.links.j, R, mu, np.zeros(len(self.links)), J)
+        H = pair_hessian(self.n, self.d, *self._lagrangian_pairs(np.ascontiguousarray(q[:nd].reshape(self.n, self.d)),
+                                                                  R, mu), J)
         H = H - sp.block_diag([sp.csr_matrix((nd, nd)), nu * volume_curvature(J)], format="csr")
         Z = cluster_tangent_basis(self.gram.labels, self.links.i, self.links.j, R / np.linalg.norm(R, axis=1)[:, None])
         c = self._solver(q)
