@@ -93,6 +93,11 @@ TRUST_MOVE: float = 0.05
 #: and actual differences agree to 1e-19 at ``tr W = 8.6e-4`` (N = 480 circulo-lines, P0 = 1e-6).
 ENTHALPY_ROUNDOFF: float = 4.0
 
+#: Smallest ratio of the actual to the predicted decrease of ``U`` after which :func:`polish_constrained`
+#: takes its next step with the same factors and tangent basis (a chord step) [1]: the quadratic model
+#: then holds over the step, so it holds over the next, shorter one to first order in the step.
+CHORD_RATIO: float = 0.5
+
 #: Fractions of a rejected step tried along its direction before the shift grows [1]:
 #: a step that closes a contact the Hessian does not see overshoots, a part of it does not.
 TRUST_BACKTRACK: tuple[float, ...] = tuple(0.25**k for k in range(12))
@@ -226,9 +231,8 @@ def positive_semidefinite(a: sp.csc_matrix) -> bool:
     return bool(np.linalg.eigvalsh(a.toarray())[0] >= 0.0)
 
 
-def _shifted_solve(a: sp.csc_matrix, metric: NDArray[np.float64], shift: float,
-                   rhs: NDArray[np.float64]) -> NDArray[np.float64] | None:
-    """``(a + shift diag(metric))^-1 rhs`` when that matrix is positive definite (all diagonal pivots of a
+def _shifted_factor(a: sp.csc_matrix, metric: NDArray[np.float64], shift: float) -> sla.SuperLU | None:
+    """Factors of ``a + shift diag(metric)`` when that matrix is positive definite (all diagonal pivots of a
     symmetric-mode SuperLU positive, Sylvester's inertia), else None."""
     try:
         lu = sla.splu((a + sp.diags(shift * metric)).tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
@@ -237,8 +241,21 @@ def _shifted_solve(a: sp.csc_matrix, metric: NDArray[np.float64], shift: float,
         return None
     if not np.array_equal(lu.perm_r, lu.perm_c) or not np.all(lu.U.diagonal() > 0.0):
         return None
+    return lu
+
+
+def _solve(lu: sla.SuperLU | None, rhs: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """``lu``'s solution of ``rhs`` when factors exist and the solution is finite, else None."""
+    if lu is None:
+        return None
     step = lu.solve(rhs)
     return step if np.all(np.isfinite(step)) else None
+
+
+def _shifted_solve(a: sp.csc_matrix, metric: NDArray[np.float64], shift: float,
+                   rhs: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """``(a + shift diag(metric))^-1 rhs`` when that matrix is positive definite (:func:`_shifted_factor`), else None."""
+    return _solve(_shifted_factor(a, metric, shift), rhs)
 
 
 def _largest_move(model: EnergyModel, step: NDArray[np.float64], arm: float, spacing: float) -> float:
@@ -378,6 +395,12 @@ def polish_constrained(model: EnergyModel, config: NDArray[np.float64], force_to
     rebased on the new state (``rescaled`` by 1). The run is accepted once the largest projected
     force is at most ``force_tol`` and the reduced Hessian there has no eigenvalue below
     ``-NEGATIVE_CURVATURE`` of its largest diagonal entry (a minimum, not a saddle).
+    A full step at a shift of at most :data:`TRUST_SHIFT` whose decrease was at least
+    :data:`CHORD_RATIO` of the prediction is followed
+    by chord steps (the factors and basis of the last system with the new gradient; the old
+    tangent basis is tangent at the new point to first order in the step) until one fails,
+    which is retried from a fresh system: from FIRE's states near the minimum most steps then
+    cost a solve, not a factorisation.
 
     Parameters
     ----------
@@ -403,7 +426,7 @@ def polish_constrained(model: EnergyModel, config: NDArray[np.float64], force_to
     ev, fmax, x = _tangent_state(model, q)
     spacing = (model.box.volume / len(x)) ** (1.0 / model.box.d)
     mu, nu = TRUST_SHIFT, 2.0
-    evaluations, descended, system = 1, False, None
+    evaluations, descended, system, chord = 1, False, None, False
     it = 0
     for it in range(1, max_iterations + 1):
         if system is None:
@@ -414,8 +437,11 @@ def polish_constrained(model: EnergyModel, config: NDArray[np.float64], force_to
             metric = np.full(system.hessian.shape[0], kmax)
             rhs = -(system.basis.T @ system.gradient)
             resolution = ENTHALPY_ROUNDOFF * np.finfo(float).eps * abs(system.virial_trace)
+            factors = None
         mu = max(mu, NEWTON_SHIFT)
-        a = _shifted_solve(system.hessian, metric, mu, rhs)
+        if factors is None or factors[0] != mu:
+            factors = (mu, _shifted_factor(system.hessian, metric, mu))
+        a = _solve(factors[1], rhs)
         dq = None if a is None else system.basis @ a
         if dq is None or system.move(dq) > TRUST_MOVE * spacing:
             mu, nu = mu * nu, 2.0 * nu
@@ -436,16 +462,27 @@ def polish_constrained(model: EnergyModel, config: NDArray[np.float64], force_to
             accepted = rho >= TRUST_ACCEPT if predicted > resolution else trial[3] < fmax
             if accepted:
                 break
+        if not accepted and chord:
+            system, chord = None, False  # a chord step that fails is retried from a fresh system
+            continue
         if not accepted:
             mu, nu = mu * nu, 2.0 * nu
             if mu > TRUST_SHIFT_MAX:
                 break
             continue
-        if length == 1.0:
-            mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3) if predicted > resolution else 1.0 / 3.0
-            nu = 2.0
         model, q, ev, fmax, x = trial
-        system, descended = None, True
+        descended = True
+        # a full Newton step (shift at most the starting one) that the quadratic model predicted well (or that
+        # lowered the force below the energy's round-off) is followed by chord steps: the same factors and
+        # tangent basis, the new gradient; under a larger shift the shift must fall first
+        chord = length == 1.0 and mu <= TRUST_SHIFT and (rho >= CHORD_RATIO or predicted <= resolution)
+        if chord:
+            rhs = -(system.basis.T @ ev.gradient)
+        else:
+            if length == 1.0:
+                mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3) if predicted > resolution else 1.0 / 3.0
+                nu = 2.0
+            system = None
         if fmax <= force_tol:
             final = model.tangent_newton(q)
             ev, fmax, x = _tangent_state(model, q)  # the model's last evaluation is the final state
