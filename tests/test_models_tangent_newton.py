@@ -16,6 +16,7 @@ import jamflow.minimize.onset as onset
 from jamflow.box import Box
 from jamflow.chains.builders import linked_packing
 from jamflow.chains.jamming import jam_linked
+from jamflow.cli import main
 from jamflow.io import read_packing
 from jamflow.minimize.fire import minimize_fire
 from jamflow.minimize.newton import _tangent_minimum, polish_constrained
@@ -182,3 +183,13 @@ def test_jamming_with_the_polish_ends_in_the_window_isostatic_by_rank(strain, st
         assert a["n_contacts"] >= a["isostatic_count"]
         assert a["max_link_error"] <= 1e-13
     assert any(tries)  # the polish ended at least one minimisation of the final stage
+
+
+def test_soft_jam_newton_polish_is_for_linked_packings(tmp_path, capsys):
+    out = tmp_path / "j.nc"
+    assert main(["soft-jam", str(DATA / "spheres_soft.nc"), str(out), "--pressure", "1e-3", "--newton-polish",
+                 "--quiet"]) == 1
+    assert "--newton-polish is for linked packings" in capsys.readouterr().err
+    assert main(["soft-jam", str(DATA / "linked_soft.nc"), str(out), "--pressure", "1e-3", "--newton-polish",
+                 "--quiet"]) == 0
+    assert read_packing(out, None).attrs["n_contacts"] >= read_packing(out, None).attrs["isostatic_count"]
