@@ -39,7 +39,11 @@ Protocol (O'Hern et al., PRE 68, 011306 (2003); VanderWerf et al., Sec. II):
    box degrees of freedom), or step 2 continues at fixed box with ``force_tol``
    until ``|P - P0| <= pressure_rtol * P0``; the bisection then shortens a step to
    the secant estimate of ``P(phi) = P0`` when that is shorter (``secant`` of
-   :func:`bisect_to_pressure`; the search has its own secant).
+   :func:`bisect_to_pressure`; the search has its own secant). With
+   ``JammingSettings.newton_polish`` either may end with a Newton polish: the enthalpy
+   stage by :func:`~jamflow.minimize.newton.polish_enthalpy`, the fixed-box minimisations
+   of constrained models by :func:`~jamflow.minimize.newton.polish_constrained`
+   (:func:`_polished_fire`).
 
 Units: energy ``epsilon`` (see :mod:`jamflow.models.spheres.potential`), length the mean
 diameter ``<D>``, pressure ``epsilon / <D>^d``, force ``epsilon / <D>``.
@@ -167,7 +171,10 @@ class JammingSettings:
     packing fraction of either; ``max_strain_step`` caps the search's steps (relative
     change of the box length). ``newton_polish`` lets the enthalpy stage end with Newton
     iterations (:func:`jamflow.minimize.newton.polish_enthalpy`) once FIRE is close
-    enough (tried when its largest force is within :data:`POLISH_FORCE` of the tolerance), to the same tolerances.
+    enough (tried when its largest force is within :data:`POLISH_FORCE` of the tolerance), to the same tolerances;
+    for models without box degrees of freedom that offer ``tangent_newton`` (linked spheres) the
+    fixed-box minimisations of the final stage likewise (:func:`jamflow.minimize.newton.polish_constrained`,
+    :func:`_polished_fire`).
     """
 
     force_tol: float = FORCE_TOL_VANDERWERF
