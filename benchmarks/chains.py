@@ -17,7 +17,8 @@ Writes ``benchmarks/output/chains.nc`` and ``chains.png`` and prints the numbers
 of the child, start-up included) of bidisperse linked starts (size ratio 1.4, half the
 clusters large; ``jamflow init-chains --dispersity bi``) at fixed box and shear-stabilised
 against the same start with the links dropped (bidisperse spheres), the three runs of a
-start alternating, ``--seeds`` starts per size; writes ``chains_whole.nc`` and ``.png``.
+start alternating, ``--seeds`` starts per size; writes ``chains_whole.nc`` and ``.png``
+(``chains_whole_newton`` with ``--newton-polish``: the linked runs end their final minimisations by Newton).
 
 Usage: ``python benchmarks/chains.py [--sizes 2:150 3:256 ...] [--hessian-sizes 30 60 120]
 [--pressure 1e-4] [--pressure-rtol 1e-3] [--whole [--seeds 3] [--boxes fixed shear]]``; the defaults are the issue's sizes (2D rigid
@@ -200,8 +201,10 @@ def _child_cpu(cmd: list[str]) -> float:
 
 
 def whole_runs(sizes: list[tuple[int, int]], seeds: int, pressure: float, rtol: float,
-               boxes: tuple[str, ...] = ("fixed", "shear")) -> list[dict]:
-    """``jamflow soft-jam`` of linked starts (``boxes``: fixed box, shear-stabilised) and of the same starts without links."""
+               boxes: tuple[str, ...] = ("fixed", "shear"), polish: bool = False) -> list[dict]:
+    """``jamflow soft-jam`` of linked starts (``boxes``: fixed box, shear-stabilised; ``polish``: with
+    ``--newton-polish``) and of the same starts without links."""
+    linked = ["--newton-polish"] if polish else []
     jam = [JAMFLOW, "soft-jam", "--quiet", "--pressure", f"{pressure:g}", "--force-tol",
            "1e-12", "--pressure-rtol", f"{rtol:g}", "--delta-phi", "1e-2"]
     rows = []
@@ -212,17 +215,19 @@ def whole_runs(sizes: list[tuple[int, int]], seeds: int, pressure: float, rtol: 
             start = _whole_start(tmp, d, n if d == 2 else 128, 1)
             unlinked = tmp / "w_spheres.nc"
             write_packing(read_packing(start).evolve(links=None), unlinked)
-            for src, extra in [(start, [])] * ("fixed" in boxes) + [(start, ["--shear-stabilize"])] * ("shear" in boxes) \
+            for src, extra in [(start, linked)] * ("fixed" in boxes) \
+                    + [(start, ["--shear-stabilize", *linked])] * ("shear" in boxes) \
                     + [(unlinked, [])]:
                 subprocess.run(jam + [str(src), str(tmp / "w.nc"), "--in-place", *extra], check=True,
                                stdout=subprocess.DEVNULL)
         for d, n in sizes:
             for seed in range(1, seeds + 1):
-                linked = _whole_start(tmp, d, n, seed)
+                start = _whole_start(tmp, d, n, seed)
                 spheres = tmp / "spheres.nc"
-                write_packing(read_packing(linked).evolve(links=None), spheres)
+                write_packing(read_packing(start).evolve(links=None), spheres)
                 cpu, attrs = {}, {}
-                cases = [("spheres", spheres, []), ("fixed", linked, []), ("shear", linked, ["--shear-stabilize"])]
+                cases = [("spheres", spheres, []), ("fixed", start, linked),
+                         ("shear", start, ["--shear-stabilize", *linked])]
                 for case, src, extra in [c for c in cases if c[0] in ("spheres", *boxes)]:
                     out = tmp / f"{case}_out.nc"
                     cpu[case] = _child_cpu(jam + [str(src), str(out), "--in-place", *extra])
@@ -270,14 +275,16 @@ def _whole_start(tmp: Path, d: int, n: int, seed: int) -> Path:
 
 
 def whole_output(rows: list[dict], args: argparse.Namespace) -> None:
-    """``chains_whole.nc`` and a bar chart of the CPU ratios against the targets."""
+    """``chains_whole.nc`` (``chains_whole_newton.nc`` with ``--newton-polish``) and a bar chart of the CPU ratios
+    against the targets."""
     ds = xr.Dataset({k: (("run",), [r[k] for r in rows], {"units": "s" if k.endswith("_s") else "1",
                                                          "long_name": k.replace("_", " ")}) for k in rows[0]},
                     attrs=new_dataset_attrs("jamflow chains benchmark: whole soft-jam against spheres", vars(args),
                                             note="CPU time of each soft-jam process on 2 shared cores, start-up "
                                                  "included; compare ratios within this run"))
     OUT.mkdir(exist_ok=True)
-    write_dataset(ds, OUT / "chains_whole.nc")
+    name = "chains_whole_newton" if args.newton_polish else "chains_whole"
+    write_dataset(ds, OUT / f"{name}.nc")
     fig, ax = plt.subplots(figsize=(7, 3.8))
     cells = sorted({(r["d"], r["n"], r["shear"]) for r in rows})
     for k, (d, n, shear) in enumerate(cells):
@@ -289,8 +296,8 @@ def whole_output(rows: list[dict], args: argparse.Namespace) -> None:
     ax.set_xlabel("linked packing (d, N spheres, box); red: target")
     ax.set_ylabel("soft-jam CPU time / spheres' (1)")
     fig.tight_layout()
-    fig.savefig(OUT / "chains_whole.png", dpi=120)
-    print(f"wrote {OUT / 'chains_whole.nc'} and {OUT / 'chains_whole.png'}")
+    fig.savefig(OUT / f"{name}.png", dpi=120)
+    print(f"wrote {OUT / name}.nc and .png")
 
 
 def main() -> None:
@@ -310,10 +317,13 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=2, help="starts per size of --whole")
     ap.add_argument("--boxes", nargs="+", choices=("fixed", "shear"), default=["fixed", "shear"],
                     help="linked cells of --whole: fixed box, shear-stabilised")
+    ap.add_argument("--newton-polish", action="store_true",
+                    help="linked runs of --whole with soft-jam --newton-polish (the constrained Newton polish)")
     args = ap.parse_args()
     sizes = [tuple(int(v) for v in s.split(":")) for s in args.sizes]
     if args.whole:
-        whole_output(whole_runs(sizes, args.seeds, args.pressure, args.pressure_rtol, tuple(args.boxes)), args)
+        whole_output(whole_runs(sizes, args.seeds, args.pressure, args.pressure_rtol, tuple(args.boxes),
+                                args.newton_polish), args)
         return
     jam = [] if args.skip_jamming else jamming_runs(sizes, args.pressure, args.pressure_rtol, args.seed)
     proto_sizes = [tuple(int(v) for v in s.split(":")) for s in args.protocol_sizes]

@@ -54,7 +54,8 @@ from numpy.typing import NDArray
 
 from ..box import Box
 from ..models.spheres.potential import HARMONIC, PowerLawPotential, overlapping_pairs
-from ..models.strain import _upper, strain_components
+from ..models.strain import strain_components, strain_jacobian
+from ..models.tangent import pair_hessian, volume_curvature
 from ..network import contact_jacobian, link_jacobian, sphere_contacts
 from ..state.bodies import Links
 from ..state.packing import Packing
@@ -77,62 +78,21 @@ __all__ = [
 ZERO_MODE_RTOL: float = 1e-10
 
 
-def _strain_jacobian(d: int, scale: float) -> NDArray[np.float64]:
-    """``dF / de``, shape (d * d, m): ``F`` is linear in ``e`` (:func:`~jamflow.models.strain.strain_matrix`)."""
-    a, b, weight = _upper(d)
-    J = np.zeros((d * d, a.size))
-    J[a * d + b, np.arange(a.size)] = 1.0 / (scale * weight)
-    J[b * d + a, np.arange(a.size)] = 1.0 / (scale * weight)
-    return J
-
-
 def strain_coordinate_basis(d: int, scale: float) -> NDArray[np.float64]:
     """``d eps / d e_k`` (m, d, d): the model's strain coordinates as a strain basis of
     :func:`~jamflow.network.jacobian.contact_jacobian` (``e_aa = q_s eps_aa``,
     ``e_ab = sqrt(2) q_s eps_ab``, upper-triangle order of :func:`~jamflow.models.strain.strain_matrix`)."""
-    return _strain_jacobian(d, scale).T.reshape(-1, d, d)
+    return strain_jacobian(d, scale).T.reshape(-1, d, d)
 
 
 def pair_second_derivatives(n: int, d: int, i: NDArray[np.int64], j: NDArray[np.int64], R: NDArray[np.float64],
                             dphi: NDArray[np.float64], d2phi: NDArray[np.float64], strain_scale: float | None
                             ) -> NDArray[np.float64]:
-    """Dense ``sum_p d2 phi_p(|F R_p|) / dq dq`` at zero strain (module doc), shape (n_dof, n_dof).
-
-    Parameters
-    ----------
-    i, j : ndarray of int, shape (P,)
-    R : ndarray, shape (P, d)
-        Pair vectors ``x_j - x_i`` (minimum image) [length].
-    dphi, d2phi : ndarray, shape (P,)
-        ``phi'(r)`` and ``phi''(r)``.
-    strain_scale : float or None
-        ``q_s`` of the strain components; None: positions only.
-    """
-    r = np.linalg.norm(R, axis=1)
-    u = R / r[:, None]
-    uu = u[:, :, None] * u[:, None, :]
-    k = d2phi[:, None, None] * uu + (dphi / r)[:, None, None] * (np.eye(d) - uu)
-    m = 0 if strain_scale is None else d * (d + 1) // 2
-    H = np.zeros((n * d + m, n * d + m))
-    Hx = H[: n * d, : n * d].reshape(n, d, n, d)
-    np.add.at(Hx, (i, slice(None), i, slice(None)), k)
-    np.add.at(Hx, (j, slice(None), j, slice(None)), k)
-    np.add.at(Hx, (i, slice(None), j, slice(None)), -k)
-    np.add.at(Hx, (j, slice(None), i, slice(None)), -k)
-    if strain_scale is None:
-        return H
-    J = _strain_jacobian(d, strain_scale)
-    # d2 phi / dx_j dF_cd = k_bc R_d + delta_bd phi' u_c  -> (P, d, d*d)
-    xF = np.einsum("pbc,pd->pbcd", k, R) + np.einsum("bd,pc->pbcd", np.eye(d), dphi[:, None] * u)
-    xe = xF.reshape(len(i), d, d * d) @ J  # (P, d, m)
-    He = np.zeros((n, d, m))
-    np.add.at(He, j, xe)
-    np.add.at(He, i, -xe)
-    H[: n * d, n * d:] = He.reshape(n * d, m)
-    H[n * d:, : n * d] = He.reshape(n * d, m).T
-    FF = np.einsum("pce,pd,pf->cdef", k, R, R).reshape(d * d, d * d)
-    H[n * d:, n * d:] = J.T @ FF @ J
-    return H
+    """Dense ``sum_p d2 phi_p(|F R_p|) / dq dq`` at zero strain (module doc), shape (n_dof, n_dof):
+    :func:`jamflow.models.tangent.pair_hessian` in the strain coordinates of scale ``strain_scale``
+    (None: positions only)."""
+    J = None if strain_scale is None else strain_jacobian(d, strain_scale)
+    return pair_hessian(n, d, i, j, R, dphi, d2phi, J).toarray()
 
 
 @dataclass(frozen=True)
@@ -285,7 +245,7 @@ def tension_hessian(geo: _Geometry, strain: bool, volume: bool,
         M -= pair_second_derivatives(geo.n, geo.d, geo.links.i, geo.links.j, geo.link_vector, mu,
                                      np.zeros(L), scale)
     if strain and volume:
-        M[geo.n * geo.d:, geo.n * geo.d:] -= nu * _volume_curvature(geo.d, geo.strain_scale)
+        M[geo.n * geo.d:, geo.n * geo.d:] -= nu * volume_curvature(strain_jacobian(geo.d, geo.strain_scale))
     return M
 
 
@@ -327,14 +287,6 @@ def constrained_hessian(packing: Packing, potential: PowerLawPotential = HARMONI
     w, v = np.linalg.eigh(HE)
     n_zero = int(np.sum(np.abs(w) <= ZERO_MODE_RTOL * np.abs(w).max()))
     return ConstrainedHessian(HE, B, H0, w, B.T @ v, n_zero, strain)
-
-
-def _volume_curvature(d: int, scale: float) -> NDArray[np.float64]:
-    """``d2 det F / de de`` at ``F = 1``, shape (m, m) (module doc)."""
-    J = _strain_jacobian(d, scale)
-    eye = np.eye(d)
-    det2 = (np.einsum("ab,cd->abcd", eye, eye) - np.einsum("ad,bc->abcd", eye, eye)).reshape(d * d, d * d)
-    return J.T @ det2 @ J
 
 
 def extended_rigidity(packing: Packing, strain: bool = True, potential: PowerLawPotential = HARMONIC,

@@ -79,6 +79,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                         f"docs/notes/chains.md has the measurement)")
     p.add_argument("--energy-tol", type=positive, default=None,
                    help="energy per sphere [epsilon] at which --jam-protocol energy stops, e.g. 1e-12")
+    p.add_argument("--newton-polish", action="store_true",
+                   help="linked packings: let each fixed-box minimisation of the final stage (to --force-tol) end "
+                        "with the constrained trust-region Newton polish once FIRE's largest force is within 1e3 of "
+                        "the tolerance (same tolerances; fewer FIRE steps from N ~ 1000, docs/notes/chains.md); "
+                        "shaped bodies always polish their enthalpy stage")
     p.add_argument("--frozen-orientations", action="store_true",
                    help="shaped bodies: jam with every orientation fixed (VanderWerf et al. Fig. 3a, non-rotating "
                         "circulo-lines); counted with 2 degrees of freedom per body")
@@ -162,7 +167,7 @@ def _soft_jam_linked(args: argparse.Namespace, packing: Packing) -> int:
     if energy and args.pressure is not None:
         raise ValueError("--pressure is the bisection's target; --jam-protocol energy stops at --energy-tol instead")
     settings = JammingSettings(args.force_tol, args.pressure_rtol, args.delta_phi, max_steps=args.max_steps,
-                               box_dof=args.box_dof, onset=args.onset)
+                               box_dof=args.box_dof, onset=args.onset, newton_polish=args.newton_polish)
     result = jam_linked(packing, args.pressure, PowerLawPotential(exponent=args.exponent), settings, progress,
                         args.shear_stabilize, args.jam_protocol, args.energy_tol)
     bar.close()
@@ -207,6 +212,8 @@ def _soft_jam(args: argparse.Namespace) -> int:
         raise ValueError("--frozen-orientations is for shaped bodies (spheres have no orientation)")
     if linked:
         return _soft_jam_linked(args, packing)
+    if args.newton_polish:
+        raise ValueError("--newton-polish is for linked packings (spheres end with the enthalpy minimisation alone)")
     if args.seed is not None:
         packing = _random_start(packing, args.seed)
     bar = progress_bar(args.quiet, desc="soft-jam", unit=" bisection")

@@ -34,6 +34,7 @@ is reported).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,10 +44,11 @@ from numpy.typing import NDArray
 
 from ..box import Box
 from .fire import MinimizeResult
-from .model import EnergyModel, pressure_of
+from .model import EnergyModel, ModelEvaluation, pressure_of
 
 __all__ = ["ENTHALPY_ROUNDOFF", "NEGATIVE_CURVATURE", "NEWTON_ITERATIONS", "NEWTON_SHIFT", "SCALE_STEP", "TRUST_ACCEPT",
-           "TRUST_BACKTRACK", "TRUST_MOVE", "TRUST_SHIFT", "NewtonPolish", "polish_enthalpy", "positive_semidefinite"]
+           "TRUST_BACKTRACK", "TRUST_MOVE", "TRUST_SHIFT", "NewtonPolish", "TangentNewton", "polish_constrained",
+           "polish_enthalpy", "positive_semidefinite"]
 
 #: Relative step of the box scale in the central differences of the border [1]: far
 #: below the overlaps of a packing at P0 >= 1e-12 relative to the centre distances, so no
@@ -91,6 +93,11 @@ TRUST_MOVE: float = 0.05
 #: and actual differences agree to 1e-19 at ``tr W = 8.6e-4`` (N = 480 circulo-lines, P0 = 1e-6).
 ENTHALPY_ROUNDOFF: float = 4.0
 
+#: Smallest ratio of the actual to the predicted decrease of ``U`` after which :func:`polish_constrained`
+#: takes its next step with the same factors and tangent basis (a chord step) [1]: the quadratic model
+#: then holds over the step, so it holds over the next, shorter one to first order in the step.
+CHORD_RATIO: float = 0.5
+
 #: Fractions of a rejected step tried along its direction before the shift grows [1]:
 #: a step that closes a contact the Hessian does not see overshoots, a part of it does not.
 TRUST_BACKTRACK: tuple[float, ...] = tuple(0.25**k for k in range(12))
@@ -112,6 +119,48 @@ class NewtonPolish:
     position: NDArray[np.float64] | None = None
     box: Box | None = None
     descended: bool = False
+    model: EnergyModel | None = None
+
+
+@dataclass(frozen=True)
+class TangentNewton:
+    """The Newton system of a constrained model on the tangent space of its manifold at a point ``q``.
+
+    A model with constraints offers it as ``model.tangent_newton(q)`` (None where it has
+    none); :func:`polish_constrained` steps along ``basis @ a`` and returns to the manifold
+    with the model's ``reproject``.
+
+    Attributes
+    ----------
+    hessian : scipy.sparse.csc_matrix, shape (n_t, n_t)
+        ``B H_L B^T``: the Lagrangian Hessian ``H0 - sum_k mu_k grad^2 c_k`` (multipliers
+        of the model's projection) on the tangent basis [energy / length^2].
+    basis : scipy.sparse.csr_matrix, shape (n_dof, n_t)
+        ``B^T``: orthonormal columns spanning the tangent space (unit masses: the metric
+        of the model's projection).
+    gradient : ndarray, shape (n_dof,)
+        ``grad U`` at ``q`` [energy / length].
+    energy, virial_trace : float
+        ``U`` [energy] and ``tr W`` [energy] at ``q``.
+    move : callable
+        ``move(dq)``: the largest change of a pair or link vector under ``dq`` at linear order [length].
+    """
+
+    hessian: sp.csc_matrix
+    basis: sp.csr_matrix
+    gradient: NDArray[np.float64]
+    energy: float
+    virial_trace: float
+    move: Callable[[NDArray[np.float64]], float]
+
+    @classmethod
+    def reduce(cls, lagrangian: sp.spmatrix, basis: sp.spmatrix, ev: ModelEvaluation,
+               move: Callable[[NDArray[np.float64]], float]) -> TangentNewton:
+        """The system of the Lagrangian Hessian (n_dof, n_dof) on ``basis`` (n_dof, n_t) at the evaluation ``ev``."""
+        basis = sp.csr_matrix(basis)
+        reduced = sp.csc_matrix(basis.T @ (sp.csr_matrix(lagrangian) @ basis))
+        return cls(_symmetric(reduced), basis, np.asarray(ev.gradient, dtype=np.float64), float(ev.energy),
+                   float(np.trace(ev.virial)), move)
 
 
 def _state(model: EnergyModel, config: NDArray[np.float64], pressure0: float) -> tuple:
@@ -182,9 +231,8 @@ def positive_semidefinite(a: sp.csc_matrix) -> bool:
     return bool(np.linalg.eigvalsh(a.toarray())[0] >= 0.0)
 
 
-def _shifted_solve(a: sp.csc_matrix, metric: NDArray[np.float64], shift: float,
-                   rhs: NDArray[np.float64]) -> NDArray[np.float64] | None:
-    """``(a + shift diag(metric))^-1 rhs`` when that matrix is positive definite (all diagonal pivots of a
+def _shifted_factor(a: sp.csc_matrix, metric: NDArray[np.float64], shift: float) -> sla.SuperLU | None:
+    """Factors of ``a + shift diag(metric)`` when that matrix is positive definite (all diagonal pivots of a
     symmetric-mode SuperLU positive, Sylvester's inertia), else None."""
     try:
         lu = sla.splu((a + sp.diags(shift * metric)).tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
@@ -193,8 +241,21 @@ def _shifted_solve(a: sp.csc_matrix, metric: NDArray[np.float64], shift: float,
         return None
     if not np.array_equal(lu.perm_r, lu.perm_c) or not np.all(lu.U.diagonal() > 0.0):
         return None
+    return lu
+
+
+def _solve(lu: sla.SuperLU | None, rhs: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """``lu``'s solution of ``rhs`` when factors exist and the solution is finite, else None."""
+    if lu is None:
+        return None
     step = lu.solve(rhs)
     return step if np.all(np.isfinite(step)) else None
+
+
+def _shifted_solve(a: sp.csc_matrix, metric: NDArray[np.float64], shift: float,
+                   rhs: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """``(a + shift diag(metric))^-1 rhs`` when that matrix is positive definite (:func:`_shifted_factor`), else None."""
+    return _solve(_shifted_factor(a, metric, shift), rhs)
 
 
 def _largest_move(model: EnergyModel, step: NDArray[np.float64], arm: float, spacing: float) -> float:
@@ -295,3 +356,140 @@ def polish_enthalpy(model: EnergyModel, config: NDArray[np.float64], pressure0: 
                 n_contacts=ev.n_contacts, steps=0, converged=True, rebuilds=0, evaluations=evaluations,
             ), it, x, model.box, True)
     return NewtonPolish(None, it, x, model.box, descended)
+
+
+def _tangent_state(model: EnergyModel, q: NDArray[np.float64]) -> tuple:
+    """Energy evaluation at ``q``, largest projected force, and the centres there."""
+    ev = model.evaluate(q)
+    return ev, model.max_force(model.project(ev.gradient, q)), np.array(model.positions(q))
+
+
+def _rebased(model: EnergyModel, q: NDArray[np.float64]) -> tuple:
+    """The model rebased on the state ``q`` (``rescaled`` by 1: a strained box becomes the reference at
+    zero strain) with that state's ``q``, evaluation, largest projected force and centres."""
+    model.evaluate(q)
+    base, x = model.rescaled(1.0, model.positions(q))
+    qb = base.dofs(x)
+    return (base, qb, *_tangent_state(base, qb))
+
+
+def _tangent_minimum(system: TangentNewton) -> bool:
+    """Whether no eigenvalue of the reduced Hessian lies below ``-NEGATIVE_CURVATURE`` of its largest diagonal entry."""
+    a = system.hessian
+    margin = NEGATIVE_CURVATURE * float(np.abs(a.diagonal()).max(initial=0.0))
+    return positive_semidefinite((a + margin * sp.identity(a.shape[0])).tocsc())
+
+
+def polish_constrained(model: EnergyModel, config: NDArray[np.float64], force_tol: float,
+                       max_iterations: int = NEWTON_ITERATIONS) -> NewtonPolish:
+    """Levenberg–Marquardt trust-region Newton on ``U`` at fixed volume on a constrained model's manifold.
+
+    Each iteration takes the model's :class:`TangentNewton` system at ``q`` (``model.tangent_newton``)
+    and solves ``(K + mu k_max 1) a = -B grad U`` on the tangent basis (``K`` the reduced
+    Lagrangian Hessian, ``k_max`` its largest diagonal entry, ``mu`` Nielsen's shift of
+    :func:`polish_enthalpy`); the trial state is ``reproject(q + B^T a)`` (and quarter lengths
+    of it, :data:`TRUST_BACKTRACK`), kept when ``U`` decreases by :data:`TRUST_ACCEPT` of the
+    quadratic prediction (exact to second order on the manifold: the multipliers' term is the
+    constraints' curvature) or, below the round-off of ``U`` (:data:`ENTHALPY_ROUNDOFF` of
+    ``eps tr W``), when the largest projected force falls. After each kept step the model is
+    rebased on the new state (``rescaled`` by 1). The run is accepted once the largest projected
+    force is at most ``force_tol`` and the reduced Hessian there has no eigenvalue below
+    ``-NEGATIVE_CURVATURE`` of its largest diagonal entry (a minimum, not a saddle).
+    A full step at a shift of at most :data:`TRUST_SHIFT` whose decrease was at least
+    :data:`CHORD_RATIO` of the prediction is followed
+    by chord steps (the factors and basis of the last system with the new gradient; the old
+    tangent basis is tangent at the new point to first order in the step) until one fails,
+    which is retried from a fresh system: from FIRE's states near the minimum most steps then
+    cost a solve, not a factorisation.
+
+    Parameters
+    ----------
+    model : EnergyModel
+        A constrained model in the box of ``config`` (for strain coordinates: rebased, zero
+        strain), with ``tangent_newton``; without it (or where it returns None) nothing is polished.
+    config : ndarray
+        Centres (``model.positions`` form) on the manifold to the model's precision.
+    force_tol : float
+        Largest projected force of the result (:meth:`EnergyModel.max_force`) [energy / length].
+    max_iterations : int
+        Largest number of trial steps (each backtracking length one; each kept step one system).
+
+    Returns
+    -------
+    NewtonPolish
+        ``result`` (``steps = 0``) and ``model`` (rebased on it) when accepted, else ``result``
+        None; ``position`` and ``descended`` as :func:`polish_enthalpy`.
+    """
+    if getattr(model, "tangent_newton", None) is None:
+        return NewtonPolish(None, 0)
+    q = model.dofs(np.array(config, dtype=np.float64))
+    ev, fmax, x = _tangent_state(model, q)
+    spacing = (model.box.volume / len(x)) ** (1.0 / model.box.d)
+    mu, nu = TRUST_SHIFT, 2.0
+    evaluations, descended, system, chord = 1, False, None, False
+    it = 0
+    for it in range(1, max_iterations + 1):
+        if system is None:
+            system = model.tangent_newton(q)
+            if system is None:
+                return NewtonPolish(None, it - 1)
+            kmax = float(np.abs(system.hessian.diagonal()).max(initial=0.0))
+            metric = np.full(system.hessian.shape[0], kmax)
+            rhs = -(system.basis.T @ system.gradient)
+            resolution = ENTHALPY_ROUNDOFF * np.finfo(float).eps * abs(system.virial_trace)
+            factors = None
+        mu = max(mu, NEWTON_SHIFT)
+        if factors is None or factors[0] != mu:
+            factors = (mu, _shifted_factor(system.hessian, metric, mu))
+        a = _solve(factors[1], rhs)
+        dq = None if a is None else system.basis @ a
+        if dq is None or system.move(dq) > TRUST_MOVE * spacing:
+            mu, nu = mu * nu, 2.0 * nu
+            if mu > TRUST_SHIFT_MAX:
+                break
+            continue
+        gain, curvature = float(rhs @ a), float(a @ (system.hessian @ a))
+        accepted = False
+        for length in TRUST_BACKTRACK:
+            predicted = length * gain - 0.5 * length**2 * curvature
+            try:
+                trial = _rebased(model, model.reproject(q + length * dq))
+            except RuntimeError:  # re-affixing failed: too long a step
+                continue
+            evaluations += 2
+            actual = ev.energy - trial[2].energy
+            rho = actual / predicted if predicted > resolution else 0.0
+            accepted = rho >= TRUST_ACCEPT if predicted > resolution else trial[3] < fmax
+            if accepted:
+                break
+        if not accepted and chord:
+            system, chord = None, False  # a chord step that fails is retried from a fresh system
+            continue
+        if not accepted:
+            mu, nu = mu * nu, 2.0 * nu
+            if mu > TRUST_SHIFT_MAX:
+                break
+            continue
+        model, q, ev, fmax, x = trial
+        descended = True
+        # a full Newton step (shift at most the starting one) that the quadratic model predicted well (or that
+        # lowered the force below the energy's round-off) is followed by chord steps: the same factors and
+        # tangent basis, the new gradient; under a larger shift the shift must fall first
+        chord = length == 1.0 and mu <= TRUST_SHIFT and (rho >= CHORD_RATIO or predicted <= resolution)
+        if chord:
+            rhs = -(system.basis.T @ ev.gradient)
+        else:
+            if length == 1.0:
+                mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3) if predicted > resolution else 1.0 / 3.0
+                nu = 2.0
+            system = None
+        if fmax <= force_tol:
+            final = model.tangent_newton(q)
+            ev, fmax, x = _tangent_state(model, q)  # the model's last evaluation is the final state
+            if final is None or not _tangent_minimum(final):
+                return NewtonPolish(None, it, x, model.box, True, model)
+            return NewtonPolish(MinimizeResult(
+                position=x, box=model.box, energy=ev.energy, pressure=pressure_of(ev, model.box), max_force=fmax,
+                n_contacts=ev.n_contacts, steps=0, converged=True, rebuilds=0, evaluations=evaluations,
+            ), it, x, model.box, True, model)
+    return NewtonPolish(None, it, x, model.box, descended, model)

@@ -39,7 +39,11 @@ Protocol (O'Hern et al., PRE 68, 011306 (2003); VanderWerf et al., Sec. II):
    box degrees of freedom), or step 2 continues at fixed box with ``force_tol``
    until ``|P - P0| <= pressure_rtol * P0``; the bisection then shortens a step to
    the secant estimate of ``P(phi) = P0`` when that is shorter (``secant`` of
-   :func:`bisect_to_pressure`; the search has its own secant).
+   :func:`bisect_to_pressure`; the search has its own secant). With
+   ``JammingSettings.newton_polish`` either may end with a Newton polish: the enthalpy
+   stage by :func:`~jamflow.minimize.newton.polish_enthalpy`, the fixed-box minimisations
+   of constrained models by :func:`~jamflow.minimize.newton.polish_constrained`
+   (:func:`_polished_fire`).
 
 Units: energy ``epsilon`` (see :mod:`jamflow.models.spheres.potential`), length the mean
 diameter ``<D>``, pressure ``epsilon / <D>^d``, force ``epsilon / <D>``.
@@ -69,7 +73,7 @@ from .fire import (
     minimize_fire,
 )
 from .model import EnergyModel
-from .newton import polish_enthalpy
+from .newton import polish_constrained, polish_enthalpy
 
 __all__ = ["FORCE_TOL_VANDERWERF", "MAX_STRAIN_STEP", "ONSET_METHODS", "JammingSettings", "bisect_to_pressure",
            "jam_model_to_pressure", "search_to_pressure"]
@@ -133,6 +137,28 @@ POLISH_FORCE: float = 1e3
 #: failed would be followed by near copies of itself.
 POLISH_INTERVAL: int = 20000
 
+#: FIRE steps of a fixed-box minimisation of the final stage before the constrained Newton polish
+#: is first considered (:func:`_polished_fire`) [1]: a minimisation that has not converged by then
+#: is held up by soft modes, where the polish pays; at 3D chains of four, N = 1024, P0 = 1e-4 a try
+#: from FIRE's largest force ~1e-9 (after ~2e4 steps) costs ~0.3 s of CPU, ~2000 FIRE steps, and
+#: ends 3000-5000 steps early, while minimisations of N = 256 converge in 1000-2500 steps, fewer
+#: than a try costs (docs/notes/chains.md, "A Newton polish for the last linked minimisations").
+LINKED_POLISH_AFTER: int = 5000
+
+#: FIRE steps between two looks at the largest force of a fixed-box minimisation of the final stage [1]
+#: (each look is one evaluation; the force falls by about a decade per 2000 steps there, same notes).
+LINKED_POLISH_CHECK: int = 500
+
+#: Least FIRE steps between two tries of the constrained Newton polish in a fixed-box minimisation of
+#: the final stage (:func:`_polished_fire`) [1], growing by :data:`POLISH_GROWTH` after each further
+#: failed try.
+LINKED_POLISH_INTERVAL: int = 2000
+
+#: Trial steps of one try of the constrained polish [1]: from FIRE's states at largest force 1e-9 ...
+#: 2e-8 it lands in 1-5 (N = 1024, same notes); a failed try stops there (each trial step costs
+#: ~0.1 s at N = 1024, a sparse factorisation and a Hessian).
+LINKED_NEWTON_ITERATIONS: int = 8
+
 #: Growth of the interval between two tries of the Newton polish [1].
 POLISH_GROWTH: float = 1.25
 
@@ -145,7 +171,10 @@ class JammingSettings:
     packing fraction of either; ``max_strain_step`` caps the search's steps (relative
     change of the box length). ``newton_polish`` lets the enthalpy stage end with Newton
     iterations (:func:`jamflow.minimize.newton.polish_enthalpy`) once FIRE is close
-    enough (tried when its largest force is within :data:`POLISH_FORCE` of the tolerance), to the same tolerances.
+    enough (tried when its largest force is within :data:`POLISH_FORCE` of the tolerance), to the same tolerances;
+    for models without box degrees of freedom that offer ``tangent_newton`` (linked spheres) the
+    fixed-box minimisations of the final stage likewise (:func:`jamflow.minimize.newton.polish_constrained`,
+    :func:`_polished_fire`).
     """
 
     force_tol: float = FORCE_TOL_VANDERWERF
@@ -167,17 +196,52 @@ class JammingSettings:
             raise ValueError(f"max_strain_step must lie in (0, 1), got {self.max_strain_step}")
 
 
+def _polished_fire(model: EnergyModel, x: np.ndarray, force_tol: float, budget: int, fire_params: FireParameters,
+                   floor: float) -> tuple[EnergyModel, MinimizeResult]:
+    """Fixed-box FIRE that pauses every :data:`LINKED_POLISH_CHECK` steps after the first
+    :data:`LINKED_POLISH_AFTER` and, when its largest force is within :data:`POLISH_FORCE` of
+    ``force_tol`` and :data:`LINKED_POLISH_INTERVAL` steps (growing by :data:`POLISH_GROWTH` after each
+    further failed try) have passed since the last try, tries (:data:`LINKED_NEWTON_ITERATIONS` trial steps) the
+    constrained Newton polish (:func:`~jamflow.minimize.newton.polish_constrained`) from its state; the
+    first try that succeeds ends the run (its ``steps`` are FIRE's), a failed one changes nothing.
+    Returns the model of the result (rebased on the polished state when the polish ended it)."""
+    engine = _fire_engine(model, model.dofs(x), fire_params)
+    steps, last_try = 0, None
+    interval = float(LINKED_POLISH_INTERVAL)
+    while True:
+        chunk = max(LINKED_POLISH_AFTER - steps, LINKED_POLISH_CHECK)
+        res = _fire(engine, force_tol, min(chunk, budget - steps), floor)
+        steps += res.steps
+        if res.converged or res.below or steps >= budget:
+            return model, replace(res, steps=steps)
+        if res.max_force > POLISH_FORCE * force_tol or (last_try is not None and steps - last_try < interval):
+            continue
+        base, start = model.rescaled(1.0, res.position)
+        polish = polish_constrained(base, start, force_tol, LINKED_NEWTON_ITERATIONS)
+        if polish.result is not None:
+            return polish.model, replace(polish.result, steps=steps)
+        if last_try is not None:
+            interval *= POLISH_GROWTH
+        last_try = steps
+
+
 def _minimum(model: EnergyModel, x: np.ndarray, phi: float, force_tol: float, budget: int,
              fire_params: FireParameters, progress: Callable[[dict], None] | None, history: dict[str, list] | None,
-             info: dict, pressure: float, rtol: float) -> MinimizeResult:
+             info: dict, pressure: float, rtol: float, polish: bool = False) -> tuple[EnergyModel, MinimizeResult]:
     """One fixed-box FIRE minimisation of step 2, recorded in ``history`` and reported to ``progress``
     (with ``info``: ``delta_phi`` and the protocol's ``steps`` before it); raises when the budget runs out.
 
     It stops early on the energy verdict (:data:`VERDICT_SHARE`); its ``pressure`` is then
     the least of the state's and the verdict's bound ``VERDICT_SHARE (1 - rtol) P0``, and
-    ``below`` is set."""
+    ``below`` is set. With ``polish`` it may end with the constrained Newton polish
+    (:func:`_polished_fire`; models without ``tangent_newton`` run FIRE alone). Returns the
+    model of the result (the polish rebases it on its state) and the result."""
     ceiling = VERDICT_SHARE * (1.0 - rtol) * pressure
-    res = minimize_fire(model, x, force_tol, budget, fire_params, model.energy_floor(ceiling))
+    floor = model.energy_floor(ceiling)
+    if polish and getattr(model, "tangent_newton", None) is not None:
+        model, res = _polished_fire(model, x, force_tol, budget, fire_params, floor)
+    else:
+        res = minimize_fire(model, x, force_tol, budget, fire_params, floor)
     if res.below:
         res = replace(res, pressure=min(res.pressure, ceiling))
     if history is not None:
@@ -189,7 +253,7 @@ def _minimum(model: EnergyModel, x: np.ndarray, phi: float, force_tol: float, bu
                   "model": model, "position": res.position})
     if not (res.converged or res.below):
         raise RuntimeError(f"FIRE step budget ({budget + info['steps']}) exhausted at phi = {phi:.10f}")
-    return res
+    return model, res
 
 
 def bisect_to_pressure(
@@ -206,6 +270,7 @@ def bisect_to_pressure(
     history: dict[str, list] | None = None,
     direction: int = 0,
     secant: bool = False,
+    polish: bool = False,
 ) -> tuple[EnergyModel, MinimizeResult, float, float, int, int]:
     """Compress/decompress bisection of any model to ``|P - P0| <= rtol P0`` (module doc, step 2).
 
@@ -237,6 +302,8 @@ def bisect_to_pressure(
         Direction of the previous step (0: none), to resume a bisection.
     secant : bool
         Secant steps when shorter (above).
+    polish : bool
+        Let each minimisation end with the constrained Newton polish (:func:`_polished_fire`).
 
     Returns
     -------
@@ -249,8 +316,8 @@ def bisect_to_pressure(
     last: tuple[float, float] | None = None
     slope: float | None = None
     while True:
-        res = _minimum(model, x, phi, force_tol, max_steps - steps, fire_params, progress, history,
-                       {"delta_phi": delta_phi, "steps": steps}, pressure, rtol)
+        model, res = _minimum(model, x, phi, force_tol, max_steps - steps, fire_params, progress, history,
+                              {"delta_phi": delta_phi, "steps": steps}, pressure, rtol, polish)
         steps += res.steps
         x = res.position
         if abs(res.pressure - pressure) <= rtol * pressure:
@@ -389,6 +456,7 @@ def search_to_pressure(
     history: dict[str, list] | None = None,
     slope: float | None = None,
     scout: bool = True,
+    polish: bool = False,
 ) -> tuple[EnergyModel, MinimizeResult, float, float | None, int]:
     """Fixed-box FIRE minima on a search for ``|P - P0| <= rtol P0`` that keeps the last minimum below ``P0``.
 
@@ -417,6 +485,8 @@ def search_to_pressure(
     scout : bool
         Scout with steps up to ``max_strain`` and approach again from ``RETURN_SHARE``
         below (:class:`_Bracket`); False for a start already close to ``P0``.
+    polish : bool
+        As :func:`bisect_to_pressure`.
 
     Returns
     -------
@@ -429,8 +499,8 @@ def search_to_pressure(
     steps = 0
     x = position
     while True:
-        res = _minimum(model, x, phi, force_tol, max_steps - steps, fire_params, progress, history,
-                       {"delta_phi": bracket.step, "steps": steps}, pressure, rtol)
+        model, res = _minimum(model, x, phi, force_tol, max_steps - steps, fire_params, progress, history,
+                              {"delta_phi": bracket.step, "steps": steps}, pressure, rtol, polish)
         steps += res.steps
         if abs(res.pressure - pressure) <= rtol * pressure:
             break
@@ -516,11 +586,11 @@ def jam_model_to_pressure(
         step = c.bisection_rtol * pressure / slope if slope else c.delta_phi
         model, final, _, _, more = search_to_pressure(
             model, res.position, phi, pressure, c.force_tol, c.pressure_rtol, step, c.max_strain_step,
-            c.max_steps - steps, c.fire_params, progress, history, slope, scout=False,
+            c.max_steps - steps, c.fire_params, progress, history, slope, scout=False, polish=c.newton_polish,
         )
         return model, final, history, steps + more
     model, final, _, _, _, more = bisect_to_pressure(
         model, res.position, phi, pressure, c.force_tol, c.pressure_rtol, delta_phi, c.max_steps - steps,
-        c.fire_params, progress, history, direction, secant=True,
+        c.fire_params, progress, history, direction, secant=True, polish=c.newton_polish,
     )
     return model, final, history, steps + more

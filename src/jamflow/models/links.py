@@ -48,6 +48,7 @@ from ..box import Box
 from ..minimize import _fire_kernels
 from ..minimize.fire import FireParameters, MinimizeResult, _fire_params
 from ..minimize.model import ModelEvaluation, pressure_of
+from ..minimize.newton import TangentNewton
 from ..neighbors import _verlet_kernels
 from ..neighbors.verlet import NeighborList
 from ..state.bodies import Links
@@ -56,6 +57,7 @@ from . import _hinge_kernels, _link_kernels
 from .spheres import _kernels
 from .spheres.model import SphereBodies
 from .spheres.potential import HARMONIC, PowerLawPotential
+from .tangent import cluster_tangent_basis, pair_hessian
 
 __all__ = ["LINK_NEWTON_MAX_ITERATIONS", "ClusterGram", "LinkedFire", "LinkedSpheresModel"]
 
@@ -434,7 +436,37 @@ class LinkedSpheresModel(SphereBodies):
         return model, x
 
     def hessian(self, q: NDArray[np.float64]) -> sp.csr_matrix:
-        raise NotImplementedError("the constrained Hessian of linked spheres is not implemented yet")
+        raise NotImplementedError("the Hessian on the links' manifold is tangent_newton(q); the unconstrained one "
+                                  "is not a Hessian of this model")
+
+    def _lagrangian_pairs(self, x: NDArray[np.float64], R_links: NDArray[np.float64], tensions: NDArray[np.float64]
+                          ) -> tuple[NDArray[np.float64], ...]:
+        """Pair functions of the Lagrangian ``U - sum_k mu_k c_k`` at centres ``x`` (:func:`.tangent.pair_hessian`
+        arguments ``i, j, R, phi', phi''``): the overlapping listed unlinked pairs (the list of the last
+        :meth:`evaluate` at ``x``) and the links ``R_links`` as ``phi = -mu |r|``."""
+        R = x[self._pj] - x[self._pi] + self._offset
+        xi = 1.0 - np.linalg.norm(R, axis=1) / self._sigma
+        c = xi > 0.0
+        sigma = self._sigma[c]
+        return (np.concatenate([self._pi[c], self.links.i]), np.concatenate([self._pj[c], self.links.j]),
+                np.concatenate([R[c], R_links]), np.concatenate([-self.potential.force(xi[c], sigma), -tensions]),
+                np.concatenate([self.potential.stiffness(xi[c], sigma), np.zeros(len(self.links))]))
+
+    def tangent_newton(self, q: NDArray[np.float64]) -> TangentNewton:
+        """The Newton system on the links' manifold at ``q`` (:class:`~jamflow.minimize.newton.TangentNewton`).
+
+        Lagrangian Hessian ``H0 - sum_k mu_k grad^2 c_k`` with the tensions of :meth:`multipliers`
+        (:mod:`.tangent`), reduced on the per-cluster orthonormal basis of ``Null(Omega)``;
+        :meth:`reproject` is the retraction.
+        """
+        ev = self.evaluate(q)
+        R = self.link_vectors(q)
+        H = pair_hessian(self.n, self.d, *self._lagrangian_pairs(np.ascontiguousarray(self.positions(q)), R,
+                                                                  self.multipliers(ev.gradient, q)))
+        T = cluster_tangent_basis(self.gram.labels, self.links.i, self.links.j,
+                                  R / np.linalg.norm(R, axis=1)[:, None])
+        n, d = self.n, self.d
+        return TangentNewton.reduce(H, T, ev, lambda dq: float(np.sqrt(np.max(np.sum(dq.reshape(n, d) ** 2, axis=1)))))
 
 
 class LinkedFire:

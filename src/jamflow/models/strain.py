@@ -52,6 +52,7 @@ from ..minimize.fire import (
     no_energy_floor,
 )
 from ..minimize.model import ModelEvaluation, pressure_of
+from ..minimize.newton import TangentNewton
 from ..neighbors import _verlet_kernels
 from ..neighbors.verlet import NeighborList
 from ..state.bodies import Links
@@ -66,8 +67,9 @@ from .links import (
 )
 from .spheres import _kernels
 from .spheres.potential import HARMONIC, PowerLawPotential
+from .tangent import cluster_tangent_basis, pair_hessian, volume_curvature
 
-__all__ = ["ShearStabilizedModel", "StrainFire", "strain_components", "strain_matrix"]
+__all__ = ["ShearStabilizedModel", "StrainFire", "strain_components", "strain_jacobian", "strain_matrix"]
 
 
 @lru_cache(maxsize=8)
@@ -91,6 +93,15 @@ def strain_components(G: NDArray[np.float64], scale: float) -> NDArray[np.float6
     """``dX/de`` (..., m) of scalars ``X`` with ``dX/dF = G`` (..., d, d): the chain rule of :func:`strain_matrix`."""
     a, b, weight = _upper(G.shape[-1])
     return (G[..., a, b] + G[..., b, a]) / (weight * scale) * np.where(a == b, 0.5, 1.0)
+
+
+def strain_jacobian(d: int, scale: float) -> NDArray[np.float64]:
+    """``dF / de``, shape (d * d, m): ``F`` is linear in ``e`` (:func:`strain_matrix`)."""
+    a, b, weight = _upper(d)
+    J = np.zeros((d * d, a.size))
+    J[a * d + b, np.arange(a.size)] = 1.0 / (scale * weight)
+    J[b * d + a, np.arange(a.size)] = 1.0 / (scale * weight)
+    return J
 
 
 class ShearStabilizedModel(LinkedSpheresModel):
@@ -375,7 +386,50 @@ class ShearStabilizedModel(LinkedSpheresModel):
         return model, x
 
     def hessian(self, q: NDArray[np.float64]) -> sp.csr_matrix:
-        raise NotImplementedError("use jamflow.chains.hessian for the constrained Hessian with strain blocks")
+        raise NotImplementedError("the Hessian on the manifold of links and det F = 1 is tangent_newton(q) "
+                                  "(jamflow.chains.hessian for a packing's dense one)")
+
+    def tangent_newton(self, q: NDArray[np.float64]) -> TangentNewton | None:
+        """The Newton system on the manifold of links and ``det F = 1`` at ``q`` of zero strain
+        (:class:`~jamflow.minimize.newton.TangentNewton`); None with the volume free.
+
+        Lagrangian Hessian ``H0 - sum_k mu_k grad^2 c_k - nu grad^2 det F`` with the multipliers
+        of :meth:`constraint_multipliers` (:mod:`.tangent`). Tangent basis: the per-cluster
+        orthonormal basis of ``Null(Omega)`` with no strain part, and ``m - 1`` columns for the
+        strains ``de`` that keep the volume (``ce . de = 0``), their centres following by the
+        minimum-norm ``dy = -Omega^T A^-1 B_e de`` (orthogonal to the first block), orthonormalised.
+        Zero strain: a minimiser rebases the model on its deformed box (:meth:`rescaled` by 1).
+        """
+        if not self.fixed_volume:
+            return None
+        nd, m = self.n * self.d, self.m
+        if np.any(q[nd:] != 0.0):
+            raise ValueError("tangent_newton is taken at zero strain: rebase the model with rescaled(1.0, positions)")
+        ev = self.evaluate(q)
+        J = strain_jacobian(self.d, self.strain_scale)
+        mu, nu = self.constraint_multipliers(ev.gradient, q)
+        R = self._reference_links(q)
+        H = pair_hessian(self.n, self.d, *self._lagrangian_pairs(np.ascontiguousarray(q[:nd].reshape(self.n, self.d)),
+                                                                  R, mu), J)
+        H = H - sp.block_diag([sp.csr_matrix((nd, nd)), nu * volume_curvature(J)], format="csr")
+        Z = cluster_tangent_basis(self.gram.labels, self.links.i, self.links.j, R / np.linalg.norm(R, axis=1)[:, None])
+        c = self._solver(q)
+        keep = np.linalg.svd(c["ce"][None, :])[2][1:].T  # (m, m - 1): strains of constant volume
+        centres = np.zeros((m - 1, self.n, self.d))
+        lam = self._a_inverse(c["Be"] @ keep) if len(self.links) else np.zeros((0, m - 1))
+        for t in range(m - 1):
+            self.gram.subtract_transpose(c["w"], lam[:, t], centres[t])
+        S = np.vstack([centres.reshape(m - 1, nd).T, keep])
+        S = S @ np.linalg.inv(np.linalg.cholesky(S.T @ S)).T
+        T = sp.bmat([[Z, sp.csr_matrix(S[:nd])], [None, sp.csr_matrix(S[nd:])]], format="csr")
+        diameter = float(self.diameter.max())
+
+        def move(dq: NDArray[np.float64]) -> float:
+            # a pair vector r changes by dy_j - dy_i + eps r, |r| at most a diameter
+            eps = np.linalg.norm(strain_matrix(dq[nd:], self.d, self.strain_scale), 2)
+            return float(np.sqrt(np.max(np.sum(dq[:nd].reshape(self.n, self.d) ** 2, axis=1)))) + eps * diameter
+
+        return TangentNewton.reduce(H, T, ev, move)
 
 
 class StrainFire:

@@ -11,6 +11,8 @@ jamflow init "$tmp/w0.nc" --d 2 --n 16 --phi 0.5 --dispersity bi --seed 1 --wall
 jamflow calippso "$tmp/w0.nc" walls_hard.nc --walls --quiet
 jamflow init-chains "$tmp/l0.nc" --d 2 --clusters 6 --cluster trimer --seed 1 --quiet
 jamflow soft-jam "$tmp/l0.nc" linked_soft.nc --pressure 1e-3 --quiet
+# the same start shear-stabilised (tests/test_models_tangent_newton.py)
+jamflow soft-jam "$tmp/l0.nc" linked_soft_shear.nc --pressure 1e-3 --shear-stabilize --quiet
 jamflow init-shapes "$tmp/e0.nc" --shape ellipse --asphericity 1.1 --n 12 --seed 1 --quiet
 jamflow soft-jam "$tmp/e0.nc" shapes_soft.nc --pressure 1e-3 --quiet
 # 12 rigid trimers, fixed box, P0 = 1e-6: one trimer touches only through one sphere and swings

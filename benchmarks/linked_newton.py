@@ -1,0 +1,150 @@
+"""Linked jamming with and without the constrained Newton polish of the final fixed-box minimisations.
+
+``jam_linked`` (the body of ``jamflow soft-jam`` on linked packings; bisection to ``P0``,
+``--force-tol 1e-12 --pressure-rtol 1e-3 --delta-phi 1e-2``) of bidisperse 3D chains of four
+with frozen angles (``jamflow init-chains --dispersity bi --ratio 1.4``), each start run with
+``JammingSettings.newton_polish`` off and on, alternating, in one process after an untimed
+warm-up of both. Per run: CPU time (``time.process_time``), FIRE steps, minimisations, the
+polish's tries (successful, trial steps, CPU) and the checks of the result: converged, the
+final pressure in the window, ``N_c >= N_iso`` by rank (``count_bodies``, the attributes of
+``jam_linked``) and the largest link error. Writes ``benchmarks/output/linked_newton.nc`` and
+``.png`` (other cells or seeds: ``linked_newton_<cells>``).
+
+Usage: ``python benchmarks/linked_newton.py [--cells 1024:shear 1024:fixed 256:shear]
+[--seeds 4] [--quick]`` (``--quick``: N = 256 shear-stabilised, one seed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+import xarray as xr
+
+import jamflow.minimize.onset as onset
+from jamflow.chains.jamming import jam_linked
+from jamflow.io import new_dataset_attrs, read_packing, write_dataset
+from jamflow.minimize.onset import JammingSettings
+
+OUT = Path(__file__).resolve().parent / "output"
+JAMFLOW = str(Path(sys.executable).with_name("jamflow"))
+P0 = 1e-4
+CELLS = ["1024:shear", "1024:fixed", "256:shear"]
+SEEDS = 4
+
+
+def _start(tmp: Path, n: int, seed: int) -> Path:
+    path = tmp / f"start_{n}_{seed}.nc"
+    if not path.exists():
+        subprocess.run([JAMFLOW, "init-chains", "--quiet", "--d", "3", "--cluster", "chain", "--chain-length", "4",
+                        "--clusters", str(n // 4), "--dispersity", "bi", "--ratio", "1.4", "--seed", str(seed),
+                        str(path)], check=True, stdout=subprocess.DEVNULL)
+    return path
+
+
+def _run(path: Path, shear: bool, polish: bool, tries: list) -> dict:
+    settings = JammingSettings(force_tol=1e-12, pressure_rtol=1e-3, delta_phi=1e-2, newton_polish=polish)
+    tries.clear()
+    t = time.process_time()
+    res = jam_linked(read_packing(path), P0, settings=settings, shear_stabilize=shear)
+    cpu = time.process_time() - t
+    a = res.packing.attrs
+    return {"cpu_s": cpu, "steps": int(a["fire_steps"]), "minimisations": int(a["onset_minimizations"]),
+            "polish_tries": len(tries), "polish_successes": sum(ok for ok, _, _ in tries),
+            "polish_trial_steps": sum(k for _, k, _ in tries), "polish_cpu_s": sum(c for _, _, c in tries),
+            "converged": int(res.converged), "pressure_error": abs(res.history["pressure"][-1] / P0 - 1.0),
+            "phi": float(res.packing.packing_fraction), "n_contacts": int(a["n_contacts"]),
+            "isostatic_count": int(a["isostatic_count"]), "max_link_error": float(a["max_link_error"]),
+            "max_force": float(np.sqrt(a["max_force_sq"]))}
+
+
+def runs(cells: list[tuple[int, bool]], seeds: int) -> list[dict]:
+    tries: list = []
+    original = onset.polish_constrained
+
+    def counted(*args, **kwargs):
+        t = time.process_time()
+        out = original(*args, **kwargs)
+        tries.append((out.result is not None, out.iterations, time.process_time() - t))
+        return out
+
+    onset.polish_constrained = counted
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        for shear in sorted({s for _, s in cells}):  # untimed warm-up: every kernel loaded or compiled
+            for polish in (False, True):
+                _run(_start(tmp, 256, 1), shear, polish, tries)
+        for n, shear in cells:
+            for seed in range(1, seeds + 1):
+                path = _start(tmp, n, seed)
+                for polish in (False, True):
+                    r = {"n": n, "shear": int(shear), "seed": seed, "polish": int(polish),
+                         **_run(path, shear, polish, tries)}
+                    rows.append(r)
+                    print(f"N={n} {'shear' if shear else 'fixed'} seed {seed} polish {polish}: CPU {r['cpu_s']:.2f} s, "
+                          f"{r['steps']} FIRE steps, {r['minimisations']} minimisations, polish {r['polish_successes']}"
+                          f"/{r['polish_tries']} tries ({r['polish_trial_steps']} trial steps, {r['polish_cpu_s']:.2f} s); "
+                          f"phi {r['phi']:.10f}, |P/P0-1| {r['pressure_error']:.1e}, max F {r['max_force']:.1e}, "
+                          f"N_c {r['n_contacts']} / iso {r['isostatic_count']}, link error {r['max_link_error']:.1e}, "
+                          f"converged {r['converged']}", flush=True)
+    onset.polish_constrained = original
+    for n, shear in cells:
+        sel = {p: [r for r in rows if (r["n"], r["shear"], r["polish"]) == (n, int(shear), p)] for p in (0, 1)}
+        cpu = {p: sum(r["cpu_s"] for r in sel[p]) for p in (0, 1)}
+        steps = {p: sum(r["steps"] for r in sel[p]) for p in (0, 1)}
+        print(f"N={n} {'shear' if shear else 'fixed'} over {seeds} seeds: CPU with/without polish {cpu[1]:.1f} / "
+              f"{cpu[0]:.1f} s = {cpu[1] / cpu[0]:.3f}; FIRE steps {steps[1]} / {steps[0]} = {steps[1] / steps[0]:.3f}")
+    return rows
+
+
+def output(rows: list[dict], args: argparse.Namespace) -> None:
+    default = args.cells == CELLS and args.seeds == SEEDS
+    name = "linked_newton" if default else "linked_newton_" + "_".join(args.cells).replace(":", "-")
+    ds = xr.Dataset({k: (("run",), [r[k] for r in rows], {"units": "s" if k.endswith("_s") else "1",
+                                                         "long_name": k.replace("_", " ")}) for k in rows[0]},
+                    attrs=new_dataset_attrs("jamflow benchmark: linked jamming with and without the Newton polish",
+                                            vars(args), note="CPU time in one process on 2 shared cores; compare "
+                                                             "the two variants of a start (run alternating)"))
+    OUT.mkdir(exist_ok=True)
+    write_dataset(ds, OUT / f"{name}.nc")
+    fig, ax = plt.subplots(figsize=(6.5, 3.6))
+    cells = sorted({(r["n"], r["shear"]) for r in rows})
+    for k, (n, shear) in enumerate(cells):
+        on = {r["seed"]: r["cpu_s"] for r in rows if (r["n"], r["shear"], r["polish"]) == (n, shear, 1)}
+        off = {r["seed"]: r["cpu_s"] for r in rows if (r["n"], r["shear"], r["polish"]) == (n, shear, 0)}
+        ratio = [on[s] / off[s] for s in on]
+        ax.bar(k, sum(on.values()) / sum(off.values()), color="C1" if shear else "C0")
+        ax.plot([k] * len(ratio), ratio, "k.", ms=5)
+    ax.axhline(1.0, color="r", lw=1)
+    ax.set_xticks(range(len(cells)), [f"N={n}\n{'shear' if s else 'fixed'}" for n, s in cells])
+    ax.set_xlabel("3D chains of four (N spheres, box)")
+    ax.set_ylabel("CPU time with / without polish (1)")
+    fig.tight_layout()
+    fig.savefig(OUT / f"{name}.png", dpi=120)
+    print(f"wrote {OUT / name}.nc and .png")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cells", nargs="+", default=CELLS, help="N:box pairs (box shear or fixed)")
+    ap.add_argument("--seeds", type=int, default=SEEDS)
+    ap.add_argument("--quick", action="store_true", help="N = 256 shear-stabilised, one seed")
+    args = ap.parse_args()
+    if args.quick:
+        args.cells, args.seeds = ["256:shear"], 1
+    cells = [(int(c.split(":")[0]), c.split(":")[1] == "shear") for c in args.cells]
+    output(runs(cells, args.seeds), args)
+
+
+if __name__ == "__main__":
+    main()
