@@ -14,7 +14,7 @@ from ls_data import LS_DIMENSIONS, ls_dat
 STRAIN_ENGINE_MODULES = frozenset({
     "test_chains_certify", "test_chains_compliance", "test_chains_entanglement", "test_chains_hessian",
     "test_chains_shear", "test_chains_swinging", "test_extremes_bodies", "test_models_engines",
-    "test_models_strain_kernels", "test_onset_search", "test_onset_verdict",
+    "test_models_strain_kernels", "test_models_tangent_newton", "test_onset_search", "test_onset_verdict",
 })
 
 
