@@ -9,7 +9,7 @@ import pytest
 from ls_data import LS_DIMENSIONS, ls_dat
 
 #: Test modules that run the shear-stabilised engine (``StrainFire``): one xdist work unit, so
-#: that one worker compiles its kernels on a clean checkout (26-39 CPU-s, the largest
+#: that one worker compiles its kernels on a clean checkout (26-44 CPU-s, the largest
 #: compile of the suite) instead of both at once; docs/notes/test-times.md.
 STRAIN_ENGINE_MODULES = frozenset({
     "test_chains_certify", "test_chains_compliance", "test_chains_entanglement", "test_chains_hessian",
