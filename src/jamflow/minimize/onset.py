@@ -196,6 +196,25 @@ class JammingSettings:
             raise ValueError(f"max_strain_step must lie in (0, 1), got {self.max_strain_step}")
 
 
+@dataclass
+class _PolishTries:
+    """When a paused FIRE run tries a Newton polish: its largest force within :data:`POLISH_FORCE` of
+    ``force_tol`` and at least ``interval`` steps since the last failed try (the interval grows by
+    :data:`POLISH_GROWTH` after each further failed try)."""
+
+    force_tol: float
+    interval: float
+    last: int | None = None
+
+    def due(self, steps: int, max_force: float) -> bool:
+        return max_force <= POLISH_FORCE * self.force_tol and (self.last is None or steps - self.last >= self.interval)
+
+    def failed(self, steps: int) -> None:
+        if self.last is not None:
+            self.interval *= POLISH_GROWTH
+        self.last = steps
+
+
 def _polished_fire(model: EnergyModel, x: np.ndarray, force_tol: float, budget: int, fire_params: FireParameters,
                    floor: float) -> tuple[EnergyModel, MinimizeResult]:
     """Fixed-box FIRE that pauses every :data:`LINKED_POLISH_CHECK` steps after the first
@@ -206,23 +225,20 @@ def _polished_fire(model: EnergyModel, x: np.ndarray, force_tol: float, budget: 
     first try that succeeds ends the run (its ``steps`` are FIRE's), a failed one changes nothing.
     Returns the model of the result (rebased on the polished state when the polish ended it)."""
     engine = _fire_engine(model, model.dofs(x), fire_params)
-    steps, last_try = 0, None
-    interval = float(LINKED_POLISH_INTERVAL)
+    steps, tries = 0, _PolishTries(force_tol, float(LINKED_POLISH_INTERVAL))
     while True:
         chunk = max(LINKED_POLISH_AFTER - steps, LINKED_POLISH_CHECK)
         res = _fire(engine, force_tol, min(chunk, budget - steps), floor)
         steps += res.steps
         if res.converged or res.below or steps >= budget:
             return model, replace(res, steps=steps)
-        if res.max_force > POLISH_FORCE * force_tol or (last_try is not None and steps - last_try < interval):
+        if not tries.due(steps, res.max_force):
             continue
         base, start = model.rescaled(1.0, res.position)
         polish = polish_constrained(base, start, force_tol, LINKED_NEWTON_ITERATIONS)
         if polish.result is not None:
             return polish.model, replace(polish.result, steps=steps)
-        if last_try is not None:
-            interval *= POLISH_GROWTH
-        last_try = steps
+        tries.failed(steps)
 
 
 def _minimum(model: EnergyModel, x: np.ndarray, phi: float, force_tol: float, budget: int,
@@ -525,23 +541,20 @@ def _enthalpy_stage(model: EnergyModel, position: np.ndarray, pressure: float, c
         return minimize_enthalpy_model(model, position, pressure, c.force_tol, c.pressure_rtol, budget,
                                        c.fire_params, c.box_dof)
     engine = _fire_engine(model, model.dofs(position), c.fire_params, float(pressure), c.pressure_rtol, c.box_dof)
-    steps, last_try = 0, None
-    interval = float(POLISH_INTERVAL)
+    steps, tries = 0, _PolishTries(c.force_tol, float(POLISH_INTERVAL))
     while True:
         res = _fire(engine, c.force_tol, min(POLISH_CHECK, budget - steps))
         steps += res.steps
         if res.converged or steps >= budget:
             return replace(res, steps=steps)
-        if res.max_force > POLISH_FORCE * c.force_tol or (last_try is not None and steps - last_try < interval):
+        if not tries.due(steps, res.max_force):
             continue
         scale = (res.box.volume / model.box.volume) ** (1.0 / model.box.d)
         scaled, _ = model.rescaled(scale, res.position)
         polish = polish_enthalpy(scaled, res.position, pressure, c.force_tol, c.pressure_rtol)
         if polish.result is not None:
             return replace(polish.result, steps=steps)
-        if last_try is not None:
-            interval *= POLISH_GROWTH
-        last_try = steps
+        tries.failed(steps)
 
 
 def jam_model_to_pressure(
