@@ -3,13 +3,12 @@ the three contact conventions, refusal of unjammed starts, normalisation."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from jamflow.cli import main
 from jamflow.io import read_dataset, read_packing
 from jamflow.protocols.soft_jam import jam_to_pressure
 from jamflow.shapes.analysis import contact_angle_dataset, contact_angles
@@ -94,26 +93,23 @@ def test_survey_groups_means_and_errors():
     assert ds.z_eq3_mean.values[0, k] == pytest.approx(rows[1]["counts"]["spectral"]["z_eq3"])
 
 
-def test_shape_survey_and_contact_angles_commands(tmp_path):
+def test_shape_survey_and_contact_angles_commands(tmp_path, capsys):
     out = tmp_path / "survey.nc"
-    run = subprocess.run([sys.executable, "-m", "jamflow", "shape-survey", str(NEAR_DISKS), str(LINES), str(out)],
-                         capture_output=True, text=True)
-    assert run.returncode == 0, run.stderr
-    assert "phi_J 0.83631" in run.stdout and "4.0000 ± 0.0000 / 4.0000 ± 0.0000" in run.stdout
-    assert "z = 2 N_c / N' once/twice" in run.stdout
+    assert main(["shape-survey", str(NEAR_DISKS), str(LINES), str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "phi_J 0.83631" in printed and "4.0000 ± 0.0000 / 4.0000 ± 0.0000" in printed
+    assert "z = 2 N_c / N' once/twice" in printed
     ds = read_dataset(out, "shape-survey")
     assert ds.sizes["group"] == 2 and np.all(np.isnan(ds.z_eq3.sel(convention="spectral").values))
     angles = tmp_path / "angles.nc"
-    run = subprocess.run([sys.executable, "-m", "jamflow", "contact-angles", str(LINES), str(angles)],
-                         capture_output=True, text=True)
-    assert run.returncode == 0, run.stderr
+    assert main(["contact-angles", str(LINES), str(angles)]) == 0
     assert read_dataset(angles, "contact-angles").attrs["n_angles"] == 2 * 40
-    bad = subprocess.run([sys.executable, "-m", "jamflow", "contact-angles", str(angles)],
-                         capture_output=True, text=True)
-    assert bad.returncode != 0 and "at least one shape packing" in bad.stderr
+    capsys.readouterr()
+    assert main(["contact-angles", str(angles)]) != 0
+    assert "at least one shape packing" in capsys.readouterr().err
 
 
-def test_survey_and_modes_refuse_unjammed_starts(tmp_path):
+def test_survey_and_modes_refuse_unjammed_starts(tmp_path, capsys):
     """A random start (init-shapes) is refused in one line before any work, never counted
     as a packing with every body a rattler at the start's packing fraction."""
     from jamflow.io import write_packing
@@ -129,9 +125,10 @@ def test_survey_and_modes_refuse_unjammed_starts(tmp_path):
     start = tmp_path / "start.nc"
     write_packing(p, start)
     for command in (["shape-survey", str(start), str(tmp_path / "s.nc")], ["modes", str(start), str(tmp_path / "m.nc")]):
-        run = subprocess.run([sys.executable, "-m", "jamflow", *command], capture_output=True, text=True)
-        assert run.returncode == 1 and "not jammed by soft-jam" in run.stderr and "lambda" not in run.stderr
-        assert len(run.stderr.strip().splitlines()) == 1
+        assert main(command) == 1
+        err = capsys.readouterr().err
+        assert "not jammed by soft-jam" in err and "lambda" not in err
+        assert len(err.strip().splitlines()) == 1
         assert not Path(command[-1]).exists()
 
 

@@ -95,8 +95,9 @@ def test_a_scene_that_cannot_run_fails_at_the_dry_run_in_one_line(tmp_path, patc
 
 def test_a_dry_run_prints_each_rule_s_requests_and_the_core_hours(tmp_path):
     work = _workdir(tmp_path)
-    laptop = _snakemake(work, "-n", "--configfile", "config/scenes/calippso-fig3.yaml")
-    paper = _snakemake(work, "-n", "--configfile", "config/scenes/calippso-fig3.yaml", "--config", "scale=paper")
+    # a scene of few jobs at both scales: the plan's printout, not its size, is under test
+    laptop = _snakemake(work, "-n", "--configfile", "config/scenes/lerner-fig4.yaml")
+    paper = _snakemake(work, "-n", "--configfile", "config/scenes/lerner-fig4.yaml", "--config", "scale=paper")
     for res in (laptop, paper):
         assert res.returncode == 0, res.stderr[-3000:]
     hours = [float(re.search(r"jobs, ([0-9.e+-]+) core-hours", r.stderr)[1]) for r in (laptop, paper)]
