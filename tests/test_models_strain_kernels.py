@@ -110,7 +110,7 @@ def test_reaffixing_lands_on_the_manifold_next_to_newton(strained, size):
         y, e, model._h0, model.strain_scale, fixed, g["ci"], g["cj"], g["offset"], g["length"], g["sign"],
         g["first"], g["cptr"], g["fptr"], b["chol"], b["pinv"], b["R0"], b["u"], b["rl"], b["w"], b["Be"], b["Z"],
         b["S"], b["ce"], b["sce"], b["small"], float(b["schur"]), np.zeros((len(g["ci"]), 2)), np.zeros((6, 2)),
-        np.zeros((6, 2)), LINK_LENGTH_RTOL, 50, LINK_RANK_RTOL, True)
+        np.zeros((6, 2)), LINK_LENGTH_RTOL, 50, LINK_RANK_RTOL)
     ours = np.concatenate([y.ravel(), e])
     assert bad == -1 and 1 <= sweeps <= 8 and err <= LINK_LENGTH_RTOL
     assert np.abs(model.link_errors(ours)).max() <= LINK_LENGTH_RTOL

@@ -260,7 +260,8 @@ def _det_inverse(F):
             for b in range(3):
                 inv[a, b] /= det
         return det, inv
-    return np.linalg.det(F), np.linalg.inv(F)
+    # C order like the closed forms: one compiled layout for every caller of the inverse
+    return np.linalg.det(F), np.ascontiguousarray(np.linalg.inv(F))
 
 
 @njit(cache=True)

@@ -320,7 +320,7 @@ def sheared_list(y, h0, h0_inv, U, T, diameter, skin, adj_ptr, adj, buffers):
 
 @njit(cache=True)
 def strain_reaffix(y, e, h0, scale, fixed_volume, li, lj, offset, length, sign, first, cptr, fptr, chol, pinv, R0, u,
-                   rl, w, Be, Z, S, ce, sce, small, schur, z, t, q, length_rtol, max_sweeps, rank_rtol, chord):
+                   rl, w, Be, Z, S, ce, sce, small, schur, z, t, q, length_rtol, max_sweeps, rank_rtol):
     """Newton re-affixing of links and ``det F = 1`` in place (:meth:`ShearStabilizedModel.reproject`).
 
     A sweep is the minimum-norm step ``(y, e) -= Gamma (lam, nu)`` with
@@ -334,6 +334,7 @@ def strain_reaffix(y, e, h0, scale, fixed_volume, li, lj, offset, length, sign, 
     """
     previous = np.inf
     err = 0.0
+    chord = True
     for sweep in range(max_sweeps + 1):
         F, _, _, _, det, Finv = strain_state(e, h0, scale)
         err = strain_links(y, F, li, lj, offset, length, R0, u, rl)
@@ -486,7 +487,7 @@ def strain_fire(
             _strain_step_back(y, vy, e, ve, body, vb, vh, free, dt)
             k_, err, bad, small, schur = strain_reaffix(
                 y, e, h0, scale, fixed_volume, li, lj, link_offset, length, sign, first, cptr, fptr, chol, pinv, R0, u,
-                rl, w, Be, Z, S, ce, sce, small, schur, z, t_m, q_m, length_rtol, max_sweeps, rank_rtol, True)
+                rl, w, Be, Z, S, ce, sce, small, schur, z, t_m, q_m, length_rtol, max_sweeps, rank_rtol)
             sweeps += max(k_, 0)
             if k_ < 0 or bad >= 0:
                 status = STALLED
@@ -498,7 +499,7 @@ def strain_fire(
                                  Finv, vh, dt)
         k_, err, bad, small, schur = strain_reaffix(
             y, e, h0, scale, fixed_volume, li, lj, link_offset, length, sign, first, cptr, fptr, chol, pinv, R0, u,
-            rl, w, Be, Z, S, ce, sce, small, schur, z, t_m, q_m, length_rtol, max_sweeps, rank_rtol, True)
+            rl, w, Be, Z, S, ce, sce, small, schur, z, t_m, q_m, length_rtol, max_sweeps, rank_rtol)
         sweeps += max(k_, 0)
         if k_ < 0 or bad >= 0:
             status = STALLED

@@ -204,7 +204,9 @@ def shape_fire(
             if not reach < 0.5 * s * shortest:
                 status = REBUILD
                 break
-            pi, pj, _, offset, _, buffers = _inline_list(centres, s, lengths, diameter, reach, skin, buffers)
+            # a contiguous copy: the sphere engines' compiled list builder serves, not a second one
+            pi, pj, _, offset, _, buffers = _inline_list(np.ascontiguousarray(centres), s, lengths, diameter,
+                                                         reach, skin, buffers)
             lam = np.full(pi.shape[0], -1.0)
             for i in range(n):
                 y_build[i, 0] = y[i, 0]

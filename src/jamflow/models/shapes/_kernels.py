@@ -665,7 +665,8 @@ def reuleaux_terms(dx0, dx1, ti, tj, pi, pj, k, g, record, out):
 POINT_TERM_COLUMNS = ("pair", "type", "a", "b", "point_i_x", "point_i_y", "point_j_x", "point_j_y", "r", "delta")
 
 
-@njit(cache=True)
+# inlined: called with constant kinds and indices, it would otherwise compile once per combination
+@njit(cache=True, inline="always")
 def _record_point(out, rows, record, kind, a, b, pix, piy, pjx, pjy, r, delta):
     """Write one point-term row (see :data:`POINT_TERM_COLUMNS`, without the pair column)."""
     if record:
