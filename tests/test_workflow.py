@@ -139,31 +139,41 @@ TINY = {
 }
 
 
-#: the shapes scene is the heaviest (soft-jam of circulo-lines with rotations, in job processes):
-#: slow; the fast suite plans a shapes scene (tests/test_scenes.py) and runs every command on
-#: shapes (tests/test_stages.py)
-@pytest.mark.parametrize("kind", [pytest.param(k, marks=[pytest.mark.slow] if k == "shapes" else [])
-                                  for k in TINY])
-def test_a_tiny_scene_of_each_body_kind_runs_end_to_end(tmp_path, kind):
+def _run_tiny_scene(tmp_path: Path, kinds: list[str]) -> None:
+    """One scene with a tiny body of each of ``kinds``: every body keeps its kind through
+    the chain, the check counts it as such, its log ends with the check's summary, and the
+    packing figure is drawn."""
     work = _workdir(tmp_path)
-    scene = {"scene": f"tiny-{kind}", "bodies": {kind: TINY[kind]}, "seeds": [3],
+    scene = {"scene": "tiny", "bodies": {kind: TINY[kind] for kind in kinds}, "seeds": [3],
              "chain": [{"soft-jam": {"pressure": 1e-2}}], "analyses": ["check"], "figures": ["packing"]}
     res = _snakemake(work, "-c2", "--configfile", str(_write(work, scene)))
     assert res.returncode == 0, res.stderr[-4000:]
-    body = {"spheres": "spheres", "linked": "linked-trimer", "shapes": "shapes-circulo-line"}[kind]
-    folder = work / "results" / scene["scene"] / body / "base" / "seed3"
-    check_text = (folder / "soft-jam.check.json").read_text()
-    check = json.loads(check_text)
-    # the check job's log ends with the summary it printed (its output is its stdout)
-    logs = [q.read_text() for q in (work / "results" / scene["scene"] / "logs").rglob("*") if q.is_file()]
-    assert any(text.endswith(check_text) for text in logs)
-    packing = read_packing(folder / "soft-jam.nc", None)
-    # the bodies kept their kind through the chain, and the check counted them as such
-    assert packing.body_kind == kind
-    assert check["n_contacts"] > 0 and check["isostatic_count"] > 0
-    point = json.loads(xr.load_dataset(folder / "soft-jam.nc").attrs["scan_point"])
-    assert point == {"body": body, "sample": "seed3", "seed": 3}
-    assert (work / "results" / scene["scene"] / "figures" / f"packing_{body}_base.png").stat().st_size > 1000
+    logs = [q.read_text() for q in (work / "results" / "tiny" / "logs").rglob("*") if q.is_file()]
+    for kind in kinds:
+        body = {"spheres": "spheres", "linked": "linked-trimer", "shapes": "shapes-circulo-line"}[kind]
+        folder = work / "results" / "tiny" / body / "base" / "seed3"
+        check_text = (folder / "soft-jam.check.json").read_text()
+        check = json.loads(check_text)
+        # the check job's log ends with the summary it printed (its output is its stdout)
+        assert any(text.endswith(check_text) for text in logs)
+        packing = read_packing(folder / "soft-jam.nc", None)
+        assert packing.body_kind == kind
+        assert check["n_contacts"] > 0 and check["isostatic_count"] > 0
+        point = json.loads(xr.load_dataset(folder / "soft-jam.nc").attrs["scan_point"])
+        assert point == {"body": body, "sample": "seed3", "seed": 3}
+        assert (work / "results" / "tiny" / "figures" / f"packing_{body}_base.png").stat().st_size > 1000
+
+
+def test_tiny_scenes_of_spheres_and_linked_spheres_run_end_to_end(tmp_path):
+    _run_tiny_scene(tmp_path, ["spheres", "linked"])
+
+
+#: the shapes scene is the heaviest (soft-jam of circulo-lines with rotations, in job processes):
+#: slow; the fast suite plans a shapes scene (tests/test_scenes.py) and runs every command on
+#: shapes (tests/test_stages.py)
+@pytest.mark.slow
+def test_a_tiny_scene_of_shapes_runs_end_to_end(tmp_path):
+    _run_tiny_scene(tmp_path, ["shapes"])
 
 
 @pytest.mark.slow
