@@ -189,11 +189,10 @@ def pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial=
     d = y.shape[1]
     force[:, :] = 0.0
     virial[:, :] = 0.0
-    # bool() drops the literal type of a constant flag: one compiled loop serves every caller
     if d == 2:
-        return _pair_forces_2d(y, s, offset, pi, pj, sigma, eps, w, force, virial, bool(with_virial))
+        return _pair_forces_2d(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial)
     if d == 3:
-        return _pair_forces_3d(y, s, offset, pi, pj, sigma, eps, w, force, virial, bool(with_virial))
+        return _pair_forces_3d(y, s, offset, pi, pj, sigma, eps, w, force, virial, with_virial)
     energy = 0.0
     n_contact = 0
     dx = np.empty(d)
