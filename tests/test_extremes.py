@@ -86,7 +86,7 @@ def test_soft_jamming_isostatic_and_certified_from_n8_to_n1024(n):
 
 
 #: Largest excess ``N_c - N_iso`` accepted at ``N P0^(1/2) = 0.41`` (2D N = 4096 at P0 = 1e-8):
-#: O'Hern's excess ``~c N P^(1/2)`` has ``c`` = 1.5 (0.9 ... 2.5) on 2D N = 1024 at P0 = 1e-5,
+#: O'Hern's excess ``~c N P^(1/2)`` has ``c`` = 1.5 (0.9 ... 2.5) on 2D N = 1024 at P0 = 1e-5 (3 seeds),
 #: so at 0.41 a mean of at most ~1 (measured at 0.41: 0.31 on N = 256, 48 seeds, and 0.75 on
 #: N = 1024, 8 seeds, at most 2), and a count of mean 1 exceeds 5 with probability 6e-4
 #: (Poisson). Measurements: docs/notes/extremes.md, "2D N = 4096".
@@ -117,18 +117,21 @@ def test_soft_jamming_2d_n4096_never_hypostatic_resolved_and_certified():
     An isostatic backbone is a draw here, not the physics: ``N P0^(1/2) = 0.41`` excess
     contacts are expected (O'Hern's ``Delta z ~ P^(1/2)``), and the isostatic window
     ``P0 <~ (0.05 / N)^2 = 1.5e-10`` lies where the weakest backbone forces (``~5e-4``
-    of the mean ``~P0``) fall below the force tolerance 1e-13, whose float64 floor is
-    ~1e-14. So asserted: the target pressure, force balance, a backbone never hypostatic
-    and at most :data:`N4096_MAX_EXCESS` contacts beyond isostatic, a count resolved
-    against the residual (every backbone contact carries more than the force tolerance,
-    and no other pair of backbone particles is closer than the overlap that would),
-    certified collectively jammed with the same backbone; and, independently, CALiPPSO
-    from the soft centres (diameters shrunk by twice the largest overlap) jams them
-    exactly, never hypostatic, certified, at a ``phi_J`` :data:`ONSET_PHI_RANGE` times
-    ``P0`` below the soft ``phi``. Measured (seed 1):
-    7753 = 7753 contacts, 219 rattlers, ``max F`` 9.0e-14, weakest backbone force 4.6e-12,
-    closest other backbone pair at relative gap 3.4e-6; CALiPPSO 2 LPs, the same 7753
-    contacts, ``(phi - phi_J) / P0 = 2.50`` (docs/notes/extremes.md, "2D N = 4096").
+    of the mean ``~P0``) fall to the force tolerance 1e-13, whose float64 floor is
+    ~1e-14 (measured there: 11 contacts short, weakest forces 9.4e-14, 1.2e-13). So
+    asserted: the target pressure, force balance, a backbone never hypostatic and at
+    most :data:`N4096_MAX_EXCESS` contacts beyond isostatic, a count resolved against
+    the residual (every backbone contact carries more than the force tolerance, and no
+    other pair of backbone particles is closer than the overlap that would), certified
+    collectively jammed with the same backbone; and, independently, CALiPPSO from the
+    soft centres (diameters shrunk by twice the largest overlap) jams them as hard
+    spheres, converged, never hypostatic, certified, at a ``phi_J`` that lies
+    :data:`ONSET_PHI_RANGE` times ``P0`` below the soft ``phi``. Measured (seed 1): 7753 =
+    7753 contacts, 219 rattlers, ``max F`` 9.0e-14, weakest backbone force 4.6e-12,
+    closest other backbone pair at relative gap 3.4e-6; CALiPPSO 2 LPs, isostatic with
+    the same 7753 contacts, ``(phi - phi_J) / P0 = 2.50``; the assertions hold as well on
+    hyperstatic packings at the same ``N P0^(1/2)`` (N = 256, 1024) (docs/notes/extremes.md,
+    "2D N = 4096").
     """
     p0 = onset_pressure(4096)
     p = jam_to_pressure(random_packing(4096, 2, 0.5, "bi", seed=1), p0).packing
