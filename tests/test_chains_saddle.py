@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from jamflow.chains import jamming
 from jamflow.chains.hessian import constrained_hessian
 from jamflow.chains.jamming import leave_linked_saddle
 from jamflow.io import read_packing
@@ -42,13 +43,19 @@ def _count(p, res):
 
 
 @pytest.mark.slow
-def test_a_linked_saddle_is_kicked_to_an_isostatic_stable_minimum():
+@pytest.mark.parametrize("newton_polish", [False, True])
+def test_a_linked_saddle_is_kicked_to_an_isostatic_stable_minimum(newton_polish, monkeypatch):
     # the 8-disk saddle of tests/test_onset_search.py as a linked packing without links at fixed box:
     # 8 contacts against the isostatic 9, an eigenvalue ~ -f/r, forces balanced by symmetry
     p0 = 1e-7
     p = read_packing(DATA / "saddle_8disks_p1e-7.nc", None)
     p = p.evolve(links=Links(np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0)))
-    settings = JammingSettings(pressure_rtol=1e-3)
+    settings = JammingSettings(pressure_rtol=1e-3, newton_polish=newton_polish)
+    # the re-bisection after a kick ends its minimisations as the settings ask
+    polished = []
+    bisect = jamming.bisect_to_pressure
+    monkeypatch.setattr(jamming, "bisect_to_pressure",
+                        lambda *a, **k: polished.append(k.get("polish", False)) or bisect(*a, **k))
     model, at_saddle = _at_minimum(p, settings)
     assert at_saddle.converged and at_saddle.steps == 0
     before = _count(p, at_saddle)
@@ -57,6 +64,7 @@ def test_a_linked_saddle_is_kicked_to_an_isostatic_stable_minimum():
     assert w.min() < -p0
     model, final, steps, kicks = leave_linked_saddle(model, at_saddle, p, p0, settings, False, seed=0)
     assert kicks >= 1 and steps > 0 and final.converged
+    assert polished and set(polished) == {newton_polish}
     assert abs(final.pressure - p0) <= settings.pressure_rtol * p0
     after = _count(p, final)
     assert after.n_contacts >= after.isostatic_count > 0

@@ -188,7 +188,7 @@ def leave_linked_saddle(model: LinkedSpheresModel, final: MinimizeResult, templa
         m, out, _, _, _, steps = bisect_to_pressure(
             m, x, phi, pressure, settings.force_tol, settings.pressure_rtol,
             settings.pressure_rtol * settings.delta_phi, settings.max_steps, settings.fire_params, progress, history,
-            secant=True)
+            secant=True, polish=settings.newton_polish)
         state["model"] = m
         return replace(out, box=_current_box(m)), steps
 
