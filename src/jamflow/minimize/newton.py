@@ -25,7 +25,10 @@ closing pair) and kept when it decreases ``H`` by at least :data:`TRUST_ACCEPT` 
 quadratic prediction; else ``mu`` grows. Only a shifted matrix with positive
 pivots (a descent direction) is used, and no body moves by more than
 :data:`TRUST_MOVE` of a neighbour distance in one step. Below the round-off of the
-enthalpy (:data:`ENTHALPY_ROUNDOFF`) a step is kept when the largest force falls.
+enthalpy (:data:`ENTHALPY_ROUNDOFF`) a step is kept when the largest force falls. A step
+after which the Hessian, shifted as for it, is no longer positive definite is undone (it
+went past a contact that holds the packing); after :data:`TRUST_INDEFINITE` of them the
+polish gives up.
 A run is accepted only when both tolerances hold and the bordered Hessian there has
 no negative eigenvalue (a minimum, not a saddle); otherwise the caller keeps its own
 state (a failed polish changes nothing; the last state it reached, of lower ``H``,
