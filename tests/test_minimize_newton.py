@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import functools
+from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
+from jamflow.io import read_packing
 from jamflow.minimize import newton
 from jamflow.minimize.fire import DEFAULT_FIRE, _fire
 from jamflow.minimize.newton import polish_enthalpy, positive_semidefinite
@@ -16,6 +18,9 @@ from jamflow.models.shapes.model import ShapeModel
 from jamflow.shapes import bidisperse_shapes, random_shape_packing, unit_shape
 
 P0 = 1e-4
+DATA = Path(__file__).parent / "data" / "bodies"
+#: Pressure of the vendored enthalpy-stage states of circulo-triangles [k].
+P0_TRIANGLES = 1e-6
 
 
 def _squeezed(family):
@@ -138,3 +143,34 @@ def test_a_polish_whose_every_step_is_refused_gives_up_before_its_shift_overflow
     assert polished.result is None and not polished.descended
     # the shift starts at TRUST_SHIFT and grows by 2, 4, 8, ...: past 1 / eps after about 10 refusals
     assert polished.iterations < 20
+
+
+def _enthalpy_try(name):
+    """Model and configuration of a vendored enthalpy-stage state of circulo-triangles (tests/data/bodies/make.sh)."""
+    p = read_packing(DATA / f"circulo_triangles_enthalpy_{name}.nc", overlap_tol=None)
+    model = ShapeModel(p.box, p.shapes, p.shape_index)
+    return model, np.column_stack([p.position, p.orientation])
+
+
+def test_a_polish_in_a_flat_valley_gives_up_early_and_one_in_the_basin_lands_on_a_minimum():
+    """Circulo-triangles at P0 = 1e-6, FIRE's states at two Newton tries of one enthalpy stage. In the valley
+    (largest force 2e-11, 0.1 neighbour distances from the minimum FIRE reaches) every step that grows goes
+    past a corner contact of overlap ~1e-11 into a region where the Hessian is indefinite: the polish gives
+    up after TRUST_INDEFINITE such steps (14 trial steps; 87 before such steps were undone). From the basin it
+    lands (9 trial steps; 25 before):
+    both tolerances in a fresh model of the final box, and no negative eigenvalue of the bordered Hessian."""
+    model, config = _enthalpy_try("valley")
+    polished = polish_enthalpy(model, config, P0_TRIANGLES, 1e-13, 1e-6)
+    assert polished.result is None and polished.iterations <= 20
+    model, config = _enthalpy_try("basin")
+    polished = polish_enthalpy(model, config, P0_TRIANGLES, 1e-13, 1e-6)
+    res = polished.result
+    assert res is not None
+    final = ShapeModel(res.box, model.shapes, model.shape_index)
+    q = final.dofs(res.position)
+    ev = final.evaluate(q)
+    assert final.max_force(ev.gradient) <= 1e-13
+    assert abs(np.trace(ev.virial) / (2.0 * res.box.volume) - P0_TRIANGLES) <= 1e-6 * P0_TRIANGLES
+    a = newton._bordered_hessian(final, res.position, q, P0_TRIANGLES).toarray()
+    a = 0.5 * (a + a.T)
+    assert np.linalg.eigvalsh(a)[0] >= -newton.NEGATIVE_CURVATURE * np.abs(np.diag(a)).max()

@@ -25,7 +25,10 @@ closing pair) and kept when it decreases ``H`` by at least :data:`TRUST_ACCEPT` 
 quadratic prediction; else ``mu`` grows. Only a shifted matrix with positive
 pivots (a descent direction) is used, and no body moves by more than
 :data:`TRUST_MOVE` of a neighbour distance in one step. Below the round-off of the
-enthalpy (:data:`ENTHALPY_ROUNDOFF`) a step is kept when the largest force falls.
+enthalpy (:data:`ENTHALPY_ROUNDOFF`) a step is kept when the largest force falls. A step
+after which the Hessian, shifted as for it, is no longer positive definite is undone (it
+went past a contact that holds the packing); after :data:`TRUST_INDEFINITE` of them the
+polish gives up.
 A run is accepted only when both tolerances hold and the bordered Hessian there has
 no negative eigenvalue (a minimum, not a saddle); otherwise the caller keeps its own
 state (a failed polish changes nothing; the last state it reached, of lower ``H``,
@@ -47,7 +50,7 @@ from .fire import MinimizeResult
 from .model import EnergyModel, ModelEvaluation, pressure_of
 
 __all__ = ["ENTHALPY_ROUNDOFF", "NEGATIVE_CURVATURE", "NEWTON_ITERATIONS", "NEWTON_SHIFT", "SCALE_STEP", "TRUST_ACCEPT",
-           "TRUST_BACKTRACK", "TRUST_MOVE", "TRUST_SHIFT", "NewtonPolish", "TangentNewton", "polish_constrained",
+           "TRUST_BACKTRACK", "TRUST_INDEFINITE", "TRUST_MOVE", "TRUST_SHIFT", "NewtonPolish", "TangentNewton", "polish_constrained",
            "polish_enthalpy", "positive_semidefinite"]
 
 #: Relative step of the box scale in the central differences of the border [1]: far
@@ -87,6 +90,15 @@ TRUST_SHIFT_MAX: float = 1.0 / float(np.finfo(np.float64).eps)
 #: distance between neighbours [1]: a step that would move a body further is treated as
 #: rejected, so no step can carry a body through another's core.
 TRUST_MOVE: float = 0.05
+
+#: Steps undone because the Hessian at their end, shifted as for the step, is not positive definite,
+#: after which :func:`polish_enthalpy` gives up [1]: such a step overshot a contact whose overlap is far
+#: below the others' (the packing without it is unstable); many of them mark a flat valley without a
+#: minimum within reach, which FIRE leaves by a rearrangement. Measured: 8 within 13-36 trial steps of
+#: each try that failed (circulo-triangles N = 100, P0 = 1e-6), at most 4 in a try that lands (2 there,
+#: 4 for the N = 24 ellipses of the tests from force 1e-6); docs/notes/shapes.md, "Why the Newton tries
+#: of circulo shapes fail".
+TRUST_INDEFINITE: int = 8
 
 #: Round-off of an enthalpy difference in units of ``eps tr W`` (virial trace ``tr W = d P V``) [1]:
 #: a predicted decrease below it is judged by the largest force instead. Measured: predicted
@@ -269,6 +281,15 @@ def _largest_move(model: EnergyModel, step: NDArray[np.float64], arm: float, spa
     return float(move.max()) + spacing * abs(float(step[-1]))
 
 
+def _enthalpy_system(model: EnergyModel, x: NDArray[np.float64], q: NDArray[np.float64], pressure0: float,
+                     spacing: float) -> tuple[sp.csc_matrix, NDArray[np.float64]]:
+    """The symmetrised bordered Hessian at ``q`` and its metric: FIRE's masses, and for the box scale the square
+    of a contact distance ``spacing``, both times the Hessian's largest diagonal entry."""
+    system = _symmetric(_bordered_hessian(model, x, q, pressure0))
+    kmax = float(np.abs(system.diagonal()[:-1]).max())
+    return system, kmax * np.r_[1.0 / model.inverse_mass, spacing**2]
+
+
 def polish_enthalpy(model: EnergyModel, config: NDArray[np.float64], pressure0: float, force_tol: float,
                     pressure_rtol: float, max_iterations: int = NEWTON_ITERATIONS) -> NewtonPolish:
     """Levenberg–Marquardt trust-region Newton on ``H = U + P0 V`` (module doc) from ``config`` in ``model``'s box.
@@ -307,12 +328,10 @@ def polish_enthalpy(model: EnergyModel, config: NDArray[np.float64], pressure0: 
     nu = 2.0
     system = None
     descended = False
+    undone = 0
     for it in range(1, max_iterations + 1):
         if system is None:
-            system = _symmetric(_bordered_hessian(model, x, q, pressure0))
-            kmax = float(np.abs(system.diagonal()[:-1]).max())
-            # the mass metric of FIRE, and for the box scale the square of a contact distance
-            metric = kmax * np.r_[1.0 / model.inverse_mass, spacing**2]
+            system, metric = _enthalpy_system(model, x, q, pressure0, spacing)
             rhs = -np.concatenate([g, [dhds]])
         mu = max(mu, NEWTON_SHIFT)
         step = _shifted_solve(system, metric, mu, rhs)
@@ -336,6 +355,17 @@ def polish_enthalpy(model: EnergyModel, config: NDArray[np.float64], pressure0: 
             accepted = rho >= TRUST_ACCEPT if predicted > resolution else tfmax < fmax
             if accepted:
                 break
+        converged = accepted and tfmax <= force_tol and abs(tp - pressure0) <= pressure_rtol * pressure0
+        next_system = None
+        if accepted and not converged:
+            # a step into a region where the model, shifted as for this step, is no longer positive
+            # definite left the quadratic model's region (a contact whose overlap the step overshot
+            # opened): it is undone, as a rejected step
+            next_system = _enthalpy_system(trial_model, trial_x, tq, pressure0, spacing)
+            accepted = _shifted_factor(*next_system, mu) is not None
+            undone += not accepted
+            if undone >= TRUST_INDEFINITE:
+                break
         if not accepted:
             mu, nu = mu * nu, 2.0 * nu
             if mu > TRUST_SHIFT_MAX:
@@ -346,9 +376,12 @@ def polish_enthalpy(model: EnergyModel, config: NDArray[np.float64], pressure0: 
             nu = 2.0
         model, x, q, g, dhds, fmax, p, ev = trial_model, trial_x, tq, tg, tdhds, tfmax, tp, tev
         system = None
+        if next_system is not None:
+            system, metric = next_system
+            rhs = -np.concatenate([g, [dhds]])
         descended = True
         evaluations += 2
-        if fmax <= force_tol and abs(p - pressure0) <= pressure_rtol * pressure0:
+        if converged:
             if not _is_minimum(model, x, q, pressure0):
                 return NewtonPolish(None, it, x, model.box, True)
             return NewtonPolish(MinimizeResult(

@@ -46,3 +46,36 @@ result = jamming.jam_linked(read_packing(sys.argv[1], None), 1e-12, settings=set
 write_packing(result.packing, "saddle_chains30_3d_p1e-12.nc")
 PY
 rm -r "$tmp"
+
+# circulo_triangles_enthalpy_{valley,basin}.nc: FIRE's states at the 2nd and 7th Newton tries of the enthalpy
+# stage of circulo-triangles (A = 1.1, N = 100, seed 2, P0 = 1e-6): a flat valley without a minimum within
+# reach, and the basin the 7th try lands in (docs/notes/shapes.md, "Why the Newton tries of circulo shapes fail")
+tmp=$(mktemp -d)
+jamflow init-shapes --shape circulo-polygon --sides 3 --asphericity 1.1 --phi 0.4 --seed 2 --n 100 --quiet "$tmp/t.nc"
+python - "$tmp/t.nc" <<'PY'
+import sys
+
+import numpy as np
+
+from jamflow.io import read_packing, write_packing
+from jamflow.minimize import onset
+from jamflow.shapes.jamming import jam_shapes, shape_packing
+
+start = read_packing(sys.argv[1], None)
+tries = []
+polish = onset.polish_enthalpy
+
+
+def record(model, config, *args):
+    tries.append((model, np.array(config)))
+    return polish(model, config, *args)
+
+
+onset.polish_enthalpy = record
+jam_shapes(start, 1e-6)
+for k, name in ((1, "valley"), (6, "basin")):
+    model, config = tries[k]
+    write_packing(shape_packing(model, config, start, {"pressure": 1e-6}, {}),
+                  f"circulo_triangles_enthalpy_{name}.nc")
+PY
+rm -r "$tmp"
