@@ -50,8 +50,8 @@ from .fire import MinimizeResult
 from .model import EnergyModel, ModelEvaluation, pressure_of
 
 __all__ = ["ENTHALPY_ROUNDOFF", "NEGATIVE_CURVATURE", "NEWTON_ITERATIONS", "NEWTON_SHIFT", "SCALE_STEP", "TRUST_ACCEPT",
-           "TRUST_BACKTRACK", "TRUST_INDEFINITE", "TRUST_MOVE", "TRUST_SHIFT", "NewtonPolish", "TangentNewton", "polish_constrained",
-           "polish_enthalpy", "positive_semidefinite"]
+           "TRUST_BACKTRACK", "TRUST_INDEFINITE", "TRUST_MOVE", "TRUST_SHIFT", "NewtonPolish", "TangentNewton",
+           "polish_constrained", "polish_enthalpy", "positive_semidefinite"]
 
 #: Relative step of the box scale in the central differences of the border [1]: far
 #: below the overlaps of a packing at P0 >= 1e-12 relative to the centre distances, so no
