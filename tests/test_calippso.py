@@ -125,9 +125,15 @@ def test_random_2d_bidisperse():
     assert 0.80 < res.packing.packing_fraction < 0.87
 
 
-def test_random_3d_mono():
+@pytest.fixture(scope="module")
+def mono_3d():
+    """A 3D monodisperse N = 128 start and its chain (shared: jammed once for the module)."""
     start = random_packing(128, 3, 0.25, "mono", seed=5)
-    res = calippso(start)
+    return start, calippso(start)
+
+
+def test_random_3d_mono(mono_3d):
+    start, res = mono_3d
     _check_jammed(res, start)
     assert 0.60 < res.packing.packing_fraction < 0.68
 
@@ -310,11 +316,11 @@ def test_loosest_solver_tolerance_still_jams_without_overlap():
     assert force_balance_residual(res.packing)[~res.packing.rattler].max() < FORCE_BALANCE_TOL
 
 
-def test_same_input_same_chain():
+def test_same_input_same_chain(mono_3d):
     # no decision of the chain depends on wall-clock time (warm starts are limited
     # by pivots, not seconds): two runs give bitwise identical packings and histories
-    start = random_packing(128, 3, 0.3, "mono", seed=4)
-    a, b = calippso(start), calippso(start)
+    start, a = mono_3d
+    b = calippso(start)
     assert np.array_equal(a.packing.position, b.packing.position)
     assert np.array_equal(a.history["sqrt_gamma_minus_1"].values, b.history["sqrt_gamma_minus_1"].values)
     assert list(a.history["solver"].values) == list(b.history["solver"].values)

@@ -174,7 +174,8 @@ def _dense_newton_forces(chain, step, lp, container, packing):
     return None
 
 
-@pytest.mark.parametrize("n, dispersity, seed", [(64, "mono", 2), (128, "poly", 4)], ids=["3d-mono-64", "3d-poly-128"])
+@pytest.mark.parametrize("n, dispersity, seed", [(64, "mono", 2), pytest.param(128, "poly", 4, marks=pytest.mark.slow)],
+                         ids=["3d-mono-64", "3d-poly-128"])
 def test_early_rejection_agrees_with_full_newton(n, dispersity, seed, monkeypatch):
     """An attempt rejected before any step (a network force not positive at the LP's
     configuration) is one that full Newton by dense algebra refuses too, and a
