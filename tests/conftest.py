@@ -18,9 +18,16 @@ STRAIN_ENGINE_MODULES = frozenset({
 })
 
 
+#: The test that runs every command on each body kind it takes: one work unit per command, so
+#: that the engines those commands compile on a clean checkout (sphere FIRE, LS, the overdamped
+#: solver, shapes) spread over both workers; the smoke set is mostly this test.
+PER_COMMAND_TEST = "test_stages.py::test_an_accepted_body_kind_keeps_its_bodies["
+
+
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config: pytest.Config, log):
-    """``--dist loadfile`` with :data:`STRAIN_ENGINE_MODULES` as one unit (other modes unchanged)."""
+    """``--dist loadfile`` with :data:`STRAIN_ENGINE_MODULES` as one unit and
+    :data:`PER_COMMAND_TEST` split by command (other modes unchanged)."""
     if config.getoption("dist") != "loadfile":
         return None
     from xdist.scheduler import LoadFileScheduling
@@ -28,6 +35,9 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log):
     class SharedKernelScheduling(LoadFileScheduling):
         def _split_scope(self, nodeid: str) -> str:
             scope = super()._split_scope(nodeid)
+            if PER_COMMAND_TEST in nodeid:
+                # the parameter id is "<command>-<body kind>"
+                return f"{scope}::{nodeid.rsplit('[', 1)[1].rsplit('-', 1)[0]}"
             return "strain-engine" if Path(scope).stem in STRAIN_ENGINE_MODULES else scope
 
     return SharedKernelScheduling(config, log)
