@@ -51,6 +51,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 import xarray as xr
+from _cells import cell_bars, rows_dataset
 
 from jamflow.chains.builders import linked_packing
 from jamflow.chains.compliance import compliance
@@ -277,22 +278,19 @@ def _whole_start(tmp: Path, d: int, n: int, seed: int) -> Path:
 def whole_output(rows: list[dict], args: argparse.Namespace) -> None:
     """``chains_whole.nc`` (``chains_whole_newton.nc`` with ``--newton-polish``) and a bar chart of the CPU ratios
     against the targets."""
-    ds = xr.Dataset({k: (("run",), [r[k] for r in rows], {"units": "s" if k.endswith("_s") else "1",
-                                                         "long_name": k.replace("_", " ")}) for k in rows[0]},
-                    attrs=new_dataset_attrs("jamflow chains benchmark: whole soft-jam against spheres", vars(args),
-                                            note="CPU time of each soft-jam process on 2 shared cores, start-up "
-                                                 "included; compare ratios within this run"))
+    ds = rows_dataset(rows, "jamflow chains benchmark: whole soft-jam against spheres", args,
+                      "CPU time of each soft-jam process on 2 shared cores, start-up included; compare ratios "
+                      "within this run")
     OUT.mkdir(exist_ok=True)
     name = "chains_whole_newton" if args.newton_polish else "chains_whole"
     write_dataset(ds, OUT / f"{name}.nc")
     fig, ax = plt.subplots(figsize=(7, 3.8))
     cells = sorted({(r["d"], r["n"], r["shear"]) for r in rows})
-    for k, (d, n, shear) in enumerate(cells):
-        sel = [r["cpu_ratio"] for r in rows if (r["d"], r["n"], r["shear"]) == (d, n, shear)]
-        ax.bar(k, float(np.median(sel)), color="C1" if shear else "C0")
-        ax.plot([k] * len(sel), sel, "k.", ms=4)
+    points = [[r["cpu_ratio"] for r in rows if (r["d"], r["n"], r["shear"]) == cell] for cell in cells]
+    cell_bars(ax, [float(np.median(p)) for p in points], points, [s for *_, s in cells],
+              [f"d={d} N={n}\n{'shear' if s else 'fixed'}" for d, n, s in cells], fontsize=7)
+    for k, (*_, shear) in enumerate(cells):
         ax.hlines(WHOLE_TARGETS[shear], k - 0.4, k + 0.4, colors="r", lw=1.2)
-    ax.set_xticks(range(len(cells)), [f"d={d} N={n}\n{'shear' if s else 'fixed'}" for d, n, s in cells], fontsize=7)
     ax.set_xlabel("linked packing (d, N spheres, box); red: target")
     ax.set_ylabel("soft-jam CPU time / spheres' (1)")
     fig.tight_layout()

@@ -28,11 +28,11 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-import xarray as xr
+from _cells import cell_bars, rows_dataset
 
 import jamflow.minimize.onset as onset
 from jamflow.chains.jamming import jam_linked
-from jamflow.io import new_dataset_attrs, read_packing, write_dataset
+from jamflow.io import read_packing, write_dataset
 from jamflow.minimize.onset import JammingSettings
 
 OUT = Path(__file__).resolve().parent / "output"
@@ -110,23 +110,21 @@ def runs(cells: list[tuple[int, bool]], seeds: int) -> list[dict]:
 def output(rows: list[dict], args: argparse.Namespace) -> None:
     default = args.cells == CELLS and args.seeds == SEEDS
     name = "linked_newton" if default else "linked_newton_" + "_".join(args.cells).replace(":", "-")
-    ds = xr.Dataset({k: (("run",), [r[k] for r in rows], {"units": "s" if k.endswith("_s") else "1",
-                                                         "long_name": k.replace("_", " ")}) for k in rows[0]},
-                    attrs=new_dataset_attrs("jamflow benchmark: linked jamming with and without the Newton polish",
-                                            vars(args), note="CPU time in one process on 2 shared cores; compare "
-                                                             "the two variants of a start (run alternating)"))
+    ds = rows_dataset(rows, "jamflow benchmark: linked jamming with and without the Newton polish", args,
+                      "CPU time in one process on 2 shared cores; compare the two variants of a start (run "
+                      "alternating)")
     OUT.mkdir(exist_ok=True)
     write_dataset(ds, OUT / f"{name}.nc")
     fig, ax = plt.subplots(figsize=(6.5, 3.6))
     cells = sorted({(r["n"], r["shear"]) for r in rows})
-    for k, (n, shear) in enumerate(cells):
+    heights, points = [], []
+    for n, shear in cells:
         on = {r["seed"]: r["cpu_s"] for r in rows if (r["n"], r["shear"], r["polish"]) == (n, shear, 1)}
         off = {r["seed"]: r["cpu_s"] for r in rows if (r["n"], r["shear"], r["polish"]) == (n, shear, 0)}
-        ratio = [on[s] / off[s] for s in on]
-        ax.bar(k, sum(on.values()) / sum(off.values()), color="C1" if shear else "C0")
-        ax.plot([k] * len(ratio), ratio, "k.", ms=5)
+        heights.append(sum(on.values()) / sum(off.values()))
+        points.append([on[s] / off[s] for s in on])
+    cell_bars(ax, heights, points, [s for _, s in cells], [f"N={n}\n{'shear' if s else 'fixed'}" for n, s in cells])
     ax.axhline(1.0, color="r", lw=1)
-    ax.set_xticks(range(len(cells)), [f"N={n}\n{'shear' if s else 'fixed'}" for n, s in cells])
     ax.set_xlabel("3D chains of four (N spheres, box)")
     ax.set_ylabel("CPU time with / without polish (1)")
     fig.tight_layout()
