@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
+from pathlib import Path
 
 import xarray as xr
 
@@ -25,3 +26,12 @@ def cell_bars(ax, heights: Sequence[float], points: Sequence[Sequence[float]], s
         ax.bar(k, height, color="C1" if stabilized else "C0")
         ax.plot([k] * len(values), values, "k.", ms=4)
     ax.set_xticks(range(len(labels)), labels, fontsize=fontsize)
+
+
+def save_chart(fig, ax, xlabel: str, ylabel: str, stem: Path) -> None:
+    """Label the axes, write ``<stem>.png`` and say where the dataset and the chart went."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    fig.tight_layout()
+    fig.savefig(stem.with_suffix(".png"), dpi=120)
+    print(f"wrote {stem}.nc and .png")

@@ -51,7 +51,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 import xarray as xr
-from _cells import cell_bars, rows_dataset
+from _cells import cell_bars, rows_dataset, save_chart
 
 from jamflow.chains.builders import linked_packing
 from jamflow.chains.compliance import compliance
@@ -291,11 +291,8 @@ def whole_output(rows: list[dict], args: argparse.Namespace) -> None:
               [f"d={d} N={n}\n{'shear' if s else 'fixed'}" for d, n, s in cells], fontsize=7)
     for k, (*_, shear) in enumerate(cells):
         ax.hlines(WHOLE_TARGETS[shear], k - 0.4, k + 0.4, colors="r", lw=1.2)
-    ax.set_xlabel("linked packing (d, N spheres, box); red: target")
-    ax.set_ylabel("soft-jam CPU time / spheres' (1)")
-    fig.tight_layout()
-    fig.savefig(OUT / f"{name}.png", dpi=120)
-    print(f"wrote {OUT / name}.nc and .png")
+    save_chart(fig, ax, "linked packing (d, N spheres, box); red: target", "soft-jam CPU time / spheres' (1)",
+               OUT / name)
 
 
 def main() -> None:

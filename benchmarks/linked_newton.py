@@ -28,7 +28,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-from _cells import cell_bars, rows_dataset
+from _cells import cell_bars, rows_dataset, save_chart
 
 import jamflow.minimize.onset as onset
 from jamflow.chains.jamming import jam_linked
@@ -125,11 +125,7 @@ def output(rows: list[dict], args: argparse.Namespace) -> None:
         points.append([on[s] / off[s] for s in on])
     cell_bars(ax, heights, points, [s for _, s in cells], [f"N={n}\n{'shear' if s else 'fixed'}" for n, s in cells])
     ax.axhline(1.0, color="r", lw=1)
-    ax.set_xlabel("3D chains of four (N spheres, box)")
-    ax.set_ylabel("CPU time with / without polish (1)")
-    fig.tight_layout()
-    fig.savefig(OUT / f"{name}.png", dpi=120)
-    print(f"wrote {OUT / name}.nc and .png")
+    save_chart(fig, ax, "3D chains of four (N spheres, box)", "CPU time with / without polish (1)", OUT / name)
 
 
 def main() -> None:
