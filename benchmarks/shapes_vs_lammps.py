@@ -17,8 +17,7 @@ Same bodies, same configuration, one thread, interleaved repeats, medians:
   ``pair_coeff * * k_n k_na`` = ``1 0`` (Fraige et al.'s vertex-edge springs, no
   cohesion). What cannot be switched off: LAMMPS still computes each contact's
   relative velocity (damping terms multiplied by zero), its per-body store of the
-  non-conservative forces, rotates every body's vertices to the space frame each
-  evaluation (jamflow rotates them per pair) and applies at most two contact forces
+  non-conservative forces, and applies at most two contact forces
   per pair (Fraige's model; jamflow sums every overlapping vertex-edge term);
 - neighbour lists: jamflow lists pairs within the sum of bounding radii plus
   ``DEFAULT_SKIN`` times the mean bounding diameter; LAMMPS's list cutoff of a type pair

@@ -31,10 +31,12 @@ from ._kernels import (
     ELLIPSE,
     REULEAUX,
     _ellipse_matrix,
-    circulo_pair_rotated,
+    circulo_vertex_edge,
+    core_radius,
     dumbbell_pair,
     ellipse_terms_matrices,
     reuleaux_pair,
+    rotate_vertices,
 )
 
 
@@ -51,17 +53,18 @@ def _pair(family, dx0, dx1, ti, tj, pa, pb, k, g):
 
 @njit(cache=True)
 def _body_terms(y, family, params):
-    """Per-body functions of the orientation used by every pair of the body, shape (N, 3).
+    """Per-body functions of the orientation used by every pair of the body, shape (N, W).
 
-    Circulo: ``cos, sin`` of the orientation; ellipse: the shape matrix ``R diag(a^2, b^2) R^T``
-    (entries xx, xy, yy); other families none (zero rows).
+    Circulo: the vertices rotated to the orientation, relative to the centre, and the core
+    radius (``x0, y0, x1, y1, ..., rho``; :func:`._kernels.core_radius`); ellipse: the shape
+    matrix ``R diag(a^2, b^2) R^T`` (entries xx, xy, yy); other families none (zero rows).
     """
     n = y.shape[0] if family == CIRCULO or family == ELLIPSE else 0
-    out = np.zeros((n, 3))
+    out = np.zeros((n, params.shape[1] - 1 if family == CIRCULO else 3))
     for i in range(n):
         if family == CIRCULO:
-            out[i, 0] = np.cos(y[i, 2])
-            out[i, 1] = np.sin(y[i, 2])
+            rotate_vertices(params[i], np.cos(y[i, 2]), np.sin(y[i, 2]), out, i)
+            out[i, out.shape[1] - 1] = core_radius(params[i])
         else:
             out[i, 0], out[i, 1], out[i, 2] = _ellipse_matrix(params[i, 0], params[i, 1], y[i, 2])
     return out
@@ -86,6 +89,7 @@ def shape_forces(y, s, offset, pi, pj, family, params, bound, lam, k, force, vir
     n_contact = 0
     g = np.zeros(6)
     body = _body_terms(y, family, params)
+    rho = body.shape[1] - 1
     for p in range(pi.shape[0]):
         a = pi[p]
         b = pj[p]
@@ -96,8 +100,10 @@ def shape_forces(y, s, offset, pi, pj, family, params, bound, lam, k, force, vir
             continue
         g[:] = 0.0
         if family == CIRCULO:
-            e = circulo_pair_rotated(dx0, dx1, body[a, 0], body[a, 1], body[b, 0], body[b, 1], params[a], params[b],
-                                     k, g)
+            ra, rb = params[a, 0], params[b, 0]
+            na, nb = int(params[a, 1]), int(params[b, 1])
+            e = circulo_vertex_edge(dx0, dx1, body, a, b, ra, rb, na, nb, body[b, rho], k, g, 0, 3, None)[0]
+            e += circulo_vertex_edge(-dx0, -dx1, body, b, a, rb, ra, nb, na, body[a, rho], k, g, 3, 0, None)[0]
         elif family == ELLIPSE:
             e, lam[p] = ellipse_terms_matrices(dx0, dx1, np.sqrt(dx0 * dx0 + dx1 * dx1), body[a, 0], body[a, 1],
                                                body[a, 2], body[b, 0], body[b, 1], body[b, 2], k, g, lam[p])

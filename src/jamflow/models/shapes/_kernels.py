@@ -33,15 +33,34 @@ COMPLEX_STEP: float = 1e-30
 
 
 @njit(cache=True, inline="always")
-def circulo_vertex_edge(dx0, dx1, ca, sa, cb, sb, pa, pb, k, g, oa, ob, out):
+def core_radius(p):
+    """Distance from a circulo body's centre to its farthest vertex (real), parameters as
+    :func:`circulo_vertex_edge`: every point of its core lies within it."""
+    rho2 = 0.0
+    for e in range(int(p[1].real)):
+        rho2 = max(rho2, p[2 + 2 * e].real * p[2 + 2 * e].real + p[3 + 2 * e].real * p[3 + 2 * e].real)
+    return np.sqrt(rho2)
+
+
+@njit(cache=True, inline="always")
+def rotate_vertices(p, c, s, out, row):
+    """Vertices of a circulo body rotated by the angle of cosine ``c`` and sine ``s``, relative to its
+    centre, written to ``out[row] = (x0, y0, x1, y1, ...)``."""
+    for m in range(int(p[1].real)):
+        out[row, 2 * m] = c * p[2 + 2 * m] - s * p[3 + 2 * m]
+        out[row, 2 * m + 1] = s * p[2 + 2 * m] + c * p[3 + 2 * m]
+
+
+@njit(cache=True, inline="always")
+def circulo_vertex_edge(dx0, dx1, world, a, b, ra, rb, na, nb, rho_b, k, g, oa, ob, out):
     """Vertices of body ``a`` (centre at 0) against the edges of body ``b`` (centre ``dx``).
 
-    ``ca, sa`` and ``cb, sb`` are the cosines and sines of the two orientations
-    (computed once per pair by the callers, for both sides).
-
-    Parameters ``p = [R, n, v0x, v0y, v1x, v1y, ...]``: rounding radius, vertex
-    count, body-frame vertices. Body ``a``'s vertex ``P`` meets edge ``[S0, S1]`` of
-    ``b`` at distance ``r = min_t |P - S0 - t (S1 - S0)|``, ``t`` in [0, 1]: the
+    ``world[a]`` and ``world[b]`` are the two bodies' vertices rotated to their orientations,
+    relative to their centres (:func:`rotate_vertices`; callers rotate each body once, not
+    once per pair); ``ra, rb`` their rounding radii and ``na, nb`` their vertex counts
+    (parameters ``p = [R, n, v0x, v0y, v1x, v1y, ...]``: rounding radius, vertex count,
+    body-frame vertices); ``rho_b`` is :func:`core_radius` of ``b``. Body ``a``'s vertex ``P``
+    meets edge ``[S0, S1]`` of ``b`` at distance ``r = min_t |P - S0 - t (S1 - S0)|``, ``t`` in [0, 1]: the
     perpendicular distance for an end-middle contact (foot inside the edge), the
     distance to an end of the edge for an end-end contact (VanderWerf et al. App. A).
     Each overlapping term has energy ``(k/2) w (R_a + R_b - r)^2`` with ``w`` the
@@ -52,40 +71,31 @@ def circulo_vertex_edge(dx0, dx1, ca, sa, cb, sb, pa, pb, k, g, oa, ob, out):
     unit normal x, y from ``b`` to ``a``, foot parameter t) and the row count returned
     second.
     """
-    ra = pa[0]
-    rb = pb[0]
-    na = int(pa[1].real)
-    nb = int(pb[1].real)
     sigma = ra + rb
     w = 1.0 if na == 2 else 2.0
     n_edges = 1 if nb == 2 else nb
-    # every edge point of b lies within rho_b (its farthest vertex) of b's centre, so a
-    # vertex of a at least rho_b + sigma from that centre is at least sigma from every
-    # edge: its terms are all zero and it is skipped before the edge loop
-    rho2 = 0.0
-    for e in range(nb):
-        rho2 = max(rho2, pb[2 + 2 * e].real * pb[2 + 2 * e].real + pb[3 + 2 * e].real * pb[3 + 2 * e].real)
-    reach = np.sqrt(rho2) + sigma.real
+    # every edge point of b lies within rho_b of b's centre, so a vertex of a at least
+    # rho_b + sigma from that centre is at least sigma from every edge: its terms are all
+    # zero and it is skipped before the edge loop
+    reach = rho_b + sigma.real
     energy = 0.0 * dx0
     rows = 0
     for m in range(na):
-        vx = pa[2 + 2 * m]
-        vy = pa[3 + 2 * m]
-        px = ca * vx - sa * vy
-        py = sa * vx + ca * vy
+        px = world[a, 2 * m]
+        py = world[a, 2 * m + 1]
         wx = (px - dx0).real
         wy = (py - dx1).real
         if wx * wx + wy * wy >= reach * reach:
             continue
-        # the end of edge e is the start of edge e + 1: one vertex of b rotated per edge
-        s1x = dx0 + cb * pb[2] - sb * pb[3]
-        s1y = dx1 + sb * pb[2] + cb * pb[3]
+        # the end of edge e is the start of edge e + 1
+        s1x = dx0 + world[b, 0]
+        s1y = dx1 + world[b, 1]
         for e in range(n_edges):
-            f = (e + 1) % nb
+            f = e + 1 if e + 1 < nb else 0
             s0x = s1x
             s0y = s1y
-            s1x = dx0 + cb * pb[2 + 2 * f] - sb * pb[3 + 2 * f]
-            s1y = dx1 + sb * pb[2 + 2 * f] + cb * pb[3 + 2 * f]
+            s1x = dx0 + world[b, 2 * f]
+            s1y = dx1 + world[b, 2 * f + 1]
             ex = s1x - s0x
             ey = s1y - s0y
             t = ((px - s0x) * ex + (py - s0y) * ey) / (ex * ex + ey * ey)
@@ -121,14 +131,13 @@ def circulo_vertex_edge(dx0, dx1, ca, sa, cb, sb, pa, pb, k, g, oa, ob, out):
 @njit(cache=True)
 def circulo_pair(dx0, dx1, ti, tj, pi, pj, k, g):
     """Circulo-line / circulo-polygon pair (App. A): vertices of each against edges of the other."""
-    return circulo_pair_rotated(dx0, dx1, np.cos(ti), np.sin(ti), np.cos(tj), np.sin(tj), pi, pj, k, g)
-
-
-@njit(cache=True)
-def circulo_pair_rotated(dx0, dx1, ci, si, cj, sj, pi, pj, k, g):
-    """:func:`circulo_pair` from the cosines and sines of the orientations (a loop computes them once per body)."""
-    e1, _ = circulo_vertex_edge(dx0, dx1, ci, si, cj, sj, pi, pj, k, g, 0, 3, None)
-    e2, _ = circulo_vertex_edge(-dx0, -dx1, cj, sj, ci, si, pj, pi, k, g, 3, 0, None)
+    world = np.zeros((2, max(pi.shape[0], pj.shape[0]) - 2)) + 0.0 * (ti + tj)
+    rotate_vertices(pi, np.cos(ti), np.sin(ti), world, 0)
+    rotate_vertices(pj, np.cos(tj), np.sin(tj), world, 1)
+    ni = int(pi[1].real)
+    nj = int(pj[1].real)
+    e1, _ = circulo_vertex_edge(dx0, dx1, world, 0, 1, pi[0], pj[0], ni, nj, core_radius(pj), k, g, 0, 3, None)
+    e2, _ = circulo_vertex_edge(-dx0, -dx1, world, 1, 0, pj[0], pi[0], nj, ni, core_radius(pi), k, g, 3, 0, None)
     return e1 + e2
 
 
@@ -412,20 +421,21 @@ def circulo_terms(i, j, dx, theta, params, k):
     buf = np.zeros((2 * nv * nv, 10))
     rows = []
     g = np.zeros(6)
+    world = np.zeros((2, params.shape[1] - 2))
     for p in range(i.size):
         a = i[p]
         b = j[p]
-        ci = np.cos(theta[a])
-        si = np.sin(theta[a])
-        cj = np.cos(theta[b])
-        sj = np.sin(theta[b])
+        rotate_vertices(params[a], np.cos(theta[a]), np.sin(theta[a]), world, 0)
+        rotate_vertices(params[b], np.cos(theta[b]), np.sin(theta[b]), world, 1)
+        na = int(params[a, 1])
+        nb = int(params[b, 1])
         for side in range(2):
             if side == 0:
-                _, n = circulo_vertex_edge(dx[p, 0], dx[p, 1], ci, si, cj, sj, params[a], params[b],
-                                           k, g, 0, 3, buf)
+                _, n = circulo_vertex_edge(dx[p, 0], dx[p, 1], world, 0, 1, params[a, 0], params[b, 0], na, nb,
+                                           core_radius(params[b]), k, g, 0, 3, buf)
             else:
-                _, n = circulo_vertex_edge(-dx[p, 0], -dx[p, 1], cj, sj, ci, si, params[b], params[a],
-                                           k, g, 3, 0, buf)
+                _, n = circulo_vertex_edge(-dx[p, 0], -dx[p, 1], world, 1, 0, params[b, 0], params[a, 0], nb, na,
+                                           core_radius(params[a]), k, g, 3, 0, buf)
             for r in range(n):
                 row = np.empty(12)
                 row[0] = p
