@@ -152,6 +152,23 @@ def _enthalpy_try(name):
     return model, np.column_stack([p.position, p.orientation])
 
 
+def test_a_walk_in_the_flat_valley_goes_on_past_indefinite_steps_and_lowers_the_enthalpy():
+    """The enthalpy stage's tries (``max_indefinite=None``) do not give up at TRUST_INDEFINITE undone steps:
+    from the same valley state a walk spends its whole budget, every kept step lowers ``H = U + P0 V``, and
+    it returns its end state with the model of that state's box, from which FIRE goes on."""
+    model, config = _enthalpy_try("valley")
+
+    def enthalpy(m, c):
+        return m.evaluate(m.dofs(c)).energy + P0_TRIANGLES * m.box.volume
+
+    walk = polish_enthalpy(model, config, P0_TRIANGLES, 1e-13, 1e-6, 40, max_indefinite=None)
+    assert walk.result is None and walk.iterations == 40 and walk.descended
+    assert walk.model.box == walk.box and walk.model.shapes is model.shapes
+    assert enthalpy(walk.model, walk.position) < enthalpy(model, config)
+    # the cap stays where a caller keeps it
+    assert polish_enthalpy(model, config, P0_TRIANGLES, 1e-13, 1e-6, 40).iterations <= 20
+
+
 def test_a_polish_in_a_flat_valley_gives_up_early_and_one_in_the_basin_lands_on_a_minimum():
     """Circulo-triangles at P0 = 1e-6, FIRE's states at two Newton tries of one enthalpy stage. In the valley
     (largest force 2e-11, 0.1 neighbour distances from the minimum FIRE reaches) every step that grows goes

@@ -123,8 +123,9 @@ NEGATIVE_CURVATURE: float = 1e-13
 
 @dataclass(frozen=True)
 class NewtonPolish:
-    """Outcome of :func:`polish_enthalpy`: the final state (or None), the trial steps spent and the last
-    state reached (``position`` in ``box``; ``descended`` when a step was kept, so its ``H`` is below the start's)."""
+    """Outcome of a polish: the final state (or None), the trial steps spent and the last state reached
+    (``position`` in ``box``, of ``model``, the model in that box; ``descended`` when a step was kept, so
+    its energy or enthalpy is below the start's)."""
 
     result: MinimizeResult | None
     iterations: int
@@ -291,7 +292,8 @@ def _enthalpy_system(model: EnergyModel, x: NDArray[np.float64], q: NDArray[np.f
 
 
 def polish_enthalpy(model: EnergyModel, config: NDArray[np.float64], pressure0: float, force_tol: float,
-                    pressure_rtol: float, max_iterations: int = NEWTON_ITERATIONS) -> NewtonPolish:
+                    pressure_rtol: float, max_iterations: int = NEWTON_ITERATIONS,
+                    max_indefinite: int | None = TRUST_INDEFINITE) -> NewtonPolish:
     """Levenberg–Marquardt trust-region Newton on ``H = U + P0 V`` (module doc) from ``config`` in ``model``'s box.
 
     Parameters
@@ -308,6 +310,10 @@ def polish_enthalpy(model: EnergyModel, config: NDArray[np.float64], pressure0: 
     max_iterations : int
         Largest number of trial steps (accepted or not; each backtracking length is one
         evaluation of the model, each accepted step one Hessian).
+    max_indefinite : int or None
+        Steps undone because the Hessian at their end is indefinite after which the polish
+        gives up (:data:`TRUST_INDEFINITE`); None walks on, each such step counting as rejected
+        (a walk along a flat valley whose end state a caller continues from).
 
     Returns
     -------
@@ -364,7 +370,7 @@ def polish_enthalpy(model: EnergyModel, config: NDArray[np.float64], pressure0: 
             next_system = _enthalpy_system(trial_model, trial_x, tq, pressure0, spacing)
             accepted = _shifted_factor(*next_system, mu) is not None
             undone += not accepted
-            if undone >= TRUST_INDEFINITE:
+            if max_indefinite is not None and undone >= max_indefinite:
                 break
         if not accepted:
             mu, nu = mu * nu, 2.0 * nu
@@ -383,12 +389,12 @@ def polish_enthalpy(model: EnergyModel, config: NDArray[np.float64], pressure0: 
         evaluations += 2
         if converged:
             if not _is_minimum(model, x, q, pressure0):
-                return NewtonPolish(None, it, x, model.box, True)
+                return NewtonPolish(None, it, x, model.box, True, model)
             return NewtonPolish(MinimizeResult(
                 position=np.array(x), box=model.box, energy=ev.energy, pressure=p, max_force=fmax,
                 n_contacts=ev.n_contacts, steps=0, converged=True, rebuilds=0, evaluations=evaluations,
             ), it, x, model.box, True)
-    return NewtonPolish(None, it, x, model.box, descended)
+    return NewtonPolish(None, it, x, model.box, descended, model)
 
 
 def _tangent_state(model: EnergyModel, q: NDArray[np.float64]) -> tuple:
