@@ -286,7 +286,7 @@ def lerner_sd_shear(
     Returns
     -------
     xarray.Dataset
-        Flow schema (/tmp/flow_schema.md): dim ``step`` with coordinates ``strain`` and
+        The flow-run schema (docs/schema.md, "Flow runs"): dim ``step`` with coordinates ``strain`` and
         ``time`` (= strain, unit 1/gamma_dot); ``shear_stress``, ``pressure``,
         ``packing_fraction``, ``kappa`` (NaN: fixed volume), ``n_contacts``, ``z_bar``,
         ``volume``, ``constraint_error``, plus ``energy`` and ``sd_steps``; events

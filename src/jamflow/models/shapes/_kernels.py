@@ -34,8 +34,7 @@ COMPLEX_STEP: float = 1e-30
 
 @njit(cache=True, inline="always")
 def core_radius(p):
-    """Distance from a circulo body's centre to its farthest vertex (real), parameters as
-    :func:`circulo_vertex_edge`: every point of its core lies within it."""
+    """Distance from a circulo body's centre to its farthest vertex (real), bounding its core."""
     rho2 = 0.0
     for e in range(int(p[1].real)):
         rho2 = max(rho2, p[2 + 2 * e].real * p[2 + 2 * e].real + p[3 + 2 * e].real * p[3 + 2 * e].real)
@@ -44,8 +43,7 @@ def core_radius(p):
 
 @njit(cache=True, inline="always")
 def rotate_vertices(p, c, s, out, row):
-    """Vertices of a circulo body rotated by the angle of cosine ``c`` and sine ``s``, relative to its
-    centre, written to ``out[row] = (x0, y0, x1, y1, ...)``."""
+    """A circulo body's vertices rotated by cosine ``c``, sine ``s``, to ``out[row] = (x0, y0, x1, ...)``."""
     for m in range(int(p[1].real)):
         out[row, 2 * m] = c * p[2 + 2 * m] - s * p[3 + 2 * m]
         out[row, 2 * m + 1] = s * p[2 + 2 * m] + c * p[3 + 2 * m]
@@ -55,21 +53,19 @@ def rotate_vertices(p, c, s, out, row):
 def circulo_vertex_edge(dx0, dx1, world, a, b, ra, rb, na, nb, rho_b, k, g, oa, ob, out):
     """Vertices of body ``a`` (centre at 0) against the edges of body ``b`` (centre ``dx``).
 
-    ``world[a]`` and ``world[b]`` are the two bodies' vertices rotated to their orientations,
-    relative to their centres (:func:`rotate_vertices`; callers rotate each body once, not
-    once per pair); ``ra, rb`` their rounding radii and ``na, nb`` their vertex counts
-    (parameters ``p = [R, n, v0x, v0y, v1x, v1y, ...]``: rounding radius, vertex count,
-    body-frame vertices); ``rho_b`` is :func:`core_radius` of ``b``. Body ``a``'s vertex ``P``
-    meets edge ``[S0, S1]`` of ``b`` at distance ``r = min_t |P - S0 - t (S1 - S0)|``, ``t`` in [0, 1]: the
-    perpendicular distance for an end-middle contact (foot inside the edge), the
-    distance to an end of the edge for an end-end contact (VanderWerf et al. App. A).
-    Each overlapping term has energy ``(k/2) w (R_a + R_b - r)^2`` with ``w`` the
-    number of edges of ``a`` that share the vertex (1 on a circulo-line, 2 on a
-    polygon, App. A 2). Gradient slots: ``oa`` for ``a`` and ``ob`` for ``b`` in ``g``.
-    When ``out`` is an array (not None), one row per overlapping term is written to it
-    (rows: vertex, edge, r, delta, w, contact point x, y relative to ``a``'s centre,
-    unit normal x, y from ``b`` to ``a``, foot parameter t) and the row count returned
-    second.
+    ``world[a]``, ``world[b]``: the bodies' vertices rotated to their orientations, relative to their
+    centres (:func:`rotate_vertices`; callers rotate each body once, not once per pair); ``ra, rb``
+    their rounding radii, ``na, nb`` their vertex counts (parameters ``p = [R, n, v0x, v0y, ...]``:
+    rounding radius, vertex count, body-frame vertices); ``rho_b`` is :func:`core_radius` of ``b``.
+    Body ``a``'s vertex ``P`` meets edge ``[S0, S1]`` of ``b`` at distance ``r = min_t |P - S0 - t (S1 -
+    S0)|``, ``t`` in [0, 1]: the perpendicular distance for an end-middle contact (foot inside the
+    edge), the distance to an end of the edge for an end-end contact (VanderWerf et al. App. A).
+    Each overlapping term has energy ``(k/2) w (R_a + R_b - r)^2`` with ``w`` the number of edges of
+    ``a`` that share the vertex (1 on a circulo-line, 2 on a polygon, App. A 2). Gradient slots:
+    ``oa`` for ``a`` and ``ob`` for ``b`` in ``g``. When ``out`` is an array (not None), one row per
+    overlapping term is written to it (rows: vertex, edge, r, delta, w, contact point x, y relative
+    to ``a``'s centre, unit normal x, y from ``b`` to ``a``, foot parameter t) and the row count
+    returned second.
     """
     sigma = ra + rb
     w = 1.0 if na == 2 else 2.0
