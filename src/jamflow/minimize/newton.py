@@ -393,7 +393,7 @@ def polish_enthalpy(model: EnergyModel, config: NDArray[np.float64], pressure0: 
             return NewtonPolish(MinimizeResult(
                 position=np.array(x), box=model.box, energy=ev.energy, pressure=p, max_force=fmax,
                 n_contacts=ev.n_contacts, steps=0, converged=True, rebuilds=0, evaluations=evaluations,
-            ), it, x, model.box, True)
+            ), it, x, model.box, True, model)
     return NewtonPolish(None, it, x, model.box, descended, model)
 
 
