@@ -127,6 +127,7 @@ def circulo_vertex_edge(dx0, dx1, world, a, b, ra, rb, na, nb, rho_b, k, g, oa, 
 @njit(cache=True)
 def circulo_pair(dx0, dx1, ti, tj, pi, pj, k, g):
     """Circulo-line / circulo-polygon pair (App. A): vertices of each against edges of the other."""
+    # rows 0 and 1: the two bodies' rotated vertices, complex when the angles carry a complex step
     world = np.zeros((2, max(pi.shape[0], pj.shape[0]) - 2)) + 0.0 * (ti + tj)
     rotate_vertices(pi, np.cos(ti), np.sin(ti), world, 0)
     rotate_vertices(pj, np.cos(tj), np.sin(tj), world, 1)
