@@ -163,7 +163,8 @@ def test_a_walk_in_the_flat_valley_goes_on_past_indefinite_steps_and_lowers_the_
 
     walk = polish_enthalpy(model, config, P0_TRIANGLES, 1e-13, 1e-6, 40, max_indefinite=None)
     assert walk.result is None and walk.iterations == 40 and walk.descended
-    assert walk.model.box == walk.box and walk.model.shapes is model.shapes
+    # the walk moved the box, so its end state is only meaningful in the model of that box it returns
+    assert walk.box.volume != model.box.volume and walk.model.box == walk.box
     assert enthalpy(walk.model, walk.position) < enthalpy(model, config)
     # the cap stays where a caller keeps it
     assert polish_enthalpy(model, config, P0_TRIANGLES, 1e-13, 1e-6, 40).iterations <= 20
