@@ -22,10 +22,16 @@ and the enthalpy rises. So the step is globalised (Nielsen's update of ``mu`` on
 ratio of the actual to the predicted decrease of ``H``): a step is tried at full
 length, then at quarter lengths (:data:`TRUST_BACKTRACK`, which stops short of a
 closing pair) and kept when it decreases ``H`` by at least :data:`TRUST_ACCEPT` of the
-quadratic prediction; else ``mu`` grows. Only a shifted matrix with positive
+quadratic prediction; else ``mu`` grows. A step kept only at a shortened length stopped short
+of a contact the Hessian does not see (a body sliding along a soft valley into a neighbour):
+the minimum along its line lies between the kept length and the next longer, refused one,
+where the slope ``dH/dt`` changes sign, and is found there by Brent's method on the slope
+(:data:`LINE_XTOL`, :data:`LINE_ITERATIONS`), which needs no enthalpy differences; the point
+found is kept when it passes the same test as any trial step. Only a shifted matrix with positive
 pivots (a descent direction) is used, and no body moves by more than
 :data:`TRUST_MOVE` of a neighbour distance in one step. Below the round-off of the
-enthalpy (:data:`ENTHALPY_ROUNDOFF`) a step is kept when the largest force falls. A step
+enthalpy (:data:`ENTHALPY_ROUNDOFF`) the decrease is measured by the trapezoid rule on the
+slopes ``dH/dt`` at both ends of the step instead of the difference of the enthalpies. A step
 after which the Hessian, shifted as for it, is no longer positive definite is undone (it
 went past a contact that holds the packing); after :data:`TRUST_INDEFINITE` of them the
 polish gives up.
@@ -44,12 +50,14 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 from numpy.typing import NDArray
+from scipy.optimize import brentq
 
 from ..box import Box
 from .fire import MinimizeResult
 from .model import EnergyModel, ModelEvaluation, pressure_of
 
-__all__ = ["ENTHALPY_ROUNDOFF", "NEGATIVE_CURVATURE", "NEWTON_ITERATIONS", "NEWTON_SHIFT", "SCALE_STEP", "TRUST_ACCEPT",
+__all__ = ["ENTHALPY_ROUNDOFF", "LINE_ITERATIONS", "LINE_XTOL", "NEGATIVE_CURVATURE", "NEWTON_ITERATIONS",
+           "NEWTON_SHIFT", "SCALE_STEP", "TRUST_ACCEPT",
            "TRUST_BACKTRACK", "TRUST_INDEFINITE", "TRUST_MOVE", "TRUST_SHIFT", "NewtonPolish", "TangentNewton",
            "polish_constrained", "polish_enthalpy", "positive_semidefinite"]
 
@@ -101,8 +109,9 @@ TRUST_MOVE: float = 0.05
 TRUST_INDEFINITE: int = 8
 
 #: Round-off of an enthalpy difference in units of ``eps tr W`` (virial trace ``tr W = d P V``) [1]:
-#: a predicted decrease below it is judged by the largest force instead. Measured: predicted
-#: and actual differences agree to 1e-19 at ``tr W = 8.6e-4`` (N = 480 circulo-lines, P0 = 1e-6).
+#: a predicted decrease below it is measured from the slopes at both ends (:func:`polish_enthalpy`) or
+#: judged by the largest force (:func:`polish_constrained`) instead. Measured: predicted and actual
+#: differences agree to 1e-19 at ``tr W = 8.6e-4`` (N = 480 circulo-lines, P0 = 1e-6).
 ENTHALPY_ROUNDOFF: float = 4.0
 
 #: Smallest ratio of the actual to the predicted decrease of ``U`` after which :func:`polish_constrained`
@@ -113,6 +122,17 @@ CHORD_RATIO: float = 0.5
 #: Fractions of a rejected step tried along its direction before the shift grows [1]:
 #: a step that closes a contact the Hessian does not see overshoots, a part of it does not.
 TRUST_BACKTRACK: tuple[float, ...] = tuple(0.25**k for k in range(12))
+
+#: Width, relative to the refused length, to which the sign change of the slope ``dH/dt`` along a step cut
+#: short is located [1]: a contact that closes inside the bracket then carries its balancing overlap to this
+#: share of the step, and the next Newton step, whose Hessian holds the contact, corrects the rest. Measured
+#: on the enthalpy stage of N = 480 circulo-lines (seeds 2 and 5, P0 = 1e-6): 1e-6 lands as 1e-8 does, 1e-4
+#: takes 1.6-4.9 times the stage's FIRE steps (docs/notes/shapes.md, "Closing contacts along a step's line").
+LINE_XTOL: float = 1e-6
+
+#: Largest number of evaluations of Brent's method on the slope along a step cut short [1]: with
+#: :data:`LINE_XTOL` it ends within 12 on those stages; a search that does not keeps its best point.
+LINE_ITERATIONS: int = 12
 
 #: Eigenvalues of the bordered enthalpy Hessian below ``-NEGATIVE_CURVATURE`` times its
 #: largest diagonal entry mark a saddle [1]: far above the round-off of a dense
@@ -291,6 +311,73 @@ def _enthalpy_system(model: EnergyModel, x: NDArray[np.float64], q: NDArray[np.f
     return system, kmax * np.r_[1.0 / model.inverse_mass, spacing**2]
 
 
+def _trial(model: EnergyModel, q: NDArray[np.float64], step: NDArray[np.float64], length: float,
+           pressure0: float) -> tuple:
+    """The state (:func:`_state`) at ``length`` along ``step = (dq, ds)`` from ``q`` at ``s = 1``, in its own box."""
+    return _state(*model.rescaled(1.0 + length * float(step[-1]), model.positions(q + length * step[:-1])), pressure0)
+
+
+def _slope(step: NDArray[np.float64], length: float, trial: tuple) -> float:
+    """``dH/dt`` at ``length`` along ``step = (dq, ds)``, from the :func:`_trial` state there.
+
+    That state's gradient is taken in its box, scaled by ``s = 1 + t ds``: its centres are ``s`` times the
+    reference ones, so ``dH/dx = s dH/dx'``, and at fixed reference coordinates ``dH/ds = (dH/ds') / s``.
+    """
+    s = 1.0 + length * float(step[-1])
+    q, g, dhds, model = trial[0], trial[1], trial[2], trial[6]
+    n_centre = model.positions(q).shape[0] * model.box.d
+    return float(s * (g[:n_centre] @ step[:n_centre]) + g[n_centre:] @ step[n_centre:-1] + dhds / s * step[-1])
+
+
+def _enthalpy_drop(ev: ModelEvaluation, trial: tuple, pressure0: float, volume: float, length: float,
+                   ds: float) -> float:
+    """``H`` at ``s = 1`` minus ``H`` of the trial state at ``length`` [energy] (the box term without cancellation)."""
+    d = trial[6].box.d
+    return ev.energy - trial[5].energy - pressure0 * volume * float(np.expm1(d * np.log1p(length * ds)))
+
+
+def _decrease(ev: ModelEvaluation, trial: tuple, pressure0: float, volume: float, length: float,
+              step: NDArray[np.float64], gain: float, predicted: float, resolution: float) -> float:
+    """Decrease of ``H`` from ``s = 1`` to the trial state at ``length`` along ``step`` [energy].
+
+    The difference of the two enthalpies where the predicted decrease is above their round-off
+    ``resolution``; below it, the trapezoid rule on the slopes at both ends, ``t (gain - dH/dt(t)) / 2``
+    (``gain = -dH/dt(0)``): exact to third order in ``t``, and resolved to the round-off of the gradients,
+    so that a step along a flat valley, whose largest force does not change, is judged by what it gains.
+    """
+    if predicted > resolution:
+        return _enthalpy_drop(ev, trial, pressure0, volume, length, float(step[-1]))
+    return 0.5 * length * (gain - _slope(step, length, trial))
+
+
+def _line_minimum(model: EnergyModel, q: NDArray[np.float64], step: NDArray[np.float64], pressure0: float,
+                  kept: tuple[float, tuple], refused: tuple[float, tuple]) -> tuple[list[tuple[float, tuple]], int]:
+    """Points ``(t, state)`` between a kept length and the refused one after it where ``|dH/dt|`` is below its value
+    at the kept length, nearest the slope's sign change first (none when the slope does not change sign there),
+    and the number of states evaluated.
+
+    Brent's method on ``dH/dt`` (:data:`LINE_XTOL` of the refused length, at most :data:`LINE_ITERATIONS`
+    evaluations): the slope needs no enthalpy differences, so it resolves the line below their round-off.
+    """
+    (lo, state_lo), (hi, state_hi) = kept, refused
+    slope_lo, slope_hi = _slope(step, lo, state_lo), _slope(step, hi, state_hi)
+    if not slope_lo < 0.0 < slope_hi:
+        return [], 0
+    points: list[tuple[float, float, tuple]] = []
+
+    def slope(t: float) -> float:
+        if t in (lo, hi):
+            return slope_lo if t == lo else slope_hi
+        state = _trial(model, q, step, t, pressure0)
+        points.append((t, _slope(step, t, state), state))
+        return points[-1][1]
+
+    brentq(slope, lo, hi, xtol=LINE_XTOL * hi, maxiter=LINE_ITERATIONS, disp=False)
+    closer = [(t, state) for t, value, state in sorted(points, key=lambda point: abs(point[1]))
+              if abs(value) < abs(slope_lo)]
+    return closer, len(points)
+
+
 def polish_enthalpy(model: EnergyModel, config: NDArray[np.float64], pressure0: float, force_tol: float,
                     pressure_rtol: float, max_iterations: int = NEWTON_ITERATIONS,
                     max_indefinite: int | None = TRUST_INDEFINITE) -> NewtonPolish:
@@ -347,20 +434,30 @@ def polish_enthalpy(model: EnergyModel, config: NDArray[np.float64], pressure0: 
                 break
             continue
         gain, curvature = float(rhs @ step), float(step @ (system @ step))
-        # below the round-off of the energy sums the enthalpy cannot judge a step; the force does
+        # below the round-off of the energy sums their difference cannot judge a step; the slopes can
         resolution = ENTHALPY_ROUNDOFF * np.finfo(float).eps * abs(p) * d * model.box.volume
+        refused = None
         for length in TRUST_BACKTRACK:
             predicted = length * gain - 0.5 * length**2 * curvature
-            trial = _state(*model.rescaled(1.0 + length * float(step[-1]), model.positions(q + length * step[:-1])),
-                           pressure0)
-            tq, tg, tdhds, tfmax, tp, tev, trial_model, trial_x = trial
+            trial = _trial(model, q, step, length, pressure0)
             evaluations += 1
-            actual = ev.energy - tev.energy \
-                - pressure0 * model.box.volume * np.expm1(d * np.log1p(length * float(step[-1])))
-            rho = actual / predicted if predicted > resolution else 0.0
-            accepted = rho >= TRUST_ACCEPT if predicted > resolution else tfmax < fmax
+            rho = _decrease(ev, trial, pressure0, model.box.volume, length, step, gain, predicted, resolution) / predicted
+            accepted = rho >= TRUST_ACCEPT
             if accepted:
                 break
+            refused = (length, trial)
+        if accepted and refused is not None:
+            # cut short by a contact the Hessian does not see: the line's minimum is where that contact has closed
+            closer, spent = _line_minimum(model, q, step, pressure0, (length, trial), refused)
+            evaluations += spent
+            for t, state in closer:
+                t_predicted = t * gain - 0.5 * t**2 * curvature
+                t_rho = _decrease(ev, state, pressure0, model.box.volume, t, step, gain, t_predicted,
+                                  resolution) / t_predicted
+                if t_rho >= TRUST_ACCEPT:
+                    length, trial, rho = t, state, t_rho
+                    break
+        tq, tg, tdhds, tfmax, tp, tev, trial_model, trial_x = trial
         converged = accepted and tfmax <= force_tol and abs(tp - pressure0) <= pressure_rtol * pressure0
         next_system = None
         if accepted and not converged:
@@ -378,7 +475,7 @@ def polish_enthalpy(model: EnergyModel, config: NDArray[np.float64], pressure0: 
                 break
             continue
         if length == 1.0:
-            mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3) if predicted > resolution else 1.0 / 3.0
+            mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
             nu = 2.0
         model, x, q, g, dhds, fmax, p, ev = trial_model, trial_x, tq, tg, tdhds, tfmax, tp, tev
         system = None
