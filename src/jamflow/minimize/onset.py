@@ -132,14 +132,18 @@ POLISH_CHECK: int = 2000
 #: (docs/notes/shapes.md, "Trust-region Newton for the enthalpy stage").
 POLISH_FORCE: float = 1e3
 
-#: Trial steps of one try of the enthalpy stage's polish [1]. A try that fails after descending
-#: hands its end state to FIRE, so it is a walk along the stage's flat valley rather than a lost
-#: try, and it is not cut short by steps into indefinite regions (``max_indefinite=None``). On the
+#: Trial steps of the first try of the enthalpy stage's polish [1]; each try after a failed one gets
+#: half of the one before, so a stage's tries cost at most twice its first. A try that fails after
+#: descending hands its end state to FIRE, so it is a walk along the stage's flat valley rather than a
+#: lost try, and it is not cut short by steps into indefinite regions (``max_indefinite=None``). On the
 #: N = 480 circulo-lines of seed 2 (P0 = 1e-6) FIRE glides 3.5 million steps along one collective
 #: soft mode; walks of up to 400 trial steps end that stage in 100471 steps and 41 s of CPU, against
 #: 102178 steps with tries of 100 and at most 8 undone steps, handed over too (seed 1: 56266 against
 #: 102178 steps; circulo-triangles N = 100: the same CPU): docs/notes/shapes.md, "Newton walks in the
-#: enthalpy stage".
+#: enthalpy stage". The halving: the walks of near-disk ellipses (N = 100, aspect ratio 1 + 1e-3) creep
+#: on modes softer than the polish's least shift and never land, ten of 400 trial steps in a stage whose
+#: FIRE steps they do not change; the tries that land after a failed one take 8-49 trial steps (same
+#: notes, "Closing contacts along a step's line").
 STAGE_WALK_ITERATIONS: int = 400
 
 #: Least FIRE steps between two tries of the polish [1], growing by :data:`POLISH_GROWTH`
@@ -547,14 +551,15 @@ def _enthalpy_stage(model: EnergyModel, position: np.ndarray, pressure: float, c
     tries a trust-region Newton polish when its largest force is within :data:`POLISH_FORCE` of ``c.force_tol``
     and at least :data:`POLISH_INTERVAL` steps (growing by :data:`POLISH_GROWTH` after each failed try) have
     passed since the last try; the stage ends with the first try that succeeds (its ``steps`` are FIRE's). A
-    try of at most :data:`STAGE_WALK_ITERATIONS` trial steps that fails after lowering ``H`` is a walk along
-    the valley: FIRE goes on from its end state, at rest."""
+    try of at most :data:`STAGE_WALK_ITERATIONS` trial steps (half the last try's after a failed one) that
+    fails after lowering ``H`` is a walk along the valley: FIRE goes on from its end state, at rest."""
     if not c.newton_polish:
         return minimize_enthalpy_model(model, position, pressure, c.force_tol, c.pressure_rtol, budget,
                                        c.fire_params, c.box_dof)
     base = model
     engine = _fire_engine(base, base.dofs(position), c.fire_params, float(pressure), c.pressure_rtol, c.box_dof)
     steps, tries = 0, _PolishTries(c.force_tol, float(POLISH_INTERVAL))
+    walk = STAGE_WALK_ITERATIONS
     while True:
         res = _fire(engine, c.force_tol, min(POLISH_CHECK, budget - steps))
         steps += res.steps
@@ -564,11 +569,12 @@ def _enthalpy_stage(model: EnergyModel, position: np.ndarray, pressure: float, c
             continue
         scale = (res.box.volume / base.box.volume) ** (1.0 / base.box.d)
         scaled, _ = base.rescaled(scale, res.position)
-        polish = polish_enthalpy(scaled, res.position, pressure, c.force_tol, c.pressure_rtol,
-                                 STAGE_WALK_ITERATIONS, max_indefinite=None)
+        polish = polish_enthalpy(scaled, res.position, pressure, c.force_tol, c.pressure_rtol, walk,
+                                 max_indefinite=None)
         if polish.result is not None:
             return replace(polish.result, steps=steps)
         tries.failed(steps)
+        walk = max(walk // 2, 1)
         if polish.descended:
             base = polish.model
             engine = _fire_engine(base, base.dofs(polish.position), c.fire_params, float(pressure),
