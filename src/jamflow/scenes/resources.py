@@ -52,9 +52,10 @@ COST: dict[str, Cost] = {
     "certify": Cost(1683.0, 4096, 3.0, "3D N = 4096 from soft jamming: 1683 s, the collective LP by dual simplex"),
     "soft-jam": Cost(1325.0, 4096, 2.0, "FIRE to P0 = 1e-8: 2D N = 1024 in 30 s, 3D N = 4096 in 1325 s; (d/3)^2"),
     "soft-jam:shapes": Cost(100.0, 480, 1.7, "2D shapes, whole soft-jam: N = 480 ellipses (A = 1.1) to P0 = 1e-9 "
-                                             "in 97 CPU-s; N^1.6-1.7 between N = 100 and 480 at P0 = 1e-6 "
-                                             "(ellipses 5.5 -> 68 s, circulo-lines 6.5 -> 93 s); circulo-polygons and "
-                                             "Reuleaux triangles take up to 4x this row (10-29 s at N = 100)"),
+                                             "in 51-97 CPU-s; N^1.6-1.7 between N = 100 and 480 at P0 = 1e-6 "
+                                             "(ellipses 5.5 -> 68 s, circulo-lines 6.5 -> 93 s); at N = 100 "
+                                             "circulo-polygons, Reuleaux triangles and dumbbells take 0.9-1.5x this "
+                                             "row (6-11 s), near-disk ellipses (1 + 1e-3) 3.3x (23 s)"),
     "soft-jam:linked": Cost(20.0, 150, 2.0, "projected FIRE bisection: 50 3D trimers (N = 150) in 33 s wall loaded "
                                             "(chains-fig2), 32 dimers in 17 s (vanderwerf-fig3b); the N^2 is assumed"),
     "minimize": Cost(300.0, 4096, 2.0, "a fixed-box FIRE minimisation: a quarter of soft-jam's bisection"),
