@@ -443,7 +443,8 @@ def polish_enthalpy(model: EnergyModel, config: NDArray[np.float64], pressure0: 
             predicted = length * gain - 0.5 * length**2 * curvature
             trial = _trial(model, q, step, length, pressure0)
             evaluations += 1
-            rho = _decrease(ev, trial, pressure0, model.box.volume, length, step, gain, predicted, resolution) / predicted
+            decrease = _decrease(ev, trial, pressure0, model.box.volume, length, step, gain, predicted, resolution)
+            rho = decrease / predicted
             accepted = rho >= TRUST_ACCEPT
             if accepted:
                 break
