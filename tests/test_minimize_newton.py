@@ -204,7 +204,7 @@ def test_the_slope_along_a_step_is_the_derivative_of_the_enthalpy_along_it(ds):
 
     def enthalpy(t):
         trial = newton._trial(model, q, step, t, P0)
-        return trial[5].energy + P0 * trial[6].box.volume
+        return trial.ev.energy + P0 * trial.model.box.volume
 
     for t in (0.5, 1.0):
         h = 1e-4

@@ -45,6 +45,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -198,14 +199,29 @@ class TangentNewton:
                    float(np.trace(ev.virial)), move)
 
 
-def _state(model: EnergyModel, config: NDArray[np.float64], pressure0: float) -> tuple:
-    """Gradient of ``H`` in ``q``, ``dH/ds``, largest projected force, pressure and energy at ``s = 1``."""
+class _State(NamedTuple):
+    """A state of :func:`polish_enthalpy` at ``s = 1`` of its own box: coordinates ``q``, the projected gradient
+    ``g`` of ``H`` in ``q``, ``dH/ds``, the largest projected force, the pressure, the model's evaluation, the
+    model and its configuration."""
+
+    q: NDArray[np.float64]
+    g: NDArray[np.float64]
+    dhds: float
+    fmax: float
+    p: float
+    ev: ModelEvaluation
+    model: EnergyModel
+    config: NDArray[np.float64]
+
+
+def _state(model: EnergyModel, config: NDArray[np.float64], pressure0: float) -> _State:
+    """The :class:`_State` of ``config`` in ``model``'s box."""
     q = model.dofs(config)
     ev = model.evaluate(q)
     g = model.project(ev.gradient, q)
     p = pressure_of(ev, model.box)
     d = model.box.d
-    return q, g, d * model.box.volume * (pressure0 - p), model.max_force(g), p, ev, model, config
+    return _State(q, g, d * model.box.volume * (pressure0 - p), model.max_force(g), p, ev, model, config)
 
 
 def _scaled_gradient(model: EnergyModel, config: NDArray[np.float64], pressure0: float,
@@ -314,46 +330,42 @@ def _enthalpy_system(model: EnergyModel, x: NDArray[np.float64], q: NDArray[np.f
 
 
 def _trial(model: EnergyModel, q: NDArray[np.float64], step: NDArray[np.float64], length: float,
-           pressure0: float) -> tuple:
+           pressure0: float) -> _State:
     """The state (:func:`_state`) at ``length`` along ``step = (dq, ds)`` from ``q`` at ``s = 1``, in its own box."""
     return _state(*model.rescaled(1.0 + length * float(step[-1]), model.positions(q + length * step[:-1])), pressure0)
 
 
-def _slope(step: NDArray[np.float64], length: float, trial: tuple) -> float:
+def _slope(step: NDArray[np.float64], length: float, trial: _State) -> float:
     """``dH/dt`` at ``length`` along ``step = (dq, ds)``, from the :func:`_trial` state there.
 
     That state's gradient is taken in its box, scaled by ``s = 1 + t ds``: its centres are ``s`` times the
     reference ones, so ``dH/dx = s dH/dx'``, and at fixed reference coordinates ``dH/ds = (dH/ds') / s``.
     """
     s = 1.0 + length * float(step[-1])
-    q, g, dhds, model = trial[0], trial[1], trial[2], trial[6]
-    n_centre = model.positions(q).shape[0] * model.box.d
-    return float(s * (g[:n_centre] @ step[:n_centre]) + g[n_centre:] @ step[n_centre:-1] + dhds / s * step[-1])
+    g = trial.g
+    n_centre = trial.model.positions(trial.q).shape[0] * trial.model.box.d
+    return float(s * (g[:n_centre] @ step[:n_centre]) + g[n_centre:] @ step[n_centre:-1] + trial.dhds / s * step[-1])
 
 
-def _enthalpy_drop(ev: ModelEvaluation, trial: tuple, pressure0: float, volume: float, length: float,
-                   ds: float) -> float:
-    """``H`` at ``s = 1`` minus ``H`` of the trial state at ``length`` [energy] (the box term without cancellation)."""
-    d = trial[6].box.d
-    return ev.energy - trial[5].energy - pressure0 * volume * float(np.expm1(d * np.log1p(length * ds)))
-
-
-def _decrease(ev: ModelEvaluation, trial: tuple, pressure0: float, volume: float, length: float,
+def _decrease(ev: ModelEvaluation, trial: _State, pressure0: float, volume: float, length: float,
               step: NDArray[np.float64], gain: float, predicted: float, resolution: float) -> float:
-    """Decrease of ``H`` from ``s = 1`` to the trial state at ``length`` along ``step`` [energy].
+    """Decrease of ``H`` from ``s = 1`` (evaluation ``ev``, box ``volume``) to the trial state at ``length`` along
+    ``step`` [energy].
 
-    The difference of the two enthalpies where the predicted decrease is above their round-off
-    ``resolution``; below it, the trapezoid rule on the slopes at both ends, ``t (gain - dH/dt(t)) / 2``
-    (``gain = -dH/dt(0)``): exact to third order in ``t``, and resolved to the round-off of the gradients,
-    so that a step along a flat valley, whose largest force does not change, is judged by what it gains.
+    The difference of the two enthalpies (the box term as ``expm1``, without cancellation) where the predicted
+    decrease is above their round-off ``resolution``; below it, the trapezoid rule on the slopes at both ends,
+    ``t (gain - dH/dt(t)) / 2`` (``gain = -dH/dt(0)``): exact to third order in ``t``, and resolved to the
+    round-off of the gradients, so that a step along a flat valley, whose largest force does not change, is
+    judged by what it gains.
     """
     if predicted > resolution:
-        return _enthalpy_drop(ev, trial, pressure0, volume, length, float(step[-1]))
+        d = trial.model.box.d
+        return ev.energy - trial.ev.energy - pressure0 * volume * float(np.expm1(d * np.log1p(length * step[-1])))
     return 0.5 * length * (gain - _slope(step, length, trial))
 
 
 def _line_minimum(model: EnergyModel, q: NDArray[np.float64], step: NDArray[np.float64], pressure0: float,
-                  kept: tuple[float, tuple], refused: tuple[float, tuple]) -> tuple[list[tuple[float, tuple]], int]:
+                  kept: tuple[float, _State], refused: tuple[float, _State]) -> tuple[list[tuple[float, _State]], int]:
     """Points ``(t, state)`` between a kept length and the refused one after it where ``|dH/dt|`` is below its value
     at the kept length, nearest the slope's sign change first (none when the slope does not change sign there),
     and the number of states evaluated.
@@ -365,7 +377,7 @@ def _line_minimum(model: EnergyModel, q: NDArray[np.float64], step: NDArray[np.f
     slope_lo, slope_hi = _slope(step, lo, state_lo), _slope(step, hi, state_hi)
     if not slope_lo < 0.0 < slope_hi:
         return [], 0
-    points: list[tuple[float, float, tuple]] = []
+    points: list[tuple[float, float, _State]] = []
 
     def slope(t: float) -> float:
         if t in (lo, hi):
