@@ -131,6 +131,66 @@ def test_flat_fire_of_the_enthalpy_reports_the_pressure_of_its_own_box():
     assert abs(res.pressure - p0) <= 1e-6 * p0
 
 
+def test_strain_engine_enthalpy_force_is_minus_the_derivative_of_u_plus_p0_v():
+    """The compiled loop's strain force with ``pressure0`` (volume free, spheres without links, so nothing is
+    projected) against central differences of ``H = U + P0 V`` of the model's own energy and volume."""
+    rng = np.random.default_rng(3)
+    box = Box(np.array([[4.0, 0.7], [0.0, 4.3]]))
+    D = np.where(np.arange(16) % 2 == 0, 1.0, 1.4)
+    x = rng.uniform(0.0, 4.0, (16, 2))
+    model = ShearStabilizedModel(box, D, Links(np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0)), x,
+                                 fixed_volume=False)
+    q = model.dofs(x)
+    q[-3:] = model.strain_scale * np.array([0.02, -0.01, 0.03])
+    p0 = 0.05
+    engine = model.fire_engine(q, DEFAULT_FIRE, p0)
+    assert isinstance(engine, StrainFire)
+    engine.advance(1e-30, 0, False)  # one evaluation, no step
+
+    def enthalpy(e):
+        qe = q.copy()
+        qe[-3:] = e
+        return model.evaluate(qe).energy + p0 * model.volume(qe)
+
+    h = 1e-5 * model.strain_scale
+    numeric = np.array([-(enthalpy(q[-3:] + h * u) - enthalpy(q[-3:] - h * u)) / (2 * h) for u in np.eye(3)])
+    assert model.evaluate(q).n_contacts > 0
+    # the central differences' truncation error is O(h^2) of the third derivative
+    np.testing.assert_allclose(engine.fe, numeric, rtol=1e-7, atol=1e-9 * np.abs(numeric).max())
+
+
+@pytest.mark.parametrize("flexible", [False, True], ids=["rigid", "mixed"])
+def test_strain_engine_enthalpy_reaches_the_flat_enthalpy_minimum(flexible):
+    """The compiled engine on ``U + P0 V`` (volume free) and the flat FIRE of :class:`EnthalpyModel`, from one
+    start near a minimum of ``H``: the same minimum (centres, box, enthalpy), the pressure P0 to the force
+    tolerance, links held; the rigid trimers move as bodies, the flexible chains on the Gram path."""
+    model, x = _compressed_trimers(functools.partial(ShearStabilizedModel, fixed_volume=False), 0.86, flexible)
+    p0 = 1e-2
+    flat = _fire(_ModelFire(EnthalpyModel(model, p0), model.dofs(x), DEFAULT_FIRE), 1e-12, 200_000)
+    near, xn = model.rescaled(1.0, flat.position)
+    rng = np.random.default_rng(5)
+    q = near.dofs(xn)
+    q[:-3] += 0.02 * rng.standard_normal(len(q) - 3)
+    q[-3:] += 1e-3 * near.strain_scale * rng.standard_normal(3)
+    q = near.reproject(q)
+    runs = []
+    for fast in (True, False):
+        m, _ = model.rescaled(1.0, flat.position)
+        e = m.fire_engine(q, DEFAULT_FIRE, p0) if fast else _ModelFire(EnthalpyModel(m, p0), q, DEFAULT_FIRE)
+        runs.append((_fire(e, 1e-12, 200_000), m, e))
+    (a, ma, ea), (b, mb, eb) = runs
+    assert isinstance(ea, StrainFire) and len(ea.vb) == (10 if flexible else 20)
+    assert a.converged and b.converged
+    assert max(a.max_force, b.max_force) <= 1e-12
+    # the engine reports U, the flat FIRE of the wrapper U + P0 V
+    assert abs(a.energy + p0 * a.box.volume - b.energy) <= 1e-12 * b.energy
+    np.testing.assert_allclose(a.box.matrix, b.box.matrix, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(a.position, b.position, rtol=0, atol=1e-8)
+    assert abs(a.pressure - p0) <= 1e-9 * p0 and abs(b.pressure - p0) <= 1e-9 * p0
+    assert np.abs(ma.link_errors(ea.q())).max() <= LINK_LENGTH_RTOL
+    assert abs(a.box.volume - flat.box.volume) <= 1e-9 * flat.box.volume
+
+
 def test_strain_engine_from_the_squeezed_start_reaches_a_valid_minimum(strain_minima):
     """From the squeezed start the rigid bodies' metric takes another path than the flat FIRE (docs/notes/chains.md):
     its minimum is force-balanced by the flat projection, with links and volume held."""

@@ -366,7 +366,7 @@ def strain_fire(
     offset, pi, pj, sigma, eps, w_exp, y_build, h_build_inv, reach, skin, diameter, adj_ptr, adj,
     li, lj, link_offset, length, sign, first, cptr, fptr, chol, rptr, members, shift, ref, body, vb, fb, inv_mass,
     hinge_spheres, hinge_local, hinge_shift, hinge_zero, hinge_body, hinge_state, hinge_geo, hinge_origin, hinge_r,
-    vh, fh, free, length_rtol, max_sweeps, rank_rtol, force_tol, max_steps, energy_floor, fy, fe,
+    vh, fh, free, length_rtol, max_sweeps, rank_rtol, force_tol, max_steps, energy_floor, pressure0, fy, fe,
 ):
     """FIRE 2.0 of shear-stabilised linked spheres in one compiled loop (the steps of :class:`~jamflow.minimize.fire._ModelFire`).
 
@@ -399,7 +399,9 @@ def strain_fire(
     and ``h_build_inv`` updated in place), or, in a
     box too sheared or small for it, the loop returns ``REBUILD`` for the caller's
     build. ``energy_floor`` > 0 stops the run (``BELOW``) once the pair energy plus the
-    kinetic energy of FIRE's metric is at or below it.
+    kinetic energy of FIRE's metric is at or below it. ``pressure0`` > 0 (volume free,
+    ``fixed_volume`` false) minimises the enthalpy ``U + P0 V`` instead: the strain force
+    gains ``-P0 V0 d(det F)/de`` (``V0 = det h0``) and the energy returned is ``U + P0 V``.
 
     Returns
     -------
@@ -425,6 +427,7 @@ def strain_fire(
     r_body = np.empty_like(ref)
     hinged = hinge_spheres.shape[0] > 0
     h0_inv = np.linalg.inv(h0)
+    volume0 = abs(np.linalg.det(h0))
     buffers = pair_buffers(n, d)
     builds = 0
     energy = 0.0
@@ -463,6 +466,11 @@ def strain_fire(
             hinge_strain_forces(Finv, hinge_spheres, hinge_r, scale, fy, fe, fh)
             hinge_project(hinge_local, hinge_geo, fh)
             hinge_project(hinge_local, hinge_geo, vh)
+        if pressure0 > 0.0:
+            # ce = d(det F)/de at this point (strain_solver): the box's share of the enthalpy
+            energy += pressure0 * volume0 * det
+            for p in range(m):
+                fe[p] -= pressure0 * volume0 * ce[p]
         strain_project_pair(w, Z, S, small, ce, sce, schur, fixed_volume, li, lj, first, cptr, fptr, chol, pinv,
                             fy, fe, vy, ve, z, t_m, q_m)
         fmax2 = max(_free_max_sq(fy, free), _dot1(fe, fe), rigid_max_force_sq(rptr, r_body, inv_mass, fb),

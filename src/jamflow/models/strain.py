@@ -137,6 +137,22 @@ class ShearStabilizedModel(LinkedSpheresModel):
         self._h0 = np.ascontiguousarray(self.box.matrix)
         self._h_build_key: NDArray[np.float64] | None = None
 
+    @property
+    def box_dofs(self) -> bool:
+        """With the volume free, every strain component is a box degree of freedom of the enthalpy engine."""
+        return not self.fixed_volume
+
+    def with_free_volume(self, position: NDArray[np.float64]) -> tuple[ShearStabilizedModel, NDArray[np.float64]]:
+        """The model rebased on its last evaluated box (:meth:`rescaled` by 1) with the volume free, and the centres.
+
+        The enthalpy stage of the jamming onset minimises ``U + P0 V`` on it
+        (:func:`jamflow.minimize.onset.jam_model_to_pressure`): the shape is free already,
+        so the stage frees the whole box and ends at the stress ``-P0 1``.
+        """
+        base, x = self.rescaled(1.0, position)
+        return ShearStabilizedModel(base.box, self.diameter, self.links, x, self.potential, self.nlist,
+                                    self.length_rtol, fixed_volume=False, gram=self.gram), x
+
     def energy_floor(self, pressure: float) -> float:
         """The linked spheres' floor at fixed volume (the box's shape changes, its volume not); 0 with the volume free."""
         return super().energy_floor(pressure) if self.fixed_volume else 0.0
@@ -359,14 +375,18 @@ class ShearStabilizedModel(LinkedSpheresModel):
 
     def fire_engine(self, q: NDArray[np.float64], params: FireParameters, pressure0: float | None = None,
                     pressure_rtol: float = 0.0, box_dof: str = "isotropic") -> StrainFire | None:
-        """The compiled FIRE loop (:class:`StrainFire`); None for enthalpy (the volume is a constraint here).
+        """The compiled FIRE loop (:class:`StrainFire`); with ``pressure0`` on ``U + P0 V`` over every
+        strain component (the volume must be free; ``box_dof`` is "full" for this model whatever is
+        asked, since its shape is free by construction), else None at fixed volume.
 
         None too for a subclass with an energy of its own (another :meth:`evaluate`): the
         loop computes this class's energy, not the subclass's.
         """
-        if pressure0 is not None or type(self).evaluate is not ShearStabilizedModel.evaluate:
+        if type(self).evaluate is not ShearStabilizedModel.evaluate:
             return None
-        return StrainFire(self, q, params)
+        if pressure0 is None:
+            return StrainFire(self, q, params)
+        return None if self.fixed_volume else StrainFire(self, q, params, pressure0=pressure0)
 
     def max_force(self, g: NDArray[np.float64]) -> float:
         """Largest per-sphere norm of the centre part and the norm of the strain part of ``g``."""
@@ -459,8 +479,11 @@ class StrainFire:
     """
 
     def __init__(self, model: ShearStabilizedModel, q: NDArray[np.float64], params: FireParameters,
-                 hinged: bool = True) -> None:
+                 hinged: bool = True, pressure0: float = 0.0) -> None:
+        if pressure0 > 0.0 and model.fixed_volume:
+            raise ValueError("enthalpy minimisation needs the volume free (fixed_volume=False)")
         self.model = model
+        self.pressure0 = float(pressure0)
         self.builds0 = model.nlist.builds
         q = model.reproject(np.array(q, dtype=np.float64))
         y, e = model._split(q)
@@ -513,7 +536,7 @@ class StrainFire:
         status, n = self._steps(force_tol * self.tol_scale, budget, rebuild, energy_floor)
         while status == _fire_kernels.CONVERGED and (len(self.vb) or len(self.vh)):
             q = self.q()
-            flat = self.model.max_force(self.model.project(self.model.evaluate(q).gradient, q))
+            flat = self._max_force(q, self.model.evaluate(q))
             if flat <= force_tol:
                 break
             self.tol_scale *= 0.9 * force_tol / flat
@@ -542,8 +565,8 @@ class StrainFire:
             g["sign"], g["first"], g["cptr"], g["fptr"], self.chol, rigid["rptr"], rigid["members"], rigid["shift"],
             rigid["ref"], rigid["body"], self.vb, self.fb, rigid["inv_mass"], h["spheres"], h["local"], h["shift"],
             h["zero"], h["body"], h["state"], h["geo"], h["origin"], h["r"], self.vh, self.fh, self.free, m.length_rtol,
-            LINK_NEWTON_MAX_ITERATIONS, LINK_RANK_RTOL, float(force_tol), int(budget), float(energy_floor), self.fy,
-            self.fe,
+            LINK_NEWTON_MAX_ITERATIONS, LINK_RANK_RTOL, float(force_tol), int(budget), float(energy_floor), self.pressure0,
+            self.fy, self.fe,
         )
         self.pairs = (pairs[0], pairs[1], pairs[2], pairs[3])
         self.inline_builds += builds
@@ -554,15 +577,23 @@ class StrainFire:
                                f"{m.length_rtol:.3g}) after {LINK_NEWTON_MAX_ITERATIONS} sweeps")
         return status, n
 
+    def _max_force(self, q: NDArray[np.float64], ev: ModelEvaluation) -> float:
+        """The model's largest projected force of what the loop minimises at ``q``: ``U`` (evaluated in
+        ``ev``), plus ``P0 V`` with ``pressure0`` (:meth:`ShearStabilizedModel.volume_gradient`)."""
+        m = self.model
+        g = ev.gradient + self.pressure0 * m.volume_gradient(q) if self.pressure0 > 0.0 else ev.gradient
+        return m.max_force(m.project(g, q))
+
     def result(self, steps: int, calls: int, status: int) -> MinimizeResult:
-        """The run's outcome; energy, virial (pairs, link tensions) and force from one evaluation of the final state."""
+        """The run's outcome; energy ``U``, virial (pairs, link tensions) and the force of what the loop
+        minimises (:meth:`_max_force`) from one evaluation of the final state."""
         m = self.model
         q = self.q()
         ev = m.evaluate(q)
         box = m.current_box(q)
         return MinimizeResult(
             position=np.array(m.positions(q)), box=box, energy=ev.energy, pressure=pressure_of(ev, box),
-            max_force=m.max_force(m.project(ev.gradient, q)), n_contacts=ev.n_contacts, steps=steps,
+            max_force=self._max_force(q, ev), n_contacts=ev.n_contacts, steps=steps,
             converged=status == _fire_kernels.CONVERGED, rebuilds=m.nlist.builds - self.builds0 + self.inline_builds,
             evaluations=steps + 2, below=status == _fire_kernels.BELOW,
         )
