@@ -105,12 +105,14 @@ def stabilized():
 def test_shear_stabilized_trimers_have_vanishing_strain_forces_and_isotropic_stress(stabilized):
     start, result = stabilized
     p = result.packing
-    assert result.converged and p.pressure == pytest.approx(1e-4, rel=1e-2)
-    # det F = 1 in every minimisation: the volume is the one the bisection set
-    assert p.packing_fraction == pytest.approx(result.history["phi"][-1], rel=1e-12)
+    assert result.converged
+    # the last minimisation is the enthalpy's, volume free: a diagonal strain force (W_aa - P0 V) / q_s within
+    # F_tol puts P within q_s F_tol / V of P0 (the bisection's window is 1e-2)
+    model = ShearStabilizedModel(p.box, p.diameter, p.links, p.position)
+    assert abs(p.pressure - 1e-4) <= model.strain_scale * 1e-11 / p.box.volume
+    assert p.packing_fraction != result.history["phi"][-1]
     assert np.max(np.abs(p.links.length_errors(p.position, p.box))) <= LINK_LENGTH_RTOL
     # re-evaluated in its own box at zero strain: positions and strain forces balanced on the manifold
-    model = ShearStabilizedModel(p.box, p.diameter, p.links, p.position)
     q = model.dofs(p.position)
     ev = model.evaluate(q)
     pg = model.project(ev.gradient, q)

@@ -295,7 +295,7 @@ STAGES: dict[str, Stage] = {s.command: s for s in (
                _o("exponent", "float", "potential exponent w (2 harmonic, 2.5 Hertz)", ge=2),
                _o("box_dof", "choice", "final enthalpy minimisation box", choices=("isotropic", "full")),
                _o("max_steps", "int", "FIRE step budget", ge=1),
-               _o("shear_stabilize", "bool", "strain degrees of freedom at fixed volume"),
+               _o("shear_stabilize", "bool", "strain free at fixed volume, then the enthalpy with the whole box free"),
                _o("jam_protocol", "choice", "linked packings: bisection or energy", choices=("bisection", "energy")),
                _o("energy_tol", "float", "energy per sphere ending --jam-protocol energy", gt=0))),
     _stage("minimize", "energy minimisation at a fixed box", {"spheres", "linked", "shapes"},

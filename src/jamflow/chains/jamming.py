@@ -7,7 +7,10 @@ followed by fixed-box FIRE with constraint projection and Newton re-affixing
 (:class:`~jamflow.models.links.LinkedSpheresModel`), compressing below ``P0`` and
 decompressing above with halving steps, until ``|P - P0| <= pressure_rtol P0`` at
 ``max |P F| <= force_tol``. ``P`` is the virial pressure of the contact forces and
-the link tensions. Scaling the box scales the clusters' centres, not their shapes:
+the link tensions. Shear-stabilised (``shear_stabilize``: the strain free at fixed volume in
+every bisection step) the protocol ends, as the spheres' does, with ``U + P0 V`` minimised
+over the centres and the whole box (:meth:`ShearStabilizedModel.with_free_volume`), at the
+stress ``-P0 1``. Scaling the box scales the clusters' centres, not their shapes:
 the affine move stretches links by the scale factor and the first re-affixing
 restores them (the paper's "cluster size decreased while maintaining their average
 positions", seen from the clusters' frame).
@@ -32,10 +35,14 @@ from dataclasses import replace
 import numpy as np
 
 from ..box import Box
-from ..minimize.fire import FireParameters, MinimizeResult, minimize_fire
+from ..minimize.fire import (
+    FireParameters,
+    MinimizeResult,
+    minimize_enthalpy_model,
+    minimize_fire,
+)
 from ..minimize.model import EnergyModel
 from ..minimize.onset import JammingSettings, bisect_to_pressure, jam_model_to_pressure
-from ..models.box import EnthalpyModel
 from ..models.links import LinkedSpheresModel
 from ..models.spheres.potential import HARMONIC, PowerLawPotential, overlapping_pairs
 from ..models.strain import ShearStabilizedModel
@@ -184,11 +191,17 @@ def leave_linked_saddle(model: LinkedSpheresModel, final: MinimizeResult, templa
 
     def reminimize(res: MinimizeResult, kick: np.ndarray) -> tuple[MinimizeResult, int]:
         m, x = state["model"].rescaled(1.0, res.position + kick)
-        phi = linked_volume(m.box.d, m.diameter, m.links) / m.box.volume
-        m, out, _, _, _, steps = bisect_to_pressure(
-            m, x, phi, pressure, settings.force_tol, settings.pressure_rtol,
-            settings.pressure_rtol * settings.delta_phi, settings.max_steps, settings.fire_params, progress, history,
-            secant=True, polish=settings.newton_polish)
+        if m.box_dofs:
+            # the onset ended with the enthalpy stage (volume free): so does each re-minimisation
+            out = minimize_enthalpy_model(m, x, pressure, settings.force_tol, settings.pressure_rtol,
+                                          settings.max_steps, settings.fire_params, "full")
+            steps = out.steps
+        else:
+            phi = linked_volume(m.box.d, m.diameter, m.links) / m.box.volume
+            m, out, _, _, _, steps = bisect_to_pressure(
+                m, x, phi, pressure, settings.force_tol, settings.pressure_rtol,
+                settings.pressure_rtol * settings.delta_phi, settings.max_steps, settings.fire_params, progress,
+                history, secant=True, polish=settings.newton_polish)
         state["model"] = m
         return replace(out, box=_current_box(m)), steps
 
@@ -218,8 +231,8 @@ def jam_linked(
     pressure : float or None
         ``P0`` [epsilon / <D>^d], > 0, of the bisection; None with ``protocol="energy"``.
     settings : JammingSettings, optional
-        Default :class:`~jamflow.minimize.onset.JammingSettings`; ``force_tol`` bounds the largest projected force per sphere; ``box_dof`` must
-        be ``"isotropic"`` (a fixed-shape box).
+        Default :class:`~jamflow.minimize.onset.JammingSettings`; ``force_tol`` bounds the largest projected force per
+        sphere; ``box_dof="full"`` implies ``shear_stabilize``.
     protocol : {"bisection", "energy"}
         :data:`PROTOCOLS`; ``"energy"`` runs :func:`scale_to_energy` (uses
         ``settings.force_tol``, ``delta_phi`` and ``max_steps``).
@@ -251,6 +264,9 @@ def jam_linked(
     if settings.box_dof not in ("isotropic", "full"):
         raise ValueError(f"box_dof must be 'isotropic' or 'full', got {settings.box_dof!r}")
     shear_stabilize = shear_stabilize or full_box
+    if shear_stabilize and settings.newton_polish and protocol == "bisection":
+        raise ValueError("newton_polish polishes the fixed-box final stage of a linked packing; a shear-stabilised "
+                         "bisection ends with the enthalpy minimisation (volume free), which it does not polish")
     if packing.links is None:
         packing = packing.evolve(links=Links(np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0)))
     check_linked_start(packing)
@@ -282,9 +298,6 @@ def jam_linked(
             model, final, scaled, pressure, settings, shear_stabilize,
             packing.seed if packing.seed is not None and packing.seed >= 0 else 0, checked, history)
         steps += more
-    if full_box:
-        model, final, more = _relax_box(model, final, pressure, settings, potential)
-        steps += more
     check_untangled(model.links, final.position, final.box, D, final.pressure, potential)
     attrs = {
         "length_unit": "mean particle diameter", "force_unit": "epsilon / mean diameter",
@@ -292,6 +305,9 @@ def jam_linked(
         "max_force_sq": final.max_force**2, "potential_exponent": potential.exponent,
         "fire_steps": steps, "converged": int(final.converged), "jamming_protocol": protocol,
         "box_dof": settings.box_dof,
+        # shear-stabilised bisections end with the enthalpy, volume free (jam_model_to_pressure)
+        "final_minimization": "enthalpy, whole box free" if model.box_dofs else
+                              ("fixed volume" if shear_stabilize else "fixed box"),
         **({"target_pressure": pressure, "onset_method": settings.onset,
             "onset_minimizations": len(history["phi"]), "saddle_kicks": kicks}
            if protocol == "bisection" else {"energy_tol": energy_tol}),
@@ -311,18 +327,6 @@ def jam_linked(
     else:
         converged = final.converged and ENERGY_FLOOR * energy_tol < final.energy / model.n <= energy_tol
     return JammingResult(out, bool(converged), history, steps)
-
-
-def _relax_box(model: ShearStabilizedModel, final: MinimizeResult, pressure: float, settings: JammingSettings,
-               potential: PowerLawPotential) -> tuple[ShearStabilizedModel, MinimizeResult, int]:
-    """Enthalpy ``U + P0 V`` with the whole box free (:class:`~jamflow.models.box.EnthalpyModel`) from the
-    shear-stabilised minimum at ``P0``: the box takes the stress ``-P0 1`` exactly (to the force tolerance)."""
-    free = ShearStabilizedModel(final.box, model.diameter, model.links, final.position, potential,
-                                length_rtol=model.length_rtol, fixed_volume=False)
-    res = minimize_fire(EnthalpyModel(free, pressure), final.position, settings.force_tol, settings.max_steps,
-                        settings.fire_params)
-    # the result carries the relaxed box and its pressure; report U (the minimiser's energy is U + P0 V)
-    return free, replace(res, energy=res.energy - pressure * res.box.volume), res.steps
 
 
 def _current_box(model: LinkedSpheresModel) -> Box:

@@ -67,12 +67,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--exponent", type=EXPONENT, default=2.0, help="potential exponent w (2 harmonic, 2.5 Hertz)")
     p.add_argument("--box-dof", choices=["isotropic", "full"], default="isotropic",
                    help="final enthalpy minimisation over an isotropic box scale (default) or the whole box "
-                        "(stress tensor -P0 1, the box may tilt); linked packings: full adds an enthalpy "
-                        "minimisation with the whole box free after the shear-stabilised bisection")
+                        "(stress tensor -P0 1, the box may tilt); linked packings: full is --shear-stabilize, "
+                        "whose bisection ends with that minimisation")
     p.add_argument("--max-steps", type=count, default=20_000_000, help="FIRE step budget of the whole protocol")
     p.add_argument("--shear-stabilize", action="store_true",
-                   help="strain degrees of freedom at fixed volume in every minimisation (chains paper Sec. II D): "
-                        "the final stress is isotropic; spheres and linked packings")
+                   help="strain degrees of freedom at fixed volume in the bisection's minimisations (chains paper "
+                        "Sec. II D), then, as for spheres, U + P0 V minimised with the whole box free: the final "
+                        "stress is -P0 1; spheres and linked packings")
     p.add_argument("--jam-protocol", choices=PROTOCOLS, default=DEFAULT_PROTOCOL,
                    help=f"linked packings: bisection to --pressure, or the chains paper's decompression by the "
                         f"energy scaling of phi - phi_J down to --energy-tol (default {DEFAULT_PROTOCOL}; "
@@ -80,10 +81,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--energy-tol", type=positive, default=None,
                    help="energy per sphere [epsilon] at which --jam-protocol energy stops, e.g. 1e-12")
     p.add_argument("--newton-polish", action="store_true",
-                   help="linked packings: let each fixed-box minimisation of the final stage (to --force-tol) end "
-                        "with the constrained trust-region Newton polish once FIRE's largest force is within 1e3 of "
-                        "the tolerance (same tolerances; fewer FIRE steps from N ~ 1000, docs/notes/chains.md); "
-                        "shaped bodies always polish their enthalpy stage")
+                   help="linked packings in a fixed box: let each minimisation of the final stage (to --force-tol) "
+                        "end with the constrained trust-region Newton polish once FIRE's largest force is within 1e3 "
+                        "of the tolerance (same tolerances; fewer FIRE steps from N ~ 1000, docs/notes/chains.md); "
+                        "refused with --shear-stabilize, whose final stage is the enthalpy minimisation; shaped "
+                        "bodies always polish their enthalpy stage")
     p.add_argument("--frozen-orientations", action="store_true",
                    help="shaped bodies: jam with every orientation fixed (VanderWerf et al. Fig. 3a, non-rotating "
                         "circulo-lines); counted with 2 degrees of freedom per body")
@@ -184,8 +186,8 @@ def _soft_jam_linked(args: argparse.Namespace, packing: Packing) -> int:
         ("pressure", f"{out.pressure:.6g} ("
                      + (f"energy per sphere {a['energy'] / out.n:.3g} <= {args.energy_tol:g}" if energy
                         else f"target {args.pressure:g}") + ") epsilon / mean diameter^d"),
-        ("shear-stabilised", ("at fixed pressure, the whole box free (enthalpy)" if args.box_dof == "full" else
-                              "at fixed volume" if args.shear_stabilize else "no")
+        ("shear-stabilised", ("no" if not (args.shear_stabilize or args.box_dof == "full") else
+                              "at fixed volume" if energy else "at fixed volume, then U + P0 V with the whole box free")
          + f" (max |sigma_ab - P delta_ab| / P = {stress:.3g})"),
         ("links", f"{len(out.links)} (max relative length error {a['max_link_error']:.3g})"),
         ("contacts N_c (backbone)", f"{a['n_contacts']} (cluster isostatic count {a['isostatic_count']}, "

@@ -592,8 +592,9 @@ def jam_model_to_pressure(
     """Jamming onset of any model at pressure ``P0`` (the protocol of :func:`jam_to_pressure`).
 
     Step 2 by ``settings.onset`` (module doc). Models with box degrees of freedom
-    (``model.box_dofs``, e.g. soft spheres) end with the enthalpy minimisation of step 3;
-    any other model continues step 2 with fixed-box FIRE to ``force_tol`` until
+    (``model.box_dofs``, e.g. soft spheres) end with the enthalpy minimisation of step 3, and
+    so do models that offer a twin with the volume free (``model.with_free_volume(position)``,
+    shear-stabilised linked spheres: the stage frees their whole box); any other model continues step 2 with fixed-box FIRE to ``force_tol`` until
     ``|P - P0| <= pressure_rtol P0`` (the search from the first stage's slope).
 
     Returns
@@ -615,8 +616,16 @@ def jam_model_to_pressure(
             model, position, phi, pressure, loose, c.bisection_rtol, c.delta_phi,
             c.max_steps, c.fire_params, progress, history,
         )
+    x = res.position
+    free_volume = getattr(model, "with_free_volume", None)
+    if free_volume is not None:
+        # a model whose volume is a constraint of the onset (shear-stabilised linked spheres) ends, as spheres
+        # do, with the enthalpy minimisation, on its twin with the volume free; the constrained model has no
+        # Hessian for the enthalpy polish (its own polish works at fixed volume), so none is tried
+        model, x = free_volume(x)
+        c = replace(c, newton_polish=False)
     if model.box_dofs:
-        final = _enthalpy_stage(model, res.position, pressure, c, c.max_steps - steps)
+        final = _enthalpy_stage(model, x, pressure, c, c.max_steps - steps)
         return model, final, history, steps + final.steps
     if c.onset == "search":
         # first step: the pressure window of the loose stage, on its slope
