@@ -399,9 +399,8 @@ def strain_fire(
     and ``h_build_inv`` updated in place), or, in a
     box too sheared or small for it, the loop returns ``REBUILD`` for the caller's
     build. ``energy_floor`` > 0 stops the run (``BELOW``) once the pair energy plus the
-    kinetic energy of FIRE's metric is at or below it. ``pressure0`` > 0 (volume free,
-    ``fixed_volume`` false) minimises the enthalpy ``U + P0 V`` instead: the strain force
-    gains ``-P0 V0 d(det F)/de`` (``V0 = det h0``) and the energy returned is ``U + P0 V``.
+    kinetic energy of FIRE's metric is at or below it. ``pressure0`` > 0 (``fixed_volume``
+    false) minimises ``U + P0 V`` instead (:func:`_box_enthalpy`; the energy returned is it).
 
     Returns
     -------
@@ -467,10 +466,7 @@ def strain_fire(
             hinge_project(hinge_local, hinge_geo, fh)
             hinge_project(hinge_local, hinge_geo, vh)
         if pressure0 > 0.0:
-            # ce = d(det F)/de at this point (strain_solver): the box's share of the enthalpy
-            energy += pressure0 * volume0 * det
-            for p in range(m):
-                fe[p] -= pressure0 * volume0 * ce[p]
+            energy += _box_enthalpy(fe, ce, pressure0, volume0, det)
         strain_project_pair(w, Z, S, small, ce, sce, schur, fixed_volume, li, lj, first, cptr, fptr, chol, pinv,
                             fy, fe, vy, ve, z, t_m, q_m)
         fmax2 = max(_free_max_sq(fy, free), _dot1(fe, fe), rigid_max_force_sq(rptr, r_body, inv_mass, fb),
@@ -514,6 +510,15 @@ def strain_fire(
             break
     fire_state[0], fire_state[1], fire_state[2], fire_state[3] = dt, alpha, npos, done + step
     return status, step, energy, n_contact, fmax2, sweeps, bad, builds, pi, pj, offset, sigma
+
+
+@njit(cache=True)
+def _box_enthalpy(fe, ce, pressure0, volume0, det):
+    """The box's share of ``U + P0 V``: ``-P0 V0 d(det F)/de`` added to the strain forces ``fe``
+    (``ce = d(det F)/de`` of the loop's solver, ``V0 = det h0``); returns ``P0 V``."""
+    for p in range(fe.shape[0]):
+        fe[p] -= pressure0 * volume0 * ce[p]
+    return pressure0 * volume0 * det
 
 
 @njit(cache=True)
