@@ -13,7 +13,7 @@ from ls_data import LS_DIMENSIONS, ls_dat
 #: compile of the suite) instead of both at once; docs/notes/test-times.md.
 STRAIN_ENGINE_MODULES = frozenset({
     "test_chains_certify", "test_chains_compliance", "test_chains_entanglement", "test_chains_hessian",
-    "test_chains_shear", "test_chains_swinging", "test_extremes_bodies", "test_models_engines",
+    "test_chains_saddle", "test_chains_shear", "test_chains_swinging", "test_extremes_bodies", "test_models_engines",
     "test_models_strain_kernels", "test_models_tangent_newton", "test_onset_search", "test_onset_verdict",
 })
 

@@ -19,10 +19,11 @@ from jamflow.chains import jamming
 from jamflow.chains.hessian import constrained_hessian
 from jamflow.chains.jamming import leave_linked_saddle
 from jamflow.io import read_packing
-from jamflow.minimize.fire import minimize_fire
+from jamflow.minimize.fire import minimize_enthalpy_model, minimize_fire
 from jamflow.minimize.onset import JammingSettings
 from jamflow.models.links import LinkedSpheresModel
 from jamflow.models.spheres.potential import HARMONIC, overlapping_pairs
+from jamflow.models.strain import ShearStabilizedModel
 from jamflow.network import count_bodies
 from jamflow.state.bodies import Links
 
@@ -69,6 +70,27 @@ def test_a_linked_saddle_is_kicked_to_an_isostatic_stable_minimum(newton_polish,
     after = _count(p, final)
     assert after.n_contacts >= after.isostatic_count > 0
     w = constrained_hessian(p.evolve(position=final.position, box=final.box), strain=False).eigenvalues
+    assert w.min() > -1e-12  # round-off of the zero translations
+
+
+def test_a_shear_stabilised_saddle_is_kicked_and_re_minimised_at_p0_with_the_box_free():
+    """Shear-stabilised, the onset ends with the enthalpy (volume free): the 8-disk saddle minimised there is
+    still a saddle of the Hessian with the strain, and the guard re-minimises the kicked state by the enthalpy
+    too, to a stable minimum at P0."""
+    p0 = 1e-7
+    p = read_packing(DATA / "saddle_8disks_p1e-7.nc", None)
+    p = p.evolve(links=Links(np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0)))
+    settings = JammingSettings(pressure_rtol=1e-3)
+    model = ShearStabilizedModel(p.box, p.diameter, p.links, p.position, fixed_volume=False)
+    res = minimize_enthalpy_model(model, p.position, p0, settings.force_tol, settings.pressure_rtol, 10**6,
+                                  settings.fire_params, "full")
+    assert res.converged
+    assert constrained_hessian(p.evolve(position=res.position, box=res.box), strain=True).eigenvalues.min() < -p0
+    model, final, steps, kicks = leave_linked_saddle(model, res, p, p0, settings, True, seed=0)
+    assert kicks >= 1 and steps > 0 and final.converged and model.box_dofs
+    # a diagonal strain force (W_aa - P0 V) / q_s within F_tol puts P within q_s F_tol / V of P0
+    assert abs(final.pressure - p0) <= model.strain_scale * settings.force_tol / final.box.volume
+    w = constrained_hessian(p.evolve(position=final.position, box=final.box), strain=True).eigenvalues
     assert w.min() > -1e-12  # round-off of the zero translations
 
 
