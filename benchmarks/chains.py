@@ -18,7 +18,7 @@ of the child, start-up included) of bidisperse linked starts (size ratio 1.4, ha
 clusters large; ``jamflow init-chains --dispersity bi``) at fixed box and shear-stabilised
 against the same start with the links dropped (bidisperse spheres), the three runs of a
 start alternating, ``--seeds`` starts per size; writes ``chains_whole.nc`` and ``.png``
-(``chains_whole_newton`` with ``--newton-polish``: the linked runs end their final minimisations by Newton).
+(``chains_whole_newton`` with ``--newton-polish``: the fixed-box linked runs end their final minimisations by Newton).
 
 Usage: ``python benchmarks/chains.py [--sizes 2:150 3:256 ...] [--hessian-sizes 30 60 120]
 [--pressure 1e-4] [--pressure-rtol 1e-3] [--whole [--seeds 3] [--boxes fixed shear]]``; the defaults are the issue's sizes (2D rigid
@@ -203,8 +203,8 @@ def _child_cpu(cmd: list[str]) -> float:
 
 def whole_runs(sizes: list[tuple[int, int]], seeds: int, pressure: float, rtol: float,
                boxes: tuple[str, ...] = ("fixed", "shear"), polish: bool = False) -> list[dict]:
-    """``jamflow soft-jam`` of linked starts (``boxes``: fixed box, shear-stabilised; ``polish``: with
-    ``--newton-polish``) and of the same starts without links."""
+    """``jamflow soft-jam`` of linked starts (``boxes``: fixed box, shear-stabilised; ``polish``: the fixed-box
+    runs with ``--newton-polish``, which a shear-stabilised run refuses) and of the same starts without links."""
     linked = ["--newton-polish"] if polish else []
     jam = [JAMFLOW, "soft-jam", "--quiet", "--pressure", f"{pressure:g}", "--force-tol",
            "1e-12", "--pressure-rtol", f"{rtol:g}", "--delta-phi", "1e-2"]
@@ -217,7 +217,7 @@ def whole_runs(sizes: list[tuple[int, int]], seeds: int, pressure: float, rtol: 
             unlinked = tmp / "w_spheres.nc"
             write_packing(read_packing(start).evolve(links=None), unlinked)
             for src, extra in [(start, linked)] * ("fixed" in boxes) \
-                    + [(start, ["--shear-stabilize", *linked])] * ("shear" in boxes) \
+                    + [(start, ["--shear-stabilize"])] * ("shear" in boxes) \
                     + [(unlinked, [])]:
                 subprocess.run(jam + [str(src), str(tmp / "w.nc"), "--in-place", *extra], check=True,
                                stdout=subprocess.DEVNULL)
@@ -228,7 +228,7 @@ def whole_runs(sizes: list[tuple[int, int]], seeds: int, pressure: float, rtol: 
                 write_packing(read_packing(start).evolve(links=None), spheres)
                 cpu, attrs = {}, {}
                 cases = [("spheres", spheres, []), ("fixed", start, linked),
-                         ("shear", start, ["--shear-stabilize", *linked])]
+                         ("shear", start, ["--shear-stabilize"])]
                 for case, src, extra in [c for c in cases if c[0] in ("spheres", *boxes)]:
                     out = tmp / f"{case}_out.nc"
                     cpu[case] = _child_cpu(jam + [str(src), str(out), "--in-place", *extra])
@@ -313,7 +313,7 @@ def main() -> None:
     ap.add_argument("--boxes", nargs="+", choices=("fixed", "shear"), default=["fixed", "shear"],
                     help="linked cells of --whole: fixed box, shear-stabilised")
     ap.add_argument("--newton-polish", action="store_true",
-                    help="linked runs of --whole with soft-jam --newton-polish (the constrained Newton polish)")
+                    help="fixed-box linked runs of --whole with soft-jam --newton-polish (the constrained Newton polish)")
     args = ap.parse_args()
     sizes = [tuple(int(v) for v in s.split(":")) for s in args.sizes]
     if args.whole:
