@@ -161,7 +161,9 @@ def leave_linked_saddle(model: LinkedSpheresModel, final: MinimizeResult, templa
     :data:`~jamflow.protocols.soft_jam.SADDLE_KICK` (Gaussian, seeded), its links
     re-affixed by the minimiser, and brought back to ``|P - P0| <= pressure_rtol P0`` by
     the bisection at fixed box shape from the kicked centres (first step
-    ``pressure_rtol * delta_phi``, secant steps as the onset's final stage), up to :data:`~jamflow.protocols.soft_jam.SADDLE_KICKS`
+    ``pressure_rtol * delta_phi``, secant steps as the onset's final stage), or, for a model
+    with the volume free (the shear-stabilised onset's enthalpy stage), by the enthalpy
+    minimisation at ``P0`` over the whole box, up to :data:`~jamflow.protocols.soft_jam.SADDLE_KICKS`
     times.
 
     Parameters

@@ -594,8 +594,9 @@ def jam_model_to_pressure(
     Step 2 by ``settings.onset`` (module doc). Models with box degrees of freedom
     (``model.box_dofs``, e.g. soft spheres) end with the enthalpy minimisation of step 3, and
     so do models that offer a twin with the volume free (``model.with_free_volume(position)``,
-    shear-stabilised linked spheres: the stage frees their whole box); any other model continues step 2 with fixed-box FIRE to ``force_tol`` until
-    ``|P - P0| <= pressure_rtol P0`` (the search from the first stage's slope).
+    shear-stabilised linked spheres: the stage frees their whole box); any other model
+    continues step 2 with fixed-box FIRE to ``force_tol`` until ``|P - P0| <= pressure_rtol P0``
+    (the search from the first stage's slope).
 
     Returns
     -------

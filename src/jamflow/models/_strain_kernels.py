@@ -400,7 +400,7 @@ def strain_fire(
     box too sheared or small for it, the loop returns ``REBUILD`` for the caller's
     build. ``energy_floor`` > 0 stops the run (``BELOW``) once the pair energy plus the
     kinetic energy of FIRE's metric is at or below it. ``pressure0`` > 0 (``fixed_volume``
-    false) minimises ``U + P0 V`` instead (:func:`_box_enthalpy`; the energy returned is it).
+    false) minimises ``U + P0 V`` instead (:func:`_box_enthalpy`), and returns that energy.
 
     Returns
     -------

@@ -565,8 +565,8 @@ class StrainFire:
             g["sign"], g["first"], g["cptr"], g["fptr"], self.chol, rigid["rptr"], rigid["members"], rigid["shift"],
             rigid["ref"], rigid["body"], self.vb, self.fb, rigid["inv_mass"], h["spheres"], h["local"], h["shift"],
             h["zero"], h["body"], h["state"], h["geo"], h["origin"], h["r"], self.vh, self.fh, self.free, m.length_rtol,
-            LINK_NEWTON_MAX_ITERATIONS, LINK_RANK_RTOL, float(force_tol), int(budget), float(energy_floor), self.pressure0,
-            self.fy, self.fe,
+            LINK_NEWTON_MAX_ITERATIONS, LINK_RANK_RTOL, float(force_tol), int(budget), float(energy_floor),
+            self.pressure0, self.fy, self.fe,
         )
         self.pairs = (pairs[0], pairs[1], pairs[2], pairs[3])
         self.inline_builds += builds
