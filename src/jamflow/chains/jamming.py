@@ -266,9 +266,6 @@ def jam_linked(
     if settings.box_dof not in ("isotropic", "full"):
         raise ValueError(f"box_dof must be 'isotropic' or 'full', got {settings.box_dof!r}")
     shear_stabilize = shear_stabilize or full_box
-    if shear_stabilize and settings.newton_polish and protocol == "bisection":
-        raise ValueError("newton_polish polishes the fixed-box final stage of a linked packing; a shear-stabilised "
-                         "bisection ends with the enthalpy minimisation (volume free), which it does not polish")
     if packing.links is None:
         packing = packing.evolve(links=Links(np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0)))
     check_linked_start(packing)

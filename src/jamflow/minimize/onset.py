@@ -605,6 +605,11 @@ def jam_model_to_pressure(
         (``phi``, ``pressure``, ``steps``) and the total FIRE steps.
     """
     c = settings
+    free_volume = hasattr(model, "with_free_volume")
+    if free_volume and c.newton_polish:
+        # the constrained polish works at fixed volume; the enthalpy stage's twin has no Hessian for it
+        raise ValueError("newton_polish polishes the fixed-box final stage of a linked packing; a shear-stabilised "
+                         "bisection ends with the enthalpy minimisation (volume free), which it does not polish")
     history: dict[str, list] = {"phi": [], "pressure": [], "steps": []}
     loose = c.bisection_force_factor * pressure
     if c.onset == "search":
@@ -618,13 +623,10 @@ def jam_model_to_pressure(
             c.max_steps, c.fire_params, progress, history,
         )
     x = res.position
-    free_volume = getattr(model, "with_free_volume", None)
-    if free_volume is not None:
+    if free_volume:
         # a model whose volume is a constraint of the onset (shear-stabilised linked spheres) ends, as spheres
-        # do, with the enthalpy minimisation, on its twin with the volume free; the constrained model has no
-        # Hessian for the enthalpy polish (its own polish works at fixed volume), so none is tried
-        model, x = free_volume(x)
-        c = replace(c, newton_polish=False)
+        # do, with the enthalpy minimisation, on its twin with the volume free (rebased on the last box)
+        model, x = model.with_free_volume(x)
     if model.box_dofs:
         final = _enthalpy_stage(model, x, pressure, c, c.max_steps - steps)
         return model, final, history, steps + final.steps
