@@ -10,7 +10,7 @@ from jamflow.box import Box
 from jamflow.chains.builders import linked_packing
 from jamflow.chains.jamming import linked_volume
 from jamflow.minimize.fire import DEFAULT_FIRE, minimize_fire
-from jamflow.minimize.onset import VERDICT_SHARE, bisect_to_pressure
+from jamflow.minimize.onset import VERDICT_SHARE, JammingSettings, bisect_to_pressure, jam_model_to_pressure
 from jamflow.models.links import LinkedSpheresModel
 from jamflow.models.shapes.model import ShapeModel
 from jamflow.models.spheres.model import SphereModel
@@ -187,7 +187,7 @@ def test_secant_steps_reach_the_window_in_fewer_minimisations():
     and force balance, in fewer minimisations than the halving bisection from the same loose minimum."""
     model, x = _disks(0.86)
     loose = bisect_to_pressure(model, x, 0.86, P0, 1e-2 * P0, 0.1, 1e-2, 1_000_000)
-    model1, res1, phi1, delta, direction, _ = loose
+    model1, res1, phi1, delta, direction, _, _ = loose
     runs = {}
     for secant in (False, True):
         history = {"phi": [], "pressure": [], "steps": []}
@@ -197,3 +197,45 @@ def test_secant_steps_reach_the_window_in_fewer_minimisations():
         assert abs(res.pressure - P0) <= 1e-3 * P0
         runs[secant] = len(history["phi"])
     assert runs[True] < runs[False]
+
+
+def _last_bracket(phi: list[float], pressure: list[float]) -> float:
+    """``dP/dphi`` of the secant through the last minimum above ``P0`` and the last one below it."""
+    above = max(k for k, p in enumerate(pressure) if p > P0)
+    below = max(k for k, p in enumerate(pressure) if 0.0 < p < P0)
+    return (pressure[above] - pressure[below]) / (phi[above] - phi[below])
+
+
+def test_a_resumed_bisection_steps_on_the_slope_of_the_loose_bracket():
+    """The loose bisection returns the slope of its last bracket of ``P0`` (read back from its history), and the
+    fixed-box stage at the final force tolerance resumed with it takes the secant step from its first minimum:
+    ``P`` is linear in ``phi`` on one contact network, so that step lands in ``|P - P0| <= 1e-3 P0`` at once.
+    Without it the stage first steps the loose stage's whole ``delta_phi`` and needs more minimisations."""
+    model, x = _disks(0.86)
+    loose = {"phi": [], "pressure": [], "steps": []}
+    model1, res1, phi1, delta, direction, _, slope = bisect_to_pressure(model, x, 0.86, P0, 1e-2 * P0, 0.1, 1e-2,
+                                                                        1_000_000, history=loose)
+    assert slope == pytest.approx(_last_bracket(loose["phi"], loose["pressure"]), rel=1e-12)
+    runs = {}
+    for seeded in (None, slope):
+        history = {"phi": [], "pressure": [], "steps": []}
+        m, res, *_ = bisect_to_pressure(model1, res1.position, phi1, P0, 1e-12, 1e-3, delta, 2_000_000,
+                                        history=history, direction=direction, secant=True, slope=seeded)
+        assert res.converged and res.max_force <= 1e-12 and abs(res.pressure - P0) <= 1e-3 * P0
+        runs[seeded is not None] = history
+    seeded = runs[True]
+    assert len(seeded["phi"]) == 2 < len(runs[False]["phi"])
+    assert seeded["phi"][1] - seeded["phi"][0] == pytest.approx((P0 - seeded["pressure"][0]) / slope, rel=1e-12)
+
+
+def test_the_final_fixed_box_stage_of_jamming_starts_on_the_loose_slope():
+    """``jam_model_to_pressure`` of linked trimers in a fixed box: the final stage's first minimisation (at the
+    loose stage's last ``phi``) is followed by the secant step on the slope of the loose stage's last bracket,
+    not by the loose stage's ``delta_phi``, and that step lands in the pressure window."""
+    model, x = _trimers(0.7, False)
+    _, final, history, _ = jam_model_to_pressure(model, x, 0.7, P0, JammingSettings(1e-12, 1e-3, 1e-2))
+    phi, pressure = history["phi"], history["pressure"]
+    first = next(k for k in range(1, len(phi)) if phi[k] == phi[k - 1])  # the final stage resumes at the same phi
+    slope = _last_bracket(phi[:first], pressure[:first])
+    assert phi[first + 1] - phi[first] == pytest.approx((P0 - pressure[first]) / slope, rel=1e-12)
+    assert len(phi) == first + 2 and final.converged and abs(final.pressure - P0) <= 1e-3 * P0

@@ -200,7 +200,7 @@ def leave_linked_saddle(model: LinkedSpheresModel, final: MinimizeResult, templa
             steps = out.steps
         else:
             phi = linked_volume(m.box.d, m.diameter, m.links) / m.box.volume
-            m, out, _, _, _, steps = bisect_to_pressure(
+            m, out, _, _, _, steps, _ = bisect_to_pressure(
                 m, x, phi, pressure, settings.force_tol, settings.pressure_rtol,
                 settings.pressure_rtol * settings.delta_phi, settings.max_steps, settings.fire_params, progress,
                 history, secant=True, polish=settings.newton_polish)

@@ -39,7 +39,8 @@ Protocol (O'Hern et al., PRE 68, 011306 (2003); VanderWerf et al., Sec. II):
    box degrees of freedom), or step 2 continues at fixed box with ``force_tol``
    until ``|P - P0| <= pressure_rtol * P0``; the bisection then shortens a step to
    the secant estimate of ``P(phi) = P0`` when that is shorter (``secant`` of
-   :func:`bisect_to_pressure`; the search has its own secant). With
+   :func:`bisect_to_pressure`, its first steps on the slope of the first stage's last
+   bracket of ``P0``; the search has its own secant). With
    ``JammingSettings.newton_polish`` either may end with a Newton polish: the enthalpy
    stage by :func:`~jamflow.minimize.newton.polish_enthalpy`, the fixed-box minimisations
    of constrained models by :func:`~jamflow.minimize.newton.polish_constrained`
@@ -301,7 +302,8 @@ def bisect_to_pressure(
     direction: int = 0,
     secant: bool = False,
     polish: bool = False,
-) -> tuple[EnergyModel, MinimizeResult, float, float, int, int]:
+    slope: float | None = None,
+) -> tuple[EnergyModel, MinimizeResult, float, float, int, int, float | None]:
     """Compress/decompress bisection of any model to ``|P - P0| <= rtol P0`` (module doc, step 2).
 
     After each fixed-box FIRE minimisation to ``force_tol`` the box is scaled by
@@ -313,7 +315,11 @@ def bisect_to_pressure(
     it is positive): ``P`` is linear in ``phi - phi_J`` on one contact network for
     harmonic contacts, so near ``P0`` the bisection's halvings shrink to a few
     Newton steps, each still from the last minimum; a rearrangement between two minima
-    gives a wrong slope for one step, which the next pair replaces.
+    gives a wrong slope for one step, which the next pair replaces. Before two minima of its
+    own give a slope, ``slope`` (the bracket of an earlier stage) serves: without it the
+    first step of a resumed bisection is the whole ``delta_phi`` of the stage before, which
+    may cross back past the bracket's lower end and decompress the packing to a fragile
+    state that rearranges (docs/notes/chains.md, "The final stage's first step").
 
     Parameters
     ----------
@@ -334,22 +340,31 @@ def bisect_to_pressure(
         Secant steps when shorter (above).
     polish : bool
         Let each minimisation end with the constrained Newton polish (:func:`_polished_fire`).
+    slope : float, optional
+        ``dP/dphi`` [epsilon / <D>^d] known from an earlier stage, > 0, for the secant steps
+        until two minima of this run give one.
 
     Returns
     -------
-    model, result, phi, delta_phi, direction, steps
-        The model in the last box, its FIRE result, and the state to resume from.
+    model, result, phi, delta_phi, direction, steps, slope
+        The model in the last box, its FIRE result, the state to resume from, and the
+        slope of the last bracket of ``P0``: the secant through the last minimum above
+        ``P0`` and the last one below it with ``P > 0`` (stopped by the verdict, a minimum
+        has only a bound on its pressure and does not count), or None when there is no
+        such pair or its slope is not positive.
     """
     d = model.box.d
     steps = 0
     x = position
     last: tuple[float, float] | None = None
-    slope: float | None = None
+    side: dict[bool, tuple[float, float]] = {}  # the last minimum above (True) and below P0 with a true P > 0
     while True:
         model, res = _minimum(model, x, phi, force_tol, max_steps - steps, fire_params, progress, history,
                               {"delta_phi": delta_phi, "steps": steps}, pressure, rtol, polish)
         steps += res.steps
         x = res.position
+        if res.pressure > 0.0 and not res.below:
+            side[res.pressure > pressure] = (phi, res.pressure)
         if abs(res.pressure - pressure) <= rtol * pressure:
             break
         if secant and res.pressure > 0.0 and not res.below:
@@ -368,7 +383,17 @@ def bisect_to_pressure(
         factor = (phi / new_phi) ** (1.0 / d)
         model, x = model.rescaled(factor, x)
         phi = new_phi
-    return model, res, phi, delta_phi, direction, steps
+    return model, res, phi, delta_phi, direction, steps, _bracket_slope(side)
+
+
+def _bracket_slope(side: dict[bool, tuple[float, float]]) -> float | None:
+    """``dP/dphi`` of the secant through the last minima above (``side[True]``) and below ``P0``, if both
+    exist and it is positive (a rearrangement between them can make ``P`` fall with ``phi``)."""
+    if len(side) < 2 or side[True][0] == side[False][0]:
+        return None
+    (phi_hi, p_hi), (phi_lo, p_lo) = side[True], side[False]
+    rise = (p_hi - p_lo) / (phi_hi - phi_lo)
+    return rise if rise > 0.0 else None
 
 
 class _Bracket:
@@ -618,7 +643,7 @@ def jam_model_to_pressure(
             c.max_steps, c.fire_params, progress, history,
         )
     else:
-        model, res, phi, delta_phi, direction, steps = bisect_to_pressure(
+        model, res, phi, delta_phi, direction, steps, slope = bisect_to_pressure(
             model, position, phi, pressure, loose, c.bisection_rtol, c.delta_phi,
             c.max_steps, c.fire_params, progress, history,
         )
@@ -638,8 +663,8 @@ def jam_model_to_pressure(
             c.max_steps - steps, c.fire_params, progress, history, slope, scout=False, polish=c.newton_polish,
         )
         return model, final, history, steps + more
-    model, final, _, _, _, more = bisect_to_pressure(
+    model, final, _, _, _, more, _ = bisect_to_pressure(
         model, res.position, phi, pressure, c.force_tol, c.pressure_rtol, delta_phi, c.max_steps - steps,
-        c.fire_params, progress, history, direction, secant=True, polish=c.newton_polish,
+        c.fire_params, progress, history, direction, secant=True, polish=c.newton_polish, slope=slope,
     )
     return model, final, history, steps + more
