@@ -225,6 +225,8 @@ def test_a_resumed_bisection_steps_on_the_slope_of_the_loose_bracket():
         runs[seeded is not None] = history
     seeded = runs[True]
     assert len(seeded["phi"]) == 2 < len(runs[False]["phi"])
+    with pytest.raises(ValueError, match="secant"):
+        bisect_to_pressure(model1, res1.position, phi1, P0, 1e-12, 1e-3, delta, 10, slope=slope)
     assert seeded["phi"][1] - seeded["phi"][0] == pytest.approx((P0 - seeded["pressure"][0]) / slope, rel=1e-12)
 
 

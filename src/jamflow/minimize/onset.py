@@ -342,7 +342,7 @@ def bisect_to_pressure(
         Let each minimisation end with the constrained Newton polish (:func:`_polished_fire`).
     slope : float, optional
         ``dP/dphi`` [epsilon / <D>^d] known from an earlier stage, > 0, for the secant steps
-        until two minima of this run give one.
+        (``secant`` must be set) until two minima of this run give one.
 
     Returns
     -------
@@ -353,6 +353,8 @@ def bisect_to_pressure(
         has only a bound on its pressure and does not count), or None when there is no
         such pair or its slope is not positive.
     """
+    if slope is not None and not secant:
+        raise ValueError("slope seeds the secant steps: pass secant=True with it")
     d = model.box.d
     steps = 0
     x = position
