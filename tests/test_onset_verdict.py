@@ -10,7 +10,12 @@ from jamflow.box import Box
 from jamflow.chains.builders import linked_packing
 from jamflow.chains.jamming import linked_volume
 from jamflow.minimize.fire import DEFAULT_FIRE, minimize_fire
-from jamflow.minimize.onset import VERDICT_SHARE, JammingSettings, bisect_to_pressure, jam_model_to_pressure
+from jamflow.minimize.onset import (
+    VERDICT_SHARE,
+    JammingSettings,
+    bisect_to_pressure,
+    jam_model_to_pressure,
+)
 from jamflow.models.links import LinkedSpheresModel
 from jamflow.models.shapes.model import ShapeModel
 from jamflow.models.spheres.model import SphereModel
