@@ -215,7 +215,8 @@ def test_a_resumed_bisection_steps_on_the_slope_of_the_loose_bracket():
     """The loose bisection returns the slope of its last bracket of ``P0`` (read back from its history), and the
     fixed-box stage at the final force tolerance resumed with it takes the secant step from its first minimum:
     ``P`` is linear in ``phi`` on one contact network, so that step lands in ``|P - P0| <= 1e-3 P0`` at once.
-    Without it the stage first steps the loose stage's whole ``delta_phi`` and needs more minimisations."""
+    Without it the stage first steps the loose stage's whole ``delta_phi`` and needs more minimisations. A slope
+    without secant steps is refused."""
     model, x = _disks(0.86)
     loose = {"phi": [], "pressure": [], "steps": []}
     model1, res1, phi1, delta, direction, _, slope = bisect_to_pressure(model, x, 0.86, P0, 1e-2 * P0, 0.1, 1e-2,
@@ -224,15 +225,15 @@ def test_a_resumed_bisection_steps_on_the_slope_of_the_loose_bracket():
     runs = {}
     for seeded in (None, slope):
         history = {"phi": [], "pressure": [], "steps": []}
-        m, res, *_ = bisect_to_pressure(model1, res1.position, phi1, P0, 1e-12, 1e-3, delta, 2_000_000,
+        _, res, *_ = bisect_to_pressure(model1, res1.position, phi1, P0, 1e-12, 1e-3, delta, 2_000_000,
                                         history=history, direction=direction, secant=True, slope=seeded)
         assert res.converged and res.max_force <= 1e-12 and abs(res.pressure - P0) <= 1e-3 * P0
         runs[seeded is not None] = history
     seeded = runs[True]
     assert len(seeded["phi"]) == 2 < len(runs[False]["phi"])
+    assert seeded["phi"][1] - seeded["phi"][0] == pytest.approx((P0 - seeded["pressure"][0]) / slope, rel=1e-12)
     with pytest.raises(ValueError, match="secant"):
         bisect_to_pressure(model1, res1.position, phi1, P0, 1e-12, 1e-3, delta, 10, slope=slope)
-    assert seeded["phi"][1] - seeded["phi"][0] == pytest.approx((P0 - seeded["pressure"][0]) / slope, rel=1e-12)
 
 
 def test_the_final_fixed_box_stage_of_jamming_starts_on_the_loose_slope():
