@@ -149,9 +149,7 @@ class ShearStabilizedModel(LinkedSpheresModel):
         (:func:`jamflow.minimize.onset.jam_model_to_pressure`): the shape is free already,
         so the stage frees the whole box and ends at the stress ``-P0 1``.
         """
-        base, x = self.rescaled(1.0, position)
-        return ShearStabilizedModel(base.box, self.diameter, self.links, x, self.potential, self.nlist,
-                                    self.length_rtol, fixed_volume=False, gram=self.gram), x
+        return self._rebased(1.0, position, fixed_volume=False)
 
     def energy_floor(self, pressure: float) -> float:
         """The linked spheres' floor at fixed volume (the box's shape changes, its volume not); 0 with the volume free."""
@@ -399,10 +397,15 @@ class ShearStabilizedModel(LinkedSpheresModel):
         ``position`` are the centres a minimiser returned (:meth:`positions` of the
         last evaluated ``q``), so the pair of (box, centres) is consistent.
         """
+        return self._rebased(factor, position, self.fixed_volume)
+
+    def _rebased(self, factor: float, position: NDArray[np.float64], fixed_volume: bool
+                 ) -> tuple[ShearStabilizedModel, NDArray[np.float64]]:
+        """The model on the last evaluated box scaled by ``factor``, at zero strain, with ``fixed_volume``."""
         box = self.last_box().scaled(factor)
         x = np.asarray(position) * factor
         model = ShearStabilizedModel(box, self.diameter, self.links, x, self.potential, self.nlist, self.length_rtol,
-                                     self.fixed_volume, self.gram)
+                                     fixed_volume, self.gram)
         return model, x
 
     def hessian(self, q: NDArray[np.float64]) -> sp.csr_matrix:
