@@ -20,6 +20,7 @@ from ..protocols.calippso import (
     DEFAULT_WARM_ENGINE,
     FINISHES,
     FIRST_LPS,
+    HIPO_MIN_COLUMNS,
     INTERIOR_POINTS,
     NEAR_START_GAP,
     SOLVER_TOL,
@@ -77,8 +78,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help=f"largest number of LPs (default {DEFAULT_MAX_ITERATIONS})")
     p.add_argument("--threads", type=integer(1, os.cpu_count() or 1), default=1, help="HiGHS threads (default 1)")
     p.add_argument("--interior", choices=INTERIOR_POINTS, default=DEFAULT_INTERIOR,
-                   help="HiGHS interior point method of the interior point LPs; hipo needs "
-                        f"pip install 'jamflow[hipo]' (default {DEFAULT_INTERIOR})")
+                   help="HiGHS interior point method of the interior point LPs: ipx on the LP, or hipo on its "
+                        "explicit dual (needs HiPO in highspy, pip install 'jamflow[hipo]'); auto takes hipo from "
+                        f"{HIPO_MIN_COLUMNS} columns (d N + 1) on when highspy has it, else ipx (default {DEFAULT_INTERIOR})")
     p.add_argument("--warm-engine", choices=WARM_ENGINES, default=DEFAULT_WARM_ENGINE,
                    help="engine of the warm simplex LPs: highs, or jamflow (a simplex on a nested-dissection "
                         "sparse LU; HiGHS solves any LP it reports trouble on); auto takes jamflow from "
@@ -102,6 +104,9 @@ def _calippso(args: argparse.Namespace) -> int:
         kwargs["bound"] = ((5e-4, args.bound[0]), (1e-5, args.bound[1]))
     with progress_bar(args.quiet, desc="calippso", unit=" LP") as bar:
         def progress(rec) -> None:
+            if rec.interior.startswith("ipx after"):
+                bar.write(f"LP {rec.iteration}: HiPO on the dual reported {rec.interior.split(': ', 1)[1]!r}; "
+                          "IPX solved the LP as it is")
             if rec.warm_fallback and rec.solver == "crash>ipm":
                 bar.write(f"LP {rec.iteration}: jamflow.simplex from the crash basis reported {rec.warm_fallback!r}; "
                           "HiGHS's interior point solved it")
@@ -128,6 +133,7 @@ def _calippso(args: argparse.Namespace) -> int:
         ("warm LPs", (f"{a['warm_lps_jamflow']} by jamflow.simplex, {a['warm_fallbacks']} of its attempts re-solved "
                       f"by HiGHS after trouble ({a['warm_fallback_reasons']}); LU by {a['warm_lu']}")),
         ("first LP", f"{a['first_lp']} ({a['first_lp_fallbacks']} crash attempt(s) re-solved by the interior point)"),
+        ("interior point LPs", f"{a['interior_lps']} ({a['interior_fallbacks']} HiPO dual attempt(s) re-solved by IPX)"),
         ("finish", f"{a['finish']} ({a['newton_attempts']} Newton attempt(s) in {a['newton_time']:.2f} s, "
                    f"{a['newton_rejections']} rejected, last because: {a['newton_last_rejection']})"),
         ("contacts N_c", f"{a['n_contacts']} (isostatic count d(N_s-1)+1 = {a['isostatic_count']}: {counting})"),

@@ -108,7 +108,7 @@ def calippso(
         HiGHS threads.
     finish : {"newton", "lp"}
         How the chain ends, see :data:`FINISHES`.
-    interior : {"ipx", "hipo"}
+    interior : {"auto", "ipx", "hipo"}
         HiGHS interior point method of the interior point LPs, see :data:`INTERIOR_POINTS`.
     warm_engine : {"auto", "highs", "jamflow"}
         Engine of the warm simplex LPs, see :data:`WARM_ENGINES`.
@@ -210,7 +210,7 @@ def _lp_record(it: int, lp: _LPSetup, sol: _Solution, step: _Step, accepted: boo
         cutoff=lp.ell / lp.sig_max, bound=lp.bound, min_active_dual=step.min_active_dual,
         max_inactive_dual=step.max_inactive_dual, accepted=accepted, warm_start=sol.warm,
         simplex_iterations=sol.simplex_iterations, ipm_iterations=sol.ipm_iterations, engine=sol.engine,
-        warm_fallback=sol.fallback, warm_lu=sol.lu)
+        warm_fallback=sol.fallback, warm_lu=sol.lu, interior=sol.interior)
 
 
 def _failed_record(it: int, lp: _LPSetup, sol: _Solution) -> IterationRecord:
@@ -221,4 +221,4 @@ def _failed_record(it: int, lp: _LPSetup, sol: _Solution) -> IterationRecord:
         lp_time=sol.seconds, solver=sol.method, cutoff=lp.ell / lp.sig_max, bound=lp.bound,
         min_active_dual=np.nan, max_inactive_dual=np.nan, accepted=False, warm_start=sol.warm,
         simplex_iterations=sol.simplex_iterations, ipm_iterations=sol.ipm_iterations, engine=sol.engine,
-        warm_fallback=sol.fallback, warm_lu=sol.lu)
+        warm_fallback=sol.fallback, warm_lu=sol.lu, interior=sol.interior)

@@ -55,13 +55,20 @@ DEFAULT_CUTOFF_NEAR: float = 1.4
 #: bound in mean radii; the first phase (``far``) bound is derived from the cutoff.
 DEFAULT_BOUND_SCHEDULE: tuple[tuple[float, float], ...] = ((5e-4, 0.1), (1e-5, 0.01))
 
-#: HiGHS interior point methods of the interior point LPs: ``ipx`` (HiGHS's default,
-#: in every highspy wheel) and ``hipo`` (nested-dissection factorisation; needs the
-#: ``hipo`` extra, ``highspy[extras]``, which exists only for highspy <= 1.15.1).
-#: ``hipo`` is opt-in: it wins only at N = 16384
-#: (measured: docs/notes/calippso-constants.md#interior_points).
-INTERIOR_POINTS: tuple[str, ...] = ("ipx", "hipo")
-DEFAULT_INTERIOR: str = "ipx"
+#: HiGHS interior point methods of the interior point LPs: ``ipx`` (in every highspy
+#: wheel) on the LP as it is, and ``hipo`` (a nested-dissection Cholesky; needs HiPO in
+#: the highspy build, ``highspy[extras]``) on the LP's explicit dual (:mod:`.dual`), whose
+#: normal equations have the contact network's sparsity where the primal's are dense.
+#: Without crossover (``ipm-nox``) HiPO solves the LP as it is. ``auto`` takes ``hipo``
+#: from :data:`HIPO_MIN_COLUMNS` columns on when the build has it, else ``ipx``.
+INTERIOR_POINTS: tuple[str, ...] = ("auto", "ipx", "hipo")
+DEFAULT_INTERIOR: str = "auto"
+#: ``auto``: HiPO on the dual from 6144 columns on (``d N + 1``; 3D N = 2048 has 6145). The first LP of a near
+#: start, CPU time of IPX + crossover / HiPO on the dual + crossover, one core: 3D
+#: N = 1024 0.81, N = 2048 1.20-1.37, N = 4096 2.64; the LS examples (N = 1024) d = 3
+#: 0.85, d = 4 0.78, d = 5 0.84; the same optimum and active set
+#: (measured: docs/notes/warm-simplex.md, "The first LP as its dual").
+HIPO_MIN_COLUMNS: int = 6144
 
 #: Engines of the warm simplex LPs: ``highs`` (HiGHS's primal simplex) or ``jamflow``
 #: (:mod:`jamflow.simplex`, a bounded simplex whose basis LU has a nested-dissection

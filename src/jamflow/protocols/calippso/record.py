@@ -71,6 +71,7 @@ class IterationRecord:
     engine: str = "highs"  # engine of the LP (highs or jamflow; interior point LPs are HiGHS's), or "newton"
     warm_fallback: str = ""  # the trouble jamflow.simplex reported before HiGHS solved the LP
     warm_lu: str = ""  # jamflow.simplex's LU library on this LP (pardiso, superlu; "+superlu": a PARDISO LU redone)
+    interior: str = ""  # interior point of the LP: ipx, hipo, hipo-dual (HiPO on its dual), "ipx after hipo-dual: why"
 
 
 @dataclass(frozen=True)
@@ -212,6 +213,9 @@ def _history(records: list[IterationRecord]) -> xr.Dataset:
     data["warm_lu"] = (("iteration",), col("warm_lu").astype(str), {
         "long_name": "LU library of jamflow.simplex on this warm LP: pardiso (MKL) or superlu; '+superlu': "
                      "a PARDISO LU with perturbed pivots was redone by SuperLU ('' = not jamflow.simplex)"})
+    data["interior"] = (("iteration",), col("interior").astype(str), {
+        "long_name": "interior point of the LP: ipx, hipo (the LP), hipo-dual (HiPO on its explicit dual), "
+                     "'ipx after hipo-dual: <trouble>' (IPX re-solved it); '' = no interior point"})
     return xr.Dataset(data, coords={"iteration": np.arange(1, len(records) + 1)})
 
 
@@ -284,6 +288,9 @@ def _result(packing: Packing, chain: _Chain, container: _Container, net: _Networ
         warm_fallbacks=sum(bool(r.warm_fallback) and r.solver != "crash>ipm" for r in records),
         warm_fallback_reasons=", ".join(sorted({r.warm_fallback for r in records if r.warm_fallback})) or "none",
         warm_lu=", ".join(sorted({r.warm_lu for r in records if r.warm_lu})) or "none",
+        interior_lps=", ".join(f"{k} {sum(r.interior == k for r in records)}"
+                               for k in sorted({r.interior for r in records if r.interior})) or "none",
+        interior_fallbacks=sum(r.interior.startswith("ipx after") for r in records),
     )
     if container.walls:
         attrs["walls"] = "hard walls on every face of the orthogonal box [0, L_mu]; wall contacts in wall_contact_*"

@@ -14,8 +14,15 @@ from numpy.typing import NDArray
 
 from ...highs import new_highs
 from .crash import _crash_basis
+from .dual import dual_lp, primal_answer
 from .lp import _highs_lp, _Rows
-from .options import DEFAULT_INTERIOR, INTERIOR_POINTS, SOLVER_TOL, WARM_ENGINES
+from .options import (
+    DEFAULT_INTERIOR,
+    HIPO_MIN_COLUMNS,
+    INTERIOR_POINTS,
+    SOLVER_TOL,
+    WARM_ENGINES,
+)
 
 #: ``hybrid``: from interior point to the warm simplex below this ``sqrt(Gamma*) - 1``.
 HYBRID_SWITCH: float = 1e-5
@@ -58,6 +65,7 @@ class _Solution:
     engine: str = "highs"  # which engine produced the answer (see WARM_ENGINES)
     fallback: str = ""  # jamflow.simplex's trouble on this LP, which HiGHS then solved
     lu: str = ""  # jamflow.simplex's LU library; "+superlu" when a PARDISO LU was redone by SuperLU
+    interior: str = ""  # the interior point that solved it: ipx, hipo (the LP), hipo-dual (its dual); "" for none
 
 
 @dataclass
@@ -106,10 +114,13 @@ class _Solver:
         self.warm_engine = warm_engine
         if interior not in INTERIOR_POINTS:
             raise ValueError(f"unknown interior point {interior!r}; choose one of {', '.join(INTERIOR_POINTS)}")
-        if self.h.setOptionValue("solver", interior) != highspy.HighsStatus.kOk:
+        hipo = self.h.setOptionValue("solver", "hipo") == highspy.HighsStatus.kOk
+        if interior == "hipo" and not hipo:
             raise ValueError(f"interior point {interior!r} is not in this highspy build: HiPO needs "
-                             "`pip install 'jamflow[hipo]'` (highspy[extras]==1.15.1, which must match highspy)")
+                             "`pip install 'jamflow[hipo]'` (highspy[extras], which must match highspy)")
         self.interior = interior
+        #: HiPO is in this highspy build
+        self.hipo = hipo
         for option in ("primal_feasibility_tolerance", "dual_feasibility_tolerance", "ipm_optimality_tolerance"):
             if self.h.setOptionValue(option, tol) != highspy.HighsStatus.kOk:
                 raise ValueError(f"HiGHS refused {option} = {tol:g}")
@@ -134,6 +145,7 @@ class _Solver:
             if sol.col is not None:
                 return sol
             fallback = sol.status
+        spent = 0.0  # wall time [s] of an attempt that failed before HiGHS's solve below
         crashed = False
         if method == "ipm" and self.crash_first and self.basis is None:
             self.crash_first = False
@@ -142,21 +154,27 @@ class _Solver:
             if sol.col is not None:
                 return sol
             fallback = sol.status
-        lp = _highs_lp(A, rhs, col_lower, col_upper)
+            spent += sol.seconds
         if method == "simplex" and not warm and not cold and self.cold_simplex_as_ipm:
             method = "ipm"
+        lp = _highs_lp(A, rhs, col_lower, col_upper)
+        if method == "ipm":
+            sol = self._interior_point(A, rhs, col_lower, col_upper, rows, lp)
+            return replace(sol, seconds=sol.seconds + spent, method="crash>ipm" if crashed else "ipm",
+                           fallback=fallback)
         status, elapsed = self._run(lp, method, carried.for_highs() if warm else None)
+        elapsed += spent
         pivots, ipm_its = self._iterations()
-        if crashed:
-            elapsed += sol.seconds
-            method = "crash>ipm"
+        extra = dict(interior=self._primal_interior()) if method == "ipm-nox" else {}
         if warm and status == highspy.HighsModelStatus.kIterationLimit:
-            warm = False
-            method = "simplex>ipm"
-            status, t_ipm = self._run(lp, "ipm", None)
-            elapsed += t_ipm
-            more_pivots, ipm_its = self._iterations()
-            pivots += more_pivots
+            sol = self._interior_point(A, rhs, col_lower, col_upper, rows, lp)
+            return replace(sol, seconds=sol.seconds + elapsed, method="simplex>ipm",
+                           simplex_iterations=sol.simplex_iterations + pivots, fallback=fallback)
+        return self._highs_answer(status, elapsed, warm, method, pivots, ipm_its, rows, fallback=fallback, **extra)
+
+    def _highs_answer(self, status, elapsed: float, warm: bool, method: str, pivots: int, ipm_its: int,
+                      rows: _Rows, **extra) -> _Solution:
+        """The answer of HiGHS's last run on the LP as it is; keeps its basis for the next LP."""
         h = self.h
         name = h.modelStatusToString(status)
         # without crossover HiGHS may stop with status "Unknown" at a primal-feasible
@@ -165,12 +183,57 @@ class _Solver:
                        and int(h.getInfo().primal_solution_status) == 2)
         if status != highspy.HighsModelStatus.kOptimal and not interior_ok:
             self.basis = None
-            return _Solution(name, elapsed, None, None, warm, method, pivots, ipm_its, fallback=fallback)
+            return _Solution(name, elapsed, None, None, warm, method, pivots, ipm_its, **extra)
         sol = h.getSolution()
         self.basis = _Basis(highs=h.getBasis()) if method != "ipm-nox" else None
         self.basis_rows = rows
         return _Solution(name, elapsed, np.asarray(sol.col_value), -np.asarray(sol.row_dual), warm, method,
-                         pivots, ipm_its, fallback=fallback)
+                         pivots, ipm_its, **extra)
+
+    def _interior_point(self, A: sp.csc_matrix, rhs, col_lower, col_upper, rows: _Rows,
+                        lp: highspy.HighsLp) -> _Solution:
+        """The LP by an interior point with crossover: HiPO on its explicit dual where
+        :attr:`interior` takes it (:meth:`_on_dual`), else (and after any trouble there,
+        recorded in ``interior``) IPX or HiPO on the LP as it is."""
+        spent, run, interior = 0.0, self._primal_interior(), self._primal_interior()
+        if self._on_dual(A.shape[1]):
+            sol = self._solve_dual(A, rhs, col_lower, col_upper, rows)
+            if sol.col is not None:
+                return sol
+            spent, run, interior = sol.seconds, "ipx", f"ipx after hipo-dual: {sol.status}"
+        status, elapsed = self._run(lp, "ipm", None, run)
+        pivots, ipm_its = self._iterations()
+        return self._highs_answer(status, elapsed + spent, False, "ipm", pivots, ipm_its, rows, interior=interior)
+
+    def _on_dual(self, columns: int) -> bool:
+        """Whether an interior point LP with crossover of ``columns`` columns is solved as its dual by HiPO."""
+        return self.interior == "hipo" or (self.interior == "auto" and self.hipo and columns >= HIPO_MIN_COLUMNS)
+
+    def _primal_interior(self) -> str:
+        """The interior point of the LP as it is: HiPO when asked for by name, else IPX."""
+        return "hipo" if self.interior == "hipo" else "ipx"
+
+    def _solve_dual(self, A: sp.csc_matrix, rhs, col_lower, col_upper, rows: _Rows) -> _Solution:
+        """The LP as its explicit dual (:mod:`.dual`) by HiPO with crossover, read back as
+        the LP's solution and vertex basis; on trouble the solution has no columns and
+        its status names the trouble."""
+        dual = dual_lp(A, rhs, col_lower, col_upper)
+        status, elapsed = self._run(dual.lp, "ipm", None, "hipo")
+        pivots, ipm_its = self._iterations()
+        h = self.h
+        if status != highspy.HighsModelStatus.kOptimal:
+            return _Solution(h.modelStatusToString(status), elapsed, None, None, False, "ipm", pivots, ipm_its,
+                             interior="hipo-dual")
+        sol, basis = h.getSolution(), h.getBasis()
+        answer = primal_answer(dual, np.asarray(sol.col_value), np.asarray(sol.row_dual),
+                               np.array([int(v) for v in basis.col_status], dtype=np.int8))
+        if answer is None:
+            return _Solution("dual basis not a primal basis", elapsed, None, None, False, "ipm", pivots, ipm_its,
+                             interior="hipo-dual")
+        z, y, col_status, row_status = answer
+        self.basis = _Basis(col=col_status, row=row_status)
+        self.basis_rows = rows
+        return _Solution("Optimal", elapsed, z, y, False, "ipm", pivots, ipm_its, interior="hipo-dual")
 
     def _solve_jamflow(self, A: sp.csc_matrix, rhs, col_lower, col_upper, carried: _Basis,
                        rows: _Rows, held: NDArray[np.bool_] | None = None) -> _Solution:
@@ -240,11 +303,13 @@ class _Solver:
             return None
         return _Basis(col=col, row=status)
 
-    def _run(self, lp: highspy.HighsLp, method: str, basis):
+    def _run(self, lp: highspy.HighsLp, method: str, basis, interior: str | None = None):
+        """Run HiGHS on ``lp`` by ``method`` (``interior``: the interior point's name, by
+        default that of the LP as it is); model status and wall time [s]."""
         h = self.h
         h.clearSolver()
         if method in ("ipm", "ipm-nox"):
-            h.setOptionValue("solver", self.interior)
+            h.setOptionValue("solver", interior or self._primal_interior())
             h.setOptionValue("run_crossover", "on" if method == "ipm" else "off")
             h.setOptionValue("presolve", self.ipm_presolve)
         else:
