@@ -1,11 +1,12 @@
 """CALiPPSO's first LP of a start near jamming: HiGHS's interior point (IPX) without
-and with crossover, against jamflow.simplex from the crash basis of the start's
-smallest gaps (``jamflow.protocols.calippso.crash``), all on one core.
+and with crossover, HiPO with crossover on the LP's explicit dual
+(``jamflow.protocols.calippso.dual``), and jamflow.simplex from the crash basis of the
+start's smallest gaps (``jamflow.protocols.calippso.crash``), all on one core.
 
 For each start the first LP is set up as the chain sets it up (``_set_up_lp``) and
 solved by the three methods in one process, the order rotating from start to start;
-CPU time (``time.process_time``) of each, IPX iterations, crossover and simplex pivots,
-and the crash's agreement with HiGHS's crossover vertex: ``g`` (relative), the active
+CPU time (``time.process_time``) of each, interior point iterations, crossover and
+simplex pivots, and the agreement of HiPO's and the crash's answers with IPX's crossover vertex: ``g`` (relative), the active
 set (rows with a dual above ``CONTACT_DUAL_REL_TOL`` of the largest) and the duals
 (largest difference over the largest dual). Writes ``OUT/first_lp.nc`` and
 ``OUT/first_lp.png``.
@@ -42,7 +43,7 @@ from jamflow.protocols.calippso.steps import _set_up_lp
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from calippso import OUT
 
-METHODS = ("ipm-nox", "ipm", "crash")
+METHODS = ("ipm-nox", "ipm", "hipo-dual", "crash")
 UNITS = {"cpu": "s", "basis_cpu": "s"}
 
 
@@ -71,6 +72,19 @@ def highs(lp, method: str) -> dict:
     return dict(cpu=cpu, status=s.h.modelStatusToString(status), ipm_its=int(info.ipm_iteration_count),
                 pivots=int(max(info.crossover_iteration_count, 0)), col=np.asarray(sol.col_value),
                 dual=-np.asarray(sol.row_dual))
+
+
+def hipo_dual(lp) -> dict:
+    """The LP as its explicit dual by HiPO with crossover, read back (the chain's ``_solve_dual``)."""
+    s = _Solver(1, interior="hipo")
+    s.ipm_presolve = NEAR_START_PRESOLVE
+    c0 = time.process_time()
+    sol = s._solve_dual(lp.A, lp.geo.rhs, lp.col_lower, lp.col_upper, lp.rows)
+    cpu = time.process_time() - c0
+    n, m = lp.A.shape[1], lp.A.shape[0]
+    return dict(cpu=cpu, status=sol.status, ipm_its=sol.ipm_iterations, pivots=sol.simplex_iterations,
+                col=sol.col if sol.col is not None else np.full(n, np.nan),
+                dual=sol.dual if sol.dual is not None else np.full(m, np.nan))
 
 
 def crash(lp) -> dict:
@@ -107,18 +121,20 @@ def main() -> None:
     args = ap.parse_args()
     fields = ["N", "rows"] + [f"{m}_{k}" for m in METHODS for k in ("cpu", "pivots", "ipm_its")] + [
         "basis_cpu", "crash_rows", "held", "dual_pivots", "flips", "factorisations", "gamma_rel", "active_diff",
-        "dual_diff", "contacts", "crash_optimal"]
+        "dual_diff", "contacts", "crash_optimal", "hipo_gamma_rel", "hipo_active_diff", "hipo_dual_diff"]
     rows = []
     for k, start in enumerate(args.starts):
         p, lp = first_lp(start)
-        order = METHODS[k % 3:] + METHODS[:k % 3]
-        runs = {m: crash(lp) if m == "crash" else highs(lp, m) for m in order}
+        order = METHODS[k % len(METHODS):] + METHODS[:k % len(METHODS)]
+        solve = dict(crash=crash, **{"hipo-dual": hipo_dual})
+        runs = {m: solve[m](lp) if m in solve else highs(lp, m) for m in order}
         row = dict(N=p.n, rows=lp.A.shape[0], crash_optimal=float(runs["crash"]["status"] == "optimal"))
         for m in METHODS:
             row.update({f"{m}_{q}": runs[m][q] for q in ("cpu", "pivots", "ipm_its")})
         row.update({q: runs["crash"][q] for q in ("basis_cpu", "crash_rows", "held", "dual_pivots", "flips",
                                                    "factorisations")})
         row.update(agreement(runs["crash"], runs["ipm"]))
+        row.update({f"hipo_{q}": v for q, v in agreement(runs["hipo-dual"], runs["ipm"]).items() if q != "contacts"})
         rows.append(row)
         print(f"{start.name}: IPX {row['ipm-nox_cpu']:.2f} s ({row['ipm-nox_ipm_its']} its) | IPX + crossover "
               f"{row['ipm_cpu']:.2f} s ({row['ipm_ipm_its']} its, {row['ipm_pivots']} crossover pivots) | crash "
@@ -130,14 +146,15 @@ def main() -> None:
     data = {f: (("start",), np.array([r[f] for r in rows], float), {"units": UNITS.get(f.split("_", 1)[-1], "1")})
             for f in fields}
     ds = xr.Dataset(data, coords={"start": [s.name for s in args.starts]}, attrs=new_dataset_attrs(
-        "CALiPPSO first LP: IPX without and with crossover against jamflow.simplex from a crash basis",
+        "CALiPPSO first LP: IPX without and with crossover, HiPO on the dual, jamflow.simplex from a crash basis",
         {"starts": [str(s) for s in args.starts]}))
     write_dataset(ds, OUT / args.output)
     fig, ax = plt.subplots(figsize=(6, 4))
     x = np.arange(len(rows))
     for i, (m, label) in enumerate((("ipm-nox", "IPX, no crossover"), ("ipm", "IPX + crossover"),
+                                    ("hipo-dual", "HiPO on the dual + crossover"),
                                     ("crash", "crash basis + jamflow.simplex"))):
-        ax.bar(x + (i - 1) * 0.27, ds[f"{m}_cpu"].values, 0.27, label=label)
+        ax.bar(x + (i - 1.5) * 0.2, ds[f"{m}_cpu"].values, 0.2, label=label)
     ax.set_xticks(x, [f"N = {int(n)}\n{s.split('_')[-1][:-3]}" for n, s in zip(ds.N.values, ds.start.values)])
     ax.set_ylabel("CPU time of the first LP [s]")
     ax.legend()

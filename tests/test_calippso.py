@@ -335,7 +335,7 @@ def test_jamming_lp_is_the_first_lp_of_the_chain():
     lp = jamming_lp(start)
     h = highspy.Highs()
     h.setOptionValue("output_flag", False)
-    h.setOptionValue("solver", "ipm")
+    h.setOptionValue("solver", "ipx")
     h.passModel(lp.to_highs())
     h.run()
     assert h.getModelStatus() == highspy.HighsModelStatus.kOptimal

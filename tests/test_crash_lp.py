@@ -49,7 +49,7 @@ def solved(request):
     lp = _first_lp(request.param)
     h = highspy.Highs()
     h.silent()
-    for option, value in (("solver", "ipm"), ("run_crossover", "on"), ("presolve", "off"), ("threads", 1),
+    for option, value in (("solver", "ipx"), ("run_crossover", "on"), ("presolve", "off"), ("threads", 1),
                           ("primal_feasibility_tolerance", SOLVER_TOL), ("dual_feasibility_tolerance", SOLVER_TOL),
                           ("ipm_optimality_tolerance", SOLVER_TOL)):
         h.setOptionValue(option, value)

@@ -79,7 +79,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--threads", type=integer(1, os.cpu_count() or 1), default=1, help="HiGHS threads (default 1)")
     p.add_argument("--interior", choices=INTERIOR_POINTS, default=DEFAULT_INTERIOR,
                    help="HiGHS interior point method of the interior point LPs: ipx on the LP, or hipo on its "
-                        "explicit dual (needs HiPO in highspy, pip install 'jamflow[hipo]'); auto takes hipo from "
+                        "explicit dual (needs HiPO in highspy: highspy[extras]); auto takes hipo from "
                         f"{HIPO_MIN_COLUMNS} columns (d N + 1) on when highspy has it, else ipx (default {DEFAULT_INTERIOR})")
     p.add_argument("--warm-engine", choices=WARM_ENGINES, default=DEFAULT_WARM_ENGINE,
                    help="engine of the warm simplex LPs: highs, or jamflow (a simplex on a nested-dissection "

@@ -100,6 +100,14 @@ LP safe with any cutoff; measured: docs/notes/calippso-constants.md#near_start_g
 and solves its interior point LPs without HiGHS presolve, whose vertex is the better
 warm start (:data:`NEAR_START_PRESOLVE`).
 
+An interior point LP with crossover is solved by IPX as it is, or by HiPO as its
+explicit dual (:mod:`~jamflow.protocols.calippso.dual`; ``interior``, default ``auto``:
+HiPO from :data:`HIPO_MIN_COLUMNS` columns on). The primal's normal equations are dense
+(``g``'s column touches every row); the dual's have the contact network's sparsity.
+The dual's answer is read back as the LP's columns, forces and vertex basis; trouble
+there (a status other than optimal, a basis that maps to no primal vertex basis) is
+re-solved by IPX, recorded per LP in ``interior`` and counted in ``interior_fallbacks``.
+
 Newton finish
 -------------
 In the tail the chain fine-tunes positions of a network that no longer changes. With

@@ -114,7 +114,8 @@ def primal_answer(dual: DualLP, col_value: NDArray[np.float64], row_dual: NDArra
     Returns
     -------
     (z, y, col_status, row_status), or None when the dual's basis does not map to a
-    primal basis (not one basic variable per primal row).
+    primal vertex basis (not one basic variable per primal row; e.g. a basic logical of
+    a dual row leaves its column nonbasic off its bounds).
     """
     m = dual.n_rows
     n = len(dual.col_lower)
@@ -134,4 +135,6 @@ def primal_answer(dual: DualLP, col_value: NDArray[np.float64], row_dual: NDArra
     col_status_primal[dual.free] = free_status
     if int(np.sum(row_status == _BASIC)) + int(np.sum(col_status_primal == _BASIC)) != m:
         return None
+    # a nonbasic column's value is its bound (the dual's row duals carry its rounding)
+    z = np.where(col_status_primal == _LOWER, dual.col_lower, np.where(col_status_primal == _UPPER, dual.col_upper, z))
     return z, y, col_status_primal, row_status

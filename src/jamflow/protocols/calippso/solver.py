@@ -117,7 +117,7 @@ class _Solver:
         hipo = self.h.setOptionValue("solver", "hipo") == highspy.HighsStatus.kOk
         if interior == "hipo" and not hipo:
             raise ValueError(f"interior point {interior!r} is not in this highspy build: HiPO needs "
-                             "`pip install 'jamflow[hipo]'` (highspy[extras], which must match highspy)")
+                             "`pip install 'highspy[extras]'` (highspy-extras of highspy's version)")
         self.interior = interior
         #: HiPO is in this highspy build
         self.hipo = hipo

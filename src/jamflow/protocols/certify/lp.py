@@ -45,7 +45,8 @@ class MotionLP:
         self.h.setOptionValue("primal_feasibility_tolerance", 1e-9)
         self.h.setOptionValue("dual_feasibility_tolerance", 1e-9)
         self.solver = solver
-        self.h.setOptionValue("solver", solver)
+        # IPX by name: a highspy build with HiPO takes HiPO for "ipm"
+        self.h.setOptionValue("solver", "ipx" if solver == "ipm" else solver)
         if solver == "ipm":
             # any optimal point is a valid motion, so no vertex (crossover) is needed;
             # HiGHS 1.x IPX stalled with presolve on some symmetric lattice LPs, and
