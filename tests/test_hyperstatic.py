@@ -201,8 +201,10 @@ def test_mono_ls_check_and_certify_agree(mono, tmp_path, capsys):
 
 
 def test_walls_mono_stores_geometric_pair_and_wall_contacts():
-    """2D monodisperse between walls (seed 2: the dual vertex left 15 rattlers)."""
-    p0 = random_packing(64, 2, 0.5, "mono", seed=2)
+    """2D monodisperse between walls. Which optimal vertex HiGHS returns decides whether
+    the duals strip force-bearing particles; with seed 1 they do (highspy 1.15.1: 17
+    rattlers of the dual vertex, 2 of the geometric network), the case under test."""
+    p0 = random_packing(64, 2, 0.5, "mono", seed=1)
     D = 0.9 * p0.diameter
     res = calippso(p0.evolve(position=0.5 * D.max() + p0.position * (1.0 - D.max()), diameter=D), walls=True)
     p, wc, fw = res.packing, res.wall_contacts, res.wall_force
