@@ -137,7 +137,10 @@ def main() -> None:
         row.update({f"hipo_{q}": v for q, v in agreement(runs["hipo-dual"], runs["ipm"]).items() if q != "contacts"})
         rows.append(row)
         print(f"{start.name}: IPX {row['ipm-nox_cpu']:.2f} s ({row['ipm-nox_ipm_its']} its) | IPX + crossover "
-              f"{row['ipm_cpu']:.2f} s ({row['ipm_ipm_its']} its, {row['ipm_pivots']} crossover pivots) | crash "
+              f"{row['ipm_cpu']:.2f} s ({row['ipm_ipm_its']} its, {row['ipm_pivots']} crossover pivots) | HiPO on the dual + "
+              f"crossover {row['hipo-dual_cpu']:.2f} s ({row['hipo-dual_ipm_its']} its, {row['hipo-dual_pivots']} "
+              f"crossover pivots; Gamma {row['hipo_gamma_rel']:.1e} active {row['hipo_active_diff']:.0f} duals "
+              f"{row['hipo_dual_diff']:.1e}) | crash "
               f"{runs['crash']['status']} {row['crash_cpu']:.2f} s (basis {row['basis_cpu']:.2f} s, "
               f"{row['crash_rows']} rows, {row['held']} held; {row['crash_pivots']} pivots, {row['dual_pivots']} dual, "
               f"{row['flips']} flips, {row['factorisations']} LUs) | HiGHS/crash {row['ipm_cpu'] / row['crash_cpu']:.2f} "
