@@ -4,11 +4,12 @@ and with crossover, HiPO with crossover on the LP's explicit dual
 start's smallest gaps (``jamflow.protocols.calippso.crash``), all on one core.
 
 For each start the first LP is set up as the chain sets it up (``_set_up_lp``) and
-solved by the three methods in one process, the order rotating from start to start;
+solved by the four methods in one process, the order rotating from start to start;
 CPU time (``time.process_time``) of each, interior point iterations, crossover and
-simplex pivots, and the agreement of HiPO's and the crash's answers with IPX's crossover vertex: ``g`` (relative), the active
-set (rows with a dual above ``CONTACT_DUAL_REL_TOL`` of the largest) and the duals
-(largest difference over the largest dual). Writes ``OUT/first_lp.nc`` and
+simplex pivots, and the agreement of HiPO's and the crash's answers with IPX's
+crossover vertex: ``g`` (relative), the active set (rows with a dual above
+``CONTACT_DUAL_REL_TOL`` of the largest) and the duals (largest difference over the
+largest dual). Writes ``OUT/first_lp.nc`` and
 ``OUT/first_lp.png``.
 
 Run: ``python benchmarks/first_lp.py --starts benchmarks/output/calippso_start_ls_p1e+07_N2048_s1.nc ...``
@@ -137,10 +138,10 @@ def main() -> None:
         row.update({f"hipo_{q}": v for q, v in agreement(runs["hipo-dual"], runs["ipm"]).items() if q != "contacts"})
         rows.append(row)
         print(f"{start.name}: IPX {row['ipm-nox_cpu']:.2f} s ({row['ipm-nox_ipm_its']} its) | IPX + crossover "
-              f"{row['ipm_cpu']:.2f} s ({row['ipm_ipm_its']} its, {row['ipm_pivots']} crossover pivots) | HiPO on the dual + "
-              f"crossover {row['hipo-dual_cpu']:.2f} s ({row['hipo-dual_ipm_its']} its, {row['hipo-dual_pivots']} "
-              f"crossover pivots; Gamma {row['hipo_gamma_rel']:.1e} active {row['hipo_active_diff']:.0f} duals "
-              f"{row['hipo_dual_diff']:.1e}) | crash "
+              f"{row['ipm_cpu']:.2f} s ({row['ipm_ipm_its']} its, {row['ipm_pivots']} crossover pivots) | "
+              f"HiPO on the dual + crossover {row['hipo-dual_cpu']:.2f} s ({row['hipo-dual_ipm_its']} its, "
+              f"{row['hipo-dual_pivots']} crossover pivots; Gamma {row['hipo_gamma_rel']:.1e} active "
+              f"{row['hipo_active_diff']:.0f} duals {row['hipo_dual_diff']:.1e}) | crash "
               f"{runs['crash']['status']} {row['crash_cpu']:.2f} s (basis {row['basis_cpu']:.2f} s, "
               f"{row['crash_rows']} rows, {row['held']} held; {row['crash_pivots']} pivots, {row['dual_pivots']} dual, "
               f"{row['flips']} flips, {row['factorisations']} LUs) | HiGHS/crash {row['ipm_cpu'] / row['crash_cpu']:.2f} "

@@ -180,5 +180,6 @@ def test_trouble_on_the_dual_is_solved_by_ipx_printed_and_counted(near_start, mo
     write_packing(near_start, tmp_path / "in.nc")
     assert main(["calippso", str(tmp_path / "in.nc"), str(tmp_path / "out.nc"), "--interior", "hipo"]) == 0
     out = capsys.readouterr()
-    assert "LP 1: HiPO on the dual reported 'dual basis not a primal basis'; IPX solved the LP as it is" in out.out + out.err
+    line = "LP 1: HiPO on the dual reported 'dual basis not a primal basis'; IPX solved the LP as it is"
+    assert line in out.out + out.err
     assert "(1 HiPO dual attempt(s) re-solved by IPX)" in out.out

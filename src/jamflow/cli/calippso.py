@@ -80,7 +80,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--interior", choices=INTERIOR_POINTS, default=DEFAULT_INTERIOR,
                    help="HiGHS interior point method of the interior point LPs: ipx on the LP, or hipo on its "
                         "explicit dual (needs HiPO in highspy: highspy[extras]); auto takes hipo from "
-                        f"{HIPO_MIN_COLUMNS} columns (d N + 1) on when highspy has it, else ipx (default {DEFAULT_INTERIOR})")
+                        f"{HIPO_MIN_COLUMNS} columns (d N + 1) on when highspy has it, else ipx "
+                        f"(default {DEFAULT_INTERIOR})")
     p.add_argument("--warm-engine", choices=WARM_ENGINES, default=DEFAULT_WARM_ENGINE,
                    help="engine of the warm simplex LPs: highs, or jamflow (a simplex on a nested-dissection "
                         "sparse LU; HiGHS solves any LP it reports trouble on); auto takes jamflow from "

@@ -11,8 +11,7 @@ rows) is dense. Its dual::
 has one equality row per free column of the primal; its normal matrix ``A^T Theta A``
 (columns by columns) has the contact network's sparsity and one dense row, ``g``'s.
 HiPO's nested-dissection Cholesky of it is what makes the first LP of a 3D near start
-2.6 times faster at N = 4096 (measured: docs/notes/warm-simplex.md, "The first LP as
-its dual").
+2.6 times faster at N = 4096 (measured: docs/notes/calippso-constants.md#interior_points).
 
 The dual's row duals are the primal columns ``z`` (HiGHS's sign convention: reduced
 costs ``c - M^T lambda``, so ``M^T z <= (rhs, -l, u)`` is the primal's feasibility),
@@ -100,8 +99,8 @@ def primal_answer(dual: DualLP, col_value: NDArray[np.float64], row_dual: NDArra
                   col_status: NDArray[np.int8]) -> tuple[NDArray[np.float64], NDArray[np.float64],
                                                          NDArray[np.int8], NDArray[np.int8]] | None:
     """The primal LP's answer from the dual's: columns ``z``, row forces ``y`` (the
-    chain's sign: HiGHS's primal row duals negated; non-negative up to the tolerance) and the vertex basis as HiGHS status
-    codes (column statuses, row statuses).
+    chain's sign: HiGHS's primal row duals negated; non-negative up to the tolerance)
+    and the vertex basis as HiGHS status codes (column statuses, row statuses).
 
     Parameters
     ----------
@@ -136,5 +135,6 @@ def primal_answer(dual: DualLP, col_value: NDArray[np.float64], row_dual: NDArra
     if int(np.sum(row_status == _BASIC)) + int(np.sum(col_status_primal == _BASIC)) != m:
         return None
     # a nonbasic column's value is its bound (the dual's row duals carry its rounding)
-    z = np.where(col_status_primal == _LOWER, dual.col_lower, np.where(col_status_primal == _UPPER, dual.col_upper, z))
+    z = np.where(col_status_primal == _LOWER, dual.col_lower,
+                 np.where(col_status_primal == _UPPER, dual.col_upper, z))
     return z, y, col_status_primal, row_status

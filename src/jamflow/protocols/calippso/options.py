@@ -63,11 +63,11 @@ DEFAULT_BOUND_SCHEDULE: tuple[tuple[float, float], ...] = ((5e-4, 0.1), (1e-5, 0
 #: from :data:`HIPO_MIN_COLUMNS` columns on when the build has it, else ``ipx``.
 INTERIOR_POINTS: tuple[str, ...] = ("auto", "ipx", "hipo")
 DEFAULT_INTERIOR: str = "auto"
-#: ``auto``: HiPO on the dual from 6144 columns on (``d N + 1``; 3D N = 2048 has 6145). The first LP of a near
-#: start, CPU time of IPX + crossover / HiPO on the dual + crossover, one core: 3D
-#: N = 1024 0.81, N = 2048 1.20-1.37, N = 4096 2.64; the LS examples (N = 1024) d = 3
-#: 0.85, d = 4 0.78, d = 5 0.84; the same optimum and active set
-#: (measured: docs/notes/warm-simplex.md, "The first LP as its dual").
+#: ``auto``: HiPO on the dual from 6144 columns (``d N + 1``; 3D N = 2048 has 6145) on.
+#: CPU time of a near start's first LP, IPX + crossover / HiPO on the dual + crossover,
+#: one core: 3D N = 1024 0.81, N = 2048 1.20-1.37, N = 4096 2.64; the LS examples
+#: (N = 1024) d = 3, 4, 5: 0.85, 0.78, 0.84; the same optimum and active set
+#: (measured: docs/notes/calippso-constants.md#interior_points).
 HIPO_MIN_COLUMNS: int = 6144
 
 #: Engines of the warm simplex LPs: ``highs`` (HiGHS's primal simplex) or ``jamflow``
