@@ -18,6 +18,7 @@ from ..protocols.calippso import (
     DEFAULT_TOL_GAMMA,
     DEFAULT_TOL_S,
     DEFAULT_WARM_ENGINE,
+    DUAL_FALLBACK,
     FINISHES,
     FIRST_LPS,
     HIPO_MIN_COLUMNS,
@@ -105,8 +106,8 @@ def _calippso(args: argparse.Namespace) -> int:
         kwargs["bound"] = ((5e-4, args.bound[0]), (1e-5, args.bound[1]))
     with progress_bar(args.quiet, desc="calippso", unit=" LP") as bar:
         def progress(rec) -> None:
-            if rec.interior.startswith("ipx after"):
-                bar.write(f"LP {rec.iteration}: HiPO on the dual reported {rec.interior.split(': ', 1)[1]!r}; "
+            if rec.interior.startswith(DUAL_FALLBACK):
+                bar.write(f"LP {rec.iteration}: HiPO on the dual reported {rec.interior[len(DUAL_FALLBACK):]!r}; "
                           "IPX solved the LP as it is")
             if rec.warm_fallback and rec.solver == "crash>ipm":
                 bar.write(f"LP {rec.iteration}: jamflow.simplex from the crash basis reported {rec.warm_fallback!r}; "

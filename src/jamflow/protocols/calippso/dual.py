@@ -118,7 +118,7 @@ def primal_answer(dual: DualLP, col_value: NDArray[np.float64], row_dual: NDArra
     """
     m = dual.n_rows
     n = len(dual.col_lower)
-    z = dual.col_lower.copy()
+    z = np.zeros(n)
     z[dual.free] = row_dual
     y = np.asarray(col_value[:m], dtype=np.float64)
     row_status = np.where(col_status[:m] == _BASIC, _UPPER, _BASIC).astype(np.int8)

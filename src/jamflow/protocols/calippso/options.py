@@ -65,10 +65,14 @@ INTERIOR_POINTS: tuple[str, ...] = ("auto", "ipx", "hipo")
 DEFAULT_INTERIOR: str = "auto"
 #: ``auto``: HiPO on the dual from 6144 columns (``d N + 1``; 3D N = 2048 has 6145) on.
 #: CPU time of a near start's first LP, IPX + crossover / HiPO on the dual + crossover,
-#: one core: 3D N = 1024 0.81, N = 2048 1.20-1.37, N = 4096 2.64; the LS examples
-#: (N = 1024) d = 3, 4, 5: 0.85, 0.78, 0.84; the same optimum and active set
+#: one core: 3D N = 1024 0.69-0.81, N = 2048 1.20-1.37, N = 4096 2.43-2.64; the LS
+#: examples (N = 1024) d = 3, 4, 5: 0.85, 0.78, 0.84, tiled to N = 2048 in d = 4, 5: 2.11,
+#: 1.46; the same optimum and active set
 #: (measured: docs/notes/calippso-constants.md#interior_points).
 HIPO_MIN_COLUMNS: int = 6144
+#: The ``interior`` of an LP that HiPO on the dual had trouble with, before the trouble;
+#: IPX then solved the LP as it is.
+DUAL_FALLBACK: str = "ipx after hipo-dual: "
 
 #: Engines of the warm simplex LPs: ``highs`` (HiGHS's primal simplex) or ``jamflow``
 #: (:mod:`jamflow.simplex`, a bounded simplex whose basis LU has a nested-dissection

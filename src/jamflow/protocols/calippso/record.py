@@ -14,6 +14,7 @@ from numpy.typing import NDArray
 from ...network.forces import MIN_NORM
 from ...state.packing import Packing
 from ...tolerances import CONTACT_GAP_TOL
+from .options import DUAL_FALLBACK
 
 if TYPE_CHECKING:
     from .container import _Container
@@ -71,7 +72,7 @@ class IterationRecord:
     engine: str = "highs"  # engine of the LP (highs or jamflow; interior point LPs are HiGHS's), or "newton"
     warm_fallback: str = ""  # the trouble jamflow.simplex reported before HiGHS solved the LP
     warm_lu: str = ""  # jamflow.simplex's LU library on this LP (pardiso, superlu; "+superlu": a PARDISO LU redone)
-    interior: str = ""  # interior point of the LP: ipx, hipo, hipo-dual (HiPO on its dual), "ipx after hipo-dual: why"
+    interior: str = ""  # interior point of the LP: ipx, hipo, hipo-dual (HiPO on its dual), DUAL_FALLBACK + why
 
 
 @dataclass(frozen=True)
@@ -290,7 +291,7 @@ def _result(packing: Packing, chain: _Chain, container: _Container, net: _Networ
         warm_lu=", ".join(sorted({r.warm_lu for r in records if r.warm_lu})) or "none",
         interior_lps=", ".join(f"{k} {sum(r.interior == k for r in records)}"
                                for k in sorted({r.interior for r in records if r.interior})) or "none",
-        interior_fallbacks=sum(r.interior.startswith("ipx after") for r in records),
+        interior_fallbacks=sum(r.interior.startswith(DUAL_FALLBACK) for r in records),
     )
     if container.walls:
         attrs["walls"] = "hard walls on every face of the orthogonal box [0, L_mu]; wall contacts in wall_contact_*"

@@ -18,6 +18,7 @@ from .dual import dual_lp, primal_answer
 from .lp import _highs_lp, _Rows
 from .options import (
     DEFAULT_INTERIOR,
+    DUAL_FALLBACK,
     HIPO_MIN_COLUMNS,
     INTERIOR_POINTS,
     SOLVER_TOL,
@@ -195,13 +196,13 @@ class _Solver:
         """The LP by an interior point with crossover: HiPO on its explicit dual where
         :attr:`interior` takes it (:meth:`_on_dual`), else (and after any trouble there,
         recorded in ``interior``) IPX or HiPO on the LP as it is."""
-        spent, run, interior = 0.0, self._primal_interior(), self._primal_interior()
+        spent, interior = 0.0, self._primal_interior()
         if self._on_dual(A.shape[1]):
             sol = self._solve_dual(A, rhs, col_lower, col_upper, rows)
             if sol.col is not None:
                 return sol
-            spent, run, interior = sol.seconds, "ipx", f"ipx after hipo-dual: {sol.status}"
-        status, elapsed = self._run(lp, "ipm", None, run)
+            spent, interior = sol.seconds, DUAL_FALLBACK + sol.status
+        status, elapsed = self._run(lp, "ipm", None, "ipx" if spent else interior)
         pivots, ipm_its = self._iterations()
         return self._highs_answer(status, elapsed + spent, False, "ipm", pivots, ipm_its, rows, interior=interior)
 
