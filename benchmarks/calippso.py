@@ -5,7 +5,7 @@ Every timed run is the whole ``jamflow calippso IN OUT`` command in a child proc
 Parts (d = 3 monodisperse unless stated):
 
 ``scaling``
-    Time to jam, number of LPs and median LP time against N = 256 ... 4096 from
+    Time to jam, number of LPs and median LP time against N = 256 ... 4096 (``--sizes``) from
     random starts (RSA at phi0 = 0.3) and from near-jamming starts (an LS compression,
     fast stage kappa0 = 5e-3 to p = 500 then kappa = 1e-3, to p = ``NEAR_PRESSURE``),
     ``--seeds`` starts of each kind per N (the LP count of a chain moves with the
@@ -136,6 +136,8 @@ NEAR_PRESSURE = 1e7
 #: Issue 19 targets for the whole command on the LS examples [s] (issue 9 had 10, 40, 120).
 LS_TARGETS = {3: 5.0, 4: 15.0, 5: 40.0}
 PAPER_EXPONENTS = {"time": 3.0, "t_lp": 2.34, "lps": 1.04}
+#: N of the 'scaling' part by default (``--sizes``)
+SCALING_SIZES = (256, 512, 1024, 2048, 4096)
 METRICS = ("time", "cpu_time", "peak_memory", "lps", "t_lp", "phi", "overlap", "fb", "iso")
 #: units of the quantities the parts store that have one (the others are counts or ratios)
 UNITS = {"time": "s", "cpu_time": "s", "peak_memory": "B", "t_lp": "s", "t_lps": "s"}
@@ -229,8 +231,9 @@ def median_over_seeds(values: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.array([np.median(v[np.isfinite(v)]) if np.isfinite(v).any() else np.nan for v in values])
 
 
-def part_scaling(quick: bool, max_random: int, seeds: int, jobs: int) -> xr.Dataset:
-    sizes = np.array([128, 256] if quick else [256, 512, 1024, 2048, 4096])
+def part_scaling(quick: bool, max_random: int, seeds: int, jobs: int,
+                 sizes: tuple[int, ...] = SCALING_SIZES) -> xr.Dataset:
+    sizes = np.array([128, 256] if quick else sorted(sizes))
     kinds = {"random": random_start, "near": near_start}
     seed_list = list(range(1, seeds + 1))
     tasks = [(kind, int(n), seed) for kind in kinds for n in sizes for seed in seed_list
@@ -251,7 +254,7 @@ def part_scaling(quick: bool, max_random: int, seeds: int, jobs: int) -> xr.Data
     ds = xr.Dataset(data, coords={"start": list(kinds), "N": sizes, "seed": seed_list})
     exps = {}
     grid = np.broadcast_to(sizes[:, None], (len(sizes), len(seed_list)))
-    for kind in kinds:
+    for kind in sorted({t[0] for t in tasks}, key=list(kinds).index):
         for k in PAPER_EXPONENTS:
             y = ds[k].sel(start=kind).values
             for suffix, keep in (("", sizes > 0), ("_from_1024", sizes >= 1024)):
@@ -266,7 +269,8 @@ def part_scaling(quick: bool, max_random: int, seeds: int, jobs: int) -> xr.Data
                           f"{exps[f'exponent_{kind}_{k}_from_1024']:.2f} ± {exps[f'exponent_{kind}_{k}_from_1024_err']:.2f}"
                           f" ({PAPER_EXPONENTS[k]:g})" for k in PAPER_EXPONENTS), flush=True)
     ds.attrs.update(new_dataset_attrs("CALiPPSO scaling with N",
-                                      {"quick": quick, "near_pressure": NEAR_PRESSURE, "seeds": seeds, "jobs": jobs},
+                                      {"quick": quick, "near_pressure": NEAR_PRESSURE, "seeds": seeds, "jobs": jobs,
+                                       "max_random": max_random},
                                       **exps, **{f"paper_exponent_{k}": v for k, v in PAPER_EXPONENTS.items()}))
     return ds
 
@@ -728,6 +732,8 @@ def main() -> None:
                     help="parts to run (default all; 'large' takes tens of minutes)")
     ap.add_argument("--large-n", type=int, default=16384, help="N of the 'large' part (default 16384)")
     ap.add_argument("--seeds", type=int, default=3, help="starts of each kind and N in 'scaling' (seeds 1 .. SEEDS; default 3)")
+    ap.add_argument("--sizes", type=int, nargs="+", default=list(SCALING_SIZES),
+                    help=f"N of 'scaling' (default {' '.join(map(str, SCALING_SIZES))}; 8192 and up take hours)")
     ap.add_argument("--jobs", type=int, default=1, help="whole commands of 'scaling' run at once (default 1)")
     ap.add_argument("--max-random", type=int, default=4096,
                     help="largest N of the random starts in 'scaling' (3D N = 1024 takes ~200 LPs, ~6 min)")
@@ -745,7 +751,7 @@ def main() -> None:
     if args.seeds < 1 or args.jobs < 1:
         ap.error("--seeds and --jobs must be at least 1")
     OUT.mkdir(exist_ok=True)
-    runners = {"scaling": lambda: part_scaling(args.quick, args.max_random, args.seeds, args.jobs),
+    runners = {"scaling": lambda: part_scaling(args.quick, args.max_random, args.seeds, args.jobs, tuple(args.sizes)),
                "ls": lambda: part_ls(args.quick),
                "preset": lambda: part_preset(args.quick),
                "finish": lambda: part_finish(args.quick, args.max_finish),
