@@ -750,6 +750,8 @@ def main() -> None:
     args = ap.parse_args()
     if args.seeds < 1 or args.jobs < 1:
         ap.error("--seeds and --jobs must be at least 1")
+    if min(args.sizes) < 2 or len(set(args.sizes)) != len(args.sizes):
+        ap.error("--sizes must be distinct particle numbers of at least 2")
     OUT.mkdir(exist_ok=True)
     runners = {"scaling": lambda: part_scaling(args.quick, args.max_random, args.seeds, args.jobs, tuple(args.sizes)),
                "ls": lambda: part_ls(args.quick),
