@@ -196,13 +196,14 @@ class _Solver:
         """The LP by an interior point with crossover: HiPO on its explicit dual where
         :attr:`interior` takes it (:meth:`_on_dual`), else (and after any trouble there,
         recorded in ``interior``) IPX or HiPO on the LP as it is."""
-        spent, interior = 0.0, self._primal_interior()
+        spent, run = 0.0, self._primal_interior()
+        interior = run
         if self._on_dual(A.shape[1]):
             sol = self._solve_dual(A, rhs, col_lower, col_upper, rows)
             if sol.col is not None:
                 return sol
-            spent, interior = sol.seconds, DUAL_FALLBACK + sol.status
-        status, elapsed = self._run(lp, "ipm", None, "ipx" if spent else interior)
+            spent, run, interior = sol.seconds, "ipx", DUAL_FALLBACK + sol.status
+        status, elapsed = self._run(lp, "ipm", None, run)
         pivots, ipm_its = self._iterations()
         return self._highs_answer(status, elapsed + spent, False, "ipm", pivots, ipm_its, rows, interior=interior)
 
