@@ -10,6 +10,7 @@ code  meaning
 0     done (the outputs are written)
 1     refused or failed: bad input file or value, impossible target, disk full
 2     usage: an option missing, unknown or out of its range (:mod:`jamflow.cli.types`)
+3     stopped on request (``calippso --stop-after``): no output yet, the checkpoint holds the run
 130   interrupted by Ctrl-C (SIGINT); no partial output is left
 141   stdout closed early (``jamflow check x.nc | head -1``); quiet
 ====  =====================================================================
@@ -149,7 +150,7 @@ def _run(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:
         code = int(args.handler(args) or 0)
     if code == 0:
         for line in replaced:
-            if "flow checkpoint" not in line:  # a checkpoint is resumed, not replaced
+            if "checkpoint (" not in line:  # a checkpoint is resumed, not replaced
                 print(f"jamflow {args.command}: replaced {line}", file=sys.stderr)
     return code
 

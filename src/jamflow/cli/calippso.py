@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
+from pathlib import Path
 
 from ..io import read_packing, write_dataset
 from ..protocols.calippso import (
+    CHECKPOINT_EVERY,
     CRASH_MIN_COLUMNS,
     DEFAULT_CUTOFF,
     DEFAULT_CUTOFF_NEAR,
@@ -28,6 +31,7 @@ from ..protocols.calippso import (
     SOLVERS,
     WARM_ENGINE_MIN_COLUMNS,
     WARM_ENGINES,
+    ChainStopped,
     calippso,
     result_to_dataset,
 )
@@ -39,7 +43,13 @@ from .common import (
     progress_bar,
     stage_parameters,
 )
-from .types import count, integer, path_with_suffix, positive, real
+from .types import UsageError, count, integer, path_with_suffix, positive, real
+
+#: Exit code of a run stopped by ``--stop-after`` (its chain is in the checkpoint).
+STOPPED: int = 3
+
+#: Options that manage the run, not the chain (a resumed chain's output equals the uninterrupted one's).
+RUN_ONLY: tuple[str, ...] = ("checkpoint", "checkpoint_every", "stop_after")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -51,7 +61,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "max|s| < tol-s; contacts and forces from the LP duals; a degenerate (hyperstatic, "
                     "crystalline) packing stores its geometric contacts with minimum-norm balanced forces "
                     "(attribute force_assignment). Writes the jammed packing with the per-LP history.",
-        reads=("packing",), writes=("out",), packings=("out",),
+        reads=("packing",), writes=("out", "checkpoint"), packings=("out",),
+        makes={"checkpoint": ("calippso-checkpoint",)},
     )
     p.add_argument("packing", help="input netCDF packing (no overlaps)")
     p.add_argument("out", type=path_with_suffix(".nc"), help="output netCDF jammed packing")
@@ -95,12 +106,24 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="newton: once the network is isostatic in the chain's tail, solve its square system by "
                         "Newton and keep it only if certified (positive forces, no overlap, same geometric "
                         f"network), else go on with LPs; lp: the pure LP chain (default {DEFAULT_FINISH})")
+    p.add_argument("--checkpoint", type=path_with_suffix(".nc"), default=None,
+                   help="checkpoint netCDF: written every --checkpoint-every seconds, resumed from if present (only "
+                        "by the same input, options but --max-iterations, and jamflow version), removed once the "
+                        "output is written; a resumed chain repeats the uninterrupted one bit for bit")
+    p.add_argument("--checkpoint-every", type=real(0.0, need="a number of seconds >= 0"), default=CHECKPOINT_EVERY,
+                   metavar="SECONDS", help=f"wall time between checkpoint writes (default {CHECKPOINT_EVERY:g})")
+    p.add_argument("--stop-after", type=count, default=None, metavar="LPS",
+                   help="stop this run after this many LPs, writing the checkpoint (resume later; needs --checkpoint)")
     add_quiet(p)
     add_preset(p)
 
 
 def _calippso(args: argparse.Namespace) -> int:
+    if args.stop_after is not None and args.checkpoint is None:
+        raise UsageError("--stop-after needs --checkpoint (where the stopped chain is kept)")
     packing = read_packing(args.packing)
+    if args.checkpoint and Path(args.checkpoint).exists() and not args.quiet:
+        print(f"jamflow calippso: resuming from {args.checkpoint}", file=sys.stderr)
     kwargs = {}
     if args.bound is not None:
         kwargs["bound"] = ((5e-4, args.bound[0]), (1e-5, args.bound[1]))
@@ -119,13 +142,21 @@ def _calippso(args: argparse.Namespace) -> int:
             bar.set_postfix(sqrtG_1=f"{rec.sqrt_gamma_minus_1:.2e}", s=f"{rec.max_displacement_stable:.2e}",
                             Nc=rec.n_contacts)
 
-        result = calippso(
-            packing, tol_s=args.tol_s, tol_gamma=args.tol_gamma, solver=args.solver, solver_tol=args.solver_tol, cutoff=args.cutoff,
-            cutoff_near=args.cutoff_near, relax=args.relax, walls=args.walls,
-            max_iterations=args.max_iterations, threads=args.threads, finish=args.finish, interior=args.interior, warm_engine=args.warm_engine,
-            first_lp=args.first_lp, progress=progress, **kwargs,
-        )
-    write_dataset(result_to_dataset(result, stage_parameters(args, "packing", "out")), args.out)
+        try:
+            result = calippso(
+                packing, tol_s=args.tol_s, tol_gamma=args.tol_gamma, solver=args.solver, solver_tol=args.solver_tol,
+                cutoff=args.cutoff, cutoff_near=args.cutoff_near, relax=args.relax, walls=args.walls,
+                max_iterations=args.max_iterations, threads=args.threads, finish=args.finish, interior=args.interior,
+                warm_engine=args.warm_engine, first_lp=args.first_lp, progress=progress, checkpoint=args.checkpoint,
+                checkpoint_every=args.checkpoint_every, stop_after=args.stop_after, **kwargs,
+            )
+        except ChainStopped as stopped:
+            print(f"jamflow calippso: {stopped}", file=sys.stderr)
+            return STOPPED
+    write_dataset(result_to_dataset(result, stage_parameters(args, "packing", "out", *RUN_ONLY)), args.out)
+    if args.checkpoint and Path(args.checkpoint).exists():
+        # the output is written: a finished chain's checkpoint could only be resumed by mistake
+        Path(args.checkpoint).unlink()
     a = result.packing.attrs
     counting = "hyperstatic" if a["hyperstatic"] else "isostatic" if a["isostatic"] else "not isostatic"
     print_summary(args, args.out, [

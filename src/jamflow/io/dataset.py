@@ -82,6 +82,8 @@ DATASET_KINDS: dict[str, tuple[frozenset[str], str]] = {
                      "normal modes of a linked packing (jamflow modes on links)"),
     "tradeoff": (frozenset({"time", "on_front", "is_reference"}), "a speed/accuracy sweep (jamflow tradeoff)"),
     "checkpoint": (frozenset({"x", "h", "radius", "nl_pairs"}), "a flow checkpoint (--checkpoint)"),
+    "calippso-checkpoint": (frozenset({"chain_x", "chain_D", "records_sqrt_gamma_minus_1"}),
+                            "a CALiPPSO checkpoint (jamflow calippso --checkpoint)"),
     "snapshots": (frozenset({"snapshot_position", "snapshot_box"}), "flow snapshots (--snapshots)"),
 }
 

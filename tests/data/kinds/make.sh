@@ -15,6 +15,8 @@ jamflow init "$tmp/s.nc" --d 2 --n 16 --phi 0.5 --dispersity bi --seed 2 $q
 jamflow ls "$tmp/s.nc" "$tmp/p1.nc" "$tmp/p2.nc" --growth-rate 1e-2 --p-target 1e2 1e3 --eos eos.nc $q
 jamflow calippso "$tmp/p1.nc" "$tmp/j1.nc" $q
 jamflow calippso "$tmp/p2.nc" "$tmp/j2.nc" $q
+jamflow calippso "$tmp/p2.nc" "$tmp/j3.nc" --checkpoint calippso-checkpoint.nc --checkpoint-every 0 \
+    --stop-after 2 $q || [ $? -eq 3 ]  # 3: stopped, the chain kept in the checkpoint
 jamflow overlap "$tmp/j1.nc" "$tmp/j2.nc" overlap.nc $q
 jamflow overlap-series "$tmp/j1.nc" "$tmp/j2.nc" overlap-series.nc --p-target 1e2 1e3 --growth-rate 1e-2 $q
 jamflow jamming-table overlap-series.nc jamming-table.nc --eos eos.nc --fit-min 1e1 --fit-max 1e3 $q

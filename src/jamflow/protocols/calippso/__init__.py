@@ -160,6 +160,7 @@ checks), ``record`` (history, :class:`CalippsoResult`), ``state`` (what the chai
 """
 
 from .chain import calippso
+from .checkpoint import CHECKPOINT_EVERY, ChainStopped
 from .container import FACE_KEY_STRIDE, LOWER, UPPER
 from .crash import CRASH_GAP
 from .lp import CONTACT_DUAL_REL_TOL, FAR_GROWTH, MIN_CUTOFF, NEAR_START_GAP, JammingLP
@@ -230,10 +231,12 @@ from .steps import RATTLER_MOVE_WEIGHT, REUSE_FRACTION, jamming_lp
 __all__ = [
     "BOUND_ACTIVE_FRACTION",
     "BOUND_SHRINK",
+    "CHECKPOINT_EVERY",
     "CONTACT_DUAL_REL_TOL",
     "CUTOFF_GROWTH",
     "CalippsoDiagnostics",
     "CalippsoResult",
+    "ChainStopped",
     "CRASH_GAP",
     "CRASH_MIN_COLUMNS",
     "DEFAULT_BOUND_SCHEDULE",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable
 
@@ -10,6 +11,13 @@ import numpy as np
 from ...stages import require
 from ...state.packing import Packing
 from ...tolerances import OVERLAP_TOL
+from .checkpoint import (
+    CHECKPOINT_EVERY,
+    ChainStopped,
+    chain_binding,
+    load_checkpoint,
+    save_checkpoint,
+)
 from .container import _Container
 from .lp import _near_start
 from .network import _dual_network, _final_checks, _Network
@@ -64,6 +72,9 @@ def calippso(
     warm_engine: str = DEFAULT_WARM_ENGINE,
     first_lp: str = DEFAULT_FIRST_LP,
     progress: Callable[[IterationRecord], None] | None = None,
+    checkpoint: str | os.PathLike | None = None,
+    checkpoint_every: float = CHECKPOINT_EVERY,
+    stop_after: int | None = None,
 ) -> CalippsoResult:
     """Jam ``packing`` by CALiPPSO (Algorithm 1), see :mod:`jamflow.protocols.calippso`.
 
@@ -116,6 +127,16 @@ def calippso(
         The first LP of a start near jamming, see :data:`FIRST_LPS`.
     progress : callable, optional
         Called with each :class:`IterationRecord`.
+    checkpoint : path-like, optional
+        Checkpoint netCDF (:mod:`.checkpoint`): resumed from when it exists (only one of
+        the same start, options but ``max_iterations``, and jamflow code), written at the
+        top of an LP once ``checkpoint_every`` seconds have passed since the last write.
+        A resumed chain repeats the uninterrupted one bit for bit. Left in place at the end.
+    checkpoint_every : float
+        Wall time [s] between checkpoint writes (0: before every LP but the first).
+    stop_after : int, optional
+        LP budget of this call: after this many LPs the checkpoint is written and
+        :class:`~.checkpoint.ChainStopped` raised (needs ``checkpoint``).
 
     Returns
     -------
@@ -128,6 +149,8 @@ def calippso(
     RuntimeError
         The chain did not converge, or the converged network failed its checks after
         the recoveries.
+    ChainStopped
+        ``stop_after`` LPs were solved; the chain is in ``checkpoint``.
     """
     require("calippso", packing.body_kind)
     opt = _Options(tol_s=tol_s, tol_gamma=tol_gamma, solver=solver, solver_tol=solver_tol, cutoff=cutoff,
@@ -135,6 +158,11 @@ def calippso(
                    max_iterations=max_iterations, require_isostatic=require_isostatic, threads=threads,
                    finish=finish, interior=interior, warm_engine=warm_engine, first_lp=first_lp)
     opt.check(packing)
+    if stop_after is not None and (checkpoint is None or stop_after < 1):
+        raise ValueError(f"stop_after must be a positive LP count with a checkpoint, got {stop_after} "
+                         f"(checkpoint {checkpoint})")
+    if not checkpoint_every >= 0:
+        raise ValueError(f"checkpoint_every must be >= 0 seconds, got {checkpoint_every}")
     t_start = time.perf_counter()
     container = _Container(packing.box, opt.walls)
     chain = _Chain(x=packing.position.copy() if opt.walls else packing.box.wrap(packing.position),
@@ -145,7 +173,14 @@ def calippso(
     if chain.near_start:
         lp_solver.ipm_presolve = NEAR_START_PRESOLVE
         lp_solver.crash_first = _crash_first(first_lp, packing.d * packing.n)
-    network, converged = _run_chain(chain, lp_solver, container, opt, packing, progress)
+    first, save = 1, None
+    if checkpoint is not None:
+        binding = chain_binding(packing, opt)
+        if os.path.exists(checkpoint):
+            first, elapsed = load_checkpoint(checkpoint, chain, lp_solver, binding)
+            t_start -= elapsed
+        save = _Saver(checkpoint, checkpoint_every, chain, lp_solver, t_start, binding)
+    network, converged = _run_chain(chain, lp_solver, container, opt, packing, progress, first, save, stop_after)
     total = time.perf_counter() - t_start
     if network is None:
         raise RuntimeError(_diagnose(f"not converged in {max_iterations} LPs", chain.records))
@@ -154,16 +189,41 @@ def calippso(
     return _result(packing, chain, container, network, converged, total, opt.settings())
 
 
+class _Saver:
+    """Writes the chain's checkpoint at the top of an LP when due (every ``every`` seconds)."""
+
+    def __init__(self, path: str | os.PathLike, every: float, chain: _Chain, solver: _Solver, t_start: float,
+                 binding: dict[str, str]) -> None:
+        self.path, self.every, self.chain, self.solver = path, every, chain, solver
+        self.t_start, self.binding = t_start, binding
+        self.last = time.perf_counter()
+
+    def __call__(self, it: int, force: bool = False) -> None:
+        now = time.perf_counter()
+        if force or now - self.last >= self.every:
+            save_checkpoint(self.path, it, self.chain, self.solver, now - self.t_start, self.binding)
+            self.last = time.perf_counter()
+
+
 def _run_chain(chain: _Chain, lp_solver: _Solver, container: _Container, opt: _Options, packing: Packing,
-               progress: Callable[[IterationRecord], None] | None) -> tuple[_Network | None, bool]:
-    """Algorithm 1, lines 3-16: LPs until one converges and its network passes the final
-    checks (or fails them for good), or the Newton finish is certified.
+               progress: Callable[[IterationRecord], None] | None, first: int = 1, save: _Saver | None = None,
+               stop_after: int | None = None) -> tuple[_Network | None, bool]:
+    """Algorithm 1, lines 3-16, from LP ``first``: LPs until one converges and its network
+    passes the final checks (or fails them for good), or the Newton finish is certified.
+    ``save`` writes the checkpoint at the top of an LP; after ``stop_after`` LPs it is
+    written and :class:`ChainStopped` raised.
 
     Returns the network of the jammed packing (None when ``opt.max_iterations`` LPs did
     not converge) and whether it passed the final checks; the chain holds its configuration.
     """
     d, n = packing.d, packing.n
-    for it in range(1, opt.max_iterations + 1):
+    for it in range(first, opt.max_iterations + 1):
+        if save is not None and it > first:
+            if stop_after is not None and it - first >= stop_after:
+                save(it, force=True)
+                raise ChainStopped(f"stopped after {it - first} LP(s) of this run (LP {it - 1} of the chain); "
+                                   f"{save.path} holds the chain: run again with it to resume")
+            save(it)
         lp = _set_up_lp(chain, container, opt, d, n)  # lines 4-7
         sol = lp_solver.solve(lp.A, lp.geo.rhs, lp.col_lower, lp.col_upper, lp.method, lp.rows)  # line 8
         if sol.col is None:

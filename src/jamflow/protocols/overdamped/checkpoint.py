@@ -14,7 +14,6 @@ repeats the uninterrupted one bit for bit.
 
 from __future__ import annotations
 
-import json
 import os
 
 import numpy as np
@@ -22,6 +21,7 @@ import xarray as xr
 
 from ...box import Box
 from ...io import new_dataset_attrs, read_dataset, write_dataset
+from ...io.binding import check_binding
 from ...neighbors.verlet import NeighborList
 from .collisions import FLOW_ROOM_SHARE
 from .driving import Drive
@@ -29,7 +29,7 @@ from .integrate import FlowOptions, FlowState, Integrator
 from .recorder import SERIES, Recorder
 from .skin import SkinBudget
 
-__all__ = ["check_binding", "load_checkpoint", "save_checkpoint"]
+__all__ = ["load_checkpoint", "save_checkpoint"]
 
 
 def _v(dims: tuple[str, ...], data, long_name: str) -> tuple:
@@ -88,39 +88,12 @@ def save_checkpoint(path: str | os.PathLike, integ: Integrator, rec: Recorder,
     write_dataset(ds, path)
 
 
-def _flat(value: object, prefix: str = "") -> dict[str, object]:
-    if isinstance(value, dict):
-        return {k: v for key, sub in value.items() for k, v in _flat(sub, f"{prefix}{key}.").items()}
-    return {prefix.rstrip("."): value}
-
-
-def check_binding(path: str | os.PathLike, attrs: dict, binding: dict[str, str]) -> None:
-    """Refuse a checkpoint whose start or run parameters differ from ``binding``.
-
-    Raises
-    ------
-    ValueError
-        One line naming the checkpoint and what differs.
-    """
-    if "bound_run" not in attrs:
-        raise ValueError(f"checkpoint {path} records no start or parameters (older jamflow): "
-                         "remove it or choose another --checkpoint")
-    differ = []
-    if attrs["bound_input_sha256"] != binding["bound_input_sha256"]:
-        differ.append("input packing")
-    old, new = _flat(json.loads(attrs["bound_run"])), _flat(json.loads(binding["bound_run"]))
-    differ += [f"{k} ({old.get(k)} -> {new.get(k)})" for k in sorted(old.keys() | new.keys()) if old.get(k) != new.get(k)]
-    if differ:
-        raise ValueError(f"checkpoint {path} belongs to another run (different {', '.join(differ)}): "
-                         "remove it or choose another --checkpoint")
-
-
 def load_checkpoint(path: str | os.PathLike, drive: Drive, options: FlowOptions,
                     binding: dict[str, str]) -> tuple[Integrator, Recorder]:
     """Rebuild the integrator and recorder from a checkpoint (``drive`` is updated in place).
 
     The checkpoint must have been written by the same run (``binding``, see
-    :func:`check_binding`).
+    :func:`jamflow.io.binding.check_binding`).
     """
     ds = read_dataset(path, "checkpoint")
     a = ds.attrs
