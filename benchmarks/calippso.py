@@ -7,7 +7,8 @@ Parts (d = 3 monodisperse unless stated):
 ``scaling``
     Time to jam, number of LPs and median LP time against N = 256 ... 4096 (``--sizes``) from
     random starts (RSA at phi0 = 0.3) and from near-jamming starts (an LS compression,
-    fast stage kappa0 = 5e-3 to p = 500 then kappa = 1e-3, to p = ``NEAR_PRESSURE``),
+    fast stage kappa0 = 5e-3 to p = 500 then kappa = ``--near-kappa``, 1e-3 by default, to
+    p = ``NEAR_PRESSURE``),
     ``--seeds`` starts of each kind per N (the LP count of a chain moves with the
     vertex each LP ends at, so one seed per N can put the exponent anywhere), with
     least-squares exponents over every (N, seed) and their standard errors, over all
@@ -131,9 +132,13 @@ PARTS = ("scaling", "ls", "preset", "finish", "scale", "engine", "solvers", "lp"
 FORMER_FAST = ("--tol-s", "1e-6", "--tol-gamma", "1e-9")
 #: LS pressure of the near-jamming starts: the paper's Sec. IV value. (At 1e6 the
 #: chain is longer: 3D N = 2048 needed 220 LPs from p = 1e6 and 86 from 1e7 of the
-#: same compression.) The growth rate is kappa = 1e-3, not the paper's 1e-5: LS at
-#: 1e-5 would take hours at N = 16384.
+#: same compression.)
 NEAR_PRESSURE = 1e7
+#: LS growth rate of the near-jamming starts (``--near-kappa``). 1e-3 by default, not the
+#: paper's 1e-5 (its Fig. 5): LS at 1e-5 would take hours at N = 16384. The chains are
+#: far longer from the faster compression (docs/notes/warm-simplex.md, "The start's
+#: compression rate").
+NEAR_KAPPA = 1e-3
 #: Issue 19 targets for the whole command on the LS examples [s] (issue 9 had 10, 40, 120).
 LS_TARGETS = {3: 5.0, 4: 15.0, 5: 40.0}
 PAPER_EXPONENTS = {"time": 3.0, "t_lp": 2.34, "lps": 1.04}
@@ -174,11 +179,19 @@ def random_start(n: int, seed: int = 1) -> Path:
     return path
 
 
+def near_tag() -> str:
+    """``near``, or ``near_k<kappa>`` for starts compressed at another rate than 1e-3."""
+    return "near" if NEAR_KAPPA == 1e-3 else f"near_k{NEAR_KAPPA:.0e}"
+
+
 def near_start(n: int, seed: int = 1) -> Path:
-    path = OUT / f"calippso_start_ls_p{NEAR_PRESSURE:.0e}_N{n}_s{seed}.nc"
+    """The LS compression of a random start to :data:`NEAR_PRESSURE` at :data:`NEAR_KAPPA` (cached)."""
+    rate = "" if NEAR_KAPPA == 1e-3 else f"_k{NEAR_KAPPA:.0e}"
+    path = OUT / f"calippso_start_ls{rate}_p{NEAR_PRESSURE:.0e}_N{n}_s{seed}.nc"
     if not path.exists():
         t0 = time.perf_counter()
-        snap = compress(random_packing(n, 3, 0.3, "mono", seed=seed), 1e-3, [NEAR_PRESSURE], seed=seed).snapshots[0]
+        snap = compress(random_packing(n, 3, 0.3, "mono", seed=seed), NEAR_KAPPA, [NEAR_PRESSURE],
+                        seed=seed).snapshots[0]
         write_packing(snap, path)
         print(f"   LS start N = {n}: p = {snap.pressure:.3g}, phi = {snap.packing_fraction:.5f} "
               f"({time.perf_counter() - t0:.0f} s)", flush=True)
@@ -244,7 +257,7 @@ def part_scaling(quick: bool, max_random: int, seeds: int, jobs: int,
     def run(task: tuple[str, int, int]) -> dict[str, float]:
         kind, n, seed = task
         print(f"N = {n}, {kind} start, seed {seed}", flush=True)
-        return command(starts[task], f"{kind}_N{n}_s{seed}")
+        return command(starts[task], f"{near_tag() if kind == 'near' else kind}_N{n}_s{seed}")
 
     with ThreadPoolExecutor(max_workers=jobs) as pool:
         done = dict(zip(tasks, pool.map(run, tasks)))
@@ -270,7 +283,8 @@ def part_scaling(quick: bool, max_random: int, seeds: int, jobs: int,
                           f"{exps[f'exponent_{kind}_{k}_from_1024']:.2f} ± {exps[f'exponent_{kind}_{k}_from_1024_err']:.2f}"
                           f" ({PAPER_EXPONENTS[k]:g})" for k in PAPER_EXPONENTS), flush=True)
     ds.attrs.update(new_dataset_attrs("CALiPPSO scaling with N",
-                                      {"quick": quick, "near_pressure": NEAR_PRESSURE, "seeds": seeds, "jobs": jobs,
+                                      {"quick": quick, "near_pressure": NEAR_PRESSURE, "near_kappa": NEAR_KAPPA,
+                                       "seeds": seeds, "jobs": jobs,
                                        "max_random": max_random},
                                       **exps, **{f"paper_exponent_{k}": v for k, v in PAPER_EXPONENTS.items()}))
     return ds
@@ -447,15 +461,17 @@ def part_engine(quick: bool, cases: list[str], seeds: int,
 def part_large(n: int, options: tuple[str, ...] = ()) -> xr.Dataset:
     """One chain at large N, checkpointed: a run stopped or killed goes on where it was
     when the part is run again; ``chain_time`` is the chain's wall time over all runs."""
-    ckpt = OUT / f"calippso_ckpt_near_N{n}.nc"
+    tag = f"{near_tag()}_N{n}"
+    ckpt = OUT / f"calippso_ckpt_{tag}.nc"
     print(f"N = {n}, near-jamming start (target 1800 s, 8 GiB), options {' '.join(options) or 'none'}; "
           f"checkpoint {ckpt}{' (resumed)' if ckpt.exists() else ''}", flush=True)
-    row = command(near_start(n), f"near_N{n}", *options, "--checkpoint", str(ckpt))
+    row = command(near_start(n), tag, *options, "--checkpoint", str(ckpt))
     chain_time = np.nan
     if np.isfinite(row["lps"]):
-        chain_time = float(read_dataset(OUT / f"calippso_out_near_N{n}.nc").attrs["total_time"])
+        chain_time = float(read_dataset(OUT / f"calippso_out_{tag}.nc").attrs["total_time"])
         print(f"   chain wall time over all runs: {chain_time:.1f} s", flush=True)
-    ds = table([row], "N", [n], new_dataset_attrs("CALiPPSO at large N", {"near_pressure": NEAR_PRESSURE}))
+    ds = table([row], "N", [n], new_dataset_attrs("CALiPPSO at large N", {"near_pressure": NEAR_PRESSURE,
+                                                                          "near_kappa": NEAR_KAPPA}))
     return ds.assign(chain_time=(("N",), [chain_time], {"units": "s", "long_name": "chain wall time over all runs"}))
 
 
@@ -751,6 +767,8 @@ def main() -> None:
                     help="extra jamflow calippso options of the 'large' part, e.g. \"--interior hipo --threads 2\"")
     ap.add_argument("--max-finish", type=int, default=4096, help="largest N of the 'finish' part (1024: the LS examples; 2048, 4096: tilings)")
     ap.add_argument("--max-scale", type=int, default=1024, help="largest N of the 'scale' part (1024 or 2048)")
+    ap.add_argument("--near-kappa", type=float, default=NEAR_KAPPA,
+                    help=f"LS growth rate of the near starts (default {NEAR_KAPPA:g}; the paper's 1e-5)")
     ap.add_argument("--suffix", default="", help="appended to the parts' output names (runs side by side)")
     ap.add_argument("--engine-cases", nargs="+", default=["ls", "1024", "2048"],
                     choices=["ls", "1024", "2048", "4096", "8192"],
@@ -762,6 +780,10 @@ def main() -> None:
         ap.error("--seeds and --jobs must be at least 1")
     if min(args.sizes) < 2 or len(set(args.sizes)) != len(args.sizes):
         ap.error("--sizes must be distinct particle numbers of at least 2")
+    if not args.near_kappa > 0:
+        ap.error("--near-kappa must be a positive growth rate")
+    global NEAR_KAPPA
+    NEAR_KAPPA = args.near_kappa
     OUT.mkdir(exist_ok=True)
     runners = {"scaling": lambda: part_scaling(args.quick, args.max_random, args.seeds, args.jobs, tuple(args.sizes)),
                "ls": lambda: part_ls(args.quick),
