@@ -752,6 +752,7 @@ def plot() -> None:
 
 
 def main() -> None:
+    global NEAR_KAPPA
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="small sizes only (a few minutes)")
     ap.add_argument("--parts", nargs="+", choices=PARTS, default=[p for p in PARTS],
@@ -782,7 +783,6 @@ def main() -> None:
         ap.error("--sizes must be distinct particle numbers of at least 2")
     if not args.near_kappa > 0:
         ap.error("--near-kappa must be a positive growth rate")
-    global NEAR_KAPPA
     NEAR_KAPPA = args.near_kappa
     OUT.mkdir(exist_ok=True)
     runners = {"scaling": lambda: part_scaling(args.quick, args.max_random, args.seeds, args.jobs, tuple(args.sizes)),
