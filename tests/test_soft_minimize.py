@@ -80,6 +80,41 @@ def test_enthalpy_minimisation_rejects_nonpositive_pressure():
         minimize_enthalpy(p.position, p.box, p.diameter, 0.0)
 
 
+def _square_lattice(strain: float):
+    """Nine unit spheres on a square lattice of spacing 1.0667 in a box 3.2 wide, sheared by ``strain``.
+
+    The harmonic repulsion is bounded and of finite range: the spheres touch once the
+    box has shrunk by 0.9375, and it holds them (two diameters across) down to 0.625,
+    where their pressure is at most ~0.55 epsilon / D^2.
+    """
+    from jamflow.box import Box
+    from jamflow.protocols.quasistatic import affine_shear
+
+    g = (np.arange(3) + 0.5) * 3.2 / 3
+    return affine_shear(np.array([[a, b] for a in g for b in g]), Box(np.diag([3.2, 3.2])), strain)
+
+
+@pytest.mark.parametrize("strain", [0.0, 0.1])
+@pytest.mark.parametrize("p0", [1e12, 10.0])
+def test_a_pressure_beyond_the_soft_repulsion_is_refused_in_one_line(p0, strain):
+    """The barostat drives the box down until it no longer holds the spheres: over a few
+    steps at P0 = 10, in the first at 1e12, where the box scale underflows to 0 and every
+    pair distance with it. Both are refused in one line, not divided by r = 0, with the
+    orthogonal box (lists rebuilt in the compiled loop) and a sheared one (in Python)."""
+    x, box = _square_lattice(strain)
+    with pytest.raises(ValueError, match="collapsed the box") as refused:
+        minimize_enthalpy(x, box, np.ones(9), p0)
+    assert "\n" not in str(refused.value) and f"target pressure {p0:.6g}" in str(refused.value)
+
+
+@pytest.mark.parametrize("strain", [0.0, 0.1])
+def test_a_pressure_the_soft_repulsion_holds_is_reached(strain):
+    x, box = _square_lattice(strain)
+    res = minimize_enthalpy(x, box, np.ones(9), 0.1, force_tol=1e-13, pressure_rtol=1e-8)
+    assert res.converged
+    assert evaluate(res.position, res.box, np.ones(9)).pressure == pytest.approx(0.1, rel=1e-8)
+
+
 @pytest.mark.parametrize("d", [2, 3])
 def test_full_box_enthalpy_minimum_has_isotropic_stress_p0(d):
     """With the whole box free the residual shear stress of a strained packing relaxes:

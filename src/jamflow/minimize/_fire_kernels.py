@@ -8,11 +8,13 @@ from __future__ import annotations
 
 from .._numba import njit
 
-__all__ = ["BELOW", "CONVERGED", "REBUILD", "MAX_STEPS", "STALLED"]
+__all__ = ["BELOW", "COLLAPSED", "CONVERGED", "REBUILD", "MAX_STEPS", "STALLED"]
 
 #: Status codes returned by the iterative kernels; ``BELOW``: a fixed-box run stopped
-#: because its energy ``U + K`` fell below the floor it was given (``minimize_fire``'s ``energy_floor``).
-CONVERGED, REBUILD, MAX_STEPS, STALLED, BELOW = 0, 1, 2, 3, 4
+#: because its energy ``U + K`` fell below the floor it was given (``minimize_fire``'s ``energy_floor``);
+#: ``COLLAPSED``: a barostat shrank the box until it no longer holds the bodies (the target
+#: pressure is beyond what their repulsion exerts in any box that does).
+CONVERGED, REBUILD, MAX_STEPS, STALLED, BELOW, COLLAPSED = 0, 1, 2, 3, 4, 5
 
 
 @njit(cache=True)

@@ -129,6 +129,14 @@ class NeighborList:
         self.skin = reach - d_max
         self.adopt(*verlet_pairs(x, box, self.diameter, self.skin), x, box)
 
+    def smallest_scale(self, box: Box) -> float:
+        """The factor at or below which ``box`` scaled by it holds no list (:meth:`build` refuses it).
+
+        Half the scaled box's smallest width is then at most the largest diameter, so no
+        skin fits and a sphere may meet two images of another.
+        """
+        return 2.0 * float(self.diameter.max()) / float(np.min(box.widths))
+
     def adopt(self, i: NDArray[np.int64], j: NDArray[np.int64], image: NDArray[np.float64], x: NDArray[np.float64],
               box: Box, builds: int = 1) -> None:
         """Take a list built elsewhere with this skin (e.g. inside a compiled FIRE loop) at ``x`` in ``box``.

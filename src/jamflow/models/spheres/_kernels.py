@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from ..._numba import njit
 from ...minimize._fire_kernels import (
     BELOW,
+    COLLAPSED,
     CONVERGED,
     MAX_STEPS,
     REBUILD,
@@ -68,13 +69,16 @@ class Potential(NamedTuple):
 
 class Enthalpy(NamedTuple):
     """The enthalpy ``H = U + P0 V`` of a free box: whether it is minimised (``on``; fixed
-    box otherwise), the pressure ``pressure0``, the reference volume ``volume_ref`` and the
-    box coordinate's scale ``q_scale`` [length]."""
+    box otherwise), the pressure ``pressure0``, the reference volume ``volume_ref``, the
+    box coordinate's scale ``q_scale`` [length] and the box scale ``scale_min`` at or below
+    which the box holds the spheres no more
+    (:meth:`jamflow.neighbors.verlet.NeighborList.smallest_scale`)."""
 
     on: bool
     pressure0: float
     volume_ref: float
     q_scale: float
+    scale_min: float
 
 
 class Stop(NamedTuple):
@@ -231,7 +235,10 @@ def fire(y, v, box_state, fire_state, fire_params, pairs, potential, built, s_bu
         With ``s_build`` the box scale at the build.
     enthalpy : Enthalpy
         With ``on``, minimise the enthalpy ``H = U + P0 V`` with ``q`` as a degree of
-        freedom, whose generalised force is ``d V (P - P0) / q_scale``.
+        freedom, whose generalised force is ``d V (P - P0) / q_scale``. A step that takes
+        ``s`` to ``scale_min`` or below stops the run with ``COLLAPSED`` before the forces
+        are evaluated, ``box_state`` holding that ``s`` and the returned values those
+        before the step.
     stop : Stop
         ``rtol`` bounds ``|P - P0| / P0`` (with ``enthalpy.on``); ``energy_floor`` is
         used at a fixed box only, tested after the list test.
@@ -254,7 +261,7 @@ def fire(y, v, box_state, fire_state, fire_params, pairs, potential, built, s_bu
     offset, pi, pj, sigma = pairs
     eps, w = potential
     y_build, reach, skin, slack = built
-    barostat, pressure0, volume_ref, q_scale = enthalpy
+    barostat, pressure0, volume_ref, q_scale, scale_min = enthalpy
     force_tol, pressure_rtol, max_steps, energy_floor = stop
     floor = energy_floor if not barostat else 0.0
     d = y.shape[1]
@@ -329,6 +336,13 @@ def fire(y, v, box_state, fire_state, fire_params, pairs, potential, built, s_bu
             q += dt * vq
             s = np.exp(q / q_scale)
             volume = volume_ref * s**d
+            # a P0 beyond what the finite-range repulsion exerts drives the box down without
+            # end (in one step when P0 is huge: s underflows to 0, every pair distance with
+            # it, and the forces would divide by r = 0); at scale_min the list is stale from
+            # the scale change alone and no new one fits, so no run stopped here could go on
+            if not s > scale_min:
+                status = COLLAPSED
+                break
         energy, n_contact = pair_forces(y, s, offset, pi, pj, sigma, eps, w, force, virial, barostat)
         pressure = np.trace(virial) / (d * volume)
         fmax2 = _max_force_sq(force)
@@ -523,7 +537,8 @@ def fire_stress(y, v, A, vA, fire_state, fire_params, pairs, potential, built, A
     (``W = sum f R R^T / r``), so at the minimum the stress tensor is ``-P0 1``.
     Converged when ``max_i |F_i| <= stop.force_tol`` and
     ``max_ab |W_ab / V - P0 delta_ab| <= stop.rtol * P0``. ``A_build_inv`` is the
-    inverse of ``A`` at the list's build (``built``); ``enthalpy.on`` is not read.
+    inverse of ``A`` at the list's build (``built``); ``enthalpy.on`` and ``enthalpy.scale_min``
+    are not read.
 
     Returns
     -------
@@ -532,7 +547,7 @@ def fire_stress(y, v, A, vA, fire_state, fire_params, pairs, potential, built, A
     offset, pi, pj, sigma = pairs
     eps, w = potential
     y_build, reach, skin, slack = built
-    _, pressure0, volume_ref, q_scale = enthalpy
+    _, pressure0, volume_ref, q_scale, _ = enthalpy
     force_tol, stress_tol, max_steps, _ = stop
     d = y.shape[1]
     dt, alpha, npos = fire_state[0], fire_state[1], int(fire_state[2])

@@ -53,7 +53,8 @@ class SphereFire:
     """FIRE steps of soft spheres in the compiled loop (:func:`jamflow.models.spheres._kernels.fire`).
 
     Fixed box, or an isotropic barostat (``pressure0``). Runs until convergence, the
-    step budget or a neighbour-list rebuild; the state persists across calls.
+    step budget or a neighbour-list rebuild; the state persists across calls. A barostat
+    that shrinks the box until it no longer holds the spheres raises ``ValueError``.
     """
 
     def __init__(self, model: SphereModel, x: NDArray[np.float64], params: FireParameters,
@@ -78,6 +79,8 @@ class SphereFire:
         self.v = np.zeros_like(self.y)
         self.q_scale = float(np.sqrt(len(self.y)) * model.diameter.mean())
         self.box_state = np.array([0.0, 0.0, 1.0])
+        # the box scale at which the barostat's box stops holding the spheres (the kernel stops there)
+        self.scale_min = self.nlist.smallest_scale(model.box)
         self.fire_state = np.array([params.dt * unit, params.alpha0, 0.0, 0.0])
         self.fparams = _fire_params(params, unit)
         self.force = np.zeros_like(self.y)
@@ -87,7 +90,15 @@ class SphereFire:
         self.inline_builds = 0
 
     def advance(self, force_tol: float, budget: int, rebuild: bool, energy_floor: float = 0.0) -> tuple[int, int]:
-        """At most ``budget`` steps; returns ``(status, steps)`` (status of :mod:`._kernels`)."""
+        """At most ``budget`` steps; returns ``(status, steps)`` (status of :mod:`._kernels`).
+
+        Raises
+        ------
+        ValueError
+            The barostat shrank the box to :attr:`scale_min` or below (``COLLAPSED``): the
+            target pressure is beyond what the spheres' repulsion, bounded and of finite
+            range, exerts in any box that holds them.
+        """
         nlist, potential, h_ref = self.nlist, self.model.potential, self.model.box
         s = self.box_state[2]
         # the reference box itself at s = 1 (fixed box): its cached widths serve every build
@@ -102,13 +113,19 @@ class SphereFire:
             _kernels.PairList(nlist.image @ h_ref.matrix.T, nlist.i, nlist.j, nlist.sigma),
             _kernels.Potential(potential.epsilon, potential.exponent),
             _kernels.ListBuild(affine / s, nlist.reach, nlist.skin, slack), s,
-            _kernels.Enthalpy(self.barostat, self.pressure0, h_ref.volume, self.q_scale),
+            _kernels.Enthalpy(self.barostat, self.pressure0, h_ref.volume, self.q_scale, self.scale_min),
             _kernels.Stop(float(force_tol), self.pressure_rtol, int(budget), float(energy_floor)), self.force,
             self.virial, self.lengths, nlist.diameter,
         )
         if builds:
             nlist.adopt(i, j, image.astype(np.float64), s_build * y_build, h_ref.scaled(s_build), builds)
             self.inline_builds += builds
+        if status == _fire_kernels.COLLAPSED:
+            raise ValueError(
+                f"target pressure {self.pressure0:.6g} collapsed the box: the enthalpy minimisation shrank it to "
+                f"{self.box_state[2]:.3g} times its size, at or below {self.scale_min:.3g}, where it is two largest "
+                f"diameters across and holds the spheres no more; their bounded, finite-range repulsion exerts no "
+                f"such pressure in a box that holds them (last pressure {self.last[3]:.6g})")
         return status, n
 
     def result(self, steps: int, calls: int, status: int) -> MinimizeResult:
@@ -163,7 +180,7 @@ class SphereFireFullBox:
             _kernels.PairList(offset, nlist.i, nlist.j, nlist.sigma),
             _kernels.Potential(potential.epsilon, potential.exponent),
             _kernels.ListBuild(affine @ A_inv.T, nlist.reach, nlist.skin, slack), A_inv,
-            _kernels.Enthalpy(True, self.pressure0, h_ref.volume, self.q_scale),
+            _kernels.Enthalpy(True, self.pressure0, h_ref.volume, self.q_scale, 0.0),
             _kernels.Stop(float(force_tol), self.stress_rtol, int(budget), 0.0), self.force, self.virial,
         )
         return status, n
