@@ -7,11 +7,13 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
+from jamflow.box import Box
 from jamflow.minimize.onset import FORCE_TOL_VANDERWERF
 from jamflow.models.spheres.fast import steepest_descent
 from jamflow.models.spheres.model import conjugate_gradient, fire, minimize_enthalpy
 from jamflow.models.spheres.potential import evaluate
 from jamflow.protocols.initial import random_packing
+from jamflow.protocols.quasistatic import affine_shear
 from jamflow.protocols.soft_jam import jam_to_pressure
 
 
@@ -87,9 +89,6 @@ def _square_lattice(strain: float):
     box has shrunk by 0.9375, and it holds them (two diameters across) down to 0.625,
     where their pressure is at most ~0.55 epsilon / D^2.
     """
-    from jamflow.box import Box
-    from jamflow.protocols.quasistatic import affine_shear
-
     g = (np.arange(3) + 0.5) * 3.2 / 3
     return affine_shear(np.array([[a, b] for a in g for b in g]), Box(np.diag([3.2, 3.2])), strain)
 
