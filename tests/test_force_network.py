@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
+import jamflow.network.forces as forces
 from jamflow.network.forces import balance_matrix, min_norm_forces
 from jamflow.network.rigidity import contact_geometry, rigidity_matrix
 from jamflow.network.spheres import contacts_from_gaps
@@ -67,3 +71,22 @@ def test_newton_and_highs_qp_give_the_same_minimum_norm_forces():
     np.testing.assert_allclose(f_newton, f_qp, rtol=0, atol=1e-9 * f_qp.max())
     assert max(r_newton, r_qp) < 1e-11
     np.testing.assert_allclose(p.force, f_newton, rtol=0, atol=1e-12 * f_qp.max())
+
+
+@pytest.mark.slow
+def test_a_stalled_dual_newton_hands_over_to_the_qp_early(monkeypatch):
+    """The geometric network of a CALiPPSO packing hyperstatic by one contact (3D N = 2048
+    from an LS start at kappa = 1e-4, seed 2; 131 rattler contacts without force): the dual
+    Newton reaches a residual of 3.6e-10 after 5 steps, then its line search, below the dual
+    function's round-off, accepts steps that stay at 2e-6. It must stop within
+    ``_NEWTON_STALL`` steps of its best and leave the answer to the QP, which balances the
+    6008 backbone contacts."""
+    z = np.load(Path(__file__).parent / "data" / "min_norm_stall_n2048.npz")
+    B = sp.csr_matrix((z["data"], z["indices"], z["indptr"]), shape=tuple(z["shape"]))
+    steps = []
+    lu = forces.splu
+    monkeypatch.setattr(forces, "splu", lambda M: steps.append(1) or lu(M))
+    f, residual = min_norm_forces(B, z["weight"], 3)
+    assert len(steps) <= 6 + forces._NEWTON_STALL + 1  # the first solve, the best step, the stalled ones
+    assert residual < 1e-10 and (f >= 0).all() and (f > 0).sum() == 6008
+    np.testing.assert_allclose(f, min_norm_forces(B, z["weight"], 3, method="qp")[0], rtol=0, atol=1e-9 * f.max())

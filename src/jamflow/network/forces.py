@@ -49,6 +49,11 @@ _QP_TOL: float = 1e-10
 #: (measured: docs/notes/network-constants.md#dual-newton-of-the-minimum-norm-forces-jamflownetworkforces).
 _NEWTON_REG: float = 1e-12
 _NEWTON_MAX_ITER: int = 200
+#: Dual Newton: steps without a new smallest residual after which it stops (the QP decides):
+#: where the dual function's changes fall below its round-off, the line search accepts
+#: steps that do not reach the tolerance, and would do so to :data:`_NEWTON_MAX_ITER`
+#: (measured: docs/notes/network-constants.md#dual-newton-of-the-minimum-norm-forces-jamflownetworkforces).
+_NEWTON_STALL: int = 10
 
 
 def balance_matrix(
@@ -162,7 +167,8 @@ def _dual_newton(B: sp.csr_matrix, wn: NDArray[np.float64], total: float) -> NDA
     floppy modes of ``S``), by block elimination of the dense normalisation row
     around one sparse LU of ``B_S B_S^T + delta I``, with an Armijo backtracking line
     search on ``g``, from the unconstrained minimum-norm solution. Returns None when
-    :data:`_NEWTON_MAX_ITER` steps do not reach :data:`_QP_TOL` (the QP decides then).
+    :data:`_NEWTON_MAX_ITER` steps do not reach :data:`_QP_TOL`, or :data:`_NEWTON_STALL`
+    steps in a row do not lower the smallest residual (the QP decides then).
     """
     A = sp.vstack([B, sp.csr_matrix(wn[None, :])], format="csr")
     At = sp.csr_matrix(A.T)
@@ -184,12 +190,17 @@ def _dual_newton(B: sp.csr_matrix, wn: NDArray[np.float64], total: float) -> NDA
         return float(rhs @ lam - 0.5 * z @ z)
 
     lam = step(np.ones(A.shape[1], dtype=bool), rhs)
+    best, since = np.inf, 0
     for _ in range(_NEWTON_MAX_ITER):
         z = At @ lam
         phi = np.maximum(z, 0.0)
         r = rhs - A @ phi
-        if np.abs(r).max() <= _QP_TOL:
+        residual = float(np.abs(r).max())
+        if residual <= _QP_TOL:
             return phi
+        best, since = (residual, 0) if residual < best else (best, since + 1)
+        if since >= _NEWTON_STALL:
+            return None
         dlam = step(z > 0.0, r)
         g0, slope, t = dual(lam), float(r @ dlam), 1.0
         while dual(lam + t * dlam) < g0 + 1e-4 * t * slope and t > 1e-12:
