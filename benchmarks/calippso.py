@@ -8,7 +8,9 @@ Parts (d = 3 monodisperse unless stated):
     Time to jam, number of LPs and median LP time against N = 256 ... 4096 (``--sizes``) from
     random starts (RSA at phi0 = 0.3) and from near-jamming starts (an LS compression,
     fast stage kappa0 = 5e-3 to p = 500 then kappa = ``--near-kappa``, 1e-3 by default, to
-    p = ``NEAR_PRESSURE``),
+    p = ``NEAR_PRESSURE``; at 1e-3 a start is 6-66 times further below its phi_J than its
+    pressure says, at 1e-4 it obeys ``(phi_J - phi) / phi = d / p`` as the paper's starts
+    do: ``--near-kappa 1e-4`` measures the paper's regime),
     ``--seeds`` starts of each kind per N (the LP count of a chain moves with the
     vertex each LP ends at, so one seed per N can put the exponent anywhere), with
     least-squares exponents over every (N, seed) and their standard errors, over all
