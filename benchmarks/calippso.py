@@ -22,6 +22,10 @@ Parts (d = 3 monodisperse unless stated):
 ``large``
     N = 16384 (``--large-n``) from a near-jamming start: target 30 min, 8 GB. The chain is
     checkpointed: run the part again to go on with a chain that was stopped or killed.
+``fit``
+    The exponents of total time, LPs and median LP time against N over every stored chain
+    of the near starts of ``--near-kappa`` (the outputs of ``scaling`` and ``large``, which
+    may come from several runs), with their standard errors; runs nothing.
 ``factor``
     Profile of a warm LP: its time is the LU factorisation of the simplex basis (perf:
     ~95 % in HiGHS ``HFactor::buildKernel`` at N = 4096), not the pivots. For each
@@ -79,6 +83,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import subprocess
 import sys
 import time
@@ -129,7 +134,7 @@ OUT = Path(__file__).resolve().parent / "output"
 LS = Path(__file__).resolve().parents[1] / "tests" / "data" / "calippso-ls"
 
 PARTS = ("scaling", "ls", "preset", "finish", "scale", "engine", "solvers", "lp", "relax", "tolerances", "large",
-         "factor")
+         "fit", "factor")
 #: the former ``fast`` preset of ``jamflow calippso`` (dropped: not faster, part ``preset``)
 FORMER_FAST = ("--tol-s", "1e-6", "--tol-gamma", "1e-9")
 #: LS pressure of the near-jamming starts: the paper's Sec. IV value. (At 1e6 the
@@ -627,6 +632,41 @@ def highs_factor_time(K: sp.csc_matrix) -> float:
 FACTOR_REPEATS = 3
 
 
+def part_fit() -> xr.Dataset:
+    """Exponents over the stored chains of the near starts (``calippso_out_<near tag>_N<n>_s<seed>.nc``
+    of ``scaling``; ``..._N<n>.nc`` of ``large`` is seed 1 where ``scaling`` has none). The
+    time is the chain's own wall time (``total_time``, over all runs of a checkpointed chain)."""
+    runs = {}
+    found = [(m, path) for path in OUT.glob(f"calippso_out_{near_tag()}_N*.nc")
+             if (m := re.fullmatch(rf"calippso_out_{near_tag()}_N(\d+)(?:_s(\d+))?\.nc", path.name))]
+    for m, path in sorted(found, key=lambda mp: mp[0][2] is None):  # the seeded names first
+        runs.setdefault((int(m[1]), int(m[2] or 1)), path)
+    if not runs:
+        raise SystemExit(f"no stored chains of {near_tag()} starts in {OUT}")
+    keys = sorted(runs)
+    rows = []
+    for key in keys:
+        ds = read_dataset(runs[key])
+        rows.append((ds.attrs["total_time"], ds.attrs["n_lps"], float(np.median(ds["lp_time"].values))))
+    n = np.array([k[0] for k in keys], float)
+    values = np.array(rows, float)
+    exps = {}
+    for j, name in enumerate(("time", "lps", "t_lp")):
+        a, err = fit_with_error(n, values[:, j])
+        exps[f"exponent_{name}"], exps[f"exponent_{name}_error"] = a, err
+    print(f"{near_tag()} starts, {len(keys)} chains at N = {', '.join(map(str, sorted(set(n.astype(int)))))}: "
+          + ", ".join(f"{k} ~ N^({exps[f'exponent_{k}']:.2f} ± {exps[f'exponent_{k}_error']:.2f}) "
+                      f"(paper {PAPER_EXPONENTS[k]:g})" for k in ("time", "lps", "t_lp")), flush=True)
+    data = {"time": (("run",), values[:, 0], {"units": "s", "long_name": "chain wall time"}),
+            "lps": (("run",), values[:, 1], {"units": "1"}),
+            "t_lp": (("run",), values[:, 2], {"units": "s", "long_name": "median LP time"}),
+            "N": (("run",), n.astype(int), {"units": "1"}),
+            "seed": (("run",), [k[1] for k in keys], {"units": "1"})}
+    return xr.Dataset(data, attrs=new_dataset_attrs("CALiPPSO exponents over stored chains",
+                                                     {"near_kappa": NEAR_KAPPA, "near_pressure": NEAR_PRESSURE},
+                                                     **exps))
+
+
 def part_factor(quick: bool) -> xr.Dataset:
     sizes = [128, 256] if quick else [256, 512, 1024, 2048, 4096]
     rows = []
@@ -797,6 +837,7 @@ def main() -> None:
                "relax": lambda: part_relax(args.quick),
                "tolerances": lambda: part_tolerances(args.quick),
                "large": lambda: part_large(1024 if args.quick else args.large_n, tuple(args.large_options.split())),
+               "fit": part_fit,
                "factor": lambda: part_factor(args.quick)}
     for part in args.parts:
         write_dataset(runners[part](), OUT / f"calippso_{part}{args.suffix}.nc")
