@@ -632,36 +632,59 @@ def highs_factor_time(K: sp.csc_matrix) -> float:
 FACTOR_REPEATS = 3
 
 
-def part_fit() -> xr.Dataset:
-    """Exponents over the stored chains of the near starts (``calippso_out_<near tag>_N<n>_s<seed>.nc``
-    of ``scaling``; ``..._N<n>.nc`` of ``large`` is seed 1 where ``scaling`` has none). The
-    time is the chain's own wall time (``total_time``, over all runs of a checkpointed chain)."""
+def _stored_chains(tag: str) -> tuple[NDArray[np.float64], NDArray[np.float64], list[int]]:
+    """N, (chain wall time [s], LPs, median LP time [s]) and seed of every stored chain of the
+    starts ``tag`` (``calippso_out_<tag>_N<n>_s<seed>.nc`` of ``scaling``; ``..._N<n>.nc`` of
+    ``large`` is seed 1 where ``scaling`` has none). The time is the chain's own wall time
+    (``total_time``, over all runs of a checkpointed chain)."""
+    found = [(m, path) for path in OUT.glob(f"calippso_out_{tag}_N*.nc")
+             if (m := re.fullmatch(rf"calippso_out_{tag}_N(\d+)(?:_s(\d+))?\.nc", path.name))]
     runs = {}
-    found = [(m, path) for path in OUT.glob(f"calippso_out_{near_tag()}_N*.nc")
-             if (m := re.fullmatch(rf"calippso_out_{near_tag()}_N(\d+)(?:_s(\d+))?\.nc", path.name))]
     for m, path in sorted(found, key=lambda mp: mp[0][2] is None):  # the seeded names first
         runs.setdefault((int(m[1]), int(m[2] or 1)), path)
-    if not runs:
-        raise SystemExit(f"no stored chains of {near_tag()} starts in {OUT}")
     keys = sorted(runs)
     rows = []
     for key in keys:
         ds = read_dataset(runs[key])
         rows.append((ds.attrs["total_time"], ds.attrs["n_lps"], float(np.median(ds["lp_time"].values))))
-    n = np.array([k[0] for k in keys], float)
-    values = np.array(rows, float)
+    return np.array([k[0] for k in keys], float), np.array(rows, float).reshape(-1, 3), [k[1] for k in keys]
+
+
+def part_fit() -> xr.Dataset:
+    """Exponents over the stored chains of the near starts of ``--near-kappa`` (see
+    :func:`_stored_chains`), and a figure of their time against N beside the 1e-3 starts'."""
+    n, values, seeds = _stored_chains(near_tag())
+    if not len(n):
+        raise SystemExit(f"no stored chains of {near_tag()} starts in {OUT}")
     exps = {}
     for j, name in enumerate(("time", "lps", "t_lp")):
         a, err = fit_with_error(n, values[:, j])
         exps[f"exponent_{name}"], exps[f"exponent_{name}_error"] = a, err
-    print(f"{near_tag()} starts, {len(keys)} chains at N = {', '.join(map(str, sorted(set(n.astype(int)))))}: "
+    print(f"{near_tag()} starts, {len(n)} chains at N = {', '.join(map(str, sorted(set(n.astype(int)))))}: "
           + ", ".join(f"{k} ~ N^({exps[f'exponent_{k}']:.2f} ± {exps[f'exponent_{k}_error']:.2f}) "
                       f"(paper {PAPER_EXPONENTS[k]:g})" for k in ("time", "lps", "t_lp")), flush=True)
+    fig, ax = plt.subplots(figsize=(5, 4))
+    if near_tag() != "near":
+        n0, v0, _ = _stored_chains("near")
+        ax.loglog(n0, v0[:, 0], "o", mfc="none", color="C3", label="LS kappa = 1e-03 starts")
+    ax.loglog(n, values[:, 0], "s", color="C0", label=f"LS kappa = {NEAR_KAPPA:.0e} starts")
+    grid = np.geomspace(n.min(), n.max(), 20)
+    scale = np.exp(np.mean(np.log(values[:, 0]) - exps["exponent_time"] * np.log(n)))
+    ax.loglog(grid, scale * grid ** exps["exponent_time"], "-", color="C0",
+              label=f"N^({exps['exponent_time']:.2f} ± {exps['exponent_time_error']:.2f})")
+    ax.set_xlabel("number of spheres N")
+    ax.set_ylabel("CALiPPSO chain wall time [s]")
+    ax.set_title(f"3D near starts, p = {NEAR_PRESSURE:.0e}", fontsize=10)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(OUT / f"calippso_fit_{near_tag()}.png", dpi=120)
+    plt.close(fig)
+    print(f"wrote {OUT / f'calippso_fit_{near_tag()}.png'}")
     data = {"time": (("run",), values[:, 0], {"units": "s", "long_name": "chain wall time"}),
             "lps": (("run",), values[:, 1], {"units": "1"}),
             "t_lp": (("run",), values[:, 2], {"units": "s", "long_name": "median LP time"}),
             "N": (("run",), n.astype(int), {"units": "1"}),
-            "seed": (("run",), [k[1] for k in keys], {"units": "1"})}
+            "seed": (("run",), seeds, {"units": "1"})}
     return xr.Dataset(data, attrs=new_dataset_attrs("CALiPPSO exponents over stored chains",
                                                      {"near_kappa": NEAR_KAPPA, "near_pressure": NEAR_PRESSURE},
                                                      **exps))
