@@ -2,10 +2,22 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 
-__all__ = ["check_binding"]
+import numpy as np
+
+__all__ = ["arrays_sha256", "check_binding"]
+
+
+def arrays_sha256(*arrays: np.ndarray | None) -> str:
+    """SHA-256 (hex) of the arrays' bytes in order, ``None`` hashed as a marker: the
+    ``bound_input_sha256`` of a checkpoint's start."""
+    digest = hashlib.sha256()
+    for a in arrays:
+        digest.update(b"-" if a is None else np.ascontiguousarray(a).tobytes())
+    return digest.hexdigest()
 
 
 def _flat(value: object, prefix: str = "") -> dict[str, object]:

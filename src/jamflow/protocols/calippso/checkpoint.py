@@ -13,7 +13,6 @@ chain repeats the uninterrupted one bit for bit.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 from dataclasses import fields
@@ -23,7 +22,7 @@ import numpy as np
 import xarray as xr
 
 from ...io import new_dataset_attrs, read_dataset, write_dataset
-from ...io.binding import check_binding
+from ...io.binding import arrays_sha256, check_binding
 from ...provenance import git_sha, jamflow_version
 from ...state.packing import Packing
 from .lp import _Rows
@@ -42,9 +41,10 @@ CHECKPOINT_EVERY: float = 60.0
 #: The chain's lists of records and the dataclass of their entries.
 _RECORD_LISTS: dict[str, type] = {"records": IterationRecord, "newton": _NewtonAttempt}
 
-#: netCDF types of the record fields (annotations are strings under ``from __future__ import annotations``).
-_FIELD_DTYPES: dict[str, type] = {"int": np.int64, "float": np.float64, "bool": np.int8, "str": str}
-_FIELD_TYPES: dict[str, type] = {"int": int, "float": float, "bool": bool, "str": str}
+#: netCDF type and Python type of each record field's annotation (strings under
+#: ``from __future__ import annotations``).
+_FIELD_TYPES: dict[str, tuple[type, type]] = {"int": (np.int64, int), "float": (np.float64, float),
+                                              "bool": (np.int8, bool), "str": (str, str)}
 
 #: Options that may differ on resume: the total LP budget (a resumed chain may be given more).
 _UNBOUND_OPTIONS: frozenset[str] = frozenset({"max_iterations"})
@@ -65,12 +65,10 @@ def chain_binding(packing: Packing, opt: _Options) -> dict[str, str]:
         ``bound_run``: JSON of the options but :data:`_UNBOUND_OPTIONS`; ``bound_code``:
         jamflow's version and git commit.
     """
-    digest = hashlib.sha256()
-    for a in (packing.position, packing.diameter, packing.box.matrix):
-        digest.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
     run = {k: v for k, v in opt.settings().items() if k not in _UNBOUND_OPTIONS}
     run["require_isostatic"] = opt.require_isostatic
-    return {"bound_input_sha256": digest.hexdigest(), "bound_run": json.dumps(run, sort_keys=True),
+    return {"bound_input_sha256": arrays_sha256(packing.position, packing.diameter, packing.box.matrix),
+            "bound_run": json.dumps(run, sort_keys=True),
             "bound_code": f"jamflow {jamflow_version()} ({git_sha()})"}
 
 
@@ -92,13 +90,13 @@ def _rows_from(ds: xr.Dataset, prefix: str, cutoff: float) -> _Rows:
 def _table_vars(name: str, entries: list, cls: type) -> dict[str, tuple]:
     out = {}
     for f in fields(cls):
-        values = np.array([getattr(e, f.name) for e in entries], dtype=_FIELD_DTYPES[f.type])
+        values = np.array([getattr(e, f.name) for e in entries], dtype=_FIELD_TYPES[f.type][0])
         out[f"{name}_{f.name}"] = ((f"{name}_entry",), values, {"units": "1", "long_name": f"{name}: {f.name}"})
     return out
 
 
 def _table_from(ds: xr.Dataset, name: str, n: int, cls: type) -> list:
-    columns = {f.name: (ds[f"{name}_{f.name}"].values, _FIELD_TYPES[f.type]) for f in fields(cls)}
+    columns = {f.name: (ds[f"{name}_{f.name}"].values, _FIELD_TYPES[f.type][1]) for f in fields(cls)}
     return [cls(**{k: cast(v[i]) for k, (v, cast) in columns.items()}) for i in range(n)]
 
 

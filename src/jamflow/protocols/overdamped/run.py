@@ -11,7 +11,6 @@ coordinates ``strain`` and ``time``; ``shear_stress`` (Eq. 30), ``pressure``
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 from dataclasses import asdict, dataclass
@@ -23,6 +22,7 @@ import xarray as xr
 
 from ...box import Box
 from ...io import new_dataset_attrs
+from ...io.binding import arrays_sha256
 from ...network.spheres import find_rattlers
 from ...stages import require
 from ...state.packing import Packing, length_unit, near_pairs
@@ -160,15 +160,12 @@ def run_binding(packing: Packing, drive: Drive, stop: Stop, options: FlowOptions
         the targets of ``stop`` (not its step budget, which a resumed run may change),
         the options, the length unit and the recording choices.
     """
-    digest = hashlib.sha256()
-    arrays = [packing.position, packing.diameter, packing.box.matrix, packing.contacts, drive.external,
-              drive.permanent, None if drive.propulsion is None else drive.propulsion.force]
-    for a in arrays:
-        digest.update(b"-" if a is None else np.ascontiguousarray(a).tobytes())
+    digest = arrays_sha256(packing.position, packing.diameter, packing.box.matrix, packing.contacts, drive.external,
+                           drive.permanent, None if drive.propulsion is None else drive.propulsion.force)
     run = {"drive": drive.describe(), "stop": {"strain": stop.strain, "packing_fraction": stop.packing_fraction,
                                                "time": stop.time},
            "options": asdict(options), "unit": unit, "record_every": record_every, "n_snapshots": n_snapshots}
-    return {"bound_input_sha256": digest.hexdigest(), "bound_run": json.dumps(run, sort_keys=True, default=str)}
+    return {"bound_input_sha256": digest, "bound_run": json.dumps(run, sort_keys=True, default=str)}
 
 
 def run_flow(
