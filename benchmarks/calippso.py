@@ -253,10 +253,10 @@ def median_over_seeds(values: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def part_scaling(quick: bool, max_random: int, seeds: int, jobs: int,
-                 sizes: tuple[int, ...] = SCALING_SIZES) -> xr.Dataset:
+                 sizes: tuple[int, ...] = SCALING_SIZES, first_seed: int = 1) -> xr.Dataset:
     sizes = np.array([128, 256] if quick else sorted(sizes))
     kinds = {"random": random_start, "near": near_start}
-    seed_list = list(range(1, seeds + 1))
+    seed_list = list(range(first_seed, seeds + 1))
     tasks = [(kind, int(n), seed) for kind in kinds for n in sizes for seed in seed_list
              if not (kind == "random" and n > max_random)]
     starts = {t: kinds[t[0]](t[1], t[2]) for t in tasks}  # LS compressions run here, one at a time
@@ -282,7 +282,7 @@ def part_scaling(quick: bool, max_random: int, seeds: int, jobs: int,
                 a, err = fit_with_error(grid[keep], y[keep])
                 exps[f"exponent_{kind}_{k}{suffix}"], exps[f"exponent_{kind}_{k}{suffix}_err"] = a, err
         times, lps = (median_over_seeds(ds[k].sel(start=kind).values) for k in ("time", "lps"))
-        print(f"{kind} starts, medians over {seeds} seed(s): "
+        print(f"{kind} starts, medians over {len(seed_list)} seed(s): "
               + ", ".join(f"N = {n}: {t:.2f} s, {l:.0f} LPs" for n, t, l in zip(sizes, times, lps) if np.isfinite(t)),
               flush=True)
         print(f"{kind} starts, fitted exponents (all N | N >= 1024), paper in brackets: "
@@ -291,7 +291,7 @@ def part_scaling(quick: bool, max_random: int, seeds: int, jobs: int,
                           f" ({PAPER_EXPONENTS[k]:g})" for k in PAPER_EXPONENTS), flush=True)
     ds.attrs.update(new_dataset_attrs("CALiPPSO scaling with N",
                                       {"quick": quick, "near_pressure": NEAR_PRESSURE, "near_kappa": NEAR_KAPPA,
-                                       "seeds": seeds, "jobs": jobs,
+                                       "seeds": seed_list, "jobs": jobs,
                                        "max_random": max_random},
                                       **exps, **{f"paper_exponent_{k}": v for k, v in PAPER_EXPONENTS.items()}))
     return ds
@@ -823,7 +823,10 @@ def main() -> None:
     ap.add_argument("--parts", nargs="+", choices=PARTS, default=[p for p in PARTS],
                     help="parts to run (default all; 'large' takes tens of minutes)")
     ap.add_argument("--large-n", type=int, default=16384, help="N of the 'large' part (default 16384)")
-    ap.add_argument("--seeds", type=int, default=3, help="starts of each kind and N in 'scaling' (seeds 1 .. SEEDS; default 3)")
+    ap.add_argument("--seeds", type=int, default=3,
+                    help="starts of each kind and N in 'scaling' (seeds FIRST_SEED .. SEEDS; default 3)")
+    ap.add_argument("--first-seed", type=int, default=1,
+                    help="first seed of 'scaling' (default 1; a larger one adds seeds to stored chains)")
     ap.add_argument("--sizes", type=int, nargs="+", default=list(SCALING_SIZES),
                     help=f"N of 'scaling' (default {' '.join(map(str, SCALING_SIZES))}; 8192 and up take hours)")
     ap.add_argument("--jobs", type=int, default=1, help="whole commands of 'scaling' run at once (default 1)")
@@ -844,13 +847,16 @@ def main() -> None:
     args = ap.parse_args()
     if args.seeds < 1 or args.jobs < 1:
         ap.error("--seeds and --jobs must be at least 1")
+    if not 1 <= args.first_seed <= args.seeds:
+        ap.error("--first-seed must be between 1 and --seeds")
     if min(args.sizes) < 2 or len(set(args.sizes)) != len(args.sizes):
         ap.error("--sizes must be distinct particle numbers of at least 2")
     if not args.near_kappa > 0:
         ap.error("--near-kappa must be a positive growth rate")
     NEAR_KAPPA = args.near_kappa
     OUT.mkdir(exist_ok=True)
-    runners = {"scaling": lambda: part_scaling(args.quick, args.max_random, args.seeds, args.jobs, tuple(args.sizes)),
+    runners = {"scaling": lambda: part_scaling(args.quick, args.max_random, args.seeds, args.jobs,
+                                                   tuple(args.sizes), args.first_seed),
                "ls": lambda: part_ls(args.quick),
                "preset": lambda: part_preset(args.quick),
                "finish": lambda: part_finish(args.quick, args.max_finish),
