@@ -7,10 +7,11 @@ Parts (d = 3 monodisperse unless stated):
 ``scaling``
     Time to jam, number of LPs and median LP time against N = 256 ... 4096 (``--sizes``) from
     random starts (RSA at phi0 = 0.3) and from near-jamming starts (an LS compression,
-    fast stage kappa0 = 5e-3 to p = 500 then kappa = ``--near-kappa``, 1e-3 by default, to
-    p = ``NEAR_PRESSURE``; at 1e-3 a start is 6-66 times further below its phi_J than its
-    pressure says, at 1e-4 it obeys ``(phi_J - phi) / phi = d / p`` as the paper's starts
-    do: ``--near-kappa 1e-4`` measures the paper's regime),
+    fast stage kappa0 = 5e-3 to p = 500 then kappa = ``--near-kappa``, 1e-4 by default, to
+    p = ``NEAR_PRESSURE``; at 1e-4 a start obeys ``(phi_J - phi) / phi = d / p`` as the
+    paper's starts do, at 1e-3 it is 6-66 times further below its phi_J than its pressure
+    says and its chain takes 5-25 times more LPs: ``--near-kappa 1e-3`` gives the starts of the
+    warm-LP studies),
     ``--seeds`` starts of each kind per N (the LP count of a chain moves with the
     vertex each LP ends at, so one seed per N can put the exponent anywhere), with
     least-squares exponents over every (N, seed) and their standard errors, over all
@@ -141,11 +142,16 @@ FORMER_FAST = ("--tol-s", "1e-6", "--tol-gamma", "1e-9")
 #: chain is longer: 3D N = 2048 needed 220 LPs from p = 1e6 and 86 from 1e7 of the
 #: same compression.)
 NEAR_PRESSURE = 1e7
-#: LS growth rate of the near-jamming starts (``--near-kappa``). 1e-3 by default, not the
-#: paper's 1e-5 (its Fig. 5): LS at 1e-5 would take hours at N = 16384. The chains are
-#: far longer from the faster compression (docs/notes/warm-simplex.md, "The start's
-#: compression rate").
-NEAR_KAPPA = 1e-3
+#: LS growth rate of the near-jamming starts (``--near-kappa``). Its starts obey the
+#: free-volume equation of state (phi_J - phi) / phi = d / p to 1-6 %, as the paper's do;
+#: the paper's own 1e-5 (its Fig. 5) would add hours of LS at N = 16384
+#: (docs/notes/warm-simplex.md, "The start's compression rate").
+NEAR_KAPPA = 1e-4
+#: The faster compression of the warm-LP studies (``warm_lp.py``, ``calippso_tail.py``,
+#: ``calippso_clp.py``): its starts lie 6-66 times further below phi_J than d / p, and
+#: their chains have the long wandering tail those studies measure. Its files keep the
+#: plain ``near`` names.
+FAST_KAPPA = 1e-3
 #: Issue 19 targets for the whole command on the LS examples [s] (issue 9 had 10, 40, 120).
 LS_TARGETS = {3: 5.0, 4: 15.0, 5: 40.0}
 PAPER_EXPONENTS = {"time": 3.0, "t_lp": 2.34, "lps": 1.04}
@@ -186,18 +192,22 @@ def random_start(n: int, seed: int = 1) -> Path:
     return path
 
 
-def near_tag() -> str:
-    """``near``, or ``near_k<kappa>`` for starts compressed at another rate than 1e-3."""
-    return "near" if NEAR_KAPPA == 1e-3 else f"near_k{NEAR_KAPPA:.0e}"
+def near_tag(kappa: float | None = None) -> str:
+    """``near`` for starts compressed at :data:`FAST_KAPPA`, ``near_k<kappa>`` for others
+    (``kappa`` is :data:`NEAR_KAPPA` when not given)."""
+    kappa = NEAR_KAPPA if kappa is None else kappa
+    return "near" if kappa == FAST_KAPPA else f"near_k{kappa:.0e}"
 
 
-def near_start(n: int, seed: int = 1) -> Path:
-    """The LS compression of a random start to :data:`NEAR_PRESSURE` at :data:`NEAR_KAPPA` (cached)."""
-    rate = "" if NEAR_KAPPA == 1e-3 else f"_k{NEAR_KAPPA:.0e}"
+def near_start(n: int, seed: int = 1, kappa: float | None = None) -> Path:
+    """The LS compression of a random start to :data:`NEAR_PRESSURE` at growth rate
+    ``kappa`` (:data:`NEAR_KAPPA` when not given), cached."""
+    kappa = NEAR_KAPPA if kappa is None else kappa
+    rate = "" if kappa == FAST_KAPPA else f"_k{kappa:.0e}"
     path = OUT / f"calippso_start_ls{rate}_p{NEAR_PRESSURE:.0e}_N{n}_s{seed}.nc"
     if not path.exists():
         t0 = time.perf_counter()
-        snap = compress(random_packing(n, 3, 0.3, "mono", seed=seed), NEAR_KAPPA, [NEAR_PRESSURE],
+        snap = compress(random_packing(n, 3, 0.3, "mono", seed=seed), kappa, [NEAR_PRESSURE],
                         seed=seed).snapshots[0]
         write_packing(snap, path)
         print(f"   LS start N = {n}: p = {snap.pressure:.3g}, phi = {snap.packing_fraction:.5f} "
@@ -369,9 +379,9 @@ def part_scale(quick: bool, max_n: int) -> xr.Dataset:
     starts = {"ls_d3": ls_example(3)}
     if not quick:
         starts.update({"ls_d4": ls_example(4), "ls_d5": ls_example(5)})
-        starts.update({f"near_N1024_s{seed}": near_start(1024, seed) for seed in range(1, 7)})
+        starts.update({f"{near_tag()}_N1024_s{seed}": near_start(1024, seed) for seed in range(1, 7)})
         if max_n >= 2048:
-            starts["near_N2048_s1"] = near_start(2048)
+            starts[f"{near_tag()}_N2048_s1"] = near_start(2048)
     # HiGHS's own scaling is the module's private default for cold LPs
     variants = {"scaled": cal_solver._HIGHS_SCALE, "unscaled": cal_solver.WARM_SIMPLEX_SCALE}
     parts = []
@@ -426,7 +436,7 @@ def part_engine(quick: bool, cases: list[str], seeds: int,
         if "ls" in cases:
             starts.update({"ls_d4": ls_example(4), "ls_d5": ls_example(5)})
         for n in sorted(int(c) for c in cases if c != "ls"):
-            starts.update({f"near_N{n}_s{seed}": near_start(n, seed) for seed in range(1, seeds + 1)})
+            starts.update({f"{near_tag()}_N{n}_s{seed}": near_start(n, seed) for seed in range(1, seeds + 1)})
     ref, alt = engines
     parts = []
     for k, (case, start) in enumerate(starts.items()):
@@ -470,7 +480,7 @@ def part_large(n: int, options: tuple[str, ...] = ()) -> xr.Dataset:
     when the part is run again; ``chain_time`` is the chain's wall time over all runs."""
     tag = f"{near_tag()}_N{n}"
     ckpt = OUT / f"calippso_ckpt_{tag}.nc"
-    print(f"N = {n}, near-jamming start (target 1800 s, 8 GiB), options {' '.join(options) or 'none'}; "
+    print(f"N = {n}, near-jamming start (N = 16384 target: < 2 h, < 12 GB), options {' '.join(options) or 'none'}; "
           f"checkpoint {ckpt}{' (resumed)' if ckpt.exists() else ''}", flush=True)
     row = command(near_start(n), tag, *options, "--checkpoint", str(ckpt))
     chain_time = np.nan
@@ -652,7 +662,7 @@ def _stored_chains(tag: str) -> tuple[NDArray[np.float64], NDArray[np.float64], 
 
 def part_fit() -> xr.Dataset:
     """Exponents over the stored chains of the near starts of ``--near-kappa`` (see
-    :func:`_stored_chains`), and a figure of their time against N beside the 1e-3 starts'."""
+    :func:`_stored_chains`), and a figure of their time against N beside the :data:`FAST_KAPPA` starts'."""
     n, values, seeds = _stored_chains(near_tag())
     if not len(n):
         raise SystemExit(f"no stored chains of {near_tag()} starts in {OUT}")
@@ -664,9 +674,9 @@ def part_fit() -> xr.Dataset:
           + ", ".join(f"{k} ~ N^({exps[f'exponent_{k}']:.2f} ± {exps[f'exponent_{k}_error']:.2f}) "
                       f"(paper {PAPER_EXPONENTS[k]:g})" for k in ("time", "lps", "t_lp")), flush=True)
     fig, ax = plt.subplots(figsize=(5, 4))
-    if near_tag() != "near":
-        n0, v0, _ = _stored_chains("near")
-        ax.loglog(n0, v0[:, 0], "o", mfc="none", color="C3", label="LS kappa = 1e-03 starts")
+    if near_tag() != near_tag(FAST_KAPPA):
+        n0, v0, _ = _stored_chains(near_tag(FAST_KAPPA))
+        ax.loglog(n0, v0[:, 0], "o", mfc="none", color="C3", label=f"LS kappa = {FAST_KAPPA:.0e} starts")
     ax.loglog(n, values[:, 0], "s", color="C0", label=f"LS kappa = {NEAR_KAPPA:.0e} starts")
     grid = np.geomspace(n.min(), n.max(), 20)
     scale = np.exp(np.mean(np.log(values[:, 0]) - exps["exponent_time"] * np.log(n)))
@@ -694,9 +704,9 @@ def part_factor(quick: bool) -> xr.Dataset:
     sizes = [128, 256] if quick else [256, 512, 1024, 2048, 4096]
     rows = []
     for n in sizes:
-        out = OUT / f"calippso_out_near_N{n}_s1.nc"
+        out = OUT / f"calippso_out_{near_tag()}_N{n}_s1.nc"
         if not out.exists():
-            command(near_start(n), f"near_N{n}_s1")
+            command(near_start(n), f"{near_tag()}_N{n}_s1")
         q = read_packing(out)
         K = basis_kernel(q)
         # best of FACTOR_REPEATS: the first call of each library includes its set-up

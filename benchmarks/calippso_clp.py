@@ -4,7 +4,7 @@ The warm LPs of a near-jamming start cost the LU factorisation of the simplex ba
 (``docs/notes/calippso-scaling.md``). This benchmark asks whether CLP, the other open-source
 simplex on PyPI with a warm-basis interface (``cylp``; OR-Tools' GLOP takes no
 starting basis through its Python solver wrapper), factorises or pivots these bases
-better. For each near start (LS to p = 1e7, cached by ``benchmarks/calippso.py``) the
+better. For each near start (LS to p = 1e7 at kappa = 1e-3, cached by ``benchmarks/calippso.py``) the
 chain runs as ``jamflow calippso`` does and its first warm LPs are captured as HiGHS
 is given them: matrix, bounds and the carried basis. Each is then solved by CLP's primal simplex from the same basis at
 the chain's feasibility tolerances (``SOLVER_TOL``). Per LP:
@@ -42,7 +42,7 @@ from jamflow.io import new_dataset_attrs, read_packing, write_dataset
 from jamflow.protocols.calippso import SOLVER_TOL, calippso
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from calippso import OUT, fit, near_start  # noqa: E402
+from calippso import FAST_KAPPA, OUT, fit, near_start  # noqa: E402
 
 try:
     from cylp.cy import CyClpSimplex
@@ -151,7 +151,7 @@ def highs_refactor(w: WarmLP) -> float:
 
 
 def compare(n: int, n_warm: int) -> xr.Dataset:
-    lps = capture(near_start(n), n_warm)
+    lps = capture(near_start(n, 1, FAST_KAPPA), n_warm)
     rows = []
     for k, w in enumerate(lps):
         col = [HIGHS_TO_CLP[int(v)] for v in w.col_status]

@@ -1,6 +1,6 @@
 """CALiPPSO's tail: how the LP count of one near-jamming start spreads under tiny perturbations.
 
-A near start (LS to p = 1e7, ``calippso.near_start``) is jammed as it is and with every
+A near start (LS to p = 1e7 at kappa = 1e-3, ``calippso.near_start``) is jammed as it is and with every
 position moved by a Gaussian of ``--eps`` mean diameters (seeds 1 .. ``--perturbations``),
 by each ``--engines`` warm engine, in-process. Per chain: LPs, simplex pivots, CPU
 time, phi_J, contacts against the isostatic count, the largest overlap, and the two
@@ -33,7 +33,7 @@ from jamflow.protocols.calippso import WARM_ENGINES, calippso
 from jamflow.state.packing import Packing, max_overlap
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from calippso import OUT, near_start
+from calippso import FAST_KAPPA, OUT, near_start
 
 #: per-chain measures: name -> (units, long name)
 MEASURES = {
@@ -75,7 +75,7 @@ def chain(p: Packing, engine: str) -> dict[str, float]:
 
 
 def run(n: int, seed: int, perturbations: int, eps: float, engines: list[str]) -> xr.Dataset:
-    start = near_start(n, seed)
+    start = near_start(n, seed, FAST_KAPPA)
     p = read_packing(start)
     rows = {e: [] for e in engines}
     for k in range(perturbations + 1):

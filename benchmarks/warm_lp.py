@@ -4,7 +4,7 @@ jamflow's own bounded simplex (:mod:`jamflow.simplex`) from the same carried bas
 Two steps, each one command:
 
 ``capture``
-    Runs ``jamflow.protocols.calippso.calippso`` on near starts (LS to p = 1e7, cached by
+    Runs ``jamflow.protocols.calippso.calippso`` on near starts (LS to p = 1e7 at kappa = 1e-3, cached by
     ``benchmarks/calippso.py``: ``near_start``) and the authors' LS examples, and saves
     every warm simplex LP as HiGHS gets it, with what HiGHS made of it:
     ``OUT/warm_lps/<start>/lp_<k>.npz`` holds the matrix ``A`` (CSC arrays), ``rhs``,
@@ -50,7 +50,7 @@ from jamflow.protocols.calippso import CONTACT_DUAL_REL_TOL, SOLVER_TOL, calipps
 from jamflow.protocols.calippso.lp import _highs_lp
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from calippso import OUT, ls_example, near_start
+from calippso import FAST_KAPPA, OUT, ls_example, near_start
 
 CAPTURE = OUT / "warm_lps"
 
@@ -597,9 +597,9 @@ def main() -> None:
         for n in args.sizes:
             for s in args.seeds:
                 if args.engine == "jamflow":
-                    capture_ours(near_start(n, s), f"ours_near_N{n}_s{s}", args.max_warm)
+                    capture_ours(near_start(n, s, FAST_KAPPA), f"ours_near_N{n}_s{s}", args.max_warm)
                 else:
-                    capture(near_start(n, s), f"near_N{n}_s{s}", args.max_warm)
+                    capture(near_start(n, s, FAST_KAPPA), f"near_N{n}_s{s}", args.max_warm)
 
 
 if __name__ == "__main__":
