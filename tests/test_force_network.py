@@ -11,7 +11,7 @@ import scipy.sparse as sp
 import jamflow.network.forces as forces
 from jamflow.network.forces import balance_matrix, min_norm_forces
 from jamflow.network.rigidity import contact_geometry, rigidity_matrix
-from jamflow.network.spheres import contacts_from_gaps
+from jamflow.network.spheres import contacts_from_gaps, find_rattlers
 from jamflow.protocols.calippso import calippso
 from jamflow.protocols.initial import random_packing
 
@@ -73,20 +73,57 @@ def test_newton_and_highs_qp_give_the_same_minimum_norm_forces():
     np.testing.assert_allclose(p.force, f_newton, rtol=0, atol=1e-12 * f_qp.max())
 
 
-@pytest.mark.slow
-def test_a_stalled_dual_newton_hands_over_to_the_qp_early(monkeypatch):
-    """The geometric network of a CALiPPSO packing hyperstatic by one contact (3D N = 2048
-    from an LS start at kappa = 1e-4, seed 2; 131 rattler contacts without force): the dual
-    Newton reaches a residual of 3.6e-10 after 5 steps, then its line search, below the dual
-    function's round-off, accepts steps that stay at 2e-6. It must stop within
-    ``_NEWTON_STALL`` steps of its best and leave the answer to the QP, which balances the
-    6008 backbone contacts."""
+def _vendored_hyperstatic_network() -> tuple[sp.csr_matrix, np.ndarray, np.ndarray]:
+    """Balance matrix, weights and pair contacts of the geometric network of a CALiPPSO
+    packing hyperstatic by one contact (3D N = 2048 from an LS start at kappa = 1e-4, seed
+    2: 6008 backbone contacts, 130 contacts of rattlers)."""
     z = np.load(Path(__file__).parent / "data" / "min_norm_stall_n2048.npz")
     B = sp.csr_matrix((z["data"], z["indices"], z["indptr"]), shape=tuple(z["shape"]))
-    steps = []
-    lu = forces.splu
-    monkeypatch.setattr(forces, "splu", lambda M: steps.append(1) or lu(M))
-    f, residual = min_norm_forces(B, z["weight"], 3)
-    assert len(steps) <= 6 + forces._NEWTON_STALL + 1  # the first solve, the best step, the stalled ones
-    assert residual < 1e-10 and (f >= 0).all() and (f > 0).sum() == 6008
-    np.testing.assert_allclose(f, min_norm_forces(B, z["weight"], 3, method="qp")[0], rtol=0, atol=1e-9 * f.max())
+    Bc = B.tocsc()
+    contacts = np.array([np.unique(Bc.indices[Bc.indptr[c]:Bc.indptr[c + 1]] // 3) for c in range(B.shape[1])])
+    return B, z["weight"], contacts
+
+
+def _counting_lus(monkeypatch) -> list[int]:
+    """Record every sparse LU of :mod:`jamflow.network.forces` (one per Newton step)."""
+    calls, lu = [], forces.splu
+    monkeypatch.setattr(forces, "splu", lambda *a, **k: calls.append(1) or lu(*a, **k))
+    return calls
+
+
+@pytest.mark.slow
+def test_the_dual_newton_solves_a_near_singular_hyperstatic_network_without_the_qp(monkeypatch):
+    """On the vendored network the Newton alone must give the QP's forces to 1e-9 of the
+    largest, both on the whole network and on its backbone, with exact zeros on the
+    rattlers' contacts. Its dual is large (~1e3), so a residual of 1e-10 still leaves
+    forces wrong by ~3e-8: the steps past the tolerance are what make the two agree; and
+    near the optimum the dual function's increments are far below its own round-off."""
+    B, w, contacts = _vendored_hyperstatic_network()
+    rattler = find_rattlers(B.shape[0] // 3, 3, contacts)
+    backbone = ~(rattler[contacts[:, 0]] | rattler[contacts[:, 1]])
+    assert backbone.sum() == 6008 and (~backbone).sum() == 130
+    f_qp = min_norm_forces(B, w, 3, method="qp")[0]
+    qp_calls = []
+    qp = forces._highs_qp
+    monkeypatch.setattr(forces, "_highs_qp", lambda *a: qp_calls.append(1) or qp(*a))
+    lus = _counting_lus(monkeypatch)
+    f, residual = min_norm_forces(B, w, 3)
+    assert not qp_calls and len(lus) <= 12
+    assert residual < 1e-10 and (f >= 0).all() and (f[~backbone] == 0).all()
+    np.testing.assert_allclose(f, f_qp, rtol=0, atol=1e-9 * f_qp.max())
+    f_bb, residual_bb = min_norm_forces(B[:, backbone], w[backbone], 3)
+    assert not qp_calls and residual_bb < 1e-10
+    np.testing.assert_allclose(f_bb, f_qp[backbone], rtol=0, atol=1e-9 * f_qp.max())
+
+
+def test_a_dual_newton_without_progress_stops_after_its_stall_limit(monkeypatch):
+    """With a tolerance it cannot reach, the Newton must give up ``_NEWTON_STALL`` steps
+    after its smallest residual (the QP decides then), not after ``_NEWTON_MAX_ITER``."""
+    p = calippso(random_packing(64, 2, 0.5, "mono", seed=3)).packing
+    unit, _ = contact_geometry(p, p.contacts)
+    B = balance_matrix(unit, p.contacts, p.n, p.d)
+    w = p.sigma(p.contacts[:, 0], p.contacts[:, 1])
+    monkeypatch.setattr(forces, "_QP_TOL", -1.0)
+    lus = _counting_lus(monkeypatch)
+    assert forces._dual_newton(B, w / w.mean(), float(len(w))) is None
+    assert forces._NEWTON_STALL < len(lus) < forces._NEWTON_MAX_ITER // 2

@@ -49,11 +49,15 @@ _QP_TOL: float = 1e-10
 #: (measured: docs/notes/network-constants.md#dual-newton-of-the-minimum-norm-forces-jamflownetworkforces).
 _NEWTON_REG: float = 1e-12
 _NEWTON_MAX_ITER: int = 200
-#: Dual Newton: steps without a new smallest residual after which it stops (the QP decides):
-#: where the dual function's changes fall below its round-off, the line search accepts
-#: steps that do not reach the tolerance, and would do so to :data:`_NEWTON_MAX_ITER`
+#: Dual Newton: steps without a new smallest residual after which it stops (the QP decides),
+#: a guard against a line search that makes no progress
 #: (measured: docs/notes/network-constants.md#dual-newton-of-the-minimum-norm-forces-jamflownetworkforces).
 _NEWTON_STALL: int = 10
+#: Dual Newton: steps taken past :data:`_QP_TOL` while each at least halves the residual.
+#: A residual of 1e-10 still leaves forces wrong by up to ~1e-8 of the largest on a
+#: near-singular network (the dual is large); on a settled support the next step solves the
+#: support's equalities to round-off.
+_NEWTON_REFINE: int = 3
 
 
 def balance_matrix(
@@ -109,7 +113,8 @@ def min_norm_forces(B: sp.spmatrix, weight: NDArray[np.float64], d: int,
     method : {"newton", "qp"}
         ``"newton"``: semismooth Newton on the dual (:func:`_dual_newton`; sparse
         solves: 0.07 s for a 1024-particle triangular crystal, one step; 5-8 s for a
-        2D monodisperse N = 1024 packing, ~80 steps), falling back to the QP when it
+        2D monodisperse N = 1024 packing, ~80 steps; 5 s for a 3D N = 2048 packing
+        hyperstatic by one, 8 steps), falling back to the QP when it
         does not converge; ``"qp"``: HiGHS's QP solver only (an independent
         reference for small networks: 22 s for the 1024-particle crystal, and
         "Solve error" on the 2D monodisperse N = 1024 network).
@@ -164,14 +169,26 @@ def _dual_newton(B: sp.csr_matrix, wn: NDArray[np.float64], total: float) -> NDA
     complementary by construction, so only ``A phi = rhs`` is left to reach. A
     generalised Newton step solves ``(A_S A_S^T + delta I) dlam = rhs - A phi`` on the
     support ``S = {A^T lam > 0}`` (``delta`` regularises the translations and the
-    floppy modes of ``S``), by block elimination of the dense normalisation row
-    around one sparse LU of ``B_S B_S^T + delta I``, with an Armijo backtracking line
-    search on ``g``, from the unconstrained minimum-norm solution. Returns None when
-    :data:`_NEWTON_MAX_ITER` steps do not reach :data:`_QP_TOL`, or :data:`_NEWTON_STALL`
-    steps in a row do not lower the smallest residual (the QP decides then).
+    floppy modes of ``S``), by block elimination of the dense normalisation row around
+    one sparse LU of ``B_S B_S^T + delta I`` (symmetric positive definite: a symmetric
+    ordering with diagonal pivots, the fill of a Cholesky factor), with an Armijo
+    backtracking line search on ``g``, from the unconstrained minimum-norm solution.
+    The line search evaluates the increment ``g(lam + t dlam) - g(lam)`` as
+    one sum: near the optimum it is ~ residual^2, far below the round-off of ``g``
+    itself (~ N_c eps), and the difference of two values of ``g`` would be noise.
+    Past :data:`_QP_TOL` it goes on while each step at least halves the residual, at most
+    :data:`_NEWTON_REFINE` steps, and returns the best iterate, every component of
+    ``A^T lam`` inside its rounding error set to zero (a rattler's contact, or one the
+    optimum leaves without force, would otherwise keep a force of ~1e-14). Returns
+    None when :data:`_NEWTON_MAX_ITER` steps do not reach :data:`_QP_TOL`,
+    :data:`_NEWTON_STALL` steps in a row do not lower the smallest residual, or a factor
+    meets an exactly zero pivot (the QP decides then).
     """
     A = sp.vstack([B, sp.csr_matrix(wn[None, :])], format="csr")
     At = sp.csr_matrix(A.T)
+    # floating-point error bound of z = A^T lam, per contact: gamma_k |A^T| |lam| with
+    # k = the column's entries
+    abs_At, gamma = abs(At), (np.diff(At.indptr) + 1) * np.finfo(np.float64).eps
     rhs = np.zeros(A.shape[0])
     rhs[-1] = total
     Bc = sp.csc_matrix(B)
@@ -179,34 +196,46 @@ def _dual_newton(B: sp.csr_matrix, wn: NDArray[np.float64], total: float) -> NDA
 
     def step(support: NDArray[np.bool_], r: NDArray[np.float64]) -> NDArray[np.float64]:
         Bs, ws = Bc[:, support], wn[support]
-        lu = splu(sp.csc_matrix(Bs @ Bs.T) + reg)
+        lu = splu(sp.csc_matrix(Bs @ Bs.T) + reg, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                  options={"SymmetricMode": True})
         u = Bs @ ws
         a, b = lu.solve(r[:-1]), lu.solve(u)
         y = (r[-1] - u @ a) / (ws @ ws + _NEWTON_REG - u @ b)
         return np.append(a - b * y, y)
 
-    def dual(lam: NDArray[np.float64]) -> float:
-        z = np.maximum(At @ lam, 0.0)
-        return float(rhs @ lam - 0.5 * z @ z)
+    def gain(z: NDArray[np.float64], phi: NDArray[np.float64], dz: NDArray[np.float64],
+             rise: float, t: float) -> float:
+        # g(lam + t dlam) - g(lam), with |a|^2 - |b|^2 = (a - b) . (a + b)
+        moved = np.maximum(z + t * dz, 0.0)
+        return t * rise - 0.5 * float((moved - phi) @ (moved + phi))
 
-    lam = step(np.ones(A.shape[1], dtype=bool), rhs)
-    best, since = np.inf, 0
-    for _ in range(_NEWTON_MAX_ITER):
-        z = At @ lam
-        phi = np.maximum(z, 0.0)
-        r = rhs - A @ phi
-        residual = float(np.abs(r).max())
-        if residual <= _QP_TOL:
-            return phi
-        best, since = (residual, 0) if residual < best else (best, since + 1)
-        if since >= _NEWTON_STALL:
-            return None
-        dlam = step(z > 0.0, r)
-        g0, slope, t = dual(lam), float(r @ dlam), 1.0
-        while dual(lam + t * dlam) < g0 + 1e-4 * t * slope and t > 1e-12:
-            t *= 0.5
-        lam = lam + t * dlam
-    return None
+    try:
+        lam = step(np.ones(A.shape[1], dtype=bool), rhs)
+        best, best_phi, since, refined = np.inf, None, 0, 0
+        for _ in range(_NEWTON_MAX_ITER):
+            z = At @ lam
+            phi = np.maximum(z, 0.0)
+            r = rhs - A @ phi
+            residual = float(np.abs(r).max())
+            halved = residual <= 0.5 * best
+            if residual < best:  # a z inside its rounding error is zero, not a force
+                best, best_phi, since = residual, np.where(z > gamma * (abs_At @ np.abs(lam)), z, 0.0), 0
+            else:
+                since += 1
+            if best <= _QP_TOL:
+                if not halved or refined == _NEWTON_REFINE:
+                    return best_phi
+                refined += 1
+            if since >= _NEWTON_STALL:
+                return None
+            dlam = step(phi > 0.0, r)
+            dz, rise, slope, t = At @ dlam, float(rhs @ dlam), float(r @ dlam), 1.0
+            while gain(z, phi, dz, rise, t) < 1e-4 * t * slope and t > 1e-12:
+                t *= 0.5
+            lam = lam + t * dlam
+    except RuntimeError:  # an exactly zero pivot
+        return None
+    return best_phi if best <= _QP_TOL else None
 
 
 def _highs_qp(A: sp.csc_matrix, rhs: NDArray[np.float64]) -> NDArray[np.float64]:
