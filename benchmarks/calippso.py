@@ -143,7 +143,7 @@ FORMER_FAST = ("--tol-s", "1e-6", "--tol-gamma", "1e-9")
 #: same compression.)
 NEAR_PRESSURE = 1e7
 #: LS growth rate of the near-jamming starts (``--near-kappa``). Its starts obey the
-#: free-volume equation of state (phi_J - phi) / phi = d / p to 1-6 %, as the paper's do;
+#: free-volume equation of state (phi_J - phi) / phi = d / p to 0.5-11 %, as the paper's do;
 #: the paper's own 1e-5 (its Fig. 5) would add hours of LS at N = 16384
 #: (docs/notes/warm-simplex.md, "The start's compression rate").
 NEAR_KAPPA = 1e-4
@@ -673,6 +673,9 @@ def part_fit() -> xr.Dataset:
     print(f"{near_tag()} starts, {len(n)} chains at N = {', '.join(map(str, sorted(set(n.astype(int)))))}: "
           + ", ".join(f"{k} ~ N^({exps[f'exponent_{k}']:.2f} ± {exps[f'exponent_{k}_error']:.2f}) "
                       f"(paper {PAPER_EXPONENTS[k]:g})" for k in ("time", "lps", "t_lp")), flush=True)
+    print("chain wall time, medians over seeds: " + ", ".join(
+        f"N = {m}: {np.median(values[n == m, 0]):.1f} s, {np.median(values[n == m, 1]):.0f} LPs ({(n == m).sum()} seeds)"
+        for m in sorted(set(n.astype(int)))), flush=True)
     fig, ax = plt.subplots(figsize=(5, 4))
     if near_tag() != near_tag(FAST_KAPPA):
         n0, v0, _ = _stored_chains(near_tag(FAST_KAPPA))
